@@ -1,0 +1,31 @@
+"""Error types. Library code raises these; only ``cli.py`` turns them into exit codes.
+
+A :class:`CornerslamError` is a *user* problem (bad file, bad key, missing topic): the CLI prints
+``error: <msg> (<hint>)`` on one line and exits with code 2. Anything else is a bug (exit 1).
+"""
+
+from __future__ import annotations
+
+
+class CornerslamError(Exception):
+    """A problem with the user's input, reported as one line and exit code 2."""
+
+    def __init__(self, msg: str, hint: str | None = None):
+        super().__init__(msg)
+        self.msg = msg
+        self.hint = hint
+
+    def __str__(self) -> str:
+        return f"{self.msg} ({self.hint})" if self.hint else self.msg
+
+
+class LogError(CornerslamError):
+    """The log cannot be read or lacks what a run needs (file, format, topic)."""
+
+
+class ConfigError(CornerslamError):
+    """A configuration file or ``--set`` override is invalid."""
+
+
+class NumericalError(CornerslamError):
+    """The filter state became invalid (non-finite or non-symmetric covariance)."""
