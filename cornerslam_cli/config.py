@@ -97,7 +97,8 @@ def _coerce(value: Any, tp: Any, key: str) -> Any:
             hint = difflib.get_close_matches(str(value), [str(c) for c in choices], n=1, cutoff=0.5)
             dym = f"did you mean '{hint[0]}'? " if hint else ""
             raise ConfigError(
-                f"config key '{key}' = {value!r} is not allowed", f"{dym}choices: {', '.join(map(str, choices))}"
+                f"config key '{key}' = {value!r} is not allowed",
+                f"{dym}choices: {', '.join(map(str, choices))}",
             )
         return value
     if origin in (typing.Union, types.UnionType):
@@ -182,7 +183,9 @@ def load_config(path: str | Path | None = None, overrides: typing.Sequence[str] 
     if path is not None:
         p = Path(path)
         if not p.is_file():
-            raise ConfigError(f"config file '{p}' does not exist", "give a YAML file, e.g. configs/default.yaml")
+            raise ConfigError(
+                f"config file '{p}' does not exist", "give a YAML file, e.g. configs/default.yaml"
+            )
         try:
             loaded = yaml.safe_load(p.read_text())
         except yaml.YAMLError as e:

@@ -102,7 +102,10 @@ class Corners:
     @staticmethod
     def empty() -> Corners:
         return Corners(
-            np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros(0, dtype=np.int8), np.zeros((0, 2), dtype=np.int64)
+            np.zeros((0, 3)),
+            np.zeros((0, 3, 3)),
+            np.zeros(0, dtype=np.int8),
+            np.zeros((0, 2), dtype=np.int64),
         )
 
 

@@ -1,0 +1,46 @@
+"""Data association (paper Algorithms 3–5, NOTES §4): which landmark, if any, each corner observes.
+
+Every associator is a callable ``assoc(z, C, pred) -> AssociationResult``:
+
+    z : (m, 3) corners (x, y, φ), base frame, metres / radians
+    C : (m, 3, 3) their covariances
+    pred : :class:`~cornerslam_cli.types.Prediction` of the n landmarks
+
+``ASSOCIATORS`` maps config/CLI names to classes; ``make_associator(cfg)`` builds the configured one.
+m = 0 or n = 0 gives an all-unmatched result, never an error.
+"""
+
+from __future__ import annotations
+
+import difflib
+from typing import Protocol
+
+import numpy as np
+
+from ..errors import ConfigError
+from ..types import AssociationResult, Prediction
+from .icnn import Icnn
+from .jcbb import Jcbb
+from .params import AssociationConfig
+from .pca import Pca
+
+
+class Associator(Protocol):
+    def __call__(self, z: np.ndarray, C: np.ndarray, pred: Prediction) -> AssociationResult: ...
+
+
+ASSOCIATORS: dict[str, type] = {"icnn": Icnn, "jcbb": Jcbb, "pca": Pca}
+
+
+def make_associator(cfg: AssociationConfig) -> Associator:
+    """The associator named by ``cfg.method``, configured by ``cfg``; ConfigError for an unknown name."""
+    cls = ASSOCIATORS.get(cfg.method)
+    if cls is None:
+        names = ", ".join(ASSOCIATORS)
+        close = difflib.get_close_matches(cfg.method, list(ASSOCIATORS), n=1, cutoff=0.3)
+        hint = f"did you mean '{close[0]}'? ({names})" if close else f"choose one of: {names}"
+        raise ConfigError(f"unknown associator '{cfg.method}'", hint)
+    return cls(cfg)
+
+
+__all__ = ["ASSOCIATORS", "AssociationConfig", "Associator", "Icnn", "Jcbb", "Pca", "make_associator"]

@@ -1,0 +1,42 @@
+"""Feature extraction: line segments (paper Algorithm 1) and natural corners (Algorithm 2) of one scan.
+
+    segments, corners = extract(scan, config.sensor, config.lines, config.corners)
+
+``sensor.py`` holds the noise model (eq 1), ``lines.py`` the split-and-merge and the line fit with its
+covariance (eq 2–8), ``corners.py`` the two corner types and their covariance (eq 9–13).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..types import Corners, Scan, Segments
+from .corners import extract_corners
+from .lines import extract_segments, fit_lines
+from .params import CornersConfig, LinesConfig, SensorConfig
+from .sensor import sigma_bearing, sigma_range
+
+__all__ = [
+    "extract",
+    "extract_segments",
+    "extract_corners",
+    "fit_lines",
+    "sigma_range",
+    "sigma_bearing",
+    "SensorConfig",
+    "LinesConfig",
+    "CornersConfig",
+]
+
+
+def extract(
+    scan: Scan, sensor: SensorConfig, lines: LinesConfig, corners: CornersConfig
+) -> tuple[Segments, Corners]:
+    """Line segments and natural corners of one scan, both in the sensor frame.
+
+    Degenerate input (no beams, one beam, all points at one spot, absurd ranges) gives empty results,
+    never an exception; every returned number is finite and every covariance symmetric positive definite.
+    """
+    with np.errstate(all="ignore"):
+        segments, jac_ends = extract_segments(scan, sensor, lines)
+        return segments, extract_corners(scan, segments, jac_ends, sensor, corners)

@@ -1,0 +1,92 @@
+"""Log readers: ``open_log(path)`` picks a reader from :data:`READERS` by what the path is.
+
+>>> with open_log("sample_logs/exp1.mcap") as log:          # doctest: +SKIP
+...     print(log.info().scan_topic, log.laser_to_base())
+...     for msg in log.messages():                           # Scan | OdomSample, log-time order
+...         ...
+
+Formats: ``mcap`` (ROS 2 CDR or ROS 1 messages), ``rosbag1`` (.bag), ``rosbag2`` (directory with
+metadata.yaml, sqlite3 or mcap storage), ``carmen`` (.clf/.log, optionally gzip). Only
+:func:`open_log` touches filenames; readers raise :class:`~cornerslam_cli.errors.LogError` for
+every problem with the input.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+from ..errors import LogError
+from .base import LogInfo, LogReader, ReadStats, TopicInfo
+from .carmen import CarmenReader
+from .mcap import MAGIC as MCAP_MAGIC
+from .mcap import open_mcap
+from .rosbag import open_rosbag1, open_rosbag2
+
+__all__ = ["READERS", "LogInfo", "LogReader", "ReadStats", "TopicInfo", "detect_format", "open_log"]
+
+READERS: dict[str, Callable[..., LogReader]] = {
+    "mcap": open_mcap,
+    "rosbag1": open_rosbag1,
+    "rosbag2": open_rosbag2,
+    "carmen": CarmenReader,
+}
+EXTENSIONS = {".mcap": "mcap", ".bag": "rosbag1", ".clf": "carmen", ".log": "carmen", ".gz": "carmen"}
+ROSBAG1_MAGIC = b"#ROSBAG V2.0"
+SUPPORTED = "a .mcap file, a ROS 1 .bag, a ROS 2 bag directory or a CARMEN log (.clf/.log/.gz)"
+
+
+def detect_format(path: str | Path) -> str:
+    """Key of :data:`READERS` for ``path`` (content sniffed first, then extension); LogError if none."""
+    p = Path(path)
+    if not p.exists():
+        raise LogError(f"log '{p}' does not exist", "check the path")
+    if p.is_dir():
+        if (p / "metadata.yaml").is_file():
+            return "rosbag2"
+        raise LogError(f"directory '{p}' is not a ROS 2 bag (no metadata.yaml)", f"give {SUPPORTED}")
+    try:
+        with open(p, "rb") as f:
+            head = f.read(64)
+    except OSError as exc:
+        raise LogError(f"cannot read log '{p}': {exc.strerror or exc}", "check the file permissions") from exc
+    if not head:
+        raise LogError(f"log '{p}' is empty", "the recording holds no data; check the file")
+    if head.startswith(MCAP_MAGIC):
+        return "mcap"
+    if head.startswith(ROSBAG1_MAGIC):
+        return "rosbag1"
+    suffix = p.suffix.lower()
+    if suffix == ".db3":
+        raise LogError(
+            f"'{p.name}' is a ROS 2 bag storage file", "give the bag directory (with metadata.yaml)"
+        )
+    fmt = EXTENSIONS.get(suffix)
+    if fmt in ("mcap", "rosbag1"):
+        raise LogError(f"'{p.name}' is not a valid {suffix} file (bad magic bytes)", "check the file")
+    if fmt is None:
+        # no known extension: a CARMEN text log is recognized by its first tag
+        tag = head.split(None, 1)[0] if head.split() else b""
+        if tag in (b"FLASER", b"RLASER", b"ROBOTLASER1", b"ODOM", b"PARAM", b"#") or head[:1] == b"#":
+            return "carmen"
+        raise LogError(f"unsupported log '{p.name}'", f"give {SUPPORTED}")
+    return fmt
+
+
+def open_log(
+    path: str | Path,
+    scan_topic: str = "",
+    odom_topic: str = "",
+    odom_frame: str = "odom",
+    base_frame: str = "base_link",
+) -> LogReader:
+    """Open a log for reading; the format is chosen by :func:`detect_format`.
+
+    Topic errors (no / several LaserScan, no odometry, missing requested topic) are raised by
+    ``messages()``, ``laser_to_base()`` and ``check()``, not here, so ``info()`` can report them.
+    """
+    p = Path(path)
+    fmt = detect_format(p)
+    return READERS[fmt](
+        p, scan_topic=scan_topic, odom_topic=odom_topic, odom_frame=odom_frame, base_frame=base_frame
+    )

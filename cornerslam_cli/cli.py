@@ -1,0 +1,366 @@
+"""The ``cornerslam`` command line: a click group, shared options, and the one error boundary.
+
+Exit codes (INTERFACE.md): 0 success; 1 internal error (traceback saved to a file); 2 bad input or
+usage, reported as one line naming the file, key or topic and what to do.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import sys
+import tempfile
+import time
+import traceback
+from pathlib import Path
+
+import click
+
+from . import __version__
+from .errors import ConfigError, CornerslamError
+
+log = logging.getLogger("cornerslam")
+
+
+# ---------------------------------------------------------------------------- shared options
+def _verbosity(f):
+    f = click.option("-v", "--verbose", count=True, help="More log output (-v steps, -vv debug).")(f)
+    f = click.option("-q", "--quiet", is_flag=True, help="Only errors; no progress bar.")(f)
+    return f
+
+
+def _config_options(f):
+    f = click.option(
+        "--set",
+        "overrides",
+        multiple=True,
+        metavar="KEY=VALUE",
+        help="Override a config key, e.g. --set association.pca.group_size=5 (repeatable).",
+    )(f)
+    f = click.option(
+        "--config", "config_path", type=click.Path(dir_okay=False), help="YAML config (default: built-in)."
+    )(f)
+    return f
+
+
+def _topic_options(f):
+    f = click.option(
+        "--odom-topic", default=None, help="Odometry topic (default: by message type, else tf)."
+    )(f)
+    f = click.option("--scan-topic", default=None, help="LaserScan topic (default: the only one).")(f)
+    return f
+
+
+def _setup_logging(verbose: int, quiet: bool) -> None:
+    level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)]
+    logging.basicConfig(level=level, format="%(levelname)s: %(message)s", stream=sys.stderr, force=True)
+
+
+def _load(config_path, overrides, assoc=None, scan_topic=None, odom_topic=None):
+    from .config import load_config
+
+    extra = list(overrides)
+    if assoc:
+        extra.append(f"association.method={assoc}")
+    if scan_topic:
+        extra.append(f"input.scan_topic={scan_topic}")
+    if odom_topic:
+        extra.append(f"input.odom_topic={odom_topic}")
+    cfg = load_config(config_path, extra)
+    from .association import ASSOCIATORS
+
+    if cfg.association.method not in ASSOCIATORS:
+        from .association import make_associator
+
+        make_associator(cfg.association)  # raises the ConfigError with the closest name
+    return cfg
+
+
+class Progress:
+    """A progress line on stderr for runs longer than ~2 s: redrawn in place on a terminal,
+    a line every 10 s otherwise (CI logs). Silent with -q."""
+
+    def __init__(self, label: str, enabled: bool):
+        self.label = label
+        self.enabled = enabled
+        self.t0 = time.monotonic()
+        self.last = 0.0
+        self.tty = sys.stderr.isatty()
+        self.drawn = False
+
+    def __call__(self, done: int, total: int) -> None:
+        if not self.enabled:
+            return
+        now = time.monotonic()
+        el = now - self.t0
+        if el < 2.0 or now - self.last < (0.1 if self.tty else 10.0):
+            return
+        self.last = now
+        if total > 0:
+            frac = min(done / total, 1.0)
+            eta = el * (1 - frac) / max(frac, 1e-9)
+            bar = "#" * int(30 * frac)
+            text = f"{self.label} [{bar:<30}] {done}/{total} scans {el:5.0f}s eta {eta:4.0f}s"
+        else:
+            text = f"{self.label} {done} scans {el:5.0f}s"
+        if self.tty:
+            sys.stderr.write("\r" + text)
+            self.drawn = True
+        else:
+            sys.stderr.write(text + "\n")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.drawn:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+
+
+# ---------------------------------------------------------------------------- commands
+class _Cli(click.Group):
+    """The one error boundary: a CornerslamError becomes one line and exit 2; a bug exits 1 with its
+    traceback saved to a file; Ctrl-C exits 130 (the staged output directory is discarded)."""
+
+    def invoke(self, ctx: click.Context):
+        try:
+            return super().invoke(ctx)
+        except CornerslamError as e:
+            click.echo(f"error: {e}", err=True)
+            ctx.exit(2)
+        except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
+            raise
+        except KeyboardInterrupt:
+            click.echo(
+                "interrupted: no output written (a previous complete output directory is kept)", err=True
+            )
+            ctx.exit(130)
+        except Exception as exc:
+            fd, path = tempfile.mkstemp(prefix="cornerslam-crash-", suffix=".txt")
+            with os.fdopen(fd, "w") as f:
+                traceback.print_exc(file=f)
+            click.echo(f"internal error: {type(exc).__name__}: {exc} (traceback saved to {path})", err=True)
+            ctx.exit(1)
+
+
+@click.group(cls=_Cli, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="cornerslam")
+def cli() -> None:
+    """Natural-corner EKF-SLAM (Yan et al. 2014) on recorded 2D laser logs.
+
+    Exit codes: 0 success, 1 internal error (traceback saved), 2 bad input or usage.
+    """
+
+
+def _assoc_choice():
+    from .association import ASSOCIATORS
+
+    return click.Choice(sorted(ASSOCIATORS))
+
+
+@cli.command()
+@click.argument("log_path", metavar="LOG", type=click.Path())
+@_config_options
+@click.option("--assoc", default=None, help="Associator: icnn, jcbb or pca (default: config, pca).")
+@click.option(
+    "--out", type=click.Path(file_okay=False), help="Output directory (default ./cornerslam_out/LOG_ASSOC)."
+)
+@_topic_options
+@click.option(
+    "--ground-truth", type=click.Path(dir_okay=False), help="TUM ground truth (default: LOG.gt.tum)."
+)
+@click.option("--plot", is_flag=True, help="Also draw the map and timing plots (needs matplotlib).")
+@_verbosity
+def run(
+    log_path, config_path, overrides, assoc, out, scan_topic, odom_topic, ground_truth, plot, verbose, quiet
+):
+    """Run corner EKF-SLAM on LOG and write trajectory, map, lines, timing and summary.
+
+    \b
+    Example:
+      cornerslam run sample_logs/sim_office.mcap --assoc jcbb --out out/
+    """
+    from .pipeline import run as run_pipeline
+
+    _setup_logging(verbose, quiet)
+    cfg = _load(config_path, overrides, assoc, scan_topic, odom_topic)
+    progress = Progress(f"{Path(log_path).name} ({cfg.association.method})", not quiet)
+    try:
+        summary = run_pipeline(log_path, cfg, out, ground_truth=ground_truth, progress=progress)
+    finally:
+        progress.close()
+    if plot:
+        from .report.plots import plot_run
+
+        plot_run(Path(summary["out_dir"]))
+    if not quiet:
+        _print_summary(summary)
+
+
+def _print_summary(s: dict) -> None:
+    c, t = s["counts"], s["timing"]
+    click.echo(
+        f"{s['input']['log']}: {c['steps']} steps ({c['scans_in']} scans, {c['scans_skipped']} skipped, "
+        f"{c['keyframes_skipped']} between keyframes), {c['landmarks']} landmarks, "
+        f"{c['matched_total']} matches with {s['assoc']}"
+    )
+    click.echo(
+        f"time: extract {t['t_extract']:.2f}s predict {t['t_predict']:.2f}s match {t['t_match']:.2f}s "
+        f"update {t['t_update']:.2f}s ({t['scans_per_second']:.0f} steps/s), wall {t['wall_time']:.1f}s"
+    )
+    acc = s.get("accuracy")
+    if acc:
+        click.echo(
+            f"ATE RMSE {acc['ate']['rmse']:.3f} m (odometry {acc['odom_ate']['rmse']:.3f} m) "
+            f"against {acc['ground_truth']}"
+        )
+    click.echo(f"wrote {s['out_dir']}")
+
+
+@cli.command()
+@click.argument("log_path", metavar="LOG", type=click.Path())
+@_topic_options
+@_verbosity
+def info(log_path, scan_topic, odom_topic, verbose, quiet):
+    """Show what is in LOG: format, topics, types, counts, rates, and what `run` would use."""
+    from .logs import open_log
+
+    _setup_logging(verbose, quiet)
+    reader = open_log(Path(log_path), scan_topic=scan_topic or "", odom_topic=odom_topic or "")
+    i = reader.info()
+    click.echo(f"file:      {log_path}")
+    click.echo(f"format:    {i.format}")
+    click.echo(f"messages:  {i.n_messages}")
+    if i.start is not None:
+        click.echo(f"start:     {i.start:.3f} s")
+        click.echo(f"duration:  {i.duration:.2f} s")
+    click.echo("topics:")
+    for t in i.topics:
+        count = "?" if t.count is None else str(t.count)
+        rate = f"{t.rate_hz:8.2f} Hz" if t.rate_hz else ""
+        click.echo(f"  {t.name:<28} {t.msgtype:<30} {count:>8} msgs {rate}")
+    click.echo("run would use:")
+    click.echo(f"  scans     {i.scan_topic or '-'}")
+    click.echo(f"  odometry  {i.odom_topic or '-'} ({i.odom_source or 'none found'})")
+    laser = reader.laser_to_base()
+    if laser is not None:
+        click.echo(f"  laser     x={laser[0]:.3f} m y={laser[1]:.3f} m yaw={laser[2]:.3f} rad (from tf)")
+    for text in i.problems:
+        click.echo(f"problem:   {text}")
+    for text in i.notes:
+        click.echo(f"note:      {text}")
+
+
+@cli.command()
+@click.argument("out_path", metavar="OUT.mcap", type=click.Path(dir_okay=False))
+@click.option("--seed", default=0, show_default=True, help="Random seed (same seed, same log).")
+@click.option("--laps", default=1, show_default=True, help="Laps of the loop trajectory.")
+@click.option("--rate", default=10.0, show_default=True, help="Scan rate, Hz.")
+@click.option("--beams", default=1081, show_default=True, help="Beams per scan (over 270°).")
+@click.option("--speed", default=0.5, show_default=True, help="Robot speed, m/s.")
+@_verbosity
+def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
+    """Write a synthetic indoor log OUT.mcap with ground truth OUT.gt.tum and true corners.
+
+    \b
+    Example:
+      cornerslam simulate sim.mcap --seed 3 && cornerslam run sim.mcap
+    """
+    from .simulate import simulate_log
+
+    _setup_logging(verbose, quiet)
+    res = simulate_log(Path(out_path), seed=seed, laps=laps, rate=rate, beams=beams, speed=speed)
+    if not quiet:
+        click.echo(
+            f"wrote {res['log']} ({res['scans']} scans, {res['duration']:.1f} s), "
+            f"{res['gt']}, {res['corners']}"
+        )
+
+
+@cli.command()
+@click.argument("out_dir", metavar="OUTDIR", type=click.Path())
+@click.option("--ground-truth", type=click.Path(dir_okay=False), help="TUM ground truth.")
+@click.option("--relations", type=click.Path(dir_okay=False), help="Kümmerle et al. 2009 .relations file.")
+@click.option("--time-offset", default=0.0, show_default=True, help="Relation time − log time, seconds.")
+@_verbosity
+def evaluate(out_dir, ground_truth, relations, time_offset, verbose, quiet):
+    """Accuracy of a run's trajectory.tum against ground truth or relations.
+
+    \b
+    Example:
+      cornerslam evaluate cornerslam_out/intel_pca --relations intel.relations --time-offset 976052857.334
+    """
+    from .evaluate import ate, read_relations, relation_error, rpe
+    from .report.tables import read_tum
+
+    _setup_logging(verbose, quiet)
+    if not ground_truth and not relations:
+        raise click.UsageError("give --ground-truth FILE.tum or --relations FILE")
+    traj = Path(out_dir) / "trajectory.tum" if Path(out_dir).is_dir() else Path(out_dir)
+    t, est = read_tum(traj)
+    if ground_truth:
+        gt = read_tum(ground_truth)
+        a = ate(t, est, *gt)
+        r = rpe(t, est, *gt)
+        click.echo(
+            f"ATE  rmse {a['rmse']:.4f} m  mean {a['mean']:.4f} m  max {a['max']:.4f} m  (n={a['n']})\n"
+            f"RPE  per step {r['rpe_step_rmse']:.4f} m  per metre {r['rpe_per_m']:.4f} m/m"
+        )
+    if relations:
+        e = relation_error(t, est, read_relations(relations), time_offset)
+        if e["n"] == 0:
+            raise ConfigError(
+                f"no relation in '{relations}' falls inside the trajectory's time span",
+                "check --time-offset (relation time − log time)",
+            )
+        click.echo(
+            f"relations ({e['n']}/{e['n_total']}): "
+            f"translation {e['trans_mean']:.3f} ± {e['trans_std']:.3f} m, "
+            f"rotation {e['rot_mean_deg']:.2f} ± {e['rot_std_deg']:.2f} deg"
+        )
+
+
+@cli.command()
+@click.argument("log_path", metavar="LOG", type=click.Path())
+@click.option("--step", default=0, show_default=True, help="Index of the scan to extract (0 = first).")
+@click.option(
+    "--plot", "plot_path", type=click.Path(dir_okay=False), help="Draw the scan and features to a PNG."
+)
+@_config_options
+@_topic_options
+@_verbosity
+def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_topic, verbose, quiet):
+    """Print the segments and corners of one scan (and draw them with 3σ ellipses).
+
+    \b
+    Example:
+      cornerslam extract sample_logs/sim_office.mcap --step 40 --plot scan40.png
+    """
+    from .features import extract as extract_features
+    from .logs import open_log
+    from .report.extract_plot import format_extraction, plot_extraction
+    from .types import Scan
+
+    _setup_logging(verbose, quiet)
+    cfg = _load(config_path, overrides, None, scan_topic, odom_topic)
+    reader = open_log(Path(log_path), scan_topic=cfg.input.scan_topic, odom_topic=cfg.input.odom_topic)
+    scan = None
+    i = -1
+    for msg in reader.messages():
+        if isinstance(msg, Scan):
+            i += 1
+            if i == step:
+                scan = msg
+                break
+    if scan is None:
+        raise ConfigError(
+            f"--step {step} is past the end of '{log_path}' ({i + 1} scans)", f"use 0..{max(i, 0)}"
+        )
+    segments, corners = extract_features(scan, cfg.sensor, cfg.lines, cfg.corners)
+    click.echo(f"scan {step} at {scan.stamp:.3f} s: {len(scan.ranges)} valid of {scan.n_beams} beams")
+    click.echo(format_extraction(segments, corners))
+    if plot_path:
+        plot_extraction(scan, segments, corners, plot_path)
+        click.echo(f"wrote {plot_path}")
+
+
+main = cli  # the console-script entry point

@@ -1,0 +1,154 @@
+"""Trajectory accuracy: ATE after SE(2) alignment, RPE, and the Kümmerle et al. 2009 relation metric.
+
+All functions take 2D trajectories as ``stamps (n,)`` and ``poses (n, 3)`` = (x, y, θ).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .errors import LogError
+from .types import wrap_angle
+
+
+def interpolate_poses(stamps: np.ndarray, poses: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Poses at times ``t`` (linear in x, y; shorter arc in θ). Returns (mask of t inside the span, poses)."""
+    t = np.asarray(t, dtype=float)
+    inside = (t >= stamps[0]) & (t <= stamps[-1])
+    tq = t[inside]
+    j = np.clip(np.searchsorted(stamps, tq, side="right"), 1, len(stamps) - 1)
+    i = j - 1
+    dt = stamps[j] - stamps[i]
+    s = np.where(dt > 0, (tq - stamps[i]) / np.where(dt > 0, dt, 1.0), 0.0)
+    xy = poses[i, :2] + s[:, None] * (poses[j, :2] - poses[i, :2])
+    th = wrap_angle(poses[i, 2] + s * wrap_angle(poses[j, 2] - poses[i, 2]))
+    return inside, np.column_stack((xy, th))
+
+
+def align_se2(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray]:
+    """Rotation angle and translation minimising Σ‖R·src_i + t − dst_i‖² (Umeyama, no scale).
+
+    src, dst : (n, 2) corresponding points.
+    """
+    ms, md = src.mean(axis=0), dst.mean(axis=0)
+    a, b = src - ms, dst - md
+    # for 2D rotations the optimum has a closed form: θ = atan2(Σ a×b, Σ a·b)
+    ang = float(np.arctan2(np.sum(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]), np.sum(a * b)))
+    c, s = np.cos(ang), np.sin(ang)
+    R = np.array([[c, -s], [s, c]])
+    return ang, md - R @ ms
+
+
+def apply_se2(ang: float, t: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    c, s = np.cos(ang), np.sin(ang)
+    xy = poses[:, :2] @ np.array([[c, s], [-s, c]]) + t
+    return np.column_stack((xy, wrap_angle(poses[:, 2] + ang)))
+
+
+def ate(est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray) -> dict:
+    """Absolute trajectory error of ``est`` against ``gt`` (interpolated at est's stamps), after SE(2)
+    alignment: RMSE, mean, max of the position error (m) and RMSE of the heading error (rad)."""
+    inside, g = interpolate_poses(gt_t, gt, est_t)
+    e = est[inside]
+    if len(e) < 2:
+        return {"n": int(len(e)), "rmse": float("nan"), "mean": float("nan"), "max": float("nan")}
+    ang, t = align_se2(e[:, :2], g[:, :2])
+    ea = apply_se2(ang, t, e)
+    d = np.linalg.norm(ea[:, :2] - g[:, :2], axis=1)
+    dth = wrap_angle(ea[:, 2] - g[:, 2])
+    return {
+        "n": int(len(e)),
+        "rmse": float(np.sqrt(np.mean(d**2))),
+        "mean": float(np.mean(d)),
+        "max": float(np.max(d)),
+        "rot_rmse": float(np.sqrt(np.mean(dth**2))),
+    }
+
+
+def relative(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Pose of b in the frame of a, row-wise: a⁻¹ ∘ b for (n, 3) arrays."""
+    c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
+    dx, dy = b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]
+    return np.column_stack((c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[:, 2] - a[:, 2])))
+
+
+def rpe(est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray, delta_m: float = 1.0) -> dict:
+    """Relative pose error. Per step: RMSE of the translational error of consecutive relative poses.
+    Per metre: mean translational error of relative poses spanning ``delta_m`` metres of ground-truth
+    path, divided by that span (m/m)."""
+    inside, g = interpolate_poses(gt_t, gt, est_t)
+    e = est[inside]
+    out = {"rpe_step_rmse": float("nan"), "rpe_step_rot_rmse": float("nan"), "rpe_per_m": float("nan")}
+    if len(e) < 2:
+        return out
+    err = relative(relative(g[:-1], g[1:]), relative(e[:-1], e[1:]))
+    out["rpe_step_rmse"] = float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1))))
+    out["rpe_step_rot_rmse"] = float(np.sqrt(np.mean(err[:, 2] ** 2)))
+    dist = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(g[:, :2], axis=0), axis=1))))
+    j = np.searchsorted(dist, dist + delta_m)
+    ok = j < len(g)
+    if np.any(ok):
+        i, j = np.nonzero(ok)[0], j[ok]
+        span = dist[j] - dist[i]
+        err = relative(relative(g[i], g[j]), relative(e[i], e[j]))
+        out["rpe_per_m"] = float(np.mean(np.linalg.norm(err[:, :2], axis=1) / span))
+    return out
+
+
+def read_relations(path: str | Path) -> np.ndarray:
+    """Kümmerle relations file: rows ``t1 t2 x y z roll pitch yaw`` → (k, 5) [t1, t2, x, y, yaw]."""
+    p = Path(path)
+    if not p.is_file():
+        raise LogError(f"relations file '{p}' does not exist")
+    rows = []
+    for lineno, line in enumerate(p.read_text().splitlines(), 1):
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue
+        try:
+            v = [float(x) for x in s.split()]
+        except ValueError:
+            raise LogError(
+                f"'{p}' line {lineno} is not a relation", "expected: t1 t2 x y z roll pitch yaw"
+            ) from None
+        if len(v) < 8:
+            raise LogError(f"'{p}' line {lineno} has {len(v)} values", "expected: t1 t2 x y z roll pitch yaw")
+        rows.append((v[0], v[1], v[2], v[3], v[7]))
+    if not rows:
+        raise LogError(f"relations file '{p}' has no relations")
+    return np.array(rows)
+
+
+def relation_error(
+    est_t: np.ndarray, est: np.ndarray, relations: np.ndarray, time_offset: float = 0.0
+) -> dict:
+    """Kümmerle et al. 2009 metric: for each relation (t1, t2, δ), the error of the estimated relative
+    pose est(t1)⁻¹ ∘ est(t2) against δ. Relation times are shifted by ``-time_offset`` to log time;
+    poses between processed scans are interpolated. Returns mean ± std of the translational (m) and
+    absolute rotational (deg) errors, and how many relations could be evaluated."""
+    t1 = relations[:, 0] - time_offset
+    t2 = relations[:, 1] - time_offset
+    in1, p1 = interpolate_poses(est_t, est, t1)
+    in2, p2 = interpolate_poses(est_t, est, t2)
+    both = in1 & in2
+    # interpolate_poses returns only the inside rows: re-index to the relations inside both spans
+    idx1 = np.cumsum(in1) - 1
+    idx2 = np.cumsum(in2) - 1
+    a, b = p1[idx1[both]], p2[idx2[both]]
+    gt = relations[both][:, 2:5]
+    n = int(np.count_nonzero(both))
+    if n == 0:
+        return {"n": 0, "n_total": int(len(relations))}
+    err = relative(gt, relative(a, b))
+    trans = np.linalg.norm(err[:, :2], axis=1)
+    rot = np.degrees(np.abs(err[:, 2]))
+    return {
+        "n": n,
+        "n_total": int(len(relations)),
+        "trans_mean": float(trans.mean()),
+        "trans_std": float(trans.std()),
+        "rot_mean_deg": float(rot.mean()),
+        "rot_std_deg": float(rot.std()),
+    }

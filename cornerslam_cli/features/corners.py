@@ -1,0 +1,214 @@
+"""Natural corners of one scan: paper Algorithm 2 and the corner covariance (eq 9–13).
+
+A corner is z = (x, y, φ) in the sensor frame with a 3×3 covariance.
+
+* **Type I** (line intersection). Every pair of segments — not only neighbours in the scan — whose closest
+  end points are nearer than d_min and whose lines are at least ``min_angle`` from parallel; the
+  intersection must lie within dp_max of both segments (it may extend a segment over the last missed
+  beams). This is the prose of Algorithm 2; its pseudo-code (line 4 vs line 9) contradicts itself.
+  Eq 9 in the form N·c = (r_i, r_j), N = [n_iᵀ; n_jᵀ]; φ = |wrap(α_i − α_j)|, the angle between the two
+  lines' normals. With r >= 0 both normals point away from the sensor, so φ is the same from every pose
+  that sees the same faces of the two walls (π − the angle of the wedge they make).
+  Covariance (eq 11–13): C = F diag(C_li, C_lj) Fᵀ, F = ∂(x, y, φ)/∂(r_i, α_i, r_j, α_j); the two lines use
+  disjoint beams, so they are independent.
+* **Type II** (end point). A segment end whose next beam (in scan order, away from the segment) is more
+  than d_min away and off the segment's line — a depth jump. The corner is the intersection of the line
+  with its normal through the end beam's point q, i.e. q projected on the line: c = q − (n·q − r) n.
+  φ is not observable for an end point; it is set to ``endpoint_phi`` (default π/2: the line meets its
+  normal, which also lets a type II sighting of a right-angled edge match the type I landmark of the same
+  edge) with the prior variance ``endpoint_phi_sigma²``, uncorrelated with (x, y).
+  Covariance: exact first order in all the segment's beams. The end beam enters twice, through q and
+  through the line it helped fit, so C = A C_l Aᵀ − A J_e C_e J_eᵀ Aᵀ + G_e C_e G_eᵀ, with A = ∂c/∂(r, α),
+  J_e = ∂(r, α)/∂(ρ_e, θ_e), G_e = A J_e + (I − n nᵀ) ∂q/∂(ρ_e, θ_e), C_e = diag(σρ_e², σθ²).
+  Scan ends (the field of view's edge) are not corners.
+* **drop_occluded** (on by default): the end point on the farther side of a depth jump is the edge of an
+  occlusion shadow that moves with the viewpoint; it is dropped when the beam next to it (no dropped beam
+  between) is nearer. Corners of either type lying more than ``occlusion_margin`` behind the measured
+  range at their bearing are hidden behind a surface and are dropped too.
+* **Duplicates**: several segment pairs (and an end point) can give the same physical corner. Corners
+  closer than ``duplicate_radius`` are one: type I is preferred to type II, then the smallest position
+  uncertainty (trace of the 2×2 block) — the pair of lines that best represents the walls. Corners are not
+  averaged: their errors are correlated through shared segments.
+All covariances are symmetrised and get ``COV_FLOOR`` on the diagonal; non-finite corners are dropped.
+Corners are returned in bearing order.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..types import Corners, Scan, Segments
+from .lines import COV_FLOOR
+from .params import CornersConfig, SensorConfig
+from .sensor import beam_variances
+
+
+def _wrap(a):
+    return (a + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def intersections(segs: Segments, i: np.ndarray, j: np.ndarray):
+    """Eq 9–13 for line pairs (i, j): corners (m, 3) and covariances (m, 3, 3). Pairs must not be parallel."""
+    ai, aj, ri, rj = segs.alpha[i], segs.alpha[j], segs.r[i], segs.r[j]
+    D = np.sin(aj - ai)  # det N
+    # N⁻¹ = (1/D) [[sin αj, −sin αi], [−cos αj, cos αi]]
+    ninv = np.stack((np.stack((np.sin(aj), -np.sin(ai)), -1), np.stack((-np.cos(aj), np.cos(ai)), -1)), axis=1)
+    ninv /= D[:, None, None]
+    c = np.einsum("mab,mb->ma", ninv, np.column_stack((ri, rj)))
+    dphi = _wrap(ai - aj)
+    phi = np.abs(dphi)
+    sgn = np.where(dphi >= 0, 1.0, -1.0)
+    # N dc = dr − diag(d_i·c, d_j·c) dα,  d = (−sin α, cos α)
+    dic = -np.sin(ai) * c[:, 0] + np.cos(ai) * c[:, 1]
+    djc = -np.sin(aj) * c[:, 0] + np.cos(aj) * c[:, 1]
+    F = np.zeros((len(i), 3, 4))
+    F[:, :2, 0] = ninv[:, :, 0]
+    F[:, :2, 1] = -dic[:, None] * ninv[:, :, 0]
+    F[:, :2, 2] = ninv[:, :, 1]
+    F[:, :2, 3] = -djc[:, None] * ninv[:, :, 1]
+    F[:, 2, 1], F[:, 2, 3] = sgn, -sgn
+    C = np.zeros((len(i), 4, 4))
+    C[:, :2, :2], C[:, 2:, 2:] = segs.cov[i], segs.cov[j]
+    z = np.column_stack((c, phi))
+    return z, F @ C @ F.transpose(0, 2, 1)
+
+
+def _point_segment_distance(p, a, b):
+    ab = b - a
+    L2 = np.einsum("ij,ij->i", ab, ab)
+    t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
+    return np.hypot(*(a + t[:, None] * ab - p).T)
+
+
+def type_one(segs: Segments, cfg: CornersConfig):
+    """Type I corners from all admissible segment pairs: (z, cov, segs (m, 2))."""
+    k = len(segs)
+    i, j = np.triu_indices(k, 1)
+    ends = np.stack((segs.p1, segs.p2), axis=1)  # (k, 2 ends, 2)
+    d_end = np.hypot(*(ends[i][:, :, None, :] - ends[j][:, None, :, :]).transpose(3, 0, 1, 2)).min(axis=(1, 2))
+    phi = np.abs(_wrap(segs.alpha[i] - segs.alpha[j]))
+    ok = (d_end < cfg.d_min) & (phi >= cfg.min_angle) & (phi <= np.pi - cfg.min_angle)
+    i, j = i[ok], j[ok]
+    z, cov = intersections(segs, i, j)
+    near = (_point_segment_distance(z[:, :2], segs.p1[i], segs.p2[i]) <= cfg.dp_max) & (
+        _point_segment_distance(z[:, :2], segs.p1[j], segs.p2[j]) <= cfg.dp_max
+    )
+    return z[near], cov[near], np.column_stack((i, j))[near]
+
+
+def type_two(scan: Scan, segs: Segments, jac_ends: np.ndarray, sensor: SensorConfig, cfg: CornersConfig):
+    """Type II corners at segment ends facing a depth jump: (z, cov, segs (m, 2) with −1 second)."""
+    rho, theta = scan.ranges, scan.angles
+    n = len(rho)
+    x, y = rho * np.cos(theta), rho * np.sin(theta)
+    zs, covs, which = [], [], []
+    for end, beam, step in ((0, segs.first, -1), (1, segs.last, +1)):
+        nb = beam + step  # the next beam away from the segment
+        inside = (nb >= 0) & (nb < n)
+        nbc = np.clip(nb, 0, n - 1)
+        jump = np.hypot(x[nbc] - x[beam], y[nbc] - y[beam])
+        off_line = np.abs(x[nbc] * np.cos(segs.alpha) + y[nbc] * np.sin(segs.alpha) - segs.r)
+        is_corner = inside & (jump > cfg.d_min) & (off_line > cfg.d_min)
+        if cfg.drop_occluded:
+            adjacent = np.abs(scan.beam_index[nbc] - scan.beam_index[beam]) == 1
+            is_corner &= ~(adjacent & (rho[nbc] < rho[beam]))
+        s = np.flatnonzero(is_corner)
+        if s.size == 0:
+            continue
+        b = beam[s]
+        a, r = segs.alpha[s], segs.r[s]
+        nvec = np.column_stack((np.cos(a), np.sin(a)))
+        dvec = np.column_stack((-np.sin(a), np.cos(a)))
+        q = np.column_stack((x[b], y[b]))
+        e = np.einsum("ij,ij->i", nvec, q) - r
+        c = q - e[:, None] * nvec
+        # A = ∂c/∂(r, α): ∂c/∂r = n, ∂c/∂α = −(d·q) n − e d
+        dq = np.einsum("ij,ij->i", dvec, q)
+        A = np.stack((nvec, -dq[:, None] * nvec - e[:, None] * dvec), axis=2)  # (m, 2, 2)
+        Q = np.stack(
+            (np.column_stack((np.cos(theta[b]), np.sin(theta[b]))), rho[b][:, None] * dvec_of(theta[b])), axis=2
+        )
+        P = np.eye(2) - nvec[:, :, None] * nvec[:, None, :]  # I − n nᵀ
+        Je = jac_ends[s, end]
+        var_r, var_t = beam_variances(rho[b], sensor)
+        Ce = np.zeros((len(s), 2, 2))
+        Ce[:, 0, 0], Ce[:, 1, 1] = var_r, var_t
+        Ge = A @ Je + P @ Q
+        AJ = A @ Je
+        Cxy = A @ segs.cov[s] @ A.transpose(0, 2, 1) - AJ @ Ce @ AJ.transpose(0, 2, 1)
+        Cxy = Cxy + Ge @ Ce @ Ge.transpose(0, 2, 1)
+        cov = np.zeros((len(s), 3, 3))
+        cov[:, :2, :2] = Cxy
+        cov[:, 2, 2] = cfg.endpoint_phi_sigma**2
+        zs.append(np.column_stack((c, np.full(len(s), cfg.endpoint_phi))))
+        covs.append(cov)
+        which.append(np.column_stack((s, np.full(len(s), -1))))
+    if not zs:
+        return np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros((0, 2), dtype=np.int64)
+    return np.concatenate(zs), np.concatenate(covs), np.concatenate(which)
+
+
+def dvec_of(theta):
+    """(m, 2) unit vectors (−sin θ, cos θ): ∂/∂θ of (cos θ, sin θ)."""
+    return np.column_stack((-np.sin(theta), np.cos(theta)))
+
+
+def hidden(scan: Scan, z: np.ndarray, margin: float) -> np.ndarray:
+    """(m,) bool: the corner lies more than ``margin`` behind the range measured at its bearing.
+
+    The measured range is the nearer of the (at most two) valid beams within one beam spacing of the
+    corner's bearing; a bearing with no such beam is not judged.
+    """
+    m, n = len(z), len(scan.ranges)
+    if m == 0 or n < 2:
+        return np.zeros(m, dtype=bool)
+    bearing = np.arctan2(z[:, 1], z[:, 0])
+    spacing = float(np.median(np.diff(scan.angles)))
+    k = np.searchsorted(scan.angles, bearing)
+    measured = np.full(m, np.inf)
+    for nb in (k - 1, k):
+        nbc = np.clip(nb, 0, n - 1)
+        near = (nb >= 0) & (nb < n) & (np.abs(scan.angles[nbc] - bearing) <= spacing)
+        measured = np.where(near, np.minimum(measured, scan.ranges[nbc]), measured)
+    return measured < np.hypot(z[:, 0], z[:, 1]) - margin
+
+
+def merge_duplicates(z, cov, kind, radius: float) -> np.ndarray:
+    """Indices of the corners kept: within ``radius`` of each other only the first in the order
+    (type I before type II, then smaller trace of the position covariance) is kept."""
+    order = np.lexsort((cov[:, 0, 0] + cov[:, 1, 1], kind))
+    kept: list[int] = []
+    for i in order:
+        if not kept or np.hypot(*(z[kept, :2] - z[i, :2]).T).min() >= radius:
+            kept.append(int(i))
+    return np.asarray(kept, dtype=np.int64)
+
+
+def extract_corners(
+    scan: Scan, segs: Segments, jac_ends: np.ndarray, sensor: SensorConfig, cfg: CornersConfig
+) -> Corners:
+    """Algorithm 2 on the segments of one scan (``jac_ends`` from ``lines.extract_segments``)."""
+    if len(segs) == 0:
+        return Corners.empty()
+    z1, c1, s1 = type_one(segs, cfg)
+    parts = [(z1, c1, s1, np.full(len(z1), 1, dtype=np.int8))]
+    if cfg.endpoints:
+        z2, c2, s2 = type_two(scan, segs, jac_ends, sensor, cfg)
+        parts.append((z2, c2, s2, np.full(len(z2), 2, dtype=np.int8)))
+    z = np.concatenate([p[0] for p in parts])
+    cov = np.concatenate([p[1] for p in parts])
+    which = np.concatenate([p[2] for p in parts]).astype(np.int64)
+    kind = np.concatenate([p[3] for p in parts])
+    if len(z) == 0:
+        return Corners.empty()
+    cov = 0.5 * (cov + cov.transpose(0, 2, 1)) + COV_FLOOR * np.eye(3)
+    ok = np.isfinite(z).all(1) & np.isfinite(cov).all(axis=(1, 2))
+    ok &= np.linalg.eigvalsh(np.where(ok[:, None, None], cov, np.eye(3))).min(axis=1) > 0
+    if cfg.drop_occluded:
+        ok &= ~hidden(scan, np.where(ok[:, None], z, 0.0), cfg.occlusion_margin)
+    z, cov, which, kind = z[ok], cov[ok], which[ok], kind[ok]
+    if len(z) == 0:
+        return Corners.empty()
+    keep = merge_duplicates(z, cov, kind, cfg.duplicate_radius)
+    keep = keep[np.argsort(np.arctan2(z[keep, 1], z[keep, 0]), kind="stable")]
+    return Corners(z=z[keep], cov=cov[keep], kind=kind[keep], segs=which[keep])

@@ -1,0 +1,29 @@
+"""Laser noise model (paper eq 1, 33, 34): each beam ρ_i ~ N(ρ, σρ(ρ)²), θ_i ~ N(θ, σθ²), independent."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .params import SensorConfig
+
+
+def sigma_range(rho: np.ndarray, sensor: SensorConfig) -> np.ndarray:
+    """σρ(ρ) in metres for ranges ``rho`` (any shape, metres).
+
+    piecewise (paper, Hokuyo data sheet): σρ = sigma_r_near for ρ <= near_range, sigma_r_rel·ρ beyond.
+    linear: σρ = a + b·ρ.
+    """
+    rho = np.asarray(rho, dtype=float)
+    if sensor.model == "linear":
+        return sensor.a + sensor.b * rho
+    return np.where(rho <= sensor.near_range, sensor.sigma_r_near, sensor.sigma_r_rel * rho)
+
+
+def sigma_bearing(rho: np.ndarray, sensor: SensorConfig) -> np.ndarray:
+    """σθ in radians, broadcast to the shape of ``rho`` (constant in both models)."""
+    return np.full(np.shape(rho), sensor.sigma_theta)
+
+
+def beam_variances(rho: np.ndarray, sensor: SensorConfig) -> tuple[np.ndarray, np.ndarray]:
+    """(σρ², σθ²) per beam, each shaped like ``rho``."""
+    return sigma_range(rho, sensor) ** 2, sigma_bearing(rho, sensor) ** 2

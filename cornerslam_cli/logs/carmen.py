@@ -1,0 +1,322 @@
+"""CARMEN logs (``.clf``, ``.log``, optionally gzip-compressed): FLASER / RLASER / ROBOTLASER1 / ODOM.
+
+Line formats (one message per line, whitespace separated, ``#`` comments and PARAM lines ignored)::
+
+    FLASER n r1..rn x y theta odom_x odom_y odom_theta timestamp hostname logger_timestamp
+    RLASER (as FLASER, rear laser)
+    ROBOTLASER1 laser_type start_angle fov angular_resolution maximum_range accuracy remission_mode
+        n r1..rn n_rem rem1..rem_nrem laser_x laser_y laser_theta robot_x robot_y robot_theta
+        tv rv forward_safety_dist side_safety_dist turn_axis timestamp hostname logger_timestamp
+    ODOM x y theta tv rv accel timestamp hostname logger_timestamp
+
+Conventions (as CARMEN's own ``carmen_string_to_laser_laser_message_orig``):
+
+* FLASER/RLASER angles start at −π/2; the increment is 1° for 180/181 beams, 0.5° for 360/361,
+  0.25° for 400/401 and π/(n − 1) otherwise (so 180 beams cover −90°..+89°, 181 beams −90°..+90°).
+  ROBOTLASER1 carries start_angle and angular_resolution.
+* Max range: ROBOTLASER1 maximum_range; FLASER/RLASER the ``robot_front_laser_max`` /
+  ``robot_rear_laser_max`` PARAM if the log has one, else 81.83 m (the SICK "no return" value of the
+  classic Radish logs). Readings >= max range are no-return and dropped.
+* Stamps: the message timestamp field (sensor time), not the logger timestamp. Lines are yielded in
+  file order.
+* Odometry: ODOM lines when the log has any; otherwise the odometry pose fields of the laser lines
+  (FLASER odom_x/y/theta, ROBOTLASER1 robot_x/y/theta), yielded just before their scan.
+* The laser offset is not in FLASER lines: ``laser_to_base()`` returns the mean laser-minus-robot
+  offset of ROBOTLASER1 lines, None for FLASER logs (configure it).
+
+"Topics" are the line tags (``FLASER``, ``ODOM``, ...): ``scan_topic`` selects the laser tag
+(default ROBOTLASER1, else FLASER, else RLASER), ``odom_topic`` ``ODOM`` or a laser tag.
+"""
+
+from __future__ import annotations
+
+import gzip
+import io
+import math
+import zlib
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import LogError
+from ..types import OdomSample, Scan
+from .base import LogInfo, Pose2, ReadStats, TopicInfo, make_scan
+
+LASER_TAGS = ("ROBOTLASER1", "FLASER", "RLASER", "ROBOTLASER2")
+ODOM_TAG = "ODOM"
+DEFAULT_MAX_RANGE = 81.83
+GZIP_MAGIC = b"\x1f\x8b"
+
+
+def flaser_increment(n: int) -> float:
+    """Angle between beams of an old-style FLASER/RLASER line of n beams (CARMEN's guess)."""
+    if n in (180, 181):
+        return math.pi / 180.0
+    if n in (360, 361):
+        return math.pi / 360.0
+    if n in (400, 401):
+        return math.pi / 720.0
+    return math.pi / max(n - 1, 1)
+
+
+def _open_text(path: Path) -> io.TextIOBase:
+    with open(path, "rb") as f:
+        gz = f.read(2) == GZIP_MAGIC
+    if gz:
+        return io.TextIOWrapper(gzip.open(path, "rb"), encoding="latin-1")
+    return open(path, encoding="latin-1")  # noqa: SIM115 - caller closes
+
+
+def _lines(path: Path, stats: ReadStats | None) -> Iterator[str]:
+    """Lines of a (possibly gzip-compressed) text log; a cut/damaged gzip ends the lines with a warning."""
+    n = 0
+    try:
+        with _open_text(path) as f:
+            for line in f:
+                n += 1
+                yield line
+    except (EOFError, gzip.BadGzipFile, zlib.error) as exc:
+        if stats is not None:
+            stats.warn("%s ends early after %d lines (damaged or cut gzip: %s)", path.name, n, exc)
+
+
+class _Laser:
+    """Parsed fields of one laser line."""
+
+    __slots__ = ("stamp", "angle_min", "angle_increment", "range_max", "ranges", "laser", "robot")
+
+    def __init__(self, stamp, angle_min, angle_increment, range_max, ranges, laser, robot):
+        self.stamp, self.angle_min, self.angle_increment = stamp, angle_min, angle_increment
+        self.range_max, self.ranges, self.laser, self.robot = range_max, ranges, laser, robot
+
+
+def parse_laser(tok: list[str], max_range: float) -> _Laser:
+    """Fields of a FLASER/RLASER/ROBOTLASERx line split into tokens (raises ValueError/IndexError)."""
+    if tok[0] in ("FLASER", "RLASER"):
+        n = int(tok[1])
+        if n < 0 or len(tok) != n + 11:
+            raise ValueError(f"{tok[0]} with {n} readings has {len(tok)} fields, expected {n + 11}")
+        ranges = np.array(tok[2 : 2 + n], dtype=np.float64)
+        p = [float(v) for v in tok[2 + n : 8 + n]]
+        stamp = float(tok[8 + n])
+        return _Laser(stamp, -math.pi / 2, flaser_increment(n), max_range, ranges, tuple(p[:3]), tuple(p[3:]))
+    # ROBOTLASER1 / ROBOTLASER2
+    start, _fov, res, rmax = (float(v) for v in tok[2:6])
+    n = int(tok[8])
+    if n < 0 or len(tok) < n + 10:
+        raise ValueError(f"{tok[0]} with {n} readings is too short")
+    ranges = np.array(tok[9 : 9 + n], dtype=np.float64)
+    n_rem = int(tok[9 + n])
+    rest = 10 + n + n_rem
+    if n_rem < 0 or len(tok) != rest + 14:
+        raise ValueError(f"{tok[0]} with {n} readings and {n_rem} remissions has {len(tok)} fields")
+    p = [float(v) for v in tok[rest : rest + 6]]
+    stamp = float(tok[rest + 11])
+    return _Laser(stamp, start, res, rmax, ranges, tuple(p[:3]), tuple(p[3:]))
+
+
+class CarmenReader:
+    """A :class:`~cornerslam_cli.logs.base.LogReader` over one CARMEN log."""
+
+    format = "carmen"
+
+    def __init__(self, path: Path, scan_topic: str = "", odom_topic: str = "", **_frames):
+        self.path = Path(path)
+        self.stats = ReadStats()
+        self._counts: dict[str, int] = {}
+        self._params: dict[str, str] = {}
+        self._start: float | None = None
+        self._end: float | None = None
+        self._prescan()
+        self._want_scan, self._want_odom = scan_topic, odom_topic
+        self.scan_topic, self.odom_topic, self._problems = self._select()
+
+    def _prescan(self) -> None:
+        """Count line tags, read PARAMs and the time span (cheap: no number parsing of readings)."""
+        name = self.path.name
+        try:
+            for line in _lines(self.path, self.stats):
+                tag, _, rest = line.lstrip().partition(" ")
+                tag = tag.strip()
+                if not tag or tag[0] == "#":
+                    continue
+                if tag == "PARAM":
+                    kv = rest.split()
+                    if len(kv) >= 2:
+                        self._params[kv[0]] = kv[1]
+                    continue
+                self._counts[tag] = self._counts.get(tag, 0) + 1
+                if tag in LASER_TAGS or tag == ODOM_TAG:
+                    try:
+                        t = float(rest.rsplit(None, 3)[-3])
+                    except (ValueError, IndexError):
+                        continue
+                    if math.isfinite(t):
+                        self._start = t if self._start is None else min(self._start, t)
+                        self._end = t if self._end is None else max(self._end, t)
+        except OSError as exc:
+            raise LogError(
+                f"cannot read CARMEN log '{name}': {exc}", "check the file (gzip damaged?)"
+            ) from exc
+        if not any(t in self._counts for t in LASER_TAGS + (ODOM_TAG,)):
+            raise LogError(
+                f"'{name}' is not a CARMEN log: no FLASER/RLASER/ROBOTLASER1/ODOM lines",
+                "give a CARMEN log (.clf/.log), an .mcap, a .bag or a ROS 2 bag directory",
+            )
+
+    def _select(self) -> tuple[str, str, list[tuple[str, str]]]:
+        name = self.path.name
+        lasers = [t for t in LASER_TAGS if self._counts.get(t)]
+        problems = []
+        scan = ""
+        if self._want_scan:
+            if self._want_scan in lasers:
+                scan = self._want_scan
+            else:
+                problems.append(
+                    (
+                        f"CARMEN log '{name}' has no '{self._want_scan}' lines (laser lines: "
+                        f"{', '.join(lasers) or 'none'})",
+                        "choose one of them with --scan-topic",
+                    )
+                )
+        elif lasers:
+            scan = next(t for t in ("ROBOTLASER1", "FLASER", "RLASER", "ROBOTLASER2") if t in lasers)
+        else:
+            problems.append(
+                (f"CARMEN log '{name}' has no laser lines (FLASER/ROBOTLASER1)", "give a log with scans")
+            )
+        odom = ""
+        if self._want_odom:
+            if self._want_odom == ODOM_TAG and self._counts.get(ODOM_TAG) or self._want_odom in lasers:
+                odom = self._want_odom
+            else:
+                problems.append(
+                    (
+                        f"CARMEN log '{name}' has no '{self._want_odom}' lines",
+                        f"choose --odom-topic ODOM or a laser tag ({', '.join(lasers) or 'none'})",
+                    )
+                )
+        elif self._counts.get(ODOM_TAG):
+            odom = ODOM_TAG
+        elif scan:
+            odom = scan
+        else:
+            problems.append((f"CARMEN log '{name}' has no odometry", "select one with --odom-topic"))
+        return scan, odom, problems
+
+    def check(self) -> None:
+        if self._problems:
+            raise LogError(*self._problems[0])
+
+    def info(self) -> LogInfo:
+        dur = (self._end - self._start) if self._start is not None else 0.0
+        topics = tuple(
+            TopicInfo(tag, f"carmen/{tag}", n, (n - 1) / dur if n > 1 and dur > 0 else None, "carmen")
+            for tag, n in sorted(self._counts.items())
+        )
+        src = ""
+        if self.odom_topic == ODOM_TAG:
+            src = "ODOM lines"
+        elif self.odom_topic:
+            src = f"{self.odom_topic} odometry fields"
+        return LogInfo(
+            format=self.format,
+            path=str(self.path),
+            start=self._start,
+            end=self._end,
+            duration=dur,
+            n_messages=sum(self._counts.values()),
+            topics=topics,
+            scan_topic=self.scan_topic,
+            odom_topic=self.odom_topic,
+            odom_source=src,
+            problems=tuple(f"{m} ({h})" for m, h in self._problems),
+        )
+
+    def _max_range(self, tag: str) -> float:
+        key = "robot_rear_laser_max" if tag == "RLASER" else "robot_front_laser_max"
+        try:
+            v = float(self._params[key])
+            return v if v > 0 else DEFAULT_MAX_RANGE
+        except (KeyError, ValueError):
+            return DEFAULT_MAX_RANGE
+
+    def laser_to_base(self) -> Pose2 | None:
+        """Laser pose in the robot frame from ROBOTLASER1 laser/robot poses (first 50 lines), else None."""
+        self.check()
+        if not self.scan_topic.startswith("ROBOTLASER"):
+            return None
+        offs = []
+        for line in _lines(self.path, None):
+            tok = line.split()
+            if not tok or tok[0] != self.scan_topic:
+                continue
+            try:
+                las = parse_laser(tok, 0.0)
+            except (ValueError, IndexError):
+                continue
+            (lx, ly, lt), (rx, ry, rt) = las.laser, las.robot
+            c, s = math.cos(rt), math.sin(rt)
+            dx, dy = lx - rx, ly - ry
+            offs.append((c * dx + s * dy, -s * dx + c * dy, math.atan2(math.sin(lt - rt), math.cos(lt - rt))))
+            if len(offs) >= 50:
+                break
+        if not offs:
+            return None
+        a = np.array(offs)
+        return (
+            float(a[:, 0].mean()),
+            float(a[:, 1].mean()),
+            float(np.arctan2(np.sin(a[:, 2]).mean(), np.cos(a[:, 2]).mean())),
+        )
+
+    def messages(self) -> Iterator[Scan | OdomSample]:
+        self.check()
+        return self._iter()
+
+    def _iter(self) -> Iterator[Scan | OdomSample]:
+        st = self.stats
+        scan_tag, odom_tag = self.scan_topic, self.odom_topic
+        max_range = self._max_range(scan_tag)
+        where = self.path.name
+        for lineno, line in enumerate(_lines(self.path, st), 1):
+            tok = line.split()
+            tag = tok[0] if tok else ""
+            if tag != scan_tag and tag != odom_tag:
+                continue
+            try:
+                if tag == ODOM_TAG:
+                    if len(tok) != 10:
+                        raise ValueError(f"ODOM has {len(tok)} fields, expected 10")
+                    x, y, th = (float(v) for v in tok[1:4])
+                    st.odoms += 1
+                    yield OdomSample(float(tok[7]), x, y, th)
+                    continue
+                las = parse_laser(tok, max_range)
+            except (ValueError, IndexError) as exc:
+                st.decode_failed += 1
+                if st.decode_failed <= 5:
+                    st.warn("%s:%d: malformed %s line skipped (%s)", where, lineno, tag, exc)
+                continue
+            if tag == odom_tag:
+                st.odoms += 1
+                yield OdomSample(las.stamp, *las.robot)
+            scan = make_scan(
+                st, f"{where}:{lineno}", las.stamp, las.angle_min, None, las.angle_increment, 0.0,
+                las.range_max, las.ranges,
+            )  # fmt: skip
+            if scan is not None:
+                yield scan
+        if st.decode_failed > 5:
+            st.warn("%s: %d malformed lines skipped in total", where, st.decode_failed)
+
+    def close(self) -> None:
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

@@ -1,0 +1,372 @@
+"""MCAP files (ROS 2 CDR or ROS 1 messages): a streaming, damage-tolerant record reader.
+
+The data section is read record by record (chunks decompressed one at a time), so memory stays
+flat in log length. A file whose recorder died (no summary, cut mid-record) yields every message
+before the cut, including the readable prefix of the cut chunk (zstd/lz4/uncompressed streams are
+decompressed incrementally), and warns. A chunk that fails its CRC or does not decompress is skipped
+with a warning; a record whose length runs past the end of the file ends the read with a warning.
+
+Summary (statistics, channels, chunk indexes) is used when present for ``info()``; without it the
+data section is scanned once (no message decoding). Record layouts: https://mcap.dev/spec.
+"""
+
+from __future__ import annotations
+
+import heapq
+import io
+import struct
+import zlib
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import LogError
+from .base import Channel, ReadStats, RosLogReader
+
+MAGIC = b"\x89MCAP0\r\n"
+OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK = 0x01, 0x02, 0x03, 0x04, 0x05, 0x06
+OP_CHUNK_INDEX, OP_STATISTICS, OP_DATA_END = 0x08, 0x0B, 0x0F
+FOOTER_LEN = 1 + 8 + 20  # opcode, length, summary_start, summary_offset_start, summary_crc
+
+_REC = struct.Struct("<BQ")
+_U16 = struct.Struct("<H")
+_U32 = struct.Struct("<I")
+_U64 = struct.Struct("<Q")
+_MSG = struct.Struct("<HIQQ")
+_CHUNK = struct.Struct("<QQQI")
+_STATS = struct.Struct("<QHIIIIQQ")
+REORDER_MAX = 100_000  # messages held back to restore log-time order across overlapping chunks
+
+
+class McapFormatError(ValueError):
+    """Bytes that are not a valid MCAP record."""
+
+
+def _str(buf: memoryview, off: int) -> tuple[str, int]:
+    (n,) = _U32.unpack_from(buf, off)
+    off += 4
+    if off + n > len(buf):
+        raise McapFormatError("string overruns its record")
+    return bytes(buf[off : off + n]).decode("utf-8", "replace"), off + n
+
+
+def _schema(body: memoryview) -> tuple[int, str, str, str]:
+    """(id, name, encoding, data) of a Schema record."""
+    (sid,) = _U16.unpack_from(body, 0)
+    name, off = _str(body, 2)
+    enc, off = _str(body, off)
+    data, _ = _str(body, off)
+    return sid, name, enc, data
+
+
+def _channel(body: memoryview) -> tuple[int, int, str, str]:
+    """(id, schema_id, topic, message_encoding) of a Channel record."""
+    cid, sid = struct.unpack_from("<HH", body, 0)
+    topic, off = _str(body, 4)
+    enc, _ = _str(body, off)
+    return cid, sid, topic, enc
+
+
+def _u16_u64_map(body: memoryview, off: int) -> tuple[dict[int, int], int]:
+    (n,) = _U32.unpack_from(body, off)
+    off += 4
+    out = {}
+    for pos in range(off, off + n, 10):
+        k, v = struct.unpack_from("<HQ", body, pos)
+        out[k] = v
+    return out, off + n
+
+
+@dataclass
+class _Index:
+    """What is known of a file's channels and counts (from the summary or a scan)."""
+
+    schemas: dict[int, tuple[str, str, str]] = field(default_factory=dict)  # id -> name, encoding, data
+    channels: dict[int, tuple[str, str, int]] = field(default_factory=dict)  # id -> topic, encoding, sid
+    counts: dict[int, int] | None = None
+    start: int | None = None
+    end: int | None = None
+    n_messages: int = 0
+
+
+class McapSource:
+    """A :class:`~cornerslam_cli.logs.base.RawSource` over one MCAP file (only ``open()`` gets a name)."""
+
+    format = "mcap"
+
+    def __init__(self, path: Path, stats: ReadStats):
+        self.path = Path(path)
+        self.stats = stats
+        self.name = self.path.name
+        self.size = self.path.stat().st_size
+        self._f = open(self.path, "rb")  # noqa: SIM115 - closed by close()
+        head = self._f.read(8)
+        if head != MAGIC:
+            self._f.close()
+            raise LogError(
+                f"'{self.name}' is not an MCAP file (bad magic bytes)",
+                "check the file; MCAP files start with \\x89MCAP0",
+            )
+        self.summary_ok = False
+        self.index = self._read_summary()
+        if self.index is None:
+            self._f.seek(-8, io.SEEK_END)
+            if self._f.read(8) != MAGIC:
+                self.stats.warn(
+                    "%s has no end magic/footer (recording interrupted?): reading what is there", self.name
+                )
+            self.index = self._scan()
+
+    # ---------------------------------------------------------------- low level
+    def _records(self, start: int, end: int, warn: bool) -> Iterator[tuple[int, memoryview, int, bool]]:
+        """(opcode, body, offset, complete) of the top-level records in [start, end)."""
+        f = self._f
+        f.seek(start)
+        pos = start
+        while pos < end:
+            hdr = f.read(9)
+            if len(hdr) < 9:
+                if warn:
+                    self._warn_cut(pos, "in a record header")
+                return
+            op, length = _REC.unpack(hdr)
+            if op == 0:
+                if warn:
+                    self.stats.warn(
+                        "%s: invalid record (opcode 0) at byte %d: stopped reading", self.name, pos
+                    )
+                return
+            if length > end - pos - 9:
+                if warn:
+                    self._warn_cut(pos, f"in a record of {length} bytes (opcode 0x{op:02x})")
+                if op == OP_CHUNK:
+                    yield op, memoryview(f.read(max(0, min(end - pos - 9, 1 << 31)))), pos, False
+                return
+            body = memoryview(f.read(length))
+            yield op, body, pos, True
+            pos += 9 + length
+            if op in (OP_FOOTER, OP_DATA_END):
+                return
+        if warn and end == self.size:
+            self._warn_cut(pos, "before the footer")
+
+    def _warn_cut(self, pos: int, what: str) -> None:
+        self.stats.warn(
+            "%s ends early at byte %d of %d (%s; recorder stopped?): messages after the cut are lost",
+            self.name,
+            pos,
+            self.size,
+            what,
+        )
+
+    def _chunk_records(self, body: memoryview, pos: int, complete: bool) -> memoryview | None:
+        """Decompressed records of a Chunk record (a prefix if the chunk is cut), None if unusable."""
+        try:
+            t0, t1, usize, crc = _CHUNK.unpack_from(body, 0)
+            comp, off = _str(body, _CHUNK.size)
+            (rlen,) = _U64.unpack_from(body, off)
+            off += 8
+        except (struct.error, McapFormatError):
+            self.stats.warn(
+                "%s: chunk at byte %d is cut in its header: its messages are lost", self.name, pos
+            )
+            return None
+        data = body[off : off + rlen]
+        what = f"chunk at byte {pos} (log time {t0 * 1e-9:.3f}–{t1 * 1e-9:.3f} s)"
+        try:
+            if comp == "":
+                out = data
+            elif comp == "zstd":
+                import zstandard
+
+                if complete:
+                    out = memoryview(zstandard.ZstdDecompressor().decompress(data, max_output_size=usize))
+                else:
+                    out = memoryview(zstandard.ZstdDecompressor().decompressobj().decompress(bytes(data)))
+            elif comp == "lz4":
+                import lz4.frame
+
+                if complete:
+                    out = memoryview(lz4.frame.decompress(data))
+                else:
+                    out = memoryview(lz4.frame.LZ4FrameDecompressor().decompress(bytes(data)))
+            else:
+                self.stats.warn("%s: %s uses unknown compression %r: skipped", self.name, what, comp)
+                return None
+        except Exception as exc:  # noqa: BLE001 - corrupt compressed data
+            self.stats.warn("%s: %s does not decompress (%s): skipped", self.name, what, exc)
+            return None
+        if complete and crc and zlib.crc32(out) != crc:
+            self.stats.warn("%s: %s fails its CRC (corrupt bytes): skipped", self.name, what)
+            return None
+        if not complete:
+            self.stats.warn("%s: %s is cut: keeping its first %d bytes of records", self.name, what, len(out))
+        return out
+
+    def _data_messages(self, warn: bool) -> Iterator[tuple[int, int, memoryview, int]]:
+        """(channel_id, log_time, data, chunk_start_time) in file order; registers schemas/channels."""
+        idx = self.index
+        for op, body, pos, complete in self._records(8, self._data_end(), warn):
+            try:
+                if op == OP_CHUNK:
+                    recs = self._chunk_records(body, pos, complete)
+                    if recs is None:
+                        continue
+                    (t0,) = _U64.unpack_from(body, 0)
+                    yield from self._inner(recs, pos, t0, warn and complete)
+                elif op == OP_MESSAGE:
+                    cid, _, t, _ = _MSG.unpack_from(body, 0)
+                    yield cid, t, body[_MSG.size :], t
+                elif op == OP_SCHEMA:
+                    sid, name, enc, data = _schema(body)
+                    idx.schemas.setdefault(sid, (name, enc, data))
+                elif op == OP_CHANNEL:
+                    cid, sid, topic, enc = _channel(body)
+                    idx.channels.setdefault(cid, (topic, enc, sid))
+            except (struct.error, McapFormatError) as exc:
+                if warn:
+                    self.stats.warn("%s: bad record at byte %d (%s): skipped", self.name, pos, exc)
+
+    def _inner(
+        self, recs: memoryview, pos: int, t0: int, warn: bool
+    ) -> Iterator[tuple[int, int, memoryview, int]]:
+        idx = self.index
+        off, n = 0, len(recs)
+        while off + 9 <= n:
+            op, length = _REC.unpack_from(recs, off)
+            body_off = off + 9
+            if body_off + length > n:
+                if warn:
+                    self.stats.warn(
+                        "%s: chunk at byte %d has a record overrunning it: rest skipped", self.name, pos
+                    )
+                return
+            body = recs[body_off : body_off + length]
+            off = body_off + length
+            if op == OP_MESSAGE:
+                if length < _MSG.size:
+                    continue
+                cid, _, t, _ = _MSG.unpack_from(body, 0)
+                yield cid, t, body[_MSG.size :], t0
+            elif op == OP_SCHEMA:
+                sid, name, enc, data = _schema(body)
+                idx.schemas.setdefault(sid, (name, enc, data))
+            elif op == OP_CHANNEL:
+                cid, sid, topic, enc = _channel(body)
+                idx.channels.setdefault(cid, (topic, enc, sid))
+
+    def _data_end(self) -> int:
+        return self._summary_start if self.summary_ok else self.size
+
+    # ---------------------------------------------------------------- summary / scan
+    def _read_summary(self) -> _Index | None:
+        if self.size < 8 + FOOTER_LEN + 8:
+            return None
+        f = self._f
+        f.seek(self.size - FOOTER_LEN - 8)
+        tail = f.read(FOOTER_LEN + 8)
+        if tail[-8:] != MAGIC or tail[0] != OP_FOOTER:
+            return None
+        summary_start = _U64.unpack_from(tail, 9)[0]
+        footer_pos = self.size - FOOTER_LEN - 8
+        if not 8 <= summary_start <= footer_pos:
+            return None
+        idx = _Index()
+        stats_seen = False
+        chunk_times: list[tuple[int, int]] = []
+        try:
+            for op, body, _, _ in self._records(summary_start, footer_pos, warn=False):
+                if op == OP_SCHEMA:
+                    sid, name, enc, data = _schema(body)
+                    idx.schemas[sid] = (name, enc, data)
+                elif op == OP_CHANNEL:
+                    cid, sid, topic, enc = _channel(body)
+                    idx.channels[cid] = (topic, enc, sid)
+                elif op == OP_STATISTICS:
+                    n, *_, t0, t1 = _STATS.unpack_from(body, 0)
+                    counts, _ = _u16_u64_map(body, _STATS.size)
+                    idx.counts, idx.n_messages, stats_seen = counts, n, True
+                    if n:
+                        idx.start, idx.end = t0, t1
+                elif op == OP_CHUNK_INDEX:
+                    t0, t1 = struct.unpack_from("<QQ", body, 0)
+                    chunk_times.append((t0, t1))
+        except (struct.error, McapFormatError):
+            return None
+        if not stats_seen:
+            return None  # counts unknown: scan instead
+        self._summary_start = summary_start
+        # the data section ends at the DataEnd record, which precedes the summary
+        self.summary_ok = True
+        return idx
+
+    def _scan(self) -> _Index:
+        """Index of a file without a usable summary: one pass over the data section, no decoding."""
+        self.index = idx = _Index(counts={})
+        for cid, t, _, _ in self._data_messages(warn=True):
+            idx.counts[cid] = idx.counts.get(cid, 0) + 1
+            idx.n_messages += 1
+            idx.start = t if idx.start is None else min(idx.start, t)
+            idx.end = t if idx.end is None else max(idx.end, t)
+        return idx
+
+    # ---------------------------------------------------------------- RawSource
+    def channels(self) -> list[Channel]:
+        out = []
+        idx = self.index
+        for cid, (topic, enc, sid) in sorted(idx.channels.items()):
+            name, fmt, data = idx.schemas.get(sid, ("", "", ""))
+            count = idx.counts.get(cid, 0) if idx.counts is not None else None
+            out.append(Channel(topic, name, enc, count, data, fmt))
+        return out
+
+    def time_range(self) -> tuple[int, int] | None:
+        if self.index.start is None or self.index.end is None:
+            return None
+        return self.index.start, self.index.end
+
+    def raw_messages(self, topics: set[str]) -> Iterator[tuple[str, int, memoryview]]:
+        """Messages of ``topics`` in log-time order: a heap releases messages older than the
+        start time of the next chunk, so overlapping chunks are merged with bounded memory."""
+        ids = {cid: topic for cid, (topic, _, _) in self.index.channels.items() if topic in topics}
+        heap: list[tuple[int, int, str, memoryview]] = []
+        seq = 0
+        read = 0
+        for cid, t, data, horizon in self._data_messages(warn=True):
+            while heap and (heap[0][0] <= horizon or len(heap) > REORDER_MAX):
+                t_, _, topic_, data_ = heapq.heappop(heap)
+                yield topic_, t_, data_
+            topic = ids.get(cid)
+            if topic is None:
+                chan = self.index.channels.get(cid)
+                if chan is None or chan[0] not in topics:
+                    continue
+                ids[cid] = topic = chan[0]
+            heapq.heappush(heap, (t, seq, topic, data))
+            seq += 1
+            read += 1
+        while heap:
+            t_, _, topic_, data_ = heapq.heappop(heap)
+            yield topic_, t_, data_
+        if self.summary_ok and self.index.counts is not None:
+            expected = sum(self.index.counts.get(c, 0) for c in ids)
+            if read < expected:
+                self.stats.warn(
+                    "%s: read %d of the %d messages the summary lists on %s",
+                    self.name,
+                    read,
+                    expected,
+                    ", ".join(sorted(topics)),
+                )
+
+    def close(self) -> None:
+        self._f.close()
+
+
+def open_mcap(path: Path, **kw) -> RosLogReader:
+    stats = ReadStats()
+    try:
+        source = McapSource(path, stats)
+    except (OSError, struct.error, McapFormatError, io.UnsupportedOperation) as exc:
+        raise LogError(f"cannot read MCAP file '{Path(path).name}': {exc}", "check the file") from exc
+    return RosLogReader(source, path, stats=stats, **kw)

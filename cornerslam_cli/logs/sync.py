@@ -1,0 +1,140 @@
+"""Scan/odometry synchronisation and keyframe selection.
+
+``synchronise(messages)`` turns the time-ordered stream of :class:`Scan` and :class:`OdomSample`
+from a log reader into ``(scan, odom_pose)`` pairs, the odometry interpolated at the scan's stamp.
+It streams: only the odometry samples that a pending scan may still need are kept.
+
+Interpolation between the two odometry samples that bracket a scan is linear in (x, y) and along the
+shorter arc in θ — the SE(2) geodesic differs from this by O(Δθ·Δd), negligible between odometry
+samples a few tens of milliseconds apart.
+
+Scans that cannot be interpolated are skipped and counted in :class:`SyncStats`: before the first or
+after the last odometry sample, stamps that go backwards or repeat. Odometry samples that go back in
+time are dropped and counted too.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config import KeyframeConfig
+from ..types import OdomSample, Scan, wrap_angle
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class SyncStats:
+    scans_in: int = 0
+    scans_out: int = 0
+    before_first_odom: int = 0
+    after_last_odom: int = 0
+    scan_time_backwards: int = 0
+    odom_time_backwards: int = 0
+    keyframes_skipped: int = 0
+
+    @property
+    def scans_skipped(self) -> int:
+        return self.before_first_odom + self.after_last_odom + self.scan_time_backwards
+
+    def as_dict(self) -> dict:
+        d = dict(self.__dict__)
+        d["scans_skipped"] = self.scans_skipped
+        return d
+
+
+def interpolate_pose(a: OdomSample, b: OdomSample, t: float) -> np.ndarray:
+    """Pose (x, y, θ) at time t between samples a and b (a.stamp <= t <= b.stamp), angle-aware."""
+    dt = b.stamp - a.stamp
+    s = 0.0 if dt <= 0.0 else (t - a.stamp) / dt
+    dth = float(wrap_angle(b.theta - a.theta))
+    return np.array(
+        [a.x + s * (b.x - a.x), a.y + s * (b.y - a.y), float(wrap_angle(a.theta + s * dth))], dtype=float
+    )
+
+
+def synchronise(
+    messages: Iterable[Scan | OdomSample], stats: SyncStats | None = None
+) -> Iterator[tuple[Scan, np.ndarray]]:
+    """Yield ``(scan, odom_pose)`` for every scan that lies within the odometry's time span."""
+    st = stats if stats is not None else SyncStats()
+    odom: deque[OdomSample] = deque()  # samples a pending scan may still need, increasing stamps
+    pending: deque[Scan] = deque()  # scans waiting for an odometry sample at or after their stamp
+    last_scan_stamp = -np.inf
+    last_odom_stamp = -np.inf
+
+    def emit_ready() -> Iterator[tuple[Scan, np.ndarray]]:
+        while pending and odom and odom[-1].stamp >= pending[0].stamp:
+            scan = pending.popleft()
+            t = scan.stamp
+            if t < odom[0].stamp:
+                st.before_first_odom += 1
+                continue
+            # drop samples that no later scan can need: keep the last one at or before t
+            while len(odom) >= 2 and odom[1].stamp <= t:
+                odom.popleft()
+            a = odom[0]
+            b = odom[1] if len(odom) >= 2 else odom[0]
+            st.scans_out += 1
+            yield scan, interpolate_pose(a, b, t)
+
+    for msg in messages:
+        if isinstance(msg, Scan):
+            st.scans_in += 1
+            if msg.stamp <= last_scan_stamp:
+                st.scan_time_backwards += 1
+                continue
+            last_scan_stamp = msg.stamp
+            if not odom:
+                st.before_first_odom += 1
+                continue
+            pending.append(msg)
+        elif isinstance(msg, OdomSample):
+            if msg.stamp <= last_odom_stamp:
+                st.odom_time_backwards += 1
+                continue
+            last_odom_stamp = msg.stamp
+            odom.append(msg)
+        yield from emit_ready()
+    st.after_last_odom += len(pending)
+    if st.before_first_odom or st.after_last_odom or st.scan_time_backwards or st.odom_time_backwards:
+        log.warning(
+            "skipped %d scans before the first and %d after the last odometry sample, "
+            "%d scans and %d odometry samples whose stamps went backwards or repeated",
+            st.before_first_odom,
+            st.after_last_odom,
+            st.scan_time_backwards,
+            st.odom_time_backwards,
+        )
+
+
+def select_keyframes(
+    pairs: Iterable[tuple[Scan, np.ndarray]], cfg: KeyframeConfig, stats: SyncStats | None = None
+) -> Iterator[tuple[Scan, np.ndarray]]:
+    """Keep a scan when the robot moved ``linear_update`` metres or turned ``angular_update`` radians
+    since the last kept one (gmapping's linearUpdate/angularUpdate), or ``max_interval`` seconds
+    passed. The first scan is always kept; with all three at 0 every scan is kept."""
+    every = cfg.linear_update <= 0.0 and cfg.angular_update <= 0.0 and cfg.max_interval <= 0.0
+    last: np.ndarray | None = None
+    last_t = 0.0
+    for scan, pose in pairs:
+        if every or last is None:
+            keep = True
+        else:
+            moved = float(np.hypot(pose[0] - last[0], pose[1] - last[1]))
+            turned = abs(float(wrap_angle(pose[2] - last[2])))
+            keep = (
+                (cfg.linear_update > 0.0 and moved >= cfg.linear_update)
+                or (cfg.angular_update > 0.0 and turned >= cfg.angular_update)
+                or (cfg.max_interval > 0.0 and scan.stamp - last_t >= cfg.max_interval)
+            )
+        if keep:
+            last, last_t = pose, scan.stamp
+            yield scan, pose
+        elif stats is not None:
+            stats.keyframes_skipped += 1

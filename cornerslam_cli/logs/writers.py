@@ -1,0 +1,341 @@
+"""Log writers for test fixtures and ``cornerslam simulate``: MCAP, ROS 1 bag, ROS 2 bag, CARMEN.
+
+Every writer takes full-beam scans (:class:`RawScan`, inf/NaN allowed = no return) and odometry
+samples (:class:`~cornerslam_cli.types.OdomSample`) as iterables sorted by stamp (generators are
+fine: writing streams), merges them by stamp (odometry first on ties) and uses the stamp as both
+header stamp and log time. ROS messages are serialized with rosbags' typestores.
+
+Options shared by the ROS writers: ``tf_static=(x, y, yaw)`` writes one /tf_static message
+base_frame→frame_id of the scans; ``odom_as_tf=True`` writes odometry as /tf odom_frame→base_frame
+instead of a nav_msgs/Odometry topic.
+"""
+
+from __future__ import annotations
+
+import gzip as _gzip
+import heapq
+import math
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..types import OdomSample
+from .carmen import DEFAULT_MAX_RANGE, flaser_increment
+from .cdr import typestore
+
+LASERSCAN = "sensor_msgs/msg/LaserScan"
+ODOMETRY = "nav_msgs/msg/Odometry"
+TFMESSAGE = "tf2_msgs/msg/TFMessage"
+_TF_MSGDEF = "geometry_msgs/TransformStamped[] transforms\n"
+
+
+@dataclass(frozen=True)
+class RawScan:
+    """A scan to write: every beam of the message, in bearing order.
+
+    ranges : (n,) metres, inf/NaN or >= range_max = no return; beam i at angle_min + i * angle_increment.
+    """
+
+    stamp: float
+    angle_min: float
+    angle_increment: float
+    ranges: np.ndarray
+    range_min: float = 0.0
+    range_max: float = 30.0
+    frame_id: str = "laser"
+
+    @property
+    def angle_max(self) -> float:
+        return self.angle_min + (len(self.ranges) - 1) * self.angle_increment
+
+
+def _stamp(t: float) -> tuple[int, int]:
+    sec = math.floor(t)
+    nsec = int(round((t - sec) * 1e9))
+    if nsec >= 1_000_000_000:
+        sec, nsec = sec + 1, nsec - 1_000_000_000
+    return sec, nsec
+
+
+def _ns(t: float) -> int:
+    sec, nsec = _stamp(t)
+    return sec * 1_000_000_000 + nsec
+
+
+def _merged(scans: Iterable[RawScan], odoms: Iterable[OdomSample]) -> Iterator[RawScan | OdomSample]:
+    return heapq.merge(odoms, scans, key=lambda m: m.stamp)
+
+
+class RosSerializer:
+    """Builds and serializes LaserScan, Odometry and tf messages in one encoding (``cdr`` or ``ros1``)."""
+
+    def __init__(self, encoding: str):
+        if encoding not in ("cdr", "ros1"):
+            raise ValueError(f"encoding must be 'cdr' or 'ros1', not {encoding!r}")
+        self.ros1 = encoding == "ros1"
+        self.store = store = typestore(encoding)
+        if TFMESSAGE not in store.fielddefs:  # ROS 1 Noetic store lacks tf2_msgs
+            from rosbags.typesys import get_types_from_msg
+
+            store.register(get_types_from_msg(_TF_MSGDEF, TFMESSAGE))
+        T = store.types
+        self._Time, self._Header = T["builtin_interfaces/msg/Time"], T["std_msgs/msg/Header"]
+        self._T = T
+
+    def serialize(self, msg, typename: str) -> bytes:
+        if self.ros1:
+            return bytes(self.store.serialize_ros1(msg, typename))
+        return bytes(self.store.serialize_cdr(msg, typename))
+
+    def msgdef(self, typename: str) -> str:
+        return self.store.generate_msgdef(typename, ros_version=1 if self.ros1 else 2)[0]
+
+    def header(self, stamp: float, frame: str):
+        sec, nsec = _stamp(stamp)
+        t = self._Time(sec=sec, nanosec=nsec)
+        if self.ros1:
+            return self._Header(seq=0, stamp=t, frame_id=frame)
+        return self._Header(stamp=t, frame_id=frame)
+
+    def laserscan(self, s: RawScan) -> bytes:
+        r = np.asarray(s.ranges, dtype=np.float32)
+        msg = self._T[LASERSCAN](
+            header=self.header(s.stamp, s.frame_id),
+            angle_min=float(s.angle_min),
+            angle_max=float(s.angle_max),
+            angle_increment=float(s.angle_increment),
+            time_increment=0.0,
+            scan_time=0.0,
+            range_min=float(s.range_min),
+            range_max=float(s.range_max),
+            ranges=r,
+            intensities=np.zeros(0, dtype=np.float32),
+        )
+        return self.serialize(msg, LASERSCAN)
+
+    def _pose(self, x: float, y: float, yaw: float):
+        T = self._T
+        return (
+            T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
+            T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)),
+        )
+
+    def odometry(self, o: OdomSample, odom_frame: str, base_frame: str) -> bytes:
+        T = self._T
+        p, q = self._pose(o.x, o.y, o.theta)
+        zero3 = T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
+        msg = T[ODOMETRY](
+            header=self.header(o.stamp, odom_frame),
+            child_frame_id=base_frame,
+            pose=T["geometry_msgs/msg/PoseWithCovariance"](
+                pose=T["geometry_msgs/msg/Pose"](position=p, orientation=q), covariance=np.zeros(36)
+            ),
+            twist=T["geometry_msgs/msg/TwistWithCovariance"](
+                twist=T["geometry_msgs/msg/Twist"](linear=zero3, angular=zero3), covariance=np.zeros(36)
+            ),
+        )
+        return self.serialize(msg, ODOMETRY)
+
+    def tf(self, stamp: float, parent: str, child: str, x: float, y: float, yaw: float) -> bytes:
+        T = self._T
+        p, q = self._pose(x, y, yaw)
+        ts = T["geometry_msgs/msg/TransformStamped"](
+            header=self.header(stamp, parent),
+            child_frame_id=child,
+            transform=T["geometry_msgs/msg/Transform"](
+                translation=T["geometry_msgs/msg/Vector3"](x=p.x, y=p.y, z=0.0), rotation=q
+            ),
+        )
+        return self.serialize(T[TFMESSAGE](transforms=[ts]), TFMESSAGE)
+
+
+def _ros_messages(
+    ros: RosSerializer,
+    scans: Iterable[RawScan],
+    odoms: Iterable[OdomSample],
+    scan_topic: str,
+    odom_topic: str,
+    tf_static: tuple[float, float, float] | None,
+    odom_as_tf: bool,
+    odom_frame: str,
+    base_frame: str,
+) -> Iterator[tuple[str, str, int, bytes]]:
+    """(topic, typename, log_time_ns, data) of a whole log, in stamp order."""
+    static_done = tf_static is None
+    for m in _merged(scans, odoms):
+        if isinstance(m, RawScan):
+            if not static_done:
+                yield (
+                    "/tf_static",
+                    TFMESSAGE,
+                    _ns(m.stamp),
+                    ros.tf(m.stamp, base_frame, m.frame_id, *tf_static),
+                )
+                static_done = True
+            yield scan_topic, LASERSCAN, _ns(m.stamp), ros.laserscan(m)
+        elif odom_as_tf:
+            yield "/tf", TFMESSAGE, _ns(m.stamp), ros.tf(m.stamp, odom_frame, base_frame, m.x, m.y, m.theta)
+        else:
+            yield odom_topic, ODOMETRY, _ns(m.stamp), ros.odometry(m, odom_frame, base_frame)
+
+
+def write_mcap(
+    path: str | Path,
+    scans: Iterable[RawScan],
+    odoms: Iterable[OdomSample],
+    *,
+    encoding: str = "cdr",
+    scan_topic: str = "/scan",
+    odom_topic: str = "/odom",
+    tf_static: tuple[float, float, float] | None = None,
+    odom_as_tf: bool = False,
+    odom_frame: str = "odom",
+    base_frame: str = "base_link",
+    compression: str = "zstd",
+    chunk_size: int = 1024 * 1024,
+) -> Path:
+    """Write an MCAP log (``encoding`` ``cdr``: ROS 2 profile; ``ros1``: ROS 1 profile)."""
+    from mcap.writer import CompressionType, Writer
+
+    ros = RosSerializer(encoding)
+    path = Path(path)
+    comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}[
+        compression
+    ]
+    with open(path, "wb") as f:
+        w = Writer(f, chunk_size=chunk_size, compression=comp)
+        w.start(profile="ros1" if ros.ros1 else "ros2", library="cornerslam")
+        channels: dict[str, int] = {}
+        for topic, typename, t, data in _ros_messages(
+            ros, scans, odoms, scan_topic, odom_topic, tf_static, odom_as_tf, odom_frame, base_frame
+        ):
+            cid = channels.get(topic)
+            if cid is None:
+                name = typename.replace("/msg/", "/") if ros.ros1 else typename
+                sid = w.register_schema(
+                    name=name,
+                    encoding="ros1msg" if ros.ros1 else "ros2msg",
+                    data=ros.msgdef(typename).encode(),
+                )
+                cid = channels[topic] = w.register_channel(
+                    topic=topic, message_encoding="ros1" if ros.ros1 else "cdr", schema_id=sid
+                )
+            w.add_message(channel_id=cid, log_time=t, data=data, publish_time=t)
+        w.finish()
+    return path
+
+
+def write_rosbag1(
+    path: str | Path,
+    scans: Iterable[RawScan],
+    odoms: Iterable[OdomSample],
+    *,
+    scan_topic: str = "/scan",
+    odom_topic: str = "/odom",
+    tf_static: tuple[float, float, float] | None = None,
+    odom_as_tf: bool = False,
+    odom_frame: str = "odom",
+    base_frame: str = "base_link",
+) -> Path:
+    """Write a ROS 1 bag (v2.0, uncompressed chunks)."""
+    from rosbags.rosbag1 import Writer
+
+    ros = RosSerializer("ros1")
+    path = Path(path)
+    with Writer(path) as w:
+        conns = {}
+        for topic, typename, t, data in _ros_messages(
+            ros, scans, odoms, scan_topic, odom_topic, tf_static, odom_as_tf, odom_frame, base_frame
+        ):
+            if topic not in conns:
+                conns[topic] = w.add_connection(
+                    topic, typename, typestore=ros.store, latching=1 if topic == "/tf_static" else None
+                )
+            w.write(conns[topic], t, data)
+    return path
+
+
+def write_rosbag2(
+    path: str | Path,
+    scans: Iterable[RawScan],
+    odoms: Iterable[OdomSample],
+    *,
+    storage: str = "sqlite3",
+    scan_topic: str = "/scan",
+    odom_topic: str = "/odom",
+    tf_static: tuple[float, float, float] | None = None,
+    odom_as_tf: bool = False,
+    odom_frame: str = "odom",
+    base_frame: str = "base_link",
+) -> Path:
+    """Write a ROS 2 bag directory (``storage`` ``sqlite3`` or ``mcap``); ``path`` must not exist."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    plugin = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}[storage]
+    ros = RosSerializer("cdr")
+    path = Path(path)
+    with Writer(path, version=9, storage_plugin=plugin) as w:
+        conns = {}
+        for topic, typename, t, data in _ros_messages(
+            ros, scans, odoms, scan_topic, odom_topic, tf_static, odom_as_tf, odom_frame, base_frame
+        ):
+            if topic not in conns:
+                conns[topic] = w.add_connection(topic, typename, typestore=ros.store)
+            w.write(conns[topic], t, data)
+    return path
+
+
+def _fmt(values) -> str:
+    return " ".join(repr(float(v)) for v in values)
+
+
+def write_carmen(
+    path: str | Path,
+    scans: Iterable[RawScan],
+    odoms: Iterable[OdomSample],
+    *,
+    gzip: bool = False,
+    odom_lines: bool = True,
+    laser: str = "auto",
+    hostname: str = "cornerslam",
+) -> Path:
+    """Write a CARMEN log: ODOM lines (unless ``odom_lines=False``) and one laser line per scan.
+
+    laser ``FLASER`` needs CARMEN's implied angles (angle_min = −π/2, the increment of
+    :func:`~cornerslam_cli.logs.carmen.flaser_increment`) and no-return = 81.83 m; ``ROBOTLASER1``
+    stores angles and max range; ``auto`` picks FLASER when the scan fits it. The laser line's pose
+    fields hold the latest odometry pose (so a log without ODOM lines still has odometry).
+    No-return readings (inf, NaN, >= range_max) are written as the max range.
+    """
+    path = Path(path)
+    opener = _gzip.open if gzip else open
+    pose = (0.0, 0.0, 0.0)
+    with opener(path, "wt", encoding="ascii") as f:
+        f.write("# written by cornerslam write_carmen\n")
+        for m in _merged(scans, odoms):
+            ts = repr(float(m.stamp))
+            if isinstance(m, OdomSample):
+                pose = (m.x, m.y, m.theta)
+                if odom_lines:
+                    f.write(f"ODOM {_fmt(pose)} 0 0 0 {ts} {hostname} {ts}\n")
+                continue
+            n = len(m.ranges)
+            flaser_ok = (
+                abs(m.angle_min + math.pi / 2) < 1e-9
+                and abs(m.angle_increment - flaser_increment(n)) < 1e-9
+                and m.range_max == DEFAULT_MAX_RANGE
+            )
+            tag = ("FLASER" if flaser_ok else "ROBOTLASER1") if laser == "auto" else laser
+            if tag == "FLASER" and not flaser_ok:
+                raise ValueError("scan does not fit FLASER's implied angles / max range; use ROBOTLASER1")
+            r = np.asarray(m.ranges, dtype=np.float64).copy()
+            r[~np.isfinite(r) | (r >= m.range_max)] = m.range_max
+            if tag == "FLASER":
+                f.write(f"FLASER {n} {_fmt(r)} {_fmt(pose)} {_fmt(pose)} {ts} {hostname} {ts}\n")
+            else:
+                fov = n * m.angle_increment
+                head = f"ROBOTLASER1 0 {_fmt((m.angle_min, fov, m.angle_increment, m.range_max))} 0.01 0"
+                f.write(f"{head} {n} {_fmt(r)} 0 {_fmt(pose)} {_fmt(pose)} 0 0 0 0 0 {ts} {hostname} {ts}\n")
+    return path

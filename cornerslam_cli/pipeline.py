@@ -1,0 +1,375 @@
+"""The SLAM pipeline: log → synchronised keyframes → extract → predict → associate → update/augment.
+
+``run()`` reads as the table of contents of a cornerslam run; :class:`Slam.step` is one step of
+the paper's loop (Fig 1), each stage timed for ``timing.csv``.
+"""
+
+from __future__ import annotations
+
+import logging
+import platform
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .association import make_associator
+from .config import Config
+from .errors import LogError
+from .evaluate import ate, rpe
+from .features import extract
+from .filter import Ekf
+from .logs import open_log
+from .logs.sync import SyncStats, select_keyframes, synchronise
+from .report.tables import (
+    LINES_COLUMNS,
+    MAP_COLUMNS,
+    TIMING_COLUMNS,
+    TRAJECTORY_COLUMNS,
+    CsvTable,
+    StagedDir,
+    read_tum,
+    write_json,
+    write_tum,
+)
+from .types import Corners, Scan, Segments
+
+log = logging.getLogger(__name__)
+
+
+def se2_matrix(x: float, y: float, yaw: float) -> np.ndarray:
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s, x], [s, c, y], [0.0, 0.0, 1.0]])
+
+
+def corners_to_base(
+    corners: Corners, laser2base: tuple[float, float, float]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Corner measurements and covariances moved from the sensor frame to the base frame.
+
+    z_base = [t + R z_xy; φ] (φ, an angle between two lines, is frame-invariant); C_base = J C Jᵀ with
+    J = blockdiag(R, 1).
+    """
+    x, y, yaw = laser2base
+    J = np.eye(3)
+    J[:2, :2] = se2_matrix(0.0, 0.0, yaw)[:2, :2]
+    z = corners.z @ J.T
+    z[:, 0] += x
+    z[:, 1] += y
+    C = J @ corners.cov @ J.T
+    return z, C
+
+
+def segments_to_map(segments: Segments, sensor2map: np.ndarray) -> np.ndarray:
+    """(k, 4) segment end points x1, y1, x2, y2 in the map frame."""
+    R, t = sensor2map[:2, :2], sensor2map[:2, 2]
+    return np.hstack((segments.p1 @ R.T + t, segments.p2 @ R.T + t))
+
+
+@dataclass
+class StepRecord:
+    """What one step produced (one row of trajectory.csv and timing.csv)."""
+
+    step: int
+    stamp: float
+    pose: np.ndarray
+    pose_var: np.ndarray
+    odom: np.ndarray
+    n_points: int
+    n_lines: int
+    n_corners: int
+    n_candidates: int
+    n_matched: int
+    n_new: int
+    n_landmarks: int
+    t_extract: float
+    t_predict: float
+    t_match: float
+    t_update: float
+    segments_map: np.ndarray
+    nodes: int = 0
+    budget_hit: bool = False
+
+    @property
+    def t_total(self) -> float:
+        return self.t_extract + self.t_predict + self.t_match + self.t_update
+
+
+class Slam:
+    """Corner EKF-SLAM state across steps: the filter, the associator, landmark bookkeeping."""
+
+    def __init__(self, cfg: Config, laser2base: tuple[float, float, float]):
+        self.cfg = cfg
+        self.laser2base = laser2base
+        self.ekf = Ekf(cfg.ekf)
+        self.associate = make_associator(cfg.association)
+        self.first_step: list[int] = []
+        self.last_step: list[int] = []
+        self.n_obs: list[int] = []
+        self.prev_odom: np.ndarray | None = None
+        self.n_steps = 0
+
+    def step(self, scan: Scan, odom: np.ndarray) -> StepRecord:
+        k = self.n_steps
+        cfg = self.cfg
+        t0 = time.perf_counter()
+        segments, corners = extract(scan, cfg.sensor, cfg.lines, cfg.corners)  # Alg 1-2
+        z, C = corners_to_base(corners, self.laser2base)
+        t1 = time.perf_counter()
+        if self.prev_odom is not None:
+            self.ekf.predict(self.prev_odom, odom)  # eq 19-22, O(N)
+        self.prev_odom = odom
+        t2 = time.perf_counter()
+        result = self.associate(z, C, self.ekf.predict_observations())  # Alg 3-5
+        t3 = time.perf_counter()
+        matched = result.pairs >= 0
+        ids = result.pairs[matched]
+        if len(ids):
+            self.ekf.update(ids, z[matched], C[matched])  # eq 23-32, block update
+        new_ids = self.ekf.augment(z[~matched], C[~matched])
+        self.ekf.check_health(k)
+        t4 = time.perf_counter()
+        for i in ids:
+            self.last_step[i] = k
+            self.n_obs[i] += 1
+        for _ in range(len(new_ids)):
+            self.first_step.append(k)
+            self.last_step.append(k)
+            self.n_obs.append(1)
+        pose = np.array(self.ekf.pose, dtype=float)
+        sensor2map = se2_matrix(*pose) @ se2_matrix(*self.laser2base)
+        self.n_steps += 1
+        return StepRecord(
+            step=k,
+            stamp=scan.stamp,
+            pose=pose,
+            pose_var=np.diag(self.ekf.P[:3, :3]).copy(),
+            odom=odom,
+            n_points=len(scan.ranges),
+            n_lines=len(segments),
+            n_corners=len(corners),
+            n_candidates=int(np.sum(result.n_candidates)),
+            n_matched=int(len(ids)),
+            n_new=int(len(new_ids)),
+            n_landmarks=self.ekf.n_landmarks,
+            t_extract=t1 - t0,
+            t_predict=t2 - t1,
+            t_match=t3 - t2,
+            t_update=t4 - t3,
+            segments_map=segments_to_map(segments, sensor2map),
+            nodes=int(result.nodes),
+            budget_hit=bool(result.budget_hit),
+        )
+
+    def landmark_table(self) -> np.ndarray:
+        """(n, 11) rows of map.csv."""
+        n = self.ekf.n_landmarks
+        L = np.asarray(self.ekf.landmarks).reshape(n, 3)
+        P = self.ekf.P
+        idx = 3 + 3 * np.arange(n)
+        return np.column_stack(
+            (
+                np.arange(n),
+                L,
+                P[idx, idx],
+                P[idx + 1, idx + 1],
+                P[idx, idx + 1],
+                P[idx + 2, idx + 2],
+                self.first_step,
+                self.last_step,
+                self.n_obs,
+            )
+        )
+
+
+def find_ground_truth(log_path: Path) -> Path | None:
+    """``LOG.gt.tum`` beside the log (also without the log's extension), if present."""
+    candidates = [log_path.with_name(log_path.name + ".gt.tum"), log_path.with_suffix(".gt.tum")]
+    return next((c for c in candidates if c.is_file()), None)
+
+
+def default_out_dir(log_path: Path, assoc: str) -> Path:
+    stem = log_path.name.split(".")[0] or "log"
+    return Path("cornerslam_out") / f"{stem}_{assoc}"
+
+
+def run(
+    log_path: str | Path,
+    cfg: Config,
+    out: str | Path | None = None,
+    ground_truth: str | Path | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> dict:
+    """Run corner EKF-SLAM on one log and write the output directory atomically.
+
+    Returns the summary (also written to summary.json).
+    """
+    wall0 = time.perf_counter()
+    log_path = Path(log_path)
+    inp = cfg.input
+    reader = open_log(
+        log_path,
+        scan_topic=inp.scan_topic,
+        odom_topic=inp.odom_topic,
+        odom_frame=inp.odom_frame,
+        base_frame=inp.base_frame,
+    )
+    info = reader.info()
+    laser2base, laser_source = _laser_mount(reader, cfg)
+    gt_path = Path(ground_truth) if ground_truth else find_ground_truth(log_path)
+    gt = read_tum(gt_path) if gt_path else None  # read before the run: a bad file fails fast
+    out_dir = Path(out) if out else default_out_dir(log_path, cfg.association.method)
+    total_scans = _scan_count(info)
+
+    slam = Slam(cfg, laser2base)
+    stats = SyncStats()
+    with StagedDir(out_dir) as stage:
+        traj = CsvTable(stage.path / "trajectory.csv", TRAJECTORY_COLUMNS)
+        timing = CsvTable(stage.path / "timing.csv", TIMING_COLUMNS)
+        lines = CsvTable(stage.path / "lines.csv", LINES_COLUMNS)
+        stamps, poses, odoms = [], [], []
+        totals = np.zeros(4)
+        t_match_max, budget_hits, matched_total = 0.0, 0, 0
+        pairs = select_keyframes(synchronise(_scans_cropped(reader, cfg), stats), cfg.keyframes, stats)
+        for scan, odom in pairs:
+            r = slam.step(scan, odom)
+            traj.row(r.step, f"{r.stamp:.9f}", *r.pose, *r.odom, *r.pose_var)
+            timing.row(
+                r.step, f"{r.stamp:.9f}", r.n_points, r.n_lines, r.n_corners, r.n_candidates, r.n_matched,
+                r.n_new, r.n_landmarks, r.t_extract, r.t_predict, r.t_match, r.t_update, r.t_total,
+            )  # fmt: skip
+            lines.rows(r.segments_map, lead=(r.step,))
+            stamps.append(r.stamp)
+            poses.append(r.pose)
+            odoms.append(r.odom)
+            totals += (r.t_extract, r.t_predict, r.t_match, r.t_update)
+            t_match_max = max(t_match_max, r.t_match)
+            budget_hits += r.budget_hit
+            matched_total += r.n_matched
+            if progress is not None:
+                progress(stats.scans_in, total_scans)
+        for table in (traj, timing, lines):
+            table.close()
+        if slam.n_steps == 0:
+            raise LogError(
+                f"log '{log_path}': no scan could be processed ({stats.scans_in} scans read, "
+                f"{stats.before_first_odom} before the first and {stats.after_last_odom} "
+                "after the last odometry sample)",
+                "check that the scan and odometry topics overlap in time",
+            )
+        lm = slam.landmark_table()
+        mp = CsvTable(stage.path / "map.csv", MAP_COLUMNS)
+        for row in lm:
+            mp.row(*(int(v) if i in (0, 8, 9, 10) else v for i, v in enumerate(row)))
+        mp.close()
+        stamps_a, poses_a, odoms_a = np.array(stamps), np.array(poses), np.array(odoms)
+        write_tum(stage.path / "trajectory.tum", stamps_a, poses_a)
+        accuracy = None
+        if gt is not None:
+            accuracy = {
+                "ground_truth": str(gt_path),
+                "ate": ate(stamps_a, poses_a, *gt),
+                "odom_ate": ate(stamps_a, odoms_a, *gt),
+                **rpe(stamps_a, poses_a, *gt),
+            }
+        summary = {
+            "cornerslam_version": __version__,
+            "mode": "slam",
+            "input": {
+                "log": str(log_path),
+                "format": info.format,
+                "scan_topic": info.scan_topic,
+                "odom_topic": info.odom_topic,
+                "odom_source": info.odom_source,
+                "laser_to_base": list(laser2base),
+                "laser_to_base_source": laser_source,
+            },
+            "assoc": cfg.association.method,
+            "counts": {
+                "steps": slam.n_steps,
+                "landmarks": slam.ekf.n_landmarks,
+                "matched_total": matched_total,
+                "beams_total": reader.stats.beams,
+                "beams_invalid": reader.stats.beams_dropped,
+                "scans_bad_geometry": reader.stats.scans_skipped,
+                "scans_size_mismatch": reader.stats.size_mismatch,
+                "messages_failed": reader.stats.decode_failed,
+                **stats.as_dict(),
+                "budget_hits": int(budget_hits),
+            },
+            "timing": {
+                "t_extract": totals[0],
+                "t_predict": totals[1],
+                "t_match": totals[2],
+                "t_update": totals[3],
+                "t_total": float(totals.sum()),
+                "t_match_max": t_match_max,
+                "wall_time": time.perf_counter() - wall0,
+                "scans_per_second": slam.n_steps / max(float(totals.sum()), 1e-12),
+            },
+            "final_pose": poses_a[-1].tolist(),
+            "warnings": list(reader.stats.warnings),
+            "accuracy": accuracy,
+            "config": cfg.to_dict(),
+            "versions": _versions(),
+        }
+        write_json(stage.path / "summary.json", summary)
+        summary["out_dir"] = str(stage.commit())
+    return summary
+
+
+def _scans_cropped(reader, cfg: Config):
+    """The reader's messages with the configured beams at the scan's ends removed (robot body)."""
+    inp = cfg.input
+    lo, hi, max_range = inp.skip_beams_start, inp.skip_beams_end, inp.max_range
+    if lo == 0 and hi == 0 and max_range <= 0.0:
+        yield from reader.messages()
+        return
+    for msg in reader.messages():
+        if isinstance(msg, Scan):
+            keep = (msg.beam_index >= lo) & (msg.beam_index < msg.n_beams - hi)
+            if max_range > 0.0:
+                keep &= msg.ranges < max_range
+            msg = Scan(
+                stamp=msg.stamp,
+                ranges=msg.ranges[keep],
+                angles=msg.angles[keep],
+                beam_index=msg.beam_index[keep],
+                n_beams=msg.n_beams,
+                range_min=msg.range_min,
+                range_max=msg.range_max if max_range <= 0.0 else min(max_range, msg.range_max),
+                angle_increment=msg.angle_increment,
+                frame_id=msg.frame_id,
+            )
+        yield msg
+
+
+def _laser_mount(reader, cfg: Config) -> tuple[tuple[float, float, float], str]:
+    mount = cfg.input.laser
+    if mount.from_tf:
+        tf = reader.laser_to_base()
+        if tf is not None:
+            return (float(tf[0]), float(tf[1]), float(tf[2])), "tf"
+    return (mount.x, mount.y, mount.yaw), "config"
+
+
+def _scan_count(info) -> int:
+    for t in info.topics:
+        if t.name == info.scan_topic:
+            return int(t.count or 0)
+    return 0
+
+
+def _versions() -> dict:
+    import importlib.metadata as md
+
+    out = {"python": platform.python_version()}
+    for name in ("numpy", "scipy", "mcap", "rosbags", "click", "pyyaml"):
+        try:
+            out[name] = md.version(name)
+        except md.PackageNotFoundError:
+            pass
+    return out

@@ -1,0 +1,84 @@
+"""Config loading: defaults, YAML, overrides, and the exit-2 errors that name the key."""
+
+from pathlib import Path
+
+import pytest
+
+from cornerslam_cli.config import Config, dump_config, load_config
+from cornerslam_cli.errors import ConfigError
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_default_yaml_mirrors_the_built_in_defaults():
+    assert load_config(ROOT / "configs" / "default.yaml") == Config()
+
+
+@pytest.mark.parametrize("name", ["default.yaml", "paper.yaml"])
+def test_shipped_configs_load(name):
+    cfg = load_config(ROOT / "configs" / name)
+    assert cfg.association.method in ("icnn", "jcbb", "pca")
+
+
+def test_paper_config_has_the_papers_parameters():
+    cfg = load_config(ROOT / "configs" / "paper.yaml")
+    assert cfg.association.pca.group_size == 3
+    assert cfg.sensor.model == "piecewise"
+    assert cfg.sensor.sigma_r_near == pytest.approx(0.03)
+
+
+def test_yaml_then_override_wins(tmp_path):
+    p = tmp_path / "c.yaml"
+    p.write_text("association:\n  alpha: 0.01\n  pca:\n    group_size: 4\n")
+    cfg = load_config(p, ["association.pca.group_size=6"])
+    assert cfg.association.alpha == 0.01
+    assert cfg.association.pca.group_size == 6
+    assert cfg.association.method == "pca"
+
+
+def test_int_is_accepted_for_float_and_lists_become_tuples():
+    cfg = load_config(None, ["association.alpha=1"])
+    assert isinstance(cfg.association.alpha, float)
+
+
+@pytest.mark.parametrize(
+    "override, fragment",
+    [
+        ("association.pca.grup_size=5", "did you mean 'group_size'"),
+        ("asociation.alpha=0.1", "did you mean 'association'"),
+        ("association.alpha=abc", "'association.alpha' must be a number"),
+        ("lines.min_points=2.5", "'lines.min_points' must be an integer"),
+        ("corners.drop_occluded=3", "'corners.drop_occluded' must be true or false"),
+        ("sensor.model=linaer", "did you mean 'linear'"),
+        ("association=3", "'association' must be a mapping"),
+        ("noequals", "is not key=value"),
+    ],
+)
+def test_bad_keys_and_types_name_the_key(override, fragment):
+    with pytest.raises(ConfigError) as e:
+        load_config(None, [override])
+    assert fragment in str(e.value)
+
+
+def test_bad_yaml_names_the_file_and_line(tmp_path):
+    p = tmp_path / "bad.yaml"
+    p.write_text("association:\n  alpha: [0.1\n")
+    with pytest.raises(ConfigError) as e:
+        load_config(p)
+    assert "bad.yaml" in str(e.value) and "not valid YAML" in str(e.value)
+
+
+def test_missing_and_non_mapping_files(tmp_path):
+    with pytest.raises(ConfigError, match="does not exist"):
+        load_config(tmp_path / "nope.yaml")
+    p = tmp_path / "list.yaml"
+    p.write_text("- 1\n- 2\n")
+    with pytest.raises(ConfigError, match="must contain a mapping"):
+        load_config(p)
+
+
+def test_dump_round_trips(tmp_path):
+    cfg = load_config(None, ["association.method=jcbb", "keyframes.linear_update=0.2"])
+    p = tmp_path / "dump.yaml"
+    p.write_text(dump_config(cfg))
+    assert load_config(p) == cfg

@@ -1,0 +1,98 @@
+"""CARMEN specifics: line formats, comments/PARAMs, malformed lines, angle convention."""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+import pytest
+from _log_fixtures import split
+
+from cornerslam_cli.errors import LogError
+from cornerslam_cli.logs import open_log
+from cornerslam_cli.logs.carmen import flaser_increment
+
+
+def flaser(n, t, r=2.0, pose=(0, 0, 0)):
+    p = " ".join(map(str, pose))
+    return f"FLASER {n} {' '.join([str(r)] * n)} {p} {p} {t} host {t}\n"
+
+
+def test_flaser_increments_follow_carmen():
+    assert flaser_increment(180) == flaser_increment(181) == pytest.approx(math.radians(1))
+    assert flaser_increment(361) == pytest.approx(math.radians(0.5))
+    assert flaser_increment(401) == pytest.approx(math.radians(0.25))
+    assert flaser_increment(91) == pytest.approx(math.pi / 90)
+
+
+def test_comments_params_malformed_and_max_range(tmp_path, caplog):
+    text = (
+        "# a comment\nPARAM robot_front_laser_max 50.0\n"
+        + flaser(181, 1.0)
+        + "FLASER 181 1 2 3\n"  # malformed: too short
+        + "ODOM 1 2 0.5 0 0 0 1.5 host 1.5\n"
+        + "ODOM x y z 0 0 0 1.6 host 1.6\n"  # malformed number
+        + flaser(181, 2.0, r=50.0)  # all at max range: all no-return
+        + "SONAR 1 2 3\n"  # unknown tag: ignored
+    )
+    p = tmp_path / "a.clf"
+    p.write_text(text)
+    with caplog.at_level(logging.WARNING, logger="cornerslam.logs"):
+        log = open_log(p)
+        scans, odoms = split(log.messages())
+    assert len(scans) == 2 and len(odoms) == 1 and log.stats.decode_failed == 2
+    assert "malformed" in caplog.text
+    assert scans[0].n_beams == 181 and scans[0].angles[-1] == pytest.approx(math.pi / 2)
+    assert scans[1].range_max == 50.0 and len(scans[1].ranges) == 0 and scans[1].n_invalid == 181
+    assert (odoms[0].stamp, odoms[0].x, odoms[0].theta) == (1.5, 1.0, 0.5)
+    assert {t.name: t.count for t in log.info().topics} == {"FLASER": 3, "ODOM": 2, "SONAR": 1}
+
+
+def test_robotlaser1_fields_and_offset(tmp_path):
+    n = 5
+    ranges = " ".join(["1.0", "2.0", "9.9", "inf", "3.0"])
+    line = (
+        f"ROBOTLASER1 0 -0.5 1.0 0.25 9.9 0.01 0 {n} {ranges} 0 1.1 2.0 0.0 1.0 2.0 0.0 0 0 0 0 0 7.5 h 7.5\n"
+    )
+    p = tmp_path / "r.log"
+    p.write_text(line)
+    log = open_log(p)
+    (scan,), (odom,) = split(log.messages())
+    np.testing.assert_array_equal(scan.beam_index, [0, 1, 4])
+    np.testing.assert_allclose(scan.angles, [-0.5, -0.25, 0.5])
+    assert scan.range_max == 9.9 and scan.stamp == 7.5
+    assert (odom.stamp, odom.x, odom.y) == (7.5, 1.0, 2.0)  # robot pose fields, no ODOM lines
+    assert log.laser_to_base() == pytest.approx((0.1, 0.0, 0.0))
+
+
+def test_rlaser_selected_explicitly_and_missing_tag(tmp_path):
+    p = tmp_path / "x.log"
+    p.write_text(flaser(180, 1.0) + flaser(180, 1.0).replace("FLASER", "RLASER"))
+    assert open_log(p).scan_topic == "FLASER"
+    assert open_log(p, scan_topic="RLASER").scan_topic == "RLASER"
+    with pytest.raises(LogError, match="no 'ROBOTLASER1' lines"):
+        open_log(p, scan_topic="ROBOTLASER1").messages()
+    with pytest.raises(LogError, match="no 'ODOM' lines"):
+        open_log(p, odom_topic="ODOM").messages()
+
+
+def test_odom_only_log_has_no_laser(tmp_path):
+    p = tmp_path / "o.log"
+    p.write_text("ODOM 1 2 0.5 0 0 0 1.5 host 1.5\n")
+    with pytest.raises(LogError, match="no laser lines"):
+        open_log(p).messages()
+
+
+def test_cut_gzip_yields_prefix_with_warning(tmp_path, caplog):
+    import gzip
+
+    rng = np.random.default_rng(0)
+    text = "".join(flaser(180, float(i), r=round(rng.uniform(1, 5), 3)) for i in range(200))
+    data = gzip.compress(text.encode())
+    p = tmp_path / "x.log.gz"
+    p.write_bytes(data[: len(data) // 2])
+    with caplog.at_level(logging.WARNING, logger="cornerslam.logs"):
+        scans, _ = split(open_log(p).messages())
+    assert 0 < len(scans) < 200 and [s.stamp for s in scans] == list(range(len(scans)))
+    assert "ends early" in caplog.text

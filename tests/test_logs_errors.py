@@ -1,0 +1,194 @@
+"""open_log and topic selection: every user problem is a LogError naming the file/topic + a hint."""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+import pytest
+from _log_fixtures import (
+    make_odoms,
+    make_scans,
+    odom_messages,
+    scan_messages,
+    split,
+    write_log,
+    write_messages_mcap,
+)
+
+from cornerslam_cli.errors import LogError
+from cornerslam_cli.logs import READERS, detect_format, open_log
+from cornerslam_cli.logs.writers import RawScan, RosSerializer, write_mcap
+
+
+def test_readers_table_covers_formats(tmp_path):
+    assert set(READERS) == {"mcap", "rosbag1", "rosbag2", "carmen"}
+    for fmt, name in [
+        ("mcap-cdr", "mcap"),
+        ("rosbag1", "rosbag1"),
+        ("rosbag2-sqlite3", "rosbag2"),
+        ("carmen", "carmen"),
+    ]:
+        d = tmp_path / fmt
+        d.mkdir()
+        assert detect_format(write_log(fmt, d)) == name
+
+
+def test_content_sniffed_before_extension(tmp_path):
+    p = write_log("mcap-cdr", tmp_path)
+    renamed = p.rename(tmp_path / "recording.dat")
+    assert detect_format(renamed) == "mcap"
+    carmen = write_log("carmen", tmp_path).rename(tmp_path / "intel.txt")
+    assert detect_format(carmen) == "carmen"
+
+
+@pytest.mark.parametrize(
+    "make, match",
+    [
+        (lambda d: d / "missing.mcap", "does not exist"),
+        (lambda d: (d / "e.mcap").write_bytes(b"") and None or d / "e.mcap", "is empty"),
+        (lambda d: (d / "e.log").write_bytes(b"") and None or d / "e.log", "is empty"),
+        (lambda d: d, "not a ROS 2 bag"),
+        (
+            lambda d: (d / "x.pcd").write_bytes(b"\x00\x01binary") and None or d / "x.pcd",
+            "unsupported log 'x.pcd'",
+        ),
+        (
+            lambda d: (d / "x.mcap").write_bytes(b"not an mcap at all") and None or d / "x.mcap",
+            "not a valid .mcap",
+        ),
+        (lambda d: (d / "x.bag").write_bytes(b"not a bag") and None or d / "x.bag", "not a valid .bag"),
+        (lambda d: (d / "x.log").write_text("hello world\n") and None or d / "x.log", "not a CARMEN log"),
+        (lambda d: (d / "x.db3").write_bytes(b"SQLite format 3") and None or d / "x.db3", "bag directory"),
+    ],
+)
+def test_bad_paths(tmp_path, make, match):
+    with pytest.raises(LogError, match=match) as err:
+        open_log(make(tmp_path))
+    assert err.value.hint
+
+
+def test_no_laserscan(tmp_path):
+    p = write_mcap(tmp_path / "odom_only.mcap", [], make_odoms())
+    log = open_log(p)
+    info = log.info()  # info never raises for selection problems: it reports them
+    assert info.scan_topic == "" and "no sensor_msgs/LaserScan" in info.problems[0]
+    with pytest.raises(LogError, match="'odom_only.mcap' has no sensor_msgs/LaserScan"):
+        log.messages()
+    with pytest.raises(LogError):
+        log.laser_to_base()
+
+
+def test_several_laserscans_listed(tmp_path):
+    p = write_messages_mcap(
+        tmp_path / "two.mcap", scan_messages("/scan") + scan_messages("/scan2") + odom_messages()
+    )
+    with pytest.raises(LogError, match="2 LaserScan topics: /scan, /scan2") as err:
+        open_log(p).messages()
+    assert "--scan-topic" in err.value.hint
+    scans, odoms = split(open_log(p, scan_topic="/scan2").messages())
+    assert len(scans) == 5 and len(odoms) == 5
+
+
+def test_no_odometry_hint_names_option(tmp_path):
+    p = write_mcap(tmp_path / "scans.mcap", make_scans(), [])
+    with pytest.raises(LogError, match="no odometry") as err:
+        open_log(p).messages()
+    assert "--odom-topic" in err.value.hint
+
+
+def test_requested_topics_missing_or_wrong_type(tmp_path):
+    p = write_log("mcap-cdr", tmp_path)
+    with pytest.raises(LogError, match=r"no topic '/laser' \(LaserScan topics: /scan\)"):
+        open_log(p, scan_topic="/laser").messages()
+    with pytest.raises(LogError, match=r"no topic '/wheel_odom' \(Odometry topics: /odom"):
+        open_log(p, odom_topic="/wheel_odom").messages()
+    with pytest.raises(LogError, match="is nav_msgs/Odometry, not sensor_msgs/LaserScan"):
+        open_log(p, scan_topic="/odom").messages()
+    with pytest.raises(LogError, match="not nav_msgs/Odometry or tf2_msgs/TFMessage"):
+        open_log(p, odom_topic="/scan").messages()
+
+
+def test_several_odometry_topics(tmp_path):
+    both = scan_messages() + odom_messages("/odom") + odom_messages("/odometry/filtered")
+    assert open_log(write_messages_mcap(tmp_path / "a.mcap", both)).odom_topic == "/odom"
+    neither = scan_messages() + odom_messages("/wheel") + odom_messages("/ekf")
+    with pytest.raises(LogError, match="2 Odometry topics: /ekf, /wheel") as err:
+        open_log(write_messages_mcap(tmp_path / "b.mcap", neither)).messages()
+    assert "--odom-topic" in err.value.hint
+    assert open_log(tmp_path / "b.mcap", odom_topic="/ekf").odom_topic == "/ekf"
+
+
+def _scan(ranges, **kw):
+    args = dict(stamp=100.0, angle_min=-1.0, angle_increment=0.01, range_min=0.1, range_max=10.0)
+    args.update(kw)
+    return RawScan(ranges=np.asarray(ranges, dtype=float), **args)
+
+
+def test_invalid_beams_dropped_and_counted(tmp_path):
+    r = [1.0, np.nan, np.inf, -np.inf, 0.05, 10.0, 11.0, 0.0, 2.0]
+    p = write_mcap(tmp_path / "b.mcap", [_scan(r)], make_odoms(1, t0=99.0))
+    log = open_log(p)
+    (scan,), _ = split(log.messages())
+    np.testing.assert_array_equal(scan.beam_index, [0, 8])
+    np.testing.assert_allclose(scan.ranges, [1.0, 2.0])
+    np.testing.assert_allclose(scan.angles, [-1.0, -0.92])
+    assert scan.n_beams == 9 and scan.n_invalid == 7
+    assert log.stats.beams == 9 and log.stats.beams_dropped == 7
+
+
+def test_size_mismatch_and_bad_increment(tmp_path, caplog):
+    ros = RosSerializer("cdr")
+    good = _scan(np.ones(10))
+    T = ros._T
+    msgs = []
+    for i, (a_max, inc) in enumerate([(5.0, 0.01), (-1.0 + 9 * 0.01, 0.0), (0.0, math.nan), (-0.91, -0.01)]):
+        m = T["sensor_msgs/msg/LaserScan"](
+            header=ros.header(100.0 + i, "laser"), angle_min=-1.0, angle_max=a_max, angle_increment=inc,
+            time_increment=0.0, scan_time=0.0, range_min=0.1, range_max=10.0,
+            ranges=np.ones(10, dtype=np.float32), intensities=np.zeros(0, dtype=np.float32),
+        )  # fmt: skip
+        msgs.append(
+            (
+                "/scan",
+                "sensor_msgs/msg/LaserScan",
+                int((100 + i) * 1e9),
+                ros.serialize(m, "sensor_msgs/msg/LaserScan"),
+            )
+        )
+    msgs += [("/scan", "sensor_msgs/msg/LaserScan", int(104e9), ros.laserscan(good))]
+    msgs += odom_messages()
+    log = open_log(write_messages_mcap(tmp_path / "m.mcap", msgs))
+    with caplog.at_level(logging.WARNING, logger="cornerslam.logs"):
+        scans, _ = split(log.messages())
+    assert len(scans) == 2  # the mismatched one (10 beams from angle_min) and the good one
+    np.testing.assert_allclose(scans[0].angles, -1.0 + 0.01 * np.arange(10), atol=1e-6)
+    assert log.stats.size_mismatch == 1 and log.stats.scans_skipped == 3
+    assert "imply" in caplog.text and "angle_increment" in caplog.text
+
+
+def test_undecodable_message_skipped_and_counted(tmp_path, caplog):
+    msgs = scan_messages(n=3) + [
+        ("/scan", "sensor_msgs/msg/LaserScan", int(1.7e18) + 10**9, b"\x00\x01\x00\x00garbage")
+    ]
+    msgs += odom_messages(n=3) + [
+        ("/odom", "nav_msgs/msg/Odometry", int(1.7e18) + 10**9, b"\x00\x01\x00\x00xx")
+    ]
+    log = open_log(write_messages_mcap(tmp_path / "g.mcap", sorted(msgs, key=lambda m: m[2])))
+    with caplog.at_level(logging.WARNING, logger="cornerslam.logs"):
+        scans, odoms = split(log.messages())
+    assert len(scans) == 3 and len(odoms) == 3 and log.stats.decode_failed == 2
+    assert "cannot decode" in caplog.text
+
+
+def test_info_fields(tmp_path):
+    p = write_log("mcap-cdr", tmp_path, tf_static=(0.1, 0.0, 0.0))
+    info = open_log(p).info()
+    assert info.format == "mcap" and info.path == str(p)
+    topics = {t.name: t for t in info.topics}
+    assert topics["/scan"].msgtype == "sensor_msgs/LaserScan" and topics["/scan"].count == 12
+    assert topics["/scan"].rate_hz == pytest.approx(11 / info.duration)
+    assert topics["/tf_static"].count == 1
+    assert (info.scan_topic, info.odom_topic, info.odom_source) == ("/scan", "/odom", "nav_msgs/Odometry")
+    assert info.n_messages == 25 and info.problems == ()

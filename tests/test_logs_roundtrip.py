@@ -1,0 +1,119 @@
+"""Every writer/reader pair round-trips scans (valid beams, angles, stamps) and odometry."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from _log_fixtures import ROS_WRITERS, WRITERS, make_odoms, make_scans, split, write_log
+
+from cornerslam_cli.logs import open_log
+from cornerslam_cli.logs.writers import write_carmen
+
+
+def expected_valid(raw, range_min):
+    r = np.asarray(raw.ranges, dtype=np.float32).astype(np.float64)
+    with np.errstate(invalid="ignore"):
+        return np.flatnonzero(np.isfinite(r) & (r > 0) & (r >= range_min) & (r < raw.range_max))
+
+
+@pytest.mark.parametrize("fmt", sorted(WRITERS))
+def test_round_trip(fmt, tmp_path):
+    raw, odoms = make_scans(), make_odoms()
+    path = write_log(fmt, tmp_path, raw, odoms)
+    with open_log(path) as log:
+        scans, got_odoms = split(log.messages())
+        info = log.info()
+        stats = log.stats
+    assert len(scans) == len(raw) and len(got_odoms) == len(odoms)
+    dropped = 0
+    for s, r in zip(scans, raw, strict=True):
+        idx = expected_valid(r, 0.0 if fmt == "carmen" else r.range_min)  # CARMEN has no range_min
+        dropped += len(r.ranges) - len(idx)
+        assert s.stamp == pytest.approx(r.stamp, abs=1e-6)
+        assert s.n_beams == len(r.ranges)
+        np.testing.assert_array_equal(s.beam_index, idx)
+        np.testing.assert_allclose(s.ranges, r.ranges[idx], rtol=1e-6)
+        np.testing.assert_allclose(s.angles, r.angle_min + idx * r.angle_increment, atol=1e-6)
+        assert np.all(np.diff(s.angles) > 0)
+    for o, e in zip(got_odoms, odoms, strict=True):
+        assert (o.stamp, o.x, o.y) == pytest.approx((e.stamp, e.x, e.y), abs=1e-6)
+        assert math.remainder(o.theta - e.theta, math.tau) == pytest.approx(0, abs=1e-9)
+    assert stats.scans == len(raw) and stats.odoms == len(odoms)
+    assert stats.beams_dropped == dropped > 0 and stats.decode_failed == 0
+    assert info.scan_topic and info.odom_topic
+    assert info.start == pytest.approx(odoms[0].stamp, abs=1e-6)
+    assert info.end == pytest.approx(raw[-1].stamp, abs=1e-6)
+
+
+@pytest.mark.parametrize("fmt", sorted(WRITERS))
+def test_messages_in_time_order_and_rereadable(fmt, tmp_path):
+    with open_log(write_log(fmt, tmp_path)) as log:
+        first = [m.stamp for m in log.messages()]
+        second = [m.stamp for m in log.messages()]
+    assert first == sorted(first) and first == second and len(first) == 24
+
+
+@pytest.mark.parametrize("fmt", sorted(ROS_WRITERS))
+def test_tf_static_laser_offset(fmt, tmp_path):
+    path = write_log(fmt, tmp_path, tf_static=(0.145, -0.02, 0.3))
+    with open_log(path) as log:
+        assert log.laser_to_base() == pytest.approx((0.145, -0.02, 0.3), abs=1e-6)
+        assert "/tf_static" in [t.name for t in log.info().topics]
+
+
+@pytest.mark.parametrize("fmt", sorted(ROS_WRITERS))
+def test_no_tf_static_gives_none(fmt, tmp_path):
+    with open_log(write_log(fmt, tmp_path)) as log:
+        assert log.laser_to_base() is None
+
+
+@pytest.mark.parametrize("fmt", sorted(ROS_WRITERS))
+def test_odometry_from_tf(fmt, tmp_path):
+    odoms = make_odoms()
+    path = write_log(fmt, tmp_path, odoms=odoms, odom_as_tf=True, tf_static=(0.2, 0.0, 0.0))
+    with open_log(path) as log:
+        info = log.info()
+        assert info.odom_source == "tf odom→base_link" and info.odom_topic == "/tf"
+        _, got = split(log.messages())
+        # tf_static base_link→laser must not be taken as odometry; laser offset still found
+        assert log.laser_to_base() == pytest.approx((0.2, 0.0, 0.0))
+    np.testing.assert_allclose(
+        [(o.stamp, o.x, o.y) for o in got], [(o.stamp, o.x, o.y) for o in odoms], atol=1e-6
+    )
+
+
+def test_tf_odometry_wrong_frames_is_an_error(tmp_path):
+    from cornerslam_cli.errors import LogError
+
+    path = write_log("mcap-cdr", tmp_path, odom_as_tf=True)
+    with open_log(path, base_frame="base_footprint") as log:
+        with pytest.raises(LogError, match="odom→base_footprint"):
+            list(log.messages())
+
+
+def test_carmen_without_odom_lines_uses_laser_pose_fields(tmp_path):
+    raw, odoms = make_scans(), make_odoms()
+    path = write_carmen(tmp_path / "x.log", raw, odoms, odom_lines=False)
+    with open_log(path) as log:
+        assert log.info().odom_source.endswith("odometry fields")
+        msgs = list(log.messages())
+    scans, got = split(msgs)
+    assert len(got) == len(scans) == len(raw)
+    # one odometry sample just before each scan, at the scan stamp, holding the latest odometry pose
+    assert [o.stamp for o in got] == [s.stamp for s in scans]
+    np.testing.assert_allclose([(o.x, o.y) for o in got], [(e.x, e.y) for e in odoms])
+
+
+@pytest.mark.parametrize("gz", [False, True])
+def test_carmen_flaser_convention(tmp_path, gz):
+    raw = make_scans(n=3, beams=180, range_max=81.83)
+    path = write_carmen(tmp_path / ("f.log.gz" if gz else "f.log"), raw, make_odoms(3), gzip=gz)
+    assert path.read_text(errors="ignore").count("FLASER") == 3 if not gz else True
+    with open_log(path) as log:
+        scans, _ = split(log.messages())
+    s = scans[0]
+    assert s.range_max == 81.83 and s.angle_increment == pytest.approx(math.pi / 180)
+    full = -math.pi / 2 + np.arange(180) * math.pi / 180
+    np.testing.assert_allclose(s.angles, full[s.beam_index])

@@ -1,0 +1,68 @@
+"""Scan/odometry synchronisation and keyframe selection against hand-computed cases."""
+
+import numpy as np
+import pytest
+
+from cornerslam_cli.config import KeyframeConfig
+from cornerslam_cli.logs.sync import SyncStats, interpolate_pose, select_keyframes, synchronise
+from cornerslam_cli.types import OdomSample, Scan
+
+
+def scan(t):
+    r = np.ones(3)
+    return Scan(t, r, np.array([-0.1, 0.0, 0.1]), np.arange(3), 3, 0.1, 10.0, 0.1)
+
+
+def test_interpolation_is_linear_and_takes_the_short_arc():
+    a = OdomSample(0.0, 0.0, 0.0, np.pi - 0.1)
+    b = OdomSample(1.0, 2.0, -4.0, -np.pi + 0.1)
+    p = interpolate_pose(a, b, 0.25)
+    assert p[:2] == pytest.approx([0.5, -1.0])
+    # from π−0.1 to −π+0.1 is +0.2 the short way round; a quarter of it lands at π−0.05
+    assert p[2] == pytest.approx(np.pi - 0.05)
+
+
+def test_scans_outside_the_odometry_span_are_skipped_and_counted():
+    msgs = [
+        scan(0.5),  # before any odometry
+        OdomSample(1.0, 0.0, 0.0, 0.0),
+        scan(1.5),  # bracketed
+        OdomSample(2.0, 1.0, 0.0, 0.0),
+        scan(2.0),  # exactly on a sample
+        scan(2.5),  # after the last sample
+    ]
+    st = SyncStats()
+    out = list(synchronise(msgs, st))
+    assert [s.stamp for s, _ in out] == [1.5, 2.0]
+    assert out[0][1] == pytest.approx([0.5, 0.0, 0.0])
+    assert out[1][1] == pytest.approx([1.0, 0.0, 0.0])
+    assert (st.before_first_odom, st.after_last_odom, st.scans_in, st.scans_out) == (1, 1, 4, 2)
+
+
+def test_scan_stamped_before_odometry_that_arrived_earlier_still_interpolates():
+    # log order differs from stamp order: the scan's header lags its arrival
+    msgs = [OdomSample(0.0, 0.0, 0.0, 0.0), OdomSample(1.0, 1.0, 0.0, 0.0), OdomSample(2.0, 2.0, 0.0, 0.0)]
+    msgs.insert(2, scan(0.5))
+    msgs.append(OdomSample(3.0, 3.0, 0.0, 0.0))
+    out = list(synchronise(msgs))
+    assert len(out) == 1 and out[0][1][0] == pytest.approx(0.5)
+
+
+def test_backwards_and_duplicate_stamps_are_dropped():
+    msgs = [OdomSample(0.0, 0, 0, 0), scan(1.0), scan(1.0), scan(0.9), OdomSample(2.0, 2, 0, 0)]
+    msgs += [OdomSample(1.9, 9, 9, 0), scan(1.5)]
+    st = SyncStats()
+    out = list(synchronise(msgs, st))
+    assert [s.stamp for s, _ in out] == [1.0, 1.5]
+    assert st.scan_time_backwards == 2 and st.odom_time_backwards == 1
+    assert out[0][1][0] == pytest.approx(1.0)
+
+
+def test_keyframes_by_distance_and_rotation():
+    poses = [np.array([0.1 * i, 0.0, 0.0]) for i in range(11)] + [np.array([1.0, 0.0, 0.6])]
+    pairs = [(scan(float(i)), p) for i, p in enumerate(poses)]
+    st = SyncStats()
+    kept = list(select_keyframes(pairs, KeyframeConfig(linear_update=0.35, angular_update=0.5), st))
+    assert [s.stamp for s, _ in kept] == [0.0, 4.0, 8.0, 11.0]
+    assert st.keyframes_skipped == 8
+    assert len(list(select_keyframes(pairs, KeyframeConfig()))) == len(pairs)
