@@ -232,7 +232,7 @@ def run(
         lines = CsvTable(stage.path / "lines.csv", LINES_COLUMNS)
         stamps, poses, odoms = [], [], []
         totals = np.zeros(4)
-        t_match_max, budget_hits, matched_total = 0.0, 0, 0
+        t_match_max, budget_hits, matched_total, points_total = 0.0, 0, 0, 0
         pairs = select_keyframes(synchronise(_scans_cropped(reader, cfg), stats), cfg.keyframes, stats)
         for scan, odom in pairs:
             r = slam.step(scan, odom)
@@ -249,10 +249,16 @@ def run(
             t_match_max = max(t_match_max, r.t_match)
             budget_hits += r.budget_hit
             matched_total += r.n_matched
+            points_total += r.n_points
             if progress is not None:
                 progress(stats.scans_in, total_scans)
         for table in (traj, timing, lines):
             table.close()
+        if slam.n_steps > 0 and points_total == 0:
+            raise LogError(
+                f"log '{log_path}': every beam of every scan is invalid (NaN, inf, zero or out of range)",
+                "check the scan topic, range_min/range_max and input.max_range",
+            )
         if slam.n_steps == 0:
             raise LogError(
                 f"log '{log_path}': no scan could be processed ({stats.scans_in} scans read, "

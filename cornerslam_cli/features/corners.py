@@ -14,6 +14,9 @@ A corner is z = (x, y, φ) in the sensor frame with a 3×3 covariance.
 * **Type II** (end point). A segment end whose next beam (in scan order, away from the segment) is more
   than d_min away and off the segment's line — a depth jump. The corner is the intersection of the line
   with its normal through the end beam's point q, i.e. q projected on the line: c = q − (n·q − r) n.
+  The true edge lies between the end beam and the next beam's bearing: the corner is moved to the middle of
+  that gap along the line and gets gap²/12 more variance along it (uniform); ends whose gap is wider than
+  ``endpoint_max_gap`` (grazing walls) are dropped.
   φ is not observable for an end point; it is set to ``endpoint_phi`` (default π/2: the line meets its
   normal, which also lets a type II sighting of a right-angled edge match the type I landmark of the same
   edge) with the prior variance ``endpoint_phi_sigma²``, uncorrelated with (x, y).
@@ -100,6 +103,7 @@ def type_two(scan: Scan, segs: Segments, jac_ends: np.ndarray, sensor: SensorCon
     """Type II corners at segment ends facing a depth jump: (z, cov, segs (m, 2) with −1 second)."""
     rho, theta = scan.ranges, scan.angles
     n = len(rho)
+    spacing = _spacing(scan)
     x, y = rho * np.cos(theta), rho * np.sin(theta)
     zs, covs, which = [], [], []
     for end, beam, step in ((0, segs.first, -1), (1, segs.last, +1)):
@@ -137,12 +141,23 @@ def type_two(scan: Scan, segs: Segments, jac_ends: np.ndarray, sensor: SensorCon
         AJ = A @ Je
         Cxy = A @ segs.cov[s] @ A.transpose(0, 2, 1) - AJ @ Ce @ AJ.transpose(0, 2, 1)
         Cxy = Cxy + Ge @ Ce @ Ge.transpose(0, 2, 1)
+        # the edge lies somewhere between the end beam and the next beam's bearing, where the line would be
+        # hit next: centre of that gap, variance gap²/12 along the line (uniform)
+        th_next = theta[b] + step * spacing
+        cos_next = np.cos(th_next - a)
+        t_next = r / np.where(cos_next > 1e-6, cos_next, np.nan)
+        x_next = t_next[:, None] * np.column_stack((np.cos(th_next), np.sin(th_next)))
+        gap_vec = x_next - c
+        gap = np.hypot(gap_vec[:, 0], gap_vec[:, 1])
+        good = gap <= cfg.endpoint_max_gap
+        c = c + 0.5 * np.where(good[:, None], gap_vec, 0.0)
+        Cxy = Cxy + (np.where(good, gap, 0.0) ** 2 / 12.0)[:, None, None] * (dvec[:, :, None] * dvec[:, None, :])
         cov = np.zeros((len(s), 3, 3))
         cov[:, :2, :2] = Cxy
         cov[:, 2, 2] = cfg.endpoint_phi_sigma**2
-        zs.append(np.column_stack((c, np.full(len(s), cfg.endpoint_phi))))
-        covs.append(cov)
-        which.append(np.column_stack((s, np.full(len(s), -1))))
+        zs.append(np.column_stack((c, np.full(len(s), cfg.endpoint_phi)))[good])
+        covs.append(cov[good])
+        which.append(np.column_stack((s, np.full(len(s), -1)))[good])
     if not zs:
         return np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros((0, 2), dtype=np.int64)
     return np.concatenate(zs), np.concatenate(covs), np.concatenate(which)
@@ -153,24 +168,53 @@ def dvec_of(theta):
     return np.column_stack((-np.sin(theta), np.cos(theta)))
 
 
-def hidden(scan: Scan, z: np.ndarray, margin: float) -> np.ndarray:
-    """(m,) bool: the corner lies more than ``margin`` behind the range measured at its bearing.
-
-    The measured range is the nearer of the (at most two) valid beams within one beam spacing of the
-    corner's bearing; a bearing with no such beam is not judged.
-    """
-    m, n = len(z), len(scan.ranges)
-    if m == 0 or n < 2:
-        return np.zeros(m, dtype=bool)
-    bearing = np.arctan2(z[:, 1], z[:, 0])
-    spacing = float(np.median(np.diff(scan.angles)))
+def measured_range(scan: Scan, bearing: np.ndarray) -> np.ndarray:
+    """Range the scan measured at each bearing: the nearer of the (at most two) valid beams within one beam
+    spacing of it; nan where there is none (a gap of dropped beams, or outside the field of view)."""
+    m, n = len(bearing), len(scan.ranges)
+    if n < 2:
+        return np.full(m, np.nan)
+    spacing = _spacing(scan)
     k = np.searchsorted(scan.angles, bearing)
     measured = np.full(m, np.inf)
     for nb in (k - 1, k):
         nbc = np.clip(nb, 0, n - 1)
         near = (nb >= 0) & (nb < n) & (np.abs(scan.angles[nbc] - bearing) <= spacing)
         measured = np.where(near, np.minimum(measured, scan.ranges[nbc]), measured)
+    return np.where(np.isfinite(measured), measured, np.nan)
+
+
+def _spacing(scan: Scan) -> float:
+    if scan.angle_increment > 0:
+        return float(scan.angle_increment)
+    return float(np.median(np.diff(scan.angles))) if len(scan.angles) > 1 else 0.0
+
+
+def hidden(scan: Scan, z: np.ndarray, margin: float) -> np.ndarray:
+    """(m,) bool: the corner lies more than ``margin`` behind the range measured at its bearing."""
+    measured = measured_range(scan, np.arctan2(z[:, 1], z[:, 0]))
     return measured < np.hypot(z[:, 0], z[:, 1]) - margin
+
+
+def seen_through(scan: Scan, segs: Segments, z: np.ndarray, which: np.ndarray, margin: float) -> np.ndarray:
+    """(m,) bool for type I corners: a segment's extension from its nearer end to the intersection crosses
+    space the scan saw through (a beam there measured more than ``margin`` beyond the extended line).
+
+    This rejects "virtual" intersections, e.g. a box face extended to a wall 15 cm behind it; at a real
+    corner the beams between a segment's end and the corner hit that same wall.
+    """
+    out = np.zeros(len(z), dtype=bool)
+    for col in (0, 1):
+        s = which[:, col]
+        c = z[:, :2]
+        ends = np.stack((segs.p1[s], segs.p2[s]), axis=1)
+        d_end = np.hypot(*(ends - c[:, None, :]).transpose(2, 0, 1))
+        e = ends[np.arange(len(s)), np.argmin(d_end, axis=1)]
+        for f in (0.25, 0.5, 0.75):
+            q = e + f * (c - e)
+            measured = measured_range(scan, np.arctan2(q[:, 1], q[:, 0]))
+            out |= measured > np.hypot(q[:, 0], q[:, 1]) + margin
+    return out
 
 
 def merge_duplicates(z, cov, kind, radius: float) -> np.ndarray:
@@ -204,8 +248,11 @@ def extract_corners(
     cov = 0.5 * (cov + cov.transpose(0, 2, 1)) + COV_FLOOR * np.eye(3)
     ok = np.isfinite(z).all(1) & np.isfinite(cov).all(axis=(1, 2))
     ok &= np.linalg.eigvalsh(np.where(ok[:, None, None], cov, np.eye(3))).min(axis=1) > 0
+    z = np.where(ok[:, None], z, 0.0)
     if cfg.drop_occluded:
-        ok &= ~hidden(scan, np.where(ok[:, None], z, 0.0), cfg.occlusion_margin)
+        ok &= ~hidden(scan, z, cfg.occlusion_margin)
+    if cfg.free_space_check:
+        ok &= ~((kind == 1) & seen_through(scan, segs, z, np.maximum(which, 0), cfg.occlusion_margin))
     z, cov, which, kind = z[ok], cov[ok], which[ok], kind[ok]
     if len(z) == 0:
         return Corners.empty()

@@ -82,7 +82,9 @@ class CornersConfig:
     min_angle: float = math.radians(30.0)  # lines closer to parallel than this do not make corners, radians
     endpoints: bool = True  # type II corners at depth jumps
     drop_occluded: bool = True  # drop corners the scan shows hidden (far side of a jump, behind a surface)
-    occlusion_margin: float = 0.1  # a corner this much behind the measured range is hidden, metres
+    free_space_check: bool = True  # drop type I intersections reached through space the scan saw through
+    occlusion_margin: float = 0.1  # margin of both checks against the measured range, metres
+    endpoint_max_gap: float = 0.2  # type II: drop ends whose next beam would hit the line farther away, m
     endpoint_phi: float = math.pi / 2  # φ given to type II corners (the end line meets its normal), radians
     endpoint_phi_sigma: float = math.radians(10.0)  # prior σ of that φ (it is not measured), radians
     duplicate_radius: float = 0.1  # corners closer than this are one corner: the most certain is kept, m
@@ -92,6 +94,7 @@ class CornersConfig:
         _check(self.dp_max >= 0.0, "corners.dp_max must be >= 0")
         _check(0.0 < self.min_angle <= math.pi / 2, "corners.min_angle must be in (0, pi/2]")
         _check(self.occlusion_margin >= 0.0, "corners.occlusion_margin must be >= 0")
+        _check(self.endpoint_max_gap > 0.0, "corners.endpoint_max_gap must be > 0")
         _check(0.0 <= self.endpoint_phi <= math.pi, "corners.endpoint_phi must be in [0, pi]")
         _check(self.endpoint_phi_sigma > 0.0, "corners.endpoint_phi_sigma must be > 0")
         _check(self.duplicate_radius >= 0.0, "corners.duplicate_radius must be >= 0")

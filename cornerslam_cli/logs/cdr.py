@@ -4,8 +4,8 @@ sensor_msgs/LaserScan is decoded by hand (struct + ``np.frombuffer``): it is the
 nav_msgs/Odometry is decoded by hand too (header, child_frame_id, pose: the 56 bytes we need);
 rosbags' generic deserializer spends ~40 µs on its covariance arrays, which halved the read rate
 (one odometry message per scan). Both are checked against rosbags in the tests. tf messages go
-through rosbags' typestores (``Stores.ROS2_HUMBLE`` for CDR, ``Stores.ROS1_NOETIC`` for ROS 1), with types the store
-lacks registered from the schema text stored in the log.
+through rosbags' typestores (``Stores.ROS2_HUMBLE`` for CDR, ``Stores.ROS1_NOETIC`` for ROS 1),
+with types the store lacks registered from the schema text stored in the log.
 
 LaserScan layout (both encodings): Header (ROS 1: uint32 seq first; stamp int32 sec, uint32 nsec;
 string frame_id), float32 angle_min, angle_max, angle_increment, time_increment, scan_time,

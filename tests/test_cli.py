@@ -1,0 +1,235 @@
+"""The CLI through click's CliRunner: every command, exit codes, and the bad-input table."""
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from cornerslam_cli.cli import cli
+from cornerslam_cli.logs.writers import RawScan, write_mcap
+from cornerslam_cli.report.tables import TIMING_COLUMNS, TRAJECTORY_COLUMNS, read_csv
+from cornerslam_cli.types import OdomSample
+
+T0 = 1_700_000_000.0
+
+
+def invoke(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
+
+
+def one_line_error(result, *fragments):
+    """Exit 2, one line on stderr starting with 'error:', no traceback, naming what it must."""
+    assert result.exit_code == 2, result.output
+    err = result.stderr.strip()
+    assert err.startswith("error:") and "\n" not in err and "Traceback" not in result.output, err
+    for f in fragments:
+        assert f in err, err
+
+
+def small_log(path, n=20, ranges=None, scan_topic="/scan", **kw):
+    r = np.full(181, 5.0) if ranges is None else ranges
+    scans = [RawScan(T0 + 0.1 * i + 0.05, -math.pi / 2, math.pi / 180, r, 0.1, 30.0) for i in range(n)]
+    odoms = [OdomSample(T0 + 0.1 * i, 0.05 * i, 0.0, 0.0) for i in range(n + 1)]
+    return write_mcap(path, scans, odoms, scan_topic=scan_topic, **kw)
+
+
+# ---------------------------------------------------------------------------- run, end to end
+def test_run_writes_every_table_with_the_interface_columns(sim_log, tmp_path):
+    out = tmp_path / "out"
+    res = invoke("run", sim_log, "--out", out, "-q")
+    assert res.exit_code == 0, res.output
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        ["trajectory.tum", "trajectory.csv", "map.csv", "lines.csv", "timing.csv", "summary.json"]
+    )
+    traj = read_csv(out / "trajectory.csv")
+    timing = read_csv(out / "timing.csv")
+    assert list(traj) == TRAJECTORY_COLUMNS and list(timing) == TIMING_COLUMNS
+    summary = json.loads((out / "summary.json").read_text())
+    steps = summary["counts"]["steps"]
+    assert len(traj["step"]) == len(timing["step"]) == steps > 100
+    assert summary["mode"] == "slam" and summary["assoc"] == "pca"
+    assert summary["config"]["association"]["pca"]["group_size"] == 3
+    # ground truth was found beside the log: the estimate beats odometry by far
+    acc = summary["accuracy"]
+    assert acc["ate"]["rmse"] < 0.25 and acc["ate"]["rmse"] < acc["odom_ate"]["rmse"] / 5
+    lm = read_csv(out / "map.csv")
+    assert len(lm["id"]) == summary["counts"]["landmarks"] > 10
+    assert np.all(lm["n_obs"] >= 1) and np.all(lm["last_step"] >= lm["first_step"])
+    tum = np.loadtxt(out / "trajectory.tum")
+    assert tum.shape == (steps, 8) and np.allclose(tum[:, 1], traj["x"])
+
+
+def test_run_overrides_reach_the_resolved_config(sim_log, tmp_path):
+    res = invoke(
+        "run",
+        sim_log,
+        "--out",
+        tmp_path / "o",
+        "-q",
+        "--assoc",
+        "icnn",
+        "--set",
+        "keyframes.linear_update=0.5",
+    )
+    assert res.exit_code == 0, res.output
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert s["assoc"] == "icnn" and s["config"]["keyframes"]["linear_update"] == 0.5
+    assert s["counts"]["keyframes_skipped"] > 0
+
+
+def test_evaluate_reports_ate(sim_log, tmp_path):
+    out = tmp_path / "out"
+    assert invoke("run", sim_log, "--out", out, "-q").exit_code == 0
+    res = invoke("evaluate", out, "--ground-truth", sim_log.with_suffix(".gt.tum"))
+    assert res.exit_code == 0 and "ATE  rmse" in res.output
+
+
+def test_info_names_the_topics_run_would_use(sim_log):
+    res = invoke("info", sim_log)
+    assert res.exit_code == 0, res.output
+    assert "/scan" in res.output and "sensor_msgs/LaserScan" in res.output
+    assert "scans     /scan" in res.output and "odometry  /odom" in res.output
+
+
+def test_extract_prints_and_plots(sim_log, tmp_path):
+    png = tmp_path / "scan.png"
+    res = invoke("extract", sim_log, "--step", 3, "--plot", png)
+    assert res.exit_code == 0, res.output
+    assert png.stat().st_size > 10_000
+
+
+def test_simulate_is_reproducible(tmp_path):
+    a, b = tmp_path / "a.mcap", tmp_path / "b.mcap"
+    for p in (a, b):
+        assert invoke("simulate", p, "--seed", 3, "--rate", 1, "--beams", 91, "-q").exit_code == 0
+    assert a.read_bytes() == b.read_bytes()
+    assert a.with_suffix(".gt.tum").read_text() == b.with_suffix(".gt.tum").read_text()
+
+
+# ---------------------------------------------------------------------------- bad input: exit 2, one line
+def test_nonexistent_log(tmp_path):
+    one_line_error(invoke("run", tmp_path / "nope.mcap", "--out", tmp_path / "o"), "nope.mcap")
+    assert not (tmp_path / "o").exists()
+
+
+def test_empty_and_unsupported_files(tmp_path):
+    empty = tmp_path / "empty.mcap"
+    empty.write_bytes(b"")
+    one_line_error(invoke("run", empty, "--out", tmp_path / "o"), "empty.mcap")
+    txt = tmp_path / "notes.txt"
+    txt.write_text("hello")
+    one_line_error(invoke("info", txt), "notes.txt")
+    assert not (tmp_path / "o").exists()
+
+
+def test_log_without_laserscan(tmp_path):
+    log = tmp_path / "odom_only.mcap"
+    write_mcap(log, [], [OdomSample(T0 + i, i, 0, 0) for i in range(5)])
+    one_line_error(invoke("run", log, "--out", tmp_path / "o"), "LaserScan")
+
+
+def test_log_without_odometry_says_how_to_choose(tmp_path):
+    log = tmp_path / "scan_only.mcap"
+    r = np.full(181, 5.0)
+    write_mcap(log, [RawScan(T0 + i, -1.5, 0.01, r) for i in range(5)], [])
+    one_line_error(invoke("run", log, "--out", tmp_path / "o"), "--odom-topic")
+
+
+def test_several_scan_topics_and_none_chosen(tmp_path):
+    log = tmp_path / "two.mcap"
+    _two_scan_topics(log)
+    one_line_error(invoke("run", log, "--out", tmp_path / "o"), "/front", "/rear", "--scan-topic")
+    assert invoke("run", log, "--scan-topic", "/rear", "--out", tmp_path / "o", "-q").exit_code == 0
+
+
+def _two_scan_topics(path: Path) -> None:
+    """An MCAP with two LaserScan topics (/front, /rear) and /odom, built with the writers' serializer."""
+    from mcap.writer import Writer
+
+    from cornerslam_cli.logs.writers import RosSerializer, _ros_messages
+
+    ros = RosSerializer("cdr")
+    r = np.full(181, 5.0)
+    scans = [RawScan(T0 + 0.1 * i + 0.05, -math.pi / 2, math.pi / 180, r) for i in range(10)]
+    odoms = [OdomSample(T0 + 0.1 * i, 0.0, 0.0, 0.0) for i in range(11)]
+    msgs = list(_ros_messages(ros, scans, odoms, "/front", "/odom", None, False, "odom", "base_link"))
+    msgs += list(_ros_messages(ros, scans, [], "/rear", "/odom", None, False, "odom", "base_link"))
+    msgs.sort(key=lambda m: m[2])
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start(profile="ros2", library="test")
+        chans = {}
+        for topic, typename, t, data in msgs:
+            if topic not in chans:
+                sid = w.register_schema(name=typename, encoding="ros2msg", data=ros.msgdef(typename).encode())
+                chans[topic] = w.register_channel(topic=topic, message_encoding="cdr", schema_id=sid)
+            w.add_message(channel_id=chans[topic], log_time=t, data=data, publish_time=t)
+        w.finish()
+
+
+def test_all_beams_invalid_is_a_clear_error(tmp_path):
+    log = small_log(tmp_path / "blind.mcap", ranges=np.full(181, np.nan))
+    one_line_error(invoke("run", log, "--out", tmp_path / "o"), "blind.mcap", "valid")
+    assert not (tmp_path / "o").exists()
+
+
+def test_time_going_backwards_is_skipped_counted_and_warned(tmp_path):
+    log = tmp_path / "back.mcap"
+    r = np.full(181, 5.0)
+    stamps = [0.05, 0.15, 0.25, 0.15, 0.35, 0.35, 0.45]
+    scans = [RawScan(T0 + s, -math.pi / 2, math.pi / 180, r) for s in stamps]
+    write_mcap(log, scans, [OdomSample(T0 + 0.1 * i, 0.05 * i, 0, 0) for i in range(6)])
+    res = invoke("run", log, "--out", tmp_path / "o")
+    assert res.exit_code == 0, res.output
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert s["counts"]["scan_time_backwards"] == 2 and s["counts"]["steps"] == 5
+    assert "went backwards or repeated" in res.stderr
+
+
+def test_invalid_yaml_and_unknown_key(tmp_path, sim_log):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("association: [\n")
+    one_line_error(invoke("run", sim_log, "--config", bad, "--out", tmp_path / "o"), "bad.yaml")
+    one_line_error(
+        invoke("run", sim_log, "--set", "association.pca.grup_size=3", "--out", tmp_path / "o"),
+        "association.pca.grup_size",
+        "group_size",
+    )
+    one_line_error(invoke("run", sim_log, "--assoc", "jbcc", "--out", tmp_path / "o"), "jbcc", "jcbb")
+    assert not (tmp_path / "o").exists()
+
+
+def test_bad_ground_truth_fails_before_the_run(tmp_path, sim_log):
+    gt = tmp_path / "gt.tum"
+    gt.write_text("1 2 3\n")
+    one_line_error(invoke("run", sim_log, "--ground-truth", gt, "--out", tmp_path / "o"), "gt.tum")
+    assert not (tmp_path / "o").exists()
+
+
+def test_truncated_mcap_processes_what_is_readable(sim_log, tmp_path):
+    data = sim_log.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) // 2])
+    res = invoke("run", cut, "--out", tmp_path / "o", "--ground-truth", sim_log.with_suffix(".gt.tum"))
+    assert res.exit_code == 0, res.output
+    assert "truncated" in res.stderr.lower() or "warning" in res.stderr.lower()
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert 10 < s["counts"]["steps"] < 200
+
+
+def test_an_internal_error_exits_1_with_the_traceback_saved(tmp_path, sim_log, monkeypatch):
+    import cornerslam_cli.pipeline as pipeline
+
+    def boom(*a, **k):
+        raise ZeroDivisionError("synthetic bug")
+
+    monkeypatch.setattr(pipeline.Slam, "step", boom)
+    res = invoke("run", sim_log, "--out", tmp_path / "o")
+    assert res.exit_code == 1
+    assert "internal error: ZeroDivisionError" in res.stderr and "traceback saved to" in res.stderr
+    saved = res.stderr.split("traceback saved to ")[1].strip().rstrip(")")
+    assert "synthetic bug" in Path(saved).read_text()
+    assert not (tmp_path / "o").exists()
