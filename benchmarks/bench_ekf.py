@@ -26,7 +26,8 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from _ekf_dense import DenseEkf  # noqa: E402
 
-from cornerslam_cli.filter import Ekf, EkfConfig, observe  # noqa: E402
+from cornerslam_cli.filter import Ekf, EkfConfig, motion_model, motion_noise, observe  # noqa: E402
+from cornerslam_cli.types import wrap_angle  # noqa: E402
 
 K_STEP = 10  # matched corners in one step (the paper's Fig 18 shows ~5–12)
 
@@ -109,6 +110,67 @@ def bench(ns: list[int], seed: int) -> list[dict]:
     return rows
 
 
+def clutter_run(cfg: EkfConfig, seed: int, n_steps: int = 200, clutter: int = 3) -> dict:
+    """Simulated loop among 60 corners with known association plus ``clutter`` one-off spurious corners
+    per keyframe (seen once, never again). Returns map size, time per step and mean robot NEES."""
+    rng = np.random.default_rng(seed)
+    lm_true = np.column_stack((rng.uniform(-7, 7, (60, 2)), rng.uniform(0.3, 2.8, 60)))
+    C = np.diag([0.03**2, 0.03**2, 0.02**2])
+    ekf = Ekf(cfg, pose0=(3.0, 0.0, np.pi / 2))
+    true, odom = np.array([3.0, 0.0, np.pi / 2]), np.zeros(3)
+    lm_id = -np.ones(len(lm_true), dtype=np.int64)
+    nees, t_total = [], 0.0
+    for _ in range(n_steps):
+        u = (0.05, 0.25, 0.05)
+        odom_next = motion_model(odom, u)[0]
+        R = motion_noise(u, true[2], cfg.alphas, cfg.min_sigma_xy, cfg.min_sigma_theta)
+        true = motion_model(true, u)[0] + np.linalg.cholesky(R) @ rng.standard_normal(3)
+        h, _, _ = observe(true, lm_true)
+        seen = np.flatnonzero(np.hypot(h[:, 0], h[:, 1]) < 5.0)
+        z = h[seen] + rng.multivariate_normal(np.zeros(3), C, len(seen))
+        z_clutter = np.column_stack((rng.uniform(-4, 4, (clutter, 2)), rng.uniform(0.3, 2.8, clutter)))
+        known = lm_id[seen] >= 0
+        t0 = time.perf_counter()
+        ekf.predict(odom, odom_next)
+        if known.any():
+            ekf.update(lm_id[seen[known]], z[known], np.broadcast_to(C, (known.sum(), 3, 3)))
+        new = np.vstack((z[~known], z_clutter))
+        ids = ekf.augment(new, np.broadcast_to(C, (len(new), 3, 3)))
+        lm_id[seen[~known]] = ids[: (~known).sum()]
+        remap = ekf.prune_tentative()
+        t_total += time.perf_counter() - t0
+        lm_id = np.where(lm_id >= 0, remap[np.maximum(lm_id, 0)], -1)
+        odom = odom_next
+        e = true - ekf.pose
+        e[2] = wrap_angle(e[2])
+        nees.append(e @ np.linalg.solve(ekf.P[:3, :3], e))
+    return {
+        "n_landmarks": ekf.n_landmarks,
+        "n_true_mapped": int((lm_id >= 0).sum()),
+        "ms_per_step": 1e3 * t_total / n_steps,
+        "nees": float(np.mean(nees)),
+    }
+
+
+def tentative_table(seeds: int = 5) -> str:
+    out = [
+        "| tentative_sightings | tentative_max_age | landmarks in state | true corners mapped | ms per step "
+        "| mean robot NEES |",
+        "|---:|---:|---:|---:|---:|---:|",
+    ]
+    for k, age in ((1, 5), (2, 3), (3, 5)):
+        cfg = EkfConfig(
+            alpha1=0.02, alpha2=0.002, alpha3=0.02, alpha4=0.002, tentative_sightings=k, tentative_max_age=age
+        )
+        runs = [clutter_run(cfg, s) for s in range(seeds)]
+        mean = {key: np.mean([r[key] for r in runs]) for key in runs[0]}
+        out.append(
+            f"| {k} | {age} | {mean['n_landmarks']:.0f} | {mean['n_true_mapped']:.0f} / 60 "
+            f"| {mean['ms_per_step']:.2f} | {mean['nees']:.2f} |"
+        )
+    return "\n".join(out)
+
+
 def table(rows: list[dict]) -> str:
     ms = lambda s: f"{1e3 * s:.3g}"
     out = [
@@ -160,12 +222,16 @@ def main() -> None:
     ap.add_argument("--n", type=int, nargs="+", default=[50, 100, 200, 500, 1000])
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, help="also write the markdown here")
+    ap.add_argument("--tentative", action="store_true", help="only the tentative-landmark table")
     args = ap.parse_args()
     env = (
         f"numpy {np.__version__}, python {platform.python_version()}, {os.cpu_count()} CPUs, "
         f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}"
     )
-    text = f"Environment: {env}\n\n{table(bench(args.n, args.seed))}\n"
+    if args.tentative:
+        text = f"Environment: {env}\n\n{tentative_table()}\n"
+    else:
+        text = f"Environment: {env}\n\n{table(bench(args.n, args.seed))}\n"
     print(text)
     if args.out:
         args.out.write_text(text)

@@ -13,6 +13,7 @@ fresh subprocess per log (tracemalloc peak of Python allocations during the read
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import math
 import os
@@ -93,7 +94,7 @@ def decoder_speed(path: Path, n: int = 2000, rounds: int = 5) -> tuple[float, fl
     from cornerslam_cli.logs.mcap import McapSource
 
     src = McapSource(path, ReadStats())
-    msgs = [bytes(m[2]) for _, m in zip(range(n), src.raw_messages({"/scan"}))]
+    msgs = [bytes(m[2]) for m in itertools.islice(src.raw_messages({"/scan"}), n)]
     src.close()
     store = typestore("cdr")
     best_own = best_ref = 0.0

@@ -217,6 +217,7 @@ def run(
         odom_frame=inp.odom_frame,
         base_frame=inp.base_frame,
     )
+    reader.check()  # topic problems are exit-2 errors before any work
     info = reader.info()
     laser2base, laser_source = _laser_mount(reader, cfg)
     gt_path = Path(ground_truth) if ground_truth else find_ground_truth(log_path)

@@ -5,7 +5,6 @@ import math
 from pathlib import Path
 
 import numpy as np
-import pytest
 from click.testing import CliRunner
 
 from cornerslam_cli.cli import cli

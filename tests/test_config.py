@@ -36,9 +36,9 @@ def test_yaml_then_override_wins(tmp_path):
     assert cfg.association.method == "pca"
 
 
-def test_int_is_accepted_for_float_and_lists_become_tuples():
-    cfg = load_config(None, ["association.alpha=1"])
-    assert isinstance(cfg.association.alpha, float)
+def test_int_is_accepted_for_float():
+    cfg = load_config(None, ["sensor.sigma_r_near=1"])
+    assert isinstance(cfg.sensor.sigma_r_near, float) and cfg.sensor.sigma_r_near == 1.0
 
 
 @pytest.mark.parametrize(

@@ -91,8 +91,11 @@ def _line_from_moments(mx, my, sxx, syy, sxy):
     return r, alpha
 
 
-def fit_lines(rho, theta, var_rho, var_theta, starts, ends) -> LineFits:
-    """Fit one line per range [starts, ends) of beams (ρ, θ) with per-beam variances (eq 2–8)."""
+def fit_lines(rho, theta, var_rho, var_theta, starts, ends, w=None) -> LineFits:
+    """Fit one line per range [starts, ends) of beams (ρ, θ) with per-beam variances (eq 2–8).
+
+    ``w`` overrides the weights (default ``beam_weights``), e.g. to hold them fixed in a derivative check.
+    """
     starts = np.asarray(starts, dtype=np.int64)
     ends = np.asarray(ends, dtype=np.int64)
     k = len(starts)
@@ -107,7 +110,7 @@ def fit_lines(rho, theta, var_rho, var_theta, starts, ends) -> LineFits:
     var_theta = np.broadcast_to(var_theta, idx.shape) if np.ndim(var_theta) == 0 else var_theta[idx]
     cos_t, sin_t = np.cos(theta), np.sin(theta)
     x, y = rho * cos_t, rho * sin_t
-    w = beam_weights(rho, var_rho, var_theta)
+    w = beam_weights(rho, var_rho, var_theta) if w is None else np.asarray(w, dtype=float)[idx]
     seg, W, mx, my, sxx, syy, sxy = _moments(x, y, w, offs, offs + cnt)
     r, alpha = _line_from_moments(mx, my, sxx, syy, sxy)
     c, s = np.cos(alpha), np.sin(alpha)
@@ -155,6 +158,31 @@ def fit_lines(rho, theta, var_rho, var_theta, starts, ends) -> LineFits:
     return LineFits(r, alpha, cov, p1, p2, jac_ends, ok)
 
 
+def fit_ranges(rho, theta, sensor: SensorConfig, starts, ends) -> LineFits:
+    """Fit the ranges [starts, ends) of a scan's beams with the sensor model, in two passes.
+
+    Weights and variances computed from the measured ranges correlate with their noise (σρ grows with ρ,
+    so a beam measured long gets less weight) and bias r by a good fraction of σ with the paper's
+    3 %-of-range model. The second pass evaluates the model at the range the first line predicts for each
+    beam, ρ̂_i = r / cos(θ_i − α), which does not depend on that beam's noise.
+    """
+    var_rho, var_theta = beam_variances(rho, sensor)
+    fit = fit_lines(rho, theta, var_rho, var_theta, starts, ends)
+    if len(fit.r) == 0:
+        return fit
+    cnt = np.asarray(ends) - np.asarray(starts)
+    seg = np.repeat(np.arange(len(cnt)), cnt)
+    idx = np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt - np.asarray(starts), cnt)
+    cos_i = np.cos(theta[idx] - fit.alpha[seg])
+    rho_hat = np.where(cos_i > 1e-3, fit.r[seg] / np.where(cos_i > 1e-3, cos_i, 1.0), rho[idx])
+    rho_hat = np.where(np.isfinite(rho_hat) & (rho_hat > 0), rho_hat, rho[idx])
+    vr, vt = beam_variances(rho_hat, sensor)
+    full_vr, full_w = var_rho.copy(), np.ones_like(rho)
+    full_vr[idx] = vr
+    full_w[idx] = beam_weights(rho_hat, vr, vt)
+    return fit_lines(rho, theta, full_vr, var_theta, starts, ends, full_w)
+
+
 # ---------------------------------------------------------------------------------------------------------
 # Algorithm 1, steps 1–5. A partition of the beams is an increasing int array ``starts`` (starts[0] == 0);
 # range i is [starts[i], starts[i + 1]) with the last one ending at n.
@@ -179,18 +207,20 @@ def breakpoint_starts(x, y, rho, theta, cfg: LinesConfig) -> np.ndarray:
     return np.concatenate(([0], np.flatnonzero(brk) + 1))
 
 
-def angle_split_starts(x, y, rho, theta, starts, cfg: LinesConfig) -> np.ndarray:
+def angle_split_starts(x, y, rho, theta, starts, cfg: LinesConfig, sigma=None) -> np.ndarray:
     """Step 2: add a start at the sharpest beam of every run where the windowed chord angle exceeds a_max.
 
-    The chords (p_i−k, p_i) and (p_i, p_i+k) stay inside the beam's point set; k = ⌈chord / (ρ_i Δφ)⌉ with
-    Δφ the median beam spacing; a chord shorter than half of ``angle_split_chord`` (near a set's ends) does
-    not vote, so the distance split decides there.
+    The chords (p_i−k, p_i) and (p_i, p_i+k) stay inside the beam's point set; k = ⌈chord_i / (ρ_i Δφ)⌉ with
+    Δφ the median beam spacing and chord_i = max(angle_split_chord, angle_split_sigmas·σ_i), σ_i the beam's
+    point standard deviation, so that noise alone seldom bends a chord pair by a_max (a 3σ error at the
+    middle beam bends it by 2·atan(3 / angle_split_sigmas) ≈ 17° with the default 20). A chord shorter
+    than half of chord_i (near a set's ends) does not vote: the distance split decides there.
     """
     n = len(x)
     if n < 3:
         return starts
     dphi = float(np.median(np.diff(theta)))
-    chord = cfg.angle_split_chord
+    chord = cfg.angle_split_chord if sigma is None else np.maximum(cfg.angle_split_chord, cfg.angle_split_sigmas * sigma)
     k = np.ceil(chord / np.maximum(rho * max(dphi, 1e-9), 1e-9))
     k = np.minimum(k, n).astype(np.int64)
     ends = _ends(starts, n)
@@ -257,7 +287,9 @@ def merge_starts(x, y, w, starts, cfg: LinesConfig) -> np.ndarray:
     A merge is kept only if the merged line stays within l_max of the vertices of both ranges (first / last
     point projected on its own line; raw points for ranges of one or two beams), so a merge never undoes a
     distance split. Moments of a merged range come from the parts (parallel-axis rule): O(1) per test.
-    The angle test only applies between ranges of at least ``min_points`` beams.
+    The angle test only applies between ranges of at least ``min_points`` beams, and allows for the noise of
+    short ranges: |Δα| < a_mergeMax + 3·sqrt(1/S_dd,1 + 1/S_dd,2), 1/S_dd the variance of α of a range fitted
+    with weights 1/σ² (S_dd its weighted scatter along the line).
     """
     n = len(x)
     m = len(starts)
@@ -274,18 +306,20 @@ def merge_starts(x, y, w, starts, cfg: LinesConfig) -> np.ndarray:
     vf = np.column_stack((x[fi] - ef * np.cos(alpha), y[fi] - ef * np.sin(alpha))).tolist()
     vl = np.column_stack((x[la] - el * np.cos(alpha), y[la] - el * np.sin(alpha))).tolist()
     gaps = np.hypot(x[fi[1:]] - x[la[:-1]], y[fi[1:]] - y[la[:-1]]).tolist()
+    sdd = (0.5 * (sxx + syy) + np.hypot(0.5 * (sxx - syy), sxy)).tolist()
     W, mx, my, sxx, syy, sxy = (a.tolist() for a in (W, mx, my, sxx, syy, sxy))
     alpha, cnt = alpha.tolist(), cnt.tolist()
     l_max, a_max, min_pts = cfg.split_distance, cfg.merge_angle, cfg.min_points
 
     keep = [0]
     cur = (W[0], mx[0], my[0], sxx[0], syy[0], sxy[0])
-    cur_alpha, cur_n, cur_vertices = alpha[0], cnt[0], [vf[0], vl[0]]
+    cur_alpha, cur_n, cur_vertices, cur_sdd = alpha[0], cnt[0], [vf[0], vl[0]], sdd[0]
     for j in range(1, m):
         merged = None
         if gaps[j - 1] < cfg.merge_gap:
             dalpha = abs(math.remainder(cur_alpha - alpha[j], 2.0 * math.pi))
-            if cur_n < min_pts or cnt[j] < min_pts or dalpha < a_max:
+            tol = a_max + 3.0 * math.sqrt(1.0 / max(cur_sdd, 1e-300) + 1.0 / max(sdd[j], 1e-300))
+            if cur_n < min_pts or cnt[j] < min_pts or dalpha < tol:
                 W1, x1, y1, a1, b1, c1 = cur
                 Wt = W1 + W[j]
                 f = W1 * W[j] / Wt
@@ -303,17 +337,19 @@ def merge_starts(x, y, w, starts, cfg: LinesConfig) -> np.ndarray:
                 ca, sa = math.cos(am), math.sin(am)
                 verts = cur_vertices + [vf[j], vl[j]]
                 if all(abs(vx * ca + vy * sa - rm) <= l_max for vx, vy in verts):
-                    merged = (mom, am, verts)
+                    half_tr, rad = 0.5 * (mom[3] + mom[4]), math.hypot(0.5 * (mom[3] - mom[4]), mom[5])
+                    merged = (mom, am, verts, half_tr + rad)
         if merged is None:
             keep.append(j)
-            cur, cur_alpha, cur_n, cur_vertices = (
+            cur, cur_alpha, cur_n, cur_vertices, cur_sdd = (
                 (W[j], mx[j], my[j], sxx[j], syy[j], sxy[j]),
                 alpha[j],
                 cnt[j],
                 [vf[j], vl[j]],
+                sdd[j],
             )
         else:
-            cur, cur_alpha, cur_vertices = merged
+            cur, cur_alpha, cur_vertices, cur_sdd = merged
             cur_n += cnt[j]
     return starts[keep]
 
@@ -369,8 +405,8 @@ def trim_ends(x, y, w, starts, cfg: LinesConfig, sweeps: int = 2) -> np.ndarray:
         big = cnt >= cfg.min_points
         e0, e1 = e[starts], e[ends - 1]
         # RMS of the other beams of the range (leave the tested one out)
-        cut_first = big & (e0 * e0 > 9.0 * (sse - e0 * e0) / (cnt - 1))
-        cut_last = big & (e1 * e1 > 9.0 * (sse - e1 * e1) / (cnt - 1))
+        cut_first = big & (e0 * e0 > 9.0 * (sse - e0 * e0) / np.maximum(cnt - 1, 1))
+        cut_last = big & (e1 * e1 > 9.0 * (sse - e1 * e1) / np.maximum(cnt - 1, 1))
         if not (cut_first.any() or cut_last.any()):
             return starts
         starts = np.union1d(starts, np.concatenate((starts[cut_first] + 1, ends[cut_last] - 1)))
@@ -388,14 +424,14 @@ def extract_segments(scan: Scan, sensor: SensorConfig, cfg: LinesConfig) -> tupl
     none = (Segments.empty(), np.zeros((0, 2, 2, 2)))
     if n < max(2, cfg.min_points) or not (np.isfinite(rho).all() and np.isfinite(theta).all()):
         return none
-    var_rho, var_theta = beam_variances(rho, sensor)
+    var_rho, var_theta = beam_variances(rho, sensor)  # segmentation only: the final fit is two-pass
     x, y = rho * np.cos(theta), rho * np.sin(theta)
     w = beam_weights(rho, var_rho, var_theta)
     if not (np.isfinite(x).all() and np.isfinite(y).all() and np.isfinite(w).all()):
         return none
 
     starts = breakpoint_starts(x, y, rho, theta, cfg)  # step 1
-    starts = angle_split_starts(x, y, rho, theta, starts, cfg)  # step 2
+    starts = angle_split_starts(x, y, rho, theta, starts, cfg, 1.0 / np.sqrt(w))  # step 2
     starts = distance_split_starts(x, y, w, starts, cfg)  # step 3
     starts = merge_starts(x, y, w, starts, cfg)  # step 4
     starts = refine_boundaries(x, y, w, starts, cfg)  # step 5
@@ -404,7 +440,7 @@ def extract_segments(scan: Scan, sensor: SensorConfig, cfg: LinesConfig) -> tupl
 
     sel = (ends - starts) >= cfg.min_points  # step 7
     starts, ends = starts[sel], ends[sel]
-    fit = fit_lines(rho, theta, var_rho, var_theta, starts, ends)
+    fit = fit_ranges(rho, theta, sensor, starts, ends)
     keep = fit.ok & (np.hypot(*(fit.p2 - fit.p1).T) >= cfg.min_length)
     if not keep.any():
         return none

@@ -49,9 +49,11 @@ class LinesConfig:
     breakpoint_lambda: float = math.radians(10.0)  # λ, radians
     breakpoint_sigma: float = 0.03  # metres
     # 2. angle split: angle between the chords (p_i−k, p_i) and (p_i, p_i+k), k beams chosen per point so a
-    #    chord is about angle_split_chord long (the paper's k = 1 is noise-dominated on dense scans)
+    #    chord is max(angle_split_chord, angle_split_sigmas·σ) long, σ the beam's noise (the paper's k = 1
+    #    is noise-dominated on dense scans)
     angle_split_max: float = math.radians(30.0)  # a_max, radians
     angle_split_chord: float = 0.1  # metres
+    angle_split_sigmas: float = 20.0
     # 3. distance split (split-and-merge)
     split_distance: float = 0.05  # l_max, metres
     # 4. merge of adjacent segments
@@ -66,6 +68,7 @@ class LinesConfig:
         _check(self.breakpoint_sigma >= 0.0, "lines.breakpoint_sigma must be >= 0")
         _check(0.0 < self.angle_split_max <= math.pi, "lines.angle_split_max must be in (0, pi]")
         _check(self.angle_split_chord > 0.0, "lines.angle_split_chord must be > 0")
+        _check(self.angle_split_sigmas >= 0.0, "lines.angle_split_sigmas must be >= 0")
         _check(self.split_distance > 0.0, "lines.split_distance must be > 0")
         _check(0.0 <= self.merge_angle <= math.pi / 2, "lines.merge_angle must be in [0, pi/2]")
         _check(self.merge_gap >= 0.0, "lines.merge_gap must be >= 0")

@@ -49,6 +49,10 @@ class Ekf:
         s_xy, s_th = self.cfg.init_sigma_xy, self.cfg.init_sigma_theta
         self._P_buf[:3, :3] = np.diag([s_xy**2, s_xy**2, s_th**2])
         self.last_nis = 0.0  # νᵀS⁻¹ν of the last update() (sum over its sequential pairs)
+        # tentative-landmark bookkeeping (cfg.tentative_sightings > 1): sightings and last keyframe seen
+        self.n_steps = 0  # predict() calls so far
+        self._n_obs = np.zeros(self.cfg.initial_capacity, dtype=np.int64)
+        self._last_seen = np.zeros(self.cfg.initial_capacity, dtype=np.int64)
 
     @classmethod
     def from_state(cls, cfg: EkfConfig, mu: np.ndarray, P: np.ndarray) -> Ekf:
@@ -63,6 +67,7 @@ class Ekf:
         ekf._dim = d
         ekf._mu_buf[:d] = mu
         ekf._P_buf[:d, :d] = 0.5 * (P + P.T)
+        ekf._n_obs[: ekf.n_landmarks] = cfg.tentative_sightings  # given landmarks count as confirmed
         return ekf
 
     # ------------------------------------------------------------------ views
@@ -113,6 +118,7 @@ class Ekf:
             P[:3, 3:d] = P_rm
             P[3:d, :3] = P_rm.T
         self._mu_buf[:3] = pose_new
+        self.n_steps += 1
         return np.array(u)
 
     # ------------------------------------------------------------------ observation (NOTES §4)
@@ -139,6 +145,8 @@ class Ekf:
         else:
             nis = self._sequential(ids, z, C)
         self._mu_buf[2] = wrap_angle(self._mu_buf[2])
+        np.add.at(self._n_obs, ids, 1)
+        self._last_seen[ids] = self.n_steps
         self.last_nis = float(nis)
         return self.last_nis
 
@@ -281,6 +289,8 @@ class Ekf:
         P[d:dn, d:dn] = P_nn
         mu[d:dn] = m.ravel()
         self._dim = dn
+        self._n_obs[n0 : n0 + k] = 1
+        self._last_seen[n0 : n0 + k] = self.n_steps
         return np.arange(n0, n0 + k, dtype=np.int64)
 
     def _reserve(self, dim: int) -> None:
@@ -295,6 +305,57 @@ class Ekf:
         mu_buf[:d] = self._mu_buf[:d]
         P_buf[:d, :d] = self._P_buf[:d, :d]
         self._mu_buf, self._P_buf = mu_buf, P_buf
+        n_cap = (new_cap - 3) // 3
+        self._n_obs = np.resize(self._n_obs, n_cap)
+        self._last_seen = np.resize(self._last_seen, n_cap)
+
+    # ------------------------------------------------------------------ tentative landmarks
+    @property
+    def n_obs(self) -> np.ndarray:
+        """(n,) times each landmark was seen (creation counts as one), a view."""
+        return self._n_obs[: self.n_landmarks]
+
+    @property
+    def tentative(self) -> np.ndarray:
+        """(n,) bool, landmarks seen fewer than ``cfg.tentative_sightings`` times (all False when 1)."""
+        return self.n_obs < self.cfg.tentative_sightings
+
+    def remove_landmarks(self, landmark_ids) -> np.ndarray:
+        """Marginalise landmarks out of the state (delete their rows/columns of μ, Σ); O(N²).
+
+        Returns remap (n_old,): the new id of each old landmark, -1 for the removed ones. The
+        remaining landmarks keep their order.
+        """
+        n = self.n_landmarks
+        ids = np.unique(np.asarray(landmark_ids, dtype=np.int64).reshape(-1))
+        if len(ids) and (ids[0] < 0 or ids[-1] >= n):
+            raise ValueError(f"remove_landmarks: ids must be in [0, {n}), got {ids.tolist()}")
+        keep_l = np.setdiff1d(np.arange(n), ids)
+        remap = -np.ones(n, dtype=np.int64)
+        remap[keep_l] = np.arange(len(keep_l))
+        if len(ids) == 0:
+            return remap
+        keep = np.concatenate((np.arange(3), (3 + 3 * keep_l[:, None] + np.arange(3)).ravel()))
+        d = len(keep)
+        self._P_buf[:d, :d] = self.P[np.ix_(keep, keep)]
+        self._mu_buf[:d] = self.mu[keep]
+        self._n_obs[: len(keep_l)] = self._n_obs[keep_l]
+        self._last_seen[: len(keep_l)] = self._last_seen[keep_l]
+        self._dim = d
+        return remap
+
+    def prune_tentative(self) -> np.ndarray:
+        """Drop tentative landmarks not seen for more than ``cfg.tentative_max_age`` keyframes.
+
+        Call once per step after update/augment. Returns the remap of :meth:`remove_landmarks`
+        (identity when nothing is dropped or the tentative stage is off).
+        """
+        n = self.n_landmarks
+        if self.cfg.tentative_sightings <= 1 or n == 0:
+            return np.arange(n, dtype=np.int64)
+        age = self.n_steps - self._last_seen[:n]
+        stale = np.flatnonzero(self.tentative & (age > self.cfg.tentative_max_age))
+        return self.remove_landmarks(stale)
 
     # ------------------------------------------------------------------ health
     def check_health(self, step: int) -> None:

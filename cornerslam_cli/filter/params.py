@@ -35,7 +35,8 @@ class EkfConfig:
     joseph: bool = False  # Joseph form (I−KH)Σ(I−KH)ᵀ + KCKᵀ, as a rank-6 block update
     symmetry_tol: float = 1e-9  # health check: max|Σ − Σᵀ| ≤ tol · max(1, max diag Σ)
     initial_capacity: int = 64  # landmarks preallocated; the buffer doubles when full
-    tentative_sightings: int = 1  # 1 = landmarks are created at once (tentative stage off)
+    tentative_sightings: int = 1  # sightings before a landmark is confirmed; 1 = tentative stage off
+    tentative_max_age: int = 5  # keyframes a tentative landmark may go unseen before prune_tentative drops it
 
     def __post_init__(self) -> None:
         for name in (
@@ -59,6 +60,8 @@ class EkfConfig:
             raise ValueError(f"initial_capacity must be >= 1, got {self.initial_capacity}")
         if self.tentative_sightings < 1:
             raise ValueError(f"tentative_sightings must be >= 1, got {self.tentative_sightings}")
+        if self.tentative_max_age < 0:
+            raise ValueError(f"tentative_max_age must be >= 0, got {self.tentative_max_age}")
 
     @property
     def alphas(self) -> tuple[float, float, float, float]:
