@@ -196,6 +196,74 @@ def run(
         _print_summary(summary)
 
 
+@cli.command()
+@click.argument("log_path", metavar="LOG", type=click.Path())
+@click.option(
+    "--assoc", "assocs", default="icnn,jcbb,pca", show_default=True, help="Comma-separated associators."
+)
+@_config_options
+@click.option(
+    "--out", type=click.Path(file_okay=False), help="Output directory (default ./cornerslam_out/LOG_compare)."
+)
+@_topic_options
+@click.option(
+    "--ground-truth", type=click.Path(dir_okay=False), help="TUM ground truth (default: LOG.gt.tum)."
+)
+@click.option("--jobs", default=1, show_default=True, type=click.IntRange(1, 64), help="Parallel processes.")
+@_verbosity
+def compare(
+    log_path, assocs, config_path, overrides, out, scan_topic, odom_topic, ground_truth, jobs, verbose, quiet
+):
+    """Run several associators on LOG with the same extracted features and tabulate them.
+
+    \b
+    Example:
+      cornerslam compare sample_logs/sim_office.mcap --assoc icnn,jcbb,pca --jobs 2
+    """
+    from .pipeline import default_out_dir
+    from .report.compare import compare as run_compare
+
+    _setup_logging(verbose, quiet)
+    names = [a.strip() for a in assocs.split(",") if a.strip()]
+    if not names or len(set(names)) != len(names):
+        raise click.BadParameter(
+            f"'{assocs}' must list distinct associators, e.g. icnn,jcbb,pca", param_hint="--assoc"
+        )
+    cfg = _load(config_path, overrides, None, scan_topic, odom_topic)
+    for a in names:
+        _load(config_path, overrides, a)  # unknown names fail here, with the closest valid one
+    out_dir = Path(out) if out else default_out_dir(Path(log_path), "compare")
+    progress = Progress(f"{Path(log_path).name} (extract)", not quiet)
+    try:
+        summaries = run_compare(log_path, cfg, names, out_dir, ground_truth, jobs, progress)
+    finally:
+        progress.close()
+    if not quiet:
+        _print_comparison(summaries)
+        click.echo(f"wrote {out_dir}")
+
+
+def _print_comparison(summaries: list[dict]) -> None:
+    head = (
+        f"{'assoc':<6} {'steps':>6} {'landmarks':>9} {'matched':>8} "
+        f"{'t_match s':>10} {'max ms':>8} {'t_total s':>10}"
+    )
+    has_gt = any(s.get("accuracy") for s in summaries)
+    if has_gt:
+        head += f" {'ATE m':>8} {'odom ATE m':>10}"
+    click.echo(head)
+    for s in summaries:
+        c, t = s["counts"], s["timing"]
+        line = (
+            f"{s['assoc']:<6} {c['steps']:>6} {c['landmarks']:>9} {c['matched_total']:>8} "
+            f"{t['t_match']:>10.3f} {1000 * t['t_match_max']:>8.1f} {t['t_total']:>10.2f}"
+        )
+        if has_gt and s.get("accuracy"):
+            a = s["accuracy"]
+            line += f" {a['ate']['rmse']:>8.3f} {a['odom_ate']['rmse']:>10.3f}"
+        click.echo(line)
+
+
 def _print_summary(s: dict) -> None:
     c, t = s["counts"], s["timing"]
     click.echo(

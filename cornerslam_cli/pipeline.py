@@ -9,7 +9,7 @@ from __future__ import annotations
 import logging
 import platform
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -69,6 +69,31 @@ def segments_to_map(segments: Segments, sensor2map: np.ndarray) -> np.ndarray:
     return np.hstack((segments.p1 @ R.T + t, segments.p2 @ R.T + t))
 
 
+@dataclass(frozen=True)
+class Frame:
+    """One keyframe after feature extraction: all that the filter and the associators need.
+
+    odom : (3,) odometry pose at the scan's stamp; segments in the sensor frame;
+    z : (m, 3), C : (m, 3, 3) corners and their covariances in the base frame.
+    Extraction does not depend on the associator, so ``compare`` computes frames once for all.
+    """
+
+    stamp: float
+    odom: np.ndarray
+    n_points: int
+    segments: Segments
+    z: np.ndarray
+    C: np.ndarray
+    t_extract: float
+
+
+def extract_frame(scan: Scan, odom: np.ndarray, cfg: Config, laser2base: tuple[float, float, float]) -> Frame:
+    t0 = time.perf_counter()
+    segments, corners = extract(scan, cfg.sensor, cfg.lines, cfg.corners)  # Alg 1-2
+    z, C = corners_to_base(corners, laser2base)
+    return Frame(scan.stamp, odom, len(scan.ranges), segments, z, C, time.perf_counter() - t0)
+
+
 @dataclass
 class StepRecord:
     """What one step produced (one row of trajectory.csv and timing.csv)."""
@@ -112,12 +137,10 @@ class Slam:
         self.prev_odom: np.ndarray | None = None
         self.n_steps = 0
 
-    def step(self, scan: Scan, odom: np.ndarray) -> StepRecord:
+    def step(self, frame: Frame) -> StepRecord:
+        """One step of the paper's loop on an extracted frame: predict, associate, update, augment."""
         k = self.n_steps
-        cfg = self.cfg
-        t0 = time.perf_counter()
-        segments, corners = extract(scan, cfg.sensor, cfg.lines, cfg.corners)  # Alg 1-2
-        z, C = corners_to_base(corners, self.laser2base)
+        odom, z, C = frame.odom, frame.z, frame.C
         t1 = time.perf_counter()
         if self.prev_odom is not None:
             self.ekf.predict(self.prev_odom, odom)  # eq 19-22, O(N)
@@ -144,22 +167,22 @@ class Slam:
         self.n_steps += 1
         return StepRecord(
             step=k,
-            stamp=scan.stamp,
+            stamp=frame.stamp,
             pose=pose,
             pose_var=np.diag(self.ekf.P[:3, :3]).copy(),
             odom=odom,
-            n_points=len(scan.ranges),
-            n_lines=len(segments),
-            n_corners=len(corners),
+            n_points=frame.n_points,
+            n_lines=len(frame.segments),
+            n_corners=len(z),
             n_candidates=int(np.sum(result.n_candidates)),
             n_matched=int(len(ids)),
             n_new=int(len(new_ids)),
             n_landmarks=self.ekf.n_landmarks,
-            t_extract=t1 - t0,
+            t_extract=frame.t_extract,
             t_predict=t2 - t1,
             t_match=t3 - t2,
             t_update=t4 - t3,
-            segments_map=segments_to_map(segments, sensor2map),
+            segments_map=segments_to_map(frame.segments, sensor2map),
             nodes=int(result.nodes),
             budget_hit=bool(result.budget_hit),
         )
@@ -196,6 +219,45 @@ def default_out_dir(log_path: Path, assoc: str) -> Path:
     return Path("cornerslam_out") / f"{stem}_{assoc}"
 
 
+@dataclass
+class Input:
+    """An opened log and what a run takes from it besides the frames."""
+
+    path: Path
+    reader: object
+    info: object
+    laser2base: tuple[float, float, float]
+    laser_source: str
+    total_scans: int
+    stats: SyncStats
+
+
+def open_input(log_path: str | Path, cfg: Config) -> Input:
+    """Open the log, check its topics (exit-2 errors before any work) and find the laser mount."""
+    inp = cfg.input
+    reader = open_log(
+        Path(log_path),
+        scan_topic=inp.scan_topic,
+        odom_topic=inp.odom_topic,
+        odom_frame=inp.odom_frame,
+        base_frame=inp.base_frame,
+    )
+    reader.check()
+    info = reader.info()
+    laser2base, source = _laser_mount(reader, cfg)
+    return Input(Path(log_path), reader, info, laser2base, source, _scan_count(info), SyncStats())
+
+
+def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None = None) -> Iterator[Frame]:
+    """Synchronised keyframes of the log, features extracted (streaming)."""
+    synced = synchronise(_scans_cropped(src.reader, cfg), src.stats)
+    pairs = select_keyframes(synced, cfg.keyframes, src.stats)
+    for scan, odom in pairs:
+        yield extract_frame(scan, odom, cfg, src.laser2base)
+        if progress is not None:
+            progress(src.stats.scans_in, src.total_scans)
+
+
 def run(
     log_path: str | Path,
     cfg: Config,
@@ -208,25 +270,30 @@ def run(
     Returns the summary (also written to summary.json).
     """
     wall0 = time.perf_counter()
-    log_path = Path(log_path)
-    inp = cfg.input
-    reader = open_log(
-        log_path,
-        scan_topic=inp.scan_topic,
-        odom_topic=inp.odom_topic,
-        odom_frame=inp.odom_frame,
-        base_frame=inp.base_frame,
-    )
-    reader.check()  # topic problems are exit-2 errors before any work
-    info = reader.info()
-    laser2base, laser_source = _laser_mount(reader, cfg)
-    gt_path = Path(ground_truth) if ground_truth else find_ground_truth(log_path)
-    gt = read_tum(gt_path) if gt_path else None  # read before the run: a bad file fails fast
-    out_dir = Path(out) if out else default_out_dir(log_path, cfg.association.method)
-    total_scans = _scan_count(info)
+    gt_path, gt = load_ground_truth(Path(log_path), ground_truth)  # a bad file fails before the run
+    src = open_input(log_path, cfg)
+    out_dir = Path(out) if out else default_out_dir(src.path, cfg.association.method)
+    return run_frames(frames(src, cfg, progress), src, cfg, out_dir, gt_path, gt, wall0)
 
-    slam = Slam(cfg, laser2base)
-    stats = SyncStats()
+
+def load_ground_truth(log_path: Path, ground_truth: str | Path | None):
+    """(path, (stamps, poses)) of the given ground truth, else of LOG.gt.tum if present, else (None, None)."""
+    gt_path = Path(ground_truth) if ground_truth else find_ground_truth(log_path)
+    return gt_path, (read_tum(gt_path) if gt_path else None)
+
+
+def run_frames(
+    frame_iter: Iterable[Frame],
+    src: Input,
+    cfg: Config,
+    out_dir: Path,
+    gt_path: Path | None,
+    gt,
+    wall0: float,
+) -> dict:
+    """The filter over extracted frames; writes the output directory atomically, returns the summary."""
+    log_path, stats, reader, info = src.path, src.stats, src.reader, src.info
+    slam = Slam(cfg, src.laser2base)
     with StagedDir(out_dir) as stage:
         traj = CsvTable(stage.path / "trajectory.csv", TRAJECTORY_COLUMNS)
         timing = CsvTable(stage.path / "timing.csv", TIMING_COLUMNS)
@@ -234,9 +301,8 @@ def run(
         stamps, poses, odoms = [], [], []
         totals = np.zeros(4)
         t_match_max, budget_hits, matched_total, points_total = 0.0, 0, 0, 0
-        pairs = select_keyframes(synchronise(_scans_cropped(reader, cfg), stats), cfg.keyframes, stats)
-        for scan, odom in pairs:
-            r = slam.step(scan, odom)
+        for frame in frame_iter:
+            r = slam.step(frame)
             traj.row(r.step, f"{r.stamp:.9f}", *r.pose, *r.odom, *r.pose_var)
             timing.row(
                 r.step, f"{r.stamp:.9f}", r.n_points, r.n_lines, r.n_corners, r.n_candidates, r.n_matched,
@@ -251,8 +317,6 @@ def run(
             budget_hits += r.budget_hit
             matched_total += r.n_matched
             points_total += r.n_points
-            if progress is not None:
-                progress(stats.scans_in, total_scans)
         for table in (traj, timing, lines):
             table.close()
         if slam.n_steps > 0 and points_total == 0:
@@ -291,8 +355,8 @@ def run(
                 "scan_topic": info.scan_topic,
                 "odom_topic": info.odom_topic,
                 "odom_source": info.odom_source,
-                "laser_to_base": list(laser2base),
-                "laser_to_base_source": laser_source,
+                "laser_to_base": list(src.laser2base),
+                "laser_to_base_source": src.laser_source,
             },
             "assoc": cfg.association.method,
             "counts": {

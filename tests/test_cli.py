@@ -232,3 +232,30 @@ def test_an_internal_error_exits_1_with_the_traceback_saved(tmp_path, sim_log, m
     saved = res.stderr.split("traceback saved to ")[1].strip().rstrip(")")
     assert "synthetic bug" in Path(saved).read_text()
     assert not (tmp_path / "o").exists()
+
+
+def test_compare_runs_every_associator_on_the_same_frames(sim_log, tmp_path):
+    out = tmp_path / "cmp"
+    res = invoke("compare", sim_log, "--assoc", "icnn,pca", "--out", out, "--jobs", 2)
+    assert res.exit_code == 0, res.output
+    rows = read_csv(out / "comparison.csv")
+    assert list(rows["assoc"]) == ["icnn", "pca"]
+    assert rows["steps"][0] == rows["steps"][1] > 100
+    for a in ("icnn", "pca"):
+        s = json.loads((out / a / "summary.json").read_text())
+        assert s["assoc"] == a
+    # the same frames: identical extraction columns in both timing tables
+    t1, t2 = read_csv(out / "icnn" / "timing.csv"), read_csv(out / "pca" / "timing.csv")
+    assert np.array_equal(t1["n_corners"], t2["n_corners"]) and np.array_equal(
+        t1["t_extract"], t2["t_extract"]
+    )
+    assert "ATE m" in res.output and "icnn" in res.output
+
+
+def test_compare_rejects_unknown_and_repeated_associators(sim_log, tmp_path):
+    one_line_error(
+        invoke("compare", sim_log, "--assoc", "icnn,jbcc", "--out", tmp_path / "c"), "jbcc", "jcbb"
+    )
+    res = invoke("compare", sim_log, "--assoc", "pca,pca", "--out", tmp_path / "c")
+    assert res.exit_code == 2 and "distinct" in res.output
+    assert not (tmp_path / "c").exists()

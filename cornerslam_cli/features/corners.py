@@ -11,8 +11,10 @@ A corner is z = (x, y, φ) in the sensor frame with a 3×3 covariance.
   that sees the same faces of the two walls (π − the angle of the wedge they make).
   Covariance (eq 11–13): C = F diag(C_li, C_lj) Fᵀ, F = ∂(x, y, φ)/∂(r_i, α_i, r_j, α_j); the two lines use
   disjoint beams, so they are independent.
-* **Type II** (end point). A segment end whose next beam (in scan order, away from the segment) is more
-  than d_min away and off the segment's line — a depth jump. The corner is the intersection of the line
+* **Type II** (end point). A segment end whose next beam (in scan order, away from the segment) is valid
+  and more than d_min away and off the segment's line — a measured depth jump. An end next to dropped
+  beams (no return, beyond range, the field of view's edge, the robot's body) is not judged: what lies
+  there is unknown. The corner is the intersection of the line
   with its normal through the end beam's point q, i.e. q projected on the line: c = q − (n·q − r) n.
   The true edge lies between the end beam and the next beam's bearing: the corner is moved to the middle of
   that gap along the line and gets gap²/12 more variance along it (uniform); ends whose gap is wider than
@@ -23,10 +25,8 @@ A corner is z = (x, y, φ) in the sensor frame with a 3×3 covariance.
   Covariance: exact first order in all the segment's beams. The end beam enters twice, through q and
   through the line it helped fit, so C = A C_l Aᵀ − A J_e C_e J_eᵀ Aᵀ + G_e C_e G_eᵀ, with A = ∂c/∂(r, α),
   J_e = ∂(r, α)/∂(ρ_e, θ_e), G_e = A J_e + (I − n nᵀ) ∂q/∂(ρ_e, θ_e), C_e = diag(σρ_e², σθ²).
-  Scan ends (the field of view's edge) are not corners.
 * **drop_occluded** (on by default): the end point on the farther side of a depth jump is the edge of an
-  occlusion shadow that moves with the viewpoint; it is dropped when the beam next to it (no dropped beam
-  between) is nearer. Corners of either type lying more than ``occlusion_margin`` behind the measured
+  occlusion shadow that moves with the viewpoint; it is dropped when the beam next to it is nearer. Corners of either type lying more than ``occlusion_margin`` behind the measured
   range at their bearing are hidden behind a surface and are dropped too.
 * **Duplicates**: several segment pairs (and an end point) can give the same physical corner. Corners
   closer than ``duplicate_radius`` are one: type I is preferred to type II, then the smallest position
@@ -112,10 +112,10 @@ def type_two(scan: Scan, segs: Segments, jac_ends: np.ndarray, sensor: SensorCon
         nbc = np.clip(nb, 0, n - 1)
         jump = np.hypot(x[nbc] - x[beam], y[nbc] - y[beam])
         off_line = np.abs(x[nbc] * np.cos(segs.alpha) + y[nbc] * np.sin(segs.alpha) - segs.r)
-        is_corner = inside & (jump > cfg.d_min) & (off_line > cfg.d_min)
+        adjacent = np.abs(scan.beam_index[nbc] - scan.beam_index[beam]) == 1
+        is_corner = inside & adjacent & (jump > cfg.d_min) & (off_line > cfg.d_min)
         if cfg.drop_occluded:
-            adjacent = np.abs(scan.beam_index[nbc] - scan.beam_index[beam]) == 1
-            is_corner &= ~(adjacent & (rho[nbc] < rho[beam]))
+            is_corner &= ~(rho[nbc] < rho[beam])
         s = np.flatnonzero(is_corner)
         if s.size == 0:
             continue
@@ -168,9 +168,10 @@ def dvec_of(theta):
     return np.column_stack((-np.sin(theta), np.cos(theta)))
 
 
-def measured_range(scan: Scan, bearing: np.ndarray) -> np.ndarray:
+def measured_range(scan: Scan, bearing: np.ndarray, dropped: float = np.nan) -> np.ndarray:
     """Range the scan measured at each bearing: the nearer of the (at most two) valid beams within one beam
-    spacing of it; nan where there is none (a gap of dropped beams, or outside the field of view)."""
+    spacing of it; ``dropped`` inside a gap of dropped beams (no return, or an invalid reading), nan outside
+    the field of view."""
     m, n = len(bearing), len(scan.ranges)
     if n < 2:
         return np.full(m, np.nan)
@@ -181,7 +182,8 @@ def measured_range(scan: Scan, bearing: np.ndarray) -> np.ndarray:
         nbc = np.clip(nb, 0, n - 1)
         near = (nb >= 0) & (nb < n) & (np.abs(scan.angles[nbc] - bearing) <= spacing)
         measured = np.where(near, np.minimum(measured, scan.ranges[nbc]), measured)
-    return np.where(np.isfinite(measured), measured, np.nan)
+    in_fov = (bearing >= scan.angles[0]) & (bearing <= scan.angles[-1])
+    return np.where(np.isfinite(measured), measured, np.where(in_fov, dropped, np.nan))
 
 
 def _spacing(scan: Scan) -> float:
@@ -201,7 +203,8 @@ def seen_through(scan: Scan, segs: Segments, z: np.ndarray, which: np.ndarray, m
     space the scan saw through (a beam there measured more than ``margin`` beyond the extended line).
 
     This rejects "virtual" intersections, e.g. a box face extended to a wall 15 cm behind it; at a real
-    corner the beams between a segment's end and the corner hit that same wall.
+    corner the beams between a segment's end and the corner hit that same wall. Dropped beams there count
+    as seen through (no return).
     """
     out = np.zeros(len(z), dtype=bool)
     for col in (0, 1):
@@ -212,7 +215,7 @@ def seen_through(scan: Scan, segs: Segments, z: np.ndarray, which: np.ndarray, m
         e = ends[np.arange(len(s)), np.argmin(d_end, axis=1)]
         for f in (0.25, 0.5, 0.75):
             q = e + f * (c - e)
-            measured = measured_range(scan, np.arctan2(q[:, 1], q[:, 0]))
+            measured = measured_range(scan, np.arctan2(q[:, 1], q[:, 0]), dropped=np.inf)
             out |= measured > np.hypot(q[:, 0], q[:, 1]) + margin
     return out
 

@@ -1,0 +1,87 @@
+"""``cornerslam compare``: every associator on the same extracted frames, side by side.
+
+Frames are extracted once (extraction does not depend on the associator) and kept in memory, then
+each associator runs the filter over them — in parallel worker processes with ``jobs`` > 1 (the
+frames reach the workers by fork, not by pickling). Each associator's run is a complete ``run``
+output directory under ``OUT/ASSOC``; ``comparison.csv`` has one row per associator.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import multiprocessing
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+from ..config import Config
+from ..pipeline import Frame, Input, frames, load_ground_truth, open_input, run_frames
+from .tables import COMPARISON_COLUMNS, CsvTable, StagedDir
+
+_SHARED: dict = {}  # what forked workers inherit: frames, input, ground truth
+
+
+def with_assoc(cfg: Config, assoc: str) -> Config:
+    return dataclasses.replace(cfg, association=dataclasses.replace(cfg.association, method=assoc))
+
+
+def _run_one(assoc: str, out_dir: Path) -> dict:
+    sh = _SHARED
+    return run_frames(
+        sh["frames"], sh["src"], with_assoc(sh["cfg"], assoc), out_dir, *sh["gt"], time.perf_counter()
+    )
+
+
+def comparison_row(s: dict) -> list:
+    acc = s.get("accuracy") or {}
+    t = s["timing"]
+    return [
+        s["assoc"],
+        s["counts"]["steps"],
+        s["counts"]["landmarks"],
+        s["counts"]["matched_total"],
+        t["t_match"],
+        t["t_match_max"],
+        t["t_total"],
+        acc.get("ate", {}).get("rmse", float("nan")),
+        acc.get("odom_ate", {}).get("rmse", float("nan")),
+        acc.get("rpe_per_m", float("nan")),
+        t["wall_time"],
+        s["counts"]["budget_hits"],
+    ]
+
+
+def compare(
+    log_path: str | Path,
+    cfg: Config,
+    assocs: Sequence[str],
+    out: Path,
+    ground_truth: str | Path | None = None,
+    jobs: int = 1,
+    progress: Callable[[int, int], None] | None = None,
+) -> list[dict]:
+    """Run each associator in ``assocs`` on ``log_path``; write OUT/ASSOC/ and OUT/comparison.csv."""
+    gt = load_ground_truth(Path(log_path), ground_truth)
+    src: Input = open_input(log_path, cfg)
+    frame_list: list[Frame] = list(frames(src, cfg, progress))
+    _SHARED.update(frames=frame_list, src=src, cfg=cfg, gt=gt)
+    try:
+        with StagedDir(out) as stage:
+            dirs = [stage.path / a for a in assocs]
+            if jobs > 1 and len(assocs) > 1:
+                ctx = multiprocessing.get_context("fork")
+                with ProcessPoolExecutor(max_workers=min(jobs, len(assocs)), mp_context=ctx) as pool:
+                    summaries = list(pool.map(_run_one, assocs, dirs))
+            else:
+                summaries = [_run_one(a, d) for a, d in zip(assocs, dirs, strict=True)]
+            table = CsvTable(stage.path / "comparison.csv", COMPARISON_COLUMNS)
+            for s in summaries:
+                table.row(*comparison_row(s))
+            table.close()
+            final = stage.commit()
+    finally:
+        _SHARED.clear()
+    for s, a in zip(summaries, assocs, strict=True):
+        s["out_dir"] = str(final / a)
+    return summaries

@@ -1,0 +1,234 @@
+"""Natural corners (Algorithm 2, eq 9–13), the public ``extract`` and its robustness."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from _features_helpers import HOKUYO, PRECISE, clutter_room, mean_nees, nees_band, to_world
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from cornerslam_cli import simworld as sw
+from cornerslam_cli.features import CornersConfig, LinesConfig, SensorConfig, extract
+from cornerslam_cli.features.corners import intersections
+from cornerslam_cli.types import Scan, Segments
+
+CFG = (LinesConfig(), CornersConfig())
+
+
+def _extract(world, pose, max_range=8.0, corners=CornersConfig(), angles=HOKUYO, **noise):
+    scan = sw.simulate_scan(world, pose, angles, max_range, **noise)
+    return scan, *extract(scan, PRECISE, LinesConfig(), corners)
+
+
+NOISELESS_CASES = [
+    (clutter_room(), (3.0, 3.0, 0.0)),
+    (clutter_room(), (6.8, 1.0, 2.2)),
+    (clutter_room(), (1.0, 5.0, -0.8)),
+    (clutter_room(), (4.0, 3.5, 3.0)),
+] + [(sw.office_world(), tuple(p)) for p in sw.path_poses(sw.OFFICE_LOOP, 2.0)]
+
+
+@pytest.mark.parametrize("world, pose", NOISELESS_CASES)
+def test_noiseless_corners_match_the_world(world, pose):
+    _, _, corners = _extract(world, pose)
+    z = to_world(corners.z[:, :2], pose) if len(corners) else np.zeros((0, 2))
+    truth = sw.true_corners(world)
+    # every corner seen with both walls within 8 m is found within 1 cm, with the right φ
+    for c in sw.visible_corners(world, pose, HOKUYO, 8.0):
+        d = np.hypot(*(z - c[:2]).T)
+        assert d.size and d.min() < 0.01, f"visible corner {c} missed (nearest {d.min() if d.size else np.inf:.3f} m)"
+        assert corners.z[np.argmin(d), 2] == pytest.approx(c[2], abs=math.radians(0.2))
+    # every type I corner is a true corner (1 cm); every type II corner a true corner or a wall end (edge
+    # found within half a beam gap); none is an occlusion shadow on a farther wall
+    ends = world.walls.reshape(-1, 2)
+    for zi, kind in zip(z, corners.kind, strict=True):
+        if kind == 1:
+            assert np.hypot(*(truth[:, :2] - zi).T).min() < 0.01, f"type I corner {zi} is not a true corner"
+        else:
+            assert np.hypot(*(ends - zi).T).min() < 0.05, f"type II corner {zi} is not at a wall end"
+
+
+def test_occluded_corner_is_not_reported():
+    # a box just in front of the room's far corner hides it; the extended walls would meet there
+    world = sw.make_world([sw.room(0, 0, 8, 6), sw.rectangle(7.2, 5.2, 0.8, 0.8)])
+    pose = (2.0, 1.5, 0.6)
+    assert not np.any(np.hypot(*(sw.visible_corners(world, pose, HOKUYO, 30)[:, :2] - (8, 6)).T) < 1e-6)
+    for drop in (True, False):
+        _, _, corners = _extract(world, pose, 30.0, CornersConfig(drop_occluded=drop))
+        z = to_world(corners.z[:, :2], pose)
+        assert not np.any(np.hypot(*(z - (8, 6)).T) < 0.3)
+
+
+def test_drop_occluded_removes_shadow_edges_only():
+    # a box in front of a wall: its edges are corners, the ends of its shadow on the wall are not
+    world = sw.make_world([sw.polyline([(5, -4), (5, 4)]), sw.rectangle(2.5, 0.0, 0.6, 0.6)])
+    pose = (0.0, 0.0, 0.0)
+    angles = np.linspace(-0.7, 0.7, 500)
+    on = _extract(world, pose, 30.0, CornersConfig(drop_occluded=True), angles)[2]
+    off = _extract(world, pose, 30.0, CornersConfig(drop_occluded=False), angles)[2]
+    shadow = lambda c: np.isclose(c.z[:, 0], 5.0, atol=0.01) & (c.kind == 2)  # noqa: E731
+    edges = lambda c: np.isclose(c.z[:, 0], 2.2, atol=0.01) & (c.kind == 2)  # noqa: E731
+    assert shadow(off).sum() == 2 and shadow(on).sum() == 0
+    assert edges(off).sum() == 2 and edges(on).sum() == 2
+    np.testing.assert_allclose(np.sort(on.z[edges(on), 1]), [-0.3, 0.3], atol=0.01)
+
+
+def test_virtual_intersection_in_free_space_is_rejected():
+    # a box 15 cm in front of a wall: its face extended meets the wall within dp_max, but the scan saw
+    # through the gap
+    world = sw.make_world([sw.room(0, 0, 8, 6), sw.rectangle(7.6, 3.0, 0.5, 0.8)])
+    pose = (4.0, 1.0, 0.5)
+    _, _, corners = _extract(world, pose, 30.0)
+    z = to_world(corners.z[:, :2], pose)
+    assert not np.any(np.hypot(*(z - (8.0, 2.6)).T) < 0.05)
+    _, _, loose = _extract(world, pose, 30.0, CornersConfig(free_space_check=False))
+    assert np.any(np.hypot(*(to_world(loose.z[:, :2], pose) - (8.0, 2.6)).T) < 0.01)
+
+
+def test_all_pairs_not_only_neighbours():
+    # a pillar's shadow cuts one wall into two segments; the corner is formed by the far piece and the
+    # other wall even though a segment lies between them in scan order
+    world = sw.make_world([sw.polyline([(6, -3), (6, 3), (-2, 3)]), sw.rectangle(4.0, 2.0, 0.2, 0.2)])
+    pose = (0.0, 0.0, 0.0)
+    _, segs, corners = _extract(world, pose, 30.0, angles=np.linspace(-1.5, 1.5, 1000))
+    i = np.flatnonzero((np.hypot(*(corners.z[:, :2] - (6, 3)).T) < 0.01) & (corners.kind == 1))
+    assert len(i) == 1
+    assert abs(corners.segs[i[0], 0] - corners.segs[i[0], 1]) >= 1
+
+
+def test_duplicates_are_merged():
+    for world, pose in NOISELESS_CASES[:4]:
+        _, _, corners = _extract(world, pose)
+        d = np.hypot(*(corners.z[:, None, :2] - corners.z[None, :, :2]).transpose(2, 0, 1))
+        np.fill_diagonal(d, np.inf)
+        assert d.min() >= CornersConfig().duplicate_radius
+        b = np.arctan2(corners.z[:, 1], corners.z[:, 0])
+        assert np.all(np.diff(b) >= 0)  # bearing order
+
+
+def test_intersection_jacobian_matches_finite_differences():
+    segs = Segments(
+        r=np.array([2.0, 3.0]), alpha=np.array([0.3, 2.0]), cov=np.tile(np.eye(2), (2, 1, 1)),
+        p1=np.zeros((2, 2)), p2=np.zeros((2, 2)), n_points=np.array([9, 9]), first=np.zeros(2, int), last=np.zeros(2, int),
+    )  # fmt: skip
+    z, _ = intersections(segs, np.array([0]), np.array([1]))
+    c = z[0, :2]
+    assert c @ [math.cos(0.3), math.sin(0.3)] == pytest.approx(2.0)
+    assert c @ [math.cos(2.0), math.sin(2.0)] == pytest.approx(3.0)
+    F = np.zeros((3, 4))
+    h = 1e-7
+    for k in range(4):
+        p = np.array([2.0, 0.3, 3.0, 2.0])
+        p[k] += h
+        s2 = replace(segs, r=p[[0, 2]], alpha=p[[1, 3]])
+        F[:, k] = (intersections(s2, np.array([0]), np.array([1]))[0][0] - z[0]) / h
+    C = np.diag([1e-4, 2e-4, 3e-4, 4e-4])
+    segs_c = replace(segs, cov=np.array([C[:2, :2], C[2:, 2:]]))
+    np.testing.assert_allclose(intersections(segs_c, np.array([0]), np.array([1]))[1][0], F @ C @ F.T, rtol=1e-5)
+
+
+def _monte_carlo(world_of, truth_of, pose, kind, n, dims, rng, angles=HOKUYO):
+    err, covs = [], []
+    for _ in range(n):
+        world, truth = world_of(rng), truth_of
+        scan = sw.simulate_scan(world, pose, angles, 30.0, PRECISE.a, PRECISE.sigma_theta, rng)
+        _, corners = extract(scan, PRECISE, *CFG)
+        t = truth(world) if callable(truth) else truth
+        z = to_world(corners.z[:, :2], pose)
+        d = np.hypot(*(z - t[:2]).T)
+        i = int(np.argmin(d))
+        assert d[i] < 0.1 and corners.kind[i] == kind
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        R = np.array([[c, -s], [s, c]])
+        e = np.append(R.T @ (z[i] - t[:2]), corners.z[i, 2] - t[2])  # error in the sensor frame
+        err.append(e[:dims])
+        covs.append(corners.cov[i][:dims, :dims])
+    lo, hi = nees_band(n, dims)
+    nees = mean_nees(np.asarray(err), np.asarray(covs))
+    assert lo < nees < hi, f"mean NEES {nees:.3f} outside [{lo:.3f}, {hi:.3f}]"
+
+
+def test_type_one_covariance_monte_carlo():
+    """(x, y, φ) of a 120° room corner over 500 noisy scans: NEES in the 95 % band for d = 3."""
+    world = sw.make_world([sw.polyline([(6, -3), (6, 1), (3, 1 + 3 * math.sqrt(3))])])
+    truth = np.array([6.0, 1.0, math.pi / 3])  # the wedge is 120°, φ = 60°
+    _monte_carlo(lambda rng: world, truth, (0.0, 0.0, 0.2), 1, 500, 3, np.random.default_rng(5))
+
+
+def test_type_two_covariance_monte_carlo():
+    """(x, y) of a wall's free end over 500 noisy scans, the end drawn anywhere in the gap between two beams:
+    the covariance covers both the noise and where the edge lies between beams (d = 2; φ is a prior)."""
+    angles = np.linspace(-1.0, 1.0, 400)
+    step = angles[1] - angles[0]
+    base = math.atan2(-0.0, 2.0)  # the free end is near bearing 0 at 2 m
+
+    def world_of(rng):
+        end = 2.0 * math.tan(base + (rng.uniform(0, 1) + 0.5) * step)
+        return sw.make_world([sw.polyline([(2.0, -1.5), (2.0, end)]), sw.polyline([(5.0, -4), (5.0, 4)])])
+
+    truth = lambda w: np.array([2.0, w.walls[0, 1, 1], 0.0])  # noqa: E731
+    _monte_carlo(world_of, truth, (0.0, 0.0, 0.0), 2, 500, 2, np.random.default_rng(9), angles)
+
+
+# --- robustness -------------------------------------------------------------------------------------------
+
+
+def _check_output(segs, corners):
+    for a in (segs.r, segs.alpha, segs.cov, segs.p1, segs.p2, corners.z, corners.cov):
+        assert np.all(np.isfinite(a))
+    for C in list(segs.cov) + list(corners.cov):
+        np.testing.assert_array_equal(C, C.T)
+        np.linalg.cholesky(C)  # positive definite
+    assert len(corners.kind) == len(corners.z) == len(corners.segs)
+    assert np.all(corners.segs[:, 0] < len(segs))
+
+
+def _scan(ranges, angles):
+    ranges, angles = np.asarray(ranges, float), np.asarray(angles, float)
+    return Scan(0.0, ranges, angles, np.arange(len(ranges)), len(ranges), 0.0, np.inf, 0.0)
+
+
+def test_degenerate_scans_give_no_features():
+    for ranges, angles in [([], []), ([1.0], [0.0]), ([2.0] * 5, [0.1] * 5), ([1e-9] * 50, np.linspace(0, 1, 50))]:
+        segs, corners = extract(_scan(ranges, angles), SensorConfig(), *CFG)
+        _check_output(segs, corners)
+        assert len(corners) == 0
+
+
+@st.composite
+def scans(draw):
+    n = draw(st.integers(0, 300))
+    kind = draw(st.sampled_from(["random", "equal", "tiny", "huge", "walls"]))
+    finite = st.floats(1e-6, 1e6, allow_nan=False, allow_infinity=False)
+    if kind == "random":
+        ranges = draw(st.lists(finite, min_size=n, max_size=n))
+    elif kind == "equal":
+        ranges = [draw(finite)] * n
+    elif kind == "tiny":
+        ranges = draw(st.lists(st.floats(0.0, 1e-3), min_size=n, max_size=n))
+    elif kind == "huge":
+        ranges = draw(st.lists(st.floats(1e3, 1e12), min_size=n, max_size=n))
+    else:  # piecewise-constant ranges: many short "walls" and jumps
+        ranges = np.repeat(draw(st.lists(st.floats(0.05, 50.0), min_size=1, max_size=20)), max(1, n // 10))[:n]
+    steps = draw(st.lists(st.floats(0.0, 0.2), min_size=n, max_size=n))
+    angles = np.cumsum(steps) + draw(st.floats(-math.pi, 0.0))
+    return _scan(np.asarray(ranges, float)[:n], angles[: len(ranges)])
+
+
+@settings(max_examples=100, deadline=None)
+@given(scans(), st.sampled_from([SensorConfig(), PRECISE, SensorConfig(sigma_r_near=0.0, sigma_r_rel=0.0, sigma_theta=0.0)]))
+def test_any_scan_gives_finite_features_or_none(scan, sensor):
+    segs, corners = extract(scan, sensor, *CFG)
+    _check_output(segs, corners)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.floats(0.5, 29.5), st.floats(0.5, 19.5), st.floats(-math.pi, math.pi), st.integers(0, 2**31))
+def test_noisy_office_scans_give_finite_spd_features(x, y, th, seed):
+    rng = np.random.default_rng(seed)
+    scan = sw.simulate_scan(sw.office_world(), (x, y, th), HOKUYO, 30.0, lambda r: 0.03 * np.maximum(r, 1.0), 0.003, rng)
+    _check_output(*extract(scan, SensorConfig(), *CFG))
