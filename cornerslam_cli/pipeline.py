@@ -131,9 +131,8 @@ class Slam:
         self.laser2base = laser2base
         self.ekf = Ekf(cfg.ekf)
         self.associate = make_associator(cfg.association)
-        self.first_step: list[int] = []
-        self.last_step: list[int] = []
-        self.n_obs: list[int] = []
+        self.first_step = np.zeros(0, dtype=np.int64)  # per landmark id, kept in step with the filter's ids
+        self.last_step = np.zeros(0, dtype=np.int64)
         self.prev_odom: np.ndarray | None = None
         self.n_steps = 0
 
@@ -153,15 +152,15 @@ class Slam:
         if len(ids):
             self.ekf.update(ids, z[matched], C[matched])  # eq 23-32, block update
         new_ids = self.ekf.augment(z[~matched], C[~matched])
+        self.last_step[ids] = k
+        self.first_step = np.concatenate((self.first_step, np.full(len(new_ids), k)))
+        self.last_step = np.concatenate((self.last_step, np.full(len(new_ids), k)))
+        remap = self.ekf.prune_tentative()  # identity unless ekf.tentative_sightings > 1
+        if np.any(remap < 0):
+            kept = remap >= 0
+            self.first_step, self.last_step = self.first_step[kept], self.last_step[kept]
         self.ekf.check_health(k)
         t4 = time.perf_counter()
-        for i in ids:
-            self.last_step[i] = k
-            self.n_obs[i] += 1
-        for _ in range(len(new_ids)):
-            self.first_step.append(k)
-            self.last_step.append(k)
-            self.n_obs.append(1)
         pose = np.array(self.ekf.pose, dtype=float)
         sensor2map = se2_matrix(*pose) @ se2_matrix(*self.laser2base)
         self.n_steps += 1
@@ -188,22 +187,22 @@ class Slam:
         )
 
     def landmark_table(self) -> np.ndarray:
-        """(n, 11) rows of map.csv."""
-        n = self.ekf.n_landmarks
-        L = np.asarray(self.ekf.landmarks).reshape(n, 3)
+        """(n, 11) rows of map.csv: the confirmed landmarks (all of them without a tentative stage)."""
+        ids = np.flatnonzero(~self.ekf.tentative)
+        L = np.asarray(self.ekf.landmarks).reshape(-1, 3)[ids]
         P = self.ekf.P
-        idx = 3 + 3 * np.arange(n)
+        idx = 3 + 3 * ids
         return np.column_stack(
             (
-                np.arange(n),
+                ids,
                 L,
                 P[idx, idx],
                 P[idx + 1, idx + 1],
                 P[idx, idx + 1],
                 P[idx + 2, idx + 2],
-                self.first_step,
-                self.last_step,
-                self.n_obs,
+                self.first_step[ids],
+                self.last_step[ids],
+                self.ekf.n_obs[ids],
             )
         )
 
@@ -361,7 +360,7 @@ def run_frames(
             "assoc": cfg.association.method,
             "counts": {
                 "steps": slam.n_steps,
-                "landmarks": slam.ekf.n_landmarks,
+                "landmarks": len(lm),
                 "matched_total": matched_total,
                 "beams_total": reader.stats.beams,
                 "beams_invalid": reader.stats.beams_dropped,

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from cornerslam_cli import simworld as sw
 from cornerslam_cli.features import CornersConfig, LinesConfig, SensorConfig, extract
-from cornerslam_cli.features.corners import intersections
+from cornerslam_cli.features.corners import intersections, type_one
 from cornerslam_cli.types import Scan, Segments
 
 CFG = (LinesConfig(), CornersConfig())
@@ -89,15 +89,29 @@ def test_virtual_intersection_in_free_space_is_rejected():
     assert np.any(np.hypot(*(to_world(loose.z[:, :2], pose) - (8.0, 2.6)).T) < 0.01)
 
 
+def _segments(lines):
+    """Segments from ((r, α), p1, p2) tuples, unit covariances."""
+    k = len(lines)
+    return Segments(
+        r=np.array([ln[0][0] for ln in lines]), alpha=np.array([ln[0][1] for ln in lines]),
+        cov=np.tile(np.eye(2) * 1e-4, (k, 1, 1)), p1=np.array([ln[1] for ln in lines], float),
+        p2=np.array([ln[2] for ln in lines], float), n_points=np.full(k, 9), first=np.arange(k), last=np.arange(k),
+    )  # fmt: skip
+
+
 def test_all_pairs_not_only_neighbours():
-    # a pillar's shadow cuts one wall into two segments; the corner is formed by the far piece and the
-    # other wall even though a segment lies between them in scan order
-    world = sw.make_world([sw.polyline([(6, -3), (6, 3), (-2, 3)]), sw.rectangle(4.0, 2.0, 0.2, 0.2)])
-    pose = (0.0, 0.0, 0.0)
-    _, segs, corners = _extract(world, pose, 30.0, angles=np.linspace(-1.5, 1.5, 1000))
-    i = np.flatnonzero((np.hypot(*(corners.z[:, :2] - (6, 3)).T) < 0.01) & (corners.kind == 1))
-    assert len(i) == 1
-    assert abs(corners.segs[i[0], 0] - corners.segs[i[0], 1]) >= 1
+    # wall x = 6 and wall y = 3 meet at (6, 3); a short piece of rubbish between them in scan order
+    segs = _segments(
+        [((6.0, 0.0), (6, -2), (6, 2.9)), ((5.0, 0.7), (3.6, 3.0), (3.9, 2.6)), ((3.0, np.pi / 2), (5.85, 3), (1, 3))]
+    )
+    z, _, which = type_one(segs, CornersConfig())
+    assert len(z) == 1 and which[0].tolist() == [0, 2]
+    np.testing.assert_allclose(z[0], [6.0, 3.0, np.pi / 2], atol=1e-12)
+    # too far from a segment (dp_max) or too parallel (min_angle): none
+    far = _segments([((6.0, 0.0), (6, -2), (6, 2.7)), ((3.0, np.pi / 2), (6.1, 3), (1, 3))])
+    assert len(type_one(far, CornersConfig(d_min=1.0))[0]) == 0
+    flat = _segments([((6.0, 0.0), (6, -2), (6, 2.9)), ((6.0, 0.3), (6.2, 3), (3, 4))])
+    assert len(type_one(flat, CornersConfig())[0]) == 0
 
 
 def test_duplicates_are_merged():
@@ -154,7 +168,7 @@ def _monte_carlo(world_of, truth_of, pose, kind, n, dims, rng, angles=HOKUYO):
 
 def test_type_one_covariance_monte_carlo():
     """(x, y, φ) of a 120° room corner over 500 noisy scans: NEES in the 95 % band for d = 3."""
-    world = sw.make_world([sw.polyline([(6, -3), (6, 1), (3, 1 + 3 * math.sqrt(3))])])
+    world = sw.make_world([sw.polyline([(6, -3), (6, 1), (6 - 2 * math.sqrt(3), 3)])])
     truth = np.array([6.0, 1.0, math.pi / 3])  # the wedge is 120°, φ = 60°
     _monte_carlo(lambda rng: world, truth, (0.0, 0.0, 0.2), 1, 500, 3, np.random.default_rng(5))
 

@@ -26,8 +26,8 @@ A corner is z = (x, y, φ) in the sensor frame with a 3×3 covariance.
   through the line it helped fit, so C = A C_l Aᵀ − A J_e C_e J_eᵀ Aᵀ + G_e C_e G_eᵀ, with A = ∂c/∂(r, α),
   J_e = ∂(r, α)/∂(ρ_e, θ_e), G_e = A J_e + (I − n nᵀ) ∂q/∂(ρ_e, θ_e), C_e = diag(σρ_e², σθ²).
 * **drop_occluded** (on by default): the end point on the farther side of a depth jump is the edge of an
-  occlusion shadow that moves with the viewpoint; it is dropped when the beam next to it is nearer. Corners of either type lying more than ``occlusion_margin`` behind the measured
-  range at their bearing are hidden behind a surface and are dropped too.
+  occlusion shadow that moves with the viewpoint; it is dropped when the beam next to it is nearer. Corners of either type lying farther behind the measured range at their bearing than
+  the margin (``occlusion_margin`` + 3σρ) are hidden behind a surface and are dropped too.
 * **Duplicates**: several segment pairs (and an end point) can give the same physical corner. Corners
   closer than ``duplicate_radius`` are one: type I is preferred to type II, then the smallest position
   uncertainty (trace of the 2×2 block) — the pair of lines that best represents the walls. Corners are not
@@ -43,7 +43,7 @@ import numpy as np
 from ..types import Corners, Scan, Segments
 from .lines import COV_FLOOR
 from .params import CornersConfig, SensorConfig
-from .sensor import beam_variances
+from .sensor import beam_variances, sigma_range
 
 
 def _wrap(a):
@@ -168,20 +168,21 @@ def dvec_of(theta):
     return np.column_stack((-np.sin(theta), np.cos(theta)))
 
 
-def measured_range(scan: Scan, bearing: np.ndarray, dropped: float = np.nan) -> np.ndarray:
-    """Range the scan measured at each bearing: the nearer of the (at most two) valid beams within one beam
-    spacing of it; ``dropped`` inside a gap of dropped beams (no return, or an invalid reading), nan outside
-    the field of view."""
+def measured_range(scan: Scan, bearing: np.ndarray, dropped: float = np.nan, farther: bool = False) -> np.ndarray:
+    """Range the scan measured at each bearing: the nearer (``farther``: the farther) of the at most two
+    valid beams within one beam spacing of it; ``dropped`` inside a gap of dropped beams (no return, or an
+    invalid reading), nan outside the field of view."""
     m, n = len(bearing), len(scan.ranges)
     if n < 2:
         return np.full(m, np.nan)
     spacing = _spacing(scan)
     k = np.searchsorted(scan.angles, bearing)
-    measured = np.full(m, np.inf)
+    pick, none = (np.fmax, -np.inf) if farther else (np.fmin, np.inf)
+    measured = np.full(m, none)
     for nb in (k - 1, k):
         nbc = np.clip(nb, 0, n - 1)
         near = (nb >= 0) & (nb < n) & (np.abs(scan.angles[nbc] - bearing) <= spacing)
-        measured = np.where(near, np.minimum(measured, scan.ranges[nbc]), measured)
+        measured = np.where(near, pick(measured, scan.ranges[nbc]), measured)
     in_fov = (bearing >= scan.angles[0]) & (bearing <= scan.angles[-1])
     return np.where(np.isfinite(measured), measured, np.where(in_fov, dropped, np.nan))
 
@@ -192,13 +193,23 @@ def _spacing(scan: Scan) -> float:
     return float(np.median(np.diff(scan.angles))) if len(scan.angles) > 1 else 0.0
 
 
-def hidden(scan: Scan, z: np.ndarray, margin: float) -> np.ndarray:
-    """(m,) bool: the corner lies more than ``margin`` behind the range measured at its bearing."""
-    measured = measured_range(scan, np.arctan2(z[:, 1], z[:, 0]))
-    return measured < np.hypot(z[:, 0], z[:, 1]) - margin
+def _margin(rho, sensor: SensorConfig, margin: float):
+    """Tolerance of a range comparison: ``occlusion_margin`` + 3σρ at that range."""
+    return margin + 3.0 * sigma_range(np.where(np.isfinite(rho), rho, 0.0), sensor)
 
 
-def seen_through(scan: Scan, segs: Segments, z: np.ndarray, which: np.ndarray, margin: float) -> np.ndarray:
+def hidden(scan: Scan, z: np.ndarray, sensor: SensorConfig, margin: float) -> np.ndarray:
+    """(m,) bool: the corner lies behind the ranges measured at its bearing, by more than the margin.
+
+    Both beams bracketing the bearing must be in front: next to a corner a steep wall legitimately
+    comes nearer by several centimetres per beam."""
+    measured = measured_range(scan, np.arctan2(z[:, 1], z[:, 0]), farther=True)
+    return measured < np.hypot(z[:, 0], z[:, 1]) - _margin(measured, sensor, margin)
+
+
+def seen_through(
+    scan: Scan, segs: Segments, z: np.ndarray, which: np.ndarray, sensor: SensorConfig, margin: float
+) -> np.ndarray:
     """(m,) bool for type I corners: a segment's extension from its nearer end to the intersection crosses
     space the scan saw through (a beam there measured more than ``margin`` beyond the extended line).
 
@@ -216,7 +227,8 @@ def seen_through(scan: Scan, segs: Segments, z: np.ndarray, which: np.ndarray, m
         for f in (0.25, 0.5, 0.75):
             q = e + f * (c - e)
             measured = measured_range(scan, np.arctan2(q[:, 1], q[:, 0]), dropped=np.inf)
-            out |= measured > np.hypot(q[:, 0], q[:, 1]) + margin
+            rq = np.hypot(q[:, 0], q[:, 1])
+            out |= measured > rq + _margin(rq, sensor, margin)
     return out
 
 
@@ -253,9 +265,9 @@ def extract_corners(
     ok &= np.linalg.eigvalsh(np.where(ok[:, None, None], cov, np.eye(3))).min(axis=1) > 0
     z = np.where(ok[:, None], z, 0.0)
     if cfg.drop_occluded:
-        ok &= ~hidden(scan, z, cfg.occlusion_margin)
+        ok &= ~hidden(scan, z, sensor, cfg.occlusion_margin)
     if cfg.free_space_check:
-        ok &= ~((kind == 1) & seen_through(scan, segs, z, np.maximum(which, 0), cfg.occlusion_margin))
+        ok &= ~((kind == 1) & seen_through(scan, segs, z, np.maximum(which, 0), sensor, cfg.occlusion_margin))
     z, cov, which, kind = z[ok], cov[ok], which[ok], kind[ok]
     if len(z) == 0:
         return Corners.empty()

@@ -11,7 +11,7 @@ Pipeline, on the valid beams of a scan in bearing order (a *range* is a run of c
 4. merge             — adjacent ranges (gap < d_mergeMax, angle < a_mergeMax) whose merged line stays within
                        l_max of both ranges' end vertices become one
 5. boundary refine   — a beam at the border of two touching ranges goes to the line it is closer to
-6. end trim          — a first/last beam more than 3 RMS residuals off its range's line is split off
+6. end trim          — a first/last beam more than 4 RMS residuals off its range's line is split off
 7. filters           — at least ``min_points`` beams and ``min_length`` metres
 
 Fit (eq 2–4): weighted total least squares, x·cos α + y·sin α = r with r >= 0, α in (−π, π].  The
@@ -387,7 +387,7 @@ def refine_boundaries(x, y, w, starts, cfg: LinesConfig, sweeps: int = 2) -> np.
 
 
 def trim_ends(x, y, w, starts, cfg: LinesConfig, sweeps: int = 2) -> np.ndarray:
-    """Step 6: split off a range's first or last beam when it lies more than 3 RMS residuals off the line.
+    """Step 6: split off a range's first or last beam when it lies more than 4 RMS residuals off the line.
 
     A beam just past a corner or breakpoint can sit within l_max of the wrong line (e.g. the last beam
     of a grazing wall). The RMS is that of the range's other beams, so the test does not depend on the
@@ -405,8 +405,8 @@ def trim_ends(x, y, w, starts, cfg: LinesConfig, sweeps: int = 2) -> np.ndarray:
         big = cnt >= cfg.min_points
         e0, e1 = e[starts], e[ends - 1]
         # RMS of the other beams of the range (leave the tested one out)
-        cut_first = big & (e0 * e0 > 9.0 * (sse - e0 * e0) / np.maximum(cnt - 1, 1))
-        cut_last = big & (e1 * e1 > 9.0 * (sse - e1 * e1) / np.maximum(cnt - 1, 1))
+        cut_first = big & (e0 * e0 > 16.0 * (sse - e0 * e0) / np.maximum(cnt - 1, 1))
+        cut_last = big & (e1 * e1 > 16.0 * (sse - e1 * e1) / np.maximum(cnt - 1, 1))
         if not (cut_first.any() or cut_last.any()):
             return starts
         starts = np.union1d(starts, np.concatenate((starts[cut_first] + 1, ends[cut_last] - 1)))

@@ -86,7 +86,7 @@ class CornersConfig:
     endpoints: bool = True  # type II corners at depth jumps
     drop_occluded: bool = True  # drop corners the scan shows hidden (far side of a jump, behind a surface)
     free_space_check: bool = True  # drop type I intersections reached through space the scan saw through
-    occlusion_margin: float = 0.1  # margin of both checks against the measured range, metres
+    occlusion_margin: float = 0.03  # margin of both checks against the measured range, + 3σρ, metres
     endpoint_max_gap: float = 0.2  # type II: drop ends whose next beam would hit the line farther away, m
     endpoint_phi: float = math.pi / 2  # φ given to type II corners (the end line meets its normal), radians
     endpoint_phi_sigma: float = math.radians(10.0)  # prior σ of that φ (it is not measured), radians

@@ -22,21 +22,19 @@ class EkfConfig:
     alpha4: float = 0.01  # trans variance per rot² (m²/rad²)
     min_sigma_xy: float = 0.002  # floor per prediction, metres
     min_sigma_theta: float = math.radians(0.1)  # floor per prediction, radians
-    pure_rotation_eps: float = (
-        1e-3  # metres; below, rot1 = 0 and the turn is rot2 (heading of travel undefined)
-    )
+    # metres: below, the heading of travel is undefined, so rot1 = 0 and the turn is rot2
+    pure_rotation_eps: float = 1e-3
     reverse_motion: bool = True  # travel > 90° off the heading is driving backwards (trans < 0)
     init_sigma_xy: float = 0.0  # initial pose standard deviation (0: the map frame is the first pose)
     init_sigma_theta: float = 0.0
-    update: Literal["sequential", "batched"] = (
-        "sequential"  # per-pair block update (paper) | one stacked update
-    )
+    # sequential: the paper's block update pair by pair | batched: one update with the stacked H
+    update: Literal["sequential", "batched"] = "sequential"
     fuse: bool = True  # apply the rank-3 terms of one update() call in one pass over Σ (exact, faster)
     joseph: bool = False  # Joseph form (I−KH)Σ(I−KH)ᵀ + KCKᵀ, as a rank-6 block update
     symmetry_tol: float = 1e-9  # health check: max|Σ − Σᵀ| ≤ tol · max(1, max diag Σ)
     initial_capacity: int = 64  # landmarks preallocated; the buffer doubles when full
     tentative_sightings: int = 1  # sightings before a landmark is confirmed; 1 = tentative stage off
-    tentative_max_age: int = 5  # keyframes a tentative landmark may go unseen before prune_tentative drops it
+    tentative_max_age: int = 5  # keyframes a tentative landmark may go unseen before it is dropped
 
     def __post_init__(self) -> None:
         for name in (

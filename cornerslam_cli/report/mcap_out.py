@@ -1,0 +1,349 @@
+"""A run's results as an MCAP file for Foxglove, to open beside the input log.
+
+Why JSON: Foxglove reads its well-known schemas (``foxglove.PoseInFrame``, ``foxglove.SceneUpdate``,
+...) in any of its encodings, and the JSON one needs nothing beyond the ``mcap`` package we already
+depend on: each channel has ``message_encoding="json"`` and a ``jsonschema`` schema named after the
+Foxglove type, and each message is a UTF-8 JSON object. Protobuf would add ``protobuf`` plus compiled
+descriptors, ``foxglove-sdk`` a native wheel; ROS 2 CDR would need the ``foxglove_msgs`` definitions.
+JSON costs file size (about 3–5× protobuf), which is small next to the laser log itself. The schemas
+below are the Foxglove JSON schemas (foxglove-sdk ``schemas/jsonschema``) trimmed to the fields we
+write — every field Foxglove marks required is kept and filled.
+
+Topics (frame ``map`` is the SLAM map frame, the first corrected pose; log times are the scan stamps
+from trajectory.csv, so everything lines up with the input log):
+
+=====================================  =========================  ========================================
+topic                                  schema                     messages
+=====================================  =========================  ========================================
+``/cornerslam/pose``                   foxglove.PoseInFrame       one per step: corrected robot pose
+``/cornerslam/odom_pose``              foxglove.PoseInFrame       one per step: odometry, anchored on the
+                                                                  first corrected pose
+``/cornerslam/path``                   foxglove.PosesInFrame      one, at the first stamp: whole corrected
+                                                                  trajectory
+``/cornerslam/odom_path``              foxglove.PosesInFrame      one: whole odometry trajectory
+``/cornerslam/ground_truth_path``      foxglove.PosesInFrame      one, only with ground truth (SE(2)-
+                                                                  aligned like the ATE)
+``/cornerslam/tf``                     foxglove.FrameTransform    one per step: ``map`` → odom frame
+``/cornerslam/landmarks``              foxglove.SceneUpdate       one per landmark, at the stamp of the
+                                                                  step that created it: sphere, 3σ
+                                                                  ellipse (line loop), corner direction
+``/cornerslam/segments``               foxglove.SceneUpdate       one per step: that step's segments
+                                                                  (line list, kept, so the map builds up)
+=====================================  =========================  ========================================
+
+The transform is ``map`` → odom (REP 105: corrected pose ∘ odometry⁻¹), not ``map`` → base: the input
+log usually already carries odom → base_link, and a second parent for base_link would make Foxglove's
+transform tree flip between the two. With both files open, base_link sits at the corrected pose.
+Landmarks are the final estimates (map.csv holds only the final map), shown from their creation on.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from decimal import Decimal
+from pathlib import Path
+
+import numpy as np
+
+from .plots import ELLIPSE_SIGMA, ellipse_polygons, load_run
+
+MAP_FRAME = "map"
+TOPICS = {
+    "pose": "/cornerslam/pose",
+    "odom_pose": "/cornerslam/odom_pose",
+    "path": "/cornerslam/path",
+    "odom_path": "/cornerslam/odom_path",
+    "ground_truth_path": "/cornerslam/ground_truth_path",
+    "tf": "/cornerslam/tf",
+    "landmarks": "/cornerslam/landmarks",
+    "segments": "/cornerslam/segments",
+}
+LANDMARK_RADIUS = 0.15  # m, sphere diameter in Foxglove
+CORNER_ARROW = 0.4  # m, length of the line showing a corner's direction φ
+
+
+# --- Foxglove JSON schemas (trimmed to the fields written; names as in foxglove-sdk) -------------------
+def _obj(title: str, props: dict, required: list[str] | None = None) -> dict:
+    return {"title": title, "type": "object", "properties": props, "required": required or list(props)}
+
+
+def _num() -> dict:
+    return {"type": "number"}
+
+
+def _arr(items: dict) -> dict:
+    return {"type": "array", "items": items}
+
+
+_TIME = {
+    "type": "object",
+    "title": "time",
+    "properties": {"sec": {"type": "integer", "minimum": 0}, "nsec": {"type": "integer", "minimum": 0}},
+    "required": ["sec", "nsec"],
+}
+_DURATION = dict(_TIME, title="duration")
+_VECTOR3 = _obj("foxglove.Vector3", {"x": _num(), "y": _num(), "z": _num()})
+_POINT3 = _obj("foxglove.Point3", {"x": _num(), "y": _num(), "z": _num()})
+_QUATERNION = _obj("foxglove.Quaternion", {"x": _num(), "y": _num(), "z": _num(), "w": _num()})
+_COLOR = _obj("foxglove.Color", {"r": _num(), "g": _num(), "b": _num(), "a": _num()})
+_POSE = _obj("foxglove.Pose", {"position": _VECTOR3, "orientation": _QUATERNION})
+_STRING = {"type": "string"}
+_KEY_VALUE = _obj("foxglove.KeyValuePair", {"key": _STRING, "value": _STRING})
+_SPHERE = _obj("foxglove.SpherePrimitive", {"pose": _POSE, "size": _VECTOR3, "color": _COLOR})
+_LINE = _obj(
+    "foxglove.LinePrimitive",
+    {
+        "type": {"type": "integer", "description": "0 LINE_STRIP, 1 LINE_LOOP, 2 LINE_LIST"},
+        "pose": _POSE,
+        "thickness": _num(),
+        "scale_invariant": {"type": "boolean"},
+        "points": _arr(_POINT3),
+        "color": _COLOR,
+        "colors": _arr(_COLOR),
+        "indices": _arr({"type": "integer", "minimum": 0}),
+    },
+)
+_UNUSED_PRIMITIVES = ("arrows", "cubes", "cylinders", "triangles", "texts", "models")  # always empty
+_SCENE_ENTITY = _obj(
+    "foxglove.SceneEntity",
+    {
+        "timestamp": _TIME,
+        "frame_id": _STRING,
+        "id": _STRING,
+        "lifetime": _DURATION,
+        "frame_locked": {"type": "boolean"},
+        "metadata": _arr(_KEY_VALUE),
+        "spheres": _arr(_SPHERE),
+        "lines": _arr(_LINE),
+        **{k: _arr({"type": "object"}) for k in _UNUSED_PRIMITIVES},
+    },
+)
+SCHEMAS: dict[str, dict] = {
+    "foxglove.PoseInFrame": _obj(
+        "foxglove.PoseInFrame", {"timestamp": _TIME, "frame_id": _STRING, "pose": _POSE}
+    ),
+    "foxglove.PosesInFrame": _obj(
+        "foxglove.PosesInFrame", {"timestamp": _TIME, "frame_id": _STRING, "poses": _arr(_POSE)}
+    ),
+    "foxglove.FrameTransform": _obj(
+        "foxglove.FrameTransform",
+        {
+            "timestamp": _TIME,
+            "parent_frame_id": _STRING,
+            "child_frame_id": _STRING,
+            "translation": _VECTOR3,
+            "rotation": _QUATERNION,
+        },
+    ),
+    "foxglove.SceneUpdate": _obj(
+        "foxglove.SceneUpdate",
+        {"deletions": _arr({"type": "object"}), "entities": _arr(_SCENE_ENTITY)},
+    ),
+}
+TOPIC_SCHEMAS = {
+    "pose": "foxglove.PoseInFrame",
+    "odom_pose": "foxglove.PoseInFrame",
+    "path": "foxglove.PosesInFrame",
+    "odom_path": "foxglove.PosesInFrame",
+    "ground_truth_path": "foxglove.PosesInFrame",
+    "tf": "foxglove.FrameTransform",
+    "landmarks": "foxglove.SceneUpdate",
+    "segments": "foxglove.SceneUpdate",
+}
+
+
+# --- message builders ---------------------------------------------------------------------------------
+def stamp_to_ns(text: str) -> int:
+    """Decimal seconds as written in trajectory.csv → integer nanoseconds, without float rounding."""
+    return int((Decimal(text) * 1_000_000_000).to_integral_value())
+
+
+def _time(ns: int) -> dict:
+    return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
+
+
+def _point(x: float, y: float) -> dict:
+    return {"x": float(x), "y": float(y), "z": 0.0}
+
+
+def _quat(yaw: float) -> dict:
+    return {"x": 0.0, "y": 0.0, "z": float(np.sin(yaw / 2)), "w": float(np.cos(yaw / 2))}
+
+
+def _pose(x: float, y: float, yaw: float = 0.0) -> dict:
+    return {"position": _point(x, y), "orientation": _quat(yaw)}
+
+
+def _color(r: float, g: float, b: float, a: float = 1.0) -> dict:
+    return {"r": r, "g": g, "b": b, "a": a}
+
+
+def _line(kind: int, points: list[dict], color: dict, thickness: float) -> dict:
+    return {
+        "type": kind,
+        "pose": _pose(0.0, 0.0),
+        "thickness": thickness,
+        "scale_invariant": True,  # thickness in screen pixels
+        "points": points,
+        "color": color,
+        "colors": [],
+        "indices": [],
+    }
+
+
+def _entity(ns: int, ident: str, spheres: list, lines: list, metadata: dict | None = None) -> dict:
+    return {
+        "timestamp": _time(ns),
+        "frame_id": MAP_FRAME,
+        "id": ident,
+        "lifetime": {"sec": 0, "nsec": 0},  # zero: stays until replaced
+        "frame_locked": False,
+        "metadata": [{"key": k, "value": str(v)} for k, v in (metadata or {}).items()],
+        "spheres": spheres,
+        "lines": lines,
+        **{k: [] for k in _UNUSED_PRIMITIVES},
+    }
+
+
+def _poses_in_frame(ns: int, poses: np.ndarray) -> dict:
+    return {"timestamp": _time(ns), "frame_id": MAP_FRAME, "poses": [_pose(*p) for p in poses]}
+
+
+def _compose_inverse(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise a ∘ b⁻¹ for (n, 3) poses: with a = map←base and b = odom←base, the map←odom transform."""
+    th = a[:, 2] - b[:, 2]
+    c, s = np.cos(th), np.sin(th)
+    bx, by = b[:, 0], b[:, 1]
+    return np.column_stack((a[:, 0] - (c * bx - s * by), a[:, 1] - (s * bx + c * by), th))
+
+
+def _stamp_texts(path: Path) -> list[str]:
+    with open(path, newline="") as f:
+        reader = csv.DictReader(f)
+        return [row["stamp"] for row in reader]
+
+
+def write_results_mcap(out_dir: Path, path: Path) -> Path:
+    """Write a run directory's trajectory, landmarks and segment map to ``path`` (MCAP, JSON + Foxglove
+    schemas); returns ``path``. See the module docstring for the topics."""
+    from mcap.writer import Writer
+
+    out_dir, path = Path(out_dir), Path(path)
+    run = load_run(out_dir)
+    stamps_ns = [stamp_to_ns(t) for t in _stamp_texts(out_dir / "trajectory.csv")]
+    ns_of_step = dict(zip(run.steps.astype(int).tolist(), stamps_ns, strict=True))
+    odom_raw = read_odom_raw(out_dir)  # odom-frame poses, for the map → odom transform
+    odom_frame = str(((run.summary.get("config") or {}).get("input") or {}).get("odom_frame") or "odom")
+
+    msgs: list[tuple[int, str, dict]] = []  # (log time ns, topic key, payload)
+    for ns, c, o, m in zip(stamps_ns, run.corrected, run.odometry, _compose_inverse(run.corrected, odom_raw),
+                           strict=True):  # fmt: skip
+        msgs.append((ns, "pose", {"timestamp": _time(ns), "frame_id": MAP_FRAME, "pose": _pose(*c)}))
+        msgs.append((ns, "odom_pose", {"timestamp": _time(ns), "frame_id": MAP_FRAME, "pose": _pose(*o)}))
+        tf = {"timestamp": _time(ns), "parent_frame_id": MAP_FRAME, "child_frame_id": odom_frame,
+              "translation": _point(m[0], m[1]), "rotation": _quat(m[2])}  # fmt: skip
+        msgs.append((ns, "tf", tf))
+    if stamps_ns:
+        t0 = stamps_ns[0]
+        msgs.append((t0, "path", _poses_in_frame(t0, run.corrected)))
+        msgs.append((t0, "odom_path", _poses_in_frame(t0, run.odometry)))
+        if run.ground_truth is not None:
+            msgs.append((t0, "ground_truth_path", _poses_in_frame(t0, run.ground_truth)))
+    msgs += _landmark_messages(run.landmarks, ns_of_step, stamps_ns[0] if stamps_ns else 0)
+    msgs += _segment_messages(run.lines, run.steps.astype(int), stamps_ns)
+    msgs.sort(key=lambda m: m[0])  # stable: per-stamp order as appended
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start(profile="", library="cornerslam")
+        schema_ids = {
+            name: w.register_schema(name, "jsonschema", json.dumps(schema).encode())
+            for name, schema in SCHEMAS.items()
+        }
+        channels = {
+            key: w.register_channel(topic, "json", schema_ids[TOPIC_SCHEMAS[key]])
+            for key, topic in TOPICS.items()
+        }
+        seq: dict[str, int] = dict.fromkeys(TOPICS, 0)
+        for ns, key, payload in msgs:
+            w.add_message(
+                channels[key], ns, json.dumps(payload, separators=(",", ":")).encode(), ns, seq[key]
+            )
+            seq[key] += 1
+        w.add_metadata(
+            "cornerslam",
+            {
+                "log": str(run.summary.get("input", {}).get("log", "")),
+                "assoc": run.assoc,
+                "version": str(run.summary.get("cornerslam_version", "")),
+                "results": str(out_dir),
+            },
+        )
+        w.finish()
+    return path
+
+
+def read_odom_raw(out_dir: Path) -> np.ndarray:
+    """Odometry poses (n, 3) in the odom frame, as logged (trajectory.csv odom_* columns)."""
+    from .tables import read_csv
+
+    t = read_csv(Path(out_dir) / "trajectory.csv")
+    return np.column_stack((t["odom_x"], t["odom_y"], t["odom_theta"]))
+
+
+def _landmark_messages(lm: dict[str, np.ndarray], ns_of_step: dict[int, int], t0: int) -> list:
+    n = len(lm.get("id", ()))
+    if n == 0:
+        return []
+    xy = np.column_stack((lm["x"], lm["y"]))
+    cov = np.empty((n, 2, 2))
+    cov[:, 0, 0], cov[:, 1, 1] = lm["var_x"], lm["var_y"]
+    cov[:, 0, 1] = cov[:, 1, 0] = lm["cov_xy"]
+    ellipses = ellipse_polygons(xy, np.nan_to_num(cov), k=24)
+    green, orange = _color(0.17, 0.63, 0.17), _color(1.0, 0.5, 0.05)
+    out = []
+    for i in range(n):
+        ident = int(lm["id"][i])
+        ns = ns_of_step.get(int(lm["first_step"][i]), t0)
+        x, y, phi = float(lm["x"][i]), float(lm["y"][i]), float(lm["phi"][i])
+        size = {"x": LANDMARK_RADIUS, "y": LANDMARK_RADIUS, "z": LANDMARK_RADIUS}
+        sphere = {"pose": _pose(x, y), "size": size,
+                  "color": green}  # fmt: skip
+        ellipse = _line(1, [_point(px, py) for px, py in ellipses[i]], green, 2.0)
+        tip = _point(x + CORNER_ARROW * np.cos(phi), y + CORNER_ARROW * np.sin(phi))
+        direction = _line(0, [_point(x, y), tip], orange, 2.0)
+        meta = {
+            "id": ident,
+            "phi": f"{phi:.4f}",
+            "n_obs": int(lm["n_obs"][i]),
+            "first_step": int(lm["first_step"][i]),
+            "last_step": int(lm["last_step"][i]),
+            "ellipse": f"{ELLIPSE_SIGMA:g} sigma",
+        }
+        update = {
+            "deletions": [],
+            "entities": [_entity(ns, f"landmark/{ident}", [sphere], [ellipse, direction], meta)],
+        }
+        out.append((ns, "landmarks", update))
+    return out
+
+
+def _segment_messages(lines: dict[str, np.ndarray], steps: np.ndarray, stamps_ns: list[int]) -> list:
+    seg_steps = lines.get("step", np.empty(0)).astype(int)
+    order = np.argsort(seg_steps, kind="stable")
+    seg_steps = seg_steps[order]
+    grey = _color(0.3, 0.3, 0.3, 0.8)
+    out = []
+    for step, ns in zip(steps.tolist(), stamps_ns, strict=True):
+        lo, hi = np.searchsorted(seg_steps, [step, step + 1])
+        idx = order[lo:hi]
+        entities = []
+        if len(idx):
+            pts = []
+            for j in idx:
+                pts += [_point(lines["x1"][j], lines["y1"][j]), _point(lines["x2"][j], lines["y2"][j])]
+            entities.append(_entity(ns, f"segments/{step}", [], [_line(2, pts, grey, 1.0)]))
+        out.append((ns, "segments", {"deletions": [], "entities": entities}))
+    return out

@@ -1,0 +1,380 @@
+"""Figures of a run and of a comparison (the paper's Figs 16–20), written as PNGs beside the tables.
+
+``plot_run(DIR)`` reads a ``cornerslam run`` output directory and writes
+
+- ``map.png`` (Fig 16): odometry and corrected trajectories, ground truth when the summary names one,
+  landmarks with 3σ covariance ellipses, the segment map drawn faintly;
+- ``segments.png`` (Fig 20a): the segment map at the corrected poses with the landmark positions;
+- ``timing.png`` (Fig 17): per-step prediction / matching / update time;
+- ``corners.png`` (Fig 18): detected vs matched corners per step, and new landmarks.
+
+``plot_compare(DIR)`` reads a ``cornerslam compare`` output directory and writes
+``compare_matching.png`` (Fig 19: cumulative matching time and landmark count per associator),
+``compare_maps.png`` (each associator's map side by side) and ``compare_timing.png`` (per-step
+matching time per associator), then calls ``plot_run`` on each associator's directory.
+
+Frames: the corrected trajectory and the map are in the map frame (the first corrected pose). The
+odometry is drawn in the map frame by anchoring its first pose on the first corrected pose, and the
+ground truth by the SE(2) alignment the ATE uses (``evaluate.align_se2``), so the three overlay.
+
+matplotlib is imported inside the functions (Agg backend), so importing this module stays cheap.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..evaluate import align_se2, apply_se2, interpolate_poses
+from .tables import COMPARISON_COLUMNS, read_csv, read_tum
+
+log = logging.getLogger(__name__)
+
+DPI = 120
+ELLIPSE_SIGMA = 3.0  # ellipses are drawn at ±3σ along each principal axis
+COLORS = {"corrected": "tab:blue", "odometry": "tab:red", "ground_truth": "black", "landmark": "tab:green"}
+ASSOC_COLORS = {"icnn": "tab:orange", "jcbb": "tab:purple", "pca": "tab:blue"}
+
+RUN_FIGURES = ("map.png", "segments.png", "timing.png", "corners.png")
+COMPARE_FIGURES = ("compare_matching.png", "compare_maps.png", "compare_timing.png")
+
+
+@dataclass(frozen=True)
+class RunData:
+    """One run directory's tables, with the trajectories expressed in the map frame.
+
+    corrected, odometry : (n, 3) x, y [m], θ [rad] per step, map frame.
+    ground_truth : (g, 3) SE(2)-aligned onto ``corrected``, or None.
+    landmarks : map.csv columns; lines : lines.csv columns; timing : timing.csv columns.
+    """
+
+    out_dir: Path
+    summary: dict
+    log_name: str
+    assoc: str
+    steps: np.ndarray
+    corrected: np.ndarray
+    odometry: np.ndarray
+    ground_truth: np.ndarray | None
+    landmarks: dict[str, np.ndarray]
+    lines: dict[str, np.ndarray]
+    timing: dict[str, np.ndarray]
+
+    @property
+    def title(self) -> str:
+        return f"{self.log_name} — {self.assoc}"
+
+
+def load_run(out_dir: str | Path) -> RunData:
+    """Read a run output directory for plotting."""
+    out_dir = Path(out_dir)
+    summary = json.loads((out_dir / "summary.json").read_text())
+    traj = read_csv(out_dir / "trajectory.csv")
+    corrected = np.column_stack((traj["x"], traj["y"], traj["theta"]))
+    odom = np.column_stack((traj["odom_x"], traj["odom_y"], traj["odom_theta"]))
+    return RunData(
+        out_dir=out_dir,
+        summary=summary,
+        log_name=Path(str(summary.get("input", {}).get("log", out_dir.name))).name,
+        assoc=str(summary.get("assoc", "")),
+        steps=traj["step"],
+        corrected=corrected,
+        odometry=odom_in_map(odom, corrected),
+        ground_truth=_aligned_ground_truth(summary, traj["stamp"], corrected),
+        landmarks=read_csv(out_dir / "map.csv"),
+        lines=read_csv(out_dir / "lines.csv"),
+        timing=read_csv(out_dir / "timing.csv"),
+    )
+
+
+def odom_in_map(odom: np.ndarray, corrected: np.ndarray) -> np.ndarray:
+    """Odometry poses (odom frame) re-expressed in the map frame: map←odom puts odom[0] on corrected[0]."""
+    if len(odom) == 0:
+        return odom
+    ang = float(corrected[0, 2] - odom[0, 2])
+    c, s = np.cos(ang), np.sin(ang)
+    t = corrected[0, :2] - np.array([[c, -s], [s, c]]) @ odom[0, :2]
+    return apply_se2(ang, t, odom)
+
+
+def _aligned_ground_truth(summary: dict, stamps: np.ndarray, corrected: np.ndarray) -> np.ndarray | None:
+    path = (summary.get("accuracy") or {}).get("ground_truth")
+    if not path or len(corrected) < 2:
+        return None
+    try:
+        gt_t, gt = read_tum(path)
+    except Exception as e:  # a moved or deleted file must not stop the plots
+        log.warning("ground truth '%s' not drawn: %s", path, e)
+        return None
+    inside, g = interpolate_poses(gt_t, gt, stamps)
+    if inside.sum() < 2:
+        return None
+    ang, t = align_se2(g[:, :2], corrected[inside, :2])
+    return apply_se2(ang, t, gt[(gt_t >= stamps[inside][0]) & (gt_t <= stamps[inside][-1])])
+
+
+def ellipse_polygons(
+    xy: np.ndarray, cov: np.ndarray, n_sigma: float = ELLIPSE_SIGMA, k: int = 32
+) -> np.ndarray:
+    """Polygons (n, k, 2) of the n_sigma ellipses of (n, 2, 2) position covariances centred at xy."""
+    lam, vec = np.linalg.eigh(cov)
+    axes = vec * np.sqrt(np.clip(lam, 0.0, None))[:, None, :]  # columns: principal semi-axes at 1σ
+    a = np.linspace(0, 2 * np.pi, k, endpoint=False)
+    circle = np.column_stack((np.cos(a), np.sin(a)))  # (k, 2)
+    return xy[:, None, :] + n_sigma * np.einsum("kj,nij->nki", circle, axes)
+
+
+def _figure(*args, **kwargs):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt.subplots(*args, **kwargs)
+
+
+def _save(fig, path: Path) -> Path:
+    import matplotlib.pyplot as plt
+
+    fig.savefig(path, dpi=DPI)
+    plt.close(fig)
+    return path
+
+
+def _draw_segments(ax, lines: dict[str, np.ndarray], **kwargs) -> None:
+    from matplotlib.collections import LineCollection
+
+    if len(lines.get("x1", ())) == 0:
+        return
+    seg = np.stack(
+        (np.column_stack((lines["x1"], lines["y1"])), np.column_stack((lines["x2"], lines["y2"]))), axis=1
+    )
+    ax.add_collection(LineCollection(seg, rasterized=True, **kwargs))
+
+
+def _draw_landmarks(ax, lm: dict[str, np.ndarray], ellipses: bool = True, label: str | None = None) -> None:
+    from matplotlib.collections import PolyCollection
+
+    n = len(lm.get("x", ()))
+    if n == 0:
+        return
+    xy = np.column_stack((lm["x"], lm["y"]))
+    if ellipses:
+        cov = np.empty((n, 2, 2))
+        cov[:, 0, 0], cov[:, 1, 1] = lm["var_x"], lm["var_y"]
+        cov[:, 0, 1] = cov[:, 1, 0] = lm["cov_xy"]
+        polys = ellipse_polygons(xy, np.nan_to_num(cov))
+        ax.add_collection(
+            PolyCollection(
+                polys, closed=True, facecolors="none", edgecolors=COLORS["landmark"], linewidths=0.7
+            )
+        )
+    ax.scatter(xy[:, 0], xy[:, 1], s=9, marker="+", color=COLORS["landmark"], linewidths=0.9, label=label)
+
+
+def _draw_map(ax, run: RunData, segments_alpha: float = 0.18, legend: bool = True) -> None:
+    """Fig 16 contents on one axes."""
+    _draw_segments(ax, run.lines, colors="0.45", linewidths=0.4, alpha=segments_alpha, zorder=1)
+    if run.ground_truth is not None:
+        g = run.ground_truth
+        ax.plot(g[:, 0], g[:, 1], color=COLORS["ground_truth"], lw=1.1, ls=":", zorder=4,
+                label="ground truth (aligned)")  # fmt: skip
+    o, c = run.odometry, run.corrected
+    ax.plot(o[:, 0], o[:, 1], color=COLORS["odometry"], lw=0.9, ls="--", label="odometry")
+    ax.plot(c[:, 0], c[:, 1], color=COLORS["corrected"], lw=1.2, label="corrected (EKF)")
+    _draw_landmarks(ax, run.landmarks, label=f"landmarks ({len(run.landmarks.get('x', ()))}, 3σ)")
+    if len(c):
+        ax.plot(*c[0, :2], "o", color="k", ms=4, zorder=5, label="start")
+    _map_axes(ax)
+    if legend:
+        ax.legend(loc="best", fontsize=8, framealpha=0.85)
+
+
+def _map_axes(ax) -> None:
+    # shared axes (the side-by-side maps) cannot adjust their data limits, only their box
+    shared = len(ax.get_shared_x_axes().get_siblings(ax)) > 1
+    ax.set_aspect("equal", adjustable="box" if shared else "datalim")
+    ax.autoscale_view()
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.grid(True, lw=0.3, alpha=0.5)
+
+
+def _accuracy_note(summary: dict) -> str:
+    acc = summary.get("accuracy") or {}
+    ate, odom = (acc.get("ate") or {}).get("rmse"), (acc.get("odom_ate") or {}).get("rmse")
+    if ate is None:
+        return ""
+    text = f"ATE RMSE {ate:.3f} m"
+    if odom is not None:
+        text += f" (odometry {odom:.3f} m)"
+    return text
+
+
+def plot_map(run: RunData, path: Path) -> Path:
+    fig, ax = _figure(figsize=(8, 7), layout="constrained")
+    _draw_map(ax, run)
+    ax.set_title(f"Trajectories and landmark map (Fig 16) — {run.title}")
+    note = _accuracy_note(run.summary)
+    if note:
+        ax.text(0.01, 0.01, note, transform=ax.transAxes, fontsize=8, va="bottom",
+                bbox=dict(fc="white", ec="0.7", alpha=0.85))  # fmt: skip
+    return _save(fig, path)
+
+
+def plot_segments(run: RunData, path: Path) -> Path:
+    fig, ax = _figure(figsize=(8, 7), layout="constrained")
+    _draw_segments(ax, run.lines, colors="0.15", linewidths=0.5, alpha=0.5, zorder=1)
+    c = run.corrected
+    ax.plot(c[:, 0], c[:, 1], color=COLORS["corrected"], lw=0.8, alpha=0.8, label="corrected poses")
+    lm = run.landmarks
+    if len(lm.get("x", ())):
+        ax.scatter(lm["x"], lm["y"], s=14, color="tab:red", zorder=4, label=f"landmarks ({len(lm['x'])})")
+    ax.plot([], [], color="0.15", lw=0.8, label=f"segments ({len(run.lines.get('x1', ()))})")
+    _map_axes(ax)
+    ax.legend(loc="best", fontsize=8, framealpha=0.85)
+    ax.set_title(f"Segment map at the corrected poses (Fig 20) — {run.title}")
+    return _save(fig, path)
+
+
+def _positive(v: np.ndarray) -> np.ndarray:
+    """Values for a log axis: zeros (not measured) become NaN gaps."""
+    v = np.asarray(v, dtype=float).copy()
+    v[~(v > 0)] = np.nan
+    return v
+
+
+def plot_timing(run: RunData, path: Path) -> Path:
+    t = run.timing
+    fig, (ax, ax2) = _figure(2, 1, figsize=(9, 6), sharex=True, height_ratios=(3, 1), layout="constrained")
+    for key, label, color in (
+        ("t_predict", "prediction", "tab:gray"),
+        ("t_match", "matching", "tab:orange"),
+        ("t_update", "update", "tab:blue"),
+    ):
+        ax.plot(t["step"], _positive(t[key] * 1e3), lw=0.7, color=color, label=label)
+    ax.set_yscale("log")
+    ax.set_ylabel("time per step [ms]")
+    ax.legend(loc="upper left", fontsize=8, ncol=3)
+    ax.grid(True, which="both", lw=0.3, alpha=0.5)
+    ax.set_title(f"Per-step prediction, matching and update time (Fig 17) — {run.title}")
+    ax2.plot(t["step"], t["n_landmarks"], color=COLORS["landmark"], lw=1.0)
+    ax2.set_ylabel("landmarks")
+    ax2.set_xlabel("step")
+    ax2.grid(True, lw=0.3, alpha=0.5)
+    return _save(fig, path)
+
+
+def plot_corners(run: RunData, path: Path) -> Path:
+    t = run.timing
+    fig, (ax, ax2) = _figure(2, 1, figsize=(9, 6), sharex=True, height_ratios=(2, 1), layout="constrained")
+    ax.plot(t["step"], t["n_corners"], lw=0.8, color="tab:gray", label="detected corners")
+    ax.plot(t["step"], t["n_matched"], lw=0.8, color="tab:blue", label="matched corners")
+    ax.fill_between(t["step"], t["n_matched"], t["n_corners"], color="tab:red", alpha=0.3, lw=0,
+                    step=None, label="unmatched")  # fmt: skip
+    ax.set_ylabel("corners per step")
+    ax.legend(loc="upper left", fontsize=8, ncol=3)
+    ax.grid(True, lw=0.3, alpha=0.5)
+    total_d, total_m = int(np.nansum(t["n_corners"])), int(np.nansum(t["n_matched"]))
+    ax.set_title(
+        f"Detected vs matched corners (Fig 18) — {run.title}\n"
+        f"{total_m} of {total_d} detections matched ({100 * total_m / max(total_d, 1):.0f} %)",
+        fontsize=10,
+    )
+    ax2.bar(t["step"], t["n_new"], width=1.0, color=COLORS["landmark"], label="new landmarks")
+    ax2.set_ylabel("new landmarks")
+    ax2.set_xlabel("step")
+    ax2.grid(True, lw=0.3, alpha=0.5)
+    return _save(fig, path)
+
+
+def plot_run(out_dir: Path) -> list[Path]:
+    """Write map.png, segments.png, timing.png and corners.png into a run directory; return their paths."""
+    out_dir = Path(out_dir)
+    run = load_run(out_dir)
+    return [
+        plot_map(run, out_dir / "map.png"),
+        plot_segments(run, out_dir / "segments.png"),
+        plot_timing(run, out_dir / "timing.png"),
+        plot_corners(run, out_dir / "corners.png"),
+    ]
+
+
+def compare_assocs(out_dir: Path) -> list[str]:
+    """Associator names in comparison.csv order."""
+    table = read_csv(Path(out_dir) / "comparison.csv")
+    return [str(a) for a in table.get(COMPARISON_COLUMNS[0], [])]
+
+
+def _assoc_color(assoc: str, i: int) -> str:
+    return ASSOC_COLORS.get(assoc, f"C{i}")
+
+
+def plot_compare(out_dir: Path) -> list[Path]:
+    """Write the comparison figures into a compare directory and each associator's run figures."""
+    out_dir = Path(out_dir)
+    runs = [load_run(out_dir / a) for a in compare_assocs(out_dir)]
+    log_name = runs[0].log_name if runs else out_dir.name
+    written = [
+        _plot_compare_matching(runs, log_name, out_dir / "compare_matching.png"),
+        _plot_compare_maps(runs, log_name, out_dir / "compare_maps.png"),
+        _plot_compare_timing(runs, log_name, out_dir / "compare_timing.png"),
+    ]
+    for run in runs:
+        written += plot_run(run.out_dir)
+    return written
+
+
+def _plot_compare_matching(runs: list[RunData], log_name: str, path: Path) -> Path:
+    fig, (ax, ax2) = _figure(1, 2, figsize=(12, 4.8), layout="constrained")
+    for i, r in enumerate(runs):
+        color = _assoc_color(r.assoc, i)
+        ax.plot(r.timing["step"], np.cumsum(r.timing["t_match"]), color=color, lw=1.3, label=r.assoc)
+        ax2.plot(r.timing["step"], r.timing["n_landmarks"], color=color, lw=1.3, label=r.assoc)
+    ax.set_ylabel("cumulative matching time [s]")
+    ax.set_title("Cumulative matching time")
+    ax2.set_ylabel("landmarks in the map")
+    ax2.set_title("Total landmarks")
+    for a in (ax, ax2):
+        a.set_xlabel("step")
+        a.grid(True, lw=0.3, alpha=0.5)
+        a.legend(loc="upper left", fontsize=9)
+    fig.suptitle(f"Associators compared (Fig 19) — {log_name}")
+    return _save(fig, path)
+
+
+def _plot_compare_maps(runs: list[RunData], log_name: str, path: Path) -> Path:
+    n = max(len(runs), 1)
+    fig, axes = _figure(
+        1, n, figsize=(5.2 * n, 4.8), sharex=True, sharey=True, layout="constrained", squeeze=False
+    )
+    for ax, r in zip(axes[0], runs, strict=False):
+        _draw_map(ax, r, legend=False)
+        note = _accuracy_note(r.summary)
+        n_lm = len(r.landmarks.get("x", ()))
+        ax.set_title(f"{r.assoc}: {n_lm} landmarks" + (f"\n{note}" if note else ""), fontsize=10)
+    if runs:
+        handles, labels = axes[0][0].get_legend_handles_labels()
+        labels = [lb.split(" (")[0] if lb.startswith("landmarks") else lb for lb in labels]
+        fig.legend(handles, labels, loc="outside lower center", ncol=len(labels), fontsize=9)
+    fig.suptitle(f"Maps per associator (Fig 16) — {log_name}")
+    return _save(fig, path)
+
+
+def _plot_compare_timing(runs: list[RunData], log_name: str, path: Path) -> Path:
+    fig, ax = _figure(figsize=(10, 4.8), layout="constrained")
+    for i, r in enumerate(runs):
+        t = r.timing
+        ax.plot(t["step"], _positive(t["t_match"] * 1e3), color=_assoc_color(r.assoc, i), lw=0.7, alpha=0.85,
+                label=f"{r.assoc} (max {np.nanmax(t['t_match']) * 1e3:.1f} ms)")  # fmt: skip
+    ax.set_yscale("log")
+    ax.set_xlabel("step")
+    ax.set_ylabel("matching time per step [ms]")
+    ax.grid(True, which="both", lw=0.3, alpha=0.5)
+    ax.legend(loc="upper left", fontsize=9)
+    ax.set_title(f"Per-step matching time per associator (Fig 17) — {log_name}")
+    return _save(fig, path)
