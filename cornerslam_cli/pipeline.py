@@ -6,6 +6,8 @@ the paper's loop (Fig 1), each stage timed for ``timing.csv``.
 
 from __future__ import annotations
 
+import hashlib
+import json
 import logging
 import platform
 import time
@@ -383,6 +385,7 @@ def run_frames(
             "final_pose": poses_a[-1].tolist(),
             "warnings": list(reader.stats.warnings),
             "accuracy": accuracy,
+            "hashes": {"input": input_hash(log_path), "config": config_hash(cfg), "version": __version__},
             "config": cfg.to_dict(),
             "versions": _versions(),
         }
@@ -431,6 +434,24 @@ def _scan_count(info) -> int:
         if t.name == info.scan_topic:
             return int(t.count or 0)
     return 0
+
+
+def config_hash(cfg: Config) -> str:
+    """sha256 of the resolved config (canonical JSON): equal configs, equal hashes."""
+    text = json.dumps(cfg.to_dict(), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def input_hash(path: Path) -> str:
+    """sha256 of the log's bytes (every file, in name order, for a ROS 2 bag directory)."""
+    h = hashlib.sha256()
+    files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+    for f in files:
+        h.update(str(f.relative_to(path) if path.is_dir() else f.name).encode())
+        with open(f, "rb") as fh:
+            while chunk := fh.read(1 << 20):
+                h.update(chunk)
+    return h.hexdigest()
 
 
 def _versions() -> dict:
