@@ -174,10 +174,24 @@ def _assoc_choice():
 @click.option(
     "--ground-truth", type=click.Path(dir_okay=False), help="TUM ground truth (default: LOG.gt.tum)."
 )
-@click.option("--plot", is_flag=True, help="Also draw the map and timing plots (needs matplotlib).")
+@click.option("--plot", is_flag=True, help="Also draw the map, timing and corner plots and report.html.")
+@click.option(
+    "--mcap-out", type=click.Path(dir_okay=False), help="Also write the results as MCAP for Foxglove."
+)
 @_verbosity
 def run(
-    log_path, config_path, overrides, assoc, out, scan_topic, odom_topic, ground_truth, plot, verbose, quiet
+    log_path,
+    config_path,
+    overrides,
+    assoc,
+    out,
+    scan_topic,
+    odom_topic,
+    ground_truth,
+    plot,
+    mcap_out,
+    verbose,
+    quiet,
 ):
     """Run corner EKF-SLAM on LOG and write trajectory, map, lines, timing and summary.
 
@@ -194,12 +208,23 @@ def run(
         summary = run_pipeline(log_path, cfg, out, ground_truth=ground_truth, progress=progress)
     finally:
         progress.close()
+    out_dir = Path(summary["out_dir"])
     if plot:
+        from .report.html import write_report
         from .report.plots import plot_run
 
-        plot_run(Path(summary["out_dir"]))
+        plot_run(out_dir)
+        write_report(out_dir)
+    if mcap_out:
+        from .report.mcap_out import write_results_mcap
+
+        write_results_mcap(out_dir, Path(mcap_out))
     if not quiet:
         _print_summary(summary)
+        if plot:
+            click.echo(f"report: {out_dir / 'report.html'}")
+        if mcap_out:
+            click.echo(f"results MCAP: {mcap_out}")
 
 
 @cli.command()
@@ -244,9 +269,14 @@ def compare(
         summaries = run_compare(log_path, cfg, names, out_dir, ground_truth, jobs, progress)
     finally:
         progress.close()
+    from .report.html import write_report
+    from .report.plots import plot_compare
+
+    plot_compare(out_dir)
+    report = write_report(out_dir)
     if not quiet:
         _print_comparison(summaries)
-        click.echo(f"wrote {out_dir}")
+        click.echo(f"wrote {out_dir} (report: {report})")
 
 
 def _print_comparison(summaries: list[dict]) -> None:

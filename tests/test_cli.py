@@ -79,6 +79,15 @@ def test_run_overrides_reach_the_resolved_config(sim_log, tmp_path):
     assert s["counts"]["keyframes_skipped"] > 0
 
 
+def test_run_plot_and_mcap_out(sim_log, tmp_path):
+    out, mc = tmp_path / "out", tmp_path / "res.mcap"
+    res = invoke("run", sim_log, "--out", out, "--plot", "--mcap-out", mc, "-q")
+    assert res.exit_code == 0, res.output
+    for name in ("map.png", "segments.png", "timing.png", "corners.png", "report.html"):
+        assert (out / name).stat().st_size > 1000, name
+    assert mc.read_bytes()[:8] == b"\x89MCAP0\r\n"
+
+
 def test_evaluate_reports_ate(sim_log, tmp_path):
     out = tmp_path / "out"
     assert invoke("run", sim_log, "--out", out, "-q").exit_code == 0
@@ -250,6 +259,8 @@ def test_compare_runs_every_associator_on_the_same_frames(sim_log, tmp_path):
         t1["t_extract"], t2["t_extract"]
     )
     assert "ATE m" in res.output and "icnn" in res.output
+    for name in ("report.html", "compare_matching.png", "compare_maps.png", "icnn/map.png", "pca/timing.png"):
+        assert (out / name).stat().st_size > 1000, name
 
 
 def test_compare_rejects_unknown_and_repeated_associators(sim_log, tmp_path):

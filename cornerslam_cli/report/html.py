@@ -1,0 +1,258 @@
+"""``report.html``: one self-contained page per run or comparison.
+
+Everything is inside the one file — figures as base64 ``data:image/png`` URIs, CSS in a ``<style>``
+element, no JavaScript, no network — so it can be mailed, attached to a CI job or opened from disk.
+A directory with ``comparison.csv`` is a comparison (table, Fig 19, maps, one section per
+associator); any other is a run. Figures missing from the directory are drawn first (plots.py).
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+import math
+from collections.abc import Callable, Iterable
+from pathlib import Path
+
+from .plots import COMPARE_FIGURES, RUN_FIGURES, compare_assocs, plot_compare, plot_run
+from .tables import COMPARISON_COLUMNS, read_csv
+
+CSS = """
+body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 2em auto; max-width: 1200px;
+       padding: 0 1em; color: #222; line-height: 1.4; }
+h1 { font-size: 1.5em; border-bottom: 2px solid #ccc; padding-bottom: .3em; }
+h2 { font-size: 1.25em; margin-top: 2em; border-bottom: 1px solid #ddd; }
+h3 { font-size: 1.05em; }
+table { border-collapse: collapse; margin: .5em 0 1em; font-size: .92em; }
+th, td { border: 1px solid #ccc; padding: .25em .6em; text-align: right; }
+th { background: #f2f2f2; } td.name, th.name { text-align: left; }
+td.best { background: #d9f2d9; font-weight: bold; }
+figure { margin: 1em 0; } figure img { max-width: 100%; border: 1px solid #ddd; }
+figcaption { font-size: .9em; color: #555; }
+pre { background: #f7f7f7; padding: .8em; overflow-x: auto; font-size: .85em; }
+.warn { color: #8a4b00; } .muted { color: #777; font-size: .9em; }
+nav a { margin-right: 1em; }
+"""
+
+CAPTIONS = {
+    "map.png": "Fig 16 — odometry (dashed) and corrected (solid) trajectories, landmarks with 3σ ellipses.",
+    "segments.png": "Fig 20 — segment map at the corrected poses with the landmark positions.",
+    "timing.png": "Fig 17 — per-step prediction, matching and update time.",
+    "corners.png": "Fig 18 — detected vs matched corners per step, and new landmarks.",
+    "compare_matching.png": "Fig 19 — cumulative matching time and total landmarks per associator.",
+    "compare_maps.png": "Fig 16 — each associator's map with odometry and ground truth.",
+    "compare_timing.png": "Fig 17 — per-step matching time per associator.",
+}
+
+# comparison.csv columns where one direction is better (the best cell is highlighted)
+BETTER: dict[str, Callable[[Iterable[float]], float]] = {
+    "matched_total": max,
+    "t_match_total": min,
+    "t_match_max": min,
+    "t_total": min,
+    "ate_rmse": min,
+    "rpe_trans_per_m": min,
+    "wall_time": min,
+    "budget_hits": min,
+}
+
+
+def esc(value) -> str:
+    return html.escape(str(value), quote=True)
+
+
+def fmt(value) -> str:
+    """A table cell: integers plainly, floats to 4 significant digits, NaN as an em dash."""
+    if isinstance(value, float):
+        if math.isnan(value):
+            return "—"
+        if value.is_integer() and abs(value) < 1e12:
+            return str(int(value))
+        return f"{value:.4g}"
+    return str(value)
+
+
+def png_data_uri(path: Path) -> str:
+    return "data:image/png;base64," + base64.b64encode(Path(path).read_bytes()).decode("ascii")
+
+
+def figure(path: Path, alt: str) -> str:
+    caption = CAPTIONS.get(path.name, path.name)
+    return (
+        f'<figure><img src="{png_data_uri(path)}" alt="{esc(alt)}">'
+        f"<figcaption>{esc(caption)}</figcaption></figure>"
+    )
+
+
+def table(header: list[str], rows: list[list], name_cols: int = 1, best: set | None = None) -> str:
+    """An HTML table; ``best`` holds (row, col) cells to highlight. Everything is escaped."""
+    best = best or set()
+    out = ["<table><tr>"]
+    out += [
+        f'<th class="name">{esc(h)}</th>' if j < name_cols else f"<th>{esc(h)}</th>"
+        for j, h in enumerate(header)
+    ]
+    out.append("</tr>")
+    for i, row in enumerate(rows):
+        cells = []
+        for j, v in enumerate(row):
+            cls = " ".join(
+                c for c in ("name" if j < name_cols else "", "best" if (i, j) in best else "") if c
+            )
+            cells.append(f'<td class="{cls}">{esc(fmt(v))}</td>' if cls else f"<td>{esc(fmt(v))}</td>")
+        out.append("<tr>" + "".join(cells) + "</tr>")
+    out.append("</table>")
+    return "".join(out)
+
+
+def _page(title: str, body: list[str]) -> str:
+    return (
+        '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
+        f"<title>{esc(title)}</title><style>{CSS}</style></head><body>\n"
+        + "\n".join(body)
+        + "\n</body></html>\n"
+    )
+
+
+def _kv_table(pairs: list[tuple[str, object]]) -> str:
+    """A two-column table: a header cell naming each value."""
+    rows = "".join(f'<tr><th class="name">{esc(k)}</th><td>{esc(fmt(v))}</td></tr>' for k, v in pairs)
+    return f"<table>{rows}</table>"
+
+
+def _summary_section(summary: dict) -> list[str]:
+    inp, counts, timing = summary.get("input", {}), summary.get("counts", {}), summary.get("timing", {})
+    pairs: list[tuple[str, object]] = [
+        ("log", inp.get("log", "")),
+        ("format", inp.get("format", "")),
+        ("scan topic", inp.get("scan_topic", "")),
+        ("odometry", f"{inp.get('odom_topic', '')} ({inp.get('odom_source', '')})"),
+        ("associator", summary.get("assoc", "")),
+        ("steps", counts.get("steps", "")),
+        ("landmarks", counts.get("landmarks", "")),
+        ("matched corners", counts.get("matched_total", "")),
+    ]
+    for key in ("t_extract", "t_predict", "t_match", "t_update", "t_total", "wall_time"):
+        if key in timing:
+            pairs.append((f"{key.removeprefix('t_')} time [s]", float(timing[key])))
+    if "t_match_max" in timing:
+        pairs.append(("max matching time per step [ms]", 1e3 * float(timing["t_match_max"])))
+    if "scans_per_second" in timing:
+        pairs.append(("scans per second", float(timing["scans_per_second"])))
+    if summary.get("final_pose") is not None:
+        pairs.append(("final pose x, y [m], θ [rad]", ", ".join(f"{v:.3f}" for v in summary["final_pose"])))
+    out = ["<h2>Summary</h2>", _kv_table(pairs)]
+    acc = summary.get("accuracy")
+    if acc:
+        rows = []
+        for name, key in (("corrected", "ate"), ("odometry", "odom_ate")):
+            a = acc.get(key) or {}
+            rows.append([name, a.get("rmse", math.nan), a.get("mean", math.nan), a.get("max", math.nan),
+                         a.get("rot_rmse", math.nan), a.get("n", "")])  # fmt: skip
+        out += [
+            "<h3>Accuracy</h3>",
+            f'<p class="muted">against {esc(acc.get("ground_truth", ""))} (SE(2)-aligned)</p>',
+            table(["trajectory", "ATE RMSE [m]", "mean [m]", "max [m]", "heading RMSE [rad]", "poses"], rows),
+        ]
+        extra = [(k, v) for k, v in acc.items() if k.startswith("rpe") and isinstance(v, (int, float))]
+        if extra:
+            out.append(_kv_table([(k, float(v)) for k, v in extra]))
+    warnings = summary.get("warnings") or []
+    out.append("<h3>Warnings</h3>")
+    if warnings:
+        out.append("<ul>" + "".join(f'<li class="warn">{esc(w)}</li>' for w in warnings) + "</ul>")
+    else:
+        out.append('<p class="muted">none</p>')
+    if counts:
+        out.append("<details><summary>All counts</summary>")
+        out.append(_kv_table(list(counts.items())) + "</details>")
+    return out
+
+
+def _figures(run_dir: Path, label: str) -> list[str]:
+    return [figure(run_dir / name, f"{label}: {name}") for name in RUN_FIGURES if (run_dir / name).is_file()]
+
+
+def _config_section(summary: dict) -> list[str]:
+    config = {k: summary[k] for k in ("config", "versions") if k in summary}
+    text = json.dumps(config, indent=2, default=str)
+    return [
+        f"<details><summary>Resolved configuration and versions</summary><pre>{esc(text)}</pre></details>"
+    ]
+
+
+def _ensure_figures(out_dir: Path, names: Iterable[str], draw: Callable[[Path], list[Path]]) -> None:
+    if not all((out_dir / n).is_file() for n in names):
+        draw(out_dir)
+
+
+def _run_report(out_dir: Path) -> str:
+    summary = json.loads((out_dir / "summary.json").read_text())
+    log_name = Path(str(summary.get("input", {}).get("log", out_dir.name))).name
+    title = f"cornerslam run — {log_name} ({summary.get('assoc', '')})"
+    body = [f"<h1>{esc(title)}</h1>"]
+    body += _summary_section(summary)
+    body += ["<h2>Figures</h2>", *_figures(out_dir, summary.get("assoc", ""))]
+    body += ["<h2>Configuration</h2>", *_config_section(summary)]
+    return _page(title, body)
+
+
+def best_cells(columns: dict, n_rows: int) -> set[tuple[int, int]]:
+    """(row, col) of the best value in each BETTER column, when the values differ."""
+    best = set()
+    for j, name in enumerate(COMPARISON_COLUMNS):
+        pick = BETTER.get(name)
+        col = columns.get(name)
+        if pick is None or col is None or col.dtype == object:
+            continue
+        vals = [float(v) for v in col]
+        finite = [v for v in vals if math.isfinite(v)]
+        if len(set(finite)) < 2:  # nothing to choose between
+            continue
+        target = pick(finite)
+        best |= {(i, j) for i, v in enumerate(vals) if v == target}
+    return best
+
+
+def _compare_report(out_dir: Path) -> str:
+    columns = read_csv(out_dir / "comparison.csv")
+    assocs = compare_assocs(out_dir)
+    n = len(assocs)
+    rows = [[columns[c][i] for c in COMPARISON_COLUMNS] for i in range(n)]
+    summaries = {a: json.loads((out_dir / a / "summary.json").read_text()) for a in assocs}
+    first = summaries[assocs[0]] if assocs else {}
+    log_name = Path(str(first.get("input", {}).get("log", out_dir.name))).name
+    title = f"cornerslam compare — {log_name} ({', '.join(assocs)})"
+    body = [
+        f"<h1>{esc(title)}</h1>",
+        "<nav>" + "".join(f'<a href="#assoc-{esc(a)}">{esc(a)}</a>' for a in assocs) + "</nav>",
+        "<h2>Comparison</h2>",
+        f'<p class="muted">log {esc(first.get("input", {}).get("log", ""))}; times in seconds; '
+        "best value per column highlighted.</p>",
+        table(COMPARISON_COLUMNS, rows, best=best_cells(columns, n)),
+        "<h2>Figures</h2>",
+        *[figure(out_dir / name, name) for name in COMPARE_FIGURES if (out_dir / name).is_file()],
+    ]
+    for a in assocs:
+        s = summaries[a]
+        body.append(f'<h2 id="assoc-{esc(a)}">{esc(a)}</h2>')
+        body += [h.replace("<h2>", "<h3>").replace("</h2>", "</h3>") for h in _summary_section(s)]
+        body += _figures(out_dir / a, a)
+        body += _config_section(s)
+    return _page(title, body)
+
+
+def write_report(out_dir: Path) -> Path:
+    """Write ``out_dir/report.html`` for a run or compare directory (drawing missing figures first)."""
+    out_dir = Path(out_dir)
+    if (out_dir / "comparison.csv").is_file():
+        names = list(COMPARE_FIGURES) + [f"{a}/{f}" for a in compare_assocs(out_dir) for f in RUN_FIGURES]
+        _ensure_figures(out_dir, names, plot_compare)
+        text = _compare_report(out_dir)
+    else:
+        _ensure_figures(out_dir, RUN_FIGURES, plot_run)
+        text = _run_report(out_dir)
+    path = out_dir / "report.html"
+    path.write_text(text, encoding="utf-8")
+    return path

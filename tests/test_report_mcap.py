@@ -1,0 +1,193 @@
+"""Results as MCAP for Foxglove (report/mcap_out.py), read back with mcap's own reader."""
+
+from __future__ import annotations
+
+import csv
+import json
+from collections import defaultdict
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from test_report_plots import make_report_outputs
+
+from cornerslam_cli.report.mcap_out import SCHEMAS, TOPIC_SCHEMAS, TOPICS, stamp_to_ns, write_results_mcap
+from cornerslam_cli.report.tables import read_csv
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory, sim_log):
+    """(run dir, {topic: [(log_time, payload)]}, {topic: schema name}, {schema name: (encoding, schema)})."""
+    run_dir, _ = make_report_outputs(tmp_path_factory, sim_log)
+    path = write_results_mcap(run_dir, tmp_path_factory.mktemp("mcap") / "results.mcap")
+    messages: dict[str, list] = defaultdict(list)
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        channels = {
+            c.topic: (c.message_encoding, summary.schemas[c.schema_id].name)
+            for c in summary.channels.values()
+        }
+        schemas = {s.name: (s.encoding, json.loads(s.data)) for s in summary.schemas.values()}
+        for _schema, channel, message in reader.iter_messages(log_time_order=False):
+            messages[channel.topic].append((message.log_time, json.loads(message.data)))
+    return run_dir, messages, channels, schemas
+
+
+def validate(value, schema: dict, where: str = "$") -> None:
+    """The subset of JSON Schema our schemas use: type, properties, required, items, minimum."""
+    kind = schema.get("type")
+    checks = {
+        "object": lambda v: isinstance(v, dict),
+        "array": lambda v: isinstance(v, list),
+        "string": lambda v: isinstance(v, str),
+        "boolean": lambda v: isinstance(v, bool),
+        "integer": lambda v: isinstance(v, int) and not isinstance(v, bool),
+        "number": lambda v: isinstance(v, (int, float)) and not isinstance(v, bool),
+    }
+    if kind:
+        assert checks[kind](value), f"{where}: expected {kind}, got {value!r:.60}"
+    if "minimum" in schema:
+        assert value >= schema["minimum"], where
+    if kind == "object":
+        missing = set(schema.get("required", ())) - set(value)
+        assert not missing, f"{where}: missing required {sorted(missing)}"
+        for k, sub in schema.get("properties", {}).items():
+            if k in value:
+                validate(value[k], sub, f"{where}.{k}")
+    if kind == "array":
+        for i, item in enumerate(value):
+            validate(item, schema.get("items", {}), f"{where}[{i}]")
+
+
+def yaw(q: dict) -> float:
+    return 2 * np.arctan2(q["z"], q["w"])
+
+
+def ns(t: dict) -> int:
+    assert 0 <= t["nsec"] < 1_000_000_000
+    return t["sec"] * 1_000_000_000 + t["nsec"]
+
+
+def test_channels_and_schemas_are_the_foxglove_ones(results):
+    _, _, channels, schemas = results
+    assert channels == {TOPICS[k]: ("json", TOPIC_SCHEMAS[k]) for k in TOPICS}
+    assert set(schemas) == set(SCHEMAS)
+    for name, (encoding, schema) in schemas.items():
+        assert encoding == "jsonschema"
+        assert name.startswith("foxglove.") and schema["title"] == name
+
+
+def test_message_counts(results):
+    run_dir, messages, _, _ = results
+    steps = len(read_csv(run_dir / "trajectory.csv")["step"])
+    landmarks = len(read_csv(run_dir / "map.csv")["id"])
+    assert steps > 10 and landmarks > 5
+    counts = {topic: len(m) for topic, m in messages.items()}
+    assert counts == {
+        TOPICS["pose"]: steps,
+        TOPICS["odom_pose"]: steps,
+        TOPICS["tf"]: steps,
+        TOPICS["segments"]: steps,
+        TOPICS["landmarks"]: landmarks,
+        TOPICS["path"]: 1,
+        TOPICS["odom_path"]: 1,
+        TOPICS["ground_truth_path"]: 1,  # the sim log has ground truth
+    }
+
+
+def test_every_payload_validates_against_its_embedded_schema(results):
+    _, messages, channels, schemas = results
+    for topic, msgs in messages.items():
+        schema = schemas[channels[topic][1]][1]
+        for i, (_, payload) in enumerate(msgs):
+            validate(payload, schema, f"{topic}[{i}]")
+
+
+def test_validator_rejects_a_missing_required_field(results):
+    _, messages, _, schemas = results
+    payload = json.loads(json.dumps(messages[TOPICS["pose"]][0][1]))
+    del payload["pose"]["orientation"]["w"]
+    with pytest.raises(AssertionError, match="missing required"):
+        validate(payload, schemas["foxglove.PoseInFrame"][1])
+
+
+def test_poses_carry_the_trajectory_stamps_and_values(results):
+    run_dir, messages, _, _ = results
+    traj = read_csv(run_dir / "trajectory.csv")
+    with open(run_dir / "trajectory.csv", newline="") as f:
+        stamps = [stamp_to_ns(r["stamp"]) for r in csv.DictReader(f)]
+    np.testing.assert_allclose(np.array(stamps) / 1e9, traj["stamp"], atol=1e-6)
+    poses = messages[TOPICS["pose"]]
+    assert [t for t, _ in poses] == stamps
+    assert [ns(p["timestamp"]) for _, p in poses] == stamps
+    assert {p["frame_id"] for _, p in poses} == {"map"}
+    got = np.array([[p["pose"]["position"]["x"], p["pose"]["position"]["y"], yaw(p["pose"]["orientation"])]
+                    for _, p in poses])  # fmt: skip
+    np.testing.assert_allclose(got[:, :2], np.column_stack((traj["x"], traj["y"])), atol=1e-9)
+    np.testing.assert_allclose(np.angle(np.exp(1j * (got[:, 2] - traj["theta"]))), 0, atol=1e-9)
+    path = messages[TOPICS["path"]][0][1]["poses"]
+    np.testing.assert_allclose([p["position"]["x"] for p in path], traj["x"], atol=1e-9)
+
+
+def test_map_to_odom_transform_puts_the_odometry_on_the_corrected_pose(results):
+    run_dir, messages, _, _ = results
+    traj = read_csv(run_dir / "trajectory.csv")
+    tfs = messages[TOPICS["tf"]]
+    assert {(m["parent_frame_id"], m["child_frame_id"]) for _, m in tfs} == {("map", "odom")}
+    for i, (_, m) in enumerate(tfs):
+        a = yaw(m["rotation"])
+        c, s = np.cos(a), np.sin(a)
+        ox, oy = traj["odom_x"][i], traj["odom_y"][i]
+        x = m["translation"]["x"] + c * ox - s * oy
+        y = m["translation"]["y"] + s * ox + c * oy
+        np.testing.assert_allclose([x, y], [traj["x"][i], traj["y"][i]], atol=1e-9)
+        assert np.angle(np.exp(1j * (a + traj["odom_theta"][i] - traj["theta"][i]))) == pytest.approx(
+            0, abs=1e-9
+        )
+
+
+def test_landmarks_at_map_positions_from_their_first_step(results):
+    run_dir, messages, _, _ = results
+    lm = read_csv(run_dir / "map.csv")
+    with open(run_dir / "trajectory.csv", newline="") as f:
+        stamp_of_step = {int(r["step"]): stamp_to_ns(r["stamp"]) for r in csv.DictReader(f)}
+    by_id = {}
+    for t, update in messages[TOPICS["landmarks"]]:
+        (entity,) = update["entities"]
+        by_id[entity["id"]] = (t, entity)
+    assert set(by_id) == {f"landmark/{int(i)}" for i in lm["id"]}
+    for i, ident in enumerate(lm["id"]):
+        t, entity = by_id[f"landmark/{int(ident)}"]
+        assert t == stamp_of_step[int(lm["first_step"][i])] == ns(entity["timestamp"])
+        (sphere,) = entity["spheres"]
+        pos = sphere["pose"]["position"]
+        assert (pos["x"], pos["y"]) == pytest.approx((lm["x"][i], lm["y"][i]), abs=1e-9)
+        ellipse = entity["lines"][0]
+        assert ellipse["type"] == 1 and len(ellipse["points"]) >= 8  # LINE_LOOP
+        # the 3σ ellipse is centred on the landmark and no wider than 3·sqrt(trace)
+        pts = np.array([[p["x"], p["y"]] for p in ellipse["points"]])
+        np.testing.assert_allclose(pts.mean(axis=0), [lm["x"][i], lm["y"][i]], atol=1e-9)
+        r = np.linalg.norm(pts - pts.mean(axis=0), axis=1).max()
+        assert r <= 3 * np.sqrt(lm["var_x"][i] + lm["var_y"][i]) + 1e-9
+
+
+def test_segments_per_step_match_lines_csv(results):
+    run_dir, messages, _, _ = results
+    lines = read_csv(run_dir / "lines.csv")
+    got = []
+    for _, update in messages[TOPICS["segments"]]:
+        for entity in update["entities"]:
+            step = int(entity["id"].split("/")[1])
+            (line,) = entity["lines"]
+            assert line["type"] == 2  # LINE_LIST
+            pts = line["points"]
+            got += [(step, a["x"], a["y"], b["x"], b["y"]) for a, b in zip(pts[::2], pts[1::2], strict=True)]
+    want = np.column_stack((lines["step"], lines["x1"], lines["y1"], lines["x2"], lines["y2"]))
+    np.testing.assert_allclose(np.array(sorted(got)), want[np.lexsort(want.T[::-1])], atol=1e-9)
+
+
+def test_stamp_to_ns_is_exact():
+    assert stamp_to_ns("1700000000.006000042") == 1_700_000_000_006_000_042
+    assert stamp_to_ns("12") == 12_000_000_000
+    assert stamp_to_ns("0.000000001") == 1

@@ -1,0 +1,151 @@
+"""Figures of a run and a comparison (report/plots.py), drawn from a real small run of the sim log."""
+
+from __future__ import annotations
+
+import shutil
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cornerslam_cli.config import load_config
+from cornerslam_cli.evaluate import relative
+from cornerslam_cli.report.compare import compare
+from cornerslam_cli.report.plots import (
+    COMPARE_FIGURES,
+    RUN_FIGURES,
+    ellipse_polygons,
+    load_run,
+    odom_in_map,
+    plot_compare,
+    plot_run,
+)
+
+ASSOCS = ["icnn", "pca"]
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def make_report_outputs(tmp_path_factory, sim_log: Path) -> tuple[Path, Path]:
+    """(run dir, compare dir) on the session's sim log, computed once per session and shared by the
+    report tests (cached under the session's base temp dir). Copy them before writing into them.
+
+    The run directory is a copy of the compare's ``pca`` run: the same files ``cornerslam run`` writes.
+    """
+    base = tmp_path_factory.getbasetemp() / "report_outputs"
+    run_dir, cmp_dir = base / "run", base / "cmp"
+    if not (base / "done").exists():
+        compare(sim_log, load_config(), ASSOCS, cmp_dir)
+        shutil.copytree(cmp_dir / "pca", run_dir)
+        (base / "done").touch()
+    return run_dir, cmp_dir
+
+
+def png_size(path: Path) -> tuple[int, int]:
+    """(width, height) from a PNG's IHDR chunk; asserts the file is a PNG."""
+    data = Path(path).read_bytes()
+    assert data[:8] == PNG_SIGNATURE, f"{path} is not a PNG"
+    assert data[12:16] == b"IHDR"
+    return struct.unpack(">II", data[16:24])
+
+
+@pytest.fixture(scope="module")
+def outputs(tmp_path_factory, sim_log):
+    run_dir, cmp_dir = make_report_outputs(tmp_path_factory, sim_log)
+    mine = tmp_path_factory.mktemp("plots")
+    shutil.copytree(run_dir, mine / "run")
+    shutil.copytree(cmp_dir, mine / "cmp")
+    return mine / "run", mine / "cmp"
+
+
+@pytest.fixture(scope="module")
+def run_pngs(outputs):
+    return plot_run(outputs[0])
+
+
+@pytest.fixture(scope="module")
+def compare_pngs(outputs):
+    return plot_compare(outputs[1])
+
+
+def check_png(path: Path) -> None:
+    assert path.is_file(), path
+    w, h = png_size(path)
+    assert 500 <= w <= 4000 and 300 <= h <= 4000, (path, w, h)
+    assert path.stat().st_size > 10_000, f"{path} is suspiciously small (empty figure?)"
+
+
+def test_plot_run_writes_every_figure(outputs, run_pngs):
+    assert [p.name for p in run_pngs] == list(RUN_FIGURES)
+    assert all(p.parent == outputs[0] for p in run_pngs)
+    for p in run_pngs:
+        check_png(p)
+
+
+def test_plot_compare_writes_comparison_and_each_run(outputs, compare_pngs):
+    cmp_dir = outputs[1]
+    expected = [cmp_dir / n for n in COMPARE_FIGURES] + [cmp_dir / a / n for a in ASSOCS for n in RUN_FIGURES]
+    assert sorted(compare_pngs) == sorted(expected)
+    for p in expected:
+        check_png(p)
+    # the side-by-side maps are wider than tall, one panel per associator
+    w, h = png_size(cmp_dir / "compare_maps.png")
+    assert w > 1.5 * h
+
+
+def test_map_draws_every_landmark_ellipse_and_trajectory(outputs):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import LineCollection, PolyCollection
+
+    from cornerslam_cli.report.plots import _draw_map
+
+    run = load_run(outputs[0])
+    fig, ax = plt.subplots()
+    try:
+        _draw_map(ax, run)
+        polys = [c for c in ax.collections if isinstance(c, PolyCollection)]
+        segs = [c for c in ax.collections if isinstance(c, LineCollection)]
+        assert len(polys) == 1 and len(polys[0].get_paths()) == len(run.landmarks["id"]) > 0
+        assert len(segs) == 1 and len(segs[0].get_segments()) == len(run.lines["step"]) > 0
+        labels = [line.get_label() for line in ax.get_lines()]
+        assert {"odometry", "corrected (EKF)", "ground truth (aligned)"} <= set(labels)
+        assert ax.get_xlabel() == "x [m]" and ax.get_ylabel() == "y [m]"
+    finally:
+        plt.close(fig)
+
+
+def test_ground_truth_is_aligned_onto_the_corrected_trajectory(outputs):
+    run = load_run(outputs[0])
+    assert run.ground_truth is not None  # the sim log has sim.gt.tum beside it
+    # the sim's ground truth starts at (5, 5); aligned, it must lie on the corrected trajectory
+    d = np.linalg.norm(run.ground_truth[:, None, :2] - run.corrected[None, :, :2], axis=2).min(axis=1)
+    assert np.max(d) < 0.5
+
+
+def test_odometry_is_anchored_on_the_first_corrected_pose():
+    rng = np.random.default_rng(3)
+    odom = np.cumsum(rng.normal(0, 0.3, (20, 3)), axis=0) + [5.0, 5.0, 1.0]
+    corrected = np.column_stack((rng.normal(0, 1, (20, 2)), rng.normal(0, 1, 20)))
+    out = odom_in_map(odom, corrected)
+    np.testing.assert_allclose(out[0], corrected[0], atol=1e-12)
+    # a rigid motion: relative poses between steps are unchanged
+    np.testing.assert_allclose(relative(out[:-1], out[1:]), relative(odom[:-1], odom[1:]), atol=1e-12)
+
+
+def test_ellipse_polygons_lie_on_the_n_sigma_contour():
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(5, 2, 2))
+    cov = a @ a.transpose(0, 2, 1) + 0.01 * np.eye(2)
+    xy = rng.normal(size=(5, 2))
+    polys = ellipse_polygons(xy, cov, n_sigma=3.0, k=16)
+    assert polys.shape == (5, 16, 2)
+    for p, c, m in zip(polys, cov, xy, strict=True):
+        d = p - m
+        mahal = np.einsum("ki,ij,kj->k", d, np.linalg.inv(c), d)
+        np.testing.assert_allclose(mahal, 9.0, rtol=1e-9)
+    # axis-aligned: semi-axes 3σ = 6 m along x, 3 m along y
+    box = ellipse_polygons(np.zeros((1, 2)), np.diag([4.0, 1.0])[None], k=64)[0]
+    np.testing.assert_allclose(np.abs(box).max(axis=0), [6.0, 3.0], rtol=1e-3)
