@@ -74,7 +74,9 @@ def wall(p: Sequence[float], q: Sequence[float], doors: Sequence[tuple[float, fl
     for centre, width in sorted(doors):
         cuts += [max(0.0, centre - width / 2), min(length, centre + width / 2)]
     cuts.append(length)
-    pieces = [(p + a * u, p + b * u) for a, b in zip(cuts[::2], cuts[1::2], strict=True) if b - a > VERTEX_TOL]
+    pieces = [
+        (p + a * u, p + b * u) for a, b in zip(cuts[::2], cuts[1::2], strict=True) if b - a > VERTEX_TOL
+    ]
     return np.asarray(pieces, dtype=float).reshape(-1, 2, 2)
 
 
@@ -85,10 +87,17 @@ def rectangle(cx: float, cy: float, w: float, h: float, angle: float = 0.0) -> n
     return polyline(corners @ np.array([[c, s], [-s, c]]) + (cx, cy), closed=True)
 
 
-def room(x0: float, y0: float, x1: float, y1: float, doors: dict[str, Sequence[tuple[float, float]]] | None = None):
+def room(
+    x0: float, y0: float, x1: float, y1: float, doors: dict[str, Sequence[tuple[float, float]]] | None = None
+):
     """Axis-aligned room walls; ``doors`` maps a side ('S', 'E', 'N', 'W') to its door gaps (see ``wall``)."""
     doors = doors or {}
-    sides = {"S": ((x0, y0), (x1, y0)), "E": ((x1, y0), (x1, y1)), "N": ((x1, y1), (x0, y1)), "W": ((x0, y1), (x0, y0))}
+    sides = {
+        "S": ((x0, y0), (x1, y0)),
+        "E": ((x1, y0), (x1, y1)),
+        "N": ((x1, y1), (x0, y1)),
+        "W": ((x0, y1), (x0, y0)),
+    }
     return np.concatenate([wall(p, q, doors.get(k, ())) for k, (p, q) in sides.items()])
 
 
@@ -119,7 +128,11 @@ def raycast(world: World, pose: Sequence[float], angles: np.ndarray, max_range: 
 
 
 def scan_from_ranges(
-    ranges: np.ndarray, angles: np.ndarray, range_min: float = 0.02, range_max: float = 30.0, stamp: float = 0.0
+    ranges: np.ndarray,
+    angles: np.ndarray,
+    range_min: float = 0.02,
+    range_max: float = 30.0,
+    stamp: float = 0.0,
 ) -> Scan:
     """A :class:`Scan` keeping the beams with a finite range inside [range_min, range_max]."""
     ranges, angles = np.asarray(ranges, dtype=float), np.asarray(angles, dtype=float)
@@ -155,7 +168,9 @@ def simulate_scan(
     true_angles = angles + (rng.normal(0.0, sigma_bearing, angles.shape) if sigma_bearing > 0 else 0.0)
     ranges = raycast(world, pose, true_angles, max_range)
     if sigma_range is not None:
-        sig = sigma_range(np.where(np.isfinite(ranges), ranges, 0.0)) if callable(sigma_range) else sigma_range
+        sig = (
+            sigma_range(np.where(np.isfinite(ranges), ranges, 0.0)) if callable(sigma_range) else sigma_range
+        )
         ranges = ranges + rng.normal(0.0, 1.0, ranges.shape) * sig
     return scan_from_ranges(ranges, angles, range_min, max_range, stamp)
 
@@ -238,7 +253,9 @@ def corner_table(world: World, min_angle: float = math.radians(20.0)) -> TrueCor
                 z.append((c[0], c[1], math.pi - wedge))
                 arms.append((arm_dirs[i], arm_dirs[j]))
                 lens.append((arm_lens[i], arm_lens[j]))
-    return TrueCorners(np.asarray(z).reshape(-1, 3), np.asarray(arms).reshape(-1, 2, 2), np.asarray(lens).reshape(-1, 2))
+    return TrueCorners(
+        np.asarray(z).reshape(-1, 3), np.asarray(arms).reshape(-1, 2, 2), np.asarray(lens).reshape(-1, 2)
+    )
 
 
 def true_corners(world: World) -> np.ndarray:

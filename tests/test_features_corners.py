@@ -19,7 +19,8 @@ from cornerslam_cli.types import Scan, Segments
 CFG = (LinesConfig(), CornersConfig())
 
 
-def _extract(world, pose, max_range=8.0, corners=CornersConfig(), angles=HOKUYO, **noise):
+def _extract(world, pose, max_range=8.0, corners=None, angles=HOKUYO, **noise):
+    corners = corners or CornersConfig()
     scan = sw.simulate_scan(world, pose, angles, max_range, **noise)
     return scan, *extract(scan, PRECISE, LinesConfig(), corners)
 
@@ -40,7 +41,9 @@ def test_noiseless_corners_match_the_world(world, pose):
     # every corner seen with both walls within 8 m is found within 1 cm, with the right φ
     for c in sw.visible_corners(world, pose, HOKUYO, 8.0):
         d = np.hypot(*(z - c[:2]).T)
-        assert d.size and d.min() < 0.01, f"visible corner {c} missed (nearest {d.min() if d.size else np.inf:.3f} m)"
+        assert d.size and d.min() < 0.01, (
+            f"visible corner {c} missed (nearest {d.min() if d.size else np.inf:.3f} m)"
+        )
         assert corners.z[np.argmin(d), 2] == pytest.approx(c[2], abs=math.radians(0.2))
     # every type I corner is a true corner (1 cm); every type II corner a true corner or a wall end (edge
     # found within half a beam gap); none is an occlusion shadow on a farther wall
@@ -93,16 +96,25 @@ def _segments(lines):
     """Segments from ((r, α), p1, p2) tuples, unit covariances."""
     k = len(lines)
     return Segments(
-        r=np.array([ln[0][0] for ln in lines]), alpha=np.array([ln[0][1] for ln in lines]),
-        cov=np.tile(np.eye(2) * 1e-4, (k, 1, 1)), p1=np.array([ln[1] for ln in lines], float),
-        p2=np.array([ln[2] for ln in lines], float), n_points=np.full(k, 9), first=np.arange(k), last=np.arange(k),
-    )  # fmt: skip
+        r=np.array([ln[0][0] for ln in lines]),
+        alpha=np.array([ln[0][1] for ln in lines]),
+        cov=np.tile(np.eye(2) * 1e-4, (k, 1, 1)),
+        p1=np.array([ln[1] for ln in lines], float),
+        p2=np.array([ln[2] for ln in lines], float),
+        n_points=np.full(k, 9),
+        first=np.arange(k),
+        last=np.arange(k),
+    )
 
 
 def test_all_pairs_not_only_neighbours():
     # wall x = 6 and wall y = 3 meet at (6, 3); a short piece of rubbish between them in scan order
     segs = _segments(
-        [((6.0, 0.0), (6, -2), (6, 2.9)), ((5.0, 0.7), (3.6, 3.0), (3.9, 2.6)), ((3.0, np.pi / 2), (5.85, 3), (1, 3))]
+        [
+            ((6.0, 0.0), (6, -2), (6, 2.9)),
+            ((5.0, 0.7), (3.6, 3.0), (3.9, 2.6)),
+            ((3.0, np.pi / 2), (5.85, 3), (1, 3)),
+        ]
     )
     z, _, which = type_one(segs, CornersConfig())
     assert len(z) == 1 and which[0].tolist() == [0, 2]
@@ -126,9 +138,15 @@ def test_duplicates_are_merged():
 
 def test_intersection_jacobian_matches_finite_differences():
     segs = Segments(
-        r=np.array([2.0, 3.0]), alpha=np.array([0.3, 2.0]), cov=np.tile(np.eye(2), (2, 1, 1)),
-        p1=np.zeros((2, 2)), p2=np.zeros((2, 2)), n_points=np.array([9, 9]), first=np.zeros(2, int), last=np.zeros(2, int),
-    )  # fmt: skip
+        r=np.array([2.0, 3.0]),
+        alpha=np.array([0.3, 2.0]),
+        cov=np.tile(np.eye(2), (2, 1, 1)),
+        p1=np.zeros((2, 2)),
+        p2=np.zeros((2, 2)),
+        n_points=np.array([9, 9]),
+        first=np.zeros(2, int),
+        last=np.zeros(2, int),
+    )
     z, _ = intersections(segs, np.array([0]), np.array([1]))
     c = z[0, :2]
     assert c @ [math.cos(0.3), math.sin(0.3)] == pytest.approx(2.0)
@@ -142,7 +160,9 @@ def test_intersection_jacobian_matches_finite_differences():
         F[:, k] = (intersections(s2, np.array([0]), np.array([1]))[0][0] - z[0]) / h
     C = np.diag([1e-4, 2e-4, 3e-4, 4e-4])
     segs_c = replace(segs, cov=np.array([C[:2, :2], C[2:, 2:]]))
-    np.testing.assert_allclose(intersections(segs_c, np.array([0]), np.array([1]))[1][0], F @ C @ F.T, rtol=1e-5)
+    np.testing.assert_allclose(
+        intersections(segs_c, np.array([0]), np.array([1]))[1][0], F @ C @ F.T, rtol=1e-5
+    )
 
 
 def _monte_carlo(world_of, truth_of, pose, kind, n, dims, rng, angles=HOKUYO):
@@ -207,7 +227,12 @@ def _scan(ranges, angles):
 
 
 def test_degenerate_scans_give_no_features():
-    for ranges, angles in [([], []), ([1.0], [0.0]), ([2.0] * 5, [0.1] * 5), ([1e-9] * 50, np.linspace(0, 1, 50))]:
+    for ranges, angles in [
+        ([], []),
+        ([1.0], [0.0]),
+        ([2.0] * 5, [0.1] * 5),
+        ([1e-9] * 50, np.linspace(0, 1, 50)),
+    ]:
         segs, corners = extract(_scan(ranges, angles), SensorConfig(), *CFG)
         _check_output(segs, corners)
         assert len(corners) == 0
@@ -227,14 +252,21 @@ def scans(draw):
     elif kind == "huge":
         ranges = draw(st.lists(st.floats(1e3, 1e12), min_size=n, max_size=n))
     else:  # piecewise-constant ranges: many short "walls" and jumps
-        ranges = np.repeat(draw(st.lists(st.floats(0.05, 50.0), min_size=1, max_size=20)), max(1, n // 10))[:n]
+        ranges = np.repeat(draw(st.lists(st.floats(0.05, 50.0), min_size=1, max_size=20)), max(1, n // 10))[
+            :n
+        ]
     steps = draw(st.lists(st.floats(0.0, 0.2), min_size=n, max_size=n))
     angles = np.cumsum(steps) + draw(st.floats(-math.pi, 0.0))
     return _scan(np.asarray(ranges, float)[:n], angles[: len(ranges)])
 
 
 @settings(max_examples=100, deadline=None)
-@given(scans(), st.sampled_from([SensorConfig(), PRECISE, SensorConfig(sigma_r_near=0.0, sigma_r_rel=0.0, sigma_theta=0.0)]))
+@given(
+    scans(),
+    st.sampled_from(
+        [SensorConfig(), PRECISE, SensorConfig(sigma_r_near=0.0, sigma_r_rel=0.0, sigma_theta=0.0)]
+    ),
+)
 def test_any_scan_gives_finite_features_or_none(scan, sensor):
     segs, corners = extract(scan, sensor, *CFG)
     _check_output(segs, corners)
@@ -244,5 +276,7 @@ def test_any_scan_gives_finite_features_or_none(scan, sensor):
 @given(st.floats(0.5, 29.5), st.floats(0.5, 19.5), st.floats(-math.pi, math.pi), st.integers(0, 2**31))
 def test_noisy_office_scans_give_finite_spd_features(x, y, th, seed):
     rng = np.random.default_rng(seed)
-    scan = sw.simulate_scan(sw.office_world(), (x, y, th), HOKUYO, 30.0, lambda r: 0.03 * np.maximum(r, 1.0), 0.003, rng)
+    scan = sw.simulate_scan(
+        sw.office_world(), (x, y, th), HOKUYO, 30.0, lambda r: 0.03 * np.maximum(r, 1.0), 0.003, rng
+    )
     _check_output(*extract(scan, SensorConfig(), *CFG))

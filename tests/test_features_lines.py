@@ -24,7 +24,11 @@ def test_sensor_models():
 
 @pytest.mark.parametrize(
     "cls, kwargs",
-    [(SensorConfig, {"sigma_theta": -1.0}), (LinesConfig, {"min_points": 1}), (LinesConfig, {"split_distance": 0})],
+    [
+        (SensorConfig, {"sigma_theta": -1.0}),
+        (LinesConfig, {"min_points": 1}),
+        (LinesConfig, {"split_distance": 0}),
+    ],
 )
 def test_config_rejects_invalid_values(cls, kwargs):
     with pytest.raises(ValueError):
@@ -64,7 +68,9 @@ def test_noiseless_segments_lie_on_true_walls(world, pose):
     # Hessian form invariants and end points on the line
     assert np.all(segs.r >= 0) and np.all((segs.alpha > -np.pi) & (segs.alpha <= np.pi))
     for p in (segs.p1, segs.p2):
-        np.testing.assert_allclose(p[:, 0] * np.cos(segs.alpha) + p[:, 1] * np.sin(segs.alpha), segs.r, atol=1e-9)
+        np.testing.assert_allclose(
+            p[:, 0] * np.cos(segs.alpha) + p[:, 1] * np.sin(segs.alpha), segs.r, atol=1e-9
+        )
 
 
 def test_breakpoint_and_merge_in_a_simple_scene():
@@ -105,7 +111,10 @@ def test_line_jacobian_matches_finite_differences():
             rp[i] += dr
             tp[i] += dt
             f = fit_lines(rp, tp, var_r, var_t, [0], [len(rho)], w)  # weights fixed, as in the model
-            J[:, 2 * i + k] = (f.r[0] - fit.r[0]) / h, math.remainder(f.alpha[0] - fit.alpha[0], 2 * math.pi) / h
+            J[:, 2 * i + k] = (
+                (f.r[0] - fit.r[0]) / h,
+                math.remainder(f.alpha[0] - fit.alpha[0], 2 * math.pi) / h,
+            )
     C = J @ np.diag(np.ravel(np.column_stack((var_r, np.broadcast_to(var_t, rho.shape))))) @ J.T
     np.testing.assert_allclose(fit.cov[0], C, rtol=1e-4, atol=1e-12)
     np.testing.assert_allclose(fit.jac_ends[0, 0], J[:, :2], rtol=1e-4, atol=1e-10)

@@ -33,8 +33,12 @@ def test_raycast_points_lie_on_walls():
     world = sw.office_world()
     pose = (5.0, 5.0, 0.3)
     r = sw.raycast(world, pose, np.linspace(-np.pi, np.pi, 721, endpoint=False))
-    pts = np.column_stack((pose[0] + r * np.cos(np.linspace(-np.pi, np.pi, 721, endpoint=False) + 0.3),
-                           pose[1] + r * np.sin(np.linspace(-np.pi, np.pi, 721, endpoint=False) + 0.3)))
+    pts = np.column_stack(
+        (
+            pose[0] + r * np.cos(np.linspace(-np.pi, np.pi, 721, endpoint=False) + 0.3),
+            pose[1] + r * np.sin(np.linspace(-np.pi, np.pi, 721, endpoint=False) + 0.3),
+        )
+    )
     a, b = world.walls[:, 0], world.walls[:, 1]
     e = b - a
     t = np.clip(np.einsum("pwk,wk->pw", pts[:, None] - a, e) / np.einsum("wk,wk->w", e, e), 0, 1)

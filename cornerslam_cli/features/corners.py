@@ -26,7 +26,8 @@ A corner is z = (x, y, φ) in the sensor frame with a 3×3 covariance.
   through the line it helped fit, so C = A C_l Aᵀ − A J_e C_e J_eᵀ Aᵀ + G_e C_e G_eᵀ, with A = ∂c/∂(r, α),
   J_e = ∂(r, α)/∂(ρ_e, θ_e), G_e = A J_e + (I − n nᵀ) ∂q/∂(ρ_e, θ_e), C_e = diag(σρ_e², σθ²).
 * **drop_occluded** (on by default): the end point on the farther side of a depth jump is the edge of an
-  occlusion shadow that moves with the viewpoint; it is dropped when the beam next to it is nearer. Corners of either type lying farther behind the measured range at their bearing than
+  occlusion shadow that moves with the viewpoint; it is dropped when the beam next to it is nearer.
+  Corners of either type lying farther behind the measured range at their bearing than
   the margin (``occlusion_margin`` + 3σρ) are hidden behind a surface and are dropped too.
 * **Duplicates**: several segment pairs (and an end point) can give the same physical corner. Corners
   closer than ``duplicate_radius`` are one: type I is preferred to type II, then the smallest position
@@ -55,7 +56,9 @@ def intersections(segs: Segments, i: np.ndarray, j: np.ndarray):
     ai, aj, ri, rj = segs.alpha[i], segs.alpha[j], segs.r[i], segs.r[j]
     D = np.sin(aj - ai)  # det N
     # N⁻¹ = (1/D) [[sin αj, −sin αi], [−cos αj, cos αi]]
-    ninv = np.stack((np.stack((np.sin(aj), -np.sin(ai)), -1), np.stack((-np.cos(aj), np.cos(ai)), -1)), axis=1)
+    ninv = np.stack(
+        (np.stack((np.sin(aj), -np.sin(ai)), -1), np.stack((-np.cos(aj), np.cos(ai)), -1)), axis=1
+    )
     ninv /= D[:, None, None]
     c = np.einsum("mab,mb->ma", ninv, np.column_stack((ri, rj)))
     dphi = _wrap(ai - aj)
@@ -88,7 +91,9 @@ def type_one(segs: Segments, cfg: CornersConfig):
     k = len(segs)
     i, j = np.triu_indices(k, 1)
     ends = np.stack((segs.p1, segs.p2), axis=1)  # (k, 2 ends, 2)
-    d_end = np.hypot(*(ends[i][:, :, None, :] - ends[j][:, None, :, :]).transpose(3, 0, 1, 2)).min(axis=(1, 2))
+    d_end = np.hypot(*(ends[i][:, :, None, :] - ends[j][:, None, :, :]).transpose(3, 0, 1, 2)).min(
+        axis=(1, 2)
+    )
     phi = np.abs(_wrap(segs.alpha[i] - segs.alpha[j]))
     ok = (d_end < cfg.d_min) & (phi >= cfg.min_angle) & (phi <= np.pi - cfg.min_angle)
     i, j = i[ok], j[ok]
@@ -102,65 +107,62 @@ def type_one(segs: Segments, cfg: CornersConfig):
 def type_two(scan: Scan, segs: Segments, jac_ends: np.ndarray, sensor: SensorConfig, cfg: CornersConfig):
     """Type II corners at segment ends facing a depth jump: (z, cov, segs (m, 2) with −1 second)."""
     rho, theta = scan.ranges, scan.angles
-    n = len(rho)
-    spacing = _spacing(scan)
+    n, k = len(rho), len(segs)
+    none = np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros((0, 2), dtype=np.int64)
+    # both ends of every segment at once: end 0 = first beam (next beam before it), 1 = last (after it)
+    seg_of = np.concatenate((np.arange(k), np.arange(k)))
+    end_of = np.repeat([0, 1], k)
+    beam = np.concatenate((segs.first, segs.last))
+    step = np.where(end_of == 0, -1, 1)
+    nb = beam + step  # the next beam away from the segment
+    nbc = np.clip(nb, 0, n - 1)
     x, y = rho * np.cos(theta), rho * np.sin(theta)
-    zs, covs, which = [], [], []
-    for end, beam, step in ((0, segs.first, -1), (1, segs.last, +1)):
-        nb = beam + step  # the next beam away from the segment
-        inside = (nb >= 0) & (nb < n)
-        nbc = np.clip(nb, 0, n - 1)
-        jump = np.hypot(x[nbc] - x[beam], y[nbc] - y[beam])
-        off_line = np.abs(x[nbc] * np.cos(segs.alpha) + y[nbc] * np.sin(segs.alpha) - segs.r)
-        adjacent = np.abs(scan.beam_index[nbc] - scan.beam_index[beam]) == 1
-        is_corner = inside & adjacent & (jump > cfg.d_min) & (off_line > cfg.d_min)
-        if cfg.drop_occluded:
-            is_corner &= ~(rho[nbc] < rho[beam])
-        s = np.flatnonzero(is_corner)
-        if s.size == 0:
-            continue
-        b = beam[s]
-        a, r = segs.alpha[s], segs.r[s]
-        nvec = np.column_stack((np.cos(a), np.sin(a)))
-        dvec = np.column_stack((-np.sin(a), np.cos(a)))
-        q = np.column_stack((x[b], y[b]))
-        e = np.einsum("ij,ij->i", nvec, q) - r
-        c = q - e[:, None] * nvec
-        # A = ∂c/∂(r, α): ∂c/∂r = n, ∂c/∂α = −(d·q) n − e d
-        dq = np.einsum("ij,ij->i", dvec, q)
-        A = np.stack((nvec, -dq[:, None] * nvec - e[:, None] * dvec), axis=2)  # (m, 2, 2)
-        Q = np.stack(
-            (np.column_stack((np.cos(theta[b]), np.sin(theta[b]))), rho[b][:, None] * dvec_of(theta[b])), axis=2
-        )
-        P = np.eye(2) - nvec[:, :, None] * nvec[:, None, :]  # I − n nᵀ
-        Je = jac_ends[s, end]
-        var_r, var_t = beam_variances(rho[b], sensor)
-        Ce = np.zeros((len(s), 2, 2))
-        Ce[:, 0, 0], Ce[:, 1, 1] = var_r, var_t
-        Ge = A @ Je + P @ Q
-        AJ = A @ Je
-        Cxy = A @ segs.cov[s] @ A.transpose(0, 2, 1) - AJ @ Ce @ AJ.transpose(0, 2, 1)
-        Cxy = Cxy + Ge @ Ce @ Ge.transpose(0, 2, 1)
-        # the edge lies somewhere between the end beam and the next beam's bearing, where the line would be
-        # hit next: centre of that gap, variance gap²/12 along the line (uniform)
-        th_next = theta[b] + step * spacing
-        cos_next = np.cos(th_next - a)
-        t_next = r / np.where(cos_next > 1e-6, cos_next, np.nan)
-        x_next = t_next[:, None] * np.column_stack((np.cos(th_next), np.sin(th_next)))
-        gap_vec = x_next - c
-        gap = np.hypot(gap_vec[:, 0], gap_vec[:, 1])
-        good = gap <= cfg.endpoint_max_gap
-        c = c + 0.5 * np.where(good[:, None], gap_vec, 0.0)
-        Cxy = Cxy + (np.where(good, gap, 0.0) ** 2 / 12.0)[:, None, None] * (dvec[:, :, None] * dvec[:, None, :])
-        cov = np.zeros((len(s), 3, 3))
-        cov[:, :2, :2] = Cxy
-        cov[:, 2, 2] = cfg.endpoint_phi_sigma**2
-        zs.append(np.column_stack((c, np.full(len(s), cfg.endpoint_phi)))[good])
-        covs.append(cov[good])
-        which.append(np.column_stack((s, np.full(len(s), -1)))[good])
-    if not zs:
-        return np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros((0, 2), dtype=np.int64)
-    return np.concatenate(zs), np.concatenate(covs), np.concatenate(which)
+    alpha, r_all = segs.alpha[seg_of], segs.r[seg_of]
+    jump = np.hypot(x[nbc] - x[beam], y[nbc] - y[beam])
+    off_line = np.abs(x[nbc] * np.cos(alpha) + y[nbc] * np.sin(alpha) - r_all)
+    adjacent = (nb >= 0) & (nb < n) & (np.abs(scan.beam_index[nbc] - scan.beam_index[beam]) == 1)
+    is_corner = adjacent & (jump > cfg.d_min) & (off_line > cfg.d_min)
+    if cfg.drop_occluded:
+        is_corner &= ~(rho[nbc] < rho[beam])
+    i = np.flatnonzero(is_corner)
+    if i.size == 0:
+        return none
+    s, b, a, r = seg_of[i], beam[i], alpha[i], r_all[i]
+    ca, sa = np.cos(a), np.sin(a)
+    nvec = np.column_stack((ca, sa))
+    dvec = np.column_stack((-sa, ca))
+    q = np.column_stack((x[b], y[b]))
+    e = q[:, 0] * ca + q[:, 1] * sa - r
+    c = q - e[:, None] * nvec
+    # A = ∂c/∂(r, α): ∂c/∂r = n, ∂c/∂α = −(d·q) n − e d
+    dq = q[:, 1] * ca - q[:, 0] * sa
+    A = np.stack((nvec, -dq[:, None] * nvec - e[:, None] * dvec), axis=2)  # (m, 2, 2)
+    Q = np.stack(
+        (np.column_stack((np.cos(theta[b]), np.sin(theta[b]))), rho[b][:, None] * dvec_of(theta[b])), axis=2
+    )
+    P = dvec[:, :, None] * dvec[:, None, :]  # I − n nᵀ = d dᵀ
+    AJ = A @ jac_ends[s, end_of[i]]
+    var_r, var_t = beam_variances(rho[b], sensor)
+    Ce = np.zeros((len(i), 2, 2))
+    Ce[:, 0, 0], Ce[:, 1, 1] = var_r, var_t
+    Ge = AJ + P @ Q
+    Cxy = A @ segs.cov[s] @ A.transpose(0, 2, 1) - AJ @ Ce @ AJ.transpose(0, 2, 1)
+    Cxy = Cxy + Ge @ Ce @ Ge.transpose(0, 2, 1)
+    # the edge lies somewhere between the end beam and the next beam's bearing, where the line would be
+    # hit next: centre of that gap, variance gap²/12 along the line (uniform)
+    th_next = theta[b] + step[i] * _spacing(scan)
+    cos_next = np.cos(th_next - a)
+    t_next = r / np.where(cos_next > 1e-6, cos_next, np.nan)
+    gap_vec = t_next[:, None] * np.column_stack((np.cos(th_next), np.sin(th_next))) - c
+    gap = np.hypot(gap_vec[:, 0], gap_vec[:, 1])
+    good = gap <= cfg.endpoint_max_gap
+    c = c + 0.5 * np.where(good[:, None], gap_vec, 0.0)
+    Cxy = Cxy + (np.where(good, gap, 0.0) ** 2 / 12.0)[:, None, None] * P
+    cov = np.zeros((len(i), 3, 3))
+    cov[:, :2, :2] = Cxy
+    cov[:, 2, 2] = cfg.endpoint_phi_sigma**2
+    z = np.column_stack((c, np.full(len(i), cfg.endpoint_phi)))
+    return z[good], cov[good], np.column_stack((s, np.full(len(i), -1)))[good]
 
 
 def dvec_of(theta):
@@ -168,7 +170,9 @@ def dvec_of(theta):
     return np.column_stack((-np.sin(theta), np.cos(theta)))
 
 
-def measured_range(scan: Scan, bearing: np.ndarray, dropped: float = np.nan, farther: bool = False) -> np.ndarray:
+def measured_range(
+    scan: Scan, bearing: np.ndarray, dropped: float = np.nan, farther: bool = False
+) -> np.ndarray:
     """Range the scan measured at each bearing: the nearer (``farther``: the farther) of the at most two
     valid beams within one beam spacing of it; ``dropped`` inside a gap of dropped beams (no return, or an
     invalid reading), nan outside the field of view."""
@@ -217,19 +221,19 @@ def seen_through(
     corner the beams between a segment's end and the corner hit that same wall. Dropped beams there count
     as seen through (no return).
     """
-    out = np.zeros(len(z), dtype=bool)
-    for col in (0, 1):
-        s = which[:, col]
-        c = z[:, :2]
-        ends = np.stack((segs.p1[s], segs.p2[s]), axis=1)
-        d_end = np.hypot(*(ends - c[:, None, :]).transpose(2, 0, 1))
-        e = ends[np.arange(len(s)), np.argmin(d_end, axis=1)]
-        for f in (0.25, 0.5, 0.75):
-            q = e + f * (c - e)
-            measured = measured_range(scan, np.arctan2(q[:, 1], q[:, 0]), dropped=np.inf)
-            rq = np.hypot(q[:, 0], q[:, 1])
-            out |= measured > rq + _margin(rq, sensor, margin)
-    return out
+    m = len(z)
+    c = z[:, :2]
+    s = which.T.ravel()  # (2m,) both segments of every corner
+    ends = np.stack((segs.p1[s], segs.p2[s]), axis=1)
+    cc = np.tile(c, (2, 1))
+    d_end = np.hypot(*(ends - cc[:, None, :]).transpose(2, 0, 1))
+    e = ends[np.arange(2 * m), np.argmin(d_end, axis=1)]  # the nearer end of each segment
+    f = np.array([0.25, 0.5, 0.75])[:, None, None]
+    q = (e + f * (cc - e)).reshape(-1, 2)  # (3·2m, 2) samples along the extensions
+    measured = measured_range(scan, np.arctan2(q[:, 1], q[:, 0]), dropped=np.inf)
+    rq = np.hypot(q[:, 0], q[:, 1])
+    beyond = (measured > rq + _margin(rq, sensor, margin)).reshape(6, m)
+    return beyond.any(axis=0)
 
 
 def merge_duplicates(z, cov, kind, radius: float) -> np.ndarray:

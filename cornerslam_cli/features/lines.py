@@ -101,7 +101,9 @@ def fit_lines(rho, theta, var_rho, var_theta, starts, ends, w=None) -> LineFits:
     k = len(starts)
     if k == 0:
         z = np.zeros(0)
-        return LineFits(z, z, np.zeros((0, 2, 2)), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2, 2, 2)), z > 0)
+        return LineFits(
+            z, z, np.zeros((0, 2, 2)), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2, 2, 2)), z > 0
+        )
     # gather the beams of the ranges (they may skip beams between ranges)
     cnt = ends - starts
     offs = np.cumsum(cnt) - cnt
@@ -167,14 +169,19 @@ def fit_ranges(rho, theta, sensor: SensorConfig, starts, ends) -> LineFits:
     beam, ρ̂_i = r / cos(θ_i − α), which does not depend on that beam's noise.
     """
     var_rho, var_theta = beam_variances(rho, sensor)
-    fit = fit_lines(rho, theta, var_rho, var_theta, starts, ends)
-    if len(fit.r) == 0:
-        return fit
-    cnt = np.asarray(ends) - np.asarray(starts)
+    starts, ends = np.asarray(starts, dtype=np.int64), np.asarray(ends, dtype=np.int64)
+    if len(starts) == 0:
+        return fit_lines(rho, theta, var_rho, var_theta, starts, ends)
+    cnt = ends - starts
+    offs = np.cumsum(cnt) - cnt
     seg = np.repeat(np.arange(len(cnt)), cnt)
-    idx = np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt - np.asarray(starts), cnt)
-    cos_i = np.cos(theta[idx] - fit.alpha[seg])
-    rho_hat = np.where(cos_i > 1e-3, fit.r[seg] / np.where(cos_i > 1e-3, cos_i, 1.0), rho[idx])
+    idx = np.arange(cnt.sum()) - np.repeat(offs - starts, cnt)
+    th = theta[idx]
+    x, y = rho[idx] * np.cos(th), rho[idx] * np.sin(th)
+    w = beam_weights(rho[idx], var_rho[idx], var_theta if np.ndim(var_theta) == 0 else var_theta[idx])
+    r1, a1 = _line_from_moments(*_moments(x, y, w, offs, offs + cnt)[2:])  # first pass: the line only
+    cos_i = np.cos(th - a1[seg])
+    rho_hat = np.where(cos_i > 1e-3, r1[seg] / np.where(cos_i > 1e-3, cos_i, 1.0), rho[idx])
     rho_hat = np.where(np.isfinite(rho_hat) & (rho_hat > 0), rho_hat, rho[idx])
     vr, vt = beam_variances(rho_hat, sensor)
     full_vr, full_w = var_rho.copy(), np.ones_like(rho)
@@ -207,11 +214,14 @@ def breakpoint_starts(x, y, rho, theta, cfg: LinesConfig) -> np.ndarray:
     return np.concatenate(([0], np.flatnonzero(brk) + 1))
 
 
-def angle_split_starts(x, y, rho, theta, starts, cfg: LinesConfig, sigma=None) -> np.ndarray:
+def angle_split_starts(
+    x, y, rho, theta, starts, cfg: LinesConfig, sigma=None, spacing: float = 0.0
+) -> np.ndarray:
     """Step 2: add a start at the sharpest beam of every run where the windowed chord angle exceeds a_max.
 
     The chords (p_i−k, p_i) and (p_i, p_i+k) stay inside the beam's point set; k = ⌈chord_i / (ρ_i Δφ)⌉ with
-    Δφ the median beam spacing and chord_i = max(angle_split_chord, angle_split_sigmas·σ_i), σ_i the beam's
+    Δφ the beam spacing (``spacing``, else the median) and
+    chord_i = max(angle_split_chord, angle_split_sigmas·σ_i), σ_i the beam's
     point standard deviation, so that noise alone seldom bends a chord pair by a_max (a 3σ error at the
     middle beam bends it by 2·atan(3 / angle_split_sigmas) ≈ 17° with the default 20). A chord shorter
     than half of chord_i (near a set's ends) does not vote: the distance split decides there.
@@ -219,8 +229,12 @@ def angle_split_starts(x, y, rho, theta, starts, cfg: LinesConfig, sigma=None) -
     n = len(x)
     if n < 3:
         return starts
-    dphi = float(np.median(np.diff(theta)))
-    chord = cfg.angle_split_chord if sigma is None else np.maximum(cfg.angle_split_chord, cfg.angle_split_sigmas * sigma)
+    dphi = spacing if spacing > 0 else float(np.median(np.diff(theta)))
+    chord = (
+        cfg.angle_split_chord
+        if sigma is None
+        else np.maximum(cfg.angle_split_chord, cfg.angle_split_sigmas * sigma)
+    )
     k = np.ceil(chord / np.maximum(rho * max(dphi, 1e-9), 1e-9))
     k = np.minimum(k, n).astype(np.int64)
     ends = _ends(starts, n)
@@ -266,7 +280,9 @@ def distance_split_starts(x, y, w, starts, cfg: LinesConfig) -> np.ndarray:
         cx, cy = (x[ends - 1] - x[starts])[seg], (y[ends - 1] - y[starts])[seg]
         norm = np.hypot(cx, cy)
         dist = np.where(
-            norm > 0, np.abs(cx * (y - fy) - cy * (x - fx)) / np.where(norm > 0, norm, 1.0), np.hypot(x - fx, y - fy)
+            norm > 0,
+            np.abs(cx * (y - fy) - cy * (x - fx)) / np.where(norm > 0, norm, 1.0),
+            np.hypot(x - fx, y - fy),
         )
         dist[starts] = -1.0
         dist[ends - 1] = -1.0
@@ -301,7 +317,10 @@ def merge_starts(x, y, w, starts, cfg: LinesConfig) -> np.ndarray:
     r, alpha = _line_from_moments(mx, my, sxx, syy, sxy)
     fi, la = starts, ends - 1
     proj = cnt >= 3
-    ef, el = x[fi] * np.cos(alpha) + y[fi] * np.sin(alpha) - r, x[la] * np.cos(alpha) + y[la] * np.sin(alpha) - r
+    ef, el = (
+        x[fi] * np.cos(alpha) + y[fi] * np.sin(alpha) - r,
+        x[la] * np.cos(alpha) + y[la] * np.sin(alpha) - r,
+    )
     ef, el = np.where(proj, ef, 0.0), np.where(proj, el, 0.0)
     vf = np.column_stack((x[fi] - ef * np.cos(alpha), y[fi] - ef * np.sin(alpha))).tolist()
     vl = np.column_stack((x[la] - el * np.cos(alpha), y[la] - el * np.sin(alpha))).tolist()
@@ -374,9 +393,7 @@ def refine_boundaries(x, y, w, starts, cfg: LinesConfig, sweeps: int = 2) -> np.
         touching = (cnt[left] >= 4) & (cnt[right] >= 4)
         touching &= np.hypot(x[b] - x[b - 1], y[b] - y[b - 1]) < cfg.merge_gap
 
-        def dist(i, seg):
-            return np.abs(x[i] * c[seg] + y[i] * s[seg] - r[seg])
-
+        dist = lambda i, seg: np.abs(x[i] * c[seg] + y[i] * s[seg] - r[seg])  # noqa: B023
         to_left = touching & (dist(b, left) < dist(b, right))
         to_right = touching & ~to_left & (dist(b - 1, right) < dist(b - 1, left))
         if not (to_left.any() or to_right.any()):
@@ -431,7 +448,9 @@ def extract_segments(scan: Scan, sensor: SensorConfig, cfg: LinesConfig) -> tupl
         return none
 
     starts = breakpoint_starts(x, y, rho, theta, cfg)  # step 1
-    starts = angle_split_starts(x, y, rho, theta, starts, cfg, 1.0 / np.sqrt(w))  # step 2
+    starts = angle_split_starts(
+        x, y, rho, theta, starts, cfg, 1.0 / np.sqrt(w), scan.angle_increment
+    )  # step 2
     starts = distance_split_starts(x, y, w, starts, cfg)  # step 3
     starts = merge_starts(x, y, w, starts, cfg)  # step 4
     starts = refine_boundaries(x, y, w, starts, cfg)  # step 5

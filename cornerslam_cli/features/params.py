@@ -34,7 +34,10 @@ class SensorConfig:
     sigma_theta: float = math.pi / 1024
 
     def __post_init__(self):
-        _check(self.model in ("piecewise", "linear"), f"sensor.model must be piecewise or linear, got {self.model!r}")
+        _check(
+            self.model in ("piecewise", "linear"),
+            f"sensor.model must be piecewise or linear, got {self.model!r}",
+        )
         for name in ("sigma_r_near", "near_range", "sigma_r_rel", "a", "b", "sigma_theta"):
             v = getattr(self, name)
             _check(math.isfinite(v) and v >= 0.0, f"sensor.{name} must be finite and >= 0, got {v}")
