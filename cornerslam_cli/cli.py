@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
 import sys
 import tempfile
+import threading
 import time
 import traceback
 from pathlib import Path
@@ -62,8 +64,9 @@ def _setup_logging(verbose: int, quiet: bool) -> None:
     logging.basicConfig(level=level, format="%(levelname)s: %(message)s", stream=sys.stderr, force=True)
 
 
-def _load(config_path, overrides, assoc=None, scan_topic=None, odom_topic=None):
-    from .config import load_config
+def _load(config_path, overrides, assoc=None, scan_topic=None, odom_topic=None, log_path=None):
+    """The resolved config: user layers over the laser preset chosen for ``log_path``'s scans."""
+    from .lasers import resolve_config
 
     extra = list(overrides)
     if assoc:
@@ -72,7 +75,7 @@ def _load(config_path, overrides, assoc=None, scan_topic=None, odom_topic=None):
         extra.append(f"input.scan_topic={scan_topic}")
     if odom_topic:
         extra.append(f"input.odom_topic={odom_topic}")
-    cfg = load_config(config_path, extra)
+    cfg = resolve_config(log_path, config_path, extra)
     from .association import ASSOCIATORS
 
     if cfg.association.method not in ASSOCIATORS:
@@ -123,11 +126,23 @@ class Progress:
 
 
 # ---------------------------------------------------------------------------- commands
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM (kill) taken down the Ctrl-C path, so the staged output directory is removed too."""
+
+
+def _on_sigterm(signum, frame):
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a second kill must not interrupt the clean-up
+    raise _Terminated
+
+
 class _Cli(click.Group):
     """The one error boundary: a CornerslamError becomes one line and exit 2; a bug exits 1 with its
-    traceback saved to a file; Ctrl-C exits 130 (the staged output directory is discarded)."""
+    traceback saved to a file; Ctrl-C exits 130, SIGTERM 143 (the staged output directory is
+    discarded)."""
 
     def invoke(self, ctx: click.Context):
+        main_thread = threading.current_thread() is threading.main_thread()
+        previous = signal.signal(signal.SIGTERM, _on_sigterm) if main_thread else None
         try:
             return super().invoke(ctx)
         except CornerslamError as e:
@@ -135,17 +150,19 @@ class _Cli(click.Group):
             ctx.exit(2)
         except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
             raise
-        except KeyboardInterrupt:
-            click.echo(
-                "interrupted: no output written (a previous complete output directory is kept)", err=True
-            )
-            ctx.exit(130)
+        except KeyboardInterrupt as e:
+            word, code = ("terminated", 143) if isinstance(e, _Terminated) else ("interrupted", 130)
+            click.echo(f"{word}: no output written (a previous complete output directory is kept)", err=True)
+            ctx.exit(code)
         except Exception as exc:
             fd, path = tempfile.mkstemp(prefix="cornerslam-crash-", suffix=".txt")
             with os.fdopen(fd, "w") as f:
                 traceback.print_exc(file=f)
             click.echo(f"internal error: {type(exc).__name__}: {exc} (traceback saved to {path})", err=True)
             ctx.exit(1)
+        finally:
+            if main_thread and previous is not None:
+                signal.signal(signal.SIGTERM, previous)
 
 
 @click.group(cls=_Cli, context_settings={"help_option_names": ["-h", "--help"]})
@@ -202,7 +219,7 @@ def run(
     from .pipeline import run as run_pipeline
 
     _setup_logging(verbose, quiet)
-    cfg = _load(config_path, overrides, assoc, scan_topic, odom_topic)
+    cfg = _load(config_path, overrides, assoc, scan_topic, odom_topic, log_path)
     progress = Progress(f"{Path(log_path).name} ({cfg.association.method})", not quiet)
     try:
         summary = run_pipeline(log_path, cfg, out, ground_truth=ground_truth, progress=progress)
@@ -260,7 +277,7 @@ def compare(
         raise click.BadParameter(
             f"'{assocs}' must list distinct associators, e.g. icnn,jcbb,pca", param_hint="--assoc"
         )
-    cfg = _load(config_path, overrides, None, scan_topic, odom_topic)
+    cfg = _load(config_path, overrides, None, scan_topic, odom_topic, log_path)
     for a in names:
         _load(config_path, overrides, a)  # unknown names fail here, with the closest valid one
     out_dir = Path(out) if out else default_out_dir(Path(log_path), "compare")
@@ -445,7 +462,7 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
     from .types import Scan
 
     _setup_logging(verbose, quiet)
-    cfg = _load(config_path, overrides, None, scan_topic, odom_topic)
+    cfg = _load(config_path, overrides, None, scan_topic, odom_topic, log_path)
     reader = open_log(Path(log_path), scan_topic=cfg.input.scan_topic, odom_topic=cfg.input.odom_topic)
     scan = None
     i = -1
@@ -465,6 +482,158 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
     if plot_path:
         plot_extraction(scan, segments, corners, plot_path)
         click.echo(f"wrote {plot_path}")
+
+
+class BatchProgress:
+    """The whole batch's progress on stderr: finished/failed/skipped/remaining and an ETA from the rate
+    of the combinations run so far (skipped ones cost nothing). Redrawn in place on a terminal, a line
+    every 10 s otherwise; silent with -q."""
+
+    def __init__(self, enabled: bool):
+        self.enabled = enabled
+        self.t0 = time.monotonic()
+        self.last = 0.0
+        self.tty = sys.stderr.isatty()
+        self.drawn = False
+
+    def __call__(self, s) -> None:
+        now = time.monotonic()
+        if not self.enabled or (s.remaining and now - self.last < (0.1 if self.tty else 10.0)):
+            return
+        self.last = now
+        el = now - self.t0
+        ran = s.ok + s.failed
+        eta = f"eta {el / ran * s.remaining:4.0f}s" if ran and s.remaining else "eta    ?"
+        text = (
+            f"batch {s.finished}/{s.total}: {s.ok} ok, {s.failed} failed, {s.skipped} skipped, "
+            f"{s.remaining} remaining {el:5.0f}s {eta if s.remaining else ''}"
+        ).rstrip()
+        if self.tty:
+            sys.stderr.write("\r\033[K" + text)
+            self.drawn = True
+        else:
+            sys.stderr.write(text + "\n")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.drawn:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+
+
+def _parse_sweeps(texts) -> dict[str, list[str]]:
+    sweeps: dict[str, list[str]] = {}
+    for text in texts:
+        key, sep, values = text.partition("=")
+        key = key.strip()
+        if not sep or not key or not values.strip():
+            raise click.BadParameter(f"'{text}' is not KEY=V1,V2,...", param_hint="--sweep")
+        if key in sweeps:
+            raise click.BadParameter(
+                f"'{key}' is swept twice; give all its values at once", param_hint="--sweep"
+            )
+        sweeps[key] = [v.strip() for v in values.split(",") if v.strip()]
+    return sweeps
+
+
+@cli.command()
+@click.argument("logs", metavar="LOGS...", nargs=-1, required=True, type=click.Path())
+@click.option(
+    "--assoc", "assocs", default=None, help="Comma-separated associators (default: the config's, pca)."
+)
+@click.option(
+    "--sweep",
+    "sweeps",
+    multiple=True,
+    metavar="KEY=V1,V2,...",
+    help="Run each value of a config key; repeat for a grid, e.g. --sweep association.pca.group_size=3,5.",
+)
+@_config_options
+@click.option("--out", required=True, type=click.Path(file_okay=False), help="Batch directory (resumable).")
+@click.option(
+    "--jobs", default=None, type=click.IntRange(1, 256), help="Local worker processes [default: CPUs]."
+)
+@click.option(
+    "--scheduler", default=None, metavar="tcp://HOST:PORT", help="Run on this Dask scheduler instead."
+)
+@_verbosity
+def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, verbose, quiet):
+    """Run every LOG × associator × swept config value into OUT/<name>/ and tabulate in OUT/batch.csv.
+
+    A bad log fails its rows without stopping the batch; rerunning the same command skips the
+    combinations already complete with the same log, config and version.
+
+    \b
+    Example:
+      cornerslam batch sample_logs/*.mcap --assoc icnn,pca --sweep association.pca.group_size=3,5 \\
+          --out sweep/ --jobs 2
+    """
+    from .batch import BATCH_CSV, plan, run_batch
+
+    _setup_logging(verbose, quiet)
+    if assocs is None:
+        names = [_load(config_path, overrides).association.method]
+    else:
+        names = [a.strip() for a in assocs.split(",") if a.strip()]
+        if not names or len(set(names)) != len(names):
+            raise click.BadParameter(
+                f"'{assocs}' must list distinct associators, e.g. icnn,jcbb,pca", param_hint="--assoc"
+            )
+    if scheduler and jobs:
+        log.warning("--jobs is ignored with --scheduler (the cluster's workers run the batch)")
+    combos = plan(logs, names, _parse_sweeps(sweeps), overrides, config_path)
+    progress = BatchProgress(not quiet)
+    try:
+        rows = run_batch(combos, out, jobs, scheduler, progress)
+    except KeyboardInterrupt:
+        progress.close()
+        click.echo(
+            f"interrupted: {Path(out) / BATCH_CSV} lists the finished combinations (the rest 'pending'); "
+            "run the same command again to resume",
+            err=True,
+        )
+        raise click.exceptions.Exit(130) from None
+    progress.close()
+    failed = sum(r["status"] == "failed" for r in rows)
+    if not quiet:
+        _print_batch(rows, [k for k, _ in combos[0].sweep])
+        skipped = sum(r["status"] == "skipped" for r in rows)
+        click.echo(
+            f"{len(rows)} combinations: {len(rows) - failed - skipped} ran, {skipped} skipped (complete), "
+            f"{failed} failed"
+        )
+        click.echo(f"wrote {Path(out) / BATCH_CSV}")
+    elif failed:
+        click.echo(f"{failed} of {len(rows)} combinations failed (see {Path(out) / BATCH_CSV})", err=True)
+
+
+def _print_batch(rows: list[dict], keys: list[str]) -> None:
+    def num(v, fmt):
+        return "-" if v is None else format(v, fmt)
+
+    head = ["log", "assoc", *(k.rsplit(".", 1)[-1] for k in keys), "status", "steps", "landmarks", "ATE m"]
+    table = [
+        [
+            Path(r["log"]).name,
+            r["assoc"],
+            *(str(r[k]) for k in keys),
+            r["status"],
+            num(r["steps"], "d"),
+            num(r["landmarks"], "d"),
+            num(r["ate_rmse"], ".3f"),
+        ]
+        for r in rows
+    ]
+    widths = [max(len(str(x)) for x in col) for col in zip(head, *table, strict=True)]
+    for line in [head, *table]:
+        click.echo("  ".join(str(x).ljust(w) for x, w in zip(line, widths, strict=True)).rstrip())
+    failures: dict[tuple[str, str], int] = {}
+    for r in rows:
+        if r["status"] == "failed":
+            key = (r["log"], r["error"])
+            failures[key] = failures.get(key, 0) + 1
+    for (log_path, error), n in failures.items():
+        click.echo(f"failed ({n}x): {log_path}: {error}")
 
 
 main = cli  # the console-script entry point

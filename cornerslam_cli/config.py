@@ -8,8 +8,10 @@ the closest valid one. Each pipeline stage receives only its own section.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import difflib
+import math
 import types
 import typing
 from dataclasses import dataclass, field
@@ -35,6 +37,32 @@ class LaserMountConfig:
 
 
 @dataclass(frozen=True)
+class OdomJumpConfig:
+    """Odometry jumps and resets (``logs/sync.py reanchor_odometry``).
+
+    Between two odometry samples dt seconds apart, a move farther than ``distance`` or a turn larger
+    than ``angle`` per ``period`` seconds (scaled by dt / period when dt > period) is not motion the
+    robot can make: it is a jump (a reset of the odometry to zero, a relocalisation). The jump is
+    not applied as motion: the odometry after it is re-anchored to continue from the pose before it,
+    and the step across it adds diag(sigma_xy², sigma_xy², sigma_theta²) to the robot covariance.
+    """
+
+    distance: float = 2.0  # metres per period; 0 = no jump detection
+    angle: float = math.pi / 2  # radians per period
+    period: float = 0.1  # seconds
+    sigma_xy: float = 0.1  # metres, added robot uncertainty across a jump
+    sigma_theta: float = 0.05  # radians
+
+    def __post_init__(self) -> None:
+        for name in ("distance", "angle", "period", "sigma_xy", "sigma_theta"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0.0):
+                raise ValueError(f"odom_jump.{name} must be a finite number >= 0, got {v}")
+        if self.period <= 0.0:
+            raise ValueError(f"odom_jump.period must be > 0, got {self.period}")
+
+
+@dataclass(frozen=True)
 class InputConfig:
     """Which topics to read and how to treat beams."""
 
@@ -45,7 +73,9 @@ class InputConfig:
     max_range: float = 0.0  # 0 = use the scan's range_max; beams at or beyond are "no return"
     skip_beams_start: int = 0  # beams at the start of each scan to ignore (e.g. robot body)
     skip_beams_end: int = 0
+    laser_preset: str = "auto"  # auto (by the scan's geometry) | none | a name in lasers.PRESETS
     laser: LaserMountConfig = field(default_factory=LaserMountConfig)
+    odom_jump: OdomJumpConfig = field(default_factory=OdomJumpConfig)
 
 
 @dataclass(frozen=True)
@@ -166,6 +196,14 @@ def _parse_override(text: str) -> tuple[list[str], Any]:
     return key.split("."), value
 
 
+def _deep_merge(under: dict, over: dict) -> dict:
+    """A new mapping: ``over``'s keys win, nested mappings are merged key by key."""
+    out = dict(under)
+    for k, v in over.items():
+        out[k] = _deep_merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
 def _merge(base: dict, path: list[str], value: Any) -> None:
     d = base
     for p in path[:-1]:
@@ -177,8 +215,11 @@ def _merge(base: dict, path: list[str], value: Any) -> None:
     d[path[-1]] = value
 
 
-def load_config(path: str | Path | None = None, overrides: typing.Sequence[str] = ()) -> Config:
-    """Load ``path`` (YAML; None = defaults) and apply ``key=value`` overrides."""
+def load_config(
+    path: str | Path | None = None, overrides: typing.Sequence[str] = (), base: dict | None = None
+) -> Config:
+    """Load ``path`` (YAML; None = defaults) over the partial config ``base`` (a laser preset) and
+    apply ``key=value`` overrides: defaults < base < file < overrides."""
     data: dict = {}
     if path is not None:
         p = Path(path)
@@ -197,6 +238,8 @@ def load_config(path: str | Path | None = None, overrides: typing.Sequence[str] 
         if not isinstance(loaded, dict):
             raise ConfigError(f"config file '{p}' must contain a mapping of sections")
         data = loaded
+    if base:
+        data = _deep_merge(copy.deepcopy(base), data)  # overrides below write into data
     for text in overrides:
         keys, value = _parse_override(text)
         _merge(data, keys, value)

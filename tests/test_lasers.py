@@ -1,0 +1,69 @@
+"""Laser presets: detection from scan geometry, layering under the user's config, shipped YAML copies."""
+
+import math
+import sys
+from pathlib import Path
+
+import pytest
+
+from cornerslam_cli.config import load_config
+from cornerslam_cli.errors import ConfigError
+from cornerslam_cli.lasers import PRESETS, detect_preset, resolve_config
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLES = ROOT / "sample_logs"
+
+
+@pytest.mark.parametrize(
+    "beams, inc_deg, name",
+    [
+        (180, 1.0, "sick_lms_1deg"),
+        (361, 0.5, "sick_lms_05deg"),
+        (682, 360 / 1024, "hokuyo_urg04lx"),
+        (1081, 0.25, "hokuyo_270deg"),
+        (1081, 0.5, None),
+        (100, 1.0, None),
+    ],
+)
+def test_detect_preset_by_beams_and_step(beams, inc_deg, name):
+    assert detect_preset(beams, math.radians(inc_deg)) == name
+
+
+@pytest.mark.parametrize(
+    "log, name", [("intel_cut.clf", "sick_lms_1deg"), ("mines_exp3_cut.bag", "hokuyo_urg04lx")]
+)
+def test_sample_logs_get_their_sensor_preset(log, name):
+    cfg = resolve_config(SAMPLES / log, None)
+    assert cfg.input.laser_preset == name
+    for section, values in PRESETS[name].config.items():
+        for key, v in values.items():
+            assert getattr(getattr(cfg, section), key) == pytest.approx(v)
+
+
+def test_user_layers_win_over_the_preset(tmp_path):
+    p = tmp_path / "c.yaml"
+    p.write_text("sensor:\n  a: 0.05\n")
+    cfg = resolve_config(SAMPLES / "intel_cut.clf", p, ["lines.min_points=9"])
+    assert cfg.sensor.a == 0.05  # file over preset
+    assert cfg.sensor.b == PRESETS["sick_lms_1deg"].config["sensor"]["b"]  # preset over default
+    assert cfg.lines.min_points == 9  # --set over everything
+
+
+def test_none_and_forced_presets():
+    assert resolve_config(SAMPLES / "intel_cut.clf", None, ["input.laser_preset=none"]) == load_config(
+        None, ["input.laser_preset=none"]
+    )
+    forced = resolve_config(SAMPLES / "intel_cut.clf", None, ["input.laser_preset=hokuyo_270deg"])
+    assert forced.sensor.model == "piecewise" and forced.input.laser_preset == "hokuyo_270deg"
+    with pytest.raises(ConfigError, match="did you mean 'hokuyo_270deg'"):
+        resolve_config(SAMPLES / "intel_cut.clf", None, ["input.laser_preset=hokuyo_270"])
+
+
+def test_shipped_yaml_copies_match_the_built_in_presets():
+    sys.path.insert(0, str(ROOT / "configs"))
+    from regenerate_default import laser_yaml
+
+    for name in PRESETS:
+        assert (ROOT / "configs" / "lasers" / f"{name}.yaml").read_text() == laser_yaml(name)
+        cfg = load_config(ROOT / "configs" / "lasers" / f"{name}.yaml")  # usable as --config
+        assert cfg.input.laser_preset == "auto"
