@@ -1,0 +1,203 @@
+"""``cornerslam batch``: the plan's grid and names, failures that do not stop the batch, batch.csv,
+equal results whatever the parallelism (1 or 2 processes, a Dask cluster), and resume."""
+
+from __future__ import annotations
+
+import re
+import sys
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from cornerslam_cli import batch as batch_mod
+from cornerslam_cli.batch import TIMING_FIGURES, batch_columns, plan, read_batch, run_batch
+from cornerslam_cli.cli import cli
+from cornerslam_cli.errors import ConfigError, CornerslamError
+from cornerslam_cli.simulate import simulate_log
+
+SWEEP = ["--sweep", "association.pca.group_size=3,5"]
+KEY = "association.pca.group_size"
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory):
+    """A short simulated log (with ground truth beside it) and a file that is not a log."""
+    d = tmp_path_factory.mktemp("batch_logs")
+    good = d / "good.mcap"
+    simulate_log(good, seed=3, rate=1.0, beams=181)
+    bad = d / "bad.mcap"
+    bad.write_bytes(b"this is not an mcap file\n")
+    return good, bad
+
+
+@pytest.fixture(scope="module")
+def first(logs, tmp_path_factory):
+    """The reference batch, run through the CLI with two worker processes: (out dir, rows, output)."""
+    good, bad = logs
+    out = tmp_path_factory.mktemp("batch") / "out"
+    args = ["batch", str(good), str(bad), "--assoc", "icnn,pca", *SWEEP, "--out", str(out), "--jobs", "2"]
+    res = CliRunner().invoke(cli, args)
+    assert res.exit_code == 0, res.output
+    return out, read_batch(out / "batch.csv"), res.output
+
+
+def _figures(rows):
+    """Rows without the columns that differ between runs of the same combination (times)."""
+    return [{k: v for k, v in r.items() if k not in TIMING_FIGURES} for r in rows]
+
+
+def test_plan_grid_order_and_names():
+    combos = plan(
+        ["a/sim_office.mcap", "b/intel.clf"],
+        ["icnn", "jcbb", "pca"],
+        {KEY: [3, 5], "association.alpha": ["0.05", "0.01"]},
+        overrides=["ekf.tentative_sightings=2"],
+    )
+    assert len(combos) == 2 * 3 * 2 * 2
+    assert combos[0].name == "sim_office__icnn__association.pca.group_size=3__association.alpha=0.05"
+    assert combos[1].name == "sim_office__icnn__association.pca.group_size=3__association.alpha=0.01"
+    assert combos[-1].name == "intel__pca__association.pca.group_size=5__association.alpha=0.01"
+    assert [c.log for c in combos[:12]] == ["a/sim_office.mcap"] * 12  # logs vary slowest
+    assert len({c.name for c in combos}) == len(combos)
+    assert all(re.fullmatch(r"[A-Za-z0-9._=+-]+", c.name) for c in combos)
+    c = combos[-1]
+    assert c.sweep == ((KEY, "5"), ("association.alpha", "0.01"))
+    assert c.config["association"]["method"] == "pca"
+    assert c.config["association"]["pca"]["group_size"] == 5
+    assert c.config["ekf"]["tentative_sightings"] == 2  # base overrides reach every combination
+    assert plan(["a/sim_office.mcap"], ["pca"], {KEY: [5]})[0].name == "sim_office__pca__" + KEY + "=5"
+
+
+def test_plan_names_stay_distinct_for_clashing_logs_and_unsafe_values():
+    combos = plan(
+        ["d1/x.mcap", "d2/x.mcap", "d1/x.bag", "d1/x.mcap"], ["pca"], {"input.scan_topic": ["/a b"]}
+    )
+    names = [c.name for c in combos]
+    assert len(names) == 3  # a log listed twice runs once
+    assert names[2] == "x.bag__pca__input.scan_topic=_a_b"
+    assert re.fullmatch(r"x\.mcap-[0-9a-f]{8}__pca__input\.scan_topic=_a_b", names[0])
+    assert names[0] != names[1]
+
+
+def test_plan_resolves_each_config_as_run_does():
+    from cornerslam_cli.lasers import resolve_config
+
+    sample = Path(__file__).resolve().parents[1] / "sample_logs" / "intel_cut.clf"
+    (c,) = plan([sample], ["jcbb"], {KEY: [5]})
+    expect = resolve_config(sample, None, ["association.method=jcbb", f"{KEY}=5"])
+    assert c.config == expect.to_dict() and c.error == ""
+    assert c.config["input"]["laser_preset"] != "auto"  # the preset chosen from the log's first scan
+    (missing,) = plan(["nowhere/x.mcap"], ["pca"])
+    assert "does not exist" in missing.error  # reported as failed rows by run_batch, not raised
+
+
+@pytest.mark.parametrize(
+    ("sweep", "message"),
+    [
+        ("association.pca.group_sise=3,5", "association.pca.group_sise"),
+        ("association.pca.group_size=3,x", "association.pca.group_size=x"),
+        ("association.pca.group_size=0", "group_size=0"),
+        ("association.method=icnn,pca", "--assoc"),
+    ],
+)
+def test_bad_sweeps_exit_2_naming_the_key(tmp_path, sweep, message):
+    res = CliRunner().invoke(cli, ["batch", "x.mcap", "--sweep", sweep, "--out", str(tmp_path / "o")])
+    assert res.exit_code == 2
+    assert message in res.output
+    assert not (tmp_path / "o").exists()  # validated before any work
+    with pytest.raises(ConfigError):
+        plan(["x.mcap"], ["pca"], dict([(sweep.split("=")[0], sweep.split("=")[1].split(","))]))
+
+
+def test_unknown_associator_and_malformed_sweep_exit_2(tmp_path):
+    res = CliRunner().invoke(cli, ["batch", "x.mcap", "--assoc", "icnn,jbcc", "--out", str(tmp_path)])
+    assert res.exit_code == 2 and "did you mean 'jcbb'" in res.output
+    res = CliRunner().invoke(cli, ["batch", "x.mcap", "--sweep", "nokey", "--out", str(tmp_path)])
+    assert res.exit_code == 2 and "KEY=V1,V2" in res.output
+
+
+def test_bad_log_fails_its_rows_and_the_rest_succeed(first, logs):
+    out, rows, output = first
+    good, bad = logs
+    assert list(rows[0]) == batch_columns([KEY])
+    assert [(r["log"], r["assoc"], r[KEY]) for r in rows] == [
+        (str(log), a, v) for log in (good, bad) for a in ("icnn", "pca") for v in ("3", "5")
+    ]  # the plan's order, whatever order they finished in
+    for r in rows[:4]:
+        assert r["status"] == "ok" and r["error"] == ""
+        assert int(r["steps"]) > 100 and int(r["landmarks"]) > 10 and int(r["matched_total"]) > 0
+        assert float(r["ate_rmse"]) > 0 and float(r["t_total"]) > 0
+        assert (out / r["out_dir"] / "summary.json").is_file()
+        assert r["out_dir"] == f"good__{r['assoc']}__{KEY}={r[KEY]}"
+    for r in rows[4:]:
+        assert r["status"] == "failed" and "bad.mcap" in r["error"] and "\n" not in r["error"]
+        assert r["steps"] == "" and r["out_dir"] == ""
+    assert not (out / "bad__pca__association.pca.group_size=3").exists()
+    assert "4 failed" in output and str(out / "batch.csv") in output
+    # pca's group size matters, icnn ignores it
+    assert rows[0]["landmarks"] == rows[1]["landmarks"] and rows[0]["ate_rmse"] == rows[1]["ate_rmse"]
+    assert sorted(p.name for p in out.iterdir() if p.name.startswith(".")) == []  # no staging left
+
+
+def test_one_process_gives_the_same_batch_csv(first, logs, tmp_path):
+    out, rows, _ = first
+    states = []
+    rows1 = run_batch(plan(logs, ["icnn", "pca"], {KEY: [3, 5]}), tmp_path, jobs=1, progress=states.append)
+    assert _figures(read_batch(tmp_path / "batch.csv")) == _figures(rows)
+    assert [r["status"] for r in rows1] == ["ok"] * 4 + ["failed"] * 4
+    s = states[-1]
+    assert (s.ok, s.failed, s.skipped, s.remaining) == (4, 4, 0, 0)
+
+
+def test_resume_skips_complete_unchanged_and_reruns_changed(first, logs, tmp_path):
+    import shutil
+
+    shutil.copytree(first[0], tmp_path / "out")
+    out, rows = tmp_path / "out", first[1]
+    combos = plan(logs, ["icnn", "pca"], {KEY: [3, 5]})
+    statuses = [r["status"] for r in run_batch(combos, out, jobs=2)]
+    assert statuses == ["skipped"] * 4 + ["failed"] * 4  # failures are retried
+    # skipped rows keep every figure (re-read from summary.json), timing included
+    assert read_batch(out / "batch.csv") == [r | {"status": s} for r, s in zip(rows, statuses, strict=True)]
+
+    # a changed config (here a base override, not in the names) re-runs every combination
+    changed = plan(logs[:1], ["icnn", "pca"], {KEY: [3, 5]}, overrides=["association.alpha=0.01"])
+    assert [c.name for c in changed] == [c.name for c in combos[:4]]
+    assert [r["status"] for r in run_batch(changed, out, jobs=2)] == ["ok"] * 4
+    # a summary written by another version is not reused; the others are
+    summary = out / changed[3].name / "summary.json"
+    summary.write_text(summary.read_text().replace('"version": "', '"version": "0.0.0-'))
+    statuses = [r["status"] for r in run_batch(changed, out, jobs=2)]
+    assert statuses == ["skipped"] * 3 + ["ok"]
+
+
+def test_dask_cluster_gives_the_same_batch_csv(first, logs, tmp_path):
+    distributed = pytest.importorskip("dask.distributed")
+    out, rows, _ = first
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None
+    ) as cluster:
+        args = ["batch", *map(str, logs), "--assoc", "icnn,pca", *SWEEP, "--out", str(tmp_path), "-q"]
+        res = CliRunner().invoke(cli, [*args, "--scheduler", cluster.scheduler_address])
+    assert res.exit_code == 0, res.output
+    assert _figures(read_batch(tmp_path / "batch.csv")) == _figures(rows)
+
+
+def test_scheduler_without_dask_asks_to_install_the_extra(monkeypatch, logs, tmp_path):
+    combos = plan(logs[:1], ["pca"])
+    monkeypatch.setitem(sys.modules, "dask", None)
+    monkeypatch.setitem(sys.modules, "dask.distributed", None)
+    with pytest.raises(CornerslamError, match=r"pip install cornerslam\[dask\]"):
+        run_batch(combos, tmp_path, scheduler="tcp://127.0.0.1:8786")
+    rows = read_batch(tmp_path / "batch.csv")
+    assert [r["status"] for r in rows] == ["pending"]  # interrupted batches say what is left
+
+
+def test_a_bug_in_one_combination_is_a_failed_row(monkeypatch, logs, tmp_path):
+    def boom(*a, **k):
+        raise ZeroDivisionError("division by zero")
+
+    monkeypatch.setattr("cornerslam_cli.pipeline.run", boom)
+    out = batch_mod.run_one(str(logs[0]), plan(logs[:1], ["pca"])[0].config, str(tmp_path / "x"))
+    assert out == {"status": "failed", "error": "ZeroDivisionError: division by zero"}
