@@ -13,6 +13,8 @@ they can be read, copied and edited; tests check the two agree.
 from __future__ import annotations
 
 import dataclasses
+import difflib
+import logging
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -20,6 +22,8 @@ from pathlib import Path
 
 from .config import Config, load_config
 from .errors import ConfigError
+from .logs import open_log
+from .types import Scan
 
 
 @dataclass(frozen=True)
@@ -84,22 +88,28 @@ def detect_preset(n_beams: int, angle_increment: float) -> str | None:
 
 
 def first_scan_geometry(log_path: str | Path, cfg: Config) -> tuple[int, float] | None:
-    """(beams, angle increment) of the log's first scan, None when it has none."""
-    from .logs import open_log
-    from .types import Scan
+    """(beams, angle increment) of the log's first scan, None when it has none.
 
+    The reader's warnings are silenced here: the run reads the log again and reports them once.
+    """
     inp = cfg.input
-    with open_log(
-        Path(log_path),
-        scan_topic=inp.scan_topic,
-        odom_topic=inp.odom_topic,
-        odom_frame=inp.odom_frame,
-        base_frame=inp.base_frame,
-    ) as reader:
-        for msg in reader.messages():
-            if isinstance(msg, Scan):
-                return msg.n_beams, msg.angle_increment
-    return None
+    reader_log = logging.getLogger("cornerslam.logs")
+    level = reader_log.level
+    reader_log.setLevel(logging.ERROR)
+    try:
+        with open_log(
+            Path(log_path),
+            scan_topic=inp.scan_topic,
+            odom_topic=inp.odom_topic,
+            odom_frame=inp.odom_frame,
+            base_frame=inp.base_frame,
+        ) as reader:
+            for msg in reader.messages():
+                if isinstance(msg, Scan):
+                    return msg.n_beams, msg.angle_increment
+        return None
+    finally:
+        reader_log.setLevel(level)
 
 
 def resolve_config(
@@ -118,8 +128,6 @@ def resolve_config(
     elif choice in PRESETS:
         name = choice
     else:
-        import difflib
-
         close = difflib.get_close_matches(choice, list(PRESETS), n=1)
         hint = f"did you mean '{close[0]}'? " if close else ""
         raise ConfigError(

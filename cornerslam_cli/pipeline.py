@@ -11,8 +11,9 @@ import json
 import logging
 import platform
 import time
+from array import array
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +26,7 @@ from .evaluate import ate, rpe
 from .features import extract
 from .filter import Ekf
 from .logs import open_log
-from .logs.sync import SyncStats, select_keyframes, synchronise
+from .logs.sync import SyncStats, reanchor_odometry, select_keyframes, synchronise
 from .report.tables import (
     LINES_COLUMNS,
     MAP_COLUMNS,
@@ -87,6 +88,7 @@ class Frame:
     z: np.ndarray
     C: np.ndarray
     t_extract: float
+    odom_jump: bool = False  # the odometry jumped since the previous keyframe (logs/sync.py)
 
 
 def extract_frame(scan: Scan, odom: np.ndarray, cfg: Config, laser2base: tuple[float, float, float]) -> Frame:
@@ -145,6 +147,8 @@ class Slam:
         t1 = time.perf_counter()
         if self.prev_odom is not None:
             self.ekf.predict(self.prev_odom, odom)  # eq 19-22, O(N)
+            if frame.odom_jump:  # odometry re-anchored across a jump: the motion there is unknown
+                self.ekf.inflate_pose(self.cfg.input.odom_jump.sigma_xy, self.cfg.input.odom_jump.sigma_theta)
         self.prev_odom = odom
         t2 = time.perf_counter()
         result = self.associate(z, C, self.ekf.predict_observations())  # Alg 3-5
@@ -251,10 +255,18 @@ def open_input(log_path: str | Path, cfg: Config) -> Input:
 
 def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None = None) -> Iterator[Frame]:
     """Synchronised keyframes of the log, features extracted (streaming)."""
-    synced = synchronise(_scans_cropped(src.reader, cfg), src.stats)
+    msgs = reanchor_odometry(
+        _scans_cropped(src.reader, cfg), cfg.input.odom_jump, src.stats, src.reader.stats.warn
+    )
+    synced = synchronise(msgs, src.stats)
     pairs = select_keyframes(synced, cfg.keyframes, src.stats)
+    jumps = 0
     for scan, odom in pairs:
-        yield extract_frame(scan, odom, cfg, src.laser2base)
+        frame = extract_frame(scan, odom, cfg, src.laser2base)
+        if src.stats.odom_jumps > jumps:
+            jumps = src.stats.odom_jumps
+            frame = replace(frame, odom_jump=True)
+        yield frame
         if progress is not None:
             progress(src.stats.scans_in, src.total_scans)
 
@@ -299,7 +311,7 @@ def run_frames(
         traj = CsvTable(stage.path / "trajectory.csv", TRAJECTORY_COLUMNS)
         timing = CsvTable(stage.path / "timing.csv", TIMING_COLUMNS)
         lines = CsvTable(stage.path / "lines.csv", LINES_COLUMNS)
-        stamps, poses, odoms = [], [], []
+        track = array("d")  # stamp, pose, odom per step: 56 bytes a step (a list of arrays: ~300)
         totals = np.zeros(4)
         t_match_max, budget_hits, matched_total, points_total = 0.0, 0, 0, 0
         for frame in frame_iter:
@@ -310,9 +322,9 @@ def run_frames(
                 r.n_new, r.n_landmarks, r.t_extract, r.t_predict, r.t_match, r.t_update, r.t_total,
             )  # fmt: skip
             lines.rows(r.segments_map, lead=(r.step,))
-            stamps.append(r.stamp)
-            poses.append(r.pose)
-            odoms.append(r.odom)
+            track.append(r.stamp)
+            track.extend(r.pose)
+            track.extend(r.odom)
             totals += (r.t_extract, r.t_predict, r.t_match, r.t_update)
             t_match_max = max(t_match_max, r.t_match)
             budget_hits += r.budget_hit
@@ -337,7 +349,8 @@ def run_frames(
         for row in lm:
             mp.row(*(int(v) if i in (0, 8, 9, 10) else v for i, v in enumerate(row)))
         mp.close()
-        stamps_a, poses_a, odoms_a = np.array(stamps), np.array(poses), np.array(odoms)
+        track_a = np.frombuffer(track, dtype=float).reshape(-1, 7)
+        stamps_a, poses_a, odoms_a = track_a[:, 0], track_a[:, 1:4], track_a[:, 4:7]
         write_tum(stage.path / "trajectory.tum", stamps_a, poses_a)
         accuracy = None
         if gt is not None:

@@ -121,6 +121,10 @@ class Ekf:
         self.n_steps += 1
         return np.array(u)
 
+    def inflate_pose(self, sigma_xy: float, sigma_theta: float) -> None:
+        """Σ_rr += diag(σ_xy², σ_xy², σ_θ²): robot motion the odometry cannot tell (a jump); O(1)."""
+        self._P_buf[:3, :3] += np.diag([sigma_xy**2, sigma_xy**2, sigma_theta**2])
+
     # ------------------------------------------------------------------ observation (NOTES §4)
     def predict_observations(self) -> Prediction:
         """Predicted measurements h, Jacobians H_r, H_l of all n landmarks and the live Σ; O(n)."""
@@ -215,8 +219,8 @@ class Ekf:
         try:
             L = np.linalg.cholesky(S)  # S = L Lᵀ
         except np.linalg.LinAlgError:
-            raise NumericalError(
-                "innovation covariance S is not positive definite",
+            raise NumericalError(  # n_steps = predictions so far = the pipeline's step index
+                f"innovation covariance S is not positive definite at step {self.n_steps}",
                 "corner covariances or Σ are corrupt; check the corner extractor's covariances",
             ) from None
         B = np.linalg.solve(L, np.hstack((nu, PHt.T)))  # L⁻¹ [ν, (ΣHᵀ)ᵀ]

@@ -109,11 +109,34 @@ class ReadStats:
     warnings: list[str] = field(default_factory=list)
 
     def warn(self, msg: str, *args: object) -> None:
-        """Log a warning and keep it (first 100) so summaries can report it."""
+        """Log a warning and keep it (first 100) so summaries can report it.
+
+        A text already warned is not repeated (``laser_to_base()`` and ``messages()`` read the same
+        damaged bytes)."""
         text = msg % args if args else msg
+        if text in self.warnings:
+            return
         logger.warning(text)
         if len(self.warnings) < 100:
             self.warnings.append(text)
+
+    def bad_odometry(self, where: str, stamp: float, pose: tuple[float, float, float]) -> bool:
+        """True (counted in ``decode_failed``, warned) if an odometry sample has a non-finite field."""
+        if math.isfinite(stamp) and all(math.isfinite(v) for v in pose):
+            return False
+        self.decode_failed += 1
+        if self.decode_failed <= 5:
+            self.warn("%s: odometry sample at %r has a non-finite pose %r: skipped", where, stamp, pose)
+        return True
+
+    def check_scans_yielded(self, name: str, topic: str) -> None:
+        """Raise LogError at the end of a read in which scans were seen but none was usable."""
+        if self.scans == 0 and self.scans_skipped > 0:
+            raise LogError(
+                f"log '{name}': all {self.scans_skipped} scans on '{topic}' were skipped "
+                "(angle_increment <= 0 or not finite, no beams, or no valid stamp)",
+                "check the LaserScan messages' angle_min/angle_increment; `cornerslam extract` shows one",
+            )
 
 
 class LogReader(Protocol):
@@ -154,9 +177,19 @@ def make_scan(
     angle_max None means "not given" (CARMEN): no size check.
     """
     n = len(ranges)
-    if not (math.isfinite(angle_increment) and angle_increment > 0 and math.isfinite(angle_min)):
+    last_angle = angle_min + max(n - 1, 0) * angle_increment  # inf for absurd increments (1e308)
+    if not (math.isfinite(angle_increment) and angle_increment > 0 and math.isfinite(last_angle)):
         stats.scans_skipped += 1
-        stats.warn("%s: scan at %.3f has angle_increment %r: skipped", where, stamp, angle_increment)
+        if stats.scans_skipped <= 3:
+            stats.warn(
+                "%s: scan at %.3f has angle_min %r, angle_increment %r: skipped",
+                where, stamp, angle_min, angle_increment,
+            )  # fmt: skip
+        return None
+    if not math.isfinite(stamp):
+        stats.scans_skipped += 1
+        if stats.scans_skipped <= 3:
+            stats.warn("%s: scan with stamp %r: skipped", where, stamp)
         return None
     if angle_max is not None:
         expected = round((angle_max - angle_min) / angle_increment) + 1 if math.isfinite(angle_max) else -1
@@ -437,6 +470,12 @@ class RosLogReader:
             raise LogError(problem, hint)
         if self._odom_sel.problem:
             raise LogError(self._odom_sel.problem, self._odom_sel.hint)
+        for topic in (self.scan_topic, self.odom_topic):
+            if self._channels[topic].count == 0:
+                raise LogError(
+                    f"topic '{topic}' of log '{self.path.name}' has no messages",
+                    "it was declared but nothing was recorded on it; `cornerslam info LOG` shows the counts",
+                )
 
     # ---------------------------------------------------------------- info
     def info(self) -> LogInfo:
@@ -517,6 +556,9 @@ class RosLogReader:
             return None
         T = chain_transform(edges, self.base_frame, frame)
         self._laser2base = None if T is None else pose2_from_matrix(T)
+        if self._laser2base is not None and not all(math.isfinite(v) for v in self._laser2base):
+            self.stats.warn("%s: the tf %s→%s is not finite: ignored", self.path.name, self.base_frame, frame)
+            self._laser2base = None
         return self._laser2base  # type: ignore[return-value]
 
     def messages(self) -> Iterator[Scan | OdomSample]:
@@ -543,14 +585,20 @@ class RosLogReader:
                     for parent, child, (sec, nsec), t, q in odom_dec.transforms(data):
                         if parent == self.odom_frame and child == self.base_frame:
                             n_tf_match += 1
-                            st.odoms += 1
                             stamp = sec + nsec * 1e-9 if (sec or nsec) else log_time * 1e-9
-                            yield OdomSample(stamp, float(t[0]), float(t[1]), yaw_from_quaternion(*q))
+                            pose = (float(t[0]), float(t[1]), yaw_from_quaternion(*q))
+                            if st.bad_odometry(f"{self.path.name}:{odom_t}", stamp, pose):
+                                continue
+                            st.odoms += 1
+                            yield OdomSample(stamp, *pose)
                 else:
                     (sec, nsec), x, y, q = odom_dec.odometry(data)
                     stamp = sec + nsec * 1e-9 if (sec or nsec) else log_time * 1e-9
+                    pose = (x, y, yaw_from_quaternion(*q))
+                    if st.bad_odometry(f"{self.path.name}:{odom_t}", stamp, pose):
+                        continue
                     st.odoms += 1
-                    yield OdomSample(stamp, x, y, yaw_from_quaternion(*q))
+                    yield OdomSample(stamp, *pose)
             except LogError:
                 raise
             except Exception as exc:  # noqa: BLE001 - undecodable message: count, warn, go on
@@ -567,6 +615,7 @@ class RosLogReader:
             )
         if st.decode_failed > 5:
             st.warn("%s: %d messages could not be decoded in total", self.path.name, st.decode_failed)
+        st.check_scans_yielded(self.path.name, scan_t)
 
     def close(self) -> None:
         self.source.close()

@@ -258,6 +258,8 @@ class CarmenReader:
             except (ValueError, IndexError):
                 continue
             (lx, ly, lt), (rx, ry, rt) = las.laser, las.robot
+            if not all(math.isfinite(v) for v in (lx, ly, lt, rx, ry, rt)):
+                continue
             c, s = math.cos(rt), math.sin(rt)
             dx, dy = lx - rx, ly - ry
             offs.append((c * dx + s * dy, -s * dx + c * dy, math.atan2(math.sin(lt - rt), math.cos(lt - rt))))
@@ -291,6 +293,8 @@ class CarmenReader:
                     if len(tok) != 10:
                         raise ValueError(f"ODOM has {len(tok)} fields, expected 10")
                     x, y, th = (float(v) for v in tok[1:4])
+                    if st.bad_odometry(f"{where}:{lineno}", float(tok[7]), (x, y, th)):
+                        continue
                     st.odoms += 1
                     yield OdomSample(float(tok[7]), x, y, th)
                     continue
@@ -300,7 +304,7 @@ class CarmenReader:
                 if st.decode_failed <= 5:
                     st.warn("%s:%d: malformed %s line skipped (%s)", where, lineno, tag, exc)
                 continue
-            if tag == odom_tag:
+            if tag == odom_tag and not st.bad_odometry(f"{where}:{lineno}", las.stamp, las.robot):
                 st.odoms += 1
                 yield OdomSample(las.stamp, *las.robot)
             scan = make_scan(
@@ -311,6 +315,7 @@ class CarmenReader:
                 yield scan
         if st.decode_failed > 5:
             st.warn("%s: %d malformed lines skipped in total", where, st.decode_failed)
+        st.check_scans_yielded(where, scan_tag)
 
     def close(self) -> None:
         pass

@@ -17,12 +17,12 @@ from __future__ import annotations
 
 import logging
 from collections import deque
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import KeyframeConfig
+from ..config import KeyframeConfig, OdomJumpConfig
 from ..types import OdomSample, Scan, wrap_angle
 
 log = logging.getLogger(__name__)
@@ -37,6 +37,7 @@ class SyncStats:
     scan_time_backwards: int = 0
     odom_time_backwards: int = 0
     keyframes_skipped: int = 0
+    odom_jumps: int = 0
 
     @property
     def scans_skipped(self) -> int:
@@ -111,6 +112,62 @@ def synchronise(
             st.scan_time_backwards,
             st.odom_time_backwards,
         )
+
+
+def _compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """SE(2) a ∘ b of poses (x, y, θ)."""
+    c, s = np.cos(a[2]), np.sin(a[2])
+    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], float(wrap_angle(a[2] + b[2]))])
+
+
+def _inverse(a: np.ndarray) -> np.ndarray:
+    c, s = np.cos(a[2]), np.sin(a[2])
+    return np.array([-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2]])
+
+
+def reanchor_odometry(
+    messages: Iterable[Scan | OdomSample],
+    cfg: OdomJumpConfig,
+    stats: SyncStats | None = None,
+    warn: Callable[..., None] = log.warning,
+) -> Iterator[Scan | OdomSample]:
+    """The message stream with odometry jumps and resets taken out (``input.odom_jump``).
+
+    A jump between consecutive odometry samples a, b (see :class:`OdomJumpConfig`) is not applied as
+    motion: from b on, odometry is re-anchored so that b continues from a's pose, F ← (F ∘ a) ∘ b⁻¹
+    with corrected = F ∘ raw. Counted in ``stats.odom_jumps`` and warned; scans pass unchanged.
+    Samples whose stamps do not increase pass through untouched (``synchronise`` drops them).
+    """
+    st = stats if stats is not None else SyncStats()
+    if cfg.distance <= 0.0:
+        yield from messages
+        return
+    fix = np.zeros(3)  # F: corrected = F ∘ raw
+    prev: OdomSample | None = None
+    for msg in messages:
+        if isinstance(msg, OdomSample):
+            if prev is not None and msg.stamp <= prev.stamp:
+                yield msg
+                continue
+            raw = np.array([msg.x, msg.y, msg.theta])
+            if prev is not None:
+                a = np.array([prev.x, prev.y, prev.theta])
+                scale = max(1.0, (msg.stamp - prev.stamp) / cfg.period)
+                moved = float(np.hypot(*(raw[:2] - a[:2])))
+                turned = abs(float(wrap_angle(raw[2] - a[2])))
+                if moved > cfg.distance * scale or turned > cfg.angle * scale:
+                    st.odom_jumps += 1
+                    if st.odom_jumps <= 5:
+                        warn(
+                            "odometry jumped by %.2f m and %.1f° in %.3f s at %.3f s (reset?): "
+                            "not applied as motion, odometry re-anchored",
+                            moved, np.degrees(turned), msg.stamp - prev.stamp, msg.stamp,
+                        )  # fmt: skip
+                    fix = _compose(_compose(fix, a), _inverse(raw))
+            prev = msg
+            if st.odom_jumps:
+                msg = OdomSample(msg.stamp, *(float(v) for v in _compose(fix, raw)))
+        yield msg
 
 
 def select_keyframes(

@@ -1,0 +1,399 @@
+"""A corpus of damaged and awkward logs, generated (never committed), each with its expected behaviour.
+
+``build_corpus(dir)`` writes every entry into ``dir`` and returns ``{name: (path, Expected)}``; the
+100,000-scan log is built only on request (``build_long_log``: benchmarks and slow tests). All
+logs show one simulated robot circling a box in a 10 m × 8 m room (noise-free odometry, seeded
+range noise), so every entry is the same small, valid run with one fault added:
+
+* damaged files: truncated MCAP / ROS 1 bag at several cut points, an MCAP with a corrupt chunk;
+* topics: the scan topic pointing at /odom, topics with no messages;
+* scans: all-NaN / all-zero / negative / huge ranges, ranges count disagreeing with the angles,
+  angle_increment 0 or negative (in all scans, or in some);
+* odometry: a jump and a reset to zero mid-log, NaN poses;
+* stamps: scans and odometry out of order and repeated (MCAP, ROS 1 bag, CARMEN).
+
+``python tests/fault_corpus.py DIR`` writes the corpus and prints what each entry expects.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+import sys
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from cornerslam_cli.logs.writers import RawScan, write_carmen, write_mcap, write_rosbag1
+from cornerslam_cli.simworld import make_world, raycast, rectangle, room
+from cornerslam_cli.types import OdomSample
+
+T0 = 1_700_000_000.0
+RATE = 10.0  # scans and odometry samples per second
+N = 40  # scans of a corpus log (4 s)
+WORLD = make_world([room(0.0, 0.0, 10.0, 8.0), rectangle(5.0, 4.0, 2.0, 1.5)], "fault-room")
+
+
+@dataclass(frozen=True)
+class Expected:
+    """What ``cornerslam run LOG --out OUT *args`` must do.
+
+    exit_code 0: processed; ``message`` fragments appear in a warning on stderr; ``counts`` are
+    summary.json counts, an int (exact) or an inclusive (lo, hi) range.
+    exit_code 2: refused; ``message`` fragments appear in the one-line error; no output directory.
+    """
+
+    behaviour: str  # one line for the docs table
+    exit_code: int
+    message: tuple[str, ...] = ()
+    counts: dict[str, int | tuple[int, int]] = field(default_factory=dict)
+    args: tuple[str, ...] = ()
+
+
+# --------------------------------------------------------------------------- the simulated robot
+def truth(t: np.ndarray) -> np.ndarray:
+    """(k, 3) true base poses at times t (seconds since T0): a circle of radius 2.8 m around the box."""
+    w = 0.4 / 2.8  # 0.4 m/s
+    a = w * t - math.pi / 2
+    return np.column_stack((5.0 + 2.8 * np.cos(a), 4.0 + 2.8 * np.sin(a), a + math.pi / 2))
+
+
+def scan_stamp(i: int) -> float:
+    return T0 + (i + 0.5) / RATE  # halfway between two odometry samples
+
+
+def make_scans(
+    n: int = N, beams: int = 181, seed: int = 0, ranges: Callable[[int, np.ndarray], np.ndarray] | None = None
+) -> Iterator[RawScan]:
+    """n scans (270°, ``beams`` beams) ray cast in WORLD with 5 mm noise; ``ranges(i, r)`` edits scan i."""
+    rng = np.random.default_rng(seed)
+    inc = math.radians(270.0) / (beams - 1)
+    angles = -math.radians(135.0) + inc * np.arange(beams)
+    for i in range(n):
+        t = scan_stamp(i)
+        pose = truth(np.array([t - T0]))[0]
+        r = raycast(WORLD, pose, angles, 30.0) + rng.normal(0.0, 0.005, beams)
+        if ranges is not None:
+            r = ranges(i, r)
+        yield RawScan(t, -math.radians(135.0), inc, r, 0.05, 30.0, "laser")
+
+
+def make_odoms(
+    n: int = N + 1, edit: Callable[[int, np.ndarray], np.ndarray] | None = None
+) -> list[OdomSample]:
+    """n odometry samples at T0 + i / RATE (the true poses); ``edit(i, pose)`` changes sample i."""
+    t = np.arange(n) / RATE
+    out = []
+    for i, p in enumerate(truth(t)):
+        q = edit(i, p) if edit is not None else p
+        out.append(OdomSample(T0 + t[i], float(q[0]), float(q[1]), float(q[2])))
+    return out
+
+
+def write_gt(path: Path, n: int = N) -> Path:
+    """LOG.gt.tum beside the log: the true poses at the scan stamps (the run then reports ATE)."""
+    from cornerslam_cli.report.tables import write_tum
+
+    stamps = np.array([scan_stamp(i) for i in range(n)])
+    write_tum(path.with_suffix(".gt.tum"), stamps, truth(stamps - T0))
+    return path
+
+
+# --------------------------------------------------------------------------- damage
+def cut(src: Path, dst: Path, nbytes: int) -> Path:
+    dst.write_bytes(src.read_bytes()[:nbytes])
+    return dst
+
+
+def mcap_records(data: bytes) -> Iterator[tuple[int, int, int]]:
+    """(opcode, body_start, body_len) of the top-level records of an MCAP file."""
+    off = 8
+    while off + 9 <= len(data):
+        op, n = struct.unpack_from("<BQ", data, off)
+        yield op, off + 9, n
+        off += 9 + n
+
+
+def corrupt_chunk(src: Path, dst: Path, which: int = 1) -> Path:
+    """Copy of an MCAP with 64 bytes in the middle of its ``which``-th chunk zeroed."""
+    data = bytearray(src.read_bytes())
+    chunks = [(s, n) for op, s, n in mcap_records(bytes(data)) if op == 0x06]
+    start, n = chunks[which]
+    mid = start + n // 2
+    data[mid : mid + 64] = bytes(64)
+    dst.write_bytes(bytes(data))
+    return dst
+
+
+class _MismatchScan(RawScan):
+    """A scan whose angle_max claims 10 more beams than its ranges hold."""
+
+    @property
+    def angle_max(self) -> float:
+        return self.angle_min + (len(self.ranges) + 9) * self.angle_increment
+
+
+def _mismatched(scans):
+    for s in scans:
+        yield _MismatchScan(s.stamp, s.angle_min, s.angle_increment, s.ranges, s.range_min, s.range_max)
+
+
+def _with_increment(scans, inc: float, every: int = 1):
+    for i, s in enumerate(scans):
+        yield replace(s, angle_increment=inc) if i % every == 0 else s
+
+
+def _empty_topics_mcap(path: Path, with_odom: bool) -> Path:
+    """An MCAP with /scan and /odom channels but no scan messages (and odometry if ``with_odom``)."""
+    from mcap.writer import Writer
+
+    from cornerslam_cli.logs.writers import LASERSCAN, ODOMETRY, RosSerializer
+
+    ros = RosSerializer("cdr")
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start(profile="ros2", library="fault_corpus")
+        ids = {}
+        for topic, typ in (("/scan", LASERSCAN), ("/odom", ODOMETRY)):
+            sid = w.register_schema(name=typ, encoding="ros2msg", data=ros.msgdef(typ).encode())
+            ids[topic] = w.register_channel(topic=topic, message_encoding="cdr", schema_id=sid)
+        if with_odom:
+            for o in make_odoms():
+                t = int(round(o.stamp * 1e9))
+                w.add_message(ids["/odom"], t, ros.odometry(o, "odom", "base_link"), t)
+        w.finish()
+    return path
+
+
+def _shuffled_stamps(scans: list[RawScan], odoms: list[OdomSample]):
+    """Scans 10 and 20 repeat the previous stamp, scan 30 goes back 0.25 s; odometry 15 repeats 14's.
+
+    The writers merge their (assumed sorted) inputs lazily, so the file keeps this disorder."""
+    out = []
+    for i, s in enumerate(scans):
+        if i in (10, 20):
+            s = replace(s, stamp=scan_stamp(i - 1))
+        elif i == 30:
+            s = replace(s, stamp=scan_stamp(i) - 0.25)
+        out.append(s)
+    odo = [replace(o, stamp=odoms[14].stamp) if i == 15 else o for i, o in enumerate(odoms)]
+    return out, odo
+
+
+# --------------------------------------------------------------------------- the corpus
+VALID_COUNTS = {"steps": N, "scans_in": N, "scans_skipped": 0, "odom_jumps": 0, "messages_failed": 0}
+TRUNCATED = "no end magic/footer"
+
+
+def build_corpus(d: str | Path) -> dict[str, tuple[Path, Expected]]:
+    """Write every corpus log into ``d``; ``{name: (path, expected)}``."""
+    d = Path(d)
+    d.mkdir(parents=True, exist_ok=True)
+    out: dict[str, tuple[Path, Expected]] = {}
+
+    def add(name: str, path: Path, exp: Expected) -> None:
+        out[name] = (path, exp)
+
+    # -- the valid log, in small chunks so that damage hits one chunk of several
+    good = write_gt(write_mcap(d / "good.mcap", make_scans(), make_odoms(), chunk_size=16 * 1024))
+    add("valid", good, Expected("processed", 0, counts=VALID_COUNTS))
+
+    # -- damaged files
+    size = good.stat().st_size
+    add(
+        "mcap_cut_in_header",
+        cut(good, d / "cut_header.mcap", 40),
+        Expected("exit 2: no topics left", 2, ("cut_header.mcap", "has no sensor_msgs/LaserScan topic")),
+    )
+    for pct in (30, 60, 90):
+        add(
+            f"mcap_cut_{pct}pct",
+            cut(good, d / f"cut_{pct}.mcap", size * pct // 100),
+            Expected(
+                "processed up to the last complete chunk, warned",
+                0,
+                (TRUNCATED, "messages after the cut are lost"),
+                {"steps": (N * pct // 100 - 12, N * pct // 100), "scans_skipped": (0, 1)},
+            ),
+        )
+    add(
+        "mcap_cut_in_footer",
+        cut(good, d / "cut_footer.mcap", size - 4),
+        Expected("every scan processed (index rebuilt by a scan), warned", 0, (TRUNCATED,), VALID_COUNTS),
+    )
+    add(
+        "mcap_corrupt_chunk",
+        corrupt_chunk(good, d / "corrupt_chunk.mcap"),
+        Expected(
+            "the corrupt chunk skipped, warned", 0, ("does not decompress",), {"steps": (N // 2, N - 5)}
+        ),
+    )
+    bag = write_rosbag1(d / "good.bag", make_scans(), make_odoms())
+    bag_size = bag.stat().st_size
+    for pct in (10, 50, 95):
+        add(
+            f"bag_cut_{pct}pct",
+            cut(bag, d / f"cut_{pct}.bag", bag_size * pct // 100),
+            Expected(
+                "exit 2: the bag's index is gone; run `rosbag reindex`", 2, (f"cut_{pct}.bag", "reindex")
+            ),
+        )
+
+    # -- topics
+    add(
+        "scan_topic_is_odometry",
+        good,
+        Expected(
+            "exit 2: names the topic's type and the LaserScan topics",
+            2,
+            ("'/odom'", "nav_msgs/Odometry, not sensor_msgs/LaserScan", "--scan-topic"),
+            args=("--scan-topic", "/odom"),
+        ),
+    )
+    for name, with_odom in (("empty_topics", False), ("empty_scan_topic", True)):
+        add(
+            name,
+            _empty_topics_mcap(d / f"{name}.mcap", with_odom),
+            Expected("exit 2: the topic has no messages", 2, (f"{name}.mcap", "has no messages")),
+        )
+
+    # -- ranges
+    for name, value in (("nan", np.nan), ("zero", 0.0), ("negative", -1.0), ("huge", 1e30)):
+        scans = make_scans(ranges=lambda i, r, v=value: np.full_like(r, v))
+        add(
+            f"ranges_all_{name}",
+            write_mcap(d / f"ranges_{name}.mcap", scans, make_odoms()),
+            Expected(
+                "exit 2: every beam is invalid",
+                2,
+                (f"ranges_{name}.mcap", "every beam of every scan is invalid"),
+            ),
+        )
+    far = make_scans(ranges=lambda i, r: np.where(np.arange(len(r)) % 3 == 0, 1e30, r))
+    add(
+        "ranges_huge_without_range_max",
+        write_mcap(d / "ranges_far.mcap", (replace(s, range_max=math.inf) for s in far), make_odoms()),
+        Expected("processed; beams at 1e30 m are far points that fit no line", 0, counts=VALID_COUNTS),
+    )
+    add(
+        "ranges_nan_in_some_scans",
+        write_mcap(
+            d / "ranges_some_nan.mcap",
+            make_scans(ranges=lambda i, r: np.full_like(r, np.nan) if i % 4 == 0 else r),
+            make_odoms(),
+        ),
+        Expected(
+            "processed; blind scans only predict, invalid beams counted",
+            0,
+            counts={"steps": N, "beams_total": N * 181, "beams_invalid": (N // 4) * 181},
+        ),
+    )
+    add(
+        "ranges_count_mismatch",
+        write_mcap(d / "mismatch.mcap", _mismatched(make_scans()), make_odoms()),
+        Expected(
+            "processed with len(ranges) beams from angle_min, counted, warned",
+            0,
+            ("imply",),
+            {"steps": N, "scans_size_mismatch": N},
+        ),
+    )
+    for name, inc in (("zero", 0.0), ("negative", -math.radians(1.5))):
+        add(
+            f"angle_increment_{name}",
+            write_mcap(d / f"inc_{name}.mcap", _with_increment(make_scans(), inc), make_odoms()),
+            Expected(
+                "exit 2: every scan has a bad angle_increment",
+                2,
+                (f"inc_{name}.mcap", f"all {N} scans on '/scan' were skipped", "angle_increment"),
+            ),
+        )
+    add(
+        "angle_increment_zero_in_some_scans",
+        write_mcap(d / "inc_some_zero.mcap", _with_increment(make_scans(), 0.0, every=5), make_odoms()),
+        Expected(
+            "processed; bad scans skipped, counted, warned",
+            0,
+            ("angle_increment",),
+            {"steps": N - N // 5, "scans_bad_geometry": N // 5},
+        ),
+    )
+
+    # -- odometry: a jump, a reset to zero, NaN poses
+    def jump(i, p):
+        return p + np.array([5.0, -3.0, 0.0]) if i >= 20 else p
+
+    def reset(i, p):
+        return p - truth(np.array([2.0]))[0] if i >= 20 else p  # (0, 0, 0) at t = 2 s
+
+    for name, edit in (("jump", jump), ("reset", reset)):
+        add(
+            f"odom_{name}",
+            write_gt(write_mcap(d / f"odom_{name}.mcap", make_scans(), make_odoms(edit=edit))),
+            Expected(
+                "processed; the jump is not applied as motion (odometry re-anchored, robot "
+                "uncertainty inflated), counted, warned",
+                0,
+                ("odometry jumped",),
+                dict(VALID_COUNTS, odom_jumps=1),
+            ),
+        )
+
+    def nan_pose(i, p):
+        return np.full(3, np.nan) if i in (12, 13) else p
+
+    for fmt, writer, suffix in (("mcap", write_mcap, ".mcap"), ("carmen", write_carmen, ".clf")):
+        add(
+            f"odom_nan_{fmt}",
+            writer(d / f"odom_nan{suffix}", make_scans(), make_odoms(edit=nan_pose)),
+            Expected(
+                "processed; non-finite odometry samples skipped, counted, warned",
+                0,
+                ("non-finite pose",),
+                dict(VALID_COUNTS, messages_failed=2),
+            ),
+        )
+
+    # -- stamps out of order and repeated, in three formats. The MCAP and bag readers deliver
+    # messages in log-time order, so there only the repeated stamps reach the synchroniser late.
+    for fmt, writer, suffix, late in (
+        ("mcap", write_mcap, ".mcap", 2),
+        ("bag", write_rosbag1, ".bag", 2),
+        ("carmen", write_carmen, ".clf", 3),
+    ):
+        scans, odoms = _shuffled_stamps(list(make_scans()), make_odoms())
+        add(
+            f"stamps_disordered_{fmt}",
+            writer(d / f"stamps{suffix}", scans, odoms),
+            Expected(
+                "processed; late and repeated messages skipped, counted, warned",
+                0,
+                ("went backwards",),
+                {"steps": N - late, "scan_time_backwards": late, "odom_time_backwards": 1},
+            ),
+        )
+    return out
+
+
+# --------------------------------------------------------------------------- the long log
+def build_long_log(d: str | Path, n: int = 100_000, beams: int = 64) -> Path:
+    """An n-scan log of tiny scans (streamed: memory does not grow with n); reused if present in ``d``."""
+    path = Path(d) / f"long_{n}_{beams}.mcap"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if not path.exists():
+        tmp = path.with_name(path.name + ".tmp")
+        write_mcap(tmp, make_scans(n, beams=beams), make_odoms(n + 1))
+        tmp.rename(path)
+    return path
+
+
+def main(argv: list[str]) -> None:
+    d = Path(argv[1] if len(argv) > 1 else "fault_corpus")
+    for name, (path, exp) in build_corpus(d).items():
+        print(f"{name:<36} {path.name:<24} exit {exp.exit_code}  {exp.behaviour}")
+
+
+if __name__ == "__main__":
+    main(sys.argv)

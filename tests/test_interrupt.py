@@ -1,0 +1,63 @@
+"""Ctrl-C (SIGINT) and kill (SIGTERM) during ``cornerslam run``, in a real subprocess: the previous
+complete output directory survives untouched (or there is none), no hidden staging directory is
+left behind, and stderr says what happened."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from cornerslam_cli.simulate import simulate_log
+
+CMD = [sys.executable, "-c", "from cornerslam_cli.cli import main; main()"]
+
+
+@pytest.fixture(scope="module")
+def long_log(tmp_path_factory) -> Path:
+    """A simulated lap at 10 Hz (~1,300 scans): a run takes well over the few seconds we wait."""
+    path = tmp_path_factory.mktemp("int") / "lap.mcap"
+    simulate_log(path, seed=1, rate=10.0, beams=271)
+    return path
+
+
+def staging_dirs(out: Path) -> list[str]:
+    return [p.name for p in out.parent.iterdir() if p.name.startswith(f".{out.name}.")]
+
+
+@pytest.mark.parametrize(
+    "sig, previous", [(signal.SIGINT, False), (signal.SIGINT, True), (signal.SIGTERM, True)]
+)
+def test_interrupted_run_leaves_the_previous_output_or_none(long_log, tmp_path, sig, previous):
+    out = tmp_path / "out"
+    if previous:
+        out.mkdir()
+        (out / "summary.json").write_text('{"previous": true}\n')
+    proc = subprocess.Popen(
+        [*CMD, "run", str(long_log), "--out", str(out), "-q"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 30
+    while not staging_dirs(out) and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.05)  # wait until the run is writing its staged output ...
+    assert staging_dirs(out), "the run never started writing"
+    time.sleep(1.0)  # ... and well into the loop
+    assert proc.poll() is None, "the run finished before the signal: make the log longer"
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=30)
+    expected_code, word = (130, "interrupted") if sig == signal.SIGINT else (143, "terminated")
+    assert proc.returncode == expected_code, err
+    assert err.strip().splitlines()[-1].startswith(f"{word}: no output written"), err
+    assert "Traceback" not in err
+    assert staging_dirs(out) == []
+    if previous:
+        assert [p.name for p in out.iterdir()] == ["summary.json"]
+        assert (out / "summary.json").read_text() == '{"previous": true}\n'
+    else:
+        assert not out.exists()
