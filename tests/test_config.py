@@ -36,6 +36,16 @@ def test_yaml_then_override_wins(tmp_path):
     assert cfg.association.method == "pca"
 
 
+def test_exponent_without_a_dot_is_a_number(tmp_path):
+    # YAML 1.1 (PyYAML) reads 1e-6 as a string; as a float key it means the number
+    assert load_config(None, ["ekf.alpha1=1e-6"]).ekf.alpha1 == 1e-6
+    p = tmp_path / "c.yaml"
+    p.write_text("ekf:\n  alpha2: 2E-3\n")
+    assert load_config(p).ekf.alpha2 == 0.002
+    with pytest.raises(ConfigError, match="must be an integer"):
+        load_config(None, ["lines.min_points=1e2"])
+
+
 def test_int_is_accepted_for_float():
     cfg = load_config(None, ["sensor.sigma_r_near=1"])
     assert isinstance(cfg.sensor.sigma_r_near, float) and cfg.sensor.sigma_r_near == 1.0
