@@ -74,6 +74,7 @@ class InputConfig:
     max_range: float = 0.0  # 0 = use the scan's range_max; beams at or beyond are "no return"
     skip_beams_start: int = 0  # beams at the start of each scan to ignore (e.g. robot body)
     skip_beams_end: int = 0
+    scan_time_offset: float = 0.0  # seconds added to every scan stamp before syncing with odometry
     laser_preset: str = "auto"  # auto (by the scan's geometry) | none | a name in lasers.PRESETS
     laser: LaserMountConfig = field(default_factory=LaserMountConfig)
     odom_jump: OdomJumpConfig = field(default_factory=OdomJumpConfig)

@@ -6,6 +6,7 @@ the paper's loop (Fig 1), each stage timed for ``timing.csv``.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import logging
@@ -256,7 +257,7 @@ def open_input(log_path: str | Path, cfg: Config) -> Input:
 def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None = None) -> Iterator[Frame]:
     """Synchronised keyframes of the log, features extracted (streaming)."""
     msgs = reanchor_odometry(
-        _scans_cropped(src.reader, cfg), cfg.input.odom_jump, src.stats, src.reader.stats.warn
+        _scans_prepared(src.reader, cfg), cfg.input.odom_jump, src.stats, src.reader.stats.warn
     )
     synced = synchronise(msgs, src.stats)
     pairs = select_keyframes(synced, cfg.keyframes, src.stats)
@@ -407,11 +408,13 @@ def run_frames(
     return summary
 
 
-def _scans_cropped(reader, cfg: Config):
-    """The reader's messages with the configured beams at the scan's ends removed (robot body)."""
+def _scans_prepared(reader, cfg: Config):
+    """The reader's messages with each scan prepared as configured: beams at the ends removed (robot
+    body), beams at or beyond ``input.max_range`` dropped, ``input.scan_time_offset`` added to the
+    stamp (a laser whose stamps lag or lead the odometry clock)."""
     inp = cfg.input
-    lo, hi, max_range = inp.skip_beams_start, inp.skip_beams_end, inp.max_range
-    if lo == 0 and hi == 0 and max_range <= 0.0:
+    lo, hi, max_range, dt = inp.skip_beams_start, inp.skip_beams_end, inp.max_range, inp.scan_time_offset
+    if lo == 0 and hi == 0 and max_range <= 0.0 and dt == 0.0:
         yield from reader.messages()
         return
     for msg in reader.messages():
@@ -419,16 +422,13 @@ def _scans_cropped(reader, cfg: Config):
             keep = (msg.beam_index >= lo) & (msg.beam_index < msg.n_beams - hi)
             if max_range > 0.0:
                 keep &= msg.ranges < max_range
-            msg = Scan(
-                stamp=msg.stamp,
+            msg = dataclasses.replace(
+                msg,
+                stamp=msg.stamp + dt,
                 ranges=msg.ranges[keep],
                 angles=msg.angles[keep],
                 beam_index=msg.beam_index[keep],
-                n_beams=msg.n_beams,
-                range_min=msg.range_min,
                 range_max=msg.range_max if max_range <= 0.0 else min(max_range, msg.range_max),
-                angle_increment=msg.angle_increment,
-                frame_id=msg.frame_id,
             )
         yield msg
 

@@ -163,3 +163,24 @@ def test_segments_monte_carlo_through_extract():
         covs.append(segs.cov[k[0]])
     lo, hi = nees_band(n, 2)
     assert lo < mean_nees(np.asarray(err), np.asarray(covs)) < hi
+
+
+def test_breakpoint_breaks_across_runs_of_no_return_beams():
+    """Two points 8° apart with 15 no-return beams between: the adaptive breakpoint alone joins them
+    (d_max = ρ sin Δφ / sin(λ − Δφ) is ~4 m there), the missing-beam rule breaks."""
+    from cornerslam_cli.features.lines import breakpoint_starts
+    from cornerslam_cli.features.params import LinesConfig
+
+    inc = np.radians(0.5)
+    idx = np.array([0, 1, 2, 18, 19, 20])
+    theta = idx * inc
+    rho = np.array([1.2, 1.2, 1.2, 3.5, 3.5, 3.5])
+    x, y = rho * np.cos(theta), rho * np.sin(theta)
+    assert list(breakpoint_starts(x, y, rho, theta, LinesConfig(max_missing_beams=0), idx)) == [0]
+    assert list(breakpoint_starts(x, y, rho, theta, LinesConfig(max_missing_beams=3), idx)) == [0, 3]
+    few = np.array([0, 1, 2, 6, 7, 8])  # 3 missing beams: a dropout, not a gap
+    t2 = few * inc
+    assert list(breakpoint_starts(x, y, rho, t2, LinesConfig(max_missing_beams=3), few)) == [0, 3]  # far jump
+    r_same = np.full(6, 2.0)
+    xs, ys = r_same * np.cos(t2), r_same * np.sin(t2)
+    assert list(breakpoint_starts(xs, ys, r_same, t2, LinesConfig(max_missing_beams=3), few)) == [0]

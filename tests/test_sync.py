@@ -66,3 +66,20 @@ def test_keyframes_by_distance_and_rotation():
     assert [s.stamp for s, _ in kept] == [0.0, 4.0, 8.0, 11.0]
     assert st.keyframes_skipped == 8
     assert len(list(select_keyframes(pairs, KeyframeConfig()))) == len(pairs)
+
+
+def test_scan_time_offset_shifts_the_stamp_used_for_interpolation(tmp_path):
+    import math
+
+    from cornerslam_cli.config import load_config
+    from cornerslam_cli.logs.writers import RawScan, write_mcap
+    from cornerslam_cli.pipeline import frames, open_input
+
+    t0 = 1_700_000_000.0
+    scans = [RawScan(t0 + 0.5 + i, -math.pi / 2, math.pi / 180, np.full(181, 3.0)) for i in range(3)]
+    odoms = [OdomSample(t0 + i, float(i), 0.0, 0.0) for i in range(5)]  # x = t - t0
+    log = write_mcap(tmp_path / "l.mcap", scans, odoms)
+    for offset in (0.0, -0.25):
+        cfg = load_config(None, [f"input.scan_time_offset={offset}"])
+        got = [f.odom[0] for f in frames(open_input(log, cfg), cfg)]
+        assert got == pytest.approx([0.5 + offset, 1.5 + offset, 2.5 + offset])

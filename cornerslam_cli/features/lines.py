@@ -199,11 +199,13 @@ def _ends(starts: np.ndarray, n: int) -> np.ndarray:
     return np.append(starts[1:], n)
 
 
-def breakpoint_starts(x, y, rho, theta, cfg: LinesConfig) -> np.ndarray:
+def breakpoint_starts(x, y, rho, theta, cfg: LinesConfig, beam_index=None) -> np.ndarray:
     """Step 1: starts of the point sets separated by an adaptive breakpoint (Borges & Aldon 2004).
 
     d_max = ρ·sin Δφ / sin(λ − Δφ) + breakpoint_sigma, ρ the nearer of the two beams, Δφ their actual
-    bearing difference (dropped beams widen it); Δφ >= λ always breaks.
+    bearing difference (dropped beams widen it); Δφ >= λ always breaks. More than
+    ``max_missing_beams`` dropped beams between two points (no return: the laser saw through there)
+    also break: as Δφ nears λ the formula would otherwise join surfaces metres apart.
     """
     dphi = np.diff(theta)
     gap = np.hypot(np.diff(x), np.diff(y))
@@ -211,6 +213,8 @@ def breakpoint_starts(x, y, rho, theta, cfg: LinesConfig) -> np.ndarray:
     rho_near = np.minimum(rho[:-1], rho[1:])
     d_max = rho_near * np.sin(dphi) / np.sin(np.maximum(lam - dphi, 1e-12)) + cfg.breakpoint_sigma
     brk = (dphi >= lam) | ~(gap <= d_max)
+    if beam_index is not None and cfg.max_missing_beams > 0:
+        brk |= np.diff(beam_index) - 1 > cfg.max_missing_beams
     return np.concatenate(([0], np.flatnonzero(brk) + 1))
 
 
@@ -447,7 +451,7 @@ def extract_segments(scan: Scan, sensor: SensorConfig, cfg: LinesConfig) -> tupl
     if not (np.isfinite(x).all() and np.isfinite(y).all() and np.isfinite(w).all()):
         return none
 
-    starts = breakpoint_starts(x, y, rho, theta, cfg)  # step 1
+    starts = breakpoint_starts(x, y, rho, theta, cfg, scan.beam_index)  # step 1
     starts = angle_split_starts(
         x, y, rho, theta, starts, cfg, 1.0 / np.sqrt(w), scan.angle_increment
     )  # step 2

@@ -51,6 +51,7 @@ class LinesConfig:
     #    d_max = ρ·sin Δφ / sin(λ − Δφ) + breakpoint_sigma   (breakpoint_sigma plays B&A's 3σ_r, added as is)
     breakpoint_lambda: float = math.radians(10.0)  # λ, radians
     breakpoint_sigma: float = 0.03  # metres
+    max_missing_beams: int = 3  # more dropped (no-return) beams than this between two points break; 0 = off
     # 2. angle split: angle between the chords (p_i−k, p_i) and (p_i, p_i+k), k beams chosen per point so a
     #    chord is max(angle_split_chord, angle_split_sigmas·σ) long, σ the beam's noise (the paper's k = 1
     #    is noise-dominated on dense scans)
@@ -69,6 +70,7 @@ class LinesConfig:
     def __post_init__(self):
         _check(0.0 < self.breakpoint_lambda < math.pi / 2, "lines.breakpoint_lambda must be in (0, pi/2)")
         _check(self.breakpoint_sigma >= 0.0, "lines.breakpoint_sigma must be >= 0")
+        _check(self.max_missing_beams >= 0, "lines.max_missing_beams must be >= 0")
         _check(0.0 < self.angle_split_max <= math.pi, "lines.angle_split_max must be in (0, pi]")
         _check(self.angle_split_chord > 0.0, "lines.angle_split_chord must be > 0")
         _check(self.angle_split_sigmas >= 0.0, "lines.angle_split_sigmas must be >= 0")
