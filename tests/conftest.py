@@ -1,10 +1,17 @@
 """Shared fixtures: one small simulated log per test session (generated, never shipped)."""
 
-from pathlib import Path
+import os
 
-import pytest
+# As the CLI does (cli.py), before numpy is imported: single-threaded BLAS, so in-process runs here
+# compute exactly what `cornerslam run` computes.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
-from cornerslam_cli.simulate import simulate_log
+from pathlib import Path  # noqa: E402
+
+import pytest  # noqa: E402
+
+from cornerslam_cli.simulate import simulate_log  # noqa: E402
 
 
 @pytest.fixture(scope="session")
