@@ -85,35 +85,23 @@ def _load(config_path, overrides, assoc=None, scan_topic=None, odom_topic=None, 
     return cfg
 
 
-class Progress:
-    """A progress line on stderr for runs longer than ~2 s: redrawn in place on a terminal,
-    a line every 10 s otherwise (CI logs). Silent with -q."""
+class _StatusLine:
+    """One status line on stderr: redrawn in place on a terminal, a line every 10 s otherwise (CI
+    logs). Silent when not enabled (-q)."""
 
-    def __init__(self, label: str, enabled: bool):
-        self.label = label
+    def __init__(self, enabled: bool):
         self.enabled = enabled
         self.t0 = time.monotonic()
         self.last = 0.0
         self.tty = sys.stderr.isatty()
         self.drawn = False
 
-    def __call__(self, done: int, total: int) -> None:
-        if not self.enabled:
-            return
-        now = time.monotonic()
-        el = now - self.t0
-        if el < 2.0 or now - self.last < (0.1 if self.tty else 10.0):
-            return
-        self.last = now
-        if total > 0:
-            frac = min(done / total, 1.0)
-            eta = el * (1 - frac) / max(frac, 1e-9)
-            bar = "#" * int(30 * frac)
-            text = f"{self.label} [{bar:<30}] {done}/{total} scans {el:5.0f}s eta {eta:4.0f}s"
-        else:
-            text = f"{self.label} {done} scans {el:5.0f}s"
+    def _due(self, now: float) -> bool:
+        return now - self.last >= (0.1 if self.tty else 10.0)
+
+    def _draw(self, text: str) -> None:
         if self.tty:
-            sys.stderr.write("\r" + text)
+            sys.stderr.write("\r\033[K" + text)
             self.drawn = True
         else:
             sys.stderr.write(text + "\n")
@@ -123,6 +111,30 @@ class Progress:
         if self.drawn:
             sys.stderr.write("\n")
             sys.stderr.flush()
+
+
+class Progress(_StatusLine):
+    """Scans done of a run's log, with a bar and an ETA, for runs longer than ~2 s."""
+
+    def __init__(self, label: str, enabled: bool):
+        super().__init__(enabled)
+        self.label = label
+
+    def __call__(self, done: int, total: int) -> None:
+        if not self.enabled:
+            return
+        now = time.monotonic()
+        el = now - self.t0
+        if el < 2.0 or not self._due(now):
+            return
+        self.last = now
+        if total > 0:
+            frac = min(done / total, 1.0)
+            eta = el * (1 - frac) / max(frac, 1e-9)
+            bar = "#" * int(30 * frac)
+            self._draw(f"{self.label} [{bar:<30}] {done}/{total} scans {el:5.0f}s eta {eta:4.0f}s")
+        else:
+            self._draw(f"{self.label} {done} scans {el:5.0f}s")
 
 
 # ---------------------------------------------------------------------------- commands
@@ -484,21 +496,13 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
         click.echo(f"wrote {plot_path}")
 
 
-class BatchProgress:
-    """The whole batch's progress on stderr: finished/failed/skipped/remaining and an ETA from the rate
-    of the combinations run so far (skipped ones cost nothing). Redrawn in place on a terminal, a line
-    every 10 s otherwise; silent with -q."""
-
-    def __init__(self, enabled: bool):
-        self.enabled = enabled
-        self.t0 = time.monotonic()
-        self.last = 0.0
-        self.tty = sys.stderr.isatty()
-        self.drawn = False
+class BatchProgress(_StatusLine):
+    """The whole batch's progress: finished/failed/skipped/remaining and an ETA from the rate of the
+    combinations run so far (skipped ones cost nothing)."""
 
     def __call__(self, s) -> None:
         now = time.monotonic()
-        if not self.enabled or (s.remaining and now - self.last < (0.1 if self.tty else 10.0)):
+        if not self.enabled or (s.remaining and not self._due(now)):
             return
         self.last = now
         el = now - self.t0
@@ -508,17 +512,7 @@ class BatchProgress:
             f"batch {s.finished}/{s.total}: {s.ok} ok, {s.failed} failed, {s.skipped} skipped, "
             f"{s.remaining} remaining {el:5.0f}s {eta if s.remaining else ''}"
         ).rstrip()
-        if self.tty:
-            sys.stderr.write("\r\033[K" + text)
-            self.drawn = True
-        else:
-            sys.stderr.write(text + "\n")
-        sys.stderr.flush()
-
-    def close(self) -> None:
-        if self.drawn:
-            sys.stderr.write("\n")
-            sys.stderr.flush()
+        self._draw(text)
 
 
 def _parse_sweeps(texts) -> dict[str, list[str]]:
