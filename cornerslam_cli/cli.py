@@ -59,6 +59,21 @@ def _topic_options(f):
     return f
 
 
+def _reference_options(f):
+    f = click.option(
+        "--time-offset", default=0.0, show_default=True, help="With --relations: relation time − log time, s."
+    )(f)
+    f = click.option(
+        "--relations",
+        type=click.Path(dir_okay=False),
+        help="Kümmerle et al. 2009 .relations file to score against.",
+    )(f)
+    f = click.option(
+        "--ground-truth", type=click.Path(dir_okay=False), help="TUM ground truth (default: LOG.gt.tum)."
+    )(f)
+    return f
+
+
 def _setup_logging(verbose: int, quiet: bool) -> None:
     level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)]
     logging.basicConfig(level=level, format="%(levelname)s: %(message)s", stream=sys.stderr, force=True)
@@ -200,9 +215,7 @@ def _assoc_choice():
     "--out", type=click.Path(file_okay=False), help="Output directory (default ./cornerslam_out/LOG_ASSOC)."
 )
 @_topic_options
-@click.option(
-    "--ground-truth", type=click.Path(dir_okay=False), help="TUM ground truth (default: LOG.gt.tum)."
-)
+@_reference_options
 @click.option("--plot", is_flag=True, help="Also draw the map, timing and corner plots and report.html.")
 @click.option(
     "--mcap-out", type=click.Path(dir_okay=False), help="Also write the results as MCAP for Foxglove."
@@ -217,6 +230,8 @@ def run(
     scan_topic,
     odom_topic,
     ground_truth,
+    relations,
+    time_offset,
     plot,
     mcap_out,
     verbose,
@@ -234,7 +249,9 @@ def run(
     cfg = _load(config_path, overrides, assoc, scan_topic, odom_topic, log_path)
     progress = Progress(f"{Path(log_path).name} ({cfg.association.method})", not quiet)
     try:
-        summary = run_pipeline(log_path, cfg, out, ground_truth=ground_truth, progress=progress)
+        summary = run_pipeline(
+            log_path, cfg, out, ground_truth, progress, relations=relations, time_offset=time_offset
+        )
     finally:
         progress.close()
     out_dir = Path(summary["out_dir"])
@@ -266,13 +283,23 @@ def run(
     "--out", type=click.Path(file_okay=False), help="Output directory (default ./cornerslam_out/LOG_compare)."
 )
 @_topic_options
-@click.option(
-    "--ground-truth", type=click.Path(dir_okay=False), help="TUM ground truth (default: LOG.gt.tum)."
-)
+@_reference_options
 @click.option("--jobs", default=1, show_default=True, type=click.IntRange(1, 64), help="Parallel processes.")
 @_verbosity
 def compare(
-    log_path, assocs, config_path, overrides, out, scan_topic, odom_topic, ground_truth, jobs, verbose, quiet
+    log_path,
+    assocs,
+    config_path,
+    overrides,
+    out,
+    scan_topic,
+    odom_topic,
+    ground_truth,
+    relations,
+    time_offset,
+    jobs,
+    verbose,
+    quiet,
 ):
     """Run several associators on LOG with the same extracted features and tabulate them.
 
@@ -295,7 +322,9 @@ def compare(
     out_dir = Path(out) if out else default_out_dir(Path(log_path), "compare")
     progress = Progress(f"{Path(log_path).name} (extract)", not quiet)
     try:
-        summaries = run_compare(log_path, cfg, names, out_dir, ground_truth, jobs, progress)
+        summaries = run_compare(
+            log_path, cfg, names, out_dir, ground_truth, jobs, progress, relations, time_offset
+        )
     finally:
         progress.close()
     from .report.html import write_report
@@ -313,9 +342,12 @@ def _print_comparison(summaries: list[dict]) -> None:
         f"{'assoc':<6} {'steps':>6} {'landmarks':>9} {'matched':>8} "
         f"{'t_match s':>10} {'max ms':>8} {'t_total s':>10}"
     )
-    has_gt = any(s.get("accuracy") for s in summaries)
+    has_gt = any("ate" in (s.get("accuracy") or {}) for s in summaries)
+    has_rel = any("relations" in (s.get("accuracy") or {}) for s in summaries)
     if has_gt:
         head += f" {'ATE m':>8} {'odom ATE m':>10}"
+    if has_rel:
+        head += f" {'relations m':>16} {'odom relations m':>18}"
     click.echo(head)
     for s in summaries:
         c, t = s["counts"], s["timing"]
@@ -323,10 +355,27 @@ def _print_comparison(summaries: list[dict]) -> None:
             f"{s['assoc']:<6} {c['steps']:>6} {c['landmarks']:>9} {c['matched_total']:>8} "
             f"{t['t_match']:>10.3f} {1000 * t['t_match_max']:>8.1f} {t['t_total']:>10.2f}"
         )
-        if has_gt and s.get("accuracy"):
-            a = s["accuracy"]
+        a = s.get("accuracy") or {}
+        if has_gt:
             line += f" {a['ate']['rmse']:>8.3f} {a['odom_ate']['rmse']:>10.3f}"
+        if has_rel:
+            rel, odom = a["relations"], a["odom_relations"]
+            line += f" {_mean_std(rel):>16} {_mean_std(odom):>18}"
         click.echo(line)
+
+
+def _mean_std(e: dict) -> str:
+    """Translational relation error as 'mean ± std' (m)."""
+    return f"{e['trans_mean']:.3f} ± {e['trans_std']:.3f}" if e["n"] else "-"
+
+
+def _relation_text(e: dict) -> str:
+    if e["n"] == 0:
+        return "no relation falls inside the trajectory's time span (check --time-offset)"
+    return (
+        f"translation {_mean_std(e)} m, rotation {e['rot_mean_deg']:.2f} ± {e['rot_std_deg']:.2f} deg "
+        f"({e['n']}/{e['n_total']} relations)"
+    )
 
 
 def _print_summary(s: dict) -> None:
@@ -340,12 +389,15 @@ def _print_summary(s: dict) -> None:
         f"time: extract {t['t_extract']:.2f}s predict {t['t_predict']:.2f}s match {t['t_match']:.2f}s "
         f"update {t['t_update']:.2f}s ({t['scans_per_second']:.0f} steps/s), wall {t['wall_time']:.1f}s"
     )
-    acc = s.get("accuracy")
-    if acc:
+    acc = s.get("accuracy") or {}
+    if "ate" in acc:
         click.echo(
             f"ATE RMSE {acc['ate']['rmse']:.3f} m (odometry {acc['odom_ate']['rmse']:.3f} m) "
             f"against {acc['ground_truth']}"
         )
+    if "relations" in acc:
+        click.echo(f"relations: {_relation_text(acc['relations'])}")
+        click.echo(f"  odometry: {_relation_text(acc['odom_relations'])}")
     click.echo(f"wrote {s['out_dir']}")
 
 
@@ -445,11 +497,7 @@ def evaluate(out_dir, ground_truth, relations, time_offset, verbose, quiet):
                 f"no relation in '{relations}' falls inside the trajectory's time span",
                 "check --time-offset (relation time − log time)",
             )
-        click.echo(
-            f"relations ({e['n']}/{e['n_total']}): "
-            f"translation {e['trans_mean']:.3f} ± {e['trans_std']:.3f} m, "
-            f"rotation {e['rot_mean_deg']:.2f} ± {e['rot_std_deg']:.2f} deg"
-        )
+        click.echo(f"relations: {_relation_text(e)}")
 
 
 @cli.command()

@@ -23,7 +23,7 @@ from . import __version__
 from .association import make_associator
 from .config import Config
 from .errors import LogError
-from .evaluate import ate, rpe
+from .evaluate import ate, read_relations, relation_error, rpe
 from .features import extract
 from .filter import Ekf
 from .logs import open_log
@@ -278,22 +278,67 @@ def run(
     out: str | Path | None = None,
     ground_truth: str | Path | None = None,
     progress: Callable[[int, int], None] | None = None,
+    relations: str | Path | None = None,
+    time_offset: float = 0.0,
 ) -> dict:
     """Run corner EKF-SLAM on one log and write the output directory atomically.
 
     Returns the summary (also written to summary.json).
     """
     wall0 = time.perf_counter()
-    gt_path, gt = load_ground_truth(Path(log_path), ground_truth)  # a bad file fails before the run
+    ref = load_reference(Path(log_path), ground_truth, relations, time_offset)  # bad files fail first
     src = open_input(log_path, cfg)
     out_dir = Path(out) if out else default_out_dir(src.path, cfg.association.method)
-    return run_frames(frames(src, cfg, progress), src, cfg, out_dir, gt_path, gt, wall0)
+    return run_frames(frames(src, cfg, progress), src, cfg, out_dir, ref, wall0)
 
 
-def load_ground_truth(log_path: Path, ground_truth: str | Path | None):
-    """(path, (stamps, poses)) of the given ground truth, else of LOG.gt.tum if present, else (None, None)."""
+@dataclass(frozen=True)
+class Reference:
+    """What a run's accuracy is measured against: a TUM ground truth (stamps, poses) and/or a
+    Kümmerle et al. 2009 relations table with its time offset (relation time − log time)."""
+
+    gt_path: Path | None = None
+    gt: tuple[np.ndarray, np.ndarray] | None = None
+    relations_path: Path | None = None
+    relations: np.ndarray | None = None
+    time_offset: float = 0.0
+
+
+def load_reference(
+    log_path: Path,
+    ground_truth: str | Path | None = None,
+    relations: str | Path | None = None,
+    time_offset: float = 0.0,
+) -> Reference:
+    """The given ground truth, else LOG.gt.tum if present; the given relations file, if any."""
     gt_path = Path(ground_truth) if ground_truth else find_ground_truth(log_path)
-    return gt_path, (read_tum(gt_path) if gt_path else None)
+    rel_path = Path(relations) if relations else None
+    return Reference(
+        gt_path,
+        read_tum(gt_path) if gt_path else None,
+        rel_path,
+        read_relations(rel_path) if rel_path else None,
+        time_offset,
+    )
+
+
+def accuracy_of(stamps: np.ndarray, poses: np.ndarray, odoms: np.ndarray, ref: Reference) -> dict | None:
+    """ATE/RPE against the ground truth and the relation metric, for the estimate and for odometry."""
+    acc: dict = {}
+    if ref.gt is not None:
+        acc.update(
+            ground_truth=str(ref.gt_path),
+            ate=ate(stamps, poses, *ref.gt),
+            odom_ate=ate(stamps, odoms, *ref.gt),
+            **rpe(stamps, poses, *ref.gt),
+        )
+    if ref.relations is not None:
+        acc.update(
+            relations_file=str(ref.relations_path),
+            relations=relation_error(stamps, poses, ref.relations, ref.time_offset),
+            odom_relations=relation_error(stamps, odoms, ref.relations, ref.time_offset),
+        )
+    return acc or None
 
 
 def run_frames(
@@ -301,8 +346,7 @@ def run_frames(
     src: Input,
     cfg: Config,
     out_dir: Path,
-    gt_path: Path | None,
-    gt,
+    ref: Reference,
     wall0: float,
 ) -> dict:
     """The filter over extracted frames; writes the output directory atomically, returns the summary."""
@@ -353,14 +397,7 @@ def run_frames(
         track_a = np.frombuffer(track, dtype=float).reshape(-1, 7)
         stamps_a, poses_a, odoms_a = track_a[:, 0], track_a[:, 1:4], track_a[:, 4:7]
         write_tum(stage.path / "trajectory.tum", stamps_a, poses_a)
-        accuracy = None
-        if gt is not None:
-            accuracy = {
-                "ground_truth": str(gt_path),
-                "ate": ate(stamps_a, poses_a, *gt),
-                "odom_ate": ate(stamps_a, odoms_a, *gt),
-                **rpe(stamps_a, poses_a, *gt),
-            }
+        accuracy = accuracy_of(stamps_a, poses_a, odoms_a, ref)
         summary = {
             "cornerslam_version": __version__,
             "mode": "slam",

@@ -16,10 +16,10 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from ..config import Config
-from ..pipeline import Frame, Input, frames, load_ground_truth, open_input, run_frames
+from ..pipeline import Frame, Input, frames, load_reference, open_input, run_frames
 from .tables import COMPARISON_COLUMNS, CsvTable, StagedDir
 
-_SHARED: dict = {}  # what forked workers inherit: frames, input, ground truth
+_SHARED: dict = {}  # what forked workers inherit: frames, input, reference
 
 
 def with_assoc(cfg: Config, assoc: str) -> Config:
@@ -29,13 +29,14 @@ def with_assoc(cfg: Config, assoc: str) -> Config:
 def _run_one(assoc: str, out_dir: Path) -> dict:
     sh = _SHARED
     return run_frames(
-        sh["frames"], sh["src"], with_assoc(sh["cfg"], assoc), out_dir, *sh["gt"], time.perf_counter()
+        sh["frames"], sh["src"], with_assoc(sh["cfg"], assoc), out_dir, sh["ref"], time.perf_counter()
     )
 
 
 def comparison_row(s: dict) -> list:
     acc = s.get("accuracy") or {}
     t = s["timing"]
+    nan = float("nan")
     return [
         s["assoc"],
         s["counts"]["steps"],
@@ -44,11 +45,15 @@ def comparison_row(s: dict) -> list:
         t["t_match"],
         t["t_match_max"],
         t["t_total"],
-        acc.get("ate", {}).get("rmse", float("nan")),
-        acc.get("odom_ate", {}).get("rmse", float("nan")),
-        acc.get("rpe_per_m", float("nan")),
+        acc.get("ate", {}).get("rmse", nan),
+        acc.get("odom_ate", {}).get("rmse", nan),
+        acc.get("rpe_per_m", nan),
         t["wall_time"],
         s["counts"]["budget_hits"],
+        acc.get("relations", {}).get("trans_mean", nan),
+        acc.get("relations", {}).get("trans_std", nan),
+        acc.get("relations", {}).get("rot_mean_deg", nan),
+        acc.get("odom_relations", {}).get("trans_mean", nan),
     ]
 
 
@@ -60,12 +65,14 @@ def compare(
     ground_truth: str | Path | None = None,
     jobs: int = 1,
     progress: Callable[[int, int], None] | None = None,
+    relations: str | Path | None = None,
+    time_offset: float = 0.0,
 ) -> list[dict]:
     """Run each associator in ``assocs`` on ``log_path``; write OUT/ASSOC/ and OUT/comparison.csv."""
-    gt = load_ground_truth(Path(log_path), ground_truth)
+    ref = load_reference(Path(log_path), ground_truth, relations, time_offset)
     src: Input = open_input(log_path, cfg)
     frame_list: list[Frame] = list(frames(src, cfg, progress))
-    _SHARED.update(frames=frame_list, src=src, cfg=cfg, gt=gt)
+    _SHARED.update(frames=frame_list, src=src, cfg=cfg, ref=ref)
     try:
         with StagedDir(out) as stage:
             dirs = [stage.path / a for a in assocs]

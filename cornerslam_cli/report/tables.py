@@ -28,7 +28,8 @@ TIMING_COLUMNS = (
 ).split(",")
 COMPARISON_COLUMNS = (
     "assoc,steps,landmarks,matched_total,t_match_total,t_match_max,t_total,ate_rmse,"
-    "odom_ate_rmse,rpe_trans_per_m,wall_time,budget_hits"
+    "odom_ate_rmse,rpe_trans_per_m,wall_time,budget_hits,rel_trans_mean,rel_trans_std,rel_rot_mean_deg,"
+    "odom_rel_trans_mean"
 ).split(",")
 
 
