@@ -205,7 +205,6 @@ class McapSource:
 
     def _data_messages(self, warn: bool) -> Iterator[tuple[int, int, memoryview, int]]:
         """(channel_id, log_time, data, chunk_start_time) in file order; registers schemas/channels."""
-        idx = self.index
         for op, body, pos, complete in self._records(8, self._data_end(), warn):
             try:
                 if op == OP_CHUNK:
@@ -217,12 +216,8 @@ class McapSource:
                 elif op == OP_MESSAGE:
                     cid, _, t, _ = _MSG.unpack_from(body, 0)
                     yield cid, t, body[_MSG.size :], t
-                elif op == OP_SCHEMA:
-                    sid, name, enc, data = _schema(body)
-                    idx.schemas.setdefault(sid, (name, enc, data))
-                elif op == OP_CHANNEL:
-                    cid, sid, topic, enc = _channel(body)
-                    idx.channels.setdefault(cid, (topic, enc, sid))
+                else:
+                    self._note_definition(op, body)
             except (struct.error, McapFormatError) as exc:
                 if warn:
                     self.stats.warn("%s: bad record at byte %d (%s): skipped", self.name, pos, exc)
@@ -230,7 +225,6 @@ class McapSource:
     def _inner(
         self, recs: memoryview, pos: int, t0: int, warn: bool
     ) -> Iterator[tuple[int, int, memoryview, int]]:
-        idx = self.index
         off, n = 0, len(recs)
         while off + 9 <= n:
             op, length = _REC.unpack_from(recs, off)
@@ -248,12 +242,17 @@ class McapSource:
                     continue
                 cid, _, t, _ = _MSG.unpack_from(body, 0)
                 yield cid, t, body[_MSG.size :], t0
-            elif op == OP_SCHEMA:
-                sid, name, enc, data = _schema(body)
-                idx.schemas.setdefault(sid, (name, enc, data))
-            elif op == OP_CHANNEL:
-                cid, sid, topic, enc = _channel(body)
-                idx.channels.setdefault(cid, (topic, enc, sid))
+            else:
+                self._note_definition(op, body)
+
+    def _note_definition(self, op: int, body: memoryview) -> None:
+        """Remember a schema or channel record met while streaming (the first definition wins)."""
+        if op == OP_SCHEMA:
+            sid, name, enc, data = _schema(body)
+            self.index.schemas.setdefault(sid, (name, enc, data))
+        elif op == OP_CHANNEL:
+            cid, sid, topic, enc = _channel(body)
+            self.index.channels.setdefault(cid, (topic, enc, sid))
 
     def _data_end(self) -> int:
         return self._summary_start if self.summary_ok else self.size
