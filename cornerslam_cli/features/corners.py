@@ -39,6 +39,8 @@ Corners are returned in bearing order.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from ..types import Corners, Scan, Segments
@@ -86,10 +88,17 @@ def _point_segment_distance(p, a, b):
     return np.hypot(*(a + t[:, None] * ab - p).T)
 
 
+@functools.lru_cache(maxsize=64)
+def _pairs(k: int) -> tuple[np.ndarray, np.ndarray]:
+    """All index pairs i < j of k segments (np.triu_indices, cached: it is the same for every scan)."""
+    i, j = np.triu_indices(k, 1)
+    i.flags.writeable = j.flags.writeable = False
+    return i, j
+
+
 def type_one(segs: Segments, cfg: CornersConfig):
     """Type I corners from all admissible segment pairs: (z, cov, segs (m, 2))."""
-    k = len(segs)
-    i, j = np.triu_indices(k, 1)
+    i, j = _pairs(len(segs))
     ends = np.stack((segs.p1, segs.p2), axis=1)  # (k, 2 ends, 2)
     d_end = np.hypot(*(ends[i][:, :, None, :] - ends[j][:, None, :, :]).transpose(3, 0, 1, 2)).min(
         axis=(1, 2)
@@ -240,11 +249,13 @@ def merge_duplicates(z, cov, kind, radius: float) -> np.ndarray:
     """Indices of the corners kept: within ``radius`` of each other only the first in the order
     (type I before type II, then smaller trace of the position covariance) is kept."""
     order = np.lexsort((cov[:, 0, 0] + cov[:, 1, 1], kind))
+    xy = z[order, :2]
+    close = (np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1)) < radius).tolist()
     kept: list[int] = []
-    for i in order:
-        if not kept or np.hypot(*(z[kept, :2] - z[i, :2]).T).min() >= radius:
-            kept.append(int(i))
-    return np.asarray(kept, dtype=np.int64)
+    for a in range(len(order)):
+        if not any(close[a][b] for b in kept):
+            kept.append(a)
+    return order[kept].astype(np.int64)
 
 
 def extract_corners(
@@ -271,7 +282,9 @@ def extract_corners(
     if cfg.drop_occluded:
         ok &= ~hidden(scan, z, sensor, cfg.occlusion_margin)
     if cfg.free_space_check:
-        ok &= ~((kind == 1) & seen_through(scan, segs, z, np.maximum(which, 0), sensor, cfg.occlusion_margin))
+        t1 = np.flatnonzero(ok & (kind == 1))  # the check is for intersections only
+        if len(t1):
+            ok[t1] &= ~seen_through(scan, segs, z[t1], which[t1], sensor, cfg.occlusion_margin)
     z, cov, which, kind = z[ok], cov[ok], which[ok], kind[ok]
     if len(z) == 0:
         return Corners.empty()

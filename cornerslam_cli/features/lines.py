@@ -148,11 +148,13 @@ def fit_lines(rho, theta, var_rho, var_theta, starts, ends, w=None) -> LineFits:
     cov[:, 0, 1] = cov[:, 1, 0] = cra
 
     first, last = offs, offs + cnt - 1
+    # jac_ends[segment, end, (r, α), (ρ, θ)] of the first (end 0) and last (end 1) beam
+    ends2 = np.column_stack((first, last))
     jac_ends = np.empty((k, 2, 2, 2))
-    for end, i in ((0, first), (1, last)):
-        jac_ends[:, end] = np.stack(
-            (np.stack((dr_drho[i], dr_dth[i]), -1), np.stack((da_drho[i], da_dth[i]), -1)), axis=1
-        )
+    jac_ends[:, :, 0, 0] = dr_drho[ends2]
+    jac_ends[:, :, 0, 1] = dr_dth[ends2]
+    jac_ends[:, :, 1, 0] = da_drho[ends2]
+    jac_ends[:, :, 1, 1] = da_dth[ends2]
     p1 = np.column_stack((x[first] - e[first] * c, y[first] - e[first] * s))
     p2 = np.column_stack((x[last] - e[last] * c, y[last] - e[last] * s))
     ok &= np.isfinite(cov).all(axis=(1, 2)) & np.isfinite(p1).all(1) & np.isfinite(p2).all(1)
