@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .types import Scan
+from .types import Scan, wrap_angle
 
 #: two wall end points closer than this are one vertex, metres
 VERTEX_TOL = 1e-6
@@ -301,7 +301,7 @@ def visible_corners(
         P = np.asarray(probes) - o
         dist = np.hypot(P[:, 0], P[:, 1])
         bearing = np.arctan2(P[:, 1], P[:, 0]) - th
-        bearing = (bearing + np.pi) % (2 * np.pi) - np.pi
+        bearing = wrap_angle(bearing)
         if np.any(dist > max_range) or np.any(bearing < angles.min()) or np.any(bearing > angles.max()):
             keep[c_i] = False
             continue

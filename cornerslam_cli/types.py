@@ -145,7 +145,6 @@ class Prediction:
         ri = 3 + 3 * I[:, None] + np.arange(3)  # (a, 3) state rows of landmarks I
         # A_i = [H_r,i  H_l,i] restricted to the columns of the robot and landmark i
         if J is None:
-            rj = ri
             Prr = P[:3, :3]
             Prl = P[:3][:, ri].transpose(1, 0, 2)  # (a, 3, 3) P_r,li
             Pll = P[ri[:, :, None], ri[:, None, :]]  # (a, 3, 3) P_li,li

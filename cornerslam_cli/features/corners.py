@@ -43,14 +43,10 @@ import functools
 
 import numpy as np
 
-from ..types import Corners, Scan, Segments
+from ..types import Corners, Scan, Segments, wrap_angle
 from .lines import COV_FLOOR
 from .params import CornersConfig, SensorConfig
 from .sensor import beam_variances, sigma_range
-
-
-def _wrap(a):
-    return (a + np.pi) % (2.0 * np.pi) - np.pi
 
 
 def intersections(segs: Segments, i: np.ndarray, j: np.ndarray):
@@ -63,7 +59,7 @@ def intersections(segs: Segments, i: np.ndarray, j: np.ndarray):
     )
     ninv /= D[:, None, None]
     c = np.einsum("mab,mb->ma", ninv, np.column_stack((ri, rj)))
-    dphi = _wrap(ai - aj)
+    dphi = wrap_angle(ai - aj)
     phi = np.abs(dphi)
     sgn = np.where(dphi >= 0, 1.0, -1.0)
     # N dc = dr − diag(d_i·c, d_j·c) dα,  d = (−sin α, cos α)
@@ -103,7 +99,7 @@ def type_one(segs: Segments, cfg: CornersConfig):
     d_end = np.hypot(*(ends[i][:, :, None, :] - ends[j][:, None, :, :]).transpose(3, 0, 1, 2)).min(
         axis=(1, 2)
     )
-    phi = np.abs(_wrap(segs.alpha[i] - segs.alpha[j]))
+    phi = np.abs(wrap_angle(segs.alpha[i] - segs.alpha[j]))
     ok = (d_end < cfg.d_min) & (phi >= cfg.min_angle) & (phi <= np.pi - cfg.min_angle)
     i, j = i[ok], j[ok]
     z, cov = intersections(segs, i, j)
