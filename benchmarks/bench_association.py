@@ -27,12 +27,12 @@ from cornerslam_cli.association.params import AssociationConfig, JcbbConfig, Pca
 BUDGET_S = 2.0  # per call, scaling runs only
 
 VARIANTS = {
-    "icnn": AssociationConfig(method="icnn"),
-    "jcbb": AssociationConfig(method="jcbb"),
-    "jcbb-exact": AssociationConfig(method="jcbb", jcbb=JcbbConfig(joint_gate="exact")),
-    "pca p=3": AssociationConfig(method="pca"),
-    "pca p=1": AssociationConfig(method="pca", pca=PcaConfig(group_size=1)),
-    "pca p=5": AssociationConfig(method="pca", pca=PcaConfig(group_size=5)),
+    "icnn": AssociationConfig(method="icnn", euclidean_gate=0.0),
+    "jcbb": AssociationConfig(method="jcbb", euclidean_gate=0.0),
+    "jcbb-exact": AssociationConfig(method="jcbb", euclidean_gate=0.0, jcbb=JcbbConfig(joint_gate="exact")),
+    "pca p=3": AssociationConfig(method="pca", euclidean_gate=0.0),
+    "pca p=1": AssociationConfig(method="pca", euclidean_gate=0.0, pca=PcaConfig(group_size=1)),
+    "pca p=5": AssociationConfig(method="pca", euclidean_gate=0.0, pca=PcaConfig(group_size=5)),
 }
 
 
@@ -76,12 +76,14 @@ def bench_scaling(ms, ns, seeds):
     fast = JcbbConfig(explore_ties=False)
     budgeted = {
         "icnn": VARIANTS["icnn"],
-        "jcbb": AssociationConfig(method="jcbb", jcbb=JcbbConfig(max_seconds=BUDGET_S)),
-        "pca p=3": AssociationConfig(method="pca", pca=PcaConfig(max_seconds=BUDGET_S)),
+        "jcbb": AssociationConfig(method="jcbb", euclidean_gate=0.0, jcbb=JcbbConfig(max_seconds=BUDGET_S)),
+        "pca p=3": AssociationConfig(method="pca", euclidean_gate=0.0, pca=PcaConfig(max_seconds=BUDGET_S)),
         "jcbb no-ties": AssociationConfig(
             method="jcbb", jcbb=JcbbConfig(max_seconds=BUDGET_S, explore_ties=False)
         ),
-        "pca p=3 no-ties": AssociationConfig(method="pca", jcbb=fast, pca=PcaConfig(max_seconds=BUDGET_S)),
+        "pca p=3 no-ties": AssociationConfig(
+            method="pca", euclidean_gate=0.0, jcbb=fast, pca=PcaConfig(max_seconds=BUDGET_S)
+        ),
     }
     rows = []
     for axis, values in (("m", ms), ("n", ns)):

@@ -43,6 +43,7 @@ ASSOCS = ("icnn", "jcbb", "pca")
 REVISIT_GAP = 100  # keyframes
 REVISIT_CAP = 0.3  # metres
 REVISIT_BLOCK = 25  # keyframes: scans are grouped in blocks, neighbours come from blocks >= GAP away
+CELL = 0.05  # metres: grid of the map-sharpness count
 
 LOGS = {
     "intel": (DATA / "intel" / "intel-noisy-odom.log", []),
@@ -148,6 +149,47 @@ def revisit_misalignment(pts: list[np.ndarray], poses: np.ndarray) -> tuple[floa
     return (float(d.mean()) if len(d) else float("nan")), len(d) / max(total, 1)
 
 
+def place(pts: list[np.ndarray], poses: np.ndarray) -> np.ndarray:
+    """All scan points in the map frame, placed with ``poses``."""
+    out = []
+    for p, (x, y, th) in zip(pts, poses, strict=True):
+        c, s = math.cos(th), math.sin(th)
+        out.append(np.column_stack((x + c * p[:, 0] - s * p[:, 1], y + s * p[:, 0] + c * p[:, 1])))
+    return np.vstack(out)
+
+
+def occupied_cells(pts: list[np.ndarray], poses: np.ndarray, cell: float = CELL) -> int:
+    """Distinct ``cell``-sized grid cells hit by the scan points placed with ``poses``: the same walls
+    drawn twice (a doubled or fanned-out map) occupy more cells, so fewer = crisper."""
+    W = np.floor(place(pts, poses) / cell).astype(np.int64)
+    return len(np.unique((W[:, 0] << 32) + (W[:, 1] & 0xFFFFFFFF)))
+
+
+def points_figure(pts: list[np.ndarray], runs: dict[str, np.ndarray], title: str, dst: Path) -> None:
+    """Scan points placed with each trajectory, side by side (odometry first)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(runs), figsize=(5.2 * len(runs), 5.2), squeeze=False)
+    for ax, (label, poses) in zip(axes[0], runs.items(), strict=True):
+        W = place(pts, poses)
+        ax.scatter(W[:, 0], W[:, 1], s=0.05, c="k", alpha=0.3, linewidths=0, rasterized=True)
+        ax.plot(poses[:, 0], poses[:, 1], lw=0.8, c="tab:blue")
+        ax.set_aspect("equal")
+        ax.set_title(
+            f"{label}: {occupied_cells(pts, poses):,} occupied {100 * CELL:.0f} cm cells", fontsize=10
+        )
+        ax.set_xlabel("x [m]")
+    axes[0][0].set_ylabel("y [m]")
+    fig.suptitle(title)
+    fig.tight_layout()
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(dst, dpi=90)
+    plt.close(fig)
+
+
 def small_png(src: Path, dst: Path, width: int = 640) -> None:
     from PIL import Image
 
@@ -183,7 +225,8 @@ def main() -> int:
         if not (args.reuse and (out / "comparison.csv").exists()):
             run_compare(name, log, extra, args.set, args.work)
         runs = {a: load_run(out / a) for a in ASSOCS}
-        pts = None if name == "intel" else scan_points(log, extra + args.set, runs["pca"]["stamp"])
+        pts = scan_points(log, extra + args.set, runs["pca"]["stamp"])
+        cells_odom = occupied_cells(pts, runs["pca"]["odom"])
         scored = {}
         for a, r in runs.items():
             t = r["summary"]["timing"]
@@ -197,6 +240,7 @@ def main() -> int:
                 "ms_step": 1e3 * t["t_total"] / max(r["summary"]["counts"]["steps"], 1),
                 "t_match": r["t_match"],
                 "sps": t["scans_per_second"],
+                "cells": occupied_cells(pts, r["pose"]) / cells_odom,
             }
             if name == "intel":
                 est, odo = relation_scores(r)
@@ -214,6 +258,12 @@ def main() -> int:
             print(row, flush=True)
         best = min(scored, key=lambda a: scored[a] if math.isfinite(scored[a]) else float("inf"))
         small_png(out / best / "segments.png", args.maps / f"{name}.png")
+        points_figure(
+            pts,
+            {"odometry": runs[best]["odom"], f"SLAM ({best})": runs[best]["pose"]},
+            f"{log.name}: scan points placed with each trajectory",
+            args.maps / f"{name}_points.png",
+        )
         notes.append(f"- {name}: best associator {best}; map `real_maps/{name}.png`")
 
     lines = [
@@ -226,14 +276,14 @@ def main() -> int:
         "not across runs.",
         "",
         "| log | assoc | steps | landmarks | corners/step | matched/corners | ms/step | match total s "
-        "| scans/s | accuracy (SLAM) | accuracy (odometry, same run) |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---|---|",
+        "| scans/s | map cells vs odometry | accuracy (SLAM) | accuracy (odometry, same run) |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---|---|",
     ]
     for r in rows:
         lines.append(
             f"| {r['log']} | {r['assoc']} | {r['steps']} | {r['landmarks']} | {r['corners']:.2f} "
             f"| {r['matched']:.2f} | {r['ms_step']:.1f} | {r['t_match']:.2f} | {r['sps']:.0f} "
-            f"| {r['acc']} | {r['odom_acc']} |"
+            f"| {r['cells']:.2f} | {r['acc']} | {r['odom_acc']} |"
         )
     lines += [
         "",

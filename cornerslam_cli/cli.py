@@ -386,18 +386,22 @@ def _print_summary(s: dict) -> None:
         f"{c['matched_total']} matches with {s['assoc']}"
     )
     click.echo(
-        f"time: extract {t['t_extract']:.2f}s predict {t['t_predict']:.2f}s match {t['t_match']:.2f}s "
+        f"time: extract {t['t_extract']:.2f}s scan match {t.get('t_scan_match', 0.0):.2f}s "
+        f"predict {t['t_predict']:.2f}s match {t['t_match']:.2f}s "
         f"update {t['t_update']:.2f}s ({t['scans_per_second']:.0f} steps/s), wall {t['wall_time']:.1f}s"
     )
     acc = s.get("accuracy") or {}
     if "ate" in acc:
         click.echo(
-            f"ATE RMSE {acc['ate']['rmse']:.3f} m (odometry {acc['odom_ate']['rmse']:.3f} m) "
-            f"against {acc['ground_truth']}"
+            f"ATE RMSE {acc['ate']['rmse']:.3f} m (odometry {acc['odom_ate']['rmse']:.3f} m"
+            + (f", scan-matched {acc['scan_odom_ate']['rmse']:.3f} m" if "scan_odom_ate" in acc else "")
+            + f") against {acc['ground_truth']}"
         )
     if "relations" in acc:
         click.echo(f"relations: {_relation_text(acc['relations'])}")
         click.echo(f"  odometry: {_relation_text(acc['odom_relations'])}")
+        if "scan_odom_relations" in acc:
+            click.echo(f"  scan-matched odometry: {_relation_text(acc['scan_odom_relations'])}")
     click.echo(f"wrote {s['out_dir']}")
 
 

@@ -25,6 +25,7 @@ from .association.params import AssociationConfig
 from .errors import ConfigError
 from .features.params import CornersConfig, LinesConfig, SensorConfig
 from .filter.params import EkfConfig
+from .motion.params import ScanMatchConfig
 
 
 @dataclass(frozen=True)
@@ -93,6 +94,7 @@ class KeyframeConfig:
 class Config:
     input: InputConfig = field(default_factory=InputConfig)
     keyframes: KeyframeConfig = field(default_factory=KeyframeConfig)
+    scan_match: ScanMatchConfig = field(default_factory=ScanMatchConfig)
     sensor: SensorConfig = field(default_factory=SensorConfig)
     lines: LinesConfig = field(default_factory=LinesConfig)
     corners: CornersConfig = field(default_factory=CornersConfig)

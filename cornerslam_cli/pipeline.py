@@ -28,6 +28,7 @@ from .features import extract
 from .filter import Ekf
 from .logs import open_log
 from .logs.sync import SyncStats, reanchor_odometry, select_keyframes, synchronise
+from .motion import ScanMatcher
 from .report.tables import (
     LINES_COLUMNS,
     MAP_COLUMNS,
@@ -90,12 +91,19 @@ class Frame:
     C: np.ndarray
     t_extract: float
     odom_jump: bool = False  # the odometry jumped since the previous keyframe (logs/sync.py)
+    # motion input of the filter: the scan-matched pose chain (motion/icp.py), or None = ``odom``
+    motion: np.ndarray | None = None
+    scan_matched: bool = False  # the increment into this frame came from scan matching
+    scan_fit: float = float("nan")  # share of the scan's points on the local map after matching
+    t_scan_match: float = 0.0
 
 
 def extract_frame(scan: Scan, odom: np.ndarray, cfg: Config, laser2base: tuple[float, float, float]) -> Frame:
     t0 = time.perf_counter()
     segments, corners = extract(scan, cfg.sensor, cfg.lines, cfg.corners)  # Alg 1-2
     z, C = corners_to_base(corners, laser2base)
+    C[:, 0, 0] += cfg.corners.model_sigma**2
+    C[:, 1, 1] += cfg.corners.model_sigma**2
     return Frame(scan.stamp, odom, len(scan.ranges), segments, z, C, time.perf_counter() - t0)
 
 
@@ -108,6 +116,7 @@ class StepRecord:
     pose: np.ndarray
     pose_var: np.ndarray
     odom: np.ndarray
+    motion: np.ndarray  # the filter's motion input: scan-matched odometry, or odom
     n_points: int
     n_lines: int
     n_corners: int
@@ -122,10 +131,12 @@ class StepRecord:
     segments_map: np.ndarray
     nodes: int = 0
     budget_hit: bool = False
+    t_scan_match: float = 0.0
+    scan_fit: float = float("nan")
 
     @property
     def t_total(self) -> float:
-        return self.t_extract + self.t_predict + self.t_match + self.t_update
+        return self.t_extract + self.t_scan_match + self.t_predict + self.t_match + self.t_update
 
 
 class Slam:
@@ -145,12 +156,15 @@ class Slam:
         """One step of the paper's loop on an extracted frame: predict, associate, update, augment."""
         k = self.n_steps
         odom, z, C = frame.odom, frame.z, frame.C
+        motion = odom if frame.motion is None else frame.motion
         t1 = time.perf_counter()
         if self.prev_odom is not None:
-            self.ekf.predict(self.prev_odom, odom)  # eq 19-22, O(N)
-            if frame.odom_jump:  # odometry re-anchored across a jump: the motion there is unknown
+            sm = self.cfg.scan_match
+            noise = (sm.alphas, sm.floor) if frame.scan_matched else (None, None)
+            self.ekf.predict(self.prev_odom, motion, *noise)  # eq 19-22, O(N)
+            if frame.odom_jump and not frame.scan_matched:  # re-anchored across a jump: motion unknown
                 self.ekf.inflate_pose(self.cfg.input.odom_jump.sigma_xy, self.cfg.input.odom_jump.sigma_theta)
-        self.prev_odom = odom
+        self.prev_odom = motion
         t2 = time.perf_counter()
         result = self.associate(z, C, self.ekf.predict_observations())  # Alg 3-5
         t3 = time.perf_counter()
@@ -177,6 +191,7 @@ class Slam:
             pose=pose,
             pose_var=np.diag(self.ekf.P[:3, :3]).copy(),
             odom=odom,
+            motion=motion,
             n_points=frame.n_points,
             n_lines=len(frame.segments),
             n_corners=len(z),
@@ -185,6 +200,8 @@ class Slam:
             n_new=int(len(new_ids)),
             n_landmarks=self.ekf.n_landmarks,
             t_extract=frame.t_extract,
+            t_scan_match=frame.t_scan_match,
+            scan_fit=frame.scan_fit,
             t_predict=t2 - t1,
             t_match=t3 - t2,
             t_update=t4 - t3,
@@ -236,6 +253,7 @@ class Input:
     laser_source: str
     total_scans: int
     stats: SyncStats
+    matcher: ScanMatcher | None = None  # scan matching of the motion input (scan_match.enabled)
 
 
 def open_input(log_path: str | Path, cfg: Config) -> Input:
@@ -251,7 +269,8 @@ def open_input(log_path: str | Path, cfg: Config) -> Input:
     reader.check()
     info = reader.info()
     laser2base, source = _laser_mount(reader, cfg)
-    return Input(Path(log_path), reader, info, laser2base, source, _scan_count(info), SyncStats())
+    matcher = ScanMatcher(cfg.scan_match) if cfg.scan_match.enabled else None
+    return Input(Path(log_path), reader, info, laser2base, source, _scan_count(info), SyncStats(), matcher)
 
 
 def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None = None) -> Iterator[Frame]:
@@ -262,11 +281,23 @@ def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None 
     synced = synchronise(msgs, src.stats)
     pairs = select_keyframes(synced, cfg.keyframes, src.stats)
     jumps = 0
+    laser2base = se2_matrix(*src.laser2base)
     for scan, odom in pairs:
         frame = extract_frame(scan, odom, cfg, src.laser2base)
         if src.stats.odom_jumps > jumps:
             jumps = src.stats.odom_jumps
             frame = replace(frame, odom_jump=True)
+        if src.matcher is not None:
+            t0 = time.perf_counter()
+            points = scan.points() @ laser2base[:2, :2].T + laser2base[:2, 2]
+            m = src.matcher.step(points, odom)
+            frame = replace(
+                frame,
+                motion=m.pose,
+                scan_matched=m.matched and src.matcher.n_matched + src.matcher.n_fallback > 0,
+                scan_fit=m.fit,
+                t_scan_match=time.perf_counter() - t0,
+            )
         yield frame
         if progress is not None:
             progress(src.stats.scans_in, src.total_scans)
@@ -322,8 +353,15 @@ def load_reference(
     )
 
 
-def accuracy_of(stamps: np.ndarray, poses: np.ndarray, odoms: np.ndarray, ref: Reference) -> dict | None:
-    """ATE/RPE against the ground truth and the relation metric, for the estimate and for odometry."""
+def accuracy_of(
+    stamps: np.ndarray,
+    poses: np.ndarray,
+    odoms: np.ndarray,
+    ref: Reference,
+    scan_odoms: np.ndarray | None = None,
+) -> dict | None:
+    """ATE/RPE against the ground truth and the relation metric, for the estimate and for odometry (and
+    for the scan-matched odometry when there is one: what the corners add on top of it)."""
     acc: dict = {}
     if ref.gt is not None:
         acc.update(
@@ -332,12 +370,16 @@ def accuracy_of(stamps: np.ndarray, poses: np.ndarray, odoms: np.ndarray, ref: R
             odom_ate=ate(stamps, odoms, *ref.gt),
             **rpe(stamps, poses, *ref.gt),
         )
+        if scan_odoms is not None:
+            acc["scan_odom_ate"] = ate(stamps, scan_odoms, *ref.gt)
     if ref.relations is not None:
         acc.update(
             relations_file=str(ref.relations_path),
             relations=relation_error(stamps, poses, ref.relations, ref.time_offset),
             odom_relations=relation_error(stamps, odoms, ref.relations, ref.time_offset),
         )
+        if scan_odoms is not None:
+            acc["scan_odom_relations"] = relation_error(stamps, scan_odoms, ref.relations, ref.time_offset)
     return acc or None
 
 
@@ -356,21 +398,23 @@ def run_frames(
         traj = CsvTable(stage.path / "trajectory.csv", TRAJECTORY_COLUMNS)
         timing = CsvTable(stage.path / "timing.csv", TIMING_COLUMNS)
         lines = CsvTable(stage.path / "lines.csv", LINES_COLUMNS)
-        track = array("d")  # stamp, pose, odom per step: 56 bytes a step (a list of arrays: ~300)
-        totals = np.zeros(4)
+        track = array("d")  # stamp, pose, odom, motion per step: 80 bytes a step (a list of arrays: ~400)
+        totals = np.zeros(5)
         t_match_max, budget_hits, matched_total, points_total = 0.0, 0, 0, 0
         for frame in frame_iter:
             r = slam.step(frame)
-            traj.row(r.step, f"{r.stamp:.9f}", *r.pose, *r.odom, *r.pose_var)
+            traj.row(r.step, f"{r.stamp:.9f}", *r.pose, *r.odom, *r.pose_var, *r.motion)
             timing.row(
                 r.step, f"{r.stamp:.9f}", r.n_points, r.n_lines, r.n_corners, r.n_candidates, r.n_matched,
                 r.n_new, r.n_landmarks, r.t_extract, r.t_predict, r.t_match, r.t_update, r.t_total,
+                r.t_scan_match, r.scan_fit,
             )  # fmt: skip
             lines.rows(r.segments_map, lead=(r.step,))
             track.append(r.stamp)
             track.extend(r.pose)
             track.extend(r.odom)
-            totals += (r.t_extract, r.t_predict, r.t_match, r.t_update)
+            track.extend(r.motion)
+            totals += (r.t_extract, r.t_predict, r.t_match, r.t_update, r.t_scan_match)
             t_match_max = max(t_match_max, r.t_match)
             budget_hits += r.budget_hit
             matched_total += r.n_matched
@@ -394,10 +438,11 @@ def run_frames(
         for row in lm:
             mp.row(*(int(v) if i in (0, 8, 9, 10) else v for i, v in enumerate(row)))
         mp.close()
-        track_a = np.frombuffer(track, dtype=float).reshape(-1, 7)
+        track_a = np.frombuffer(track, dtype=float).reshape(-1, 10)
         stamps_a, poses_a, odoms_a = track_a[:, 0], track_a[:, 1:4], track_a[:, 4:7]
+        motion_a = track_a[:, 7:10] if src.matcher is not None else None
         write_tum(stage.path / "trajectory.tum", stamps_a, poses_a)
-        accuracy = accuracy_of(stamps_a, poses_a, odoms_a, ref)
+        accuracy = accuracy_of(stamps_a, poses_a, odoms_a, ref, motion_a)
         summary = {
             "cornerslam_version": __version__,
             "mode": "slam",
@@ -422,12 +467,14 @@ def run_frames(
                 "messages_failed": reader.stats.decode_failed,
                 **stats.as_dict(),
                 "budget_hits": int(budget_hits),
+                **_scan_match_counts(src.matcher),
             },
             "timing": {
                 "t_extract": totals[0],
                 "t_predict": totals[1],
                 "t_match": totals[2],
                 "t_update": totals[3],
+                "t_scan_match": totals[4],
                 "t_total": float(totals.sum()),
                 "t_match_max": t_match_max,
                 "wall_time": time.perf_counter() - wall0,
@@ -468,6 +515,13 @@ def _scans_prepared(reader, cfg: Config):
                 range_max=msg.range_max if max_range <= 0.0 else min(max_range, msg.range_max),
             )
         yield msg
+
+
+def _scan_match_counts(matcher: ScanMatcher | None) -> dict:
+    if matcher is None:
+        return {}
+    return {"scans_matched": matcher.n_matched, "scans_match_retried": matcher.n_retried,
+            "scans_match_fallback": matcher.n_fallback}  # fmt: skip
 
 
 def _laser_mount(reader, cfg: Config) -> tuple[tuple[float, float, float], str]:

@@ -333,8 +333,8 @@ def build_corpus(d: str | Path) -> dict[str, tuple[Path, Expected]]:
             f"odom_{name}",
             write_gt(write_mcap(d / f"odom_{name}.mcap", make_scans(), make_odoms(edit=edit))),
             Expected(
-                "processed; the jump is not applied as motion (odometry re-anchored, robot "
-                "uncertainty inflated), counted, warned",
+                "processed; the jump is not applied as motion (odometry re-anchored; scan matching "
+                "finds the motion, or without it the robot uncertainty is inflated), counted, warned",
                 0,
                 ("odometry jumped",),
                 dict(VALID_COUNTS, odom_jumps=1),

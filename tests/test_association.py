@@ -30,7 +30,7 @@ ALPHA = 0.05
 
 
 def cfg_for(method: str, **kw) -> AssociationConfig:
-    return dataclasses.replace(AssociationConfig(method=method), **kw)
+    return dataclasses.replace(AssociationConfig(method=method, euclidean_gate=0.0), **kw)
 
 
 def chi2_of(dof):
@@ -166,7 +166,10 @@ def test_phi_innovation_is_wrapped():
     p = random_problem(rng, 4, 6)
     z = p.z.copy()
     z[:, 2] += 2 * np.pi
-    g0, g1 = gate(p.z, p.C, p.pred, AssociationConfig()), gate(z, p.C, p.pred, AssociationConfig())
+    g0, g1 = (
+        gate(p.z, p.C, p.pred, AssociationConfig(euclidean_gate=0.0)),
+        gate(z, p.C, p.pred, AssociationConfig(euclidean_gate=0.0)),
+    )
     np.testing.assert_allclose(g0.d2, g1.d2, rtol=1e-9)
 
 
@@ -174,7 +177,7 @@ def test_phi_innovation_is_wrapped():
 def test_incremental_joint_d2_equals_stacked_solve(use_phi):
     """Random push/pop sequences: every D² equals νᵀS⁻¹ν of the stacked hypothesis."""
     rng = np.random.default_rng(6)
-    cfg = AssociationConfig(use_phi=use_phi)
+    cfg = AssociationConfig(use_phi=use_phi, euclidean_gate=0.0)
     d = 3 if use_phi else 2
     for _ in range(10):
         p = random_problem(rng, 7, 12)

@@ -299,3 +299,16 @@ def test_relations_are_scored_in_run_and_compare(sim_log, tmp_path):
     assert res.exit_code == 0, res.output
     rows = read_csv(tmp_path / "c" / "comparison.csv")
     assert np.all(rows["rel_trans_mean"] < rows["odom_rel_trans_mean"])
+
+
+def test_output_columns_extend_the_interface_and_never_change_it():
+    """INTERFACE.md's columns come first and in order; ours are appended after them."""
+    from cornerslam_cli.report.tables import TIMING_COLUMNS, TRAJECTORY_COLUMNS
+
+    traj = "step,stamp,x,y,theta,odom_x,odom_y,odom_theta,var_x,var_y,var_theta".split(",")
+    timing = (
+        "step,stamp,n_points,n_lines,n_corners,n_candidates,n_matched,n_new,n_landmarks,"
+        "t_extract,t_predict,t_match,t_update,t_total"
+    ).split(",")
+    assert list(TRAJECTORY_COLUMNS[: len(traj)]) == traj
+    assert list(TIMING_COLUMNS[: len(timing)]) == timing

@@ -54,7 +54,9 @@ class PcaConfig:
 class AssociationConfig:
     method: str = "pca"  # a name in association.ASSOCIATORS
     alpha: float = 0.05  # gates at χ²(d·k, 1 − alpha), d = 3 (2 without phi)
-    euclidean_gate: float = 0.0  # metres; pairs farther apart skip the Mahalanobis test; 0 = off
+    # metres; pairs farther apart are never paired, whatever the covariance says; 0 = off. A robot
+    # covariance grown to metres otherwise lets one corner "close a loop" metres away (docs/tuning.md)
+    euclidean_gate: float = 0.5
     use_phi: bool = True  # the corner angle is part of the measurement
     jcbb: JcbbConfig = field(default_factory=JcbbConfig)
     pca: PcaConfig = field(default_factory=PcaConfig)

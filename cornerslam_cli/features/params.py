@@ -96,6 +96,10 @@ class CornersConfig:
     endpoint_phi: float = math.pi / 2  # φ given to type II corners (the end line meets its normal), radians
     endpoint_phi_sigma: float = math.radians(10.0)  # prior σ of that φ (it is not measured), radians
     duplicate_radius: float = 0.1  # corners closer than this are one corner: the most certain is kept, m
+    # σ of how far a real corner is from an ideal point (rounded edges, skirting, segment-end bias), m:
+    # added to the x and y variance of every corner the *filter* sees (pipeline.extract_frame); the
+    # extractor's own covariance stays the propagated sensor noise that the Monte Carlo tests check
+    model_sigma: float = 0.12
 
     def __post_init__(self):
         _check(self.d_min > 0.0, "corners.d_min must be > 0")
@@ -106,3 +110,4 @@ class CornersConfig:
         _check(0.0 <= self.endpoint_phi <= math.pi, "corners.endpoint_phi must be in [0, pi]")
         _check(self.endpoint_phi_sigma > 0.0, "corners.endpoint_phi_sigma must be > 0")
         _check(self.duplicate_radius >= 0.0, "corners.duplicate_radius must be >= 0")
+        _check(self.model_sigma >= 0.0, "corners.model_sigma must be >= 0")

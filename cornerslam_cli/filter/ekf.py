@@ -101,15 +101,24 @@ class Ekf:
         return (len(self._mu_buf) - 3) // 3
 
     # ------------------------------------------------------------------ prediction (eq 19–22)
-    def predict(self, odom_prev: np.ndarray, odom_cur: np.ndarray) -> np.ndarray:
+    def predict(
+        self,
+        odom_prev: np.ndarray,
+        odom_cur: np.ndarray,
+        alphas: tuple[float, float, float, float] | None = None,
+        floor: tuple[float, float] | None = None,
+    ) -> np.ndarray:
         """Move the robot by the odometry between two keyframe poses (x, y, θ); O(N).
 
-        Returns the increment (rot1, trans, rot2) that was applied.
+        ``alphas``, ``floor`` = (σ_xy, σ_θ): the motion noise of this increment (default ``ekf.alpha1..4``
+        and ``ekf.min_sigma_xy/theta``; the scan-matched increments of motion/icp.py bring their own).
+        Returns the increment (rot1, trans, rot2) applied.
         """
         cfg = self.cfg
         u = odometry_increment(odom_prev, odom_cur, cfg.pure_rotation_eps, cfg.reverse_motion)
         pose_new, G, _ = motion_model(self._mu_buf[:3], u)
-        R = motion_noise(u, self._mu_buf[2], cfg.alphas, cfg.min_sigma_xy, cfg.min_sigma_theta)
+        sigma_xy, sigma_theta = floor or (cfg.min_sigma_xy, cfg.min_sigma_theta)
+        R = motion_noise(u, self._mu_buf[2], alphas or cfg.alphas, sigma_xy, sigma_theta)
         P, d = self._P_buf, self._dim
         P_rr = G @ P[:3, :3] @ G.T + R  # eq 22, robot block
         P[:3, :3] = 0.5 * (P_rr + P_rr.T)

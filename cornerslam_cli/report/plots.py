@@ -36,7 +36,13 @@ log = logging.getLogger(__name__)
 
 DPI = 120
 ELLIPSE_SIGMA = 3.0  # ellipses are drawn at ±3σ along each principal axis
-COLORS = {"corrected": "tab:blue", "odometry": "tab:red", "ground_truth": "black", "landmark": "tab:green"}
+COLORS = {
+    "corrected": "tab:blue",
+    "odometry": "tab:red",
+    "scan_odometry": "tab:orange",
+    "ground_truth": "black",
+    "landmark": "tab:green",
+}
 ASSOC_COLORS = {"icnn": "tab:orange", "jcbb": "tab:purple", "pca": "tab:blue"}
 
 RUN_FIGURES = ("map.png", "segments.png", "timing.png", "corners.png")
@@ -48,6 +54,7 @@ class RunData:
     """One run directory's tables, with the trajectories expressed in the map frame.
 
     corrected, odometry : (n, 3) x, y [m], θ [rad] per step, map frame.
+    scan_odometry : (n, 3) the scan-matched odometry (map frame), or None when scan matching was off.
     ground_truth : (g, 3) SE(2)-aligned onto ``corrected``, or None.
     landmarks : map.csv columns; lines : lines.csv columns; timing : timing.csv columns.
     """
@@ -59,6 +66,7 @@ class RunData:
     steps: np.ndarray
     corrected: np.ndarray
     odometry: np.ndarray
+    scan_odometry: np.ndarray | None
     ground_truth: np.ndarray | None
     landmarks: dict[str, np.ndarray]
     lines: dict[str, np.ndarray]
@@ -76,6 +84,9 @@ def load_run(out_dir: str | Path) -> RunData:
     traj = read_csv(out_dir / "trajectory.csv")
     corrected = np.column_stack((traj["x"], traj["y"], traj["theta"]))
     odom = np.column_stack((traj["odom_x"], traj["odom_y"], traj["odom_theta"]))
+    scan_odom = None
+    if "scan_odom_x" in traj and (summary.get("config", {}).get("scan_match", {}).get("enabled")):
+        scan_odom = np.column_stack((traj["scan_odom_x"], traj["scan_odom_y"], traj["scan_odom_theta"]))
     return RunData(
         out_dir=out_dir,
         summary=summary,
@@ -84,6 +95,7 @@ def load_run(out_dir: str | Path) -> RunData:
         steps=traj["step"],
         corrected=corrected,
         odometry=odom_in_map(odom, corrected),
+        scan_odometry=None if scan_odom is None else odom_in_map(scan_odom, corrected),
         ground_truth=_aligned_ground_truth(summary, traj["stamp"], corrected),
         landmarks=read_csv(out_dir / "map.csv"),
         lines=read_csv(out_dir / "lines.csv"),
@@ -185,6 +197,11 @@ def _draw_map(ax, run: RunData, segments_alpha: float = 0.18, legend: bool = Tru
                 label="ground truth (aligned)")  # fmt: skip
     o, c = run.odometry, run.corrected
     ax.plot(o[:, 0], o[:, 1], color=COLORS["odometry"], lw=0.9, ls="--", label="odometry")
+    if run.scan_odometry is not None:
+        m = run.scan_odometry
+        ax.plot(
+            m[:, 0], m[:, 1], color=COLORS["scan_odometry"], lw=0.9, ls="-.", label="scan-matched odometry"
+        )
     ax.plot(c[:, 0], c[:, 1], color=COLORS["corrected"], lw=1.2, label="corrected (EKF)")
     _draw_landmarks(ax, run.landmarks, label=f"landmarks ({len(run.landmarks.get('x', ()))}, 3σ)")
     if len(c):

@@ -19,12 +19,16 @@ from pathlib import Path
 
 import numpy as np
 
-TRAJECTORY_COLUMNS = "step,stamp,x,y,theta,odom_x,odom_y,odom_theta,var_x,var_y,var_theta".split(",")
+# INTERFACE.md's columns, then (an extension) the scan-matched odometry the filter used as motion input
+# (= odom_* when scan matching is off)
+TRAJECTORY_COLUMNS = (
+    "step,stamp,x,y,theta,odom_x,odom_y,odom_theta,var_x,var_y,var_theta,scan_odom_x,scan_odom_y,scan_odom_theta"
+).split(",")
 MAP_COLUMNS = "id,x,y,phi,var_x,var_y,cov_xy,var_phi,first_step,last_step,n_obs".split(",")
 LINES_COLUMNS = ["step", "x1", "y1", "x2", "y2"]
 TIMING_COLUMNS = (
     "step,stamp,n_points,n_lines,n_corners,n_candidates,n_matched,n_new,n_landmarks,"
-    "t_extract,t_predict,t_match,t_update,t_total"
+    "t_extract,t_predict,t_match,t_update,t_total,t_scan_match,scan_fit"
 ).split(",")
 COMPARISON_COLUMNS = (
     "assoc,steps,landmarks,matched_total,t_match_total,t_match_max,t_total,ate_rmse,"
