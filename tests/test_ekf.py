@@ -450,3 +450,26 @@ def test_tentative_landmarks_are_confirmed_or_dropped():
     assert ekf.n_landmarks == 1 and ekf.tentative.tolist() == [False] and ekf.n_obs.tolist() == [2]
     np.testing.assert_allclose(ekf.landmarks[0, :2], [2.0, 1.0], atol=0.05)
     assert Ekf(EkfConfig()).prune_tentative().tolist() == []  # stage off: identity remap
+
+
+def test_per_increment_motion_noise_equals_a_filter_configured_with_it():
+    """Scan-matched increments bring their own (alphas, floor): the same as a dense filter whose config
+    holds those values, and different from the wheel-odometry defaults."""
+    rng = np.random.default_rng(7)
+    mu, P = random_state(rng, 20)
+    alphas, floor = (0.0002, 0.0001, 0.0002, 0.0001), (0.01, 0.005)
+    own = dataclasses.replace(
+        EkfConfig(), alpha1=alphas[0], alpha2=alphas[1], alpha3=alphas[2], alpha4=alphas[3],
+        min_sigma_xy=floor[0], min_sigma_theta=floor[1],
+    )  # fmt: skip
+    ekf, ref, wheel = (
+        Ekf.from_state(EkfConfig(), mu, P),
+        DenseEkf(own, mu, P),
+        Ekf.from_state(EkfConfig(), mu, P),
+    )
+    a, b = np.array([0.3, -0.2, 0.1]), np.array([0.9, 0.1, 0.5])
+    ekf.predict(a, b, alphas, floor)
+    ref.predict(a, b)
+    wheel.predict(a, b)
+    assert_same_state(ekf, ref)
+    assert wheel.P[2, 2] > 2 * ekf.P[2, 2] - P[2, 2]

@@ -35,7 +35,7 @@ from .params import ScanMatchConfig
 NORMAL_NEIGHBOURS = 5
 NORMAL_MAX_SPREAD = 0.5  # m: the 5th neighbour farther than this → no normal (isolated point)
 NORMAL_FLATNESS = 0.2  # smaller / larger eigenvalue of the neighbourhood scatter below this → on a line
-SHRINK = 0.7
+SHRINK = 0.5
 CONVERGED = 1e-5  # largest step component (m or rad) that ends the iterations
 
 
@@ -84,17 +84,27 @@ def line_normals(points: np.ndarray, tree: cKDTree) -> tuple[np.ndarray, np.ndar
 
 @dataclass
 class LocalMap:
-    """Map points (k, 2), their kd-tree, unit normals (k, 2) and which points have a usable normal."""
+    """Map points (k, 2), their kd-tree, unit normals (k, 2) and which points have a usable normal.
+
+    ``padded_points``/``padded_normals`` have one extra row (a zero normal) at index k, where the
+    kd-tree sends queries with no neighbour in range: residual and Jacobian rows of such points, and of
+    points without a normal, are then zero without any masking.
+    """
 
     points: np.ndarray
     tree: cKDTree
     normals: np.ndarray
     has_normal: np.ndarray
+    padded_points: np.ndarray
+    padded_normals: np.ndarray
 
     @staticmethod
     def build(points: np.ndarray) -> LocalMap:
         tree = cKDTree(points)
-        return LocalMap(points, tree, *line_normals(points, tree))
+        normals, has_normal = line_normals(points, tree)
+        padded_points = np.vstack((points, np.zeros((1, 2))))
+        padded_normals = np.vstack((np.where(has_normal[:, None], normals, 0.0), np.zeros((1, 2))))
+        return LocalMap(points, tree, normals, has_normal, padded_points, padded_normals)
 
 
 @dataclass(frozen=True)
@@ -114,27 +124,28 @@ def register(
     dmax = cfg.max_distance
     for _ in range(cfg.max_iterations):
         q = points @ M[:2, :2].T + M[:2, 2]
-        dist, idx = local.tree.query(q, distance_upper_bound=dmax)
-        use = np.isfinite(dist)
-        use[use] = local.has_normal[idx[use]]
-        if use.sum() < 3:
+        _, idx = local.tree.query(q, distance_upper_bound=dmax)
+        n = local.padded_normals[idx]  # zero rows: no neighbour in range, or a neighbour with no normal
+        if np.count_nonzero(np.abs(n).sum(axis=1)) < 3:  # fewer than 3 usable correspondences
             break
-        a, n = q[use], local.normals[idx[use]]
-        r = np.einsum("ij,ij->i", a - local.points[idx[use]], n)
+        r = np.einsum("ij,ij->i", q - local.padded_points[idx], n)
         w = 1.0 / (1.0 + (r / cfg.robust_scale) ** 2)  # Cauchy
-        # ∂r/∂(tx, ty, ω) for a small left-multiplied motion: (n_x, n_y, a × n)
-        J = np.column_stack((n[:, 0], n[:, 1], a[:, 0] * n[:, 1] - a[:, 1] * n[:, 0]))
+        # ∂r/∂(x, y, θ) of the pose itself (turning about the robot, not the map origin: far from the
+        # origin that keeps rotation and translation decoupled): (n_x, n_y, (q − t) × n)
+        rel = q - M[:2, 2]
+        J = np.column_stack((n[:, 0], n[:, 1], rel[:, 0] * n[:, 1] - rel[:, 1] * n[:, 0]))
         off = pose_of(M) - guess
         off[2] = wrap_angle(off[2])
-        H = (J * w[:, None]).T @ J + np.diag(prior_info)
-        g = (J * w[:, None]).T @ r + prior_info * off
+        Jw = J * w[:, None]
+        H = Jw.T @ J + np.diag(prior_info)
+        g = Jw.T @ r + prior_info * off
         step = -np.linalg.solve(H, g)
-        M = se2(step) @ M
+        M = se2(pose_of(M) + step)
         dmax = max(cfg.min_distance, dmax * SHRINK)
         if np.abs(step).max() < CONVERGED and dmax <= cfg.min_distance:
             break
     pose = pose_of(M)
-    dist, _ = local.tree.query(transform(points, pose))
+    dist, _ = local.tree.query(transform(points, pose), distance_upper_bound=cfg.inlier_distance)
     return pose, float(np.mean(dist < cfg.inlier_distance))
 
 
@@ -204,7 +215,8 @@ class ScanMatcher:
         if len(points) < NORMAL_NEIGHBOURS:
             return
         self.last_map_pose = pose.copy()
-        self.scans.append(transform(points, pose))
+        placed = transform(points, pose)
+        self.scans.append(placed[voxel_thin(placed, cfg.voxel)])  # thinned alone first: a smaller union
         pts = np.concatenate(self.scans)
         self.local = LocalMap.build(pts[voxel_thin(pts, cfg.voxel)])
 

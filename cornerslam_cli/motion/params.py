@@ -22,7 +22,7 @@ class ScanMatchConfig:
     scan_voxel: float = 0.05  # m: the scan being matched thinned the same way (speed); 0 = off
     max_iterations: int = 30
     max_distance: float = 1.0  # m: correspondence distance at the first iteration ...
-    min_distance: float = 0.1  # m: ... shrunk by 0.7 per iteration down to this
+    min_distance: float = 0.1  # m: ... shrunk by half per iteration down to this
     robust_scale: float = 0.05  # m: Cauchy kernel scale on the point-to-line residual
     inlier_distance: float = 0.1  # m: a point within this of the map counts for the fit
     retry_fit: float = 0.65  # fit below this: retry from headings ±retry_angle around the wheel guess
