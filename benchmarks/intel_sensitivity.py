@@ -27,6 +27,7 @@ VARIANTS = [
     ("association.euclidean_gate", ["0", "0.3", "1.0"]),
     ("scan_match.window", ["5", "20"]),
     ("scan_match.sigma_theta", ["0.0017", "0.01"]),
+    ("scan_match.alpha1", ["0.0001", "0.0002"]),
     ("association.alpha", ["0.01"]),
     ("corners.endpoints", ["false"]),
     ("scan_match.enabled", ["false"]),

@@ -31,11 +31,13 @@ class ScanMatchConfig:
     min_fit: float = 0.3  # fit below this after retries: use the wheel odometry increment
     prior_sigma_xy: float = 0.5  # m: weak pull towards the wheel guess (fixes corridor degeneracy)
     prior_sigma_theta: float = 0.5  # rad
-    # motion noise of a matched increment: R = V diag(α-model) Vᵀ + diag(σ_xy², σ_xy², σ_θ²). A scan
-    # match errs by about the same amount however far the robot moved, so the constant terms dominate
-    # (measured on Intel against the RBPF poses: docs/tuning.md)
-    alpha1: float = 0.0002  # rot → rot
-    alpha2: float = 0.0001  # trans → rot
+    # motion noise of a matched increment: R = V diag(α-model) Vᵀ + diag(σ_xy², σ_xy², σ_θ²), fitted on
+    # Intel against the RBPF increments (least squares on the squared errors, which include the RBPF's
+    # own): heading var ≈ 2.8e-5·Δθ² + 1.2e-5·d² + 7.6e-5, position var per axis ≈ 2e-4·(d² + Δθ²) +
+    # 4e-4. Inflating the heading terms (α1 = 2e-4 was tried) lets close corners turn the filter away
+    # from the matcher's heading during spins in place (docs/tuning.md)
+    alpha1: float = 0.00003  # rot → rot
+    alpha2: float = 0.000012  # trans → rot
     alpha3: float = 0.0002  # trans → trans
     alpha4: float = 0.0001  # rot → trans
     sigma_xy: float = 0.01  # m per increment
