@@ -259,6 +259,10 @@ def test_compare_runs_every_associator_on_the_same_frames(sim_log, tmp_path):
         t1["t_extract"], t2["t_extract"]
     )
     assert "ATE m" in res.output and "icnn" in res.output
+    # scan matching ran once for both: the same motion input, scored once on the summary line
+    assert rows["scan_odom_ate_rmse"][0] == rows["scan_odom_ate_rmse"][1] < rows["odom_ate_rmse"][0]
+    assert np.array_equal(t1["t_scan_match"], t2["t_scan_match"])
+    assert "scan-matched odometry (the filter's motion input): ATE" in res.output
     for name in ("report.html", "compare_matching.png", "compare_maps.png", "icnn/map.png", "pca/timing.png"):
         assert (out / name).stat().st_size > 1000, name
 

@@ -54,6 +54,8 @@ def comparison_row(s: dict) -> list:
         acc.get("relations", {}).get("trans_std", nan),
         acc.get("relations", {}).get("rot_mean_deg", nan),
         acc.get("odom_relations", {}).get("trans_mean", nan),
+        acc.get("scan_odom_ate", {}).get("rmse", nan),  # the motion input, the same for every associator
+        acc.get("scan_odom_relations", {}).get("trans_mean", nan),
     ]
 
 

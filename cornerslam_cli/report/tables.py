@@ -33,7 +33,7 @@ TIMING_COLUMNS = (
 COMPARISON_COLUMNS = (
     "assoc,steps,landmarks,matched_total,t_match_total,t_match_max,t_total,ate_rmse,"
     "odom_ate_rmse,rpe_trans_per_m,wall_time,budget_hits,rel_trans_mean,rel_trans_std,rel_rot_mean_deg,"
-    "odom_rel_trans_mean"
+    "odom_rel_trans_mean,scan_odom_ate_rmse,scan_odom_rel_trans_mean"
 ).split(",")
 
 
