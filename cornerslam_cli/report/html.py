@@ -133,7 +133,7 @@ def _summary_section(summary: dict) -> list[str]:
         ("landmarks", counts.get("landmarks", "")),
         ("matched corners", counts.get("matched_total", "")),
     ]
-    for key in ("t_extract", "t_predict", "t_match", "t_update", "t_total", "wall_time"):
+    for key in ("t_extract", "t_scan_match", "t_predict", "t_match", "t_update", "t_total", "wall_time"):
         if key in timing:
             pairs.append((f"{key.removeprefix('t_')} time [s]", float(timing[key])))
     if "t_match_max" in timing:

@@ -5,7 +5,7 @@
 - ``map.png`` (Fig 16): odometry and corrected trajectories, ground truth when the summary names one,
   landmarks with 3σ covariance ellipses, the segment map drawn faintly;
 - ``segments.png`` (Fig 20a): the segment map at the corrected poses with the landmark positions;
-- ``timing.png`` (Fig 17): per-step prediction / matching / update time;
+- ``timing.png`` (Fig 17): per-step prediction / matching / update time (and scan matching when on);
 - ``corners.png`` (Fig 18): detected vs matched corners per step, and new landmarks.
 
 ``plot_compare(DIR)`` reads a ``cornerslam compare`` output directory and writes
@@ -268,15 +268,18 @@ def _positive(v: np.ndarray) -> np.ndarray:
 def plot_timing(run: RunData, path: Path) -> Path:
     t = run.timing
     fig, (ax, ax2) = _figure(2, 1, figsize=(9, 6), sharex=True, height_ratios=(3, 1), layout="constrained")
-    for key, label, color in (
+    series = [
         ("t_predict", "prediction", "tab:gray"),
         ("t_match", "matching", "tab:orange"),
         ("t_update", "update", "tab:blue"),
-    ):
+    ]
+    if np.any(t.get("t_scan_match", np.zeros(1)) > 0):  # our motion front end, not in the paper's figure
+        series.append(("t_scan_match", "scan matching", "tab:purple"))
+    for key, label, color in series:
         ax.plot(t["step"], _positive(t[key] * 1e3), lw=0.7, color=color, label=label)
     ax.set_yscale("log")
     ax.set_ylabel("time per step [ms]")
-    ax.legend(loc="upper left", fontsize=8, ncol=3)
+    ax.legend(loc="upper left", fontsize=8, ncol=len(series))
     ax.grid(True, which="both", lw=0.3, alpha=0.5)
     ax.set_title(f"Per-step prediction, matching and update time (Fig 17) — {run.title}")
     ax2.plot(t["step"], t["n_landmarks"], color=COLORS["landmark"], lw=1.0)
