@@ -125,13 +125,8 @@ def revisit_misalignment(pts: list[np.ndarray], poses: np.ndarray) -> tuple[floa
     """(mean capped NN distance over revisited points, share of points revisited); see the docstring."""
     from scipy.spatial import cKDTree
 
-    world, owner = [], []
-    for k, (p, (x, y, th)) in enumerate(zip(pts, poses, strict=True)):
-        c, s = math.cos(th), math.sin(th)
-        world.append(np.column_stack((x + c * p[:, 0] - s * p[:, 1], y + s * p[:, 0] + c * p[:, 1])))
-        owner.append(np.full(len(p), k))
-    W, K = np.vstack(world), np.concatenate(owner)
-    block = K // REVISIT_BLOCK
+    W = place(pts, poses)
+    block = np.repeat(np.arange(len(pts)), [len(p) for p in pts]) // REVISIT_BLOCK  # by keyframe
     trees = {b: cKDTree(W[block == b]) for b in np.unique(block)}
     gap = REVISIT_GAP // REVISIT_BLOCK
     dists, total = [], 0
@@ -170,8 +165,9 @@ def place(pts: list[np.ndarray], poses: np.ndarray) -> np.ndarray:
 def occupied_cells(pts: list[np.ndarray], poses: np.ndarray, cell: float = CELL) -> int:
     """Distinct ``cell``-sized grid cells hit by the scan points placed with ``poses``: the same walls
     drawn twice (a doubled or fanned-out map) occupy more cells, so fewer = crisper."""
-    W = np.floor(place(pts, poses) / cell).astype(np.int64)
-    return len(np.unique((W[:, 0] << 32) + (W[:, 1] & 0xFFFFFFFF)))
+    from cornerslam_cli.motion.icp import voxel_thin
+
+    return len(voxel_thin(place(pts, poses), cell))  # one index per occupied cell
 
 
 def points_figure(pts: list[np.ndarray], runs: dict[str, np.ndarray], title: str, dst: Path) -> None:

@@ -362,7 +362,7 @@ def _print_comparison(summaries: list[dict]) -> None:
             rel, odom = a["relations"], a["odom_relations"]
             line += f" {_mean_std(rel):>16} {_mean_std(odom):>18}"
         click.echo(line)
-    a = summaries[0].get("accuracy") or {} if summaries else {}
+    a = (summaries[0].get("accuracy") or {}) if summaries else {}
     if "scan_odom_ate" in a or "scan_odom_relations" in a:  # the motion input: one for all associators
         parts = []
         if "scan_odom_ate" in a:

@@ -29,6 +29,7 @@ from .filter import Ekf
 from .logs import open_log
 from .logs.sync import SyncStats, reanchor_odometry, select_keyframes, synchronise
 from .motion import ScanMatcher
+from .motion.icp import se2, transform
 from .report.tables import (
     LINES_COLUMNS,
     MAP_COLUMNS,
@@ -45,11 +46,6 @@ from .types import Corners, Scan, Segments
 log = logging.getLogger(__name__)
 
 
-def se2_matrix(x: float, y: float, yaw: float) -> np.ndarray:
-    c, s = np.cos(yaw), np.sin(yaw)
-    return np.array([[c, -s, x], [s, c, y], [0.0, 0.0, 1.0]])
-
-
 def corners_to_base(
     corners: Corners, laser2base: tuple[float, float, float]
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -60,7 +56,7 @@ def corners_to_base(
     """
     x, y, yaw = laser2base
     J = np.eye(3)
-    J[:2, :2] = se2_matrix(0.0, 0.0, yaw)[:2, :2]
+    J[:2, :2] = se2((0.0, 0.0, yaw))[:2, :2]
     z = corners.z @ J.T
     z[:, 0] += x
     z[:, 1] += y
@@ -149,7 +145,7 @@ class Slam:
         self.associate = make_associator(cfg.association)
         self.first_step = np.zeros(0, dtype=np.int64)  # per landmark id, kept in step with the filter's ids
         self.last_step = np.zeros(0, dtype=np.int64)
-        self.prev_odom: np.ndarray | None = None
+        self.prev_motion: np.ndarray | None = None  # the previous frame's motion input
         self.n_steps = 0
 
     def step(self, frame: Frame) -> StepRecord:
@@ -158,13 +154,13 @@ class Slam:
         odom, z, C = frame.odom, frame.z, frame.C
         motion = odom if frame.motion is None else frame.motion
         t1 = time.perf_counter()
-        if self.prev_odom is not None:
+        if self.prev_motion is not None:
             sm = self.cfg.scan_match
             noise = (sm.alphas, sm.floor) if frame.scan_matched else (None, None)
-            self.ekf.predict(self.prev_odom, motion, *noise)  # eq 19-22, O(N)
+            self.ekf.predict(self.prev_motion, motion, *noise)  # eq 19-22, O(N)
             if frame.odom_jump and not frame.scan_matched:  # re-anchored across a jump: motion unknown
                 self.ekf.inflate_pose(self.cfg.input.odom_jump.sigma_xy, self.cfg.input.odom_jump.sigma_theta)
-        self.prev_odom = motion
+        self.prev_motion = motion
         t2 = time.perf_counter()
         result = self.associate(z, C, self.ekf.predict_observations())  # Alg 3-5
         t3 = time.perf_counter()
@@ -183,7 +179,7 @@ class Slam:
         self.ekf.check_health(k)
         t4 = time.perf_counter()
         pose = np.array(self.ekf.pose, dtype=float)
-        sensor2map = se2_matrix(*pose) @ se2_matrix(*self.laser2base)
+        sensor2map = se2(pose) @ se2(self.laser2base)
         self.n_steps += 1
         return StepRecord(
             step=k,
@@ -281,7 +277,6 @@ def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None 
     synced = synchronise(msgs, src.stats)
     pairs = select_keyframes(synced, cfg.keyframes, src.stats)
     jumps = 0
-    laser2base = se2_matrix(*src.laser2base)
     for scan, odom in pairs:
         frame = extract_frame(scan, odom, cfg, src.laser2base)
         if src.stats.odom_jumps > jumps:
@@ -289,12 +284,11 @@ def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None 
             frame = replace(frame, odom_jump=True)
         if src.matcher is not None:
             t0 = time.perf_counter()
-            points = scan.points() @ laser2base[:2, :2].T + laser2base[:2, 2]
-            m = src.matcher.step(points, odom)
+            m = src.matcher.step(transform(scan.points(), src.laser2base), odom)
             frame = replace(
                 frame,
                 motion=m.pose,
-                scan_matched=m.matched and src.matcher.n_matched + src.matcher.n_fallback > 0,
+                scan_matched=m.matched,
                 scan_fit=m.fit,
                 t_scan_match=time.perf_counter() - t0,
             )

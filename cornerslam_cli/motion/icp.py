@@ -22,7 +22,6 @@ point per voxel. Per scan:
 
 from __future__ import annotations
 
-import time
 from collections import deque
 from dataclasses import dataclass
 
@@ -162,15 +161,13 @@ class ScanMatcher:
         self.n_matched = 0
         self.n_retried = 0
         self.n_fallback = 0
-        self.seconds = 0.0
 
-    def step(self, points: np.ndarray, odom: np.ndarray, reset: bool = False) -> MatchResult:
+    def step(self, points: np.ndarray, odom: np.ndarray) -> MatchResult:
         """Refined pose of the scan whose base-frame ``points`` were taken at wheel pose ``odom``.
 
-        ``reset``: the odometry jumped since the previous scan; the wheel increment is the best guess
-        and the local map is kept (ICP usually recovers the jump).
+        Across an odometry jump (already re-anchored by logs/sync.py) the wheel increment is only the
+        first guess and the local map is kept: ICP usually recovers the motion.
         """
-        t0 = time.perf_counter()
         odom = np.asarray(odom, dtype=float)
         if self.pose is None:
             result = MatchResult(odom.copy(), 1.0, True)
@@ -179,7 +176,6 @@ class ScanMatcher:
             result = self._match(points, guess)
         self.pose, self.odom = result.pose, odom
         self._grow_map(points, result.pose)
-        self.seconds += time.perf_counter() - t0
         return result
 
     def _match(self, points: np.ndarray, guess: np.ndarray) -> MatchResult:
@@ -219,11 +215,3 @@ class ScanMatcher:
         self.scans.append(placed[voxel_thin(placed, cfg.voxel)])  # thinned alone first: a smaller union
         pts = np.concatenate(self.scans)
         self.local = LocalMap.build(pts[voxel_thin(pts, cfg.voxel)])
-
-    def stats(self) -> dict:
-        return {
-            "matched": self.n_matched,
-            "retried": self.n_retried,
-            "fallback": self.n_fallback,
-            "seconds": self.seconds,
-        }
