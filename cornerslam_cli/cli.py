@@ -45,9 +45,7 @@ def _config_options(f):
         metavar="KEY=VALUE",
         help="Override a config key, e.g. --set association.pca.group_size=5 (repeatable).",
     )(f)
-    f = click.option(
-        "--config", "config_path", type=click.Path(dir_okay=False), help="YAML config (default: built-in)."
-    )(f)
+    f = click.option("--config", "config_path", type=click.Path(), help="YAML config (default: built-in).")(f)
     return f
 
 
