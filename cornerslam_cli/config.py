@@ -32,7 +32,7 @@ from .errors import ConfigError
 from .features.params import CornersConfig, LinesConfig, SensorConfig
 from .filter.params import EkfConfig
 from .motion.params import ScanMatchConfig
-from .ranges import RangeError, check_ranges, num, short_repr
+from .ranges import RangeError, check_ranges, num, short_repr, short_text
 from .textfile import read_text
 
 TWO_PI = 2.0 * math.pi
@@ -221,7 +221,7 @@ def from_dict(cls: type, data: dict, prefix: str = "") -> Any:
     kwargs = {}
     for key, value in data.items():
         if key not in names:
-            name = short_repr(key)[1:-1] if isinstance(key, str) else short_repr(key)
+            name = short_text(key) if isinstance(key, str) else short_repr(key)
             raise ConfigError(f"unknown config key '{prefix}{name}'", _closest(str(key)[:100], names))
         kwargs[key] = _coerce(value, hints[key], prefix + key)
     try:
@@ -248,8 +248,7 @@ class _ConfigLoader(yaml.SafeLoader):
                 raise yaml.constructor.ConstructorError(
                     None,
                     None,
-                    f"key '{short_repr(key_node.value)[1:-1]}' is given twice (first at line "
-                    f"{seen[k].line + 1})",
+                    f"key '{short_text(key_node.value)}' is given twice (first at line {seen[k].line + 1})",
                     key_node.start_mark,
                 )
             seen[k] = key_node.start_mark
@@ -298,11 +297,14 @@ def _parse_yaml(text: str, where: str) -> Any:
         loader.dispose()
 
 
-def _yaml_problem(e: yaml.YAMLError) -> str:
-    """' at line N: what' from a PyYAML error (its mark and problem), '' when it has neither."""
+def _yaml_problem(e: yaml.YAMLError, text: str) -> str:
+    """' at line N: what' from a PyYAML error (its mark, context and problem), '' when it has none."""
+    if isinstance(e, yaml.reader.ReaderError):  # a control character: a position, no mark
+        line = text.count("\n", 0, e.position) + 1
+        return f" at line {line}: control character #x{e.character:02x} is not allowed"
     mark = getattr(e, "problem_mark", None)
-    problem = getattr(e, "problem", None)
-    return (f" at line {mark.line + 1}" if mark is not None else "") + (f": {problem}" if problem else "")
+    what = " ".join(t for t in (getattr(e, "context", None), getattr(e, "problem", None)) if t)
+    return (f" at line {mark.line + 1}" if mark is not None else "") + (f": {what}" if what else "")
 
 
 def read_config_file(path: str | Path) -> dict:
@@ -313,7 +315,7 @@ def read_config_file(path: str | Path) -> dict:
     try:
         loaded = _parse_yaml(text, where)
     except yaml.YAMLError as e:
-        raise ConfigError(f"{where} is not valid YAML{_yaml_problem(e)}", "fix the syntax") from None
+        raise ConfigError(f"{where} is not valid YAML{_yaml_problem(e, text)}", "fix the syntax") from None
     if loaded is None:
         return {}
     if not isinstance(loaded, dict):
@@ -322,7 +324,7 @@ def read_config_file(path: str | Path) -> dict:
 
 
 def _parse_override(text: str) -> tuple[list[str], Any]:
-    shown = short_repr(text)[1:-1]
+    shown = short_text(text)
     if "=" not in text:
         raise ConfigError(f"--set '{shown}' is not key=value", "e.g. --set association.alpha=0.01")
     key, raw = text.split("=", 1)

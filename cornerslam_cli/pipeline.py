@@ -363,7 +363,7 @@ def accuracy_of(
     the run in time (then there is no ATE/RPE, rather than NaN), no relation inside the run."""
     acc: dict = {}
     notes = list(ref.notes)
-    problem = overlap_problem(stamps, ref.gt[0], f"ground truth '{ref.gt_path}'") if ref.gt else None
+    problem = ref.gt is not None and overlap_problem(stamps, ref.gt[0], f"ground truth '{ref.gt_path}'")
     if problem:
         notes.append(f"{problem}: no ATE/RPE")
     elif ref.gt is not None:
@@ -384,8 +384,7 @@ def accuracy_of(
         if scan_odoms is not None:
             acc["scan_odom_relations"] = relation_error(stamps, scan_odoms, ref.relations, ref.time_offset)
         if acc["relations"]["n"] == 0:
-            rel = f"no relation in '{ref.relations_path}' falls inside the run's time span"
-            notes.append(f"{rel} (check --time-offset)")
+            notes.append(f"no relation in '{ref.relations_path}' falls inside the run (check --time-offset)")
     return acc or None, notes
 
 

@@ -32,6 +32,11 @@ def short_repr(value: Any, limit: int = 60) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
+def short_text(text: str, limit: int = 60) -> str:
+    """``text`` cut to about ``limit`` characters, as :func:`short_repr` shows it but without quotes."""
+    return short_repr(text, limit + 2)[1:-1]
+
+
 @dataclass(frozen=True)
 class Range:
     """An interval of allowed values: ``lo`` and ``hi`` included unless ``lo_open`` / ``hi_open``."""

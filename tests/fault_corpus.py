@@ -412,6 +412,8 @@ def _config_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
         ("a_list", "- ekf\n- lines\n", bad, ("must contain a mapping of sections, not list",)),
         ("a_scalar", "3\n", bad, ("must contain a mapping of sections, not int",)),
         ("section_scalar", "ekf: 3\n", bad, ("'ekf' must be a mapping, got 3",)),
+        ("control_char", "ekf:\n  alpha1: 0.05\n  alpha2: \x07\n", bad, ("line 3", "control character #x07")),
+        ("two_documents", "ekf: {}\n---\nekf: {}\n", bad, ("line 2", "expected a single document")),
         ("duplicated_key", "ekf:\n  alpha1: 0.1\n  alpha1: 0.2\n", bad, ("line 3", "is given twice")),
         ("number_as_key", "1: 2\n", bad, ("unknown config key '1'",)),
         ("bool_as_1", "ekf:\n  fuse: 1\n", bad, ("'ekf.fuse' must be true or false, got 1",)),
