@@ -21,6 +21,7 @@ import numpy as np
 from .errors import CornerslamError
 
 UTF16_BOMS = (codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)
+SNIFF_BYTES = 1 << 16  # a binary file (a multi-GB bag given as ground truth) is refused on these
 
 
 def read_text(
@@ -37,23 +38,33 @@ def read_text(
         raise error(f"{what} '{p}' is a directory", f"give {expected}")
     if not p.exists():
         raise error(f"{what} '{p}' does not exist", f"give {expected}")
+    name = f"{what} '{p}'"
     try:
         with open(p, "rb") as f:
-            raw = f.read() if max_bytes is None else f.read(max_bytes + 1)
+            head = f.read(SNIFF_BYTES)
+            refuse_binary(head, name, error, expected)  # before reading the rest of a huge file
+            rest = f.read() if max_bytes is None else f.read(max(max_bytes + 1 - len(head), 0))
     except OSError as e:
-        raise error(f"{what} '{p}' cannot be read: {e.strerror or e}", "check its permissions") from None
+        raise error(f"{name} cannot be read: {e.strerror or e}", "check its permissions") from None
+    raw = head + rest
     if max_bytes is not None and len(raw) > max_bytes:
-        too_big = f"{what} '{p}' is larger than {max_bytes // 1024} KiB"
-        raise error(too_big, f"is it the right file? expected {expected}")
-    return decode(raw, f"{what} '{p}'", error, expected)
+        raise error(
+            f"{name} is larger than {max_bytes // 1024} KiB", f"is it the right file? expected {expected}"
+        )
+    return decode(raw, name, error, expected)
 
 
-def decode(raw: bytes, name: str, error: type[CornerslamError], expected: str) -> str:
-    """``raw`` as UTF-8 text, else ``error`` naming ``name`` and what is wrong with the bytes."""
+def refuse_binary(raw: bytes, name: str, error: type[CornerslamError], expected: str) -> None:
+    """Raise ``error`` if ``raw`` (a file's bytes, or its first bytes) is UTF-16 or holds NUL bytes."""
     if raw.startswith(UTF16_BOMS):
         raise error(f"{name} is UTF-16 text", "convert it to UTF-8, e.g. iconv -f UTF-16 -t UTF-8")
     if b"\x00" in raw:
         raise error(f"{name} is a binary file (it contains NUL bytes), not text", f"expected {expected}")
+
+
+def decode(raw: bytes, name: str, error: type[CornerslamError], expected: str) -> str:
+    """``raw`` as UTF-8 text, else ``error`` naming ``name`` and what is wrong with the bytes."""
+    refuse_binary(raw, name, error, expected)
     try:
         return raw.decode("utf-8-sig")
     except UnicodeDecodeError as e:

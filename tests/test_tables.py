@@ -91,3 +91,21 @@ def test_read_tum_sorts_drops_repeats_and_refuses_two_poses_at_one_stamp(tmp_pat
     p.write_text("\n".join([*lines, "2 2.5 0 0 0 0 0 1"]) + "\n")
     with pytest.raises(LogError, match=r"two different poses at stamp 2\.0+ \(lines 4 and 5\)"):
         read_tum(p, "ground truth", notes.append)
+
+
+def test_a_huge_binary_file_is_refused_on_its_first_bytes(tmp_path):
+    """A 256 MiB bag given as ground truth is refused after reading 64 KiB, not loaded whole."""
+    import tracemalloc
+
+    p = tmp_path / "huge.bag"
+    with open(p, "wb") as f:
+        f.write(b"#ROSBAG V2.0\n\x00\x01")
+        f.truncate(256 << 20)  # sparse: no disk used
+    tracemalloc.start()
+    try:
+        with pytest.raises(LogError, match="huge.bag' is a binary file"):
+            read_tum(p, "ground truth")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 1 << 20, peak
