@@ -434,7 +434,8 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
     for t in i.topics:
         count = "?" if t.count is None else str(t.count)
         rate = f"{t.rate_hz:8.2f} Hz" if t.rate_hz else ""
-        click.echo(f"  {t.name:<28} {t.msgtype:<30} {count:>8} msgs {rate}")
+        note = f" [{t.encoding_note}]" if t.encoding_note else ""
+        click.echo(f"  {t.name:<28} {t.msgtype:<30} {count:>8} msgs {rate}{note}")
     click.echo("run would use:")
     click.echo(f"  scans     {i.scan_topic or '-'}")
     click.echo(f"  odometry  {i.odom_topic or '-'} ({i.odom_source or 'none found'})")

@@ -73,7 +73,7 @@ def test_fault_corpus_entry(corpus, name, tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     check_counts(summary["counts"], exp.counts)
     for f in exp.message:  # warnings also reach summary.json (first 100)
-        assert any(f in w for w in summary["warnings"]) or "went backwards" in f, summary["warnings"]
+        assert any(f in w for w in summary["warnings"]), summary["warnings"]
     traj = np.loadtxt(out / "trajectory.csv", delimiter=",", skiprows=1)
     assert np.isfinite(traj).all()
     assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".out.")]
