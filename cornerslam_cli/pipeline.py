@@ -235,7 +235,7 @@ def find_ground_truth(log_path: Path) -> Path | None:
 
 
 def default_out_dir(log_path: Path, assoc: str) -> Path:
-    stem = log_path.name.split(".")[0] or "log"
+    stem = display_path(log_path.name.split(".")[0]) or "log"  # a name that is not UTF-8: printable
     return Path("cornerslam_out") / f"{stem}_{assoc}"
 
 
