@@ -332,3 +332,49 @@ def test_reorder_buffer_limit_releases_early_with_a_warning(tmp_path, monkeypatc
     assert any("overlap in log time" in w for w in src.stats.warnings)
     monkeypatch.setattr(mcap_mod, "REORDER_BYTES", 64 << 20)
     assert [t for _, t, _ in src.raw_messages({"/scan", "/odom"})] == list(range(3000))
+
+
+def test_tf_quaternions_in_json_normalised_or_ignored(tmp_path):
+    """tf as JSON: odometry from tf odom→base_link with a ×2 quaternion gives the right yaw; a static
+    base_link→laser transform with a zero-length rotation is ignored (warned), not read as yaw 0; a
+    schemaless channel shows as '(no schema)'."""
+    import json
+    import math
+
+    from _log_fixtures import write_messages_mcap
+
+    from cornerslam_cli.logs.writers import JsonSerializer
+
+    js = JsonSerializer()
+
+    def tf(stamp, parent, child, x, q):
+        rot = dict(zip("xyzw", q, strict=True))
+        t = {"header": js.header(stamp, parent), "child_frame_id": child,
+             "transform": {"translation": {"x": x, "y": 0.0, "z": 0.0}, "rotation": rot}}  # fmt: skip
+        return json.dumps({"transforms": [t]}).encode()
+
+    scans, odoms = make_scans(10), make_odoms(10)
+    msgs = [("/tf_static", "tf2_msgs/msg/TFMessage", 0, tf(0.0, "base_link", "laser", 0.2, (0.0,) * 4))]
+    for o in odoms:
+        q = (0.0, 0.0, 2 * math.sin(o.theta / 2), 2 * math.cos(o.theta / 2))
+        msgs.append(
+            ("/tf", "tf2_msgs/msg/TFMessage", int(o.stamp * 1e9), tf(o.stamp, "odom", "base_link", o.x, q))
+        )
+    msgs += [("/scan", "sensor_msgs/msg/LaserScan", int(s.stamp * 1e9), js.laserscan(s)) for s in scans]
+    p = write_messages_mcap(tmp_path / "tf.mcap", sorted(msgs, key=lambda m: m[2]), encoding="json")
+    with open_log(p) as log:
+        got = [m for m in log.messages() if not hasattr(m, "ranges")]
+        assert log.laser_to_base() is None
+        assert any(
+            "base_link→laser has a zero-length rotation quaternion: ignored" in w for w in log.stats.warnings
+        )
+    assert [g.theta for g in got] == pytest.approx([o.theta for o in odoms], abs=1e-12)
+
+    from mcap.writer import Writer
+
+    with open(tmp_path / "nos.mcap", "wb") as f:
+        w = Writer(f)
+        w.start("", "test")
+        w.add_message(w.register_channel("/points", "json", 0), 1, b"{}", 1)
+        w.finish()
+    assert [t.msgtype for t in open_log(tmp_path / "nos.mcap").info().topics] == ["(no schema)"]

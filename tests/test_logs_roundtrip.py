@@ -168,3 +168,16 @@ def test_zero_is_a_valid_stamp(fmt, tmp_path):
     assert scans[0].stamp == 0.0 and got[0].stamp == 0.0
     assert [s.stamp for s in scans] == pytest.approx([r.stamp for r in raw], abs=1e-9)
     assert [o.stamp for o in got] == pytest.approx([o.stamp for o in odoms], abs=1e-9)
+
+
+def test_float32_round_off_in_quaternions_is_normalised_silently(tmp_path):
+    """A quaternion computed in float32 (norm off by ~1e-7) is normalised without a warning."""
+
+    def float32(o):
+        return tuple(float(np.float32(v)) for v in _quaternion_times(1.0)(o))
+
+    odoms = make_odoms()
+    with open_log(write_log("mcap-cdr", tmp_path, odoms=odoms, odom_quaternion=float32)) as log:
+        _, got = split(log.messages())
+        assert log.stats.warnings == []
+    assert [o.theta for o in got] == pytest.approx([o.theta for o in odoms], abs=1e-6)

@@ -47,8 +47,9 @@ Pose2 = tuple[float, float, float]
 
 
 def normalize_msgtype(name: str) -> str:
-    """``sensor_msgs/msg/LaserScan`` (ROS 2) and ``sensor_msgs/LaserScan`` (ROS 1) -> the latter."""
-    return name.replace("/msg/", "/")
+    """``sensor_msgs/msg/LaserScan`` (ROS 2) and ``sensor_msgs/LaserScan`` (ROS 1) -> the latter;
+    ``(no schema)`` for a channel without one (schemaless JSON: its type is unknown)."""
+    return name.replace("/msg/", "/") if name else "(no schema)"
 
 
 def ros2_typename(name: str) -> str:
@@ -149,7 +150,8 @@ class ReadStats:
     ) -> OdomSample | None:
         """The sample of a pose whose orientation is the quaternion q = (x, y, z, w), counted in
         ``odoms``; None (counted in ``decode_failed``, warned) if q has no direction (length ~0) or a
-        field is not finite. A q not of unit length is normalised (warned once)."""
+        field is not finite. A q not of unit length is normalised (warned once if off by more than
+        0.1 %: float32 round-off is not worth a warning)."""
         n2 = sum(v * v for v in q)
         if n2 < 1e-12:
             self.decode_failed += 1
@@ -160,7 +162,8 @@ class ReadStats:
                 )  # fmt: skip
             return None
         if math.isfinite(n2) and abs(n2 - 1.0) > 1e-9:  # unit within 1e-9: used as it is
-            self.warn("%s: odometry orientation quaternions are not of unit length: normalised", where)
+            if abs(n2 - 1.0) > 2e-3:
+                self.warn("%s: odometry orientation quaternions are not of unit length: normalised", where)
             s = 1.0 / math.sqrt(n2)
             q = (q[0] * s, q[1] * s, q[2] * s, q[3] * s)
         pose = (x, y, yaw_from_quaternion(*q))

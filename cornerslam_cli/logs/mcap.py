@@ -5,7 +5,8 @@ length. With a summary, chunks are read in the order of their start times from t
 the mcap package's reader does), so a file whose chunks are not in time order is read in order too;
 without one, in file order. Either way a heap merges the messages of chunks that overlap in time,
 releasing those older than the next chunk's first message (the start time in the chunk's header is
-not trusted: some writers leave it 0); it holds at most :data:`REORDER_BYTES` of messages.
+not trusted: some writers leave it 0). Besides the chunk being read it holds at most
+:data:`REORDER_BYTES` of messages; beyond that the oldest are released early, with a warning.
 
 A file whose recorder died (no summary, cut mid-record) yields every message before the cut,
 including the readable prefix of the cut chunk (zstd/lz4/uncompressed streams are decompressed
@@ -361,8 +362,8 @@ class McapSource:
         return self.index.start, self.index.end
 
     def raw_messages(self, topics: set[str]) -> Iterator[tuple[str, int, memoryview]]:
-        """Messages of ``topics`` in log-time order: a heap releases the messages older than the first
-        message of the next chunk, so overlapping chunks are merged, holding at most REORDER_BYTES."""
+        """Messages of ``topics`` in log-time order: a heap releases the messages not newer than the
+        first message of the next chunk, so overlapping chunks are merged in bounded memory."""
         ids = {cid: topic for cid, (topic, _, _) in self.index.channels.items() if topic in topics}
         chunks = self._index_order(set(ids)) if self.index.chunks else self._file_order(warn=True)
         heap: list[tuple[int, int, str, memoryview]] = []
