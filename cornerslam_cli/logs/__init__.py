@@ -84,10 +84,10 @@ def detect_format(path: str | Path) -> str:
     return fmt
 
 
-STREAM_HINT = "cornerslam reads a log several times: save it to a file first, e.g. `cat … > log.mcap`"
+_STREAM_HINT = "cornerslam reads a log several times: save it to a file first, e.g. `cat … > log.mcap`"
 _NOT_FILES = {  # file type -> (what it is, what to do)
-    stat.S_IFIFO: ("a pipe", STREAM_HINT),
-    stat.S_IFSOCK: ("a socket", STREAM_HINT),
+    stat.S_IFIFO: ("a pipe", _STREAM_HINT),
+    stat.S_IFSOCK: ("a socket", _STREAM_HINT),
     stat.S_IFCHR: ("a character device", f"give {SUPPORTED}"),
     stat.S_IFBLK: ("a block device", f"give {SUPPORTED}"),
 }
