@@ -43,7 +43,7 @@ from pathlib import Path
 from typing import Any
 
 from . import __version__
-from .errors import ConfigError, CornerslamError
+from .errors import ConfigError, CornerslamError, display_path
 
 BATCH_CSV = "batch.csv"
 FIGURES = [
@@ -157,7 +157,7 @@ def _safe(text: str) -> str:
 
 
 def _short_hash(text: str) -> str:
-    return hashlib.sha1(text.encode()).hexdigest()[:8]
+    return hashlib.sha1(os.fsencode(text)).hexdigest()[:8]
 
 
 def _log_labels(logs: Sequence[str]) -> dict[str, str]:
@@ -233,8 +233,8 @@ def run_batch(
         if c.log not in log_hashes:  # once per log, not per combination
             try:
                 log_hashes[c.log] = input_hash(Path(c.log))
-            except OSError:
-                log_hashes[c.log] = None  # the run reports the unreadable log
+            except (OSError, CornerslamError):
+                log_hashes[c.log] = None  # the run reports the unreadable log (or pipe)
         expect = {
             "input": log_hashes[c.log],
             "config": config_hash(from_dict(Config, c.config)),
@@ -278,7 +278,7 @@ def _size(path: str) -> int:
 
 
 def _row(c: Combo, status: str, error: str = "", figures: dict | None = None) -> dict:
-    row = {"log": c.log, "assoc": c.assoc, **dict(c.sweep), "status": status, "error": error}
+    row = {"log": display_path(c.log), "assoc": c.assoc, **dict(c.sweep), "status": status, "error": error}
     row.update({k: (figures or {}).get(k) for k in FIGURES})
     row["out_dir"] = c.name if status in ("ok", "skipped") else ""
     return row

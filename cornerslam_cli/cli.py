@@ -25,7 +25,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import click  # noqa: E402
 
 from . import __version__  # noqa: E402
-from .errors import ConfigError, CornerslamError  # noqa: E402
+from .errors import ConfigError, CornerslamError, display_path  # noqa: E402
 
 log = logging.getLogger("cornerslam")
 
@@ -245,7 +245,7 @@ def run(
 
     _setup_logging(verbose, quiet)
     cfg = _load(config_path, overrides, assoc, scan_topic, odom_topic, log_path)
-    progress = Progress(f"{Path(log_path).name} ({cfg.association.method})", not quiet)
+    progress = Progress(f"{display_path(Path(log_path).name)} ({cfg.association.method})", not quiet)
     try:
         summary = run_pipeline(
             log_path, cfg, out, ground_truth, progress, relations=relations, time_offset=time_offset
@@ -318,7 +318,7 @@ def compare(
     for a in names:
         _load(config_path, overrides, a)  # unknown names fail here, with the closest valid one
     out_dir = Path(out) if out else default_out_dir(Path(log_path), "compare")
-    progress = Progress(f"{Path(log_path).name} (extract)", not quiet)
+    progress = Progress(f"{display_path(Path(log_path).name)} (extract)", not quiet)
     try:
         summaries = run_compare(
             log_path, cfg, names, out_dir, ground_truth, jobs, progress, relations, time_offset
@@ -422,7 +422,7 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
     _setup_logging(verbose, quiet)
     reader = open_log(Path(log_path), scan_topic=scan_topic or "", odom_topic=odom_topic or "")
     i = reader.info()
-    click.echo(f"file:      {log_path}")
+    click.echo(f"file:      {display_path(log_path)}")
     click.echo(f"format:    {i.format}")
     click.echo(f"messages:  {i.n_messages}")
     if i.start is not None:
@@ -432,7 +432,8 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
     for t in i.topics:
         count = "?" if t.count is None else str(t.count)
         rate = f"{t.rate_hz:8.2f} Hz" if t.rate_hz else ""
-        click.echo(f"  {t.name:<28} {t.msgtype:<30} {count:>8} msgs {rate}")
+        note = f" [{t.encoding_note}]" if t.encoding_note else ""
+        click.echo(f"  {t.name:<28} {t.msgtype:<30} {count:>8} msgs {rate}{note}")
     click.echo("run would use:")
     click.echo(f"  scans     {i.scan_topic or '-'}")
     click.echo(f"  odometry  {i.odom_topic or '-'} ({i.odom_source or 'none found'})")

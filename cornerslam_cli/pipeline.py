@@ -10,6 +10,7 @@ import dataclasses
 import hashlib
 import json
 import logging
+import os
 import platform
 import time
 from array import array
@@ -22,11 +23,11 @@ import numpy as np
 from . import __version__
 from .association import make_associator
 from .config import Config
-from .errors import LogError
+from .errors import ConfigError, LogError, display_path
 from .evaluate import ate, overlap_problem, read_relations, relation_error, rpe
 from .features import extract
 from .filter import Ekf
-from .logs import open_log
+from .logs import check_regular, open_log
 from .logs.sync import SyncStats, reanchor_odometry, select_keyframes, synchronise
 from .motion import ScanMatcher
 from .motion.icp import se2, transform
@@ -234,7 +235,7 @@ def find_ground_truth(log_path: Path) -> Path | None:
 
 
 def default_out_dir(log_path: Path, assoc: str) -> Path:
-    stem = log_path.name.split(".")[0] or "log"
+    stem = display_path(log_path.name.split(".")[0]) or "log"  # a name that is not UTF-8: printable
     return Path("cornerslam_out") / f"{stem}_{assoc}"
 
 
@@ -274,7 +275,7 @@ def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None 
     msgs = reanchor_odometry(
         _scans_prepared(src.reader, cfg), cfg.input.odom_jump, src.stats, src.reader.stats.warn
     )
-    synced = synchronise(msgs, src.stats)
+    synced = synchronise(msgs, src.stats, src.reader.stats.warn)  # its warning lands in summary.json too
     pairs = select_keyframes(synced, cfg.keyframes, src.stats)
     jumps = 0
     for scan, odom in pairs:
@@ -368,7 +369,7 @@ def accuracy_of(
         notes.append(f"{problem}: no ATE/RPE")
     elif ref.gt is not None:
         acc.update(
-            ground_truth=str(ref.gt_path),
+            ground_truth=display_path(ref.gt_path),
             ate=ate(stamps, poses, *ref.gt),
             odom_ate=ate(stamps, odoms, *ref.gt),
             **rpe(stamps, poses, *ref.gt),
@@ -377,7 +378,7 @@ def accuracy_of(
             acc["scan_odom_ate"] = ate(stamps, scan_odoms, *ref.gt)
     if ref.relations is not None:
         acc.update(
-            relations_file=str(ref.relations_path),
+            relations_file=display_path(ref.relations_path),
             relations=relation_error(stamps, poses, ref.relations, ref.time_offset),
             odom_relations=relation_error(stamps, odoms, ref.relations, ref.time_offset),
         )
@@ -435,8 +436,10 @@ def run_frames(
             raise LogError(
                 f"log '{log_path}': no scan could be processed ({stats.scans_in} scans read, "
                 f"{stats.before_first_odom} before the first and {stats.after_last_odom} "
-                "after the last odometry sample)",
-                "check that the scan and odometry topics overlap in time",
+                f"after the last odometry sample, {stats.odom_gap} in gaps of the odometry, "
+                f"{stats.scan_time_backwards} with a stamp that went backwards or repeated)",
+                "check that the scan and odometry topics overlap in time and that their header stamps "
+                "increase",
             )
         lm = slam.landmark_table()
         mp = CsvTable(stage.path / "map.csv", MAP_COLUMNS)
@@ -454,7 +457,7 @@ def run_frames(
             "cornerslam_version": __version__,
             "mode": "slam",
             "input": {
-                "log": str(log_path),
+                "log": display_path(log_path),
                 "format": info.format,
                 "scan_topic": info.scan_topic,
                 "odom_topic": info.odom_topic,
@@ -502,14 +505,23 @@ def run_frames(
 def _scans_prepared(reader, cfg: Config):
     """The reader's messages with each scan prepared as configured: beams at the ends removed (robot
     body), beams at or beyond ``input.max_range`` dropped, ``input.scan_time_offset`` added to the
-    stamp (a laser whose stamps lag or lead the odometry clock)."""
+    stamp (a laser whose stamps lag or lead the odometry clock). Skipping every beam of the first
+    scan is a ConfigError naming the keys."""
     inp = cfg.input
     lo, hi, max_range, dt = inp.skip_beams_start, inp.skip_beams_end, inp.max_range, inp.scan_time_offset
     if lo == 0 and hi == 0 and max_range <= 0.0 and dt == 0.0:
         yield from reader.messages()
         return
+    first = True
     for msg in reader.messages():
         if isinstance(msg, Scan):
+            if first and lo + hi >= msg.n_beams:
+                raise ConfigError(
+                    f"input.skip_beams_start={lo} and input.skip_beams_end={hi} skip all "
+                    f"{msg.n_beams} beams of the scans on '{reader.scan_topic}'",
+                    f"keep their sum below {msg.n_beams} (beams skipped at each end of a scan)",
+                )
+            first = False
             keep = (msg.beam_index >= lo) & (msg.beam_index < msg.n_beams - hi)
             if max_range > 0.0:
                 keep &= msg.ranges < max_range
@@ -554,11 +566,13 @@ def config_hash(cfg: Config) -> str:
 
 
 def input_hash(path: Path) -> str:
-    """sha256 of the log's bytes (every file, in name order, for a ROS 2 bag directory)."""
+    """sha256 of the log's bytes (every file, in name order, for a ROS 2 bag directory); a LogError
+    for a pipe or a device (reading it would consume or hang on it)."""
+    check_regular(path)
     h = hashlib.sha256()
     files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
     for f in files:
-        h.update(str(f.relative_to(path) if path.is_dir() else f.name).encode())
+        h.update(os.fsencode(f.relative_to(path) if path.is_dir() else f.name))
         with open(f, "rb") as fh:
             while chunk := fh.read(1 << 20):
                 h.update(chunk)

@@ -10,7 +10,11 @@ range noise), so every entry is the same small, valid run with one fault added:
 * scans: all-NaN / all-zero / negative / huge ranges, ranges count disagreeing with the angles,
   angle_increment 0 or negative (in all scans, or in some);
 * odometry: a jump and a reset to zero mid-log, NaN poses;
-* stamps: scans and odometry out of order and repeated (MCAP, ROS 1 bag, CARMEN).
+* stamps: scans and odometry out of order and repeated (MCAP, ROS 1 bag, CARMEN);
+* reading (``_input_faults_ii``): JSON-encoded MCAP (foxglove_bridge / rosbridge), a topic in an
+  encoding we do not decode, chunks not in time order, unnormalised and zero odometry quaternions,
+  simulated time starting at stamp 0, tab-separated CARMEN, scans outside or far beyond the
+  odometry, ``input.skip_beams_*`` removing every beam.
 
 ``python tests/fault_corpus.py DIR`` writes the corpus and prints what each entry expects.
 """
@@ -376,6 +380,7 @@ def build_corpus(d: str | Path) -> dict[str, tuple[Path, Expected]]:
         )
     _config_faults(d, add)
     _ground_truth_faults(d, add)
+    _input_faults_ii(d, add)
     return out
 
 
@@ -488,6 +493,170 @@ def _ground_truth_faults(d: Path, add: Callable[[str, Path, Expected], None]) ->
         path = _write(d, name, content)
         counts = VALID_COUNTS if code == 0 else {}
         add(name, good, Expected(behaviour, code, message, counts, args=(option, path)))
+
+
+def _foreign_encoding_mcap(path: Path, topic: str) -> Path:
+    """The valid log with ``topic`` recorded as protobuf under its ROS type name: ``/scan`` (instead
+    of CDR) or ``/tf`` (an extra tf topic beside the CDR scans and odometry)."""
+    from mcap.writer import Writer
+
+    from cornerslam_cli.logs.writers import LASERSCAN, ODOMETRY, TFMESSAGE, RosSerializer
+
+    ros = RosSerializer("cdr")
+    proto = b"\x0a\x03abc"  # a protobuf message: field 1, 3 bytes
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start(profile="", library="fault_corpus")
+        ids = {}
+        for name, typ in (("/scan", LASERSCAN), ("/odom", ODOMETRY), ("/tf", TFMESSAGE)):
+            if name == topic:
+                sid = w.register_schema(name=typ, encoding="protobuf", data=b"\x0a\x00")
+                ids[name] = w.register_channel(topic=name, message_encoding="protobuf", schema_id=sid)
+            elif name != "/tf":
+                sid = w.register_schema(name=typ, encoding="ros2msg", data=ros.msgdef(typ).encode())
+                ids[name] = w.register_channel(topic=name, message_encoding="cdr", schema_id=sid)
+        for m in sorted([*make_scans(), *make_odoms()], key=lambda m: m.stamp):
+            t = int(round(m.stamp * 1e9))
+            if isinstance(m, OdomSample):
+                w.add_message(ids["/odom"], t, ros.odometry(m, "odom", "base_link"), t)
+                if "/tf" in ids:
+                    w.add_message(ids["/tf"], t, proto, t)
+            else:
+                w.add_message(ids["/scan"], t, proto if topic == "/scan" else ros.laserscan(m), t)
+        w.finish()
+    return path
+
+
+def _sim_time(scans: Iterator[RawScan], odoms: list[OdomSample]):
+    """The log in simulated time (Gazebo, use_sim_time): stamps from exactly 0.0 (scan i and odometry
+    sample i at i / RATE); the writers add T0 for the log (wall-clock receive) time."""
+    return (replace(s, stamp=i / RATE) for i, s in enumerate(scans)), [
+        replace(o, stamp=i / RATE) for i, o in enumerate(odoms)
+    ]
+
+
+def _input_faults_ii(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
+    """Reading faults of issue 13: encodings, chunk order, quaternions, zero stamps, CARMEN tabs,
+    scans without odometry, skipping every beam."""
+
+    # -- JSON messages (foxglove_bridge / rosbridge recordings), NaN/inf ranges as null
+    def holes(i, r):
+        return np.where(np.arange(len(r)) % 10 == 0, np.inf if i % 2 else np.nan, r)
+
+    for enc in ("json", "json-ros1"):
+        add(
+            f"mcap_{enc.replace('-', '_')}",
+            write_mcap(
+                d / f"{enc}.mcap", make_scans(ranges=holes), make_odoms(), encoding=enc, tf_static=(0.1, 0, 0)
+            ),
+            Expected(
+                "processed: JSON decoded (ROS 2 or ROS 1 field names; null ranges are invalid beams)",
+                0,
+                counts=dict(VALID_COUNTS, beams_invalid=N * 19),
+            ),
+        )
+    add(
+        "mcap_scan_topic_protobuf",
+        _foreign_encoding_mcap(d / "protobuf_scan.mcap", "/scan"),
+        Expected(
+            "exit 2: names the topic and its message encoding",
+            2,
+            ("protobuf_scan.mcap", "'/scan'", "message encoding 'protobuf'"),
+        ),
+    )
+    add(
+        "mcap_tf_topic_protobuf",
+        _foreign_encoding_mcap(d / "protobuf_tf.mcap", "/tf"),
+        Expected(
+            "processed; the tf topic in protobuf is not read, warned", 0, ("'/tf'", "protobuf"), VALID_COUNTS
+        ),
+    )
+    add(
+        "mcap_chunks_unsorted",
+        write_mcap(d / "unsorted_chunks.mcap", make_scans(), make_odoms(), shuffle_blocks=8),
+        Expected("processed in log-time order (the chunk index gives the order)", 0, counts=VALID_COUNTS),
+    )
+
+    # -- odometry quaternions: twice unit length everywhere; of zero length in two samples
+    def doubled(o):
+        return (0.0, 0.0, 2 * math.sin(o.theta / 2), 2 * math.cos(o.theta / 2))
+
+    def zero_in_two(o):
+        return (
+            (0.0,) * 4
+            if round((o.stamp - T0) * RATE) in (12, 13)
+            else (0.0, 0.0, math.sin(o.theta / 2), math.cos(o.theta / 2))
+        )
+
+    add(
+        "odom_quaternion_doubled",
+        write_gt(write_mcap(d / "quat_x2.mcap", make_scans(), make_odoms(), odom_quaternion=doubled)),
+        Expected(
+            "processed; quaternions normalised, warned", 0, ("not of unit length: normalised",), VALID_COUNTS
+        ),
+    )
+    add(
+        "odom_quaternion_zero",
+        write_mcap(d / "quat_zero.mcap", make_scans(), make_odoms(), odom_quaternion=zero_in_two),
+        Expected(
+            "processed; samples with a zero-length quaternion skipped, counted, warned",
+            0,
+            ("zero-length orientation quaternion",),
+            dict(VALID_COUNTS, messages_failed=2),
+        ),
+    )
+
+    # -- simulated time: header stamps from exactly 0.0, log time from the wall clock
+    for fmt, writer, suffix in (("mcap", write_mcap, ".mcap"), ("bag", write_rosbag1, ".bag")):
+        scans, odoms = _sim_time(make_scans(), make_odoms())
+        add(
+            f"stamps_sim_time_from_zero_{fmt}",
+            writer(d / f"sim_time{suffix}", scans, odoms, log_time_offset=T0),
+            Expected("processed: 0.0 is a valid stamp", 0, counts=VALID_COUNTS),
+        )
+
+    # -- CARMEN separated by tabs
+    add(
+        "carmen_tabs",
+        write_carmen(d / "tabs.clf", make_scans(), make_odoms(), sep="\t"),
+        Expected("processed: fields separated by any whitespace", 0, counts=VALID_COUNTS),
+    )
+
+    # -- scans outside the odometry: the second half after its last sample; a wrong clock
+    add(
+        "odom_ends_halfway",
+        write_mcap(d / "odom_half.mcap", make_scans(), make_odoms(N // 2 + 1)),
+        Expected(
+            "processed; scans after the last odometry sample skipped, counted, warned (in summary.json too)",
+            0,
+            ("after the last odometry sample",),
+            {"steps": N // 2, "after_last_odom": N // 2, "scans_skipped": N // 2},
+        ),
+    )
+    add(
+        "odom_other_clock",
+        write_mcap(
+            d / "odom_clock.mcap", make_scans(), [replace(o, stamp=o.stamp - 1000.0) for o in make_odoms()]
+        ),
+        Expected(
+            "exit 2: no scan within the odometry's time span; the counts say why",
+            2,
+            ("odom_clock.mcap", "no scan could be processed", f"{N} after the last odometry sample"),
+        ),
+    )
+
+    # -- skipping more beams than a scan has
+    good = d / "good.mcap"
+    add(
+        "skip_beams_all",
+        good,
+        Expected(
+            "exit 2: names the skip_beams keys and the beam count",
+            2,
+            ("input.skip_beams_start=100", "input.skip_beams_end=81", "all 181 beams"),
+            args=("--set", "input.skip_beams_start=100", "--set", "input.skip_beams_end=81"),
+        ),
+    )
 
 
 # --------------------------------------------------------------------------- the long log
