@@ -248,11 +248,12 @@ class _Cli(click.Group):
             raise
         except KeyboardInterrupt as e:
             word, code = ("terminated", 143) if isinstance(e, _Terminated) else ("interrupted", 130)
-            written = getattr(e, "output_written", None)
-            if written is not None:  # the signal came after the commit
-                click.echo(f"{word}: after the output was complete ('{written}' is written)", err=True)
+            written = getattr(e, "output_written", None)  # the signal came after the commit
+            if written is not None:
+                text = f"after the output was complete ('{written}' is written)"
             else:
-                click.echo(f"{word}: no output written (a previous complete output directory is kept)", err=True)
+                text = "no output written (a previous complete output directory is kept)"
+            click.echo(f"{word}: {text}", err=True)
             ctx.exit(code)
         except BrokenPipeError:
             _stdout_gone()

@@ -180,7 +180,9 @@ def _refuse_foreign(target: Path, kind: str, shown: Path) -> None:
         )
 
 
-def check_replaceable(target: Path, kind: str, inputs: Sequence[Path] = (), shown: Path | None = None) -> None:
+def check_replaceable(
+    target: Path, kind: str, inputs: Sequence[Path] = (), shown: Path | None = None
+) -> None:
     """Refuse (OutputError) to replace ``target`` (resolved) by a ``kind`` output unless the module
     doc's rules allow it. ``inputs`` are the run's input files; ``shown`` names the target in errors."""
     shown = target if shown is None else shown
