@@ -288,15 +288,11 @@ def _assoc_choice():
 @click.argument("log_path", metavar="LOG", type=click.Path())
 @_config_options
 @click.option("--assoc", default=None, help="Associator: icnn, jcbb or pca (default: config, pca).")
-@click.option(
-    "--out", type=click.Path(file_okay=False), help="Output directory (default ./cornerslam_out/LOG_ASSOC)."
-)
+@click.option("--out", type=click.Path(), help="Output directory (default ./cornerslam_out/LOG_ASSOC).")
 @_topic_options
 @_reference_options
 @click.option("--plot", is_flag=True, help="Also draw the map, timing and corner plots and report.html.")
-@click.option(
-    "--mcap-out", type=click.Path(dir_okay=False), help="Also write the results as MCAP for Foxglove."
-)
+@click.option("--mcap-out", type=click.Path(), help="Also write the results as MCAP for Foxglove.")
 @_verbosity
 def run(
     log_path,
@@ -354,9 +350,7 @@ def run(
     "--assoc", "assocs", default="icnn,jcbb,pca", show_default=True, help="Comma-separated associators."
 )
 @_config_options
-@click.option(
-    "--out", type=click.Path(file_okay=False), help="Output directory (default ./cornerslam_out/LOG_compare)."
-)
+@click.option("--out", type=click.Path(), help="Output directory (default ./cornerslam_out/LOG_compare).")
 @_topic_options
 @_reference_options
 @click.option("--jobs", default=1, show_default=True, type=click.IntRange(1, 64), help="Parallel processes.")
@@ -682,7 +676,7 @@ def _parse_sweeps(texts) -> dict[str, list[str]]:
     help="Run each value of a config key; repeat for a grid, e.g. --sweep association.pca.group_size=3,5.",
 )
 @_config_options
-@click.option("--out", required=True, type=click.Path(file_okay=False), help="Batch directory (resumable).")
+@click.option("--out", required=True, type=click.Path(), help="Batch directory (resumable).")
 @click.option(
     "--jobs", default=None, type=click.IntRange(1, 256), help="Local worker processes [default: CPUs]."
 )
@@ -702,6 +696,7 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
           --out sweep/ --jobs 2
     """
     from .batch import BATCH_CSV, plan, run_batch
+    from .report.outdir import check_claimable
 
     _setup_logging(verbose, quiet)
     if assocs is None:
@@ -714,6 +709,7 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
             )
     if scheduler and jobs:
         log.warning("--jobs is ignored with --scheduler (the cluster's workers run the batch)")
+    check_claimable(out, "batch")  # a directory that is not a batch's: refused before any work
     combos = plan(logs, names, _parse_sweeps(sweeps), overrides, config_path)
     progress = BatchProgress(not quiet)
     try:

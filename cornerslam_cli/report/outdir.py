@@ -58,7 +58,7 @@ _LEGACY = (  # outputs written before the marker: (file, how it begins, kind)
     ("batch.csv", b"log,assoc,", "batch"),
 )
 _NAME_KEEP = 200  # bytes of a name kept in its sibling names (+ at most 45 of suffix: within 255)
-_HOST = hashlib.sha1(socket.gethostname().encode()).hexdigest()[:8]
+HOST = hashlib.sha1(socket.gethostname().encode()).hexdigest()[:8]  # leftovers are judged on their host
 _SIBLING = re.compile(r"(partial|old)-([0-9a-f]{8})-(\d+)(?:-.+)?")
 _DISK = "free some space, or write to another disk"
 _MOUNT = "give a new directory inside it"
@@ -70,7 +70,7 @@ _REASONS = {
     errno.EDQUOT: ("disk quota exceeded", _DISK),
     errno.EBUSY: ("busy (a mount point?)", _MOUNT),
     errno.EXDEV: ("on another file system than its parent (a mount point?)", _MOUNT),
-    errno.ENAMETOOLONG: ("name too long", "use a shorter name (at most 255 bytes per name)"),
+    errno.ENAMETOOLONG: ("name too long", "use a shorter name: at most 255 bytes"),
     errno.ENOTDIR: ("a part of the path is a file, not a directory", "check the path"),
     errno.EEXIST: ("a part of the path is a file, not a directory", "check the path"),
     errno.EISDIR: ("it is a directory", "give a file name"),
@@ -212,13 +212,21 @@ def check_replaceable(
         )
 
 
+def check_claimable(path: str | Path, kind: str) -> Path:
+    """Refuse (OutputError) a ``path`` that :func:`claim_dir` would refuse, creating nothing;
+    returns it resolved."""
+    shown = Path(path)
+    with output_errors(shown):
+        target = shown.resolve()
+        _refuse_foreign(target, kind, shown)
+    return target
+
+
 def claim_dir(path: str | Path, kind: str) -> Path:
     """Create or reuse the directory ``path`` for a ``kind`` output written in place (a batch: it
     is resumed, never replaced): refuse a file or a non-empty directory that is not ours, mark it."""
-    shown = Path(path)
-    target = shown.resolve()
-    with output_errors(shown):
-        _refuse_foreign(target, kind, shown)
+    target = check_claimable(path, kind)
+    with output_errors(path):
         target.mkdir(parents=True, exist_ok=True)
         if read_marker(target) is None:
             mark_output(target, kind)
@@ -236,7 +244,7 @@ def _stem(name: str) -> str:
 
 def _sibling(target: Path, what: str) -> str:
     """The start of a hidden sibling's name owned by this process: ``.NAME.WHAT-HOST-PID``."""
-    return f".{_stem(target.name)}.{what}-{_HOST}-{os.getpid()}"
+    return f".{_stem(target.name)}.{what}-{HOST}-{os.getpid()}"
 
 
 def _alive(pid: int) -> bool:
@@ -274,7 +282,7 @@ def clear_stale(target: Path) -> None:
     directory comes back as ``target`` when that is missing). Those of live processes, or of other
     hosts (a shared file system), are left alone."""
     for path, what, host, pid in _siblings(target):
-        if host != _HOST or _alive(pid):
+        if host != HOST or _alive(pid):
             continue
         if what == "old" and not os.path.lexists(target):
             os.rename(path, target)
@@ -285,7 +293,7 @@ def clear_stale(target: Path) -> None:
 def live_writer(target: Path) -> int | None:
     """The pid of a live process on this host staging ``target``, if any."""
     for _, what, host, pid in _siblings(target):
-        if what == "partial" and host == _HOST and _alive(pid):
+        if what == "partial" and host == HOST and _alive(pid):
             return pid
     return None
 
