@@ -23,7 +23,7 @@ import numpy as np
 from . import __version__
 from .association import make_associator
 from .config import Config
-from .errors import LogError
+from .errors import LogError, OutputError
 from .evaluate import ate, read_relations, relation_error, rpe
 from .features import extract
 from .filter import Ekf
@@ -332,6 +332,8 @@ def run(
         if mcap_path is not None:
             from .report.mcap_out import write_results_mcap
 
+            if mcap_path.is_relative_to(stage.path) and mcap_path.exists():
+                raise OutputError(f"--mcap-out '{mcap_out}' is a file of the run itself", "give another name")
             with output_errors(mcap_out):
                 write_results_mcap(stage.path, mcap_path, results=stage.target)
         summary["out_dir"] = str(stage.commit())

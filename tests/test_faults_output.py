@@ -574,6 +574,32 @@ def _(w: World) -> Case:
     return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", w.log.parent], w.log.parent)
 
 
+@fault(
+    "mcap_out_inside_out",
+    "`--mcap-out` inside `--out`: written in the staging directory, committed with it",
+    0,
+)
+def _(w: World) -> Case:
+    out = w.tmp / "out"
+
+    def after():
+        complete(out)
+        assert (out / "sub" / "r.mcap").read_bytes()[:8] == b"\x89MCAP0\r\n"
+
+    return Case(["run", w.log, "--out", out, "--mcap-out", out / "sub" / "r.mcap"], after=after)
+
+
+@fault(
+    "mcap_out_is_a_file_of_the_run",
+    "`--mcap-out OUT/summary.json` (a file the run writes itself): refused, nothing written",
+    2,
+    "is a file of the run itself",
+)
+def _(w: World) -> Case:
+    mc = w.tmp / "out" / "summary.json"
+    return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", mc], mc)
+
+
 # 7. numbers on the command line; 13. --config that is not a regular file
 @fault("simulate_seed_negative", "`simulate --seed -1`: usage error", 2, "--seed must be >= 0")
 def _(w: World) -> Case:
