@@ -323,21 +323,27 @@ def run(
         ref = load_reference(Path(log_path), ground_truth, relations, time_offset)  # bad files fail first
         src = open_input(log_path, cfg)
         summary = run_frames(frames(src, cfg, progress), src, cfg, stage.path, ref, wall0)
-        if plot:
-            from .report.html import write_report
-            from .report.plots import plot_run
-
-            plot_run(stage.path)
-            write_report(stage.path)
-        if mcap_path is not None:
-            from .report.mcap_out import write_results_mcap
-
-            if mcap_path.is_relative_to(stage.path) and mcap_path.exists():
-                raise OutputError(f"--mcap-out '{mcap_out}' is a file of the run itself", "give another name")
-            with output_errors(mcap_out):
-                write_results_mcap(stage.path, mcap_path, results=stage.target)
+        write_extras(stage, plot, mcap_out, mcap_path)
         summary["out_dir"] = str(stage.commit())
     return summary
+
+
+def write_extras(stage: StagedDir, plot: bool, mcap_out: str | Path | None, mcap_path: Path | None) -> None:
+    """What a run writes besides its tables, staged before the commit: with ``plot`` the figures and
+    report.html; the results MCAP into ``mcap_path``, the staged place of ``mcap_out``."""
+    if plot:
+        from .report.html import write_report
+        from .report.plots import plot_run
+
+        plot_run(stage.path)
+        write_report(stage.path)
+    if mcap_path is not None:
+        from .report.mcap_out import write_results_mcap
+
+        if mcap_path.is_relative_to(stage.path) and mcap_path.exists():
+            raise OutputError(f"--mcap-out '{mcap_out}' is a file of the run itself", "give another name")
+        with output_errors(mcap_out):
+            write_results_mcap(stage.path, mcap_path, results=stage.target)
 
 
 @dataclass(frozen=True)
