@@ -62,11 +62,13 @@ class Case:
 OUTPUT_FAULTS: dict[str, tuple[Expected, Callable[[World], Case]]] = {}
 
 
-def fault(name: str, behaviour: str, exit_code: int, *message: str):
-    """Register the decorated setup as scenario ``name`` of the table."""
+def fault(exit_code: int, *message: str):
+    """Register the decorated setup as a scenario of the table: its name is the scenario's, its
+    docstring the behaviour line."""
 
     def register(setup: Callable[[World], Case]) -> Callable[[World], Case]:
-        OUTPUT_FAULTS[name] = (Expected(behaviour, exit_code, message), setup)
+        behaviour = " ".join((setup.__doc__ or "").split())
+        OUTPUT_FAULTS[setup.__name__] = (Expected(behaviour, exit_code, message), setup)
         return setup
 
     return register
@@ -128,24 +130,15 @@ def complete(out: Path) -> None:
 
 # ---------------------------------------------------------------------------- the table
 # 1. only our own outputs are replaced
-@fault(
-    "out_holds_the_log",
-    "`--out` a directory holding the log (`run logs/x.mcap --out logs`): refused, nothing touched",
-    2,
-    "is not empty and was not written by cornerslam",
-    "give a new or empty directory",
-)
-def _(w: World) -> Case:
+@fault(2, "is not empty and was not written by cornerslam", "give a new or empty directory")
+def out_holds_the_log(w: World) -> Case:
+    """`--out` a directory holding the log (`run logs/x.mcap --out logs`): refused, nothing touched"""
     return Case(["run", w.log, "--out", w.log.parent], w.log.parent)
 
 
-@fault(
-    "out_is_a_foreign_directory",
-    "`--out .`, `--out ~`, any non-empty directory of other files: refused, nothing touched",
-    2,
-    "is not empty and was not written by cornerslam",
-)
-def _(w: World) -> Case:
+@fault(2, "is not empty and was not written by cornerslam")
+def out_is_a_foreign_directory(w: World) -> Case:
+    """`--out .`, `--out ~`, any non-empty directory of other files: refused, nothing touched"""
     home = w.tmp / "home"
     home.mkdir()
     (home / ".bashrc").write_text("export PS1='$ '\n")
@@ -154,104 +147,70 @@ def _(w: World) -> Case:
     return Case(["run", w.log, "--out", "."], "'.'")
 
 
-@fault(
-    "out_is_the_working_directory",
-    "`--out .` in an empty working directory: refused (it would be renamed away under the shell)",
-    2,
-    "holds the working directory",
-    "give another output directory",
-)
-def _(w: World) -> Case:
+@fault(2, "holds the working directory", "give another output directory")
+def out_is_the_working_directory(w: World) -> Case:
+    """`--out .` in an empty working directory: refused (it would be renamed away under the shell)"""
     cwd = w.tmp / "empty"
     cwd.mkdir()
     w.mp.chdir(cwd)
     return Case(["run", w.log, "--out", "."], "'.'")
 
 
-@fault(
-    "out_holds_user_files_beside_our_output",
-    "a cornerslam output holding files it did not write (notes added later): refused, naming one",
-    2,
-    "holds 'notes.txt', which cornerslam did not write",
-    "move it out first",
-)
-def _(w: World) -> Case:
+@fault(2, "holds 'notes.txt', which cornerslam did not write", "move it out first")
+def out_holds_user_files_beside_our_output(w: World) -> Case:
+    """a cornerslam output holding files it did not write (notes added later): refused, naming one"""
     out = previous_output(w.tmp / "out")
     (out / "notes.txt").write_text("keep me\n")
     return Case(["run", w.log, "--out", out], out)
 
 
-@fault(
-    "out_holds_the_log_inside_our_output",
-    "a cornerslam output that holds the run's own log: refused",
-    2,
-    "holds the input",
-)
-def _(w: World) -> Case:
+@fault(2, "holds the input")
+def out_holds_the_log_inside_our_output(w: World) -> Case:
+    """a cornerslam output that holds the run's own log: refused"""
     out = previous_output(w.tmp / "out")
     log = shutil.copy(w.log, out / "x.mcap")
     mark_output(out, "run")  # listed, so only the input rule refuses it
     return Case(["run", log, "--out", out], out)
 
 
-@fault(
-    "out_is_another_kind_of_output",
-    "`run --out` a compare or batch directory (or the reverse): refused, the kinds named",
-    2,
-    "holds a cornerslam compare output, not a run output",
-)
-def _(w: World) -> Case:
+@fault(2, "holds a cornerslam compare output, not a run output")
+def out_is_another_kind_of_output(w: World) -> Case:
+    """`run --out` a compare or batch directory (or the reverse): refused, the kinds named"""
     out = previous_output(w.tmp / "cmp", kind="compare")
     return Case(["run", w.log, "--out", out], out)
 
 
-@fault(
-    "out_is_a_file",
-    "`--out` an existing file: refused",
-    2,
-    "is a file, not a directory",
-)
-def _(w: World) -> Case:
+@fault(2, "is a file, not a directory")
+def out_is_a_file(w: World) -> Case:
+    """`--out` an existing file: refused"""
     return Case(["run", w.log, "--out", w.log], w.log)
 
 
-@fault(
-    "out_parent_is_a_file",
-    "`--out FILE/sub` (a file where a directory should be): refused",
-    2,
-    "a part of the path is a file, not a directory",
-)
-def _(w: World) -> Case:
+@fault(2, "a part of the path is a file, not a directory")
+def out_parent_is_a_file(w: World) -> Case:
+    """`--out FILE/sub` (a file where a directory should be): refused"""
     return Case(["run", w.log, "--out", w.log / "sub"], w.log / "sub")
 
 
-@fault(
-    "out_is_an_empty_directory",
-    "`--out` an empty directory (made by hand, a fresh volume): used",
-    0,
-)
-def _(w: World) -> Case:
+@fault(0)
+def out_is_an_empty_directory(w: World) -> Case:
+    """`--out` an empty directory (made by hand, a fresh volume): used"""
     out = w.tmp / "empty"
     out.mkdir()
     return Case(["run", w.log, "--out", out], after=lambda: complete(out))
 
 
-@fault(
-    "out_is_our_previous_output",
-    "`--out` a previous cornerslam output of the same kind: replaced whole, no flag needed",
-    0,
-)
-def _(w: World) -> Case:
+@fault(0)
+def out_is_our_previous_output(w: World) -> Case:
+    """`--out` a previous cornerslam output of the same kind: replaced whole, no flag needed"""
     out = previous_output(w.tmp / "out")
     return Case(["run", w.log, "--out", out], after=lambda: complete(out))
 
 
-@fault(
-    "out_is_an_output_of_an_older_version",
-    "`--out` a run output written before the marker (its summary.json says cornerslam_version): replaced",
-    0,
-)
-def _(w: World) -> Case:
+@fault(0)
+def out_is_an_output_of_an_older_version(w: World) -> Case:
+    """`--out` a run output written before the marker (its summary.json says cornerslam_version):
+    replaced"""
     out = w.tmp / "old"
     out.mkdir()
     (out / "summary.json").write_text('{\n  "cornerslam_version": "0.0.9"\n}\n')
@@ -259,44 +218,31 @@ def _(w: World) -> Case:
     return Case(["run", w.log, "--out", out], after=lambda: complete(out))
 
 
-@fault(
-    "compare_into_a_foreign_directory",
-    "`compare --out` a directory that is not a cornerslam compare output: refused before extraction",
-    2,
-    "is not empty and was not written by cornerslam",
-)
-def _(w: World) -> Case:
+@fault(2, "is not empty and was not written by cornerslam")
+def compare_into_a_foreign_directory(w: World) -> Case:
+    """`compare --out` a directory that is not a cornerslam compare output: refused before
+    extraction"""
     return Case(["compare", w.log, "--assoc", "icnn", "--out", w.log.parent], w.log.parent)
 
 
-@fault(
-    "batch_into_a_foreign_directory",
-    "`batch --out` a directory that is neither new, empty nor a batch directory: refused before any run",
-    2,
-    "is not empty and was not written by cornerslam",
-)
-def _(w: World) -> Case:
+@fault(2, "is not empty and was not written by cornerslam")
+def batch_into_a_foreign_directory(w: World) -> Case:
+    """`batch --out` a directory that is neither new, empty nor a batch directory: refused before
+    any run"""
     return Case(["batch", w.log, "--out", w.log.parent], w.log.parent)
 
 
-@fault(
-    "batch_into_a_run_output",
-    "`batch --out` a run output: refused",
-    2,
-    "holds a cornerslam run output, not a batch output",
-)
-def _(w: World) -> Case:
+@fault(2, "holds a cornerslam run output, not a batch output")
+def batch_into_a_run_output(w: World) -> Case:
+    """`batch --out` a run output: refused"""
     out = previous_output(w.tmp / "out")
     return Case(["batch", w.log, "--out", out], out)
 
 
-@fault(
-    "batch_row_dir_not_ours",
-    "a batch combination whose directory holds files cornerslam did not write: that row fails, "
-    "the files are kept, the batch goes on",
-    0,
-)
-def _(w: World) -> Case:
+@fault(0)
+def batch_row_dir_not_ours(w: World) -> Case:
+    """a batch combination whose directory holds files cornerslam did not write: that row fails, the
+    files are kept, the batch goes on"""
     out = w.tmp / "batch"
     row = out / "x__pca"
     row.mkdir(parents=True)
@@ -319,27 +265,19 @@ def _read_batch(out: Path) -> list[dict]:
 
 
 # 2. everything is staged before the one commit
-@fault(
-    "interrupted_while_drawing_figures",
-    "Ctrl-C / SIGTERM while `--plot` draws figures or report.html: exit 130 / 143, the previous "
-    "output kept whole (figures are drawn in the staging directory)",
-    130,
-    KEPT,
-)
-def _(w: World) -> Case:
+@fault(130, KEPT)
+def interrupted_while_drawing_figures(w: World) -> Case:
+    """Ctrl-C / SIGTERM while `--plot` draws figures or report.html: exit 130 / 143, the previous
+    output kept whole (figures are drawn in the staging directory)"""
     out = previous_output(w.tmp / "out")
     w.mp.setattr("cornerslam_cli.report.plots.plot_run", interrupt)
     return Case(["run", w.log, "--out", out, "--plot"])
 
 
-@fault(
-    "interrupted_while_writing_mcap_out",
-    "interrupted while `--mcap-out` is written: the previous MCAP and output directory kept, no "
-    "temporary file left",
-    130,
-    KEPT,
-)
-def _(w: World) -> Case:
+@fault(130, KEPT)
+def interrupted_while_writing_mcap_out(w: World) -> Case:
+    """interrupted while `--mcap-out` is written: the previous MCAP and output directory kept, no
+    temporary file left"""
     out = previous_output(w.tmp / "out")
     mc = w.tmp / "res.mcap"
     mc.write_bytes(b"previous results\n")
@@ -347,26 +285,20 @@ def _(w: World) -> Case:
     return Case(["run", w.log, "--out", out, "--mcap-out", mc])
 
 
-@fault(
-    "compare_interrupted_while_drawing",
-    "`compare` interrupted while drawing its figures or report: the previous compare directory kept",
-    130,
-    KEPT,
-)
-def _(w: World) -> Case:
+@fault(130, KEPT)
+def compare_interrupted_while_drawing(w: World) -> Case:
+    """`compare` interrupted while drawing its figures or report: the previous compare directory
+    kept"""
     out = previous_output(w.tmp / "cmp", kind="compare")
     w.mp.setattr("cornerslam_cli.report.plots.plot_compare", interrupt)
     return Case(["compare", w.log, "--assoc", "icnn", "--out", out])
 
 
 # 3. leftovers, concurrent runs, permissions
-@fault(
-    "staging_left_by_a_killed_run",
-    "a hidden `.NAME.partial-HOST-PID-*` left by a SIGKILLed run (its process dead): removed by the "
-    "next run into the same place",
-    0,
-)
-def _(w: World) -> Case:
+@fault(0)
+def staging_left_by_a_killed_run(w: World) -> Case:
+    """a hidden `.NAME.partial-HOST-PID-*` left by a SIGKILLed run (its process dead): removed by
+    the next run into the same place"""
     out = w.tmp / "out"
     stale = w.tmp / f".out.partial-{HOST}-{dead_pid()}-abcd1234"
     stale.mkdir()
@@ -379,26 +311,18 @@ def _(w: World) -> Case:
     return Case(["run", w.log, "--out", out], after=after)
 
 
-@fault(
-    "staging_of_a_live_run",
-    "another run is writing the same `--out` (its staging directory's process is alive): refused, "
-    "naming its pid",
-    2,
-    f"another cornerslam process (pid {os.getpid()}) is writing",
-    "wait for it to finish",
-)
-def _(w: World) -> Case:
+@fault(2, f"another cornerslam process (pid {os.getpid()}) is writing", "wait for it to finish")
+def staging_of_a_live_run(w: World) -> Case:
+    """another run is writing the same `--out` (its staging directory's process is alive): refused,
+    naming its pid"""
     out = w.tmp / "out"
     (w.tmp / f".out.partial-{HOST}-{os.getpid()}-abcd1234").mkdir()
     return Case(["run", w.log, "--out", out], out)
 
 
-@fault(
-    "staging_of_another_host",
-    "staging leftovers of another host (a shared file system): left alone, the run goes on",
-    0,
-)
-def _(w: World) -> Case:
+@fault(0)
+def staging_of_another_host(w: World) -> Case:
+    """staging leftovers of another host (a shared file system): left alone, the run goes on"""
     out = w.tmp / "out"
     other = w.tmp / ".out.partial-deadbeef-1-abcd1234"
     other.mkdir()
@@ -410,13 +334,10 @@ def _(w: World) -> Case:
     return Case(["run", w.log, "--out", out], after=after)
 
 
-@fault(
-    "umask",
-    "output directories and files (and `--mcap-out`) get the permissions the umask gives (umask 027: "
-    "directories 750, files 640)",
-    0,
-)
-def _(w: World) -> Case:
+@fault(0)
+def umask(w: World) -> Case:
+    """output directories and files (and `--mcap-out`) get the permissions the umask gives (umask
+    027: directories 750, files 640)"""
     out, mc = w.tmp / "out", w.tmp / "res.mcap"
     old = os.umask(0o027)
     w.cleanup.append(lambda: os.umask(old))
@@ -429,44 +350,28 @@ def _(w: World) -> Case:
 
 
 # 4. the environment
-@fault(
-    "read_only_file_system",
-    "`--out` on a read-only file system (EROFS): refused before any work, naming the path",
-    2,
-    "cannot write",
-    "read-only file system",
-)
-def _(w: World) -> Case:
+@fault(2, "cannot write", "read-only file system")
+def read_only_file_system(w: World) -> Case:
+    """`--out` on a read-only file system (EROFS): refused before any work, naming the path"""
     ro = w.tmp / "ro"
     ro.mkdir()
     fail_writes_under(w.mp, ro, errno.EROFS)
     return Case(["run", w.log, "--out", ro / "out"], ro / "out")
 
 
-@fault(
-    "permission_denied",
-    "`--out` in a directory without write permission (EACCES): refused before any work",
-    2,
-    "cannot write",
-    "permission denied",
-)
-def _(w: World) -> Case:
+@fault(2, "cannot write", "permission denied")
+def permission_denied(w: World) -> Case:
+    """`--out` in a directory without write permission (EACCES): refused before any work"""
     locked = w.tmp / "locked"
     locked.mkdir()
     fail_writes_under(w.mp, locked, errno.EACCES)
     return Case(["compare", w.log, "--assoc", "icnn", "--out", locked / "cmp"], locked / "cmp")
 
 
-@fault(
-    "disk_full",
-    "disk full (ENOSPC) or over quota (EDQUOT) while a run writes: exit 2 naming the output, the "
-    "staged directory removed, the previous output kept",
-    2,
-    "cannot write",
-    "no space left on device",
-    "free some space",
-)
-def _(w: World) -> Case:
+@fault(2, "cannot write", "no space left on device", "free some space")
+def disk_full(w: World) -> Case:
+    """disk full (ENOSPC) or over quota (EDQUOT) while a run writes: exit 2 naming the output, the
+    staged directory removed, the previous output kept"""
     from cornerslam_cli.report.tables import CsvTable
 
     out = previous_output(w.tmp / "out")
@@ -482,14 +387,10 @@ def _(w: World) -> Case:
     return Case(["run", w.log, "--out", out], out)
 
 
-@fault(
-    "out_is_a_mount_point",
-    "`--out` a mount point (a container volume): refused before any work, asking for a directory inside it",
-    2,
-    "is a mount point",
-    "give a new directory inside it",
-)
-def _(w: World) -> Case:
+@fault(2, "is a mount point", "give a new directory inside it")
+def out_is_a_mount_point(w: World) -> Case:
+    """`--out` a mount point (a container volume): refused before any work, asking for a directory
+    inside it"""
     vol = w.tmp / "vol"
     vol.mkdir()
     real = os.path.ismount
@@ -497,15 +398,10 @@ def _(w: World) -> Case:
     return Case(["run", w.log, "--out", vol], vol)
 
 
-@fault(
-    "rename_busy",
-    "the commit's rename fails with EBUSY (a bind mount `ismount` does not see): exit 2, the previous "
-    "output kept, nothing staged left",
-    2,
-    "cannot write",
-    "busy (a mount point?)",
-)
-def _(w: World) -> Case:
+@fault(2, "cannot write", "busy (a mount point?)")
+def rename_busy(w: World) -> Case:
+    """the commit's rename fails with EBUSY (a bind mount `ismount` does not see): exit 2, the
+    previous output kept, nothing staged left"""
     out = previous_output(w.tmp / "out")
     real = os.rename
 
@@ -518,68 +414,45 @@ def _(w: World) -> Case:
     return Case(["run", w.log, "--out", out], out)
 
 
-@fault(
-    "name_of_240_bytes",
-    "a legal 240-byte `--out` name (its staging name would pass 255 bytes): written, the staging "
-    "name shortened",
-    0,
-)
-def _(w: World) -> Case:
+@fault(0)
+def name_of_240_bytes(w: World) -> Case:
+    """a legal 240-byte `--out` name (its staging name would pass 255 bytes): written, the staging
+    name shortened"""
     out = w.tmp / ("r" * 240)
     return Case(["run", w.log, "--out", out], after=lambda: complete(out))
 
 
-@fault(
-    "name_over_255_bytes",
-    "an `--out` name over 255 bytes: refused before any work",
-    2,
-    "name too long",
-)
-def _(w: World) -> Case:
+@fault(2, "name too long")
+def name_over_255_bytes(w: World) -> Case:
+    """an `--out` name over 255 bytes: refused before any work"""
     out = w.tmp / ("r" * 256)
     return Case(["run", w.log, "--out", out], out)
 
 
-@fault(
-    "mcap_out_unwritable",
-    "`--mcap-out` in an unwritable directory: refused before any work, naming it",
-    2,
-    "cannot write",
-    "permission denied",
-)
-def _(w: World) -> Case:
+@fault(2, "cannot write", "permission denied")
+def mcap_out_unwritable(w: World) -> Case:
+    """`--mcap-out` in an unwritable directory: refused before any work, naming it"""
     locked = w.tmp / "locked"
     locked.mkdir()
     fail_writes_under(w.mp, locked, errno.EACCES)
     return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", locked / "r.mcap"], locked / "r.mcap")
 
 
-@fault(
-    "mcap_out_is_the_log",
-    "`--mcap-out` naming the input log: refused",
-    2,
-    "is an input of this run",
-)
-def _(w: World) -> Case:
+@fault(2, "is an input of this run")
+def mcap_out_is_the_log(w: World) -> Case:
+    """`--mcap-out` naming the input log: refused"""
     return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", w.log], w.log)
 
 
-@fault(
-    "mcap_out_is_a_directory",
-    "`--mcap-out` an existing directory: refused",
-    2,
-    "is a directory",
-)
-def _(w: World) -> Case:
+@fault(2, "is a directory")
+def mcap_out_is_a_directory(w: World) -> Case:
+    """`--mcap-out` an existing directory: refused"""
     return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", w.log.parent], w.log.parent)
 
 
-@fault(
-    "mcap_out_inside_out",
-    "`--mcap-out` inside `--out`: written in the staging directory, committed with it",
-    0,
-)
-def _(w: World) -> Case:
+@fault(0)
+def mcap_out_inside_out(w: World) -> Case:
+    """`--mcap-out` inside `--out`: written in the staging directory, committed with it"""
     out = w.tmp / "out"
 
     def after():
@@ -589,55 +462,42 @@ def _(w: World) -> Case:
     return Case(["run", w.log, "--out", out, "--mcap-out", out / "sub" / "r.mcap"], after=after)
 
 
-@fault(
-    "mcap_out_is_a_file_of_the_run",
-    "`--mcap-out OUT/summary.json` (a file the run writes itself): refused, nothing written",
-    2,
-    "is a file of the run itself",
-)
-def _(w: World) -> Case:
+@fault(2, "is a file of the run itself")
+def mcap_out_is_a_file_of_the_run(w: World) -> Case:
+    """`--mcap-out OUT/summary.json` (a file the run writes itself): refused, nothing written"""
     mc = w.tmp / "out" / "summary.json"
     return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", mc], mc)
 
 
 # 7. numbers on the command line; 13. --config that is not a regular file
-@fault("simulate_seed_negative", "`simulate --seed -1`: usage error", 2, "--seed must be >= 0")
-def _(w: World) -> Case:
+@fault(2, "--seed must be >= 0")
+def simulate_seed_negative(w: World) -> Case:
+    """`simulate --seed -1`: usage error"""
     return Case(["simulate", w.tmp / "s.mcap", "--seed", "-1"])
 
 
-@fault(
-    "simulate_out_of_range",
-    "`simulate` --laps < 1, --rate / --speed ≤ 0 or NaN, --beams < 2, or a log too large to build: "
-    "usage error naming the option",
-    2,
-    "--rate must be in [0.1, 1000.0], got nan",
-)
-def _(w: World) -> Case:
+@fault(2, "--rate must be in [0.1, 1000.0], got nan")
+def simulate_out_of_range(w: World) -> Case:
+    """`simulate` --laps < 1, --rate / --speed ≤ 0 or NaN, --beams < 2, or a log too large to build:
+    usage error naming the option"""
     return Case(["simulate", w.tmp / "s.mcap", "--rate", "nan"])
 
 
-@fault(
-    "time_offset_not_finite",
-    "`--time-offset nan` / `inf` (run, compare, evaluate): usage error",
-    2,
-    "is not a finite number",
-)
-def _(w: World) -> Case:
+@fault(2, "is not a finite number")
+def time_offset_not_finite(w: World) -> Case:
+    """`--time-offset nan` / `inf` (run, compare, evaluate): usage error"""
     return Case(["run", w.log, "--out", w.tmp / "out", "--time-offset", "nan"])
 
 
-@fault("extract_step_negative", "`extract --step -1`: usage error", 2, "--step", "x>=0")
-def _(w: World) -> Case:
+@fault(2, "--step", "x>=0")
+def extract_step_negative(w: World) -> Case:
+    """`extract --step -1`: usage error"""
     return Case(["extract", w.log, "--step", "-1"])
 
 
-@fault(
-    "config_dev_null",
-    "`--config /dev/null` (or an empty file): no overrides; a pipe `--config <(...)` is read once",
-    0,
-)
-def _(w: World) -> Case:
+@fault(0)
+def config_dev_null(w: World) -> Case:
+    """`--config /dev/null` (or an empty file): no overrides; a pipe `--config <(...)` is read once"""
     from cornerslam_cli.lasers import resolve_config
 
     out = w.tmp / "out"
