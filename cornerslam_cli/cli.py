@@ -51,20 +51,21 @@ def _config_options(f):
     f = click.option(
         "--config",
         "config_path",
-        type=click.Path(dir_okay=False),
+        type=click.Path(),
         callback=_config_read_once,
         help="YAML config (default: built-in).",
     )(f)
     return f
 
 
-_CONFIG_MAX = 1 << 20  # bytes read from a --config that is not a regular file
-
-
 def _config_read_once(ctx: click.Context, param, value: str | None) -> str | None:
     """A ``--config`` that is not a regular file — a pipe, ``<(...)``, ``/dev/null`` — is read once
-    into a temporary copy (removed when the command ends): a command loads its config more than
-    once, and a pipe gives its text only once. Errors name the path as given (see ``_Cli``)."""
+    into a temporary copy (removed when the command ends): ``compare`` and ``batch`` load the config
+    once per associator or combination, and a pipe gives its text only once. The copy is as large
+    as the loader accepts plus a byte (it then says "too large"); errors name the path as given
+    (see ``_Cli``)."""
+    from .config import MAX_CONFIG_BYTES
+
     try:
         mode = os.stat(value).st_mode if value else 0
     except OSError:
@@ -72,9 +73,7 @@ def _config_read_once(ctx: click.Context, param, value: str | None) -> str | Non
     if not mode or stat.S_ISREG(mode) or stat.S_ISDIR(mode):
         return value
     with open(value, "rb") as f:
-        data = f.read(_CONFIG_MAX + 1)
-    if len(data) > _CONFIG_MAX:
-        raise ConfigError(f"config '{value}' is larger than {_CONFIG_MAX} bytes", "give a YAML file")
+        data = f.read(MAX_CONFIG_BYTES + 1)
     fd, copy = tempfile.mkstemp(prefix="cornerslam-config-", suffix=".yaml")
     with os.fdopen(fd, "wb") as f:
         f.write(data)
@@ -554,30 +553,24 @@ def evaluate(out_dir, ground_truth, relations, time_offset, verbose, quiet):
     Example:
       cornerslam evaluate cornerslam_out/intel_pca --relations intel.relations --time-offset 976052857.334
     """
-    from .evaluate import ate, read_relations, relation_error, rpe
-    from .report.tables import read_tum
+    import math
+
+    from .evaluate import evaluate_files
 
     _setup_logging(verbose, quiet)
     if not ground_truth and not relations:
         raise click.UsageError("give --ground-truth FILE.tum or --relations FILE")
     traj = Path(out_dir) / "trajectory.tum" if Path(out_dir).is_dir() else Path(out_dir)
-    t, est = read_tum(traj)
-    if ground_truth:
-        gt = read_tum(ground_truth)
-        a = ate(t, est, *gt)
-        r = rpe(t, est, *gt)
+    res = evaluate_files(traj, ground_truth, relations, time_offset)
+    if "ate" in res:
+        a, r = res["ate"], res["rpe"]
+        per_m = "-" if math.isnan(r["rpe_per_m"]) else f"{r['rpe_per_m']:.4f}"  # path shorter than 1 m
         click.echo(
             f"ATE  rmse {a['rmse']:.4f} m  mean {a['mean']:.4f} m  max {a['max']:.4f} m  (n={a['n']})\n"
-            f"RPE  per step {r['rpe_step_rmse']:.4f} m  per metre {r['rpe_per_m']:.4f} m/m"
+            f"RPE  per step {r['rpe_step_rmse']:.4f} m  per metre {per_m} m/m"
         )
-    if relations:
-        e = relation_error(t, est, read_relations(relations), time_offset)
-        if e["n"] == 0:
-            raise ConfigError(
-                f"no relation in '{relations}' falls inside the trajectory's time span",
-                "check --time-offset (relation time − log time)",
-            )
-        click.echo(f"relations: {_relation_text(e)}")
+    if "relations" in res:
+        click.echo(f"relations: {_relation_text(res['relations'])}")
 
 
 @cli.command()

@@ -24,7 +24,7 @@ from . import __version__
 from .association import make_associator
 from .config import Config
 from .errors import LogError, OutputError
-from .evaluate import ate, read_relations, relation_error, rpe
+from .evaluate import ate, overlap_problem, read_relations, relation_error, rpe
 from .features import extract
 from .filter import Ekf
 from .logs import open_log
@@ -356,6 +356,7 @@ class Reference:
     relations_path: Path | None = None
     relations: np.ndarray | None = None
     time_offset: float = 0.0
+    notes: tuple[str, ...] = ()  # warnings from reading them (ground truth out of time order)
 
 
 def load_reference(
@@ -367,12 +368,14 @@ def load_reference(
     """The given ground truth, else LOG.gt.tum if present; the given relations file, if any."""
     gt_path = Path(ground_truth) if ground_truth else find_ground_truth(log_path)
     rel_path = Path(relations) if relations else None
+    notes: list[str] = []
     return Reference(
         gt_path,
-        read_tum(gt_path) if gt_path else None,
+        read_tum(gt_path, "ground truth", notes.append) if gt_path else None,
         rel_path,
         read_relations(rel_path) if rel_path else None,
         time_offset,
+        tuple(notes),
     )
 
 
@@ -382,11 +385,17 @@ def accuracy_of(
     odoms: np.ndarray,
     ref: Reference,
     scan_odoms: np.ndarray | None = None,
-) -> dict | None:
+) -> tuple[dict | None, list[str]]:
     """ATE/RPE against the ground truth and the relation metric, for the estimate and for odometry (and
-    for the scan-matched odometry when there is one: what the corners add on top of it)."""
+    for the scan-matched odometry when there is one: what the corners add on top of it), and the
+    warnings about them: a ground truth read out of time order, a ground truth that does not overlap
+    the run in time (then there is no ATE/RPE, rather than NaN), no relation inside the run."""
     acc: dict = {}
-    if ref.gt is not None:
+    notes = list(ref.notes)
+    problem = ref.gt is not None and overlap_problem(stamps, ref.gt[0], f"ground truth '{ref.gt_path}'")
+    if problem:
+        notes.append(f"{problem}: no ATE/RPE")
+    elif ref.gt is not None:
         acc.update(
             ground_truth=str(ref.gt_path),
             ate=ate(stamps, poses, *ref.gt),
@@ -403,7 +412,9 @@ def accuracy_of(
         )
         if scan_odoms is not None:
             acc["scan_odom_relations"] = relation_error(stamps, scan_odoms, ref.relations, ref.time_offset)
-    return acc or None
+        if acc["relations"]["n"] == 0:
+            notes.append(f"no relation in '{ref.relations_path}' falls inside the run (check --time-offset)")
+    return acc or None, notes
 
 
 def run_frames(
@@ -466,7 +477,9 @@ def run_frames(
         stamps_a, poses_a, odoms_a = track_a[:, 0], track_a[:, 1:4], track_a[:, 4:7]
         motion_a = track_a[:, 7:10] if src.matcher is not None else None
         write_tum(dest / "trajectory.tum", stamps_a, poses_a)
-        accuracy = accuracy_of(stamps_a, poses_a, odoms_a, ref, motion_a)
+        accuracy, notes = accuracy_of(stamps_a, poses_a, odoms_a, ref, motion_a)
+        for text in notes:
+            reader.stats.warn(text)
         summary = {
             "cornerslam_version": __version__,
             "mode": "slam",

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _strict_json import strict_load
 from click.testing import CliRunner
 from fault_corpus import N, build_corpus, build_long_log, make_odoms, make_scans
 
@@ -70,7 +71,7 @@ def test_fault_corpus_entry(corpus, name, tmp_path):
     assert res.exit_code == 0, res.output
     for f in exp.message:
         assert f in res.stderr, res.stderr
-    summary = json.loads((out / "summary.json").read_text())
+    summary = strict_load(out / "summary.json")  # strict JSON: null, never NaN or Infinity
     check_counts(summary["counts"], exp.counts)
     for f in exp.message:  # warnings also reach summary.json (first 100)
         assert any(f in w for w in summary["warnings"]) or "went backwards" in f, summary["warnings"]

@@ -47,6 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from .plots import ELLIPSE_SIGMA, ellipse_polygons, load_run
+from .tables import json_text
 
 MAP_FRAME = "map"
 TOPICS = {
@@ -269,9 +270,7 @@ def write_results_mcap(out_dir: Path, path: Path, results: Path | None = None) -
         }
         seq: dict[str, int] = dict.fromkeys(TOPICS, 0)
         for ns, key, payload in msgs:
-            w.add_message(
-                channels[key], ns, json.dumps(payload, separators=(",", ":")).encode(), ns, seq[key]
-            )
+            w.add_message(channels[key], ns, json_text(payload, separators=(",", ":")).encode(), ns, seq[key])
             seq[key] += 1
         w.add_metadata(
             "cornerslam",
