@@ -663,17 +663,19 @@ def test_sigterm_while_drawing_figures_keeps_the_previous_output(valid_log, tmp_
 
 
 def test_config_from_a_pipe_is_read_once(valid_log, tmp_path):
-    """`--config <(...)` is a pipe: it gives its text once, and a command loads its config more than
-    once (the laser preset is layered under it). The override must reach the run."""
+    """`--config <(...)` is a pipe: it gives its text once, and ``batch`` loads the config once for
+    the command and again for each combination. The CLI reads it once into a copy, so the override
+    reaches the combination's run."""
     r, w = os.pipe()
     os.write(w, b"keyframes:\n  linear_update: 0.25\n")
     os.close(w)
+    out = tmp_path / "batch"
     try:
-        res = invoke("run", valid_log, "--out", tmp_path / "out", "-q", "--config", f"/dev/fd/{r}")
+        res = invoke("batch", valid_log, "--out", out, "-q", "--jobs", "1", "--config", f"/dev/fd/{r}")
     finally:
         os.close(r)
     assert res.exit_code == 0, res.output
-    assert summary(tmp_path / "out")["config"]["keyframes"]["linear_update"] == 0.25
+    assert summary(out / "x__pca")["config"]["keyframes"]["linear_update"] == 0.25
 
 
 def main() -> None:
