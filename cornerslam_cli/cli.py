@@ -6,9 +6,12 @@ usage, reported as one line naming the file, key or topic and what to do.
 
 from __future__ import annotations
 
+import io
 import logging
+import math
 import os
 import signal
+import stat
 import sys
 import tempfile
 import threading
@@ -45,8 +48,38 @@ def _config_options(f):
         metavar="KEY=VALUE",
         help="Override a config key, e.g. --set association.pca.group_size=5 (repeatable).",
     )(f)
-    f = click.option("--config", "config_path", type=click.Path(), help="YAML config (default: built-in).")(f)
+    f = click.option(
+        "--config",
+        "config_path",
+        type=click.Path(),
+        callback=_config_read_once,
+        help="YAML config (default: built-in).",
+    )(f)
     return f
+
+
+def _config_read_once(ctx: click.Context, param, value: str | None) -> str | None:
+    """A ``--config`` that is not a regular file — a pipe, ``<(...)``, ``/dev/null`` — is read once
+    into a temporary copy (removed when the command ends): ``compare`` and ``batch`` load the config
+    once per associator or combination, and a pipe gives its text only once. The copy is as large
+    as the loader accepts plus a byte (it then says "too large"); errors name the path as given
+    (see ``_Cli``)."""
+    from .config import MAX_CONFIG_BYTES
+
+    try:
+        mode = os.stat(value).st_mode if value else 0
+    except OSError:
+        return value  # missing: the config loader says so
+    if not mode or stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return value
+    with open(value, "rb") as f:
+        data = f.read(MAX_CONFIG_BYTES + 1)
+    fd, copy = tempfile.mkstemp(prefix="cornerslam-config-", suffix=".yaml")
+    with os.fdopen(fd, "wb") as f:
+        f.write(data)
+    ctx.call_on_close(lambda: os.unlink(copy))
+    ctx.meta.setdefault("config_copies", {})[copy] = value
+    return copy
 
 
 def _topic_options(f):
@@ -57,9 +90,28 @@ def _topic_options(f):
     return f
 
 
+class _Finite(click.ParamType):
+    """A float that must be finite (click's FLOAT takes 'nan' and 'inf')."""
+
+    name = "float"
+
+    def convert(self, value, param, ctx):
+        v = click.FLOAT.convert(value, param, ctx)
+        if not math.isfinite(v):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        return v
+
+
+FINITE = _Finite()
+
+
 def _reference_options(f):
     f = click.option(
-        "--time-offset", default=0.0, show_default=True, help="With --relations: relation time − log time, s."
+        "--time-offset",
+        default=0.0,
+        type=FINITE,
+        show_default=True,
+        help="With --relations: relation time − log time, s.",
     )(f)
     f = click.option(
         "--relations",
@@ -112,18 +164,23 @@ class _StatusLine:
     def _due(self, now: float) -> bool:
         return now - self.last >= (0.1 if self.tty else 10.0)
 
+    def _write(self, text: str) -> None:
+        try:
+            sys.stderr.write(text)
+            sys.stderr.flush()
+        except OSError:  # stderr closed (`2>&1 | head`): the run goes on without a status line
+            self.enabled = False
+
     def _draw(self, text: str) -> None:
         if self.tty:
-            sys.stderr.write("\r\033[K" + text)
+            self._write("\r\033[K" + text)
             self.drawn = True
         else:
-            sys.stderr.write(text + "\n")
-        sys.stderr.flush()
+            self._write(text + "\n")
 
     def close(self) -> None:
         if self.drawn:
-            sys.stderr.write("\n")
-            sys.stderr.flush()
+            self._write("\n")
 
 
 class Progress(_StatusLine):
@@ -160,10 +217,20 @@ def _on_sigterm(signum, frame):
     raise _Terminated
 
 
+def _stdout_gone() -> None:
+    """After EPIPE on stdout: point it at /dev/null, so the interpreter's last flush stays quiet."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, io.UnsupportedOperation):
+        pass
+
+
 class _Cli(click.Group):
     """The one error boundary: a CornerslamError becomes one line and exit 2; a bug exits 1 with its
     traceback saved to a file; Ctrl-C exits 130, SIGTERM 143 (the staged output directory is
-    discarded)."""
+    discarded); a closed stdout (`| head -1`) exits 141 quietly, as a Unix tool killed by SIGPIPE
+    does (the output directory of a finished run is already committed)."""
 
     def invoke(self, ctx: click.Context):
         main_thread = threading.current_thread() is threading.main_thread()
@@ -171,14 +238,25 @@ class _Cli(click.Group):
         try:
             return super().invoke(ctx)
         except CornerslamError as e:
-            click.echo(f"error: {e}", err=True)
+            text = str(e)
+            for copy, given in ctx.meta.get("config_copies", {}).items():
+                text = text.replace(copy, given)  # a --config pipe read into a temporary copy
+            click.echo(f"error: {text}", err=True)
             ctx.exit(2)
         except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
             raise
         except KeyboardInterrupt as e:
             word, code = ("terminated", 143) if isinstance(e, _Terminated) else ("interrupted", 130)
-            click.echo(f"{word}: no output written (a previous complete output directory is kept)", err=True)
+            written = getattr(e, "output_written", None)  # the signal came after the commit
+            if written is not None:
+                text = f"after the output was complete ('{written}' is written)"
+            else:
+                text = "no output written (a previous complete output directory is kept)"
+            click.echo(f"{word}: {text}", err=True)
             ctx.exit(code)
+        except BrokenPipeError:
+            _stdout_gone()
+            ctx.exit(141)
         except Exception as exc:
             fd, path = tempfile.mkstemp(prefix="cornerslam-crash-", suffix=".txt")
             with os.fdopen(fd, "w") as f:
@@ -209,15 +287,11 @@ def _assoc_choice():
 @click.argument("log_path", metavar="LOG", type=click.Path())
 @_config_options
 @click.option("--assoc", default=None, help="Associator: icnn, jcbb or pca (default: config, pca).")
-@click.option(
-    "--out", type=click.Path(file_okay=False), help="Output directory (default ./cornerslam_out/LOG_ASSOC)."
-)
+@click.option("--out", type=click.Path(), help="Output directory (default ./cornerslam_out/LOG_ASSOC).")
 @_topic_options
 @_reference_options
 @click.option("--plot", is_flag=True, help="Also draw the map, timing and corner plots and report.html.")
-@click.option(
-    "--mcap-out", type=click.Path(dir_okay=False), help="Also write the results as MCAP for Foxglove."
-)
+@click.option("--mcap-out", type=click.Path(), help="Also write the results as MCAP for Foxglove.")
 @_verbosity
 def run(
     log_path,
@@ -248,21 +322,19 @@ def run(
     progress = Progress(f"{display_path(Path(log_path).name)} ({cfg.association.method})", not quiet)
     try:
         summary = run_pipeline(
-            log_path, cfg, out, ground_truth, progress, relations=relations, time_offset=time_offset
+            log_path,
+            cfg,
+            out,
+            ground_truth,
+            progress,
+            relations=relations,
+            time_offset=time_offset,
+            plot=plot,
+            mcap_out=mcap_out,
         )
     finally:
         progress.close()
     out_dir = Path(summary["out_dir"])
-    if plot:
-        from .report.html import write_report
-        from .report.plots import plot_run
-
-        plot_run(out_dir)
-        write_report(out_dir)
-    if mcap_out:
-        from .report.mcap_out import write_results_mcap
-
-        write_results_mcap(out_dir, Path(mcap_out))
     if not quiet:
         _print_summary(summary)
         if plot:
@@ -277,9 +349,7 @@ def run(
     "--assoc", "assocs", default="icnn,jcbb,pca", show_default=True, help="Comma-separated associators."
 )
 @_config_options
-@click.option(
-    "--out", type=click.Path(file_okay=False), help="Output directory (default ./cornerslam_out/LOG_compare)."
-)
+@click.option("--out", type=click.Path(), help="Output directory (default ./cornerslam_out/LOG_compare).")
 @_topic_options
 @_reference_options
 @click.option("--jobs", default=1, show_default=True, type=click.IntRange(1, 64), help="Parallel processes.")
@@ -325,14 +395,9 @@ def compare(
         )
     finally:
         progress.close()
-    from .report.html import write_report
-    from .report.plots import plot_compare
-
-    plot_compare(out_dir)
-    report = write_report(out_dir)
     if not quiet:
         _print_comparison(summaries)
-        click.echo(f"wrote {out_dir} (report: {report})")
+        click.echo(f"wrote {out_dir} (report: {out_dir / 'report.html'})")
 
 
 def _print_comparison(summaries: list[dict]) -> None:
@@ -461,10 +526,12 @@ def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
     Example:
       cornerslam simulate sim.mcap --seed 3 && cornerslam run sim.mcap
     """
+    from .report.outdir import output_errors
     from .simulate import simulate_log
 
     _setup_logging(verbose, quiet)
-    res = simulate_log(Path(out_path), seed=seed, laps=laps, rate=rate, beams=beams, speed=speed)
+    with output_errors(out_path):
+        res = simulate_log(Path(out_path), seed=seed, laps=laps, rate=rate, beams=beams, speed=speed)
     if not quiet:
         click.echo(
             f"wrote {res['log']} ({res['scans']} scans, {res['duration']:.1f} s), "
@@ -476,7 +543,9 @@ def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
 @click.argument("out_dir", metavar="OUTDIR", type=click.Path())
 @click.option("--ground-truth", type=click.Path(dir_okay=False), help="TUM ground truth.")
 @click.option("--relations", type=click.Path(dir_okay=False), help="Kümmerle et al. 2009 .relations file.")
-@click.option("--time-offset", default=0.0, show_default=True, help="Relation time − log time, seconds.")
+@click.option(
+    "--time-offset", default=0.0, type=FINITE, show_default=True, help="Relation time − log time, seconds."
+)
 @_verbosity
 def evaluate(out_dir, ground_truth, relations, time_offset, verbose, quiet):
     """Accuracy of a run's trajectory.tum against ground truth or relations.
@@ -507,7 +576,9 @@ def evaluate(out_dir, ground_truth, relations, time_offset, verbose, quiet):
 
 @cli.command()
 @click.argument("log_path", metavar="LOG", type=click.Path())
-@click.option("--step", default=0, show_default=True, help="Index of the scan to extract (0 = first).")
+@click.option(
+    "--step", default=0, show_default=True, type=click.IntRange(min=0), help="Index of the scan (0 = first)."
+)
 @click.option(
     "--plot", "plot_path", type=click.Path(dir_okay=False), help="Draw the scan and features to a PNG."
 )
@@ -545,7 +616,10 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
     click.echo(f"scan {step} at {scan.stamp:.3f} s: {len(scan.ranges)} valid of {scan.n_beams} beams")
     click.echo(format_extraction(segments, corners))
     if plot_path:
-        plot_extraction(scan, segments, corners, plot_path)
+        from .report.outdir import output_errors
+
+        with output_errors(plot_path):
+            plot_extraction(scan, segments, corners, plot_path)
         click.echo(f"wrote {plot_path}")
 
 
@@ -596,7 +670,7 @@ def _parse_sweeps(texts) -> dict[str, list[str]]:
     help="Run each value of a config key; repeat for a grid, e.g. --sweep association.pca.group_size=3,5.",
 )
 @_config_options
-@click.option("--out", required=True, type=click.Path(file_okay=False), help="Batch directory (resumable).")
+@click.option("--out", required=True, type=click.Path(), help="Batch directory (resumable).")
 @click.option(
     "--jobs", default=None, type=click.IntRange(1, 256), help="Local worker processes [default: CPUs]."
 )
@@ -616,6 +690,7 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
           --out sweep/ --jobs 2
     """
     from .batch import BATCH_CSV, plan, run_batch
+    from .report.outdir import check_claimable
 
     _setup_logging(verbose, quiet)
     if assocs is None:
@@ -628,6 +703,7 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
             )
     if scheduler and jobs:
         log.warning("--jobs is ignored with --scheduler (the cluster's workers run the batch)")
+    check_claimable(out, "batch")  # a directory that is not a batch's: refused before any work
     combos = plan(logs, names, _parse_sweeps(sweeps), overrides, config_path)
     progress = BatchProgress(not quiet)
     try:

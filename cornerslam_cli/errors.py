@@ -32,6 +32,11 @@ class ConfigError(CornerslamError):
     """A configuration file or ``--set`` override is invalid."""
 
 
+class OutputError(CornerslamError):
+    """An output path cannot be written (permissions, read-only or full disk, a mount point, a name
+    too long) or must not be replaced (a directory cornerslam did not write)."""
+
+
 class NumericalError(CornerslamError):
     """The filter state became invalid (non-finite or non-symmetric covariance)."""
 

@@ -15,6 +15,7 @@ import platform
 import time
 from array import array
 from collections.abc import Callable, Iterable, Iterator
+from contextlib import ExitStack
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -23,7 +24,7 @@ import numpy as np
 from . import __version__
 from .association import make_associator
 from .config import Config
-from .errors import ConfigError, LogError, display_path
+from .errors import ConfigError, LogError, OutputError, display_path
 from .evaluate import ate, overlap_problem, read_relations, relation_error, rpe
 from .features import extract
 from .filter import Ekf
@@ -31,13 +32,13 @@ from .logs import check_regular, open_log
 from .logs.sync import SyncStats, reanchor_odometry, select_keyframes, synchronise
 from .motion import ScanMatcher
 from .motion.icp import se2, transform
+from .report.outdir import StagedDir, output_errors
 from .report.tables import (
     LINES_COLUMNS,
     MAP_COLUMNS,
     TIMING_COLUMNS,
     TRAJECTORY_COLUMNS,
     CsvTable,
-    StagedDir,
     read_tum,
     write_json,
     write_tum,
@@ -306,16 +307,44 @@ def run(
     progress: Callable[[int, int], None] | None = None,
     relations: str | Path | None = None,
     time_offset: float = 0.0,
+    plot: bool = False,
+    mcap_out: str | Path | None = None,
 ) -> dict:
-    """Run corner EKF-SLAM on one log and write the output directory atomically.
+    """Run corner EKF-SLAM on one log and write the output directory atomically: the tables, with
+    ``plot`` the figures and report.html, and ``mcap_out`` beside it, all committed at once.
 
-    Returns the summary (also written to summary.json).
+    The output places are checked before any work (report/outdir.py). Returns the summary (also
+    written to summary.json) with ``out_dir``, the committed directory.
     """
     wall0 = time.perf_counter()
-    ref = load_reference(Path(log_path), ground_truth, relations, time_offset)  # bad files fail first
-    src = open_input(log_path, cfg)
-    out_dir = Path(out) if out else default_out_dir(src.path, cfg.association.method)
-    return run_frames(frames(src, cfg, progress), src, cfg, out_dir, ref, wall0)
+    out_dir = Path(out) if out else default_out_dir(Path(log_path), cfg.association.method)
+    inputs = [p for p in (log_path, ground_truth, relations) if p]
+    with StagedDir(out_dir, "run", inputs) as stage:
+        mcap_path = stage.stage_file(mcap_out) if mcap_out else None
+        ref = load_reference(Path(log_path), ground_truth, relations, time_offset)  # bad files fail first
+        src = open_input(log_path, cfg)
+        summary = run_frames(frames(src, cfg, progress), src, cfg, stage.path, ref, wall0)
+        write_extras(stage, plot, mcap_out, mcap_path)
+        summary["out_dir"] = str(stage.commit())
+    return summary
+
+
+def write_extras(stage: StagedDir, plot: bool, mcap_out: str | Path | None, mcap_path: Path | None) -> None:
+    """What a run writes besides its tables, staged before the commit: with ``plot`` the figures and
+    report.html; the results MCAP into ``mcap_path``, the staged place of ``mcap_out``."""
+    if plot:
+        from .report.html import write_report
+        from .report.plots import plot_run
+
+        plot_run(stage.path)
+        write_report(stage.path)
+    if mcap_path is not None:
+        from .report.mcap_out import write_results_mcap
+
+        if mcap_path.is_relative_to(stage.path) and mcap_path.exists():
+            raise OutputError(f"--mcap-out '{mcap_out}' is a file of the run itself", "give another name")
+        with output_errors(mcap_out):
+            write_results_mcap(stage.path, mcap_path, results=stage.target)
 
 
 @dataclass(frozen=True)
@@ -393,17 +422,18 @@ def run_frames(
     frame_iter: Iterable[Frame],
     src: Input,
     cfg: Config,
-    out_dir: Path,
+    dest: Path,
     ref: Reference,
     wall0: float,
 ) -> dict:
-    """The filter over extracted frames; writes the output directory atomically, returns the summary."""
+    """The filter over extracted frames; writes a run's files into the (staging) directory ``dest``,
+    returns the summary."""
     log_path, stats, reader, info = src.path, src.stats, src.reader, src.info
     slam = Slam(cfg, src.laser2base)
-    with StagedDir(out_dir) as stage:
-        traj = CsvTable(stage.path / "trajectory.csv", TRAJECTORY_COLUMNS)
-        timing = CsvTable(stage.path / "timing.csv", TIMING_COLUMNS)
-        lines = CsvTable(stage.path / "lines.csv", LINES_COLUMNS)
+    with ExitStack() as tables:
+        traj = tables.enter_context(CsvTable(dest / "trajectory.csv", TRAJECTORY_COLUMNS))
+        timing = tables.enter_context(CsvTable(dest / "timing.csv", TIMING_COLUMNS))
+        lines = tables.enter_context(CsvTable(dest / "lines.csv", LINES_COLUMNS))
         track = array("d")  # stamp, pose, odom, motion per step: 80 bytes a step (a list of arrays: ~400)
         totals = np.zeros(5)
         t_match_max, budget_hits, matched_total, points_total = 0.0, 0, 0, 0
@@ -442,14 +472,14 @@ def run_frames(
                 "increase",
             )
         lm = slam.landmark_table()
-        mp = CsvTable(stage.path / "map.csv", MAP_COLUMNS)
+        mp = tables.enter_context(CsvTable(dest / "map.csv", MAP_COLUMNS))
         for row in lm:
             mp.row(*(int(v) if i in (0, 8, 9, 10) else v for i, v in enumerate(row)))
         mp.close()
         track_a = np.frombuffer(track, dtype=float).reshape(-1, 10)
         stamps_a, poses_a, odoms_a = track_a[:, 0], track_a[:, 1:4], track_a[:, 4:7]
         motion_a = track_a[:, 7:10] if src.matcher is not None else None
-        write_tum(stage.path / "trajectory.tum", stamps_a, poses_a)
+        write_tum(dest / "trajectory.tum", stamps_a, poses_a)
         accuracy, notes = accuracy_of(stamps_a, poses_a, odoms_a, ref, motion_a)
         for text in notes:
             reader.stats.warn(text)
@@ -497,8 +527,7 @@ def run_frames(
             "config": cfg.to_dict(),
             "versions": _versions(),
         }
-        write_json(stage.path / "summary.json", summary)
-        summary["out_dir"] = str(stage.commit())
+        write_json(dest / "summary.json", summary)
     return summary
 
 

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from cornerslam_cli.errors import LogError
-from cornerslam_cli.report.tables import CsvTable, StagedDir, read_csv, read_tum, write_tum
+from cornerslam_cli.report.outdir import MARKER, StagedDir, mark_output
+from cornerslam_cli.report.tables import CsvTable, read_csv, read_tum, write_tum
 
 
 def test_tum_round_trip_keeps_yaw(tmp_path):
@@ -41,6 +42,7 @@ def test_staged_dir_replaces_only_on_commit(tmp_path):
     target = tmp_path / "out"
     target.mkdir()
     (target / "old.txt").write_text("previous run")
+    mark_output(target, "run")  # a previous cornerslam run: the only kind of directory replaced
     with pytest.raises(RuntimeError):
         with StagedDir(target) as st:
             (st.path / "half.csv").write_text("step\n")
@@ -50,7 +52,7 @@ def test_staged_dir_replaces_only_on_commit(tmp_path):
     with StagedDir(target) as st:
         (st.path / "new.csv").write_text("step\n")
         st.commit()
-    assert sorted(p.name for p in target.iterdir()) == ["new.csv"]
+    assert sorted(p.name for p in target.iterdir()) == [MARKER, "new.csv"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
 
 

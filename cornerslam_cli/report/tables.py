@@ -1,9 +1,7 @@
-"""Output tables (INTERFACE.md): ``write_*`` / ``read_*`` pairs and the atomic output directory.
+"""Output tables (INTERFACE.md): ``write_*`` / ``read_*`` pairs.
 
-A run writes into a hidden staging directory beside the target (``.NAME.partial-XXXX``), streaming
-its per-step rows there, and only renames it onto ``--out`` once every file is complete. A crash,
-a kill or Ctrl-C therefore leaves either the previous complete directory or none, never a
-half-written one that looks complete.
+A run streams its per-step rows into a hidden staging directory (outdir.py's :class:`StagedDir`),
+renamed onto ``--out`` only once every file is complete.
 """
 
 from __future__ import annotations
@@ -13,8 +11,6 @@ import io
 import json
 import logging
 import os
-import shutil
-import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -78,6 +74,19 @@ class CsvTable:
             self._f.flush()
             os.fsync(self._f.fileno())
             self._f.close()
+
+    def __enter__(self) -> CsvTable:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        """Closed either way; after an error (a full disk) without a second one from the close."""
+        if exc is None:
+            self.close()
+            return
+        try:
+            self._f.close()
+        except OSError:
+            pass
 
 
 def read_csv(path: str | Path) -> dict[str, np.ndarray]:
@@ -177,36 +186,3 @@ def _json_default(o):
     if isinstance(o, Path):
         return str(o)
     raise TypeError(f"not JSON serialisable: {type(o)}")
-
-
-class StagedDir:
-    """A directory built in a hidden sibling and renamed onto ``target`` on :meth:`commit`.
-
-    Use as a context manager: leaving the block without ``commit()`` (an exception, Ctrl-C) removes
-    the staging directory and leaves ``target`` as it was.
-    """
-
-    def __init__(self, target: str | Path):
-        self.target = Path(target).resolve()
-        self.target.parent.mkdir(parents=True, exist_ok=True)
-        self.path = Path(tempfile.mkdtemp(prefix=f".{self.target.name}.partial-", dir=self.target.parent))
-        self.committed = False
-
-    def __enter__(self) -> StagedDir:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        if not self.committed:
-            shutil.rmtree(self.path, ignore_errors=True)
-
-    def commit(self) -> Path:
-        """Swap the finished staging directory in place of ``target``."""
-        old = None
-        if self.target.exists():
-            old = self.target.parent / f".{self.target.name}.old-{os.getpid()}"
-            os.rename(self.target, old)
-        os.rename(self.path, self.target)
-        self.committed = True
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
-        return self.target
