@@ -56,6 +56,29 @@ class Expected:
     args: tuple[str, ...] = ()
 
 
+# --------------------------------------------------------------------------- checks shared by the fault tests
+def check_error_line(res, fragments) -> None:
+    """Exit 2 and exactly one 'error:' line, the last on stderr, naming what it must; no traceback."""
+    assert res.exit_code == 2, res.output
+    lines = res.stderr.strip().splitlines()
+    assert [ln for ln in lines if ln.startswith("error:")] == lines[-1:], res.stderr
+    assert "Traceback" not in res.output
+    for f in fragments:
+        assert f in lines[-1], lines[-1]
+
+
+def peak_bytes(run: Callable[[], object]) -> int:
+    """Peak traced Python memory (bytes) while ``run()`` runs."""
+    import tracemalloc
+
+    tracemalloc.start()
+    try:
+        run()
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
 # --------------------------------------------------------------------------- the simulated robot
 def truth(t: np.ndarray) -> np.ndarray:
     """(k, 3) true base poses at times t (seconds since T0): a circle of radius 2.8 m around the box."""

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from _strict_json import strict_load
 from click.testing import CliRunner
-from fault_corpus import N, build_corpus, build_long_log, make_odoms, make_scans
+from fault_corpus import N, build_corpus, build_long_log, check_error_line, make_odoms, make_scans
 
 from cornerslam_cli.cli import cli
 from cornerslam_cli.logs.writers import write_mcap
@@ -39,16 +39,6 @@ def no_partial_output(out: Path) -> None:
     """Neither the output directory nor a hidden staging directory beside it."""
     assert not out.exists()
     assert not [p.name for p in out.parent.iterdir() if p.name.startswith(f".{out.name}.")]
-
-
-def check_error_line(res, fragments) -> None:
-    """Exit 2 and exactly one 'error:' line, the last on stderr, naming what it must; no traceback."""
-    assert res.exit_code == 2, res.output
-    lines = res.stderr.strip().splitlines()
-    assert [ln for ln in lines if ln.startswith("error:")] == lines[-1:], res.stderr
-    assert "Traceback" not in res.output
-    for f in fragments:
-        assert f in lines[-1], lines[-1]
 
 
 def check_counts(counts: dict, expected: dict) -> None:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
-from fault_corpus import N, make_odoms, make_scans, write_gt
+from fault_corpus import N, check_error_line, make_odoms, make_scans, peak_bytes, write_gt
 
 from cornerslam_cli.cli import cli
 from cornerslam_cli.logs.writers import write_mcap
@@ -22,16 +22,6 @@ pytestmark = pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="POSIX only")
 
 def invoke(*args):
     return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
-
-
-def check_error_line(res, fragments) -> None:
-    """Exit 2, one 'error:' line (the last on stderr) naming what it must, no traceback."""
-    assert res.exit_code == 2, res.output
-    lines = res.stderr.strip().splitlines()
-    assert [ln for ln in lines if ln.startswith("error:")] == lines[-1:], res.stderr
-    assert "Traceback" not in res.output
-    for f in fragments:
-        assert f in lines[-1], lines[-1]
 
 
 @pytest.fixture(scope="module")
@@ -149,15 +139,6 @@ def test_info_batch_and_errors_with_a_name_that_is_not_utf8(latin1_log, tmp_path
 
 
 # ---------------------------------------------------------------------------- memory
-def _peak(run) -> int:
-    import tracemalloc
-
-    tracemalloc.start()
-    try:
-        run()
-        return tracemalloc.get_traced_memory()[1]
-    finally:
-        tracemalloc.stop()
 
 
 def test_scans_without_odometry_do_not_grow_memory(tmp_path):
@@ -173,7 +154,7 @@ def test_scans_without_odometry_do_not_grow_memory(tmp_path):
     def run(n):
         log = write_mcap(tmp_path / f"l{n}.mcap", make_scans(n, beams=64), make_odoms(11), chunk_size=1 << 16)
         src = open_input(log, cfg)
-        peak = _peak(lambda: sum(1 for _ in frames(src, cfg)))
+        peak = peak_bytes(lambda: sum(1 for _ in frames(src, cfg)))
         assert src.stats.scans_in == n and src.stats.after_last_odom == n - 10
         return peak
 

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from fault_corpus import peak_bytes
 
 from cornerslam_cli.config import KeyframeConfig
 from cornerslam_cli.logs.sync import SyncStats, interpolate_pose, select_keyframes, synchronise
@@ -98,17 +99,6 @@ def test_scans_in_a_gap_of_the_odometry_are_skipped_and_counted():
     assert len(warned) == 1 and "1 after the last odometry sample, 198 in gaps of the odometry" in warned[0]
 
 
-def _peak_bytes(run) -> int:
-    import tracemalloc
-
-    tracemalloc.start()
-    try:
-        run()
-        return tracemalloc.get_traced_memory()[1]
-    finally:
-        tracemalloc.stop()
-
-
 def _beams_scan(t: float, beams: int = 64) -> Scan:
     r = np.ones(beams)
     return Scan(t, r, np.linspace(-1, 1, beams), np.arange(beams), beams, 0.1, 10.0, 2 / beams)
@@ -133,5 +123,5 @@ def test_memory_does_not_grow_with_unpaired_messages(case):
         assert list(synchronise(messages(n), st, lambda *a: None)) == []
         assert st.after_last_odom == (n if case == "scans_after_odometry" else 0)
 
-    small, large = _peak_bytes(lambda: run(3000)), _peak_bytes(lambda: run(9000))
+    small, large = peak_bytes(lambda: run(3000)), peak_bytes(lambda: run(9000))
     assert large < 1.3 * small, (small, large)
