@@ -280,7 +280,7 @@ def test_compare_rejects_unknown_and_repeated_associators(sim_log, tmp_path):
 def test_relations_are_scored_in_run_and_compare(sim_log, tmp_path):
     """Relations built from the simulator's ground truth (offset by a made-up clock difference): the
     estimate must score far better than odometry, and compare tabulates the metric per associator."""
-    from cornerslam_cli.evaluate import relative
+    from cornerslam_cli.geometry import relative
     from cornerslam_cli.report.tables import read_tum
 
     t, gt = read_tum(sim_log.with_suffix(".gt.tum"))

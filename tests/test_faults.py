@@ -252,7 +252,7 @@ def test_ten_thousand_filter_steps_keep_sigma_positive_definite():
     from cornerslam_cli.filter import Ekf
     from cornerslam_cli.filter.models import observe
     from cornerslam_cli.filter.params import EkfConfig
-    from cornerslam_cli.types import wrap_angle
+    from cornerslam_cli.geometry import wrap_angle
 
     rng = np.random.default_rng(11)
     ang = np.linspace(0, 2 * np.pi, 12, endpoint=False)

@@ -34,6 +34,7 @@ from typing import Protocol
 import numpy as np
 
 from ..errors import LogError, printable
+from ..geometry import normalize_quaternion, yaw_from_quaternion
 from ..types import OdomSample, Scan
 
 logger = logging.getLogger("cornerslam.logs")
@@ -161,12 +162,9 @@ class ReadStats:
                     where, stamp, tuple(q),
                 )  # fmt: skip
             return None
-        if math.isfinite(n2) and abs(n2 - 1.0) > 1e-9:  # unit within 1e-9: used as it is
-            if abs(n2 - 1.0) > 2e-3:
-                self.warn("%s: odometry orientation quaternions are not of unit length: normalised", where)
-            s = 1.0 / math.sqrt(n2)
-            q = (q[0] * s, q[1] * s, q[2] * s, q[3] * s)
-        pose = (x, y, yaw_from_quaternion(*q))
+        if math.isfinite(n2) and abs(n2 - 1.0) > 2e-3:
+            self.warn("%s: odometry orientation quaternions are not of unit length: normalised", where)
+        pose = (x, y, yaw_from_quaternion(*normalize_quaternion(*q)))  # unit within 1e-9: used as it is
         if self.bad_odometry(where, stamp, pose):
             return None
         self.odoms += 1
@@ -271,11 +269,6 @@ def make_scan(
         angle_increment=float(angle_increment),
         frame_id=frame_id,
     )
-
-
-def yaw_from_quaternion(x: float, y: float, z: float, w: float) -> float:
-    """Yaw (rotation about z) of a unit quaternion, radians."""
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
 def transform_matrix(t: tuple[float, float, float], q: tuple[float, float, float, float]) -> np.ndarray:

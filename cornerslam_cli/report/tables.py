@@ -16,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..geometry import yaw_from_quaternion
+
 log = logging.getLogger("cornerslam.report")
 
 # INTERFACE.md's columns, then (an extension) the scan-matched odometry the filter used as motion input
@@ -151,8 +153,7 @@ def read_tum(
         keep = np.ones(len(a), dtype=bool)
         keep[same + 1] = False
         a = a[keep]
-    qx, qy, qz, qw = a[:, 4], a[:, 5], a[:, 6], a[:, 7]
-    yaw = np.arctan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
+    yaw = yaw_from_quaternion(a[:, 4], a[:, 5], a[:, 6], a[:, 7])
     return a[:, 0], np.column_stack((a[:, 1], a[:, 2], yaw))
 
 
