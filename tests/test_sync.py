@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from fault_corpus import peak_bytes
 
-from cornerslam_cli.config import KeyframeConfig
+from cornerslam_cli.logs.params import KeyframeConfig
 from cornerslam_cli.logs.sync import SyncStats, select_keyframes, synchronise
 from cornerslam_cli.types import OdomSample, Scan
 

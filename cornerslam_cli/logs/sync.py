@@ -24,9 +24,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import KeyframeConfig, OdomJumpConfig
 from ..geometry import compose, interpolate, inverse, wrap_angle
 from ..types import OdomSample, Scan
+from .params import KeyframeConfig, OdomJumpConfig
 
 log = logging.getLogger(__name__)
 
