@@ -416,7 +416,7 @@ class _CsvWriter:
         self.last = 0.0
 
     def write(self, rows: list[dict], throttle: bool = False) -> None:
-        from .report.tables import _fmt
+        from .report.tables import csv_value
 
         now = time.monotonic()
         if throttle and now - self.last < 1.0:
@@ -429,7 +429,7 @@ class _CsvWriter:
                     w = csv.writer(f, lineterminator="\n")
                     w.writerow(self.columns)
                     for r in rows:
-                        w.writerow(["" if r.get(k) is None else _fmt(r[k]) for k in self.columns])
+                        w.writerow(["" if r.get(k) is None else csv_value(r[k]) for k in self.columns])
                     f.flush()
                     os.fsync(f.fileno())
                 os.replace(tmp, self.path)

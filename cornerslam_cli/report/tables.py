@@ -38,7 +38,9 @@ COMPARISON_COLUMNS = (
 ).split(",")
 
 
-def _fmt(v) -> str:
+def csv_value(v) -> str:
+    """One CSV cell: bools and integers as integers, floats rounded to 9 decimals (``nan`` for NaN;
+    ``repr`` from 1e15 up), anything else as ``str``."""
     if isinstance(v, (bool, np.bool_)):
         return str(int(v))
     if isinstance(v, (int, np.integer)):
@@ -61,14 +63,14 @@ class CsvTable:
         self._f.write(",".join(self.columns) + "\n")
 
     def row(self, *values) -> None:
-        self._f.write(",".join(_fmt(v) for v in values) + "\n")
+        self._f.write(",".join(csv_value(v) for v in values) + "\n")
 
     def rows(self, array: np.ndarray, lead: Sequence = ()) -> None:
         """Write each row of a 2D array, prefixed by the ``lead`` values."""
-        prefix = "".join(_fmt(v) + "," for v in lead)
+        prefix = "".join(csv_value(v) + "," for v in lead)
         buf = io.StringIO()
         for r in np.asarray(array, dtype=float):
-            buf.write(prefix + ",".join(_fmt(v) for v in r) + "\n")
+            buf.write(prefix + ",".join(csv_value(v) for v in r) + "\n")
         self._f.write(buf.getvalue())
 
     def close(self) -> None:
