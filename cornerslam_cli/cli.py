@@ -375,8 +375,8 @@ def compare(
     Example:
       cornerslam compare sample_logs/sim_office.mcap --assoc icnn,jcbb,pca --jobs 2
     """
+    from .compare import compare as run_compare
     from .pipeline import default_out_dir
-    from .report.compare import compare as run_compare
 
     _setup_logging(verbose, quiet)
     names = [a.strip() for a in assocs.split(",") if a.strip()]
