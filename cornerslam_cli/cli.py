@@ -19,11 +19,9 @@ import time
 import traceback
 from pathlib import Path
 
-# The filter's and associators' matrices are small or memory-bound: BLAS threads cost more than they
-# save (a run on the simulated sample takes 2x longer with two OpenBLAS threads). An explicit setting
-# in the environment wins. This must happen before numpy is first imported.
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+from .blas import single_threaded_blas
+
+single_threaded_blas()  # before numpy is first imported (blas.py says why)
 
 import click  # noqa: E402
 
