@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import difflib
 import math
 import re
 import types
@@ -28,7 +27,7 @@ from typing import Any, Literal
 import yaml
 
 from .association.params import AssociationConfig
-from .errors import ConfigError
+from .errors import ConfigError, did_you_mean
 from .features.params import CornersConfig, LinesConfig, SensorConfig
 from .filter.params import EkfConfig
 from .logs.params import KeyframeConfig, OdomJumpConfig
@@ -102,8 +101,7 @@ def _to_plain(v: Any) -> Any:
 
 
 def _closest(key: str, valid: list[str]) -> str:
-    match = difflib.get_close_matches(key, valid, n=1, cutoff=0.5)
-    return f"did you mean '{match[0]}'?" if match else f"valid keys: {', '.join(sorted(valid))}"
+    return did_you_mean(key, valid, cutoff=0.5) or f"valid keys: {', '.join(sorted(valid))}"
 
 
 _YAML11_EXPONENT = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)[eE][+-]?\d+$")
@@ -135,8 +133,7 @@ def _coerce(value: Any, tp: Any, key: str) -> Any:
     if origin is Literal:
         choices = typing.get_args(tp)
         if not isinstance(value, str) or value not in choices:
-            hint = difflib.get_close_matches(str(value)[:100], [str(c) for c in choices], n=1, cutoff=0.5)
-            dym = f"did you mean '{hint[0]}'? " if hint else ""
+            dym = did_you_mean(str(value)[:100], map(str, choices), cutoff=0.5, then=" ")
             raise ConfigError(
                 f"config key '{key}' = {got} is not allowed",
                 f"{dym}choices: {', '.join(map(str, choices))}",
