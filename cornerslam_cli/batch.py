@@ -19,6 +19,11 @@ batch.csv is rewritten atomically (temporary file + rename) as combinations fini
 second) and at the end; while the batch runs, or after it was interrupted, the combinations not yet
 finished have status ``pending``. Paths in it are as given (``log``) or relative to OUT (``out_dir``).
 
+OUT must be new, empty or a batch directory already (its ``.cornerslam-output`` marker, or the
+batch.csv of an older version): any other directory is refused before any work (report/outdir.py).
+A combination's directory is replaced only if it is a cornerslam run output; anything else there
+fails that row.
+
 Execution: a spawn-context process pool of ``jobs`` workers (workers import the package themselves;
 OPENBLAS_NUM_THREADS etc. default to 1 in their environment), or with ``scheduler="tcp://host:port"``
 a Dask distributed cluster (``pip install cornerslam[dask]``). Dask workers must have cornerslam
@@ -35,7 +40,6 @@ import json
 import logging
 import os
 import re
-import tempfile
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -43,7 +47,8 @@ from pathlib import Path
 from typing import Any
 
 from . import __version__
-from .errors import ConfigError, CornerslamError
+from .errors import ConfigError, CornerslamError, display_path
+from .report.outdir import claim_dir, clear_stale, output_errors, staged_file
 
 BATCH_CSV = "batch.csv"
 FIGURES = [
@@ -157,7 +162,7 @@ def _safe(text: str) -> str:
 
 
 def _short_hash(text: str) -> str:
-    return hashlib.sha1(text.encode()).hexdigest()[:8]
+    return hashlib.sha1(os.fsencode(text)).hexdigest()[:8]
 
 
 def _log_labels(logs: Sequence[str]) -> dict[str, str]:
@@ -219,7 +224,8 @@ def run_batch(
     from .pipeline import config_hash, find_ground_truth, input_hash
 
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    claim_dir(out, "batch")  # refuses a directory that is not a batch's, before any work
+    clear_stale(out / BATCH_CSV)  # temporary files of a killed batch
     columns = batch_columns([k for k, _ in combos[0].sweep] if combos else [])
     rows = [_row(c, "pending") for c in combos]
     state = BatchState(len(combos))
@@ -233,8 +239,8 @@ def run_batch(
         if c.log not in log_hashes:  # once per log, not per combination
             try:
                 log_hashes[c.log] = input_hash(Path(c.log))
-            except OSError:
-                log_hashes[c.log] = None  # the run reports the unreadable log
+            except (OSError, CornerslamError):
+                log_hashes[c.log] = None  # the run reports the unreadable log (or pipe)
         expect = {
             "input": log_hashes[c.log],
             "config": config_hash(from_dict(Config, c.config)),
@@ -278,7 +284,7 @@ def _size(path: str) -> int:
 
 
 def _row(c: Combo, status: str, error: str = "", figures: dict | None = None) -> dict:
-    row = {"log": c.log, "assoc": c.assoc, **dict(c.sweep), "status": status, "error": error}
+    row = {"log": display_path(c.log), "assoc": c.assoc, **dict(c.sweep), "status": status, "error": error}
     row.update({k: (figures or {}).get(k) for k in FIGURES})
     row["out_dir"] = c.name if status in ("ok", "skipped") else ""
     return row
@@ -416,19 +422,20 @@ class _CsvWriter:
         if throttle and now - self.last < 1.0:
             return
         self.last = now
-        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", dir=self.path.parent)
-        try:
-            with os.fdopen(fd, "w", newline="") as f:
-                w = csv.writer(f, lineterminator="\n")
-                w.writerow(self.columns)
-                for r in rows:
-                    w.writerow(["" if r.get(k) is None else _fmt(r[k]) for k in self.columns])
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, self.path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        with output_errors(self.path):
+            tmp = staged_file(self.path)
+            try:
+                with open(tmp, "w", newline="") as f:
+                    w = csv.writer(f, lineterminator="\n")
+                    w.writerow(self.columns)
+                    for r in rows:
+                        w.writerow(["" if r.get(k) is None else _fmt(r[k]) for k in self.columns])
+                    f.flush()
+                    os.fsync(f.fileno())
+                os.replace(tmp, self.path)
+            except BaseException:
+                tmp.unlink(missing_ok=True)
+                raise
 
 
 def read_batch(path: str | Path) -> list[dict[str, str]]:

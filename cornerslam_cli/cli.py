@@ -6,9 +6,12 @@ usage, reported as one line naming the file, key or topic and what to do.
 
 from __future__ import annotations
 
+import io
 import logging
+import math
 import os
 import signal
+import stat
 import sys
 import tempfile
 import threading
@@ -25,7 +28,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import click  # noqa: E402
 
 from . import __version__  # noqa: E402
-from .errors import ConfigError, CornerslamError  # noqa: E402
+from .errors import ConfigError, CornerslamError, display_path  # noqa: E402
 
 log = logging.getLogger("cornerslam")
 
@@ -46,9 +49,37 @@ def _config_options(f):
         help="Override a config key, e.g. --set association.pca.group_size=5 (repeatable).",
     )(f)
     f = click.option(
-        "--config", "config_path", type=click.Path(dir_okay=False), help="YAML config (default: built-in)."
+        "--config",
+        "config_path",
+        type=click.Path(),
+        callback=_config_read_once,
+        help="YAML config (default: built-in).",
     )(f)
     return f
+
+
+def _config_read_once(ctx: click.Context, param, value: str | None) -> str | None:
+    """A ``--config`` that is not a regular file — a pipe, ``<(...)``, ``/dev/null`` — is read once
+    into a temporary copy (removed when the command ends): ``compare`` and ``batch`` load the config
+    once per associator or combination, and a pipe gives its text only once. The copy is as large
+    as the loader accepts plus a byte (it then says "too large"); errors name the path as given
+    (see ``_Cli``)."""
+    from .config import MAX_CONFIG_BYTES
+
+    try:
+        mode = os.stat(value).st_mode if value else 0
+    except OSError:
+        return value  # missing: the config loader says so
+    if not mode or stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return value
+    with open(value, "rb") as f:
+        data = f.read(MAX_CONFIG_BYTES + 1)
+    fd, copy = tempfile.mkstemp(prefix="cornerslam-config-", suffix=".yaml")
+    with os.fdopen(fd, "wb") as f:
+        f.write(data)
+    ctx.call_on_close(lambda: os.unlink(copy))
+    ctx.meta.setdefault("config_copies", {})[copy] = value
+    return copy
 
 
 def _topic_options(f):
@@ -59,9 +90,28 @@ def _topic_options(f):
     return f
 
 
+class _Finite(click.ParamType):
+    """A float that must be finite (click's FLOAT takes 'nan' and 'inf')."""
+
+    name = "float"
+
+    def convert(self, value, param, ctx):
+        v = click.FLOAT.convert(value, param, ctx)
+        if not math.isfinite(v):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        return v
+
+
+FINITE = _Finite()
+
+
 def _reference_options(f):
     f = click.option(
-        "--time-offset", default=0.0, show_default=True, help="With --relations: relation time − log time, s."
+        "--time-offset",
+        default=0.0,
+        type=FINITE,
+        show_default=True,
+        help="With --relations: relation time − log time, s.",
     )(f)
     f = click.option(
         "--relations",
@@ -114,18 +164,23 @@ class _StatusLine:
     def _due(self, now: float) -> bool:
         return now - self.last >= (0.1 if self.tty else 10.0)
 
+    def _write(self, text: str) -> None:
+        try:
+            sys.stderr.write(text)
+            sys.stderr.flush()
+        except OSError:  # stderr closed (`2>&1 | head`): the run goes on without a status line
+            self.enabled = False
+
     def _draw(self, text: str) -> None:
         if self.tty:
-            sys.stderr.write("\r\033[K" + text)
+            self._write("\r\033[K" + text)
             self.drawn = True
         else:
-            sys.stderr.write(text + "\n")
-        sys.stderr.flush()
+            self._write(text + "\n")
 
     def close(self) -> None:
         if self.drawn:
-            sys.stderr.write("\n")
-            sys.stderr.flush()
+            self._write("\n")
 
 
 class Progress(_StatusLine):
@@ -162,10 +217,20 @@ def _on_sigterm(signum, frame):
     raise _Terminated
 
 
+def _stdout_gone() -> None:
+    """After EPIPE on stdout: point it at /dev/null, so the interpreter's last flush stays quiet."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, io.UnsupportedOperation):
+        pass
+
+
 class _Cli(click.Group):
     """The one error boundary: a CornerslamError becomes one line and exit 2; a bug exits 1 with its
     traceback saved to a file; Ctrl-C exits 130, SIGTERM 143 (the staged output directory is
-    discarded)."""
+    discarded); a closed stdout (`| head -1`) exits 141 quietly, as a Unix tool killed by SIGPIPE
+    does (the output directory of a finished run is already committed)."""
 
     def invoke(self, ctx: click.Context):
         main_thread = threading.current_thread() is threading.main_thread()
@@ -173,14 +238,25 @@ class _Cli(click.Group):
         try:
             return super().invoke(ctx)
         except CornerslamError as e:
-            click.echo(f"error: {e}", err=True)
+            text = str(e)
+            for copy, given in ctx.meta.get("config_copies", {}).items():
+                text = text.replace(copy, given)  # a --config pipe read into a temporary copy
+            click.echo(f"error: {text}", err=True)
             ctx.exit(2)
         except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
             raise
         except KeyboardInterrupt as e:
             word, code = ("terminated", 143) if isinstance(e, _Terminated) else ("interrupted", 130)
-            click.echo(f"{word}: no output written (a previous complete output directory is kept)", err=True)
+            written = getattr(e, "output_written", None)  # the signal came after the commit
+            if written is not None:
+                text = f"after the output was complete ('{written}' is written)"
+            else:
+                text = "no output written (a previous complete output directory is kept)"
+            click.echo(f"{word}: {text}", err=True)
             ctx.exit(code)
+        except BrokenPipeError:
+            _stdout_gone()
+            ctx.exit(141)
         except Exception as exc:
             fd, path = tempfile.mkstemp(prefix="cornerslam-crash-", suffix=".txt")
             with os.fdopen(fd, "w") as f:
@@ -211,15 +287,11 @@ def _assoc_choice():
 @click.argument("log_path", metavar="LOG", type=click.Path())
 @_config_options
 @click.option("--assoc", default=None, help="Associator: icnn, jcbb or pca (default: config, pca).")
-@click.option(
-    "--out", type=click.Path(file_okay=False), help="Output directory (default ./cornerslam_out/LOG_ASSOC)."
-)
+@click.option("--out", type=click.Path(), help="Output directory (default ./cornerslam_out/LOG_ASSOC).")
 @_topic_options
 @_reference_options
 @click.option("--plot", is_flag=True, help="Also draw the map, timing and corner plots and report.html.")
-@click.option(
-    "--mcap-out", type=click.Path(dir_okay=False), help="Also write the results as MCAP for Foxglove."
-)
+@click.option("--mcap-out", type=click.Path(), help="Also write the results as MCAP for Foxglove.")
 @_verbosity
 def run(
     log_path,
@@ -247,24 +319,22 @@ def run(
 
     _setup_logging(verbose, quiet)
     cfg = _load(config_path, overrides, assoc, scan_topic, odom_topic, log_path)
-    progress = Progress(f"{Path(log_path).name} ({cfg.association.method})", not quiet)
+    progress = Progress(f"{display_path(Path(log_path).name)} ({cfg.association.method})", not quiet)
     try:
         summary = run_pipeline(
-            log_path, cfg, out, ground_truth, progress, relations=relations, time_offset=time_offset
+            log_path,
+            cfg,
+            out,
+            ground_truth,
+            progress,
+            relations=relations,
+            time_offset=time_offset,
+            plot=plot,
+            mcap_out=mcap_out,
         )
     finally:
         progress.close()
     out_dir = Path(summary["out_dir"])
-    if plot:
-        from .report.html import write_report
-        from .report.plots import plot_run
-
-        plot_run(out_dir)
-        write_report(out_dir)
-    if mcap_out:
-        from .report.mcap_out import write_results_mcap
-
-        write_results_mcap(out_dir, Path(mcap_out))
     if not quiet:
         _print_summary(summary)
         if plot:
@@ -279,9 +349,7 @@ def run(
     "--assoc", "assocs", default="icnn,jcbb,pca", show_default=True, help="Comma-separated associators."
 )
 @_config_options
-@click.option(
-    "--out", type=click.Path(file_okay=False), help="Output directory (default ./cornerslam_out/LOG_compare)."
-)
+@click.option("--out", type=click.Path(), help="Output directory (default ./cornerslam_out/LOG_compare).")
 @_topic_options
 @_reference_options
 @click.option("--jobs", default=1, show_default=True, type=click.IntRange(1, 64), help="Parallel processes.")
@@ -320,21 +388,16 @@ def compare(
     for a in names:
         _load(config_path, overrides, a)  # unknown names fail here, with the closest valid one
     out_dir = Path(out) if out else default_out_dir(Path(log_path), "compare")
-    progress = Progress(f"{Path(log_path).name} (extract)", not quiet)
+    progress = Progress(f"{display_path(Path(log_path).name)} (extract)", not quiet)
     try:
         summaries = run_compare(
             log_path, cfg, names, out_dir, ground_truth, jobs, progress, relations, time_offset
         )
     finally:
         progress.close()
-    from .report.html import write_report
-    from .report.plots import plot_compare
-
-    plot_compare(out_dir)
-    report = write_report(out_dir)
     if not quiet:
         _print_comparison(summaries)
-        click.echo(f"wrote {out_dir} (report: {report})")
+        click.echo(f"wrote {out_dir} (report: {out_dir / 'report.html'})")
 
 
 def _print_comparison(summaries: list[dict]) -> None:
@@ -424,7 +487,7 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
     _setup_logging(verbose, quiet)
     reader = open_log(Path(log_path), scan_topic=scan_topic or "", odom_topic=odom_topic or "")
     i = reader.info()
-    click.echo(f"file:      {log_path}")
+    click.echo(f"file:      {display_path(log_path)}")
     click.echo(f"format:    {i.format}")
     click.echo(f"messages:  {i.n_messages}")
     if i.start is not None:
@@ -434,7 +497,8 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
     for t in i.topics:
         count = "?" if t.count is None else str(t.count)
         rate = f"{t.rate_hz:8.2f} Hz" if t.rate_hz else ""
-        click.echo(f"  {t.name:<28} {t.msgtype:<30} {count:>8} msgs {rate}")
+        note = f" [{t.encoding_note}]" if t.encoding_note else ""
+        click.echo(f"  {t.name:<28} {t.msgtype:<30} {count:>8} msgs {rate}{note}")
     click.echo("run would use:")
     click.echo(f"  scans     {i.scan_topic or '-'}")
     click.echo(f"  odometry  {i.odom_topic or '-'} ({i.odom_source or 'none found'})")
@@ -462,10 +526,12 @@ def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
     Example:
       cornerslam simulate sim.mcap --seed 3 && cornerslam run sim.mcap
     """
+    from .report.outdir import output_errors
     from .simulate import simulate_log
 
     _setup_logging(verbose, quiet)
-    res = simulate_log(Path(out_path), seed=seed, laps=laps, rate=rate, beams=beams, speed=speed)
+    with output_errors(out_path):
+        res = simulate_log(Path(out_path), seed=seed, laps=laps, rate=rate, beams=beams, speed=speed)
     if not quiet:
         click.echo(
             f"wrote {res['log']} ({res['scans']} scans, {res['duration']:.1f} s), "
@@ -477,7 +543,9 @@ def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
 @click.argument("out_dir", metavar="OUTDIR", type=click.Path())
 @click.option("--ground-truth", type=click.Path(dir_okay=False), help="TUM ground truth.")
 @click.option("--relations", type=click.Path(dir_okay=False), help="Kümmerle et al. 2009 .relations file.")
-@click.option("--time-offset", default=0.0, show_default=True, help="Relation time − log time, seconds.")
+@click.option(
+    "--time-offset", default=0.0, type=FINITE, show_default=True, help="Relation time − log time, seconds."
+)
 @_verbosity
 def evaluate(out_dir, ground_truth, relations, time_offset, verbose, quiet):
     """Accuracy of a run's trajectory.tum against ground truth or relations.
@@ -486,35 +554,31 @@ def evaluate(out_dir, ground_truth, relations, time_offset, verbose, quiet):
     Example:
       cornerslam evaluate cornerslam_out/intel_pca --relations intel.relations --time-offset 976052857.334
     """
-    from .evaluate import ate, read_relations, relation_error, rpe
-    from .report.tables import read_tum
+    import math
+
+    from .evaluate import evaluate_files
 
     _setup_logging(verbose, quiet)
     if not ground_truth and not relations:
         raise click.UsageError("give --ground-truth FILE.tum or --relations FILE")
     traj = Path(out_dir) / "trajectory.tum" if Path(out_dir).is_dir() else Path(out_dir)
-    t, est = read_tum(traj)
-    if ground_truth:
-        gt = read_tum(ground_truth)
-        a = ate(t, est, *gt)
-        r = rpe(t, est, *gt)
+    res = evaluate_files(traj, ground_truth, relations, time_offset)
+    if "ate" in res:
+        a, r = res["ate"], res["rpe"]
+        per_m = "-" if math.isnan(r["rpe_per_m"]) else f"{r['rpe_per_m']:.4f}"  # path shorter than 1 m
         click.echo(
             f"ATE  rmse {a['rmse']:.4f} m  mean {a['mean']:.4f} m  max {a['max']:.4f} m  (n={a['n']})\n"
-            f"RPE  per step {r['rpe_step_rmse']:.4f} m  per metre {r['rpe_per_m']:.4f} m/m"
+            f"RPE  per step {r['rpe_step_rmse']:.4f} m  per metre {per_m} m/m"
         )
-    if relations:
-        e = relation_error(t, est, read_relations(relations), time_offset)
-        if e["n"] == 0:
-            raise ConfigError(
-                f"no relation in '{relations}' falls inside the trajectory's time span",
-                "check --time-offset (relation time − log time)",
-            )
-        click.echo(f"relations: {_relation_text(e)}")
+    if "relations" in res:
+        click.echo(f"relations: {_relation_text(res['relations'])}")
 
 
 @cli.command()
 @click.argument("log_path", metavar="LOG", type=click.Path())
-@click.option("--step", default=0, show_default=True, help="Index of the scan to extract (0 = first).")
+@click.option(
+    "--step", default=0, show_default=True, type=click.IntRange(min=0), help="Index of the scan (0 = first)."
+)
 @click.option(
     "--plot", "plot_path", type=click.Path(dir_okay=False), help="Draw the scan and features to a PNG."
 )
@@ -552,7 +616,10 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
     click.echo(f"scan {step} at {scan.stamp:.3f} s: {len(scan.ranges)} valid of {scan.n_beams} beams")
     click.echo(format_extraction(segments, corners))
     if plot_path:
-        plot_extraction(scan, segments, corners, plot_path)
+        from .report.outdir import output_errors
+
+        with output_errors(plot_path):
+            plot_extraction(scan, segments, corners, plot_path)
         click.echo(f"wrote {plot_path}")
 
 
@@ -603,7 +670,7 @@ def _parse_sweeps(texts) -> dict[str, list[str]]:
     help="Run each value of a config key; repeat for a grid, e.g. --sweep association.pca.group_size=3,5.",
 )
 @_config_options
-@click.option("--out", required=True, type=click.Path(file_okay=False), help="Batch directory (resumable).")
+@click.option("--out", required=True, type=click.Path(), help="Batch directory (resumable).")
 @click.option(
     "--jobs", default=None, type=click.IntRange(1, 256), help="Local worker processes [default: CPUs]."
 )
@@ -623,6 +690,7 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
           --out sweep/ --jobs 2
     """
     from .batch import BATCH_CSV, plan, run_batch
+    from .report.outdir import check_claimable
 
     _setup_logging(verbose, quiet)
     if assocs is None:
@@ -635,6 +703,7 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
             )
     if scheduler and jobs:
         log.warning("--jobs is ignored with --scheduler (the cluster's workers run the batch)")
+    check_claimable(out, "batch")  # a directory that is not a batch's: refused before any work
     combos = plan(logs, names, _parse_sweeps(sweeps), overrides, config_path)
     progress = BatchProgress(not quiet)
     try:

@@ -2,8 +2,14 @@
 
 ``load_config(path, overrides)`` reads a YAML file (any subset of keys; the rest keep the defaults
 below, which ``configs/default.yaml`` mirrors), applies ``--set key=value`` overrides and returns a
-:class:`Config`. Unknown keys and wrong types raise :class:`ConfigError` naming the dotted key and
-the closest valid one. Each pipeline stage receives only its own section.
+:class:`Config`. Unknown keys, wrong types and numbers outside their range (declared beside each key
+with ``ranges.num``; NaN and inf are never allowed) raise :class:`ConfigError` naming the dotted key
+and the closest valid one or the allowed range. Each pipeline stage receives only its own section.
+
+A config file is UTF-8 YAML of at most 1 MiB, one document, no key given twice. Anchors and aliases
+are allowed, but a document that expands to more than ``MAX_YAML_NODES`` nodes (an alias bomb:
+aliases of lists of aliases) is refused before anything is built from it, and error messages quote
+at most a short prefix of any value.
 """
 
 from __future__ import annotations
@@ -26,16 +32,26 @@ from .errors import ConfigError
 from .features.params import CornersConfig, LinesConfig, SensorConfig
 from .filter.params import EkfConfig
 from .motion.params import ScanMatchConfig
+from .ranges import RangeError, check_ranges, num, short_repr, short_text
+from .textfile import read_text
+
+TWO_PI = 2.0 * math.pi
+MAX_CONFIG_BYTES = 1 << 20  # configs/default.yaml, every key, is 2.5 KB
+MAX_YAML_NODES = 10_000  # nodes of a config document with every alias expanded (default.yaml: ~250)
+CONFIG_FILE = "a YAML config file, e.g. configs/default.yaml"
 
 
 @dataclass(frozen=True)
 class LaserMountConfig:
     """Pose of the laser in the robot base frame (used when the log has no tf for it)."""
 
-    x: float = 0.0
-    y: float = 0.0
-    yaw: float = 0.0
+    x: float = num(0.0, ge=-100.0, le=100.0)  # metres
+    y: float = num(0.0, ge=-100.0, le=100.0)  # metres
+    yaw: float = num(0.0, ge=-TWO_PI, le=TWO_PI)  # radians
     from_tf: bool = True  # prefer a static transform base→laser found in the log
+
+    def __post_init__(self) -> None:
+        check_ranges(self)
 
 
 @dataclass(frozen=True)
@@ -49,19 +65,14 @@ class OdomJumpConfig:
     and the step across it adds diag(sigma_xy², sigma_xy², sigma_theta²) to the robot covariance.
     """
 
-    distance: float = 2.0  # metres per period; 0 = no jump detection
-    angle: float = math.pi / 2  # radians per period
-    period: float = 0.1  # seconds
-    sigma_xy: float = 0.1  # metres, added robot uncertainty across a jump
-    sigma_theta: float = 0.05  # radians
+    distance: float = num(2.0, ge=0.0, le=1000.0)  # metres per period; 0 = no jump detection
+    angle: float = num(math.pi / 2, ge=0.0, le=TWO_PI)  # radians per period
+    period: float = num(0.1, gt=0.0, le=1000.0)  # seconds
+    sigma_xy: float = num(0.1, ge=0.0, le=100.0)  # metres, added robot uncertainty across a jump
+    sigma_theta: float = num(0.05, ge=0.0, le=TWO_PI)  # radians
 
     def __post_init__(self) -> None:
-        for name in ("distance", "angle", "period", "sigma_xy", "sigma_theta"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0.0):
-                raise ValueError(f"odom_jump.{name} must be a finite number >= 0, got {v}")
-        if self.period <= 0.0:
-            raise ValueError(f"odom_jump.period must be > 0, got {self.period}")
+        check_ranges(self)
 
 
 @dataclass(frozen=True)
@@ -72,22 +83,31 @@ class InputConfig:
     odom_topic: str = ""  # "" = nav_msgs/Odometry topic, else tf odom→base
     odom_frame: str = "odom"
     base_frame: str = "base_link"
-    max_range: float = 0.0  # 0 = use the scan's range_max; beams at or beyond are "no return"
-    skip_beams_start: int = 0  # beams at the start of each scan to ignore (e.g. robot body)
-    skip_beams_end: int = 0
-    scan_time_offset: float = 0.0  # seconds added to every scan stamp before syncing with odometry
+    # metres; 0 = use the scan's range_max; beams at or beyond are "no return"
+    max_range: float = num(0.0, ge=0.0, le=10_000.0)
+    # beams at the start of each scan to ignore (e.g. robot body)
+    skip_beams_start: int = num(0, ge=0, le=100_000)
+    skip_beams_end: int = num(0, ge=0, le=100_000)
+    # seconds added to every scan stamp before syncing with odometry (large enough to bridge two clocks)
+    scan_time_offset: float = num(0.0, ge=-1e10, le=1e10)
     laser_preset: str = "auto"  # auto (by the scan's geometry) | none | a name in lasers.PRESETS
     laser: LaserMountConfig = field(default_factory=LaserMountConfig)
     odom_jump: OdomJumpConfig = field(default_factory=OdomJumpConfig)
+
+    def __post_init__(self) -> None:
+        check_ranges(self)
 
 
 @dataclass(frozen=True)
 class KeyframeConfig:
     """Process a scan only after the robot moved this much (gmapping linearUpdate/angularUpdate)."""
 
-    linear_update: float = 0.0  # metres; 0 with angular_update 0 = every scan
-    angular_update: float = 0.0  # radians
-    max_interval: float = 0.0  # seconds; 0 = no time-based keyframes
+    linear_update: float = num(0.0, ge=0.0, le=1000.0)  # metres; 0 with angular_update 0 = every scan
+    angular_update: float = num(0.0, ge=0.0, le=TWO_PI)  # radians
+    max_interval: float = num(0.0, ge=0.0, le=1e6)  # seconds; 0 = no time-based keyframes
+
+    def __post_init__(self) -> None:
+        check_ranges(self)
 
 
 @dataclass(frozen=True)
@@ -119,22 +139,38 @@ def _closest(key: str, valid: list[str]) -> str:
 
 
 _YAML11_EXPONENT = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)[eE][+-]?\d+$")
+_NON_FINITE = re.compile(r"^[+-]?(nan|inf|infinity)$", re.IGNORECASE)
+
+
+def _number_text(value: str) -> bool:
+    """Text that means a number where a number is expected: YAML 1.1 reads 1e-6 (no dot) as a string,
+    and ``--set k=nan`` / ``inf`` arrive as strings (they are then refused as not finite)."""
+    v = value.strip()
+    return bool(_YAML11_EXPONENT.match(v) or _NON_FINITE.match(v))
+
+
+def _as_float(value: int | float) -> float:
+    try:
+        return float(value)
+    except OverflowError:  # an integer of hundreds of digits
+        return math.inf if value > 0 else -math.inf
 
 
 def _coerce(value: Any, tp: Any, key: str) -> Any:
     """Check ``value`` against the annotation ``tp``; return it converted (int → float, list → tuple)."""
     origin = typing.get_origin(tp)
+    got = short_repr(value)
     if dataclasses.is_dataclass(tp):
         if not isinstance(value, dict):
-            raise ConfigError(f"config key '{key}' must be a mapping, got {value!r}")
+            raise ConfigError(f"config key '{key}' must be a mapping, got {got}")
         return from_dict(tp, value, key + ".")
     if origin is Literal:
         choices = typing.get_args(tp)
-        if value not in choices:
-            hint = difflib.get_close_matches(str(value), [str(c) for c in choices], n=1, cutoff=0.5)
+        if not isinstance(value, str) or value not in choices:
+            hint = difflib.get_close_matches(str(value)[:100], [str(c) for c in choices], n=1, cutoff=0.5)
             dym = f"did you mean '{hint[0]}'? " if hint else ""
             raise ConfigError(
-                f"config key '{key}' = {value!r} is not allowed",
+                f"config key '{key}' = {got} is not allowed",
                 f"{dym}choices: {', '.join(map(str, choices))}",
             )
         return value
@@ -149,29 +185,31 @@ def _coerce(value: Any, tp: Any, key: str) -> Any:
                 return _coerce(value, a, key)
             except ConfigError:
                 pass
-        raise ConfigError(f"config key '{key}' has the wrong type: {value!r}", f"expected {tp}")
+        raise ConfigError(f"config key '{key}' has the wrong type: {got}", f"expected {tp}")
     if origin is tuple:
         (elem, *_rest) = typing.get_args(tp)
         if not isinstance(value, (list, tuple)):
-            raise ConfigError(f"config key '{key}' must be a list, got {value!r}")
+            raise ConfigError(f"config key '{key}' must be a list, got {got}")
         return tuple(_coerce(v, elem, f"{key}[{i}]") for i, v in enumerate(value))
     if tp is bool:
         if not isinstance(value, bool):
-            raise ConfigError(f"config key '{key}' must be true or false, got {value!r}")
+            raise ConfigError(f"config key '{key}' must be true or false, got {got}")
         return value
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"config key '{key}' must be an integer, got {value!r}")
+            raise ConfigError(f"config key '{key}' must be an integer, got {got}")
         return value
     if tp is float:
-        if isinstance(value, str) and _YAML11_EXPONENT.match(value.strip()):
-            value = float(value)  # YAML 1.1 reads 1e-6 (no dot) as a string; it is a number
+        if isinstance(value, str) and _number_text(value):
+            value = float(value)
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"config key '{key}' must be a number, got {value!r}")
-        return float(value)
+            raise ConfigError(f"config key '{key}' must be a number, got {got}")
+        return _as_float(value)
     if tp is str:
+        if isinstance(value, bool):  # YAML 1.1: yes/no/on/off are booleans
+            raise ConfigError(f"config key '{key}' must be a string, got {got}", "quote it: 'on', 'no'")
         if not isinstance(value, str):
-            raise ConfigError(f"config key '{key}' must be a string, got {value!r}")
+            raise ConfigError(f"config key '{key}' must be a string, got {got}")
         return value
     raise TypeError(f"unsupported config annotation {tp!r} for {key}")  # a bug in a section class
 
@@ -183,26 +221,121 @@ def from_dict(cls: type, data: dict, prefix: str = "") -> Any:
     kwargs = {}
     for key, value in data.items():
         if key not in names:
-            raise ConfigError(f"unknown config key '{prefix}{key}'", _closest(str(key), names))
+            name = short_text(key) if isinstance(key, str) else short_repr(key)
+            raise ConfigError(f"unknown config key '{prefix}{name}'", _closest(str(key)[:100], names))
         kwargs[key] = _coerce(value, hints[key], prefix + key)
     try:
         return cls(**kwargs)
-    except ValueError as e:  # a section's __post_init__ range check
+    except RangeError as e:  # a number outside the range declared with ranges.num
+        raise ConfigError(
+            f"config key '{prefix}{e.key}' = {short_repr(e.value)} {e.problem}", f"allowed: {e.allowed}"
+        ) from None
+    except ValueError as e:  # a section's __post_init__ check across keys
         raise ConfigError(f"config section '{prefix.rstrip('.') or 'root'}': {e}") from None
 
 
-def _parse_override(text: str) -> tuple[list[str], Any]:
-    if "=" not in text:
-        raise ConfigError(f"--set '{text}' is not key=value", "e.g. --set association.alpha=0.01")
-    key, raw = text.split("=", 1)
-    key = key.strip()
-    if not key:
-        raise ConfigError(f"--set '{text}' has an empty key")
+# --------------------------------------------------------------------------- YAML
+class _ConfigLoader(yaml.SafeLoader):
+    """PyYAML's safe loader that refuses a key given twice in one mapping (PyYAML keeps the last)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
+        seen: dict[tuple[str, str], yaml.Mark] = {}
+        for key_node, _ in node.value:
+            if not isinstance(key_node, yaml.ScalarNode) or key_node.tag == "tag:yaml.org,2002:merge":
+                continue
+            k = (key_node.tag, key_node.value)
+            if k in seen:
+                raise yaml.constructor.ConstructorError(
+                    None,
+                    None,
+                    f"key '{short_text(key_node.value)}' is given twice (first at line {seen[k].line + 1})",
+                    key_node.start_mark,
+                )
+            seen[k] = key_node.start_mark
+        return super().construct_mapping(node, deep)
+
+
+def _expanded_size(node: yaml.Node, sizes: dict[int, int | None], where: str) -> int:
+    """Nodes in ``node`` with every alias expanded (memoised per node: linear in the document)."""
+    key = id(node)
+    if key in sizes:
+        if sizes[key] is None:
+            raise ConfigError(f"{where} has an alias inside its own anchor (a recursive structure)")
+        return sizes[key]
+    sizes[key] = None
+    children: list = []
+    if isinstance(node, yaml.SequenceNode):
+        children = node.value
+    elif isinstance(node, yaml.MappingNode):
+        children = [n for pair in node.value for n in pair]
+    n = 1
+    for child in children:
+        n += _expanded_size(child, sizes, where)
+        if n > MAX_YAML_NODES:
+            raise ConfigError(
+                f"{where} expands to more than {MAX_YAML_NODES:,} YAML nodes (aliases of aliases?)",
+                "a config needs a few hundred; write the values out instead of nesting aliases",
+            )
+    sizes[key] = n
+    return n
+
+
+def _parse_yaml(text: str, where: str) -> Any:
+    """``text`` as Python values (safe loader, one document), refusing a key given twice and a document
+    whose aliases expand past ``MAX_YAML_NODES`` (checked on the node graph, before anything is built).
+    ``where`` names the source in errors; YAML syntax errors are raised as ``yaml.YAMLError``."""
+    loader = _ConfigLoader(text)
     try:
-        value = yaml.safe_load(raw) if raw.strip() else ""
+        node = loader.get_single_node()
+        if node is None:
+            return None
+        _expanded_size(node, {}, where)
+        return loader.construct_document(node)
+    except RecursionError:
+        raise ConfigError(f"{where} is nested too deeply", "a config has two or three levels") from None
+    finally:
+        loader.dispose()
+
+
+def _yaml_problem(e: yaml.YAMLError, text: str) -> str:
+    """' at line N: what' from a PyYAML error (its mark, context and problem), '' when it has none."""
+    if isinstance(e, yaml.reader.ReaderError):  # a control character: a position, no mark
+        line = text.count("\n", 0, e.position) + 1
+        return f" at line {line}: control character #x{e.character:02x} is not allowed"
+    mark = getattr(e, "problem_mark", None)
+    what = " ".join(t for t in (getattr(e, "context", None), getattr(e, "problem", None)) if t)
+    return (f" at line {mark.line + 1}" if mark is not None else "") + (f": {what}" if what else "")
+
+
+def read_config_file(path: str | Path) -> dict:
+    """The mapping a YAML config file holds (``{}`` for an empty file), not yet validated as a config."""
+    p = Path(path)
+    where = f"config file '{p}'"
+    text = read_text(p, "config file", ConfigError, CONFIG_FILE, max_bytes=MAX_CONFIG_BYTES)
+    try:
+        loaded = _parse_yaml(text, where)
+    except yaml.YAMLError as e:
+        raise ConfigError(f"{where} is not valid YAML{_yaml_problem(e, text)}", "fix the syntax") from None
+    if loaded is None:
+        return {}
+    if not isinstance(loaded, dict):
+        raise ConfigError(f"{where} must contain a mapping of sections, not {type(loaded).__name__}")
+    return loaded
+
+
+def _parse_override(text: str) -> tuple[list[str], Any]:
+    shown = short_text(text)
+    if "=" not in text:
+        raise ConfigError(f"--set '{shown}' is not key=value", "e.g. --set association.alpha=0.01")
+    key, raw = text.split("=", 1)
+    keys = [k.strip() for k in key.split(".")]
+    if not all(keys):
+        raise ConfigError(f"--set '{shown}' has an empty key", "e.g. --set association.alpha=0.01")
+    try:
+        value = _parse_yaml(raw, f"--set '{shown}'") if raw.strip() else ""
     except yaml.YAMLError:
         value = raw
-    return key.split("."), value
+    return keys, value
 
 
 def _deep_merge(under: dict, over: dict) -> dict:
@@ -224,35 +357,22 @@ def _merge(base: dict, path: list[str], value: Any) -> None:
     d[path[-1]] = value
 
 
+def config_from(data: dict, overrides: typing.Sequence[str] = (), base: dict | None = None) -> Config:
+    """The config of a file's mapping ``data`` over the partial config ``base`` (a laser preset), with
+    ``key=value`` overrides applied: defaults < base < data < overrides. ``data`` is not modified."""
+    data = _deep_merge(copy.deepcopy(base or {}), copy.deepcopy(data))  # overrides below write into it
+    for text in overrides:
+        keys, value = _parse_override(text)
+        _merge(data, keys, value)
+    return from_dict(Config, data)
+
+
 def load_config(
     path: str | Path | None = None, overrides: typing.Sequence[str] = (), base: dict | None = None
 ) -> Config:
     """Load ``path`` (YAML; None = defaults) over the partial config ``base`` (a laser preset) and
     apply ``key=value`` overrides: defaults < base < file < overrides."""
-    data: dict = {}
-    if path is not None:
-        p = Path(path)
-        if not p.is_file():
-            raise ConfigError(
-                f"config file '{p}' does not exist", "give a YAML file, e.g. configs/default.yaml"
-            )
-        try:
-            loaded = yaml.safe_load(p.read_text())
-        except yaml.YAMLError as e:
-            mark = getattr(e, "problem_mark", None)
-            where = f" at line {mark.line + 1}" if mark is not None else ""
-            raise ConfigError(f"config file '{p}' is not valid YAML{where}", "fix the syntax") from None
-        if loaded is None:
-            loaded = {}
-        if not isinstance(loaded, dict):
-            raise ConfigError(f"config file '{p}' must contain a mapping of sections")
-        data = loaded
-    if base:
-        data = _deep_merge(copy.deepcopy(base), data)  # overrides below write into data
-    for text in overrides:
-        keys, value = _parse_override(text)
-        _merge(data, keys, value)
-    return from_dict(Config, data)
+    return config_from(read_config_file(path) if path is not None else {}, overrides, base)
 
 
 def dump_config(cfg: Config) -> str:

@@ -2,9 +2,14 @@
 
 A :class:`CornerslamError` is a *user* problem (bad file, bad key, missing topic): the CLI prints
 ``error: <msg> (<hint>)`` on one line and exits with code 2. Anything else is a bug (exit 1).
+:func:`printable` / :func:`display_path` make text naming a file whose name is not UTF-8 safe to print
+and to write to UTF-8 files and JSON (error lines are made so by ``CornerslamError.__str__``).
 """
 
 from __future__ import annotations
+
+import os
+from pathlib import Path
 
 
 class CornerslamError(Exception):
@@ -16,7 +21,7 @@ class CornerslamError(Exception):
         self.hint = hint
 
     def __str__(self) -> str:
-        return f"{self.msg} ({self.hint})" if self.hint else self.msg
+        return printable(f"{self.msg} ({self.hint})" if self.hint else self.msg)
 
 
 class LogError(CornerslamError):
@@ -27,5 +32,25 @@ class ConfigError(CornerslamError):
     """A configuration file or ``--set`` override is invalid."""
 
 
+class OutputError(CornerslamError):
+    """An output path cannot be written (permissions, read-only or full disk, a mount point, a name
+    too long) or must not be replaced (a directory cornerslam did not write)."""
+
+
 class NumericalError(CornerslamError):
     """The filter state became invalid (non-finite or non-symmetric covariance)."""
+
+
+def printable(text: str) -> str:
+    """``text`` with the undecodable bytes of a file name (``os.fsdecode``'s surrogate escapes) shown
+    as U+FFFD, so that it can be printed and written to UTF-8 files and strict JSON."""
+    try:
+        raw = text.encode("utf-8", "surrogateescape")
+    except UnicodeEncodeError:  # a lone surrogate that is no escaped byte
+        raw = text.encode("utf-8", "replace")
+    return raw.decode("utf-8", "replace")
+
+
+def display_path(path: str | Path) -> str:
+    """A path as text for messages and summaries (:func:`printable`)."""
+    return printable(os.fsdecode(path))

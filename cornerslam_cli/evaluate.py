@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import LogError
+from .report.tables import read_tum
+from .textfile import read_number_rows
 from .types import wrap_angle
 
 
@@ -97,28 +99,59 @@ def rpe(est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray, de
     return out
 
 
+RELATIONS_LAYOUT = "t1 t2 x y z roll pitch yaw"
+
+
 def read_relations(path: str | Path) -> np.ndarray:
-    """Kümmerle relations file: rows ``t1 t2 x y z roll pitch yaw`` → (k, 5) [t1, t2, x, y, yaw]."""
-    p = Path(path)
-    if not p.is_file():
-        raise LogError(f"relations file '{p}' does not exist")
-    rows = []
-    for lineno, line in enumerate(p.read_text().splitlines(), 1):
-        s = line.strip()
-        if not s or s.startswith("#"):
-            continue
-        try:
-            v = [float(x) for x in s.split()]
-        except ValueError:
+    """Kümmerle relations file: rows ``t1 t2 x y z roll pitch yaw`` → (k, 5) [t1, t2, x, y, yaw].
+
+    Each row stands alone, so their order does not matter; a binary file, a line that is not 8
+    finite numbers (more are ignored) or a file without relations raises ``LogError``."""
+    v, _ = read_number_rows(path, "relations file", LogError, "relation", RELATIONS_LAYOUT, 8, more_ok=True)
+    return v[:, [0, 1, 2, 3, 7]]
+
+
+def overlap_problem(est_t: np.ndarray, gt_t: np.ndarray, gt_name: str) -> str | None:
+    """Why ``gt_name`` (stamps ``gt_t``, sorted) cannot score a trajectory with stamps ``est_t``, or
+    None: ATE and RPE need at least two trajectory poses within the ground truth's time span."""
+    n = int(np.count_nonzero((est_t >= gt_t[0]) & (est_t <= gt_t[-1])))
+    if n >= 2:
+        return None
+    return (
+        f"{gt_name} does not overlap the trajectory: {n} of its {len(est_t)} poses fall within the "
+        f"ground truth's time span ({gt_t[0]:.3f} to {gt_t[-1]:.3f} s; trajectory {est_t[0]:.3f} to "
+        f"{est_t[-1]:.3f} s)"
+    )
+
+
+def evaluate_files(
+    trajectory: str | Path,
+    ground_truth: str | Path | None = None,
+    relations: str | Path | None = None,
+    time_offset: float = 0.0,
+) -> dict:
+    """``cornerslam evaluate``: the TUM ``trajectory`` scored against a TUM ``ground_truth`` (keys
+    ``ate``, ``rpe``) and/or a ``relations`` file (key ``relations``).
+
+    Raises ``LogError`` when the ground truth does not overlap the trajectory in time or no relation
+    falls inside it: there is nothing to score, and a NaN is not a score."""
+    t, est = read_tum(trajectory)
+    out: dict = {}
+    if ground_truth:
+        gt_t, gt = read_tum(ground_truth, "ground truth")
+        problem = overlap_problem(t, gt_t, f"ground truth '{ground_truth}'")
+        if problem:
+            raise LogError(problem, "is it this log's ground truth? Its stamps must use the log's clock")
+        out.update(ate=ate(t, est, gt_t, gt), rpe=rpe(t, est, gt_t, gt))
+    if relations:
+        e = relation_error(t, est, read_relations(relations), time_offset)
+        if e["n"] == 0:
             raise LogError(
-                f"'{p}' line {lineno} is not a relation", "expected: t1 t2 x y z roll pitch yaw"
-            ) from None
-        if len(v) < 8:
-            raise LogError(f"'{p}' line {lineno} has {len(v)} values", "expected: t1 t2 x y z roll pitch yaw")
-        rows.append((v[0], v[1], v[2], v[3], v[7]))
-    if not rows:
-        raise LogError(f"relations file '{p}' has no relations")
-    return np.array(rows)
+                f"no relation in '{relations}' falls inside the trajectory's time span",
+                "check --time-offset (relation time − log time)",
+            )
+        out["relations"] = e
+    return out
 
 
 def relation_error(

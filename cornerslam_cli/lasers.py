@@ -20,7 +20,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from .config import Config, load_config
+from .config import Config, config_from, read_config_file
 from .errors import ConfigError
 from .logs import open_log
 from .types import Scan
@@ -115,8 +115,11 @@ def first_scan_geometry(log_path: str | Path, cfg: Config) -> tuple[int, float] 
 def resolve_config(
     log_path: str | Path | None, config_path: str | Path | None, overrides: Sequence[str] = ()
 ) -> Config:
-    """The run's config: the user's layers over the laser preset that ``input.laser_preset`` selects."""
-    cfg = load_config(config_path, overrides)
+    """The run's config: the user's layers over the laser preset that ``input.laser_preset`` selects.
+
+    The config file is read once (it may be a pipe) and layered twice: without, then with the preset."""
+    data = read_config_file(config_path) if config_path is not None else {}
+    cfg = config_from(data, overrides)
     choice = cfg.input.laser_preset
     if choice == "none" or (choice == "auto" and log_path is None):
         return cfg
@@ -134,5 +137,5 @@ def resolve_config(
             f"unknown laser preset 'input.laser_preset={choice}'",
             f"{hint}choices: auto, none, {', '.join(PRESETS)}",
         )
-    cfg = load_config(config_path, overrides, base=PRESETS[name].config)
+    cfg = config_from(data, overrides, base=PRESETS[name].config)
     return dataclasses.replace(cfg, input=dataclasses.replace(cfg.input, laser_preset=name))

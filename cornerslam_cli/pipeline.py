@@ -10,10 +10,12 @@ import dataclasses
 import hashlib
 import json
 import logging
+import os
 import platform
 import time
 from array import array
 from collections.abc import Callable, Iterable, Iterator
+from contextlib import ExitStack
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -22,21 +24,21 @@ import numpy as np
 from . import __version__
 from .association import make_associator
 from .config import Config
-from .errors import LogError
-from .evaluate import ate, read_relations, relation_error, rpe
+from .errors import ConfigError, LogError, OutputError, display_path
+from .evaluate import ate, overlap_problem, read_relations, relation_error, rpe
 from .features import extract
 from .filter import Ekf
-from .logs import open_log
+from .logs import check_regular, open_log
 from .logs.sync import SyncStats, reanchor_odometry, select_keyframes, synchronise
 from .motion import ScanMatcher
 from .motion.icp import se2, transform
+from .report.outdir import StagedDir, output_errors
 from .report.tables import (
     LINES_COLUMNS,
     MAP_COLUMNS,
     TIMING_COLUMNS,
     TRAJECTORY_COLUMNS,
     CsvTable,
-    StagedDir,
     read_tum,
     write_json,
     write_tum,
@@ -234,7 +236,7 @@ def find_ground_truth(log_path: Path) -> Path | None:
 
 
 def default_out_dir(log_path: Path, assoc: str) -> Path:
-    stem = log_path.name.split(".")[0] or "log"
+    stem = display_path(log_path.name.split(".")[0]) or "log"  # a name that is not UTF-8: printable
     return Path("cornerslam_out") / f"{stem}_{assoc}"
 
 
@@ -274,7 +276,7 @@ def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None 
     msgs = reanchor_odometry(
         _scans_prepared(src.reader, cfg), cfg.input.odom_jump, src.stats, src.reader.stats.warn
     )
-    synced = synchronise(msgs, src.stats)
+    synced = synchronise(msgs, src.stats, src.reader.stats.warn)  # its warning lands in summary.json too
     pairs = select_keyframes(synced, cfg.keyframes, src.stats)
     jumps = 0
     for scan, odom in pairs:
@@ -305,16 +307,44 @@ def run(
     progress: Callable[[int, int], None] | None = None,
     relations: str | Path | None = None,
     time_offset: float = 0.0,
+    plot: bool = False,
+    mcap_out: str | Path | None = None,
 ) -> dict:
-    """Run corner EKF-SLAM on one log and write the output directory atomically.
+    """Run corner EKF-SLAM on one log and write the output directory atomically: the tables, with
+    ``plot`` the figures and report.html, and ``mcap_out`` beside it, all committed at once.
 
-    Returns the summary (also written to summary.json).
+    The output places are checked before any work (report/outdir.py). Returns the summary (also
+    written to summary.json) with ``out_dir``, the committed directory.
     """
     wall0 = time.perf_counter()
-    ref = load_reference(Path(log_path), ground_truth, relations, time_offset)  # bad files fail first
-    src = open_input(log_path, cfg)
-    out_dir = Path(out) if out else default_out_dir(src.path, cfg.association.method)
-    return run_frames(frames(src, cfg, progress), src, cfg, out_dir, ref, wall0)
+    out_dir = Path(out) if out else default_out_dir(Path(log_path), cfg.association.method)
+    inputs = [p for p in (log_path, ground_truth, relations) if p]
+    with StagedDir(out_dir, "run", inputs) as stage:
+        mcap_path = stage.stage_file(mcap_out) if mcap_out else None
+        ref = load_reference(Path(log_path), ground_truth, relations, time_offset)  # bad files fail first
+        src = open_input(log_path, cfg)
+        summary = run_frames(frames(src, cfg, progress), src, cfg, stage.path, ref, wall0)
+        write_extras(stage, plot, mcap_out, mcap_path)
+        summary["out_dir"] = str(stage.commit())
+    return summary
+
+
+def write_extras(stage: StagedDir, plot: bool, mcap_out: str | Path | None, mcap_path: Path | None) -> None:
+    """What a run writes besides its tables, staged before the commit: with ``plot`` the figures and
+    report.html; the results MCAP into ``mcap_path``, the staged place of ``mcap_out``."""
+    if plot:
+        from .report.html import write_report
+        from .report.plots import plot_run
+
+        plot_run(stage.path)
+        write_report(stage.path)
+    if mcap_path is not None:
+        from .report.mcap_out import write_results_mcap
+
+        if mcap_path.is_relative_to(stage.path) and mcap_path.exists():
+            raise OutputError(f"--mcap-out '{mcap_out}' is a file of the run itself", "give another name")
+        with output_errors(mcap_out):
+            write_results_mcap(stage.path, mcap_path, results=stage.target)
 
 
 @dataclass(frozen=True)
@@ -327,6 +357,7 @@ class Reference:
     relations_path: Path | None = None
     relations: np.ndarray | None = None
     time_offset: float = 0.0
+    notes: tuple[str, ...] = ()  # warnings from reading them (ground truth out of time order)
 
 
 def load_reference(
@@ -338,12 +369,14 @@ def load_reference(
     """The given ground truth, else LOG.gt.tum if present; the given relations file, if any."""
     gt_path = Path(ground_truth) if ground_truth else find_ground_truth(log_path)
     rel_path = Path(relations) if relations else None
+    notes: list[str] = []
     return Reference(
         gt_path,
-        read_tum(gt_path) if gt_path else None,
+        read_tum(gt_path, "ground truth", notes.append) if gt_path else None,
         rel_path,
         read_relations(rel_path) if rel_path else None,
         time_offset,
+        tuple(notes),
     )
 
 
@@ -353,13 +386,19 @@ def accuracy_of(
     odoms: np.ndarray,
     ref: Reference,
     scan_odoms: np.ndarray | None = None,
-) -> dict | None:
+) -> tuple[dict | None, list[str]]:
     """ATE/RPE against the ground truth and the relation metric, for the estimate and for odometry (and
-    for the scan-matched odometry when there is one: what the corners add on top of it)."""
+    for the scan-matched odometry when there is one: what the corners add on top of it), and the
+    warnings about them: a ground truth read out of time order, a ground truth that does not overlap
+    the run in time (then there is no ATE/RPE, rather than NaN), no relation inside the run."""
     acc: dict = {}
-    if ref.gt is not None:
+    notes = list(ref.notes)
+    problem = ref.gt is not None and overlap_problem(stamps, ref.gt[0], f"ground truth '{ref.gt_path}'")
+    if problem:
+        notes.append(f"{problem}: no ATE/RPE")
+    elif ref.gt is not None:
         acc.update(
-            ground_truth=str(ref.gt_path),
+            ground_truth=display_path(ref.gt_path),
             ate=ate(stamps, poses, *ref.gt),
             odom_ate=ate(stamps, odoms, *ref.gt),
             **rpe(stamps, poses, *ref.gt),
@@ -368,30 +407,33 @@ def accuracy_of(
             acc["scan_odom_ate"] = ate(stamps, scan_odoms, *ref.gt)
     if ref.relations is not None:
         acc.update(
-            relations_file=str(ref.relations_path),
+            relations_file=display_path(ref.relations_path),
             relations=relation_error(stamps, poses, ref.relations, ref.time_offset),
             odom_relations=relation_error(stamps, odoms, ref.relations, ref.time_offset),
         )
         if scan_odoms is not None:
             acc["scan_odom_relations"] = relation_error(stamps, scan_odoms, ref.relations, ref.time_offset)
-    return acc or None
+        if acc["relations"]["n"] == 0:
+            notes.append(f"no relation in '{ref.relations_path}' falls inside the run (check --time-offset)")
+    return acc or None, notes
 
 
 def run_frames(
     frame_iter: Iterable[Frame],
     src: Input,
     cfg: Config,
-    out_dir: Path,
+    dest: Path,
     ref: Reference,
     wall0: float,
 ) -> dict:
-    """The filter over extracted frames; writes the output directory atomically, returns the summary."""
+    """The filter over extracted frames; writes a run's files into the (staging) directory ``dest``,
+    returns the summary."""
     log_path, stats, reader, info = src.path, src.stats, src.reader, src.info
     slam = Slam(cfg, src.laser2base)
-    with StagedDir(out_dir) as stage:
-        traj = CsvTable(stage.path / "trajectory.csv", TRAJECTORY_COLUMNS)
-        timing = CsvTable(stage.path / "timing.csv", TIMING_COLUMNS)
-        lines = CsvTable(stage.path / "lines.csv", LINES_COLUMNS)
+    with ExitStack() as tables:
+        traj = tables.enter_context(CsvTable(dest / "trajectory.csv", TRAJECTORY_COLUMNS))
+        timing = tables.enter_context(CsvTable(dest / "timing.csv", TIMING_COLUMNS))
+        lines = tables.enter_context(CsvTable(dest / "lines.csv", LINES_COLUMNS))
         track = array("d")  # stamp, pose, odom, motion per step: 80 bytes a step (a list of arrays: ~400)
         totals = np.zeros(5)
         t_match_max, budget_hits, matched_total, points_total = 0.0, 0, 0, 0
@@ -424,24 +466,28 @@ def run_frames(
             raise LogError(
                 f"log '{log_path}': no scan could be processed ({stats.scans_in} scans read, "
                 f"{stats.before_first_odom} before the first and {stats.after_last_odom} "
-                "after the last odometry sample)",
-                "check that the scan and odometry topics overlap in time",
+                f"after the last odometry sample, {stats.odom_gap} in gaps of the odometry, "
+                f"{stats.scan_time_backwards} with a stamp that went backwards or repeated)",
+                "check that the scan and odometry topics overlap in time and that their header stamps "
+                "increase",
             )
         lm = slam.landmark_table()
-        mp = CsvTable(stage.path / "map.csv", MAP_COLUMNS)
+        mp = tables.enter_context(CsvTable(dest / "map.csv", MAP_COLUMNS))
         for row in lm:
             mp.row(*(int(v) if i in (0, 8, 9, 10) else v for i, v in enumerate(row)))
         mp.close()
         track_a = np.frombuffer(track, dtype=float).reshape(-1, 10)
         stamps_a, poses_a, odoms_a = track_a[:, 0], track_a[:, 1:4], track_a[:, 4:7]
         motion_a = track_a[:, 7:10] if src.matcher is not None else None
-        write_tum(stage.path / "trajectory.tum", stamps_a, poses_a)
-        accuracy = accuracy_of(stamps_a, poses_a, odoms_a, ref, motion_a)
+        write_tum(dest / "trajectory.tum", stamps_a, poses_a)
+        accuracy, notes = accuracy_of(stamps_a, poses_a, odoms_a, ref, motion_a)
+        for text in notes:
+            reader.stats.warn(text)
         summary = {
             "cornerslam_version": __version__,
             "mode": "slam",
             "input": {
-                "log": str(log_path),
+                "log": display_path(log_path),
                 "format": info.format,
                 "scan_topic": info.scan_topic,
                 "odom_topic": info.odom_topic,
@@ -481,22 +527,30 @@ def run_frames(
             "config": cfg.to_dict(),
             "versions": _versions(),
         }
-        write_json(stage.path / "summary.json", summary)
-        summary["out_dir"] = str(stage.commit())
+        write_json(dest / "summary.json", summary)
     return summary
 
 
 def _scans_prepared(reader, cfg: Config):
     """The reader's messages with each scan prepared as configured: beams at the ends removed (robot
     body), beams at or beyond ``input.max_range`` dropped, ``input.scan_time_offset`` added to the
-    stamp (a laser whose stamps lag or lead the odometry clock)."""
+    stamp (a laser whose stamps lag or lead the odometry clock). Skipping every beam of the first
+    scan is a ConfigError naming the keys."""
     inp = cfg.input
     lo, hi, max_range, dt = inp.skip_beams_start, inp.skip_beams_end, inp.max_range, inp.scan_time_offset
     if lo == 0 and hi == 0 and max_range <= 0.0 and dt == 0.0:
         yield from reader.messages()
         return
+    first = True
     for msg in reader.messages():
         if isinstance(msg, Scan):
+            if first and lo + hi >= msg.n_beams:
+                raise ConfigError(
+                    f"input.skip_beams_start={lo} and input.skip_beams_end={hi} skip all "
+                    f"{msg.n_beams} beams of the scans on '{reader.scan_topic}'",
+                    f"keep their sum below {msg.n_beams} (beams skipped at each end of a scan)",
+                )
+            first = False
             keep = (msg.beam_index >= lo) & (msg.beam_index < msg.n_beams - hi)
             if max_range > 0.0:
                 keep &= msg.ranges < max_range
@@ -541,11 +595,13 @@ def config_hash(cfg: Config) -> str:
 
 
 def input_hash(path: Path) -> str:
-    """sha256 of the log's bytes (every file, in name order, for a ROS 2 bag directory)."""
+    """sha256 of the log's bytes (every file, in name order, for a ROS 2 bag directory); a LogError
+    for a pipe or a device (reading it would consume or hang on it)."""
+    check_regular(path)
     h = hashlib.sha256()
     files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
     for f in files:
-        h.update(str(f.relative_to(path) if path.is_dir() else f.name).encode())
+        h.update(os.fsencode(f.relative_to(path) if path.is_dir() else f.name))
         with open(f, "rb") as fh:
             while chunk := fh.read(1 << 20):
                 h.update(chunk)

@@ -96,15 +96,38 @@ def corrupt_odometry(truth: np.ndarray, p: SimParams, rng: np.random.Generator) 
     return out
 
 
+# what simulate accepts: (option, lowest, highest); a log's size is bounded on top (MAX_*)
+RANGES = (("--laps", 1, 100), ("--rate", 0.1, 1000.0), ("--beams", 2, 100_000), ("--speed", 0.05, 5.0))
+MAX_RANGES = 50_000_000  # scans × beams: ~200 MB of float32 ranges held before writing
+MAX_SECONDS = 20_000.0  # 10^6 odometry samples
+
+
+def check_options(seed: int, laps: int, p: SimParams) -> None:
+    """ConfigError naming the option when a simulate option is out of range (NaN included) or the
+    log would be too large to build in memory."""
+    if not seed >= 0:
+        raise ConfigError(f"--seed must be >= 0, got {seed}", "give a non-negative integer")
+    for (name, lo, hi), value in zip(RANGES, (laps, p.rate, p.beams, p.speed), strict=True):
+        if not lo <= value <= hi:
+            raise ConfigError(f"{name} must be in [{lo}, {hi}], got {value}")
+    loop = np.vstack((OFFICE_LOOP, OFFICE_LOOP[:1]))
+    seconds = laps * float(np.hypot(*np.diff(loop, axis=0).T).sum()) / p.speed
+    if seconds > MAX_SECONDS or seconds * p.rate * p.beams > MAX_RANGES:
+        raise ConfigError(
+            f"simulate would record {seconds:.0f} s of {p.rate:g} Hz scans of {p.beams} beams, more "
+            f"than it builds in memory ({MAX_SECONDS:.0f} s, {MAX_RANGES:.0e} ranges)",
+            "fewer --laps, a lower --rate or --beams, or a higher --speed",
+        )
+
+
 def simulate_log(
     out: Path, seed: int = 0, laps: int = 1, rate: float = 10.0, beams: int = 1081, speed: float = 0.5
 ) -> dict:
     """Write the synthetic log ``out`` (.mcap), ``out.gt.tum`` and ``out.corners.csv``."""
     if out.suffix != ".mcap":
         raise ConfigError(f"simulate writes MCAP: '{out}' must end in .mcap")
-    if laps < 1 or rate <= 0 or beams < 2 or speed <= 0:
-        raise ConfigError("simulate needs --laps >= 1, --rate > 0, --beams >= 2 and --speed > 0")
     p = SimParams(rate=rate, beams=beams, speed=speed)
+    check_options(seed, laps, p)
     rng = np.random.default_rng(seed)
     world = office_world()
     dt = 1.0 / p.odom_rate

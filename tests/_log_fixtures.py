@@ -39,6 +39,14 @@ def _mcap_ros1(p, s, o, **kw):
     return write_mcap(p, s, o, encoding="ros1", **kw)
 
 
+def _mcap_json(p, s, o, **kw):
+    return write_mcap(p, s, o, encoding="json", **kw)
+
+
+def _mcap_json_ros1(p, s, o, **kw):
+    return write_mcap(p, s, o, encoding="json-ros1", **kw)
+
+
 def _rosbag2_mcap(p, s, o, **kw):
     return write_rosbag2(p, s, o, storage="mcap", **kw)
 
@@ -47,6 +55,8 @@ def _rosbag2_mcap(p, s, o, **kw):
 ROS_WRITERS = {
     "mcap-cdr": ("log.mcap", write_mcap),
     "mcap-ros1": ("log.mcap", _mcap_ros1),
+    "mcap-json": ("log.mcap", _mcap_json),  # foxglove_bridge / rosbridge recordings
+    "mcap-json-ros1": ("log.mcap", _mcap_json_ros1),
     "rosbag1": ("log.bag", write_rosbag1),
     "rosbag2-sqlite3": ("bag2", write_rosbag2),
     "rosbag2-mcap": ("bag2", _rosbag2_mcap),
@@ -67,22 +77,21 @@ def split(msgs) -> tuple[list[Scan], list[OdomSample]]:
 
 
 def write_messages_mcap(path: Path, messages, encoding: str = "cdr") -> Path:
-    """MCAP with arbitrary topics: messages = [(topic, typename, log_time_ns, data)], schemas from rosbags."""
+    """MCAP with arbitrary topics: messages = [(topic, typename, log_time_ns, data)]; ``encoding`` cdr,
+    ros1 (schemas from rosbags) or json."""
     from mcap.writer import CompressionType, Writer
 
-    from cornerslam_cli.logs.writers import RosSerializer
+    from cornerslam_cli.logs.writers import serializer
 
-    ros = RosSerializer(encoding)
+    ros = serializer(encoding)
     with open(path, "wb") as f:
         w = Writer(f, compression=CompressionType.NONE)
         w.start(profile="ros2", library="test")
         chans = {}
         for topic, typename, t, data in messages:
             if topic not in chans:
-                sid = w.register_schema(
-                    typename, "ros2msg" if encoding == "cdr" else "ros1msg", ros.msgdef(typename).encode()
-                )
-                chans[topic] = w.register_channel(topic, encoding, sid)
+                sid = w.register_schema(typename, ros.schema_encoding, ros.msgdef(typename).encode())
+                chans[topic] = w.register_channel(topic, ros.message_encoding, sid)
             w.add_message(chans[topic], t, data, t)
         w.finish()
     return path

@@ -10,7 +10,11 @@ range noise), so every entry is the same small, valid run with one fault added:
 * scans: all-NaN / all-zero / negative / huge ranges, ranges count disagreeing with the angles,
   angle_increment 0 or negative (in all scans, or in some);
 * odometry: a jump and a reset to zero mid-log, NaN poses;
-* stamps: scans and odometry out of order and repeated (MCAP, ROS 1 bag, CARMEN).
+* stamps: scans and odometry out of order and repeated (MCAP, ROS 1 bag, CARMEN);
+* reading (``_input_faults_ii``): JSON-encoded MCAP (foxglove_bridge / rosbridge), a topic in an
+  encoding we do not decode, chunks not in time order, unnormalised and zero odometry quaternions,
+  simulated time starting at stamp 0, tab-separated CARMEN, scans outside or far beyond the
+  odometry, ``input.skip_beams_*`` removing every beam.
 
 ``python tests/fault_corpus.py DIR`` writes the corpus and prints what each entry expects.
 """
@@ -50,6 +54,29 @@ class Expected:
     message: tuple[str, ...] = ()
     counts: dict[str, int | tuple[int, int]] = field(default_factory=dict)
     args: tuple[str, ...] = ()
+
+
+# --------------------------------------------------------------------------- checks shared by the fault tests
+def check_error_line(res, fragments) -> None:
+    """Exit 2 and exactly one 'error:' line, the last on stderr, naming what it must; no traceback."""
+    assert res.exit_code == 2, res.output
+    lines = res.stderr.strip().splitlines()
+    assert [ln for ln in lines if ln.startswith("error:")] == lines[-1:], res.stderr
+    assert "Traceback" not in res.output
+    for f in fragments:
+        assert f in lines[-1], lines[-1]
+
+
+def peak_bytes(run: Callable[[], object]) -> int:
+    """Peak traced Python memory (bytes) while ``run()`` runs."""
+    import tracemalloc
+
+    tracemalloc.start()
+    try:
+        run()
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
 
 
 # --------------------------------------------------------------------------- the simulated robot
@@ -374,7 +401,285 @@ def build_corpus(d: str | Path) -> dict[str, tuple[Path, Expected]]:
                 {"steps": N - late, "scan_time_backwards": late, "odom_time_backwards": 1},
             ),
         )
+    _config_faults(d, add)
+    _ground_truth_faults(d, add)
+    _input_faults_ii(d, add)
     return out
+
+
+# --------------------------------------------------------------------------- config files and --set
+def alias_bomb(levels: int = 9, width: int = 9) -> str:
+    """YAML whose last anchor expands to width**levels scalars ("billion laughs": 9⁹ = 387 million),
+    used as the value of a real key (so an error message that printed the value would expand it)."""
+    lines = [f"a0: &a0 [{', '.join(['lol'] * width)}]"]
+    for i in range(1, levels):
+        lines.append(f"a{i}: &a{i} [{', '.join([f'*a{i - 1}'] * width)}]")
+    return "\n".join(lines) + f"\nekf:\n  alpha1: *a{levels - 1}\n"
+
+
+def _write(d: Path, name: str, content: str | bytes) -> Path:
+    path = d / name
+    path.write_bytes(content if isinstance(content, bytes) else content.encode())
+    return path
+
+
+def _config_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
+    """The valid log with a bad config file or --set: exit 2 naming the file (and line) or the dotted
+    key and the allowed range, before the log is read; and the awkward configs that are fine."""
+    good = d / "good.mcap"
+    (d / "config_dir.yaml").mkdir(exist_ok=True)
+    not_text, bad = "exit 2: the file is not UTF-8 text", "exit 2 naming the file or key"
+    files = [  # name, content, behaviour, fragments of the error line
+        ("not_utf8", b"ekf:\n  alpha1: 0.05  # caf\xe9\n", not_text, ("not UTF-8 text", "0xe9 at line 2")),
+        ("utf16", "ekf:\n  alpha1: 0.05\n".encode("utf-16"), not_text, ("is UTF-16 text",)),
+        ("binary", bytes(range(256)) * 4, not_text, ("binary file",)),
+        ("alias_bomb", alias_bomb(), "exit 2: expands past 10,000 nodes", ("expands to more than 10,000",)),
+        ("recursive_alias", "ekf: &e\n  alpha1: *e\n", bad, ("alias inside its own anchor",)),
+        ("nested_too_deep", "ekf:\n  a: " + "[" * 2000 + "]" * 2000, bad, ("nested too deeply",)),
+        ("too_large", "#" * (1 << 20) + "\n", "exit 2: larger than 1 MiB", ("larger than 1024 KiB",)),
+        ("a_list", "- ekf\n- lines\n", bad, ("must contain a mapping of sections, not list",)),
+        ("a_scalar", "3\n", bad, ("must contain a mapping of sections, not int",)),
+        ("section_scalar", "ekf: 3\n", bad, ("'ekf' must be a mapping, got 3",)),
+        ("control_char", "ekf:\n  alpha1: 0.05\n  alpha2: \x07\n", bad, ("line 3", "control character #x07")),
+        ("two_documents", "ekf: {}\n---\nekf: {}\n", bad, ("line 2", "expected a single document")),
+        ("duplicated_key", "ekf:\n  alpha1: 0.1\n  alpha1: 0.2\n", bad, ("line 3", "is given twice")),
+        ("number_as_key", "1: 2\n", bad, ("unknown config key '1'",)),
+        ("bool_as_1", "ekf:\n  fuse: 1\n", bad, ("'ekf.fuse' must be true or false, got 1",)),
+        ("nan", "input:\n  laser:\n    x: .nan\n", bad, ("'input.laser.x' = nan is not a finite number",)),
+        ("inf", "keyframes:\n  linear_update: .inf\n", bad, ("'keyframes.linear_update' = inf",)),
+        ("degrees", "input:\n  laser:\n    yaw: 90\n", bad, ("'input.laser.yaw' = 90.0 is out of range",)),
+    ]  # fmt: skip
+    for name, content, behaviour, message in files:
+        path = _write(d, f"config_{name}.yaml", content)
+        add(f"config_{name}", good, Expected(behaviour, 2, message, args=("--config", path)))
+    directory = d / "config_dir.yaml"
+    add("config_directory", good, Expected(bad, 2, ("is a directory",), args=("--config", directory)))
+    sets = [  # name, --set KEY=VALUE, fragments of the error line
+        ("nan", "ekf.alpha1=nan", ("'ekf.alpha1' = nan is not a finite number", "allowed: [0, 100]")),
+        ("inf", "scan_match.voxel=inf", ("'scan_match.voxel' = inf is not a finite number",)),
+        ("yaml_minus_inf", "corners.d_min=-.inf", ("'corners.d_min' = -inf",)),
+        ("1e999", "sensor.sigma_theta=1e999", ("'sensor.sigma_theta' = inf",)),
+        ("400_digits", "ekf.alpha2=1" + "0" * 400, ("'ekf.alpha2' = inf",)),
+        ("capacity", "ekf.initial_capacity=10000000000", ("'ekf.initial_capacity' = 1000000", "[1, 1000]")),
+        ("sigma_1e300", "sensor.sigma_r_near=1e300", ("'sensor.sigma_r_near' = 1e+300 is out of range",)),
+        ("group_size", "association.pca.group_size=1000000", ("'association.pca.group_size'", "[1, 1000]")),
+        ("retries", "scan_match.retry_step=1e-9", ("retry_angle / retry_step = 3.5e+08", "at most 100")),
+        ("on_as_string", "input.odom_frame=on", ("'input.odom_frame' must be a string, got True", "quote")),
+        ("no_equals", "ekf.alpha1", ("is not key=value",)),
+        ("empty_key", "=0.1", ("has an empty key",)),
+        ("empty_key_part", "association..alpha=0.1", ("has an empty key",)),
+    ]  # fmt: skip
+    for name, text, message in sets:
+        add(f"set_{name}", good, Expected(f"--set {text[:40]}: exit 2", 2, message, args=("--set", text)))
+    fine = [  # processed with the defaults: an empty config, YAML 1.1 booleans (yes/off), an alias
+        ("config_dev_null", Path("/dev/null")),
+        ("config_yes_off", _write(d, "config_yes.yaml", "ekf:\n  fuse: yes\n  joseph: off\n")),
+        ("config_alias", _write(d, "config_alias.yaml", "ekf:\n  alpha1: &a 0.05\n  alpha3: *a\n")),
+    ]
+    for name, path in fine:
+        add(name, good, Expected("processed", 0, counts=VALID_COUNTS, args=("--config", path)))
+
+
+# --------------------------------------------------------------------------- ground truth and relations
+def _ground_truth_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
+    """The valid log with a damaged --ground-truth or --relations file: refused before the run (exit 2
+    naming the file), or processed with a warning (the ground truth sorted; no accuracy when it does
+    not overlap the run, rather than NaN in summary.json)."""
+    good = d / "good.mcap"
+    rows = good.with_suffix(".gt.tum").read_text().splitlines()
+    swapped = list(rows)
+    swapped[3], swapped[30] = swapped[30], swapped[3]
+    shifted = [" ".join([f"{float(r.split()[0]) + 1000.0:.9f}", *r.split()[1:]]) for r in rows]
+    conflict = [*rows[:5], rows[5].replace(" 0 0 0 ", " 0 0 0.5 ", 1), *rows[5:]]
+    repeated = [*rows[:10], rows[9], rows[9], *rows[10:]]
+    with_nan = [*rows[:7], "nan 1 2 0 0 0 0 1", *rows[7:]]
+    latin1 = "# café\n".encode("latin-1") + "\n".join(rows).encode()
+    log = good.read_bytes()
+    no, ok, warned = "exit 2 naming the file", 0, "processed, warned"
+    gt, rel = "--ground-truth", "--relations"
+    entries = [  # option, name, content, exit code, behaviour, fragments of the error or warning
+        (gt, "gt_unsorted", "\n".join(swapped), ok, "sorted by stamp, warned", ("not in time order",)),
+        (gt, "gt_repeated", "\n".join(repeated), ok, "repeats dropped, warned", ("repeats 2 line(s)",)),
+        (gt, "gt_no_overlap", "\n".join(shifted), ok, "no ATE/RPE (accuracy null), warned",
+         ("does not overlap the trajectory", "no ATE/RPE")),
+        (gt, "gt_two_poses_one_stamp", "\n".join(conflict), 2, no, ("two different poses", "lines 6 and 7")),
+        (gt, "gt_nan", "\n".join(with_nan), 2, no, ("line 8", "not finite")),
+        (gt, "gt_random_bytes", np.random.default_rng(1).bytes(4000), 2, no, ("binary file",)),
+        (gt, "gt_utf16", "\n".join(rows).encode("utf-16"), 2, no, ("is UTF-16 text",)),
+        (gt, "gt_latin1", latin1, 2, no, ("not UTF-8 text", "line 1")),
+        (gt, "gt_is_a_log", log, 2, no, ("gt_is_a_log' is a binary file",)),
+        (rel, "relations_binary", log[:3000], 2, no, ("relations file", "binary")),
+        (rel, "relations_header", "t1 t2 x y z roll pitch yaw\n", 2, no, ("line 1 is not a relation",)),
+        (rel, "relations_outside", "1 2 0 0 0 0 0 0", ok, warned, ("no relation", "falls inside the run")),
+    ]  # fmt: skip
+    for option, name, content, code, behaviour, message in entries:
+        path = _write(d, name, content)
+        counts = VALID_COUNTS if code == 0 else {}
+        add(name, good, Expected(behaviour, code, message, counts, args=(option, path)))
+
+
+def _foreign_encoding_mcap(path: Path, topic: str) -> Path:
+    """The valid log with ``topic`` recorded as protobuf under its ROS type name: ``/scan`` (instead
+    of CDR) or ``/tf`` (an extra tf topic beside the CDR scans and odometry)."""
+    from mcap.writer import Writer
+
+    from cornerslam_cli.logs.writers import LASERSCAN, ODOMETRY, TFMESSAGE, RosSerializer
+
+    ros = RosSerializer("cdr")
+    proto = b"\x0a\x03abc"  # a protobuf message: field 1, 3 bytes
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start(profile="", library="fault_corpus")
+        ids = {}
+        for name, typ in (("/scan", LASERSCAN), ("/odom", ODOMETRY), ("/tf", TFMESSAGE)):
+            if name == topic:
+                sid = w.register_schema(name=typ, encoding="protobuf", data=b"\x0a\x00")
+                ids[name] = w.register_channel(topic=name, message_encoding="protobuf", schema_id=sid)
+            elif name != "/tf":
+                sid = w.register_schema(name=typ, encoding="ros2msg", data=ros.msgdef(typ).encode())
+                ids[name] = w.register_channel(topic=name, message_encoding="cdr", schema_id=sid)
+        for m in sorted([*make_scans(), *make_odoms()], key=lambda m: m.stamp):
+            t = int(round(m.stamp * 1e9))
+            if isinstance(m, OdomSample):
+                w.add_message(ids["/odom"], t, ros.odometry(m, "odom", "base_link"), t)
+                if "/tf" in ids:
+                    w.add_message(ids["/tf"], t, proto, t)
+            else:
+                w.add_message(ids["/scan"], t, proto if topic == "/scan" else ros.laserscan(m), t)
+        w.finish()
+    return path
+
+
+def _sim_time(scans: Iterator[RawScan], odoms: list[OdomSample]):
+    """The log in simulated time (Gazebo, use_sim_time): stamps from exactly 0.0 (scan i and odometry
+    sample i at i / RATE); the writers add T0 for the log (wall-clock receive) time."""
+    return (replace(s, stamp=i / RATE) for i, s in enumerate(scans)), [
+        replace(o, stamp=i / RATE) for i, o in enumerate(odoms)
+    ]
+
+
+def _input_faults_ii(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
+    """Reading faults of issue 13: encodings, chunk order, quaternions, zero stamps, CARMEN tabs,
+    scans without odometry, skipping every beam."""
+
+    # -- JSON messages (foxglove_bridge / rosbridge recordings), NaN/inf ranges as null
+    def holes(i, r):
+        return np.where(np.arange(len(r)) % 10 == 0, np.inf if i % 2 else np.nan, r)
+
+    for enc in ("json", "json-ros1"):
+        add(
+            f"mcap_{enc.replace('-', '_')}",
+            write_mcap(
+                d / f"{enc}.mcap", make_scans(ranges=holes), make_odoms(), encoding=enc, tf_static=(0.1, 0, 0)
+            ),
+            Expected(
+                "processed: JSON decoded (ROS 2 or ROS 1 field names; null ranges are invalid beams)",
+                0,
+                counts=dict(VALID_COUNTS, beams_invalid=N * 19),
+            ),
+        )
+    add(
+        "mcap_scan_topic_protobuf",
+        _foreign_encoding_mcap(d / "protobuf_scan.mcap", "/scan"),
+        Expected(
+            "exit 2: names the topic and its message encoding",
+            2,
+            ("protobuf_scan.mcap", "'/scan'", "message encoding 'protobuf'"),
+        ),
+    )
+    add(
+        "mcap_tf_topic_protobuf",
+        _foreign_encoding_mcap(d / "protobuf_tf.mcap", "/tf"),
+        Expected(
+            "processed; the tf topic in protobuf is not read, warned", 0, ("'/tf'", "protobuf"), VALID_COUNTS
+        ),
+    )
+    add(
+        "mcap_chunks_unsorted",
+        write_mcap(d / "unsorted_chunks.mcap", make_scans(), make_odoms(), shuffle_blocks=8),
+        Expected("processed in log-time order (the chunk index gives the order)", 0, counts=VALID_COUNTS),
+    )
+
+    # -- odometry quaternions: twice unit length everywhere; of zero length in two samples
+    def doubled(o):
+        return (0.0, 0.0, 2 * math.sin(o.theta / 2), 2 * math.cos(o.theta / 2))
+
+    def zero_in_two(o):
+        return (
+            (0.0,) * 4
+            if round((o.stamp - T0) * RATE) in (12, 13)
+            else (0.0, 0.0, math.sin(o.theta / 2), math.cos(o.theta / 2))
+        )
+
+    add(
+        "odom_quaternion_doubled",
+        write_gt(write_mcap(d / "quat_x2.mcap", make_scans(), make_odoms(), odom_quaternion=doubled)),
+        Expected(
+            "processed; quaternions normalised, warned", 0, ("not of unit length: normalised",), VALID_COUNTS
+        ),
+    )
+    add(
+        "odom_quaternion_zero",
+        write_mcap(d / "quat_zero.mcap", make_scans(), make_odoms(), odom_quaternion=zero_in_two),
+        Expected(
+            "processed; samples with a zero-length quaternion skipped, counted, warned",
+            0,
+            ("zero-length orientation quaternion",),
+            dict(VALID_COUNTS, messages_failed=2),
+        ),
+    )
+
+    # -- simulated time: header stamps from exactly 0.0, log time from the wall clock
+    for fmt, writer, suffix in (("mcap", write_mcap, ".mcap"), ("bag", write_rosbag1, ".bag")):
+        scans, odoms = _sim_time(make_scans(), make_odoms())
+        add(
+            f"stamps_sim_time_from_zero_{fmt}",
+            writer(d / f"sim_time{suffix}", scans, odoms, log_time_offset=T0),
+            Expected("processed: 0.0 is a valid stamp", 0, counts=VALID_COUNTS),
+        )
+
+    # -- CARMEN separated by tabs
+    add(
+        "carmen_tabs",
+        write_carmen(d / "tabs.clf", make_scans(), make_odoms(), sep="\t"),
+        Expected("processed: fields separated by any whitespace", 0, counts=VALID_COUNTS),
+    )
+
+    # -- scans outside the odometry: the second half after its last sample; a wrong clock
+    add(
+        "odom_ends_halfway",
+        write_mcap(d / "odom_half.mcap", make_scans(), make_odoms(N // 2 + 1)),
+        Expected(
+            "processed; scans after the last odometry sample skipped, counted, warned (in summary.json too)",
+            0,
+            ("after the last odometry sample",),
+            {"steps": N // 2, "after_last_odom": N // 2, "scans_skipped": N // 2},
+        ),
+    )
+    add(
+        "odom_other_clock",
+        write_mcap(
+            d / "odom_clock.mcap", make_scans(), [replace(o, stamp=o.stamp - 1000.0) for o in make_odoms()]
+        ),
+        Expected(
+            "exit 2: no scan within the odometry's time span; the counts say why",
+            2,
+            ("odom_clock.mcap", "no scan could be processed", f"{N} after the last odometry sample"),
+        ),
+    )
+
+    # -- skipping more beams than a scan has
+    good = d / "good.mcap"
+    add(
+        "skip_beams_all",
+        good,
+        Expected(
+            "exit 2: names the skip_beams keys and the beam count",
+            2,
+            ("input.skip_beams_start=100", "input.skip_beams_end=81", "all 181 beams"),
+            args=("--set", "input.skip_beams_start=100", "--set", "input.skip_beams_end=81"),
+        ),
+    )
 
 
 # --------------------------------------------------------------------------- the long log

@@ -9,6 +9,7 @@ from click.testing import CliRunner
 
 from cornerslam_cli.cli import cli
 from cornerslam_cli.logs.writers import RawScan, write_mcap
+from cornerslam_cli.report.outdir import MARKER
 from cornerslam_cli.report.tables import TIMING_COLUMNS, TRAJECTORY_COLUMNS, read_csv
 from cornerslam_cli.types import OdomSample
 
@@ -40,9 +41,9 @@ def test_run_writes_every_table_with_the_interface_columns(sim_log, tmp_path):
     out = tmp_path / "out"
     res = invoke("run", sim_log, "--out", out, "-q")
     assert res.exit_code == 0, res.output
-    assert sorted(p.name for p in out.iterdir()) == sorted(
-        ["trajectory.tum", "trajectory.csv", "map.csv", "lines.csv", "timing.csv", "summary.json"]
-    )
+    files = ["trajectory.tum", "trajectory.csv", "map.csv", "lines.csv", "timing.csv", "summary.json"]
+    assert sorted(p.name for p in out.iterdir()) == sorted([*files, MARKER])
+    assert json.loads((out / MARKER).read_text())["files"] == sorted(files)  # what it replaces next time
     traj = read_csv(out / "trajectory.csv")
     timing = read_csv(out / "timing.csv")
     assert list(traj) == TRAJECTORY_COLUMNS and list(timing) == TIMING_COLUMNS

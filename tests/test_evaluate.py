@@ -68,3 +68,130 @@ def test_relation_error_with_time_offset_and_interpolation():
     assert e["n"] == 2 and e["n_total"] == 3
     assert e["trans_mean"] == pytest.approx(0.1)
     assert e["rot_mean_deg"] == pytest.approx(5.0)
+
+
+# ---------------------------------------------------------------------------- files as users give them
+def circle(n: int = 200, t0: float = 1_700_000_000.0) -> tuple[np.ndarray, np.ndarray]:
+    """n poses 0.1 s apart on a circle of radius 3 m (30 m of path)."""
+    t = t0 + 0.1 * np.arange(n)
+    a = np.linspace(0.0, 2 * np.pi, n)
+    return t, np.column_stack((3 * np.cos(a), 3 * np.sin(a), a + np.pi / 2))
+
+
+@pytest.fixture
+def files(tmp_path):
+    """A trajectory (the circle with seeded noise) and its ground truth, as TUM files."""
+    from cornerslam_cli.report.tables import write_tum
+
+    t, gt = circle()
+    est = gt + np.random.default_rng(3).normal(0.0, 0.01, gt.shape)
+    write_tum(tmp_path / "est.tum", t, est)
+    write_tum(tmp_path / "gt.tum", t, gt)
+    return tmp_path / "est.tum", tmp_path / "gt.tum"
+
+
+def evaluate(*args):
+    from click.testing import CliRunner
+
+    from cornerslam_cli.cli import cli
+
+    return CliRunner().invoke(cli, ["evaluate", *map(str, args)], catch_exceptions=False)
+
+
+def rewrite(path, edit) -> None:
+    rows = path.read_text().splitlines()
+    path.write_text("\n".join(edit(rows)) + "\n")
+
+
+def swap(rows: list[str], i: int = 2, j: int = 150) -> list[str]:
+    rows = list(rows)
+    rows[i], rows[j] = rows[j], rows[i]
+    return rows
+
+
+@pytest.mark.parametrize("which", ["gt", "est"])
+def test_lines_out_of_time_order_are_sorted_not_misread(files, which):
+    """Two swapped lines (the issue: 0.995 m reported instead of 0.012 m): the same figures as the
+    sorted file, and a warning naming the file and lines."""
+    est, gt = files
+    before = evaluate(est, "--ground-truth", gt)
+    assert before.exit_code == 0 and "ATE  rmse 0.01" in before.output
+    rewrite(gt if which == "gt" else est, swap)
+    after = evaluate(est, "--ground-truth", gt)
+    assert after.exit_code == 0, after.output
+    assert after.stdout == before.stdout
+    assert "is not in time order (line 4 at" in after.stderr and "sorted by stamp" in after.stderr
+
+
+def test_repeated_lines_are_dropped_and_two_poses_at_one_stamp_refused(files):
+    est, gt = files
+    before = evaluate(est, "--ground-truth", gt).stdout
+    rewrite(gt, lambda rows: [*rows[:10], rows[9], *rows[10:]])
+    res = evaluate(est, "--ground-truth", gt)
+    assert res.stdout == before and "repeats 1 line(s) (first: line 11): dropped" in res.stderr
+    rewrite(gt, lambda rows: [*rows[:20], rows[20].replace(" 0 0 0 ", " 0 0 0.3 ", 1), *rows[20:]])
+    res = evaluate(est, "--ground-truth", gt)
+    assert res.exit_code == 2 and "two different poses at stamp" in res.stderr
+    assert "(lines 21 and 22)" in res.stderr and "Traceback" not in res.output
+
+
+def test_ground_truth_that_does_not_overlap_is_exit_2_not_nan(files):
+    est, gt = files
+    rewrite(gt, lambda rows: [" ".join([f"{float(r.split()[0]) + 100:.9f}", *r.split()[1:]]) for r in rows])
+    res = evaluate(est, "--ground-truth", gt)
+    assert res.exit_code == 2 and "nan" not in res.output.lower()
+    assert "does not overlap the trajectory: 0 of its 200 poses" in res.stderr
+
+
+@pytest.mark.parametrize(
+    "content, fragment",
+    [
+        (np.random.default_rng(0).bytes(3000), "is a binary file"),
+        ("1 2 3 4 5 6 7 8\n".encode("utf-16"), "is UTF-16 text"),
+        (b"# \xe9t\xe9\n1 2 3 4 5 6 7 8\n", "is not UTF-8 text (byte 0xe9 at line 1)"),
+        (b"1 2 3 4 5 6 7 8\n2 nan 3 4 5 6 7 8\n", "line 2 has a value that is not finite"),
+        (b"1 2 3 4 5 6 7 8\n2 inf 3 4 5 6 7 8\n", "line 2 has a value that is not finite"),
+        (b"", "has no"),
+    ],
+    ids=["binary", "utf16", "latin1", "nan", "inf", "empty"],
+)
+@pytest.mark.parametrize("option", ["--ground-truth", "--relations"])
+def test_bad_reference_files_are_exit_2_naming_the_file(files, tmp_path, option, content, fragment):
+    est, _ = files
+    bad = tmp_path / "bad.txt"
+    bad.write_bytes(content)
+    res = evaluate(est, option, bad)
+    assert res.exit_code == 2, res.output
+    assert res.stderr.startswith("error: ") and "bad.txt" in res.stderr and fragment in res.stderr
+
+
+def test_relations_in_any_order_and_partly_outside(files, tmp_path):
+    """Relations stand alone: shuffled rows score the same; those outside the trajectory are not
+    counted (n of n_total); none inside is exit 2."""
+    est, gt = files
+    t, g = circle()
+    i = np.arange(0, 190, 10)
+    rel = relative(g[i], g[i + 10])
+    rows = [
+        f"{t[a]:.6f} {t[a + 10]:.6f} {x:.6f} {y:.6f} 0 0 0 {th:.6f}"
+        for a, (x, y, th) in zip(i, rel, strict=True)
+    ]
+    rows += ["1.0 2.0 0 0 0 0 0 0", f"{t[5]:.6f} {t[-1] + 50:.6f} 1 0 0 0 0 0"]  # wholly / partly outside
+    path = tmp_path / "r.relations"
+    path.write_text("\n".join(rows) + "\n")
+    first = evaluate(est, "--relations", path)
+    assert first.exit_code == 0 and f"({len(i)}/{len(rows)} relations)" in first.stdout
+    path.write_text("\n".join(rows[::-1]) + "\n")
+    assert evaluate(est, "--relations", path).stdout == first.stdout
+    res = evaluate(est, "--relations", path, "--time-offset", 1e6)
+    assert res.exit_code == 2 and "falls inside the trajectory's time span" in res.stderr
+
+
+def test_rpe_per_metre_is_a_dash_when_the_path_is_shorter_than_a_metre(tmp_path):
+    from cornerslam_cli.report.tables import write_tum
+
+    t, g = circle(4)
+    g[:, :2] *= 0.01  # 4 poses on a circle of 3 cm
+    write_tum(tmp_path / "gt.tum", t, g)
+    res = evaluate(tmp_path / "gt.tum", "--ground-truth", tmp_path / "gt.tum")
+    assert res.exit_code == 0 and "per metre - m/m" in res.stdout and "nan" not in res.stdout

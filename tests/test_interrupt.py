@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from cornerslam_cli.report.outdir import MARKER, mark_output
 from cornerslam_cli.simulate import simulate_log
 
 CMD = [sys.executable, "-c", "from cornerslam_cli.cli import main; main()"]
@@ -37,6 +38,7 @@ def test_interrupted_run_leaves_the_previous_output_or_none(long_log, tmp_path, 
     if previous:
         out.mkdir()
         (out / "summary.json").write_text('{"previous": true}\n')
+        mark_output(out, "run")  # a previous cornerslam output: the run may replace it
     proc = subprocess.Popen(
         [*CMD, "run", str(long_log), "--out", str(out), "-q"],
         stdout=subprocess.PIPE,
@@ -57,7 +59,7 @@ def test_interrupted_run_leaves_the_previous_output_or_none(long_log, tmp_path, 
     assert "Traceback" not in err
     assert staging_dirs(out) == []
     if previous:
-        assert [p.name for p in out.iterdir()] == ["summary.json"]
+        assert sorted(p.name for p in out.iterdir()) == [MARKER, "summary.json"]
         assert (out / "summary.json").read_text() == '{"previous": true}\n'
     else:
         assert not out.exists()

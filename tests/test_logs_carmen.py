@@ -96,3 +96,23 @@ def test_cut_gzip_yields_prefix_with_warning(tmp_path, caplog):
         scans, _ = split(open_log(p).messages())
     assert 0 < len(scans) < 200 and [s.stamp for s in scans] == list(range(len(scans)))
     assert "ends early" in caplog.text
+
+
+@pytest.mark.parametrize("gz", [False, True])
+def test_tab_separated_lines_read_as_space_separated(tmp_path, gz):
+    """Fields separated by tabs (or mixed whitespace) are fields: the same messages as with spaces."""
+    from _log_fixtures import make_odoms, make_scans
+
+    from cornerslam_cli.logs.writers import write_carmen
+
+    suffix = ".clf.gz" if gz else ".clf"
+    spaces = write_carmen(tmp_path / f"s{suffix}", make_scans(), make_odoms(), gzip=gz)
+    tabs = write_carmen(tmp_path / f"t{suffix}", make_scans(), make_odoms(), gzip=gz, sep="\t")
+    with open_log(spaces) as a, open_log(tabs) as b:
+        want, got = list(a.messages()), list(b.messages())
+        assert b.info().topics == a.info().topics and b.stats.warnings == []
+    assert [m.stamp for m in got] == [m.stamp for m in want] and len(got) == 24
+    for m, n in zip(got, want, strict=True):
+        assert type(m) is type(n)
+        if hasattr(m, "ranges"):
+            np.testing.assert_array_equal(m.ranges, n.ranges)

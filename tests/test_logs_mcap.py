@@ -165,3 +165,216 @@ def test_odometry_decoder_equals_rosbags(enc, frames):
     assert (x, y, q) == (p.x, p.y, (o.x, o.y, o.z, o.w))
     with pytest.raises(DecodeError):
         (decode_odometry_ros1 if enc == "ros1" else decode_odometry_cdr)(raw[:40])
+
+
+# ---------------------------------------------------------------------------- JSON messages
+@pytest.mark.parametrize("enc", ["json", "json-ros1"])
+def test_json_messages_decode_to_what_cdr_ones_do(enc, tmp_path):
+    """A foxglove_bridge / rosbridge recording (JSON, ROS 2 or ROS 1 field names, NaN/inf ranges as
+    null) gives the same scans, odometry and laser mount as the CDR recording of the same data."""
+    scans, odoms = make_scans(30), make_odoms(30)
+    read = {}
+    for e in ("cdr", enc):
+        with open_log(
+            write_mcap(tmp_path / f"{e}.mcap", scans, odoms, encoding=e, tf_static=(0.1, 0.0, 0.3))
+        ) as log:
+            read[e] = (list(log.messages()), log.laser_to_base(), log.stats)
+    (want, mount, _), (got, json_mount, stats) = read["cdr"], read[enc]
+    assert json_mount == pytest.approx(mount) and len(got) == len(want) == 60
+    for a, b in zip(got, want, strict=True):
+        assert type(a) is type(b) and a.stamp == b.stamp
+        if hasattr(a, "ranges"):
+            np.testing.assert_array_equal(a.ranges, b.ranges)
+            np.testing.assert_array_equal(a.beam_index, b.beam_index)
+        else:
+            assert (a.x, a.y, a.theta) == pytest.approx((b.x, b.y, b.theta), abs=1e-12)
+    assert stats.beams_dropped > 0 and stats.decode_failed == 0
+
+
+@pytest.mark.parametrize(
+    "payload, match",
+    [
+        (b"{not json", "not JSON"),
+        (b"[1, 2]", "not an object"),
+        (b'{"header": {"stamp": {"sec": 1, "nanosec": 0}, "frame_id": "l"}}', "no field 'ranges'"),
+        (b'{"header": {"frame_id": "l"}, "ranges": []}', "no field 'header.stamp'|no field 'angle_min'"),
+        (b'{"header": {"stamp": {"sec": 1, "nanosec": 0}, "frame_id": "l"}, "ranges": ["a"], "angle_min": 0}',
+         "other than numbers"),
+    ],
+)  # fmt: skip
+def test_json_decoder_names_what_is_wrong(payload, match):
+    from cornerslam_cli.logs.base import Channel
+    from cornerslam_cli.logs.jsonmsg import JsonDecoder
+
+    with pytest.raises(DecodeError, match=match):
+        JsonDecoder(Channel("/scan", "sensor_msgs/msg/LaserScan", "json")).laserscan(payload)
+
+
+def test_undecodable_json_messages_are_counted_not_fatal(tmp_path):
+    """Every fifth scan's JSON is cut in half: those are skipped, counted and warned, the rest read."""
+    from _log_fixtures import write_messages_mcap
+
+    from cornerslam_cli.logs.writers import JsonSerializer
+
+    js = JsonSerializer()
+    msgs = [("/odom", "nav_msgs/msg/Odometry", int(o.stamp * 1e9), js.odometry(o, "odom", "base_link"))
+            for o in make_odoms(20)]  # fmt: skip
+    for i, s in enumerate(make_scans(20)):
+        data = js.laserscan(s)
+        msgs.append(
+            (
+                "/scan",
+                "sensor_msgs/msg/LaserScan",
+                int(s.stamp * 1e9),
+                data[: len(data) // 2] if i % 5 == 0 else data,
+            )
+        )
+    p = write_messages_mcap(tmp_path / "j.mcap", sorted(msgs, key=lambda m: m[2]), encoding="json")
+    with open_log(p) as log:
+        scans = [m for m in log.messages() if hasattr(m, "ranges")]
+        assert len(scans) == 16 and log.stats.decode_failed == 4
+        assert "cannot decode" in log.stats.warnings[0] and "not JSON" in log.stats.warnings[0]
+
+
+@pytest.mark.parametrize("topic", ["/scan", "/odom"])
+def test_a_topic_in_another_encoding_is_a_log_error_naming_it(topic, tmp_path):
+    """protobuf (or flatbuffer, cbor...) under a ROS type name: info shows it, run refuses it."""
+    from mcap.writer import Writer
+
+    from cornerslam_cli.logs.writers import JsonSerializer
+
+    js = JsonSerializer()
+    p = tmp_path / "p.mcap"
+    with open(p, "wb") as f:
+        w = Writer(f)
+        w.start("", "test")
+        ids = {}
+        for name, typ in (("/scan", "sensor_msgs/msg/LaserScan"), ("/odom", "nav_msgs/msg/Odometry")):
+            enc = "protobuf" if name == topic else "json"
+            ids[name] = w.register_channel(name, enc, w.register_schema(typ, enc, b"x"))
+        for s, o in zip(make_scans(5), make_odoms(5), strict=True):
+            w.add_message(ids["/odom"], int(o.stamp * 1e9), js.odometry(o, "odom", "base_link"), 0)
+            w.add_message(ids["/scan"], int(s.stamp * 1e9), js.laserscan(s), 0)
+        w.finish()
+    log = open_log(p)
+    info = log.info()
+    assert {t.name: t.encoding_note for t in info.topics}[topic] == "protobuf: not readable"
+    assert f"topic '{topic}' of log 'p.mcap' has message encoding 'protobuf'" in info.problems[0]
+    for call in (log.messages, log.laser_to_base, log.check):
+        with pytest.raises(LogError, match=f"'{topic}' of log 'p.mcap' has message encoding 'protobuf'"):
+            call()
+
+
+# ---------------------------------------------------------------------------- reading order, memory
+def test_chunks_out_of_time_order_are_read_in_log_time_order(tmp_path):
+    """A valid file whose chunks are shuffled (blocks of 7 messages): the chunk index gives the order,
+    so the read equals the read of the sorted file (it lost most messages to 'backwards' stamps)."""
+    scans, odoms = make_scans(N, beams=91), make_odoms(N)
+    ordered = [
+        (m.stamp, type(m).__name__)
+        for m in open_log(write_mcap(tmp_path / "a.mcap", scans, odoms)).messages()
+    ]
+    shuffled = write_mcap(tmp_path / "b.mcap", scans, odoms, shuffle_blocks=7)
+    with open_log(shuffled) as log:
+        got = [(m.stamp, type(m).__name__) for m in log.messages()]
+        assert log.stats.warnings == []
+    assert got == ordered and len(got) == 2 * N
+
+
+def _zero_chunk_start_times(src, dst, keep_summary: bool):
+    """Copy of an MCAP with message_start_time 0 in every chunk header and chunk index record (as some
+    writers leave it); without the summary section if not ``keep_summary``."""
+    import struct
+
+    from fault_corpus import mcap_records
+
+    data = bytearray(src.read_bytes())
+    for op, start, _ in list(mcap_records(bytes(data))):
+        if op in (0x06, 0x08):  # Chunk, ChunkIndex: message_start_time first
+            struct.pack_into("<Q", data, start, 0)
+    if not keep_summary:  # cut at the DataEnd record: a recording without summary and footer
+        data = data[: next(s - 9 for op, s, _ in mcap_records(bytes(data)) if op == 0x0F)]
+    dst.write_bytes(bytes(data))
+    return dst
+
+
+@pytest.mark.parametrize("keep_summary", [True, False])
+def test_reorder_buffer_is_bounded_when_chunk_start_times_are_0(keep_summary, tmp_path, monkeypatch):
+    """Chunk headers claiming start time 0 held every message back (up to 100,000 of them): the heap
+    now releases on the chunks' real first message, holding about one chunk. With the buffer limited
+    to two chunks' worth, the read is complete, in order, and never hits the limit."""
+    import cornerslam_cli.logs.mcap as mcap_mod
+
+    src = write_mcap(tmp_path / "s.mcap", make_scans(N, beams=361), make_odoms(N), chunk_size=32_000)
+    p = _zero_chunk_start_times(src, tmp_path / "z.mcap", keep_summary)
+    monkeypatch.setattr(mcap_mod, "REORDER_BYTES", 2 * 32_000)
+    with open_log(p) as log:
+        stamps = [m.stamp for m in log.messages()]
+        assert not [w for w in log.stats.warnings if "overlap" in w]
+    assert stamps == sorted(stamps) and len(stamps) == 2 * N
+
+
+def test_reorder_buffer_limit_releases_early_with_a_warning(tmp_path, monkeypatch):
+    """Chunks that all span the whole log (worst case) cannot be merged in bounded memory: past
+    REORDER_BYTES the oldest messages go out early, warned; nothing is lost."""
+    import cornerslam_cli.logs.mcap as mcap_mod
+
+    p = write_mcap(tmp_path / "s.mcap", make_scans(N, beams=361), make_odoms(N), chunk_size=32_000)
+    src = mcap_mod.McapSource(p, mcap_mod.ReadStats())
+    ids = sorted(src.index.channels)
+    every_third = [
+        [(ids[i % 2], t, memoryview(bytes(1000))) for i, t in enumerate(range(k, 3000, 3))] for k in range(3)
+    ]
+    monkeypatch.setattr(src, "_index_order", lambda wanted: iter(every_third))
+    monkeypatch.setattr(mcap_mod, "REORDER_BYTES", 1500 * 1000)
+    got = [t for _, t, _ in src.raw_messages({"/scan", "/odom"})]
+    assert sorted(got) == list(range(3000)) and got != sorted(got)
+    assert any("overlap in log time" in w for w in src.stats.warnings)
+    monkeypatch.setattr(mcap_mod, "REORDER_BYTES", 64 << 20)
+    assert [t for _, t, _ in src.raw_messages({"/scan", "/odom"})] == list(range(3000))
+
+
+def test_tf_quaternions_in_json_normalised_or_ignored(tmp_path):
+    """tf as JSON: odometry from tf odom→base_link with a ×2 quaternion gives the right yaw; a static
+    base_link→laser transform with a zero-length rotation is ignored (warned), not read as yaw 0; a
+    schemaless channel shows as '(no schema)'."""
+    import json
+    import math
+
+    from _log_fixtures import write_messages_mcap
+
+    from cornerslam_cli.logs.writers import JsonSerializer
+
+    js = JsonSerializer()
+
+    def tf(stamp, parent, child, x, q):
+        rot = dict(zip("xyzw", q, strict=True))
+        t = {"header": js.header(stamp, parent), "child_frame_id": child,
+             "transform": {"translation": {"x": x, "y": 0.0, "z": 0.0}, "rotation": rot}}  # fmt: skip
+        return json.dumps({"transforms": [t]}).encode()
+
+    scans, odoms = make_scans(10), make_odoms(10)
+    msgs = [("/tf_static", "tf2_msgs/msg/TFMessage", 0, tf(0.0, "base_link", "laser", 0.2, (0.0,) * 4))]
+    for o in odoms:
+        q = (0.0, 0.0, 2 * math.sin(o.theta / 2), 2 * math.cos(o.theta / 2))
+        msgs.append(
+            ("/tf", "tf2_msgs/msg/TFMessage", int(o.stamp * 1e9), tf(o.stamp, "odom", "base_link", o.x, q))
+        )
+    msgs += [("/scan", "sensor_msgs/msg/LaserScan", int(s.stamp * 1e9), js.laserscan(s)) for s in scans]
+    p = write_messages_mcap(tmp_path / "tf.mcap", sorted(msgs, key=lambda m: m[2]), encoding="json")
+    with open_log(p) as log:
+        got = [m for m in log.messages() if not hasattr(m, "ranges")]
+        assert log.laser_to_base() is None
+        assert any(
+            "base_link→laser has a zero-length rotation quaternion: ignored" in w for w in log.stats.warnings
+        )
+    assert [g.theta for g in got] == pytest.approx([o.theta for o in odoms], abs=1e-12)
+
+    from mcap.writer import Writer
+
+    with open(tmp_path / "nos.mcap", "wb") as f:
+        w = Writer(f)
+        w.start("", "test")
+        w.add_message(w.register_channel("/points", "json", 0), 1, b"{}", 1)
+        w.finish()
+    assert [t.msgtype for t in open_log(tmp_path / "nos.mcap").info().topics] == ["(no schema)"]

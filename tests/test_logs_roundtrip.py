@@ -121,3 +121,67 @@ def test_carmen_flaser_convention(tmp_path, gz):
     assert s.range_max == 81.83 and s.angle_increment == pytest.approx(math.pi / 180)
     full = -math.pi / 2 + np.arange(180) * math.pi / 180
     np.testing.assert_allclose(s.angles, full[s.beam_index])
+
+
+def _quaternion_times(k: float):
+    """Orientation quaternions k times unit length (k = 0: zero length) for the odometry writers."""
+    return lambda o: tuple(k * v for v in (0.0, 0.0, math.sin(o.theta / 2), math.cos(o.theta / 2)))
+
+
+@pytest.mark.parametrize("fmt", sorted(ROS_WRITERS))
+@pytest.mark.parametrize("k", [2.0, 0.5, -3.0])
+def test_odometry_quaternions_are_normalised(fmt, k, tmp_path):
+    """A quaternion k times unit length is the same rotation: the same theta (unnormalised, a ×2 one
+    turned 0.3 rad into 0.9 rad), with one warning."""
+    odoms = make_odoms()
+    path = write_log(fmt, tmp_path, odoms=odoms, odom_quaternion=_quaternion_times(k))
+    with open_log(path) as log:
+        _, got = split(log.messages())
+        warnings = log.stats.warnings
+    assert [math.remainder(o.theta - e.theta, math.tau) for o, e in zip(got, odoms, strict=True)] == (
+        pytest.approx([0.0] * len(odoms), abs=1e-12)
+    )
+    assert sum("not of unit length: normalised" in w for w in warnings) == 1
+
+
+@pytest.mark.parametrize("fmt", sorted(ROS_WRITERS))
+def test_zero_length_quaternion_skips_the_sample(fmt, tmp_path):
+    """All-zero orientation is no rotation (it was read as theta 0): skipped, counted, warned."""
+    unit, third = _quaternion_times(1.0), make_odoms()[3].stamp
+
+    def zero_in_3(o):
+        return (0.0,) * 4 if o.stamp == third else unit(o)
+
+    path = write_log(fmt, tmp_path, odom_quaternion=zero_in_3)
+    with open_log(path) as log:
+        _, got = split(log.messages())
+        stats = log.stats
+    assert len(got) == len(make_odoms()) - 1 and third not in [o.stamp for o in got]
+    assert stats.decode_failed == 1 and "zero-length orientation quaternion" in stats.warnings[0]
+
+
+@pytest.mark.parametrize("fmt", sorted(ROS_WRITERS))
+def test_zero_is_a_valid_stamp(fmt, tmp_path):
+    """Simulated time (Gazebo, use_sim_time): header stamps from exactly 0.0 while the log times are
+    wall-clock. The header stamps are used, 0.0 included (it used to fall back to the log time)."""
+    raw = make_scans(t0=-0.05)  # scan stamps 0.0, 0.1, ...
+    odoms = make_odoms(t0=0.0)
+    path = write_log(fmt, tmp_path, raw, odoms, log_time_offset=1_700_000_000.0)
+    with open_log(path) as log:
+        scans, got = split(log.messages())
+    assert scans[0].stamp == 0.0 and got[0].stamp == 0.0
+    assert [s.stamp for s in scans] == pytest.approx([r.stamp for r in raw], abs=1e-9)
+    assert [o.stamp for o in got] == pytest.approx([o.stamp for o in odoms], abs=1e-9)
+
+
+def test_float32_round_off_in_quaternions_is_normalised_silently(tmp_path):
+    """A quaternion computed in float32 (norm off by ~1e-7) is normalised without a warning."""
+
+    def float32(o):
+        return tuple(float(np.float32(v)) for v in _quaternion_times(1.0)(o))
+
+    odoms = make_odoms()
+    with open_log(write_log("mcap-cdr", tmp_path, odoms=odoms, odom_quaternion=float32)) as log:
+        _, got = split(log.messages())
+        assert log.stats.warnings == []
+    assert [o.theta for o in got] == pytest.approx([o.theta for o in odoms], abs=1e-6)

@@ -8,6 +8,7 @@ from collections import defaultdict
 
 import numpy as np
 import pytest
+from _strict_json import strict
 from mcap.reader import make_reader
 from test_report_plots import make_report_outputs
 
@@ -30,7 +31,8 @@ def results(tmp_path_factory, sim_log):
         }
         schemas = {s.name: (s.encoding, json.loads(s.data)) for s in summary.schemas.values()}
         for _schema, channel, message in reader.iter_messages(log_time_order=False):
-            messages[channel.topic].append((message.log_time, json.loads(message.data)))
+            payload = json.loads(message.data, parse_constant=strict)  # what Foxglove accepts
+            messages[channel.topic].append((message.log_time, payload))
     return run_dir, messages, channels, schemas
 
 

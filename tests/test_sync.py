@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from fault_corpus import peak_bytes
 
 from cornerslam_cli.config import KeyframeConfig
 from cornerslam_cli.logs.sync import SyncStats, interpolate_pose, select_keyframes, synchronise
@@ -83,3 +84,44 @@ def test_scan_time_offset_shifts_the_stamp_used_for_interpolation(tmp_path):
         cfg = load_config(None, [f"input.scan_time_offset={offset}"])
         got = [f.odom[0] for f in frames(open_input(log, cfg), cfg)]
         assert got == pytest.approx([0.5 + offset, 1.5 + offset, 2.5 + offset])
+
+
+def test_scans_in_a_gap_of_the_odometry_are_skipped_and_counted():
+    """Odometry at 0–1 s and again from 100 s: the scans between are neither waited for past 30 s
+    (MAX_GAP) nor interpolated across the gap; one warning sums up every kind of skip."""
+    odoms = [OdomSample(t, t, 0.0, 0.0) for t in (0.0, 0.5, 1.0, 100.0, 100.5, 101.0)]
+    scans = [scan(0.25 + 0.5 * i) for i in range(203)]  # 0.25 .. 101.25 s
+    msgs = sorted(odoms + scans, key=lambda m: m.stamp)
+    st, warned = SyncStats(), []
+    out = list(synchronise(msgs, st, lambda fmt, *a: warned.append(fmt % a)))
+    assert [s.stamp for s, _ in out] == [0.25, 0.75, 100.25, 100.75]
+    assert (st.odom_gap, st.after_last_odom, st.scans_skipped) == (198, 1, 199)  # 1.25 .. 99.75 s; 101.25 s
+    assert len(warned) == 1 and "1 after the last odometry sample, 198 in gaps of the odometry" in warned[0]
+
+
+def _beams_scan(t: float, beams: int = 64) -> Scan:
+    r = np.ones(beams)
+    return Scan(t, r, np.linspace(-1, 1, beams), np.arange(beams), beams, 0.1, 10.0, 2 / beams)
+
+
+@pytest.mark.parametrize("case", ["scans_after_odometry", "odometry_ahead_of_scans"])
+def test_memory_does_not_grow_with_unpaired_messages(case):
+    """Scans long after the last odometry sample (odometry on a wrong topic or clock), or odometry
+    running far ahead of the scans: the peak memory of synchronise is the same for 3,000 and 9,000
+    such messages (it grew with n: every unpaired scan was held to the end)."""
+
+    def messages(n):
+        if case == "scans_after_odometry":
+            yield from (OdomSample(0.1 * i, 0.0, 0.0, 0.0) for i in range(10))
+            yield from (_beams_scan(10.0 + 0.1 * i) for i in range(n))
+        else:
+            yield _beams_scan(0.05)
+            yield from (OdomSample(0.01 * i, 0.0, 0.0, 0.0) for i in range(5 * n))
+
+    def run(n):
+        st = SyncStats()
+        assert list(synchronise(messages(n), st, lambda *a: None)) == []
+        assert st.after_last_odom == (n if case == "scans_after_odometry" else 0)
+
+    small, large = peak_bytes(lambda: run(3000)), peak_bytes(lambda: run(9000))
+    assert large < 1.3 * small, (small, large)

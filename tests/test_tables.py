@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from cornerslam_cli.errors import LogError
-from cornerslam_cli.report.tables import CsvTable, StagedDir, read_csv, read_tum, write_tum
+from cornerslam_cli.report.outdir import MARKER, StagedDir, mark_output
+from cornerslam_cli.report.tables import CsvTable, read_csv, read_tum, write_tum
 
 
 def test_tum_round_trip_keeps_yaw(tmp_path):
@@ -41,6 +42,7 @@ def test_staged_dir_replaces_only_on_commit(tmp_path):
     target = tmp_path / "out"
     target.mkdir()
     (target / "old.txt").write_text("previous run")
+    mark_output(target, "run")  # a previous cornerslam run: the only kind of directory replaced
     with pytest.raises(RuntimeError):
         with StagedDir(target) as st:
             (st.path / "half.csv").write_text("step\n")
@@ -50,5 +52,62 @@ def test_staged_dir_replaces_only_on_commit(tmp_path):
     with StagedDir(target) as st:
         (st.path / "new.csv").write_text("step\n")
         st.commit()
-    assert sorted(p.name for p in target.iterdir()) == ["new.csv"]
+    assert sorted(p.name for p in target.iterdir()) == [MARKER, "new.csv"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_write_json_is_strict_json(tmp_path):
+    """NaN and ±inf (Python floats, numpy scalars, inside arrays) are written as null: every JSON
+    reader accepts the file, Python's own with NaN refused too."""
+    from _strict_json import strict_load
+
+    from cornerslam_cli.report.tables import json_text, write_json
+
+    data = {
+        "a": float("nan"),
+        "b": [1.5, float("inf"), -float("inf")],
+        "c": {"d": np.float32("nan"), "e": np.float64(2.5), "f": np.int64(3), "g": np.bool_(True)},
+        "h": np.array([[1.0, np.nan], [np.inf, 4.0]]),
+        "i": (np.float64(-np.inf), 7),
+    }
+    write_json(tmp_path / "s.json", data)
+    assert strict_load(tmp_path / "s.json") == {
+        "a": None,
+        "b": [1.5, None, None],
+        "c": {"d": None, "e": 2.5, "f": 3, "g": True},
+        "h": [[1.0, None], [None, 4.0]],
+        "i": [None, 7],
+    }
+    assert json_text({"x": 0.1, "y": [1, 2]}) == '{"x": 0.1, "y": [1, 2]}'  # finite values unchanged
+
+
+def test_read_tum_sorts_drops_repeats_and_refuses_two_poses_at_one_stamp(tmp_path):
+    lines = ["3 3 0 0 0 0 0 1", "1 1 0 0 0 0 0 1", "2 2 0 0 0 0 0 1", "2 2 0 0 0 0 0 1"]
+    p = tmp_path / "t.tum"
+    p.write_text("\n".join(lines) + "\n")
+    notes: list[str] = []
+    t, poses = read_tum(p, "ground truth", notes.append)
+    assert t.tolist() == [1, 2, 3] and poses[:, 0].tolist() == [1, 2, 3]
+    assert len(notes) == 2 and "line 2 at 1.000000 s comes after line 1 at 3.000000 s" in notes[0]
+    assert "repeats 1 line(s) (first: line 4): dropped" in notes[1]
+    p.write_text("\n".join([*lines, "2 2.5 0 0 0 0 0 1"]) + "\n")
+    with pytest.raises(LogError, match=r"two different poses at stamp 2\.0+ \(lines 4 and 5\)"):
+        read_tum(p, "ground truth", notes.append)
+
+
+def test_a_huge_binary_file_is_refused_on_its_first_bytes(tmp_path):
+    """A 256 MiB bag given as ground truth is refused after reading 64 KiB, not loaded whole."""
+    import tracemalloc
+
+    p = tmp_path / "huge.bag"
+    with open(p, "wb") as f:
+        f.write(b"#ROSBAG V2.0\n\x00\x01")
+        f.truncate(256 << 20)  # sparse: no disk used
+    tracemalloc.start()
+    try:
+        with pytest.raises(LogError, match="huge.bag' is a binary file"):
+            read_tum(p, "ground truth")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 1 << 20, peak

@@ -5,13 +5,18 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
+from ..ranges import check_ranges, num
+
+MAX_NODES = 10**12  # search nodes: far beyond any budget that finishes
+MAX_SECONDS = 1e6
+
 
 @dataclass(frozen=True)
 class JcbbConfig:
     """Optional search budget of JCBB (Neira & Tardós 2001); the best hypothesis so far is returned."""
 
-    max_nodes: int = 0  # 0 = no budget
-    max_seconds: float = 0.0  # 0 = no budget
+    max_nodes: int = num(0, ge=0, le=MAX_NODES)  # 0 = no budget
+    max_seconds: float = num(0.0, ge=0.0, le=MAX_SECONDS)  # 0 = no budget
     # prefix: Neira & Tardós, every partial hypothesis must pass χ²(d·|H|) (result depends on visiting
     # order); exact: prune only what no extension can make compatible (the true optimum, more nodes)
     joint_gate: Literal["prefix", "exact"] = "prefix"
@@ -21,8 +26,7 @@ class JcbbConfig:
     explore_ties: bool = True
 
     def __post_init__(self):
-        if self.max_nodes < 0 or self.max_seconds < 0:
-            raise ValueError("jcbb budget must be >= 0 (0 = no budget)")
+        check_ranges(self)
         if self.joint_gate not in ("prefix", "exact"):
             raise ValueError(f"jcbb.joint_gate must be 'prefix' or 'exact', got {self.joint_gate!r}")
 
@@ -36,33 +40,27 @@ class PcaConfig:
     The budget bounds the whole call (per-group JCBB plus the combination); 0 = none.
     """
 
-    group_size: int = 3  # p
+    group_size: int = num(3, ge=1, le=1000)  # p
     grouping: Literal["scan", "spatial"] = "scan"
-    max_nodes: int = 0
-    max_seconds: float = 0.0
+    max_nodes: int = num(0, ge=0, le=MAX_NODES)
+    max_seconds: float = num(0.0, ge=0.0, le=MAX_SECONDS)
 
     def __post_init__(self):
-        if self.group_size < 1:
-            raise ValueError(f"pca.group_size must be >= 1, got {self.group_size}")
+        check_ranges(self)
         if self.grouping not in ("scan", "spatial"):
             raise ValueError(f"pca.grouping must be 'scan' or 'spatial', got {self.grouping!r}")
-        if self.max_nodes < 0 or self.max_seconds < 0:
-            raise ValueError("pca budget must be >= 0 (0 = no budget)")
 
 
 @dataclass(frozen=True)
 class AssociationConfig:
     method: str = "pca"  # a name in association.ASSOCIATORS
-    alpha: float = 0.05  # gates at χ²(d·k, 1 − alpha), d = 3 (2 without phi)
+    alpha: float = num(0.05, gt=0.0, lt=1.0)  # gates at χ²(d·k, 1 − alpha), d = 3 (2 without phi)
     # metres; pairs farther apart are never paired, whatever the covariance says; 0 = off. A robot
     # covariance grown to metres otherwise lets one corner "close a loop" metres away (docs/tuning.md)
-    euclidean_gate: float = 0.5
+    euclidean_gate: float = num(0.5, ge=0.0, le=1000.0)
     use_phi: bool = True  # the corner angle is part of the measurement
     jcbb: JcbbConfig = field(default_factory=JcbbConfig)
     pca: PcaConfig = field(default_factory=PcaConfig)
 
     def __post_init__(self):
-        if not 0.0 < self.alpha < 1.0:
-            raise ValueError(f"association.alpha must be in (0, 1), got {self.alpha}")
-        if self.euclidean_gate < 0:
-            raise ValueError(f"association.euclidean_gate must be >= 0, got {self.euclidean_gate}")
+        check_ranges(self)

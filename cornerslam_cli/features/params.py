@@ -10,10 +10,9 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
+from ..ranges import check_ranges, num
 
-def _check(cond: bool, msg: str) -> None:
-    if not cond:
-        raise ValueError(msg)
+HALF_PI = math.pi / 2
 
 
 @dataclass(frozen=True)
@@ -26,21 +25,17 @@ class SensorConfig:
     """
 
     model: Literal["piecewise", "linear"] = "piecewise"
-    sigma_r_near: float = 0.03
-    near_range: float = 1.0
-    sigma_r_rel: float = 0.03
-    a: float = 0.01
-    b: float = 0.005
-    sigma_theta: float = math.pi / 1024
+    sigma_r_near: float = num(0.03, ge=0.0, le=10.0)  # metres
+    near_range: float = num(1.0, ge=0.0, le=1000.0)  # metres
+    sigma_r_rel: float = num(0.03, ge=0.0, le=1.0)  # share of the range
+    a: float = num(0.01, ge=0.0, le=10.0)  # metres
+    b: float = num(0.005, ge=0.0, le=1.0)  # share of the range
+    sigma_theta: float = num(math.pi / 1024, ge=0.0, le=0.5)  # radians
 
     def __post_init__(self):
-        _check(
-            self.model in ("piecewise", "linear"),
-            f"sensor.model must be piecewise or linear, got {self.model!r}",
-        )
-        for name in ("sigma_r_near", "near_range", "sigma_r_rel", "a", "b", "sigma_theta"):
-            v = getattr(self, name)
-            _check(math.isfinite(v) and v >= 0.0, f"sensor.{name} must be finite and >= 0, got {v}")
+        check_ranges(self)
+        if self.model not in ("piecewise", "linear"):
+            raise ValueError(f"sensor.model must be piecewise or linear, got {self.model!r}")
 
 
 @dataclass(frozen=True)
@@ -49,65 +44,55 @@ class LinesConfig:
 
     # 1. adaptive breakpoint (Borges & Aldon 2004): split when the gap between consecutive points exceeds
     #    d_max = ρ·sin Δφ / sin(λ − Δφ) + breakpoint_sigma   (breakpoint_sigma plays B&A's 3σ_r, added as is)
-    breakpoint_lambda: float = math.radians(10.0)  # λ, radians
-    breakpoint_sigma: float = 0.03  # metres
-    max_missing_beams: int = 3  # more dropped (no-return) beams than this between two points break; 0 = off
+    breakpoint_lambda: float = num(math.radians(10.0), gt=0.0, lt=HALF_PI)  # λ, radians
+    breakpoint_sigma: float = num(0.03, ge=0.0, le=10.0)  # metres
+    # more dropped (no-return) beams than this between two points break; 0 = off
+    max_missing_beams: int = num(3, ge=0, le=100_000)
     # 2. angle split: angle between the chords (p_i−k, p_i) and (p_i, p_i+k), k beams chosen per point so a
     #    chord is max(angle_split_chord, angle_split_sigmas·σ) long, σ the beam's noise (the paper's k = 1
     #    is noise-dominated on dense scans)
-    angle_split_max: float = math.radians(30.0)  # a_max, radians
-    angle_split_chord: float = 0.1  # metres
-    angle_split_sigmas: float = 20.0
+    angle_split_max: float = num(math.radians(30.0), gt=0.0, le=math.pi)  # a_max, radians
+    angle_split_chord: float = num(0.1, gt=0.0, le=100.0)  # metres
+    angle_split_sigmas: float = num(20.0, ge=0.0, le=1000.0)
     # 3. distance split (split-and-merge)
-    split_distance: float = 0.05  # l_max, metres
+    split_distance: float = num(0.05, gt=0.0, le=100.0)  # l_max, metres
     # 4. merge of adjacent segments
-    merge_angle: float = math.radians(3.0)  # a_mergeMax, radians
-    merge_gap: float = 0.2  # d_mergeMax, metres
+    merge_angle: float = num(math.radians(3.0), ge=0.0, le=HALF_PI)  # a_mergeMax, radians
+    merge_gap: float = num(0.2, ge=0.0, le=100.0)  # d_mergeMax, metres
     # filters
-    min_points: int = 6
-    min_length: float = 0.3  # metres
+    min_points: int = num(6, ge=2, le=100_000)
+    min_length: float = num(0.3, ge=0.0, le=1000.0)  # metres
 
     def __post_init__(self):
-        _check(0.0 < self.breakpoint_lambda < math.pi / 2, "lines.breakpoint_lambda must be in (0, pi/2)")
-        _check(self.breakpoint_sigma >= 0.0, "lines.breakpoint_sigma must be >= 0")
-        _check(self.max_missing_beams >= 0, "lines.max_missing_beams must be >= 0")
-        _check(0.0 < self.angle_split_max <= math.pi, "lines.angle_split_max must be in (0, pi]")
-        _check(self.angle_split_chord > 0.0, "lines.angle_split_chord must be > 0")
-        _check(self.angle_split_sigmas >= 0.0, "lines.angle_split_sigmas must be >= 0")
-        _check(self.split_distance > 0.0, "lines.split_distance must be > 0")
-        _check(0.0 <= self.merge_angle <= math.pi / 2, "lines.merge_angle must be in [0, pi/2]")
-        _check(self.merge_gap >= 0.0, "lines.merge_gap must be >= 0")
-        _check(self.min_points >= 2, "lines.min_points must be >= 2")
-        _check(self.min_length >= 0.0, "lines.min_length must be >= 0")
+        check_ranges(self)
 
 
 @dataclass(frozen=True)
 class CornersConfig:
     """Natural corner extraction (Algorithm 2); see ``features.corners``."""
 
-    d_min: float = 0.3  # type I: segment ends closer than this may form a corner; type II: depth jump, metres
-    dp_max: float = 0.2  # intersection within this distance of both segments, metres
-    min_angle: float = math.radians(30.0)  # lines closer to parallel than this do not make corners, radians
+    # type I: segment ends closer than this may form a corner; type II: depth jump, metres
+    d_min: float = num(0.3, gt=0.0, le=100.0)
+    dp_max: float = num(0.2, ge=0.0, le=100.0)  # intersection within this distance of both segments, metres
+    # lines closer to parallel than this do not make corners, radians
+    min_angle: float = num(math.radians(30.0), gt=0.0, le=HALF_PI)
     endpoints: bool = True  # type II corners at depth jumps
     drop_occluded: bool = True  # drop corners the scan shows hidden (far side of a jump, behind a surface)
     free_space_check: bool = True  # drop type I intersections reached through space the scan saw through
-    occlusion_margin: float = 0.03  # margin of both checks against the measured range, + 3σρ, metres
-    endpoint_max_gap: float = 0.2  # type II: drop ends whose next beam would hit the line farther away, m
-    endpoint_phi: float = math.pi / 2  # φ given to type II corners (the end line meets its normal), radians
-    endpoint_phi_sigma: float = math.radians(10.0)  # prior σ of that φ (it is not measured), radians
-    duplicate_radius: float = 0.1  # corners closer than this are one corner: the most certain is kept, m
+    # margin of both checks against the measured range, + 3σρ, metres
+    occlusion_margin: float = num(0.03, ge=0.0, le=10.0)
+    # type II: drop ends whose next beam would hit the line farther away, m
+    endpoint_max_gap: float = num(0.2, gt=0.0, le=100.0)
+    # φ given to type II corners (the end line meets its normal), radians
+    endpoint_phi: float = num(HALF_PI, ge=0.0, le=math.pi)
+    # prior σ of that φ (it is not measured), radians
+    endpoint_phi_sigma: float = num(math.radians(10.0), gt=0.0, le=math.pi)
+    # corners closer than this are one corner: the most certain is kept, m
+    duplicate_radius: float = num(0.1, ge=0.0, le=100.0)
     # σ of how far a real corner is from an ideal point (rounded edges, skirting, segment-end bias), m:
     # added to the x and y variance of every corner the *filter* sees (pipeline.extract_frame); the
     # extractor's own covariance stays the propagated sensor noise that the Monte Carlo tests check
-    model_sigma: float = 0.12
+    model_sigma: float = num(0.12, ge=0.0, le=10.0)
 
     def __post_init__(self):
-        _check(self.d_min > 0.0, "corners.d_min must be > 0")
-        _check(self.dp_max >= 0.0, "corners.dp_max must be >= 0")
-        _check(0.0 < self.min_angle <= math.pi / 2, "corners.min_angle must be in (0, pi/2]")
-        _check(self.occlusion_margin >= 0.0, "corners.occlusion_margin must be >= 0")
-        _check(self.endpoint_max_gap > 0.0, "corners.endpoint_max_gap must be > 0")
-        _check(0.0 <= self.endpoint_phi <= math.pi, "corners.endpoint_phi must be in [0, pi]")
-        _check(self.endpoint_phi_sigma > 0.0, "corners.endpoint_phi_sigma must be > 0")
-        _check(self.duplicate_radius >= 0.0, "corners.duplicate_radius must be >= 0")
-        _check(self.model_sigma >= 0.0, "corners.model_sigma must be >= 0")
+        check_ranges(self)

@@ -13,6 +13,7 @@ every problem with the input.
 
 from __future__ import annotations
 
+import stat
 from collections.abc import Callable
 from pathlib import Path
 
@@ -23,7 +24,16 @@ from .mcap import MAGIC as MCAP_MAGIC
 from .mcap import open_mcap
 from .rosbag import open_rosbag1, open_rosbag2
 
-__all__ = ["READERS", "LogInfo", "LogReader", "ReadStats", "TopicInfo", "detect_format", "open_log"]
+__all__ = [
+    "READERS",
+    "LogInfo",
+    "LogReader",
+    "ReadStats",
+    "TopicInfo",
+    "check_regular",
+    "detect_format",
+    "open_log",
+]
 
 READERS: dict[str, Callable[..., LogReader]] = {
     "mcap": open_mcap,
@@ -41,6 +51,7 @@ def detect_format(path: str | Path) -> str:
     p = Path(path)
     if not p.exists():
         raise LogError(f"log '{p}' does not exist", "check the path")
+    check_regular(p)
     if p.is_dir():
         if (p / "metadata.yaml").is_file():
             return "rosbag2"
@@ -71,6 +82,25 @@ def detect_format(path: str | Path) -> str:
             return "carmen"
         raise LogError(f"unsupported log '{p.name}'", f"give {SUPPORTED}")
     return fmt
+
+
+_STREAM_HINT = "cornerslam reads a log several times: save it to a file first, e.g. `cat … > log.mcap`"
+_NOT_FILES = {  # file type -> (what it is, what to do)
+    stat.S_IFIFO: ("a pipe", _STREAM_HINT),
+    stat.S_IFSOCK: ("a socket", _STREAM_HINT),
+    stat.S_IFCHR: ("a character device", f"give {SUPPORTED}"),
+    stat.S_IFBLK: ("a block device", f"give {SUPPORTED}"),
+}
+
+
+def check_regular(path: str | Path) -> None:
+    """LogError for a log that is neither a file nor a directory. A pipe (``<(zcat x.mcap)``, a FIFO)
+    can be read only once, but a log is read several times (laser preset, index, laser mount,
+    messages, hash), and opening a FIFO that nobody writes to would hang."""
+    p = Path(path)
+    kind = _NOT_FILES.get(stat.S_IFMT(p.stat().st_mode))
+    if kind is not None:
+        raise LogError(f"log '{p}' is {kind[0]}, not a file", kind[1])
 
 
 def open_log(

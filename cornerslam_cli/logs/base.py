@@ -8,8 +8,13 @@ counters. ``carmen.py`` implements :class:`LogReader` directly (text lines, no t
 
 Conventions (all formats)
 -------------------------
-* Stamps are the *header* stamp of each message (sensor time), in seconds; a zero header stamp
-  falls back to the log (receive) time. Messages are yielded in log-time order.
+* Stamps are the *header* stamp of each message (sensor time), in seconds. Zero is a valid stamp
+  (simulated time starts at 0). Messages are yielded in log-time order.
+* Message encodings: ``cdr`` (ROS 2), ``ros1`` and ``json`` (foxglove_bridge / rosbridge
+  recordings, :mod:`.jsonmsg`); a chosen topic in another encoding (protobuf, flatbuffer, ...) is a
+  LogError naming it, a tf topic in one is skipped with a warning.
+* Odometry orientation quaternions are normalised before the yaw is taken; a degenerate one (norm
+  ~0, or a non-finite component) skips its sample (counted in ``stats.decode_failed``, warned).
 * A beam is valid when finite, > 0, >= range_min and < range_max (a reading equal to range_max
   is the driver's "no return"). Invalid beams are dropped and counted.
 * A scan whose ranges count differs from ``(angle_max - angle_min) / angle_increment + 1`` is kept:
@@ -28,12 +33,13 @@ from typing import Protocol
 
 import numpy as np
 
-from ..errors import LogError
+from ..errors import LogError, printable
 from ..types import OdomSample, Scan
 
 logger = logging.getLogger("cornerslam.logs")
 
 LASERSCAN = "sensor_msgs/LaserScan"
+ENCODINGS = ("cdr", "ros1", "json")  # message encodings the ROS-message readers decode
 ODOMETRY = "nav_msgs/Odometry"
 TF_TYPES = ("tf2_msgs/TFMessage", "tf/tfMessage")
 
@@ -41,8 +47,9 @@ Pose2 = tuple[float, float, float]
 
 
 def normalize_msgtype(name: str) -> str:
-    """``sensor_msgs/msg/LaserScan`` (ROS 2) and ``sensor_msgs/LaserScan`` (ROS 1) -> the latter."""
-    return name.replace("/msg/", "/")
+    """``sensor_msgs/msg/LaserScan`` (ROS 2) and ``sensor_msgs/LaserScan`` (ROS 1) -> the latter;
+    ``(no schema)`` for a channel without one (schemaless JSON: its type is unknown)."""
+    return name.replace("/msg/", "/") if name else "(no schema)"
 
 
 def ros2_typename(name: str) -> str:
@@ -61,7 +68,8 @@ class TopicInfo:
     """One topic (channel / connection) of a log.
 
     msgtype is normalized to the ROS 1 spelling (``sensor_msgs/LaserScan``); count and rate_hz
-    are None when unknown. encoding: ``cdr`` | ``ros1`` | ``carmen``.
+    are None when unknown. encoding: ``cdr`` | ``ros1`` | ``json`` | ``carmen``, or whatever else an
+    MCAP channel declares (``protobuf``, ...: not readable, see :data:`ENCODINGS`).
     """
 
     name: str
@@ -69,6 +77,14 @@ class TopicInfo:
     count: int | None
     rate_hz: float | None = None
     encoding: str = ""
+
+    @property
+    def encoding_note(self) -> str:
+        """What ``info`` shows beside the topic: "" for the usual encodings (cdr, ros1, carmen), else
+        the encoding, saying when cornerslam cannot decode it."""
+        if self.encoding in ("", "cdr", "ros1", "carmen"):
+            return ""
+        return self.encoding if self.encoding in ENCODINGS else f"{self.encoding}: not readable"
 
 
 @dataclass(frozen=True)
@@ -113,7 +129,7 @@ class ReadStats:
 
         A text already warned is not repeated (``laser_to_base()`` and ``messages()`` read the same
         damaged bytes)."""
-        text = msg % args if args else msg
+        text = printable(msg % args if args else msg)
         if text in self.warnings:
             return
         logger.warning(text)
@@ -128,6 +144,33 @@ class ReadStats:
         if self.decode_failed <= 5:
             self.warn("%s: odometry sample at %r has a non-finite pose %r: skipped", where, stamp, pose)
         return True
+
+    def odometry_sample(
+        self, where: str, stamp: float, x: float, y: float, q: tuple[float, float, float, float]
+    ) -> OdomSample | None:
+        """The sample of a pose whose orientation is the quaternion q = (x, y, z, w), counted in
+        ``odoms``; None (counted in ``decode_failed``, warned) if q has no direction (length ~0) or a
+        field is not finite. A q not of unit length is normalised (warned once if off by more than
+        0.1 %: float32 round-off is not worth a warning)."""
+        n2 = sum(v * v for v in q)
+        if n2 < 1e-12:
+            self.decode_failed += 1
+            if self.decode_failed <= 5:
+                self.warn(
+                    "%s: odometry sample at %r has a zero-length orientation quaternion %r: skipped",
+                    where, stamp, tuple(q),
+                )  # fmt: skip
+            return None
+        if math.isfinite(n2) and abs(n2 - 1.0) > 1e-9:  # unit within 1e-9: used as it is
+            if abs(n2 - 1.0) > 2e-3:
+                self.warn("%s: odometry orientation quaternions are not of unit length: normalised", where)
+            s = 1.0 / math.sqrt(n2)
+            q = (q[0] * s, q[1] * s, q[2] * s, q[3] * s)
+        pose = (x, y, yaw_from_quaternion(*q))
+        if self.bad_odometry(where, stamp, pose):
+            return None
+        self.odoms += 1
+        return OdomSample(stamp, *pose)
 
     def check_scans_yielded(self, name: str, topic: str) -> None:
         """Raise LogError at the end of a read in which scans were seen but none was usable."""
@@ -236,9 +279,9 @@ def yaw_from_quaternion(x: float, y: float, z: float, w: float) -> float:
 
 
 def transform_matrix(t: tuple[float, float, float], q: tuple[float, float, float, float]) -> np.ndarray:
-    """4x4 homogeneous matrix of translation t and quaternion q = (x, y, z, w)."""
+    """4x4 homogeneous matrix of translation t and quaternion q = (x, y, z, w) (normalised; not 0)."""
     x, y, z, w = q
-    nrm = math.sqrt(x * x + y * y + z * z + w * w) or 1.0
+    nrm = math.sqrt(x * x + y * y + z * z + w * w)
     x, y, z, w = x / nrm, y / nrm, z / nrm, w / nrm
     T = np.eye(4)
     T[:3, :3] = [
@@ -463,13 +506,30 @@ class RosLogReader:
             return f"tf {self.odom_frame}→{self.base_frame}"
         return ""
 
+    def _encoding_problem(self, topic: str) -> tuple[str, str] | None:
+        """(problem, hint) if a chosen topic's messages are in an encoding we do not decode."""
+        enc = self._channels[topic].encoding
+        if enc in ENCODINGS:
+            return None
+        return (
+            f"topic '{topic}' of log '{self.path.name}' has message encoding '{enc}', which cornerslam "
+            f"does not decode ({', '.join(ENCODINGS)})",
+            "record the ROS messages as cdr (ros2 bag record), ros1 or json (foxglove_bridge, rosbridge)",
+        )
+
+    def _problems(self) -> list[tuple[str, str]]:
+        """(problem, hint) of everything that stops a run from reading this log, in the order found."""
+        problems = [(self._scan_sel[1], self._scan_sel[2]), (self._odom_sel.problem, self._odom_sel.hint)]
+        problems = [p for p in problems if p[0]]
+        if not problems:
+            problems = [p for t in (self.scan_topic, self.odom_topic) if (p := self._encoding_problem(t))]
+        return problems
+
     def check(self) -> None:
-        """Raise LogError if a run could not choose its scan and odometry topics."""
-        _, problem, hint = self._scan_sel
-        if problem:
-            raise LogError(problem, hint)
-        if self._odom_sel.problem:
-            raise LogError(self._odom_sel.problem, self._odom_sel.hint)
+        """Raise LogError if a run could not choose its scan and odometry topics or decode them."""
+        problems = self._problems()
+        if problems:
+            raise LogError(*problems[0])
         for topic in (self.scan_topic, self.odom_topic):
             if self._channels[topic].count == 0:
                 raise LogError(
@@ -488,14 +548,7 @@ class RosLogReader:
             if c.count is not None and c.count > 1 and duration > 0:
                 rate = (c.count - 1) / duration
             topics.append(TopicInfo(c.topic, normalize_msgtype(c.msgtype), c.count, rate, c.encoding))
-        problems = tuple(
-            f"{p} ({h})"
-            for p, h in (
-                (self._scan_sel[1], self._scan_sel[2]),
-                (self._odom_sel.problem, self._odom_sel.hint),
-            )
-            if p
-        )
+        problems = tuple(f"{p} ({h})" for p, h in self._problems())
         n = sum(c.count or 0 for c in self._channels.values())
         return LogInfo(
             format=self.format,
@@ -513,9 +566,15 @@ class RosLogReader:
 
     # ---------------------------------------------------------------- decoding
     def _decoder(self, topic: str):
-        from . import cdr  # local: keeps `import cornerslam_cli.logs` light
+        """The decoder of a topic's messages (its encoding is one of :data:`ENCODINGS`)."""
+        channel = self._channels[topic]
+        if channel.encoding == "json":
+            from .jsonmsg import JsonDecoder  # local: keeps `import cornerslam_cli.logs` light
 
-        return cdr.Decoder(self._channels[topic])
+            return JsonDecoder(channel)
+        from .cdr import Decoder
+
+        return Decoder(channel)
 
     def laser_to_base(self) -> Pose2 | None:
         """Pose (x, y, yaw) of the laser in base_frame from tf_static/tf, else None.
@@ -526,7 +585,15 @@ class RosLogReader:
         if self._laser2base is not False:
             return self._laser2base  # type: ignore[return-value]
         self.check()
-        tf_topics = set(self._topics_of(*TF_TYPES))
+        tf_topics = set()
+        for t in self._topics_of(*TF_TYPES):
+            if self._encoding_problem(t) is None:
+                tf_topics.add(t)
+            else:
+                self.stats.warn(
+                    "%s: tf topic '%s' has message encoding '%s': not read (laser mount from the config)",
+                    self.path.name, t, self._channels[t].encoding,
+                )  # fmt: skip
         frame = None
         edges: dict[tuple[str, str], np.ndarray] = {}
         static_left = sum(self._channels[t].count or 0 for t in tf_topics if t == "/tf_static")
@@ -542,8 +609,15 @@ class RosLogReader:
                 static = topic == "/tf_static"
                 static_left -= static
                 for parent, child, _, t, q in decs[topic].transforms(data):
-                    if (parent, child) != (self.odom_frame, self.base_frame) and parent != child:
-                        edges.setdefault((parent, child), transform_matrix(t, q))
+                    if (parent, child) == (self.odom_frame, self.base_frame) or parent == child:
+                        continue
+                    if sum(v * v for v in q) < 1e-12:  # no rotation at all: not a transform
+                        self.stats.warn(
+                            "%s: tf %s→%s has a zero-length rotation quaternion: ignored",
+                            self.path.name, parent, child,
+                        )  # fmt: skip
+                        continue
+                    edges.setdefault((parent, child), transform_matrix(t, q))
             except Exception as exc:  # noqa: BLE001 - bad bytes are counted, never raised
                 logger.debug("laser_to_base: skipping undecodable %s message: %s", topic, exc)
             finally:
@@ -571,34 +645,31 @@ class RosLogReader:
         scan_t, odom_t = self.scan_topic, self.odom_topic
         scan_dec, odom_dec = self._decoder(scan_t), self._decoder(odom_t)
         is_tf = self._odom_sel.kind == "tf"
-        where = f"{self.path.name}:{scan_t}"
+        where, odom_where = f"{self.path.name}:{scan_t}", f"{self.path.name}:{odom_t}"
         n_tf_match = 0
         for topic, log_time, data in self.source.raw_messages({scan_t, odom_t}):
             try:
                 if topic == scan_t:
                     (sec, nsec), frame, a_min, a_max, a_inc, r_min, r_max, ranges = scan_dec.laserscan(data)
-                    stamp = sec + nsec * 1e-9 if (sec or nsec) else log_time * 1e-9
-                    scan = make_scan(st, where, stamp, a_min, a_max, a_inc, r_min, r_max, ranges, frame)
+                    scan = make_scan(
+                        st, where, sec + nsec * 1e-9, a_min, a_max, a_inc, r_min, r_max, ranges, frame
+                    )
                     if scan is not None:
                         yield scan
-                elif is_tf:
-                    for parent, child, (sec, nsec), t, q in odom_dec.transforms(data):
-                        if parent == self.odom_frame and child == self.base_frame:
-                            n_tf_match += 1
-                            stamp = sec + nsec * 1e-9 if (sec or nsec) else log_time * 1e-9
-                            pose = (float(t[0]), float(t[1]), yaw_from_quaternion(*q))
-                            if st.bad_odometry(f"{self.path.name}:{odom_t}", stamp, pose):
-                                continue
-                            st.odoms += 1
-                            yield OdomSample(stamp, *pose)
+                    continue
+                if is_tf:
+                    poses = [
+                        (stamp, t[0], t[1], q)
+                        for parent, child, stamp, t, q in odom_dec.transforms(data)
+                        if parent == self.odom_frame and child == self.base_frame
+                    ]
+                    n_tf_match += len(poses)
                 else:
-                    (sec, nsec), x, y, q = odom_dec.odometry(data)
-                    stamp = sec + nsec * 1e-9 if (sec or nsec) else log_time * 1e-9
-                    pose = (x, y, yaw_from_quaternion(*q))
-                    if st.bad_odometry(f"{self.path.name}:{odom_t}", stamp, pose):
-                        continue
-                    st.odoms += 1
-                    yield OdomSample(stamp, *pose)
+                    poses = [odom_dec.odometry(data)]
+                for (sec, nsec), x, y, q in poses:
+                    sample = st.odometry_sample(odom_where, sec + nsec * 1e-9, float(x), float(y), q)
+                    if sample is not None:
+                        yield sample
             except LogError:
                 raise
             except Exception as exc:  # noqa: BLE001 - undecodable message: count, warn, go on

@@ -1,6 +1,7 @@
 """CARMEN logs (``.clf``, ``.log``, optionally gzip-compressed): FLASER / RLASER / ROBOTLASER1 / ODOM.
 
-Line formats (one message per line, whitespace separated, ``#`` comments and PARAM lines ignored)::
+Line formats (one message per line, fields separated by any whitespace (spaces or tabs), ``#`` comments
+and PARAM lines ignored)::
 
     FLASER n r1..rn x y theta odom_x odom_y odom_theta timestamp hostname logger_timestamp
     RLASER (as FLASER, rear laser)
@@ -137,8 +138,7 @@ class CarmenReader:
         name = self.path.name
         try:
             for line in _lines(self.path, self.stats):
-                tag, _, rest = line.lstrip().partition(" ")
-                tag = tag.strip()
+                tag, rest = (line.split(None, 1) + ["", ""])[:2]
                 if not tag or tag[0] == "#":
                     continue
                 if tag == "PARAM":

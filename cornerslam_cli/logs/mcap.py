@@ -1,10 +1,17 @@
-"""MCAP files (ROS 2 CDR or ROS 1 messages): a streaming, damage-tolerant record reader.
+"""MCAP files (ROS 2 CDR, ROS 1 or JSON messages): a streaming, damage-tolerant record reader.
 
-The data section is read record by record (chunks decompressed one at a time), so memory stays
-flat in log length. A file whose recorder died (no summary, cut mid-record) yields every message
-before the cut, including the readable prefix of the cut chunk (zstd/lz4/uncompressed streams are
-decompressed incrementally), and warns. A chunk that fails its CRC or does not decompress is skipped
-with a warning; a record whose length runs past the end of the file ends the read with a warning.
+Messages come out in log-time order, chunks decompressed one at a time, so memory stays flat in log
+length. With a summary, chunks are read in the order of their start times from the chunk index (as
+the mcap package's reader does), so a file whose chunks are not in time order is read in order too;
+without one, in file order. Either way a heap merges the messages of chunks that overlap in time,
+releasing those older than the next chunk's first message (the start time in the chunk's header is
+not trusted: some writers leave it 0). Besides the chunk being read it holds at most
+:data:`REORDER_BYTES` of messages; beyond that the oldest are released early, with a warning.
+
+A file whose recorder died (no summary, cut mid-record) yields every message before the cut,
+including the readable prefix of the cut chunk (zstd/lz4/uncompressed streams are decompressed
+incrementally), and warns. A chunk that fails its CRC or does not decompress is skipped with a
+warning; a record whose length runs past the end of the file ends the read with a warning.
 
 Summary (statistics, channels, chunk indexes) is used when present for ``info()``; without it the
 data section is scanned once (no message decoding). Record layouts: https://mcap.dev/spec.
@@ -35,7 +42,9 @@ _U64 = struct.Struct("<Q")
 _MSG = struct.Struct("<HIQQ")
 _CHUNK = struct.Struct("<QQQI")
 _STATS = struct.Struct("<QHIIIIQQ")
-REORDER_MAX = 100_000  # messages held back to restore log-time order across overlapping chunks
+REORDER_BYTES = 64 << 20  # messages held back to restore log-time order across overlapping chunks
+
+Message = tuple[int, int, memoryview]  # channel id, log time (ns), data
 
 
 class McapFormatError(ValueError):
@@ -87,6 +96,8 @@ class _Index:
     start: int | None = None
     end: int | None = None
     n_messages: int = 0
+    # from the summary's chunk indexes: (message_start_time, offset, length, channel ids or empty)
+    chunks: list[tuple[int, int, int, frozenset[int]]] = field(default_factory=list)
 
 
 class McapSource:
@@ -203,47 +214,69 @@ class McapSource:
             self.stats.warn("%s: %s is cut: keeping its first %d bytes of records", self.name, what, len(out))
         return out
 
-    def _data_messages(self, warn: bool) -> Iterator[tuple[int, int, memoryview, int]]:
-        """(channel_id, log_time, data, chunk_start_time) in file order; registers schemas/channels."""
+    def _file_order(self, warn: bool) -> Iterator[list[Message]]:
+        """The messages of each chunk (or lone message record) in file order; registers the schemas
+        and channels met on the way."""
         for op, body, pos, complete in self._records(8, self._data_end(), warn):
             try:
                 if op == OP_CHUNK:
                     recs = self._chunk_records(body, pos, complete)
-                    if recs is None:
-                        continue
-                    (t0,) = _U64.unpack_from(body, 0)
-                    yield from self._inner(recs, pos, t0, warn and complete)
+                    if recs is not None:
+                        yield self._inner(recs, pos, warn and complete)
                 elif op == OP_MESSAGE:
                     cid, _, t, _ = _MSG.unpack_from(body, 0)
-                    yield cid, t, body[_MSG.size :], t
+                    yield [(cid, t, body[_MSG.size :])]
                 else:
                     self._note_definition(op, body)
             except (struct.error, McapFormatError) as exc:
                 if warn:
                     self.stats.warn("%s: bad record at byte %d (%s): skipped", self.name, pos, exc)
 
-    def _inner(
-        self, recs: memoryview, pos: int, t0: int, warn: bool
-    ) -> Iterator[tuple[int, int, memoryview, int]]:
+    def _index_order(self, wanted: set[int]) -> Iterator[list[Message]]:
+        """The messages of each chunk holding a ``wanted`` channel, chunks in the order of their start
+        times in the chunk index (a file's chunks need not be in time order)."""
+        f = self._f
+        for _, pos, length, chans in sorted(self.index.chunks):
+            if chans and not chans & wanted:
+                continue
+            f.seek(pos)
+            hdr = f.read(9)
+            op, n = _REC.unpack(hdr) if len(hdr) == 9 else (0, 0)
+            body = memoryview(f.read(n)) if op == OP_CHUNK and 9 + n == length else memoryview(b"")
+            if len(body) != length - 9:
+                self.stats.warn(
+                    "%s: the chunk index points at byte %d, where no chunk is: skipped", self.name, pos
+                )
+                continue
+            recs = self._chunk_records(body, pos, True)
+            if recs is not None:
+                yield self._inner(recs, pos, True)
+
+    def _inner(self, recs: memoryview, pos: int, warn: bool) -> list[Message]:
+        """The messages in a chunk's records; registers its schemas and channels."""
+        out = []
         off, n = 0, len(recs)
-        while off + 9 <= n:
-            op, length = _REC.unpack_from(recs, off)
-            body_off = off + 9
-            if body_off + length > n:
-                if warn:
-                    self.stats.warn(
-                        "%s: chunk at byte %d has a record overrunning it: rest skipped", self.name, pos
-                    )
-                return
-            body = recs[body_off : body_off + length]
-            off = body_off + length
-            if op == OP_MESSAGE:
-                if length < _MSG.size:
-                    continue
-                cid, _, t, _ = _MSG.unpack_from(body, 0)
-                yield cid, t, body[_MSG.size :], t0
-            else:
-                self._note_definition(op, body)
+        try:
+            while off + 9 <= n:
+                op, length = _REC.unpack_from(recs, off)
+                body_off = off + 9
+                if body_off + length > n:
+                    raise McapFormatError("a record overruns the chunk")
+                body = recs[body_off : body_off + length]
+                off = body_off + length
+                if op == OP_MESSAGE:
+                    if length < _MSG.size:
+                        continue
+                    cid, _, t, _ = _MSG.unpack_from(body, 0)
+                    out.append((cid, t, body[_MSG.size :]))
+                else:
+                    self._note_definition(op, body)
+        except (struct.error, McapFormatError) as exc:
+            if warn:
+                self.stats.warn(
+                    "%s: chunk at byte %d has a bad record (%s): rest skipped", self.name, pos, exc
+                )
+        return out
 
     def _note_definition(self, op: int, body: memoryview) -> None:
         """Remember a schema or channel record met while streaming (the first definition wins)."""
@@ -272,7 +305,7 @@ class McapSource:
             return None
         idx = _Index()
         stats_seen = False
-        chunk_times: list[tuple[int, int]] = []
+        n_chunks = 0
         try:
             for op, body, _, _ in self._records(summary_start, footer_pos, warn=False):
                 if op == OP_SCHEMA:
@@ -282,18 +315,21 @@ class McapSource:
                     cid, sid, topic, enc = _channel(body)
                     idx.channels[cid] = (topic, enc, sid)
                 elif op == OP_STATISTICS:
-                    n, *_, t0, t1 = _STATS.unpack_from(body, 0)
+                    n, _, _, _, _, n_chunks, t0, t1 = _STATS.unpack_from(body, 0)
                     counts, _ = _u16_u64_map(body, _STATS.size)
                     idx.counts, idx.n_messages, stats_seen = counts, n, True
                     if n:
                         idx.start, idx.end = t0, t1
                 elif op == OP_CHUNK_INDEX:
-                    t0, t1 = struct.unpack_from("<QQ", body, 0)
-                    chunk_times.append((t0, t1))
+                    t0, _, pos, length = struct.unpack_from("<QQQQ", body, 0)
+                    offsets, _ = _u16_u64_map(body, 32)
+                    idx.chunks.append((t0, pos, length, frozenset(offsets)))
         except (struct.error, McapFormatError):
             return None
         if not stats_seen:
             return None  # counts unknown: scan instead
+        if len(idx.chunks) != n_chunks or any(not 8 <= c[1] < summary_start for c in idx.chunks):
+            idx.chunks = []  # an index that does not cover the chunks: read in file order
         self._summary_start = summary_start
         # the data section ends at the DataEnd record, which precedes the summary
         self.summary_ok = True
@@ -302,11 +338,12 @@ class McapSource:
     def _scan(self) -> _Index:
         """Index of a file without a usable summary: one pass over the data section, no decoding."""
         self.index = idx = _Index(counts={})
-        for cid, t, _, _ in self._data_messages(warn=True):
-            idx.counts[cid] = idx.counts.get(cid, 0) + 1
-            idx.n_messages += 1
-            idx.start = t if idx.start is None else min(idx.start, t)
-            idx.end = t if idx.end is None else max(idx.end, t)
+        for batch in self._file_order(warn=True):
+            for cid, t, _ in batch:
+                idx.counts[cid] = idx.counts.get(cid, 0) + 1
+                idx.n_messages += 1
+                idx.start = t if idx.start is None else min(idx.start, t)
+                idx.end = t if idx.end is None else max(idx.end, t)
         return idx
 
     # ---------------------------------------------------------------- RawSource
@@ -325,25 +362,36 @@ class McapSource:
         return self.index.start, self.index.end
 
     def raw_messages(self, topics: set[str]) -> Iterator[tuple[str, int, memoryview]]:
-        """Messages of ``topics`` in log-time order: a heap releases messages older than the
-        start time of the next chunk, so overlapping chunks are merged with bounded memory."""
+        """Messages of ``topics`` in log-time order: a heap releases the messages not newer than the
+        first message of the next chunk, so overlapping chunks are merged in bounded memory."""
         ids = {cid: topic for cid, (topic, _, _) in self.index.channels.items() if topic in topics}
+        chunks = self._index_order(set(ids)) if self.index.chunks else self._file_order(warn=True)
         heap: list[tuple[int, int, str, memoryview]] = []
-        seq = 0
-        read = 0
-        for cid, t, data, horizon in self._data_messages(warn=True):
-            while heap and (heap[0][0] <= horizon or len(heap) > REORDER_MAX):
+        seq = held = read = 0
+        for batch in chunks:
+            if not batch:
+                continue
+            horizon = min(t for _, t, _ in batch)  # not the chunk header's start time: may be 0
+            while heap and (heap[0][0] <= horizon or held > REORDER_BYTES):
+                if heap[0][0] > horizon and held > REORDER_BYTES:
+                    self.stats.warn(
+                        "%s: more than %d MiB of messages overlap in log time: some may come out of order",
+                        self.name, REORDER_BYTES >> 20,
+                    )  # fmt: skip
                 t_, _, topic_, data_ = heapq.heappop(heap)
+                held -= len(data_)
                 yield topic_, t_, data_
-            topic = ids.get(cid)
-            if topic is None:
-                chan = self.index.channels.get(cid)
-                if chan is None or chan[0] not in topics:
-                    continue
-                ids[cid] = topic = chan[0]
-            heapq.heappush(heap, (t, seq, topic, data))
-            seq += 1
-            read += 1
+            for cid, t, data in batch:
+                topic = ids.get(cid)
+                if topic is None:
+                    chan = self.index.channels.get(cid)
+                    if chan is None or chan[0] not in topics:
+                        continue
+                    ids[cid] = topic = chan[0]
+                heapq.heappush(heap, (t, seq, topic, data))
+                seq += 1
+                read += 1
+                held += len(data)
         while heap:
             t_, _, topic_, data_ = heapq.heappop(heap)
             yield topic_, t_, data_

@@ -2,15 +2,18 @@
 
 ``synchronise(messages)`` turns the time-ordered stream of :class:`Scan` and :class:`OdomSample`
 from a log reader into ``(scan, odom_pose)`` pairs, the odometry interpolated at the scan's stamp.
-It streams: only the odometry samples that a pending scan may still need are kept.
+It streams in bounded memory: a scan waits for an odometry sample at or after its stamp for at most
+:data:`MAX_GAP` seconds of later scans (and :data:`MAX_PENDING` scans), and only the odometry
+samples that a later scan may still need are kept (at most :data:`MAX_ODOM`).
 
 Interpolation between the two odometry samples that bracket a scan is linear in (x, y) and along the
 shorter arc in θ — the SE(2) geodesic differs from this by O(Δθ·Δd), negligible between odometry
 samples a few tens of milliseconds apart.
 
 Scans that cannot be interpolated are skipped and counted in :class:`SyncStats`: before the first or
-after the last odometry sample, stamps that go backwards or repeat. Odometry samples that go back in
-time are dropped and counted too.
+after the last odometry sample, in a gap of the odometry (samples more than MAX_GAP apart around it),
+stamps that go backwards or repeat. Odometry samples that go back in
+time are dropped and counted too. One warning sums them up.
 """
 
 from __future__ import annotations
@@ -27,6 +30,10 @@ from ..types import OdomSample, Scan, wrap_angle
 
 log = logging.getLogger(__name__)
 
+MAX_GAP = 30.0  # s: odometry this far apart does not bracket a scan; a scan waits this long for odometry
+MAX_PENDING = 1000  # scans waiting for odometry at most
+MAX_ODOM = 10_000  # odometry samples kept ahead of the scans at most
+
 
 @dataclass
 class SyncStats:
@@ -34,6 +41,7 @@ class SyncStats:
     scans_out: int = 0
     before_first_odom: int = 0
     after_last_odom: int = 0
+    odom_gap: int = 0  # scans in a gap of the odometry: no sample within MAX_GAP (or MAX_PENDING scans)
     scan_time_backwards: int = 0
     odom_time_backwards: int = 0
     keyframes_skipped: int = 0
@@ -41,7 +49,7 @@ class SyncStats:
 
     @property
     def scans_skipped(self) -> int:
-        return self.before_first_odom + self.after_last_odom + self.scan_time_backwards
+        return self.before_first_odom + self.after_last_odom + self.odom_gap + self.scan_time_backwards
 
     def as_dict(self) -> dict:
         d = dict(self.__dict__)
@@ -60,27 +68,38 @@ def interpolate_pose(a: OdomSample, b: OdomSample, t: float) -> np.ndarray:
 
 
 def synchronise(
-    messages: Iterable[Scan | OdomSample], stats: SyncStats | None = None
+    messages: Iterable[Scan | OdomSample],
+    stats: SyncStats | None = None,
+    warn: Callable[..., None] = log.warning,
 ) -> Iterator[tuple[Scan, np.ndarray]]:
-    """Yield ``(scan, odom_pose)`` for every scan that lies within the odometry's time span."""
+    """Yield ``(scan, odom_pose)`` for every scan that lies within the odometry's time span; what is
+    skipped is counted in ``stats`` and summed up in one call of ``warn`` at the end."""
     st = stats if stats is not None else SyncStats()
-    odom: deque[OdomSample] = deque()  # samples a pending scan may still need, increasing stamps
+    odom: deque[OdomSample] = deque()  # samples a later scan may still need, increasing stamps
     pending: deque[Scan] = deque()  # scans waiting for an odometry sample at or after their stamp
     last_scan_stamp = -np.inf
     last_odom_stamp = -np.inf
+    first_odom_stamp = np.inf
+    waited_out = 0  # scans that waited too long since the last odometry sample
 
     def emit_ready() -> Iterator[tuple[Scan, np.ndarray]]:
         while pending and odom and odom[-1].stamp >= pending[0].stamp:
             scan = pending.popleft()
             t = scan.stamp
-            if t < odom[0].stamp:
-                st.before_first_odom += 1
+            if t < odom[0].stamp:  # before all odometry, or before the samples still kept
+                if t < first_odom_stamp:
+                    st.before_first_odom += 1
+                else:
+                    st.odom_gap += 1
                 continue
             # drop samples that no later scan can need: keep the last one at or before t
             while len(odom) >= 2 and odom[1].stamp <= t:
                 odom.popleft()
             a = odom[0]
             b = odom[1] if len(odom) >= 2 else odom[0]
+            if t > a.stamp and b.stamp - a.stamp > MAX_GAP:  # not interpolated across a gap
+                st.odom_gap += 1
+                continue
             st.scans_out += 1
             yield scan, interpolate_pose(a, b, t)
 
@@ -95,23 +114,42 @@ def synchronise(
                 st.before_first_odom += 1
                 continue
             pending.append(msg)
+            while len(pending) > MAX_PENDING or msg.stamp - pending[0].stamp > MAX_GAP:
+                pending.popleft()  # no odometry came for it: dropped now, counted when it is known why
+                waited_out += 1
         elif isinstance(msg, OdomSample):
             if msg.stamp <= last_odom_stamp:
                 st.odom_time_backwards += 1
                 continue
             last_odom_stamp = msg.stamp
+            first_odom_stamp = min(first_odom_stamp, msg.stamp)
+            st.odom_gap += waited_out  # odometry resumed after them
+            waited_out = 0
             odom.append(msg)
+            if not pending:  # later scans come after last_scan_stamp: keep the last sample before it
+                while len(odom) >= 2 and odom[1].stamp <= last_scan_stamp:
+                    odom.popleft()
+            if len(odom) > MAX_ODOM:
+                odom.popleft()
         yield from emit_ready()
-    st.after_last_odom += len(pending)
-    if st.before_first_odom or st.after_last_odom or st.scan_time_backwards or st.odom_time_backwards:
-        log.warning(
-            "skipped %d scans before the first and %d after the last odometry sample, "
-            "%d scans and %d odometry samples whose stamps went backwards or repeated",
-            st.before_first_odom,
-            st.after_last_odom,
-            st.scan_time_backwards,
-            st.odom_time_backwards,
-        )
+    st.after_last_odom += len(pending) + waited_out
+    _warn_skipped(st, warn)
+
+
+def _warn_skipped(st: SyncStats, warn: Callable[..., None]) -> None:
+    """One warning summing up the scans and odometry samples that synchronise skipped."""
+    if not (st.scans_skipped or st.odom_time_backwards):
+        return
+    gap = f", {st.odom_gap} in gaps of the odometry (no sample within {MAX_GAP:g} s)" if st.odom_gap else ""
+    warn(
+        "skipped %d scans before the first and %d after the last odometry sample%s, "
+        "%d scans and %d odometry samples whose stamps went backwards or repeated",
+        st.before_first_odom,
+        st.after_last_odom,
+        gap,
+        st.scan_time_backwards,
+        st.odom_time_backwards,
+    )
 
 
 def _compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -7,15 +7,19 @@ header stamp and log time. ROS messages are serialized with rosbags' typestores.
 
 Options shared by the ROS writers: ``tf_static=(x, y, yaw)`` writes one /tf_static message
 base_frame→frame_id of the scans; ``odom_as_tf=True`` writes odometry as /tf odom_frame→base_frame
-instead of a nav_msgs/Odometry topic.
+instead of a nav_msgs/Odometry topic; ``odom_quaternion(sample)`` gives the orientation quaternion
+(x, y, z, w) written for an odometry sample (default: the unit quaternion of its theta; the fault
+tests write unnormalised ones); ``log_time_offset`` seconds are added to the stamps to make the log
+(receive) times (a recording of simulated time: header stamps from 0, log time from the wall clock).
 """
 
 from __future__ import annotations
 
 import gzip as _gzip
 import heapq
+import json
 import math
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -68,6 +72,13 @@ def _merged(scans: Iterable[RawScan], odoms: Iterable[OdomSample]) -> Iterator[R
     return heapq.merge(odoms, scans, key=lambda m: m.stamp)
 
 
+Quaternion = tuple[float, float, float, float]
+
+
+def _quaternion(yaw: float) -> Quaternion:
+    return (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+
+
 class RosSerializer:
     """Builds and serializes LaserScan, Odometry and tf messages in one encoding (``cdr`` or ``ros1``)."""
 
@@ -83,6 +94,13 @@ class RosSerializer:
         T = store.types
         self._Time, self._Header = T["builtin_interfaces/msg/Time"], T["std_msgs/msg/Header"]
         self._T = T
+        # how an MCAP file declares these messages
+        self.message_encoding = encoding
+        self.schema_encoding = "ros1msg" if self.ros1 else "ros2msg"
+        self.profile = "ros1" if self.ros1 else "ros2"
+
+    def schema_name(self, typename: str) -> str:
+        return typename.replace("/msg/", "/") if self.ros1 else typename
 
     def serialize(self, msg, typename: str) -> bytes:
         if self.ros1:
@@ -115,16 +133,17 @@ class RosSerializer:
         )
         return self.serialize(msg, LASERSCAN)
 
-    def _pose(self, x: float, y: float, yaw: float):
+    def _pose(self, x: float, y: float, yaw: float, q: Quaternion | None = None):
         T = self._T
-        return (
-            T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
-            T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)),
+        qx, qy, qz, qw = _quaternion(yaw) if q is None else q
+        return T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0), T["geometry_msgs/msg/Quaternion"](
+            x=qx, y=qy, z=qz, w=qw
         )
 
-    def odometry(self, o: OdomSample, odom_frame: str, base_frame: str) -> bytes:
+    def odometry(self, o: OdomSample, odom_frame: str, base_frame: str, q: Quaternion | None = None) -> bytes:
+        """A nav_msgs/Odometry of o; ``q`` replaces the orientation quaternion of o.theta."""
         T = self._T
-        p, q = self._pose(o.x, o.y, o.theta)
+        p, q = self._pose(o.x, o.y, o.theta, q)
         zero3 = T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
         msg = T[ODOMETRY](
             header=self.header(o.stamp, odom_frame),
@@ -151,6 +170,80 @@ class RosSerializer:
         return self.serialize(T[TFMESSAGE](transforms=[ts]), TFMESSAGE)
 
 
+class JsonSerializer:
+    """LaserScan, Odometry and tf messages as JSON, as foxglove_bridge / rosbridge clients record them
+    (MCAP message encoding ``json``, the schema named by the ROS type): ROS 2 field names, or ROS 1
+    ones (header seq, stamp secs/nsecs) with ``ros1_names``. NaN and infinite ranges are ``null``."""
+
+    message_encoding = "json"
+    schema_encoding = "jsonschema"
+    profile = ""
+
+    def __init__(self, ros1_names: bool = False):
+        self.ros1 = ros1_names
+
+    def schema_name(self, typename: str) -> str:
+        return typename.replace("/msg/", "/") if self.ros1 else typename
+
+    def msgdef(self, typename: str) -> str:
+        return json.dumps({"title": self.schema_name(typename), "type": "object"})
+
+    def header(self, stamp: float, frame: str) -> dict:
+        sec, nsec = _stamp(stamp)
+        if self.ros1:
+            return {"seq": 0, "stamp": {"secs": sec, "nsecs": nsec}, "frame_id": frame}
+        return {"stamp": {"sec": sec, "nanosec": nsec}, "frame_id": frame}
+
+    def laserscan(self, s: RawScan) -> bytes:
+        r = np.asarray(s.ranges, dtype=np.float32).tolist()  # the values a float32 message holds
+        msg = {
+            "header": self.header(s.stamp, s.frame_id),
+            **{k: float(np.float32(getattr(s, k))) for k in ("angle_min", "angle_max", "angle_increment")},
+            "time_increment": 0.0,
+            "scan_time": 0.0,
+            "range_min": float(np.float32(s.range_min)),
+            "range_max": float(np.float32(s.range_max)),
+            "ranges": [v if math.isfinite(v) else None for v in r],
+            "intensities": [],
+        }
+        return json.dumps(msg, allow_nan=False).encode()
+
+    def odometry(self, o: OdomSample, odom_frame: str, base_frame: str, q: Quaternion | None = None) -> bytes:
+        q = _quaternion(o.theta) if q is None else q
+        zero = dict.fromkeys("xyz", 0.0)
+        msg = {
+            "header": self.header(o.stamp, odom_frame),
+            "child_frame_id": base_frame,
+            "pose": {
+                "pose": {
+                    "position": {"x": o.x, "y": o.y, "z": 0.0},
+                    "orientation": dict(zip("xyzw", q, strict=True)),
+                },
+                "covariance": [0.0] * 36,
+            },
+            "twist": {"twist": {"linear": zero, "angular": zero}, "covariance": [0.0] * 36},
+        }
+        return json.dumps(msg).encode()
+
+    def tf(self, stamp: float, parent: str, child: str, x: float, y: float, yaw: float) -> bytes:
+        ts = {
+            "header": self.header(stamp, parent),
+            "child_frame_id": child,
+            "transform": {
+                "translation": {"x": x, "y": y, "z": 0.0},
+                "rotation": dict(zip("xyzw", _quaternion(yaw), strict=True)),
+            },
+        }
+        return json.dumps({"transforms": [ts]}).encode()
+
+
+def serializer(encoding: str) -> RosSerializer | JsonSerializer:
+    """The message builder of an MCAP ``encoding``: ``cdr``, ``ros1``, ``json`` or ``json-ros1``."""
+    if encoding in ("json", "json-ros1"):
+        return JsonSerializer(ros1_names=encoding == "json-ros1")
+    return RosSerializer(encoding)
+
+
 def _ros_messages(
     ros: RosSerializer,
     scans: Iterable[RawScan],
@@ -161,24 +254,32 @@ def _ros_messages(
     odom_as_tf: bool,
     odom_frame: str,
     base_frame: str,
+    *,
+    odom_quaternion: Callable[[OdomSample], Quaternion] | None = None,
+    log_time_offset: float = 0.0,
 ) -> Iterator[tuple[str, str, int, bytes]]:
     """(topic, typename, log_time_ns, data) of a whole log, in stamp order."""
     static_done = tf_static is None
     for m in _merged(scans, odoms):
+        t = _ns(m.stamp + log_time_offset)
         if isinstance(m, RawScan):
             if not static_done:
-                yield (
-                    "/tf_static",
-                    TFMESSAGE,
-                    _ns(m.stamp),
-                    ros.tf(m.stamp, base_frame, m.frame_id, *tf_static),
-                )
+                yield "/tf_static", TFMESSAGE, t, ros.tf(m.stamp, base_frame, m.frame_id, *tf_static)
                 static_done = True
-            yield scan_topic, LASERSCAN, _ns(m.stamp), ros.laserscan(m)
+            yield scan_topic, LASERSCAN, t, ros.laserscan(m)
         elif odom_as_tf:
-            yield "/tf", TFMESSAGE, _ns(m.stamp), ros.tf(m.stamp, odom_frame, base_frame, m.x, m.y, m.theta)
+            yield "/tf", TFMESSAGE, t, ros.tf(m.stamp, odom_frame, base_frame, m.x, m.y, m.theta)
         else:
-            yield odom_topic, ODOMETRY, _ns(m.stamp), ros.odometry(m, odom_frame, base_frame)
+            q = odom_quaternion(m) if odom_quaternion is not None else None
+            yield odom_topic, ODOMETRY, t, ros.odometry(m, odom_frame, base_frame, q)
+
+
+def _shuffled(messages: Iterable, block: int) -> Iterator:
+    """The messages in blocks of ``block``, the blocks in a seeded random order."""
+    items = list(messages)
+    blocks = [items[i : i + block] for i in range(0, len(items), block)]
+    for i in np.random.default_rng(0).permutation(len(blocks)):
+        yield from blocks[i]
 
 
 def write_mcap(
@@ -193,34 +294,46 @@ def write_mcap(
     odom_as_tf: bool = False,
     odom_frame: str = "odom",
     base_frame: str = "base_link",
+    odom_quaternion: Callable[[OdomSample], Quaternion] | None = None,
+    log_time_offset: float = 0.0,
     compression: str = "zstd",
     chunk_size: int = 1024 * 1024,
+    shuffle_blocks: int = 0,
 ) -> Path:
-    """Write an MCAP log (``encoding`` ``cdr``: ROS 2 profile; ``ros1``: ROS 1 profile)."""
+    """Write an MCAP log. ``encoding``: ``cdr`` (ROS 2 profile), ``ros1`` (ROS 1 profile), ``json``
+    (foxglove_bridge / rosbridge recordings; ``json-ros1`` with ROS 1 field names).
+
+    ``shuffle_blocks`` > 0 writes the messages in blocks of that many, the blocks in a seeded random
+    order, one message per chunk: a valid file whose chunks are not in log-time order (the whole log
+    is held in memory to do so).
+    """
     from mcap.writer import CompressionType, Writer
 
-    ros = RosSerializer(encoding)
+    ros = serializer(encoding)
     path = Path(path)
     comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}[
         compression
     ]
+    messages = _ros_messages(
+        ros, scans, odoms, scan_topic, odom_topic, tf_static, odom_as_tf, odom_frame, base_frame,
+        odom_quaternion=odom_quaternion, log_time_offset=log_time_offset,
+    )  # fmt: skip
+    if shuffle_blocks > 0:
+        messages, chunk_size = _shuffled(messages, shuffle_blocks), 1
     with open(path, "wb") as f:
         w = Writer(f, chunk_size=chunk_size, compression=comp)
-        w.start(profile="ros1" if ros.ros1 else "ros2", library="cornerslam")
+        w.start(profile=ros.profile, library="cornerslam")
         channels: dict[str, int] = {}
-        for topic, typename, t, data in _ros_messages(
-            ros, scans, odoms, scan_topic, odom_topic, tf_static, odom_as_tf, odom_frame, base_frame
-        ):
+        for topic, typename, t, data in messages:
             cid = channels.get(topic)
             if cid is None:
-                name = typename.replace("/msg/", "/") if ros.ros1 else typename
                 sid = w.register_schema(
-                    name=name,
-                    encoding="ros1msg" if ros.ros1 else "ros2msg",
+                    name=ros.schema_name(typename),
+                    encoding=ros.schema_encoding,
                     data=ros.msgdef(typename).encode(),
                 )
                 cid = channels[topic] = w.register_channel(
-                    topic=topic, message_encoding="ros1" if ros.ros1 else "cdr", schema_id=sid
+                    topic=topic, message_encoding=ros.message_encoding, schema_id=sid
                 )
             w.add_message(channel_id=cid, log_time=t, data=data, publish_time=t)
         w.finish()
@@ -238,6 +351,8 @@ def write_rosbag1(
     odom_as_tf: bool = False,
     odom_frame: str = "odom",
     base_frame: str = "base_link",
+    odom_quaternion: Callable[[OdomSample], Quaternion] | None = None,
+    log_time_offset: float = 0.0,
 ) -> Path:
     """Write a ROS 1 bag (v2.0, uncompressed chunks)."""
     from rosbags.rosbag1 import Writer
@@ -247,8 +362,9 @@ def write_rosbag1(
     with Writer(path) as w:
         conns = {}
         for topic, typename, t, data in _ros_messages(
-            ros, scans, odoms, scan_topic, odom_topic, tf_static, odom_as_tf, odom_frame, base_frame
-        ):
+            ros, scans, odoms, scan_topic, odom_topic, tf_static, odom_as_tf, odom_frame, base_frame,
+            odom_quaternion=odom_quaternion, log_time_offset=log_time_offset,
+        ):  # fmt: skip
             if topic not in conns:
                 conns[topic] = w.add_connection(
                     topic, typename, typestore=ros.store, latching=1 if topic == "/tf_static" else None
@@ -269,6 +385,8 @@ def write_rosbag2(
     odom_as_tf: bool = False,
     odom_frame: str = "odom",
     base_frame: str = "base_link",
+    odom_quaternion: Callable[[OdomSample], Quaternion] | None = None,
+    log_time_offset: float = 0.0,
 ) -> Path:
     """Write a ROS 2 bag directory (``storage`` ``sqlite3`` or ``mcap``); ``path`` must not exist."""
     from rosbags.rosbag2 import StoragePlugin, Writer
@@ -279,8 +397,9 @@ def write_rosbag2(
     with Writer(path, version=9, storage_plugin=plugin) as w:
         conns = {}
         for topic, typename, t, data in _ros_messages(
-            ros, scans, odoms, scan_topic, odom_topic, tf_static, odom_as_tf, odom_frame, base_frame
-        ):
+            ros, scans, odoms, scan_topic, odom_topic, tf_static, odom_as_tf, odom_frame, base_frame,
+            odom_quaternion=odom_quaternion, log_time_offset=log_time_offset,
+        ):  # fmt: skip
             if topic not in conns:
                 conns[topic] = w.add_connection(topic, typename, typestore=ros.store)
             w.write(conns[topic], t, data)
@@ -289,6 +408,16 @@ def write_rosbag2(
 
 def _fmt(values) -> str:
     return " ".join(repr(float(v)) for v in values)
+
+
+class _Separated:
+    """A text file whose writes have their spaces replaced by ``sep``."""
+
+    def __init__(self, f, sep: str):
+        self.f, self.sep = f, sep
+
+    def write(self, line: str) -> None:
+        self.f.write(line if self.sep == " " else line.replace(" ", self.sep))
 
 
 def write_carmen(
@@ -300,6 +429,7 @@ def write_carmen(
     odom_lines: bool = True,
     laser: str = "auto",
     hostname: str = "cornerslam",
+    sep: str = " ",
 ) -> Path:
     """Write a CARMEN log: ODOM lines (unless ``odom_lines=False``) and one laser line per scan.
 
@@ -307,12 +437,14 @@ def write_carmen(
     :func:`~cornerslam_cli.logs.carmen.flaser_increment`) and no-return = 81.83 m; ``ROBOTLASER1``
     stores angles and max range; ``auto`` picks FLASER when the scan fits it. The laser line's pose
     fields hold the latest odometry pose (so a log without ODOM lines still has odometry).
-    No-return readings (inf, NaN, >= range_max) are written as the max range.
+    No-return readings (inf, NaN, >= range_max) are written as the max range. ``sep`` separates the
+    fields (logs in the wild also use tabs).
     """
     path = Path(path)
     opener = _gzip.open if gzip else open
     pose = (0.0, 0.0, 0.0)
-    with opener(path, "wt", encoding="ascii") as f:
+    with opener(path, "wt", encoding="ascii") as out:
+        f = _Separated(out, sep)
         f.write("# written by cornerslam write_carmen\n")
         for m in _merged(scans, odoms):
             ts = repr(float(m.stamp))

@@ -3,7 +3,8 @@
 Frames are extracted once (extraction does not depend on the associator) and kept in memory, then
 each associator runs the filter over them — in parallel worker processes with ``jobs`` > 1 (the
 frames reach the workers by fork, not by pickling). Each associator's run is a complete ``run``
-output directory under ``OUT/ASSOC``; ``comparison.csv`` has one row per associator.
+output directory under ``OUT/ASSOC``; ``comparison.csv`` has one row per associator; the figures and
+report.html follow. The whole of OUT is staged and committed once (report/outdir.py).
 """
 
 from __future__ import annotations
@@ -17,7 +18,8 @@ from pathlib import Path
 
 from ..config import Config
 from ..pipeline import Frame, Input, frames, load_reference, open_input, run_frames
-from .tables import COMPARISON_COLUMNS, CsvTable, StagedDir
+from .outdir import StagedDir, mark_output
+from .tables import COMPARISON_COLUMNS, CsvTable
 
 _SHARED: dict = {}  # what forked workers inherit: frames, input, reference
 
@@ -69,28 +71,41 @@ def compare(
     progress: Callable[[int, int], None] | None = None,
     relations: str | Path | None = None,
     time_offset: float = 0.0,
+    plots: bool = True,
 ) -> list[dict]:
-    """Run each associator in ``assocs`` on ``log_path``; write OUT/ASSOC/ and OUT/comparison.csv."""
-    ref = load_reference(Path(log_path), ground_truth, relations, time_offset)
-    src: Input = open_input(log_path, cfg)
-    frame_list: list[Frame] = list(frames(src, cfg, progress))
-    _SHARED.update(frames=frame_list, src=src, cfg=cfg, ref=ref)
-    try:
-        with StagedDir(out) as stage:
-            dirs = [stage.path / a for a in assocs]
+    """Run each associator in ``assocs`` on ``log_path``; write OUT/ASSOC/, OUT/comparison.csv and
+    (``plots``) the figures and OUT/report.html, committed together. The output place is checked
+    before any work."""
+    inputs = [p for p in (log_path, ground_truth, relations) if p]
+    with StagedDir(out, "compare", inputs) as stage:
+        ref = load_reference(Path(log_path), ground_truth, relations, time_offset)
+        src: Input = open_input(log_path, cfg)
+        frame_list: list[Frame] = list(frames(src, cfg, progress))
+        dirs = [stage.path / a for a in assocs]
+        for d in dirs:
+            d.mkdir()
+        _SHARED.update(frames=frame_list, src=src, cfg=cfg, ref=ref)
+        try:
             if jobs > 1 and len(assocs) > 1:
                 ctx = multiprocessing.get_context("fork")
                 with ProcessPoolExecutor(max_workers=min(jobs, len(assocs)), mp_context=ctx) as pool:
                     summaries = list(pool.map(_run_one, assocs, dirs))
             else:
                 summaries = [_run_one(a, d) for a, d in zip(assocs, dirs, strict=True)]
-            table = CsvTable(stage.path / "comparison.csv", COMPARISON_COLUMNS)
+        finally:
+            _SHARED.clear()
+        with CsvTable(stage.path / "comparison.csv", COMPARISON_COLUMNS) as table:
             for s in summaries:
                 table.row(*comparison_row(s))
-            table.close()
-            final = stage.commit()
-    finally:
-        _SHARED.clear()
+        if plots:
+            from .html import write_report
+            from .plots import plot_compare
+
+            plot_compare(stage.path)
+            write_report(stage.path)
+        for d in dirs:
+            mark_output(d, "run")  # each is a complete run output
+        final = stage.commit()
     for s, a in zip(summaries, assocs, strict=True):
         s["out_dir"] = str(final / a)
     return summaries

@@ -47,6 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from .plots import ELLIPSE_SIGMA, ellipse_polygons, load_run
+from .tables import json_text
 
 MAP_FRAME = "map"
 TOPICS = {
@@ -224,9 +225,10 @@ def _stamp_texts(path: Path) -> list[str]:
         return [row["stamp"] for row in reader]
 
 
-def write_results_mcap(out_dir: Path, path: Path) -> Path:
+def write_results_mcap(out_dir: Path, path: Path, results: Path | None = None) -> Path:
     """Write a run directory's trajectory, landmarks and segment map to ``path`` (MCAP, JSON + Foxglove
-    schemas); returns ``path``. See the module docstring for the topics."""
+    schemas); returns ``path``. See the module docstring for the topics. ``results`` is the name of
+    the run directory recorded in the metadata (default ``out_dir``; a staging directory's target)."""
     from mcap.writer import Writer
 
     out_dir, path = Path(out_dir), Path(path)
@@ -268,9 +270,7 @@ def write_results_mcap(out_dir: Path, path: Path) -> Path:
         }
         seq: dict[str, int] = dict.fromkeys(TOPICS, 0)
         for ns, key, payload in msgs:
-            w.add_message(
-                channels[key], ns, json.dumps(payload, separators=(",", ":")).encode(), ns, seq[key]
-            )
+            w.add_message(channels[key], ns, json_text(payload, separators=(",", ":")).encode(), ns, seq[key])
             seq[key] += 1
         w.add_metadata(
             "cornerslam",
@@ -278,7 +278,7 @@ def write_results_mcap(out_dir: Path, path: Path) -> Path:
                 "log": str(run.summary.get("input", {}).get("log", "")),
                 "assoc": run.assoc,
                 "version": str(run.summary.get("cornerslam_version", "")),
-                "results": str(out_dir),
+                "results": str(out_dir if results is None else results),
             },
         )
         w.finish()

@@ -1,9 +1,7 @@
-"""Output tables (INTERFACE.md): ``write_*`` / ``read_*`` pairs and the atomic output directory.
+"""Output tables (INTERFACE.md): ``write_*`` / ``read_*`` pairs.
 
-A run writes into a hidden staging directory beside the target (``.NAME.partial-XXXX``), streaming
-its per-step rows there, and only renames it onto ``--out`` once every file is complete. A crash,
-a kill or Ctrl-C therefore leaves either the previous complete directory or none, never a
-half-written one that looks complete.
+A run streams its per-step rows into a hidden staging directory (outdir.py's :class:`StagedDir`),
+renamed onto ``--out`` only once every file is complete.
 """
 
 from __future__ import annotations
@@ -11,13 +9,14 @@ from __future__ import annotations
 import csv
 import io
 import json
+import logging
 import os
-import shutil
-import tempfile
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
+
+log = logging.getLogger("cornerslam.report")
 
 # INTERFACE.md's columns, then (an extension) the scan-matched odometry the filter used as motion input
 # (= odom_* when scan matching is off)
@@ -76,6 +75,19 @@ class CsvTable:
             os.fsync(self._f.fileno())
             self._f.close()
 
+    def __enter__(self) -> CsvTable:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        """Closed either way; after an error (a full disk) without a second one from the close."""
+        if exc is None:
+            self.close()
+            return
+        try:
+            self._f.close()
+        except OSError:
+            pass
+
 
 def read_csv(path: str | Path) -> dict[str, np.ndarray]:
     """Read one of our tables into columns (float arrays; non-numeric columns stay strings)."""
@@ -101,82 +113,76 @@ def write_tum(path: Path, stamps: np.ndarray, poses: np.ndarray) -> None:
             f.write(f"{t:.9f} {x:.9f} {y:.9f} 0 0 0 {np.sin(a / 2):.9f} {np.cos(a / 2):.9f}\n")
 
 
-def read_tum(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
-    """Read a TUM file; returns stamps (n,) and 2D poses (n, 3) (yaw from the quaternion)."""
-    from ..errors import LogError
+TUM_LAYOUT = "stamp x y z qx qy qz qw"
 
-    p = Path(path)
-    if not p.is_file():
-        raise LogError(f"trajectory file '{p}' does not exist", "give a TUM file: stamp x y z qx qy qz qw")
-    rows = []
-    for lineno, line in enumerate(p.read_text().splitlines(), 1):
-        s = line.strip()
-        if not s or s.startswith("#"):
-            continue
-        parts = s.replace(",", " ").split()
-        try:
-            vals = [float(v) for v in parts]
-        except ValueError:
-            raise LogError(f"'{p}' line {lineno} is not a TUM pose", "expected 8 numbers per line") from None
-        if len(vals) != 8:
-            raise LogError(
-                f"'{p}' line {lineno} has {len(vals)} values", "TUM needs 8: stamp x y z qx qy qz qw"
-            )
-        rows.append(vals)
-    if not rows:
-        raise LogError(f"trajectory file '{p}' has no poses")
-    a = np.array(rows)
+
+def read_tum(
+    path: str | Path, what: str = "trajectory file", warn: Callable[[str], None] = log.warning
+) -> tuple[np.ndarray, np.ndarray]:
+    """Read a TUM file; returns stamps (n,) in time order and 2D poses (n, 3) (yaw from the quaternion).
+
+    Lines out of time order are sorted (a stable sort) and repeated lines dropped, each with a warning
+    through ``warn``; two different poses at one stamp cannot be ordered and raise ``LogError``, as do
+    binary files and lines that are not 8 finite numbers. ``what`` names the file in messages."""
+    from ..errors import LogError
+    from ..textfile import read_number_rows
+
+    a, lines = read_number_rows(path, what, LogError, "TUM pose", TUM_LAYOUT, 8)
+    name = f"{what} '{path}'"
+    back = np.flatnonzero(np.diff(a[:, 0]) < 0)
+    if len(back):
+        i = int(back[0])
+        warn(
+            f"{name} is not in time order (line {lines[i + 1]} at {a[i + 1, 0]:.6f} s comes after line "
+            f"{lines[i]} at {a[i, 0]:.6f} s; {len(back)} line(s) go back): sorted by stamp"
+        )
+        order = np.argsort(a[:, 0], kind="stable")
+        a, lines = a[order], lines[order]
+    same = np.flatnonzero(np.diff(a[:, 0]) == 0)
+    differ = same[np.any(a[same, 1:] != a[same + 1, 1:], axis=1)]
+    if len(differ):
+        i = int(differ[0])
+        raise LogError(
+            f"{name} has two different poses at stamp {a[i, 0]:.9f} (lines {lines[i]} and {lines[i + 1]})",
+            "remove one of them",
+        )
+    if len(same):
+        warn(f"{name} repeats {len(same)} line(s) (first: line {lines[same[0] + 1]}): dropped")
+        keep = np.ones(len(a), dtype=bool)
+        keep[same + 1] = False
+        a = a[keep]
     qx, qy, qz, qw = a[:, 4], a[:, 5], a[:, 6], a[:, 7]
     yaw = np.arctan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
     return a[:, 0], np.column_stack((a[:, 1], a[:, 2], yaw))
 
 
 def write_json(path: Path, data: dict) -> None:
+    """Strict JSON (RFC 8259, what every non-Python reader expects): a non-finite float is written as
+    null, never as NaN or Infinity."""
     with open(path, "w") as f:
-        json.dump(data, f, indent=2, sort_keys=False, default=_json_default)
-        f.write("\n")
+        f.write(json_text(data, indent=2) + "\n")
+
+
+def json_text(data, **kwargs) -> str:
+    """``json.dumps`` of ``data`` with non-finite floats (also numpy's, also in arrays) as null."""
+    return json.dumps(_finite_or_none(data), allow_nan=False, default=_json_default, **kwargs)
+
+
+def _finite_or_none(o):
+    if isinstance(o, dict):
+        return {k: _finite_or_none(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple, np.ndarray)):
+        return [_finite_or_none(v) for v in o]
+    if isinstance(o, (float, np.floating)):
+        return float(o) if np.isfinite(o) else None
+    return o
 
 
 def _json_default(o):
     if isinstance(o, np.integer):
         return int(o)
-    if isinstance(o, np.floating):
-        return float(o)
-    if isinstance(o, np.ndarray):
-        return o.tolist()
+    if isinstance(o, np.bool_):
+        return bool(o)
     if isinstance(o, Path):
         return str(o)
     raise TypeError(f"not JSON serialisable: {type(o)}")
-
-
-class StagedDir:
-    """A directory built in a hidden sibling and renamed onto ``target`` on :meth:`commit`.
-
-    Use as a context manager: leaving the block without ``commit()`` (an exception, Ctrl-C) removes
-    the staging directory and leaves ``target`` as it was.
-    """
-
-    def __init__(self, target: str | Path):
-        self.target = Path(target).resolve()
-        self.target.parent.mkdir(parents=True, exist_ok=True)
-        self.path = Path(tempfile.mkdtemp(prefix=f".{self.target.name}.partial-", dir=self.target.parent))
-        self.committed = False
-
-    def __enter__(self) -> StagedDir:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        if not self.committed:
-            shutil.rmtree(self.path, ignore_errors=True)
-
-    def commit(self) -> Path:
-        """Swap the finished staging directory in place of ``target``."""
-        old = None
-        if self.target.exists():
-            old = self.target.parent / f".{self.target.name}.old-{os.getpid()}"
-            os.rename(self.target, old)
-        os.rename(self.path, self.target)
-        self.committed = True
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
-        return self.target

@@ -1,0 +1,110 @@
+"""A user's text file (config, ground truth, relations) read whole, or refused with one line.
+
+:func:`read_number_rows` reads a table of numbers (TUM poses, Kümmerle relations) from one.
+
+:func:`read_text` returns the file's text decoded as UTF-8 (a UTF-8 byte-order mark is dropped).
+Everything else is a :class:`~cornerslam_cli.errors.CornerslamError` of the caller's class naming the
+file: a directory, a missing or unreadable path, a file larger than the caller's limit, a binary file
+(NUL bytes: an MCAP given as ground truth, random bytes, UTF-16 without a byte-order mark), UTF-16
+with a byte-order mark, and bytes that are not UTF-8 (a Latin-1 comment), with the line they are on.
+Anything that is not a directory is read, so ``/dev/null`` and a pipe (``<(...)``) work.
+"""
+
+from __future__ import annotations
+
+import codecs
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .errors import CornerslamError
+
+UTF16_BOMS = (codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)
+SNIFF_BYTES = 1 << 16  # a binary file (a multi-GB bag given as ground truth) is refused on these
+
+
+def read_text(
+    path: str | Path,
+    what: str,
+    error: type[CornerslamError],
+    expected: str,
+    max_bytes: int | None = None,
+) -> str:
+    """The text of ``path``; ``what`` names the file in errors ("config file"), ``error`` is the
+    exception class raised, ``expected`` says what the file should hold (the hint of the errors)."""
+    p = Path(path)
+    if p.is_dir():
+        raise error(f"{what} '{p}' is a directory", f"give {expected}")
+    if not p.exists():
+        raise error(f"{what} '{p}' does not exist", f"give {expected}")
+    name = f"{what} '{p}'"
+    try:
+        with open(p, "rb") as f:
+            head = f.read(SNIFF_BYTES)
+            refuse_binary(head, name, error, expected)  # before reading the rest of a huge file
+            rest = f.read() if max_bytes is None else f.read(max(max_bytes + 1 - len(head), 0))
+    except OSError as e:
+        raise error(f"{name} cannot be read: {e.strerror or e}", "check its permissions") from None
+    raw = head + rest
+    if max_bytes is not None and len(raw) > max_bytes:
+        raise error(
+            f"{name} is larger than {max_bytes // 1024} KiB", f"is it the right file? expected {expected}"
+        )
+    return decode(raw, name, error, expected)
+
+
+def refuse_binary(raw: bytes, name: str, error: type[CornerslamError], expected: str) -> None:
+    """Raise ``error`` if ``raw`` (a file's bytes, or its first bytes) is UTF-16 or holds NUL bytes."""
+    if raw.startswith(UTF16_BOMS):
+        raise error(f"{name} is UTF-16 text", "convert it to UTF-8, e.g. iconv -f UTF-16 -t UTF-8")
+    if b"\x00" in raw:
+        raise error(f"{name} is a binary file (it contains NUL bytes), not text", f"expected {expected}")
+
+
+def decode(raw: bytes, name: str, error: type[CornerslamError], expected: str) -> str:
+    """``raw`` as UTF-8 text, else ``error`` naming ``name`` and what is wrong with the bytes."""
+    refuse_binary(raw, name, error, expected)
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        line = raw[: e.start].count(b"\n") + 1
+        raise error(
+            f"{name} is not UTF-8 text (byte 0x{raw[e.start]:02x} at line {line})", "save it as UTF-8"
+        ) from None
+
+
+def read_number_rows(
+    path: str | Path,
+    what: str,
+    error: type[CornerslamError],
+    item: str,
+    layout: str,
+    n: int,
+    more_ok: bool = False,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rows of ``n`` finite numbers (``more_ok``: at least ``n``, the first ``n`` kept), separated by
+    spaces or commas; blank lines and ``#`` comments skipped. Returns the values (k, n) and each row's
+    line number (k,). ``item`` names one row ("TUM pose"), ``layout`` its columns; ``error`` is raised
+    naming the file and line."""
+    p = Path(path)
+    name = f"{what} '{p}'"
+    rows, lines = [], []
+    for lineno, line in enumerate(read_text(p, what, error, f"a text file of {layout}").splitlines(), 1):
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue
+        parts = s.replace(",", " ").split()
+        try:
+            v = [float(x) for x in parts]
+        except ValueError:
+            raise error(f"{name} line {lineno} is not a {item}", f"expected: {layout}") from None
+        if len(v) < n or (len(v) > n and not more_ok):
+            raise error(f"{name} line {lineno} has {len(v)} values", f"expected {n}: {layout}")
+        if not all(map(math.isfinite, v[:n])):
+            raise error(f"{name} line {lineno} has a value that is not finite", f"expected: {layout}")
+        rows.append(v[:n])
+        lines.append(lineno)
+    if not rows:
+        raise error(f"{name} has no {item}s", f"expected: {layout}")
+    return np.array(rows, dtype=float), np.array(lines, dtype=np.int64)

@@ -1,0 +1,162 @@
+"""Reading faults that need more than a file of the fault corpus, through the CLI: logs that are pipes
+(``<(zcat x.mcap)``), FIFOs or devices; log names that are not UTF-8; and memory that must not grow
+with scans that find no odometry."""
+
+from __future__ import annotations
+
+import json
+import os
+import threading
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+from fault_corpus import N, check_error_line, make_odoms, make_scans, peak_bytes, write_gt
+
+from cornerslam_cli.cli import cli
+from cornerslam_cli.logs.writers import write_mcap
+
+pytestmark = pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="POSIX only")
+
+
+def invoke(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
+
+
+@pytest.fixture(scope="module")
+def good(tmp_path_factory) -> Path:
+    return write_mcap(tmp_path_factory.mktemp("in") / "good.mcap", make_scans(), make_odoms())
+
+
+# ---------------------------------------------------------------------------- pipes, FIFOs, devices
+@contextmanager
+def fifo_writer(path: Path):
+    """A thread that opens ``path`` for writing and closes it at once: if cornerslam opened the FIFO it
+    would read an empty file instead of hanging the test. At the end the thread is released."""
+    t = threading.Thread(target=lambda: open(path, "wb").close(), daemon=True)
+    t.start()
+    try:
+        yield
+    finally:
+        if t.is_alive():  # nobody opened the read end, as it should be: open it to let the thread go
+            fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+            t.join(5)
+            os.close(fd)
+        assert not t.is_alive()
+
+
+COMMANDS = {
+    "run": ("run", "{log}", "--out", "{tmp}/out"),
+    "info": ("info", "{log}"),
+    "compare": ("compare", "{log}", "--assoc", "icnn", "--out", "{tmp}/cmp"),
+    "extract": ("extract", "{log}"),
+}
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_a_fifo_named_like_a_log_is_refused_without_hanging(command, tmp_path):
+    fifo = tmp_path / "x.mcap"
+    os.mkfifo(fifo)
+    with fifo_writer(fifo):
+        res = invoke(*(a.format(log=fifo, tmp=tmp_path) for a in COMMANDS[command]))
+    check_error_line(res, ("x.mcap", "is a pipe, not a file", "save it to a file first"))
+    assert not (tmp_path / "out").exists() and not (tmp_path / "cmp").exists()
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_process_substitution_is_refused_not_read_as_empty(command, tmp_path, good):
+    """``cornerslam run <(cat good.mcap)``: the log is read several times (laser preset, index, laser
+    mount, messages), a pipe only once; it used to say 'is empty'."""
+    r, w = os.pipe()
+    try:
+        os.write(w, good.read_bytes()[:4096])
+        res = invoke(*(a.format(log=f"/dev/fd/{r}", tmp=tmp_path) for a in COMMANDS[command]))
+    finally:
+        os.close(r)
+        os.close(w)
+    check_error_line(res, (f"/dev/fd/{r}", "is a pipe, not a file"))
+
+
+def test_a_device_is_refused(tmp_path):
+    check_error_line(
+        invoke("run", os.devnull, "--out", tmp_path / "o"), ("is a character device, not a file",)
+    )
+
+
+def test_batch_fails_the_rows_of_a_pipe_and_runs_the_others(tmp_path, good):
+    """Also with the laser preset off (the log is then first touched by the resume hash)."""
+    fifo = tmp_path / "f.mcap"
+    os.mkfifo(fifo)
+    with fifo_writer(fifo):
+        res = invoke(
+            "batch", fifo, good, "--out", tmp_path / "b", "--jobs", "1", "--set", "input.laser_preset=none"
+        )
+    assert res.exit_code == 0, res.output
+    rows = (tmp_path / "b" / "batch.csv").read_text().splitlines()[1:]
+    assert rows[0].startswith(f"{fifo},pca,failed,") and "is a pipe" in rows[0]
+    assert rows[1].startswith(f"{good},pca,ok,")
+
+
+# ---------------------------------------------------------------------------- names that are not UTF-8
+@pytest.fixture(scope="module")
+def latin1_log(tmp_path_factory) -> Path:
+    """A log named b'log\\xe9.mcap' (latin-1 'é'), ground truth beside it (also not UTF-8)."""
+    d = tmp_path_factory.mktemp("latin1")
+    path = Path(os.fsdecode(os.path.join(os.fsencode(d), b"log\xe9.mcap")))
+    return write_gt(write_mcap(path, make_scans(), make_odoms()))
+
+
+def strict_json(path: Path) -> dict:
+    """The file as strict UTF-8 JSON without escaped lone surrogates."""
+    text = path.read_bytes().decode("utf-8")
+    assert "\\udc" not in text.lower(), text
+    return json.loads(text)
+
+
+def test_run_and_compare_a_log_whose_name_is_not_utf8(latin1_log, tmp_path):
+    res = invoke("run", latin1_log, "--out", tmp_path / "o")
+    assert res.exit_code == 0, res.output
+    s = strict_json(tmp_path / "o" / "summary.json")
+    assert s["input"]["log"].endswith("log\ufffd.mcap") and s["counts"]["steps"] == N
+    assert s["accuracy"]["ground_truth"].endswith("log\ufffd.gt.tum")
+    res = invoke("compare", latin1_log, "--assoc", "icnn,pca", "--out", tmp_path / "c", "-q")
+    assert res.exit_code == 0, res.output
+    assert strict_json(tmp_path / "c" / "pca" / "summary.json")["counts"]["steps"] == N
+
+
+def test_info_batch_and_errors_with_a_name_that_is_not_utf8(latin1_log, tmp_path, monkeypatch):
+    res = invoke("info", latin1_log)
+    assert res.exit_code == 0 and "log\ufffd.mcap" in res.output and "/scan" in res.output, res.output
+    monkeypatch.chdir(tmp_path)  # the default output directory is named after the log
+    res = invoke("run", latin1_log)
+    assert res.exit_code == 0 and "cornerslam_out/log\ufffd_pca\n" in res.output, res.output
+    check_error_line(invoke("run", latin1_log, "--scan-topic", "/nope"), ("log\ufffd.mcap", "/nope"))
+    res = invoke("batch", latin1_log, "--out", tmp_path / "b", "--jobs", "1", "-q")
+    assert res.exit_code == 0, res.output
+    row = (tmp_path / "b" / "batch.csv").read_bytes().decode("utf-8").splitlines()[1]
+    assert "log\ufffd.mcap,pca,ok," in row
+
+
+# ---------------------------------------------------------------------------- memory
+
+
+def test_scans_without_odometry_do_not_grow_memory(tmp_path):
+    """A log whose odometry ends after 1 s (e.g. odometry on the wrong topic): 1,500 and 4,500 later
+    scans read, synchronised and skipped with the same peak memory (every one was held to the end:
+    612 MB vs 129 MB on 20,000 real scans); each is counted. Small chunks, so that both logs have
+    many (the reader holds one decompressed chunk)."""
+    from cornerslam_cli.config import load_config
+    from cornerslam_cli.pipeline import frames, open_input
+
+    cfg = load_config()
+
+    def run(n):
+        log = write_mcap(tmp_path / f"l{n}.mcap", make_scans(n, beams=64), make_odoms(11), chunk_size=1 << 16)
+        src = open_input(log, cfg)
+        peak = peak_bytes(lambda: sum(1 for _ in frames(src, cfg)))
+        assert src.stats.scans_in == n and src.stats.after_last_odom == n - 10
+        return peak
+
+    small, large = run(1500), run(4500)
+    assert large < 1.3 * small, (small, large)

@@ -1,0 +1,688 @@
+"""Output faults: what cornerslam does when the place it writes to is not its own, read-only, full,
+busy or in use by another run; and that a closed stdout is no internal error.
+
+``OUTPUT_FAULTS`` is the table: one scenario per class, each with an ``Expected`` as in the input
+fault corpus (tests/fault_corpus.py: the behaviour line for docs/results/reliability.md, the exit
+code, fragments of the last stderr line) and a setup that builds the place in a temporary directory.
+What a test running as root cannot produce for real — a read-only file system, permission denied, a
+full disk, a busy mount point — is produced by making the os calls on that path fail with the errno
+the kernel gives. A refusal must leave the temporary directory byte for byte as it was: the log
+beside it, a previous output, and no hidden leftover. ``python tests/test_faults_output.py`` prints
+the table. Signals, pipes and locks need real processes or threads: those tests follow the table.
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+from fault_corpus import Expected, make_odoms, make_scans
+
+from cornerslam_cli.cli import cli
+from cornerslam_cli.errors import OutputError
+from cornerslam_cli.logs.writers import write_mcap
+from cornerslam_cli.report.outdir import HOST, MARKER, StagedDir, clear_stale, mark_output, target_lock
+
+CMD = [sys.executable, "-c", "from cornerslam_cli.cli import main; main()"]
+KEPT = "no output written (a previous complete output directory is kept)"
+
+
+@dataclass
+class World:
+    """A scenario's temporary world: everything it touches lives in ``tmp``; the corpus's valid log
+    is ``tmp/logs/x.mcap``; ``mp`` makes os calls fail."""
+
+    tmp: Path
+    log: Path
+    mp: pytest.MonkeyPatch
+    cleanup: list[Callable[[], object]] = field(default_factory=list)  # run after the scenario
+
+
+@dataclass
+class Case:
+    """A scenario's command line, the path its error must name, and checks after an exit 0."""
+
+    args: list
+    named: Path | str | None = None
+    after: Callable[[], None] | None = None
+
+
+OUTPUT_FAULTS: dict[str, tuple[Expected, Callable[[World], Case]]] = {}
+
+
+def fault(exit_code: int, *message: str):
+    """Register the decorated setup as a scenario of the table: its name is the scenario's, its
+    docstring the behaviour line."""
+
+    def register(setup: Callable[[World], Case]) -> Callable[[World], Case]:
+        behaviour = " ".join((setup.__doc__ or "").split())
+        OUTPUT_FAULTS[setup.__name__] = (Expected(behaviour, exit_code, message), setup)
+        return setup
+
+    return register
+
+
+# ---------------------------------------------------------------------------- building places
+def previous_output(d: Path, kind: str = "run") -> Path:
+    """A complete earlier cornerslam output (a marked directory) at ``d``."""
+    d.mkdir(parents=True)
+    (d / "summary.json").write_text('{"previous": true}\n')
+    mark_output(d, kind)
+    return d
+
+
+def dead_pid() -> int:
+    """The pid of a process that has just exited."""
+    proc = subprocess.Popen(["true"])
+    proc.wait()
+    return proc.pid
+
+
+def fail_writes_under(mp: pytest.MonkeyPatch, directory: Path, code: int) -> None:
+    """Creating a directory or opening a file for writing under ``directory`` fails with ``code``,
+    as the kernel does on a read-only file system (EROFS) or without write permission (EACCES)."""
+    real_open, real_mkdir = os.open, os.mkdir
+    root = directory.resolve()
+
+    def under(path) -> bool:
+        p = Path(os.fsdecode(path)).resolve()
+        return p == root or root in p.parents
+
+    def fake_open(path, flags, *args, **kwargs):
+        if flags & (os.O_WRONLY | os.O_RDWR | os.O_CREAT) and under(path):
+            raise OSError(code, os.strerror(code), os.fsdecode(path))
+        return real_open(path, flags, *args, **kwargs)
+
+    def fake_mkdir(path, *args, **kwargs):
+        if under(path) and not os.path.lexists(path):  # an existing one: EEXIST, as the kernel says first
+            raise OSError(code, os.strerror(code), os.fsdecode(path))
+        return real_mkdir(path, *args, **kwargs)
+
+    mp.setattr(os, "open", fake_open)
+    mp.setattr(os, "mkdir", fake_mkdir)
+
+
+def interrupt(*args, **kwargs):
+    raise KeyboardInterrupt
+
+
+def summary(out: Path) -> dict:
+    return json.loads((out / "summary.json").read_text())
+
+
+def complete(out: Path) -> None:
+    """A complete run output: the tables, the summary of a real run, the marker."""
+    assert "counts" in summary(out) and (out / "trajectory.csv").is_file()
+    assert json.loads((out / MARKER).read_text())["kind"] == "run"
+
+
+# ---------------------------------------------------------------------------- the table
+# 1. only our own outputs are replaced
+@fault(2, "is not empty and was not written by cornerslam", "give a new or empty directory")
+def out_holds_the_log(w: World) -> Case:
+    """`--out` a directory holding the log (`run logs/x.mcap --out logs`): refused, nothing touched"""
+    return Case(["run", w.log, "--out", w.log.parent], w.log.parent)
+
+
+@fault(2, "is not empty and was not written by cornerslam")
+def out_is_a_foreign_directory(w: World) -> Case:
+    """`--out .`, `--out ~`, any non-empty directory of other files: refused, nothing touched"""
+    home = w.tmp / "home"
+    home.mkdir()
+    (home / ".bashrc").write_text("export PS1='$ '\n")
+    (home / "thesis.tex").write_text("\\documentclass{article}\n")
+    w.mp.chdir(home)
+    return Case(["run", w.log, "--out", "."], "'.'")
+
+
+@fault(2, "holds the working directory", "give another output directory")
+def out_is_the_working_directory(w: World) -> Case:
+    """`--out .` in an empty working directory: refused (it would be renamed away under the shell)"""
+    cwd = w.tmp / "empty"
+    cwd.mkdir()
+    w.mp.chdir(cwd)
+    return Case(["run", w.log, "--out", "."], "'.'")
+
+
+@fault(2, "holds 'notes.txt', which cornerslam did not write", "move it out first")
+def out_holds_user_files_beside_our_output(w: World) -> Case:
+    """a cornerslam output holding files it did not write (notes added later): refused, naming one"""
+    out = previous_output(w.tmp / "out")
+    (out / "notes.txt").write_text("keep me\n")
+    return Case(["run", w.log, "--out", out], out)
+
+
+@fault(2, "holds the input")
+def out_holds_the_log_inside_our_output(w: World) -> Case:
+    """a cornerslam output that holds the run's own log: refused"""
+    out = previous_output(w.tmp / "out")
+    log = shutil.copy(w.log, out / "x.mcap")
+    mark_output(out, "run")  # listed, so only the input rule refuses it
+    return Case(["run", log, "--out", out], out)
+
+
+@fault(2, "holds a cornerslam compare output, not a run output")
+def out_is_another_kind_of_output(w: World) -> Case:
+    """`run --out` a compare or batch directory (or the reverse): refused, the kinds named"""
+    out = previous_output(w.tmp / "cmp", kind="compare")
+    return Case(["run", w.log, "--out", out], out)
+
+
+@fault(2, "is a file, not a directory")
+def out_is_a_file(w: World) -> Case:
+    """`--out` an existing file: refused"""
+    return Case(["run", w.log, "--out", w.log], w.log)
+
+
+@fault(2, "a part of the path is a file, not a directory")
+def out_parent_is_a_file(w: World) -> Case:
+    """`--out FILE/sub` (a file where a directory should be): refused"""
+    return Case(["run", w.log, "--out", w.log / "sub"], w.log / "sub")
+
+
+@fault(0)
+def out_is_an_empty_directory(w: World) -> Case:
+    """`--out` an empty directory (made by hand, a fresh volume): used"""
+    out = w.tmp / "empty"
+    out.mkdir()
+    return Case(["run", w.log, "--out", out], after=lambda: complete(out))
+
+
+@fault(0)
+def out_is_our_previous_output(w: World) -> Case:
+    """`--out` a previous cornerslam output of the same kind: replaced whole, no flag needed"""
+    out = previous_output(w.tmp / "out")
+    return Case(["run", w.log, "--out", out], after=lambda: complete(out))
+
+
+@fault(0)
+def out_is_an_output_of_an_older_version(w: World) -> Case:
+    """`--out` a run output written before the marker (its summary.json says cornerslam_version):
+    replaced"""
+    out = w.tmp / "old"
+    out.mkdir()
+    (out / "summary.json").write_text('{\n  "cornerslam_version": "0.0.9"\n}\n')
+    (out / "map.csv").write_text("id\n")
+    return Case(["run", w.log, "--out", out], after=lambda: complete(out))
+
+
+@fault(2, "is not empty and was not written by cornerslam")
+def compare_into_a_foreign_directory(w: World) -> Case:
+    """`compare --out` a directory that is not a cornerslam compare output: refused before
+    extraction"""
+    return Case(["compare", w.log, "--assoc", "icnn", "--out", w.log.parent], w.log.parent)
+
+
+@fault(2, "is not empty and was not written by cornerslam")
+def batch_into_a_foreign_directory(w: World) -> Case:
+    """`batch --out` a directory that is neither new, empty nor a batch directory: refused before
+    any run"""
+    return Case(["batch", w.log, "--out", w.log.parent], w.log.parent)
+
+
+@fault(2, "holds a cornerslam run output, not a batch output")
+def batch_into_a_run_output(w: World) -> Case:
+    """`batch --out` a run output: refused"""
+    out = previous_output(w.tmp / "out")
+    return Case(["batch", w.log, "--out", out], out)
+
+
+@fault(0)
+def batch_row_dir_not_ours(w: World) -> Case:
+    """a batch combination whose directory holds files cornerslam did not write: that row fails, the
+    files are kept, the batch goes on"""
+    out = w.tmp / "batch"
+    row = out / "x__pca"
+    row.mkdir(parents=True)
+    (row / "mine.txt").write_text("keep me\n")
+    mark_output(out, "batch")  # an earlier batch, resumed
+
+    def after():
+        (r,) = _read_batch(out)
+        assert r["status"] == "failed" and "was not written by cornerslam" in r["error"], r
+        assert (row / "mine.txt").read_text() == "keep me\n"
+        assert sorted(p.name for p in row.iterdir()) == ["mine.txt"]
+
+    return Case(["batch", w.log, "--assoc", "pca", "--out", out, "--jobs", "1"], after=after)
+
+
+def _read_batch(out: Path) -> list[dict]:
+    from cornerslam_cli.batch import read_batch
+
+    return read_batch(out / "batch.csv")
+
+
+# 2. everything is staged before the one commit
+@fault(130, KEPT)
+def interrupted_while_drawing_figures(w: World) -> Case:
+    """Ctrl-C / SIGTERM while `--plot` draws figures or report.html: exit 130 / 143, the previous
+    output kept whole (figures are drawn in the staging directory)"""
+    out = previous_output(w.tmp / "out")
+    w.mp.setattr("cornerslam_cli.report.plots.plot_run", interrupt)
+    return Case(["run", w.log, "--out", out, "--plot"])
+
+
+@fault(130, KEPT)
+def interrupted_while_writing_mcap_out(w: World) -> Case:
+    """interrupted while `--mcap-out` is written: the previous MCAP and output directory kept, no
+    temporary file left"""
+    out = previous_output(w.tmp / "out")
+    mc = w.tmp / "res.mcap"
+    mc.write_bytes(b"previous results\n")
+    w.mp.setattr("cornerslam_cli.report.mcap_out.write_results_mcap", interrupt)
+    return Case(["run", w.log, "--out", out, "--mcap-out", mc])
+
+
+@fault(130, KEPT)
+def compare_interrupted_while_drawing(w: World) -> Case:
+    """`compare` interrupted while drawing its figures or report: the previous compare directory
+    kept"""
+    out = previous_output(w.tmp / "cmp", kind="compare")
+    w.mp.setattr("cornerslam_cli.report.plots.plot_compare", interrupt)
+    return Case(["compare", w.log, "--assoc", "icnn", "--out", out])
+
+
+# 3. leftovers, concurrent runs, permissions
+@fault(0)
+def staging_left_by_a_killed_run(w: World) -> Case:
+    """a hidden `.NAME.partial-HOST-PID-*` left by a SIGKILLed run (its process dead): removed by
+    the next run into the same place"""
+    out = w.tmp / "out"
+    stale = w.tmp / f".out.partial-{HOST}-{dead_pid()}-abcd1234"
+    stale.mkdir()
+    (stale / "trajectory.csv").write_text("step\n0\n")
+
+    def after():
+        complete(out)
+        assert not stale.exists()
+
+    return Case(["run", w.log, "--out", out], after=after)
+
+
+@fault(2, f"another cornerslam process (pid {os.getpid()}) is writing", "wait for it to finish")
+def staging_of_a_live_run(w: World) -> Case:
+    """another run is writing the same `--out` (its staging directory's process is alive): refused,
+    naming its pid"""
+    out = w.tmp / "out"
+    (w.tmp / f".out.partial-{HOST}-{os.getpid()}-abcd1234").mkdir()
+    return Case(["run", w.log, "--out", out], out)
+
+
+@fault(0)
+def staging_of_another_host(w: World) -> Case:
+    """staging leftovers of another host (a shared file system): left alone, the run goes on"""
+    out = w.tmp / "out"
+    other = w.tmp / ".out.partial-deadbeef-1-abcd1234"
+    other.mkdir()
+
+    def after():
+        complete(out)
+        assert other.is_dir()
+
+    return Case(["run", w.log, "--out", out], after=after)
+
+
+@fault(0)
+def umask(w: World) -> Case:
+    """output directories and files (and `--mcap-out`) get the permissions the umask gives (umask
+    027: directories 750, files 640)"""
+    out, mc = w.tmp / "out", w.tmp / "res.mcap"
+    old = os.umask(0o027)
+    w.cleanup.append(lambda: os.umask(old))
+
+    def after():
+        assert (out.stat().st_mode & 0o777, (out / "summary.json").stat().st_mode & 0o777) == (0o750, 0o640)
+        assert mc.stat().st_mode & 0o777 == 0o640
+
+    return Case(["run", w.log, "--out", out, "--mcap-out", mc], after=after)
+
+
+# 4. the environment
+@fault(2, "cannot write", "read-only file system")
+def read_only_file_system(w: World) -> Case:
+    """`--out` on a read-only file system (EROFS): refused before any work, naming the path"""
+    ro = w.tmp / "ro"
+    ro.mkdir()
+    fail_writes_under(w.mp, ro, errno.EROFS)
+    return Case(["run", w.log, "--out", ro / "out"], ro / "out")
+
+
+@fault(2, "cannot write", "permission denied")
+def permission_denied(w: World) -> Case:
+    """`--out` in a directory without write permission (EACCES): refused before any work"""
+    locked = w.tmp / "locked"
+    locked.mkdir()
+    fail_writes_under(w.mp, locked, errno.EACCES)
+    return Case(["compare", w.log, "--assoc", "icnn", "--out", locked / "cmp"], locked / "cmp")
+
+
+@fault(2, "cannot write", "no space left on device", "free some space")
+def disk_full(w: World) -> Case:
+    """disk full (ENOSPC) or over quota (EDQUOT) while a run writes: exit 2 naming the output, the
+    staged directory removed, the previous output kept"""
+    from cornerslam_cli.report.tables import CsvTable
+
+    out = previous_output(w.tmp / "out")
+    real_row, rows = CsvTable.row, []
+
+    def row(self, *values):
+        rows.append(1)
+        if len(rows) > 30:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        real_row(self, *values)
+
+    w.mp.setattr(CsvTable, "row", row)
+    return Case(["run", w.log, "--out", out], out)
+
+
+@fault(2, "is a mount point", "give a new directory inside it")
+def out_is_a_mount_point(w: World) -> Case:
+    """`--out` a mount point (a container volume): refused before any work, asking for a directory
+    inside it"""
+    vol = w.tmp / "vol"
+    vol.mkdir()
+    real = os.path.ismount
+    w.mp.setattr(os.path, "ismount", lambda p: Path(p).resolve() == vol.resolve() or real(p))
+    return Case(["run", w.log, "--out", vol], vol)
+
+
+@fault(2, "cannot write", "busy (a mount point?)")
+def rename_busy(w: World) -> Case:
+    """the commit's rename fails with EBUSY (a bind mount `ismount` does not see): exit 2, the
+    previous output kept, nothing staged left"""
+    out = previous_output(w.tmp / "out")
+    real = os.rename
+
+    def rename(src, dst, *args, **kwargs):
+        if out.resolve() in (Path(src).resolve(), Path(dst).resolve()):
+            raise OSError(errno.EBUSY, os.strerror(errno.EBUSY), os.fsdecode(src))
+        return real(src, dst, *args, **kwargs)
+
+    w.mp.setattr(os, "rename", rename)
+    return Case(["run", w.log, "--out", out], out)
+
+
+@fault(0)
+def name_of_240_bytes(w: World) -> Case:
+    """a legal 240-byte `--out` name (its staging name would pass 255 bytes): written, the staging
+    name shortened"""
+    out = w.tmp / ("r" * 240)
+    return Case(["run", w.log, "--out", out], after=lambda: complete(out))
+
+
+@fault(2, "name too long")
+def name_over_255_bytes(w: World) -> Case:
+    """an `--out` name over 255 bytes: refused before any work"""
+    out = w.tmp / ("r" * 256)
+    return Case(["run", w.log, "--out", out], out)
+
+
+@fault(2, "cannot write", "permission denied")
+def mcap_out_unwritable(w: World) -> Case:
+    """`--mcap-out` in an unwritable directory: refused before any work, naming it"""
+    locked = w.tmp / "locked"
+    locked.mkdir()
+    fail_writes_under(w.mp, locked, errno.EACCES)
+    return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", locked / "r.mcap"], locked / "r.mcap")
+
+
+@fault(2, "is an input of this run")
+def mcap_out_is_the_log(w: World) -> Case:
+    """`--mcap-out` naming the input log: refused"""
+    return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", w.log], w.log)
+
+
+@fault(2, "is a directory")
+def mcap_out_is_a_directory(w: World) -> Case:
+    """`--mcap-out` an existing directory: refused"""
+    return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", w.log.parent], w.log.parent)
+
+
+@fault(0)
+def mcap_out_inside_out(w: World) -> Case:
+    """`--mcap-out` inside `--out`: written in the staging directory, committed with it"""
+    out = w.tmp / "out"
+
+    def after():
+        complete(out)
+        assert (out / "sub" / "r.mcap").read_bytes()[:8] == b"\x89MCAP0\r\n"
+
+    return Case(["run", w.log, "--out", out, "--mcap-out", out / "sub" / "r.mcap"], after=after)
+
+
+@fault(2, "is a file of the run itself")
+def mcap_out_is_a_file_of_the_run(w: World) -> Case:
+    """`--mcap-out OUT/summary.json` (a file the run writes itself): refused, nothing written"""
+    mc = w.tmp / "out" / "summary.json"
+    return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", mc], mc)
+
+
+# 7. numbers on the command line; 13. --config that is not a regular file
+@fault(2, "--seed must be >= 0")
+def simulate_seed_negative(w: World) -> Case:
+    """`simulate --seed -1`: usage error"""
+    return Case(["simulate", w.tmp / "s.mcap", "--seed", "-1"])
+
+
+@fault(2, "--rate must be in [0.1, 1000.0], got nan")
+def simulate_out_of_range(w: World) -> Case:
+    """`simulate` --laps < 1, --rate / --speed ≤ 0 or NaN, --beams < 2, or a log too large to build:
+    usage error naming the option"""
+    return Case(["simulate", w.tmp / "s.mcap", "--rate", "nan"])
+
+
+@fault(2, "is not a finite number")
+def time_offset_not_finite(w: World) -> Case:
+    """`--time-offset nan` / `inf` (run, compare, evaluate): usage error"""
+    return Case(["run", w.log, "--out", w.tmp / "out", "--time-offset", "nan"])
+
+
+@fault(2, "--step", "x>=0")
+def extract_step_negative(w: World) -> Case:
+    """`extract --step -1`: usage error"""
+    return Case(["extract", w.log, "--step", "-1"])
+
+
+@fault(0)
+def config_dev_null(w: World) -> Case:
+    """`--config /dev/null` (or an empty file): no overrides; a pipe `--config <(...)` is read once"""
+    from cornerslam_cli.lasers import resolve_config
+
+    out = w.tmp / "out"
+    expect = resolve_config(w.log, None, []).to_dict()
+
+    def after():
+        assert summary(out)["config"] == expect
+
+    return Case(["run", w.log, "--out", out, "--config", os.devnull], after=after)
+
+
+# ---------------------------------------------------------------------------- the table's test
+@pytest.fixture(scope="module")
+def valid_log(tmp_path_factory) -> Path:
+    """The fault corpus's valid log: 40 scans of a robot circling a box (a run takes ~0.4 s)."""
+    return write_mcap(tmp_path_factory.mktemp("valid") / "x.mcap", make_scans(), make_odoms())
+
+
+def snapshot(d: Path) -> dict[str, bytes | None]:
+    """Every entry under ``d`` (hidden ones too) with its bytes; None for a directory."""
+    return {str(p.relative_to(d)): None if p.is_dir() else p.read_bytes() for p in sorted(d.rglob("*"))}
+
+
+def leftovers(d: Path) -> list[str]:
+    """Staging directories, replaced directories and lock files of this host under ``d``."""
+    return [
+        p.name
+        for p in d.rglob(".*")
+        if p.name.endswith(".lock") or any(f".{what}-{HOST}-" in p.name for what in ("partial", "old"))
+    ]
+
+
+def invoke(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
+
+
+@pytest.mark.parametrize("name", list(OUTPUT_FAULTS))
+def test_output_fault(name, tmp_path, monkeypatch, valid_log):
+    exp, setup = OUTPUT_FAULTS[name]
+    (tmp_path / "logs").mkdir()
+    world = World(tmp_path, Path(shutil.copy(valid_log, tmp_path / "logs" / "x.mcap")), monkeypatch)
+    try:
+        case = setup(world)
+        before = snapshot(tmp_path)
+        res = invoke(*case.args, "-q")
+    finally:
+        monkeypatch.undo()
+        for undo in world.cleanup:
+            undo()
+    assert "Traceback" not in res.output and "internal error" not in res.output, res.output
+    assert res.exit_code == exp.exit_code, res.output
+    if exp.exit_code == 0:
+        if case.after is not None:
+            case.after()
+        assert leftovers(tmp_path) == []
+    else:
+        last = res.stderr.strip().splitlines()[-1]
+        if exp.exit_code == 2:
+            assert last.startswith(("error:", "Error:")), res.stderr  # ours, or click's usage error
+        for fragment in (*exp.message, *([str(case.named)] if case.named else [])):
+            assert fragment in last, (fragment, last)
+        assert snapshot(tmp_path) == before  # nothing touched, nothing left behind
+
+
+def test_a_kill_between_the_two_renames_puts_the_previous_output_back(tmp_path):
+    """A commit killed after moving the previous output aside (``.NAME.old-…``) and before renaming
+    the new one into place: the next run's clean-up renames it back, so it is never lost."""
+    aside = previous_output(tmp_path / f".out.old-{HOST}-{dead_pid()}-abcd1234")
+    before = snapshot(aside)
+    clear_stale(tmp_path / "out")
+    assert snapshot(tmp_path / "out") == before and not aside.exists()
+
+
+# ---------------------------------------------------------------------------- real processes
+def staging(out: Path) -> list[Path]:
+    return [p for p in out.parent.iterdir() if p.name.startswith(f".{out.name}.partial-")]
+
+
+def wait_for(condition: Callable[[], bool], proc: subprocess.Popen, what: str, timeout: float = 30) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert proc.poll() is None, f"the process ended before {what}: {proc.communicate()}"
+        assert time.monotonic() < deadline, f"timed out waiting for {what}"
+        time.sleep(0.005)
+
+
+def test_a_second_run_into_the_same_out_is_refused_and_a_killed_runs_staging_is_cleared(
+    sim_log, valid_log, tmp_path
+):
+    """Run A (a real process) is writing ``out``: run B into the same ``out`` is refused at once
+    naming A's pid. A is SIGKILLed: its staging directory stays (nothing can run on SIGKILL); the next
+    run into ``out`` removes it and commits."""
+    out = tmp_path / "out"
+    a = subprocess.Popen([*CMD, "run", str(sim_log), "--out", str(out), "-q"], stderr=subprocess.PIPE)
+    try:
+        wait_for(lambda: bool(staging(out)), a, "run A's staging directory")
+        res = invoke("run", valid_log, "--out", out)
+        assert res.exit_code == 2 and f"another cornerslam process (pid {a.pid}) is writing" in res.stderr
+        assert a.poll() is None, "run A finished too soon: the check raced nothing"
+    finally:
+        a.kill()
+        a.communicate()
+    assert len(staging(out)) == 1 and not out.exists()
+    assert invoke("run", valid_log, "--out", out, "-q").exit_code == 0
+    complete(out)
+    assert staging(out) == [] and leftovers(tmp_path) == []
+
+
+def test_the_commit_waits_for_the_lock_of_its_target(tmp_path):
+    """A commit holds the target's lock across its renames: one that finds it held waits (here in a
+    thread, against a lock held by the test), then commits; a second StagedDir for a target being
+    staged in a live process is refused."""
+    target = tmp_path / "out"
+    with StagedDir(target) as st:
+        (st.path / "a.csv").write_text("x\n")
+        with pytest.raises(OutputError, match=f"pid {os.getpid()}"):
+            StagedDir(target)
+        with target_lock(target):
+            t = threading.Thread(target=st.commit)
+            t.start()
+            t.join(0.3)
+            assert t.is_alive() and not target.exists()  # waiting for the lock
+        t.join(10)
+    assert sorted(p.name for p in target.iterdir()) == [MARKER, "a.csv"]
+    assert leftovers(tmp_path) == []
+
+
+def test_a_closed_stdout_is_no_internal_error(valid_log, tmp_path):
+    """`cornerslam info LOG | head -1`, `cornerslam run LOG | true`: stdout closed before the first
+    line. Exit 141 (as a Unix tool killed by SIGPIPE), nothing on stderr about it, and the run's
+    output directory is committed (the summary is printed after the commit)."""
+    out = tmp_path / "out"
+    procs = [
+        subprocess.Popen([*CMD, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        for args in (["info", str(valid_log)], ["run", str(valid_log), "--out", str(out)])
+    ]
+    for p in procs:
+        p.stdout.close()  # the reader is gone before the process writes anything
+    for p in procs:
+        err = p.stderr.read()
+        assert p.wait(timeout=60) == 141, err
+        assert "Traceback" not in err and "internal error" not in err and "Exception ignored" not in err, err
+    complete(out)
+
+
+def test_sigterm_while_drawing_figures_keeps_the_previous_output(valid_log, tmp_path):
+    """The reported failure: SIGTERM after the tables, while ``--plot`` draws. The figures are
+    drawn in the staging directory, so the previous output is still complete and untouched."""
+    out = previous_output(tmp_path / "out")
+    before = snapshot(out)
+    proc = subprocess.Popen(
+        [*CMD, "run", str(valid_log), "--out", str(out), "--plot", "-q"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    wait_for(lambda: any((s / "map.png").exists() for s in staging(out)), proc, "the first figure")
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 143, err
+    assert err.strip().splitlines()[-1] == f"terminated: {KEPT}"
+    assert snapshot(out) == before and staging(out) == []
+
+
+def test_config_from_a_pipe_is_read_once(valid_log, tmp_path):
+    """`--config <(...)` is a pipe: it gives its text once, and ``batch`` loads the config once for
+    the command and again for each combination. The CLI reads it once into a copy, so the override
+    reaches the combination's run."""
+    r, w = os.pipe()
+    os.write(w, b"keyframes:\n  linear_update: 0.25\n")
+    os.close(w)
+    out = tmp_path / "batch"
+    try:
+        res = invoke("batch", valid_log, "--out", out, "-q", "--jobs", "1", "--config", f"/dev/fd/{r}")
+    finally:
+        os.close(r)
+    assert res.exit_code == 0, res.output
+    assert summary(out / "x__pca")["config"]["keyframes"]["linear_update"] == 0.25
+
+
+def main() -> None:
+    """The table for docs/results/reliability.md."""
+    for name, (exp, _) in OUTPUT_FAULTS.items():
+        print(f"| {name} | {exp.behaviour} | exit {exp.exit_code} |")
+
+
+if __name__ == "__main__":
+    main()
