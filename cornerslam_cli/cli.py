@@ -331,6 +331,7 @@ def run(
             time_offset=time_offset,
             plot=plot,
             mcap_out=mcap_out,
+            config_path=config_path,
         )
     finally:
         progress.close()

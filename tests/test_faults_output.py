@@ -469,6 +469,41 @@ def mcap_out_is_a_file_of_the_run(w: World) -> Case:
     return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", mc], mc)
 
 
+@fault(2, "is an input of this run")
+def mcap_out_is_the_default_ground_truth(w: World) -> Case:
+    """`--mcap-out LOG.gt.tum`, the ground truth a run finds beside its log without `--ground-truth`:
+    refused (it is an input), the file kept"""
+    gt = w.log.with_suffix(".gt.tum")
+    gt.write_text("0 0 0 0 0 0 0 1\n")
+    return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", gt], gt)
+
+
+@fault(2, "is an input of this run")
+def mcap_out_is_the_config(w: World) -> Case:
+    """`--mcap-out` naming the `--config` file: refused, the file kept"""
+    cfg = w.tmp / "c.yaml"
+    cfg.write_text("ekf: {}\n")
+    return Case(["run", w.log, "--config", cfg, "--out", w.tmp / "out", "--mcap-out", cfg], cfg)
+
+
+@fault(2, "is not a regular file", "give the name of a file to write")
+def mcap_out_is_a_pipe_or_device(w: World) -> Case:
+    """`--mcap-out` an existing FIFO or device (`/dev/null`): refused (renaming a file onto it would
+    replace the node), before any work"""
+    fifo = w.tmp / "fifo.mcap"
+    os.mkfifo(fifo)
+    return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", fifo], fifo)
+
+
+@fault(2, "is not a regular file")
+def simulate_into_a_pipe(w: World) -> Case:
+    """`simulate OUT.mcap` where OUT.mcap (or OUT.gt.tum, OUT.corners.csv) is a FIFO or a device:
+    refused (writing a FIFO nobody reads hangs)"""
+    fifo = w.tmp / "s.gt.tum"
+    os.mkfifo(fifo)
+    return Case(["simulate", w.tmp / "s.mcap", "--beams", "11", "--rate", "1"], fifo)
+
+
 # 7. numbers on the command line; 13. --config that is not a regular file
 @fault(2, "--seed must be >= 0")
 def simulate_seed_negative(w: World) -> Case:
@@ -517,8 +552,12 @@ def valid_log(tmp_path_factory) -> Path:
 
 
 def snapshot(d: Path) -> dict[str, bytes | None]:
-    """Every entry under ``d`` (hidden ones too) with its bytes; None for a directory."""
-    return {str(p.relative_to(d)): None if p.is_dir() else p.read_bytes() for p in sorted(d.rglob("*"))}
+    """Every entry under ``d`` (hidden ones too) with its bytes; None for a directory, the mode for
+    a FIFO or device (reading one would block)."""
+    return {
+        str(p.relative_to(d)): None if p.is_dir() else p.read_bytes() if p.is_file() else p.lstat().st_mode
+        for p in sorted(d.rglob("*"))
+    }
 
 
 def leftovers(d: Path) -> list[str]:

@@ -212,6 +212,16 @@ def check_replaceable(
         )
 
 
+def refuse_special_file(path: Path, shown: str | Path) -> None:
+    """Refuse (OutputError) to write the file ``path`` over a device, a pipe or a socket: writing one
+    hangs or goes nowhere, and renaming a file onto it would replace the node (``/dev/null``)."""
+    if os.path.exists(path) and not (path.is_file() or path.is_dir()):
+        raise OutputError(
+            f"'{shown}' is not a regular file (a device, pipe or socket)",
+            "give the name of a file to write",
+        )
+
+
 def check_claimable(path: str | Path, kind: str) -> Path:
     """Refuse (OutputError) a ``path`` that :func:`claim_dir` would refuse, creating nothing;
     returns it resolved."""
@@ -454,6 +464,7 @@ class StagedDir:
                 raise OutputError(f"'{shown}' is an input of this run", "give another file name")
             if final.is_dir():
                 raise OutputError(f"'{shown}' is a directory", "give a file name")
+            refuse_special_file(final, shown)
             final.parent.mkdir(parents=True, exist_ok=True)
             clear_stale(final)
             staged = staged_file(final)
