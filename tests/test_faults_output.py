@@ -164,6 +164,17 @@ def out_holds_user_files_beside_our_output(w: World) -> Case:
     return Case(["run", w.log, "--out", out], out)
 
 
+@fault(2, "holds 'sub/notes.txt', which cornerslam did not write")
+def out_holds_user_files_in_a_subdirectory_of_our_output(w: World) -> Case:
+    """a cornerslam output whose subdirectory (made by `--mcap-out OUT/sub/r.mcap`) holds a file it
+    did not write: refused, naming it (the marker lists the entries of plain subdirectories too)"""
+    out = w.tmp / "out"
+    res = invoke("run", w.log, "--out", out, "--mcap-out", out / "sub" / "r.mcap", "-q")
+    assert res.exit_code == 0, res.output
+    (out / "sub" / "notes.txt").write_text("keep me\n")
+    return Case(["run", w.log, "--out", out], out)
+
+
 @fault(2, "holds the input")
 def out_holds_the_log_inside_our_output(w: World) -> Case:
     """a cornerslam output that holds the run's own log: refused"""
