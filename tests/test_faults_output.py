@@ -693,6 +693,16 @@ def test_a_closed_stdout_is_no_internal_error(valid_log, tmp_path):
     complete(out)
 
 
+def test_a_closed_stderr_is_no_internal_error(valid_log, tmp_path):
+    """`cornerslam run LOG 2>&-` (stderr closed, as some daemons start a job): the run completes
+    (exit 0, output committed), and a bad input is still exit 2 (it crashed on the progress line)."""
+    out = tmp_path / "out"
+    for args, code in ((["run", valid_log, "--out", out], 0), (["run", tmp_path / "none.mcap"], 2)):
+        line = " ".join(f"'{a}'" for a in [*CMD, *map(str, args)]) + " 2>&-"
+        assert subprocess.run(["sh", "-c", line], timeout=60).returncode == code, line
+    complete(out)
+
+
 def test_sigterm_while_drawing_figures_keeps_the_previous_output(valid_log, tmp_path):
     """The reported failure: SIGTERM after the tables, while ``--plot`` draws. The figures are
     drawn in the staging directory, so the previous output is still complete and untouched."""
