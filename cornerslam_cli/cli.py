@@ -233,6 +233,8 @@ class _Cli(click.Group):
     does (the output directory of a finished run is already committed)."""
 
     def invoke(self, ctx: click.Context):
+        if sys.stderr is None:  # started with stderr closed (`2>&-`): messages go nowhere, not into a crash
+            sys.stderr = open(os.devnull, "w")  # noqa: SIM115  # open until the process ends
         main_thread = threading.current_thread() is threading.main_thread()
         previous = signal.signal(signal.SIGTERM, _on_sigterm) if main_thread else None
         try:
@@ -331,6 +333,7 @@ def run(
             time_offset=time_offset,
             plot=plot,
             mcap_out=mcap_out,
+            config_path=config_path,
         )
     finally:
         progress.close()

@@ -309,16 +309,20 @@ def run(
     time_offset: float = 0.0,
     plot: bool = False,
     mcap_out: str | Path | None = None,
+    config_path: str | Path | None = None,
 ) -> dict:
     """Run corner EKF-SLAM on one log and write the output directory atomically: the tables, with
     ``plot`` the figures and report.html, and ``mcap_out`` beside it, all committed at once.
 
-    The output places are checked before any work (report/outdir.py). Returns the summary (also
-    written to summary.json) with ``out_dir``, the committed directory.
+    The output places are checked before any work (report/outdir.py); the run's inputs — the log,
+    the ground truth (also LOG.gt.tum found beside the log), the relations, the config file
+    ``config_path`` — are never written over. Returns the summary (also written to summary.json)
+    with ``out_dir``, the committed directory.
     """
     wall0 = time.perf_counter()
     out_dir = Path(out) if out else default_out_dir(Path(log_path), cfg.association.method)
-    inputs = [p for p in (log_path, ground_truth, relations) if p]
+    gt = ground_truth or find_ground_truth(Path(log_path))
+    inputs = [p for p in (log_path, gt, relations, config_path) if p]
     with StagedDir(out_dir, "run", inputs) as stage:
         mcap_path = stage.stage_file(mcap_out) if mcap_out else None
         ref = load_reference(Path(log_path), ground_truth, relations, time_offset)  # bad files fail first

@@ -125,6 +125,18 @@ def test_run_and_compare_a_log_whose_name_is_not_utf8(latin1_log, tmp_path):
     assert strict_json(tmp_path / "c" / "pca" / "summary.json")["counts"]["steps"] == N
 
 
+def test_mcap_out_into_a_directory_whose_name_is_not_utf8(latin1_log, tmp_path):
+    """The results MCAP's metadata names the output directory: UTF-8 with U+FFFD (it crashed)."""
+    from mcap.reader import make_reader
+
+    out = Path(os.fsdecode(os.path.join(os.fsencode(tmp_path), b"o\xe9")))
+    res = invoke("run", latin1_log, "--out", out, "--mcap-out", out / "r.mcap", "-q")
+    assert res.exit_code == 0, res.output
+    with open(out / "r.mcap", "rb") as f:
+        meta = next(m for m in make_reader(f).iter_metadata() if m.name == "cornerslam")
+    assert meta.metadata["results"].endswith("o\ufffd") and meta.metadata["log"].endswith("log\ufffd.mcap")
+
+
 def test_info_batch_and_errors_with_a_name_that_is_not_utf8(latin1_log, tmp_path, monkeypatch):
     res = invoke("info", latin1_log)
     assert res.exit_code == 0 and "log\ufffd.mcap" in res.output and "/scan" in res.output, res.output

@@ -164,6 +164,17 @@ def out_holds_user_files_beside_our_output(w: World) -> Case:
     return Case(["run", w.log, "--out", out], out)
 
 
+@fault(2, "holds 'sub/notes.txt', which cornerslam did not write")
+def out_holds_user_files_in_a_subdirectory_of_our_output(w: World) -> Case:
+    """a cornerslam output whose subdirectory (made by `--mcap-out OUT/sub/r.mcap`) holds a file it
+    did not write: refused, naming it (the marker lists the entries of plain subdirectories too)"""
+    out = w.tmp / "out"
+    res = invoke("run", w.log, "--out", out, "--mcap-out", out / "sub" / "r.mcap", "-q")
+    assert res.exit_code == 0, res.output
+    (out / "sub" / "notes.txt").write_text("keep me\n")
+    return Case(["run", w.log, "--out", out], out)
+
+
 @fault(2, "holds the input")
 def out_holds_the_log_inside_our_output(w: World) -> Case:
     """a cornerslam output that holds the run's own log: refused"""
@@ -469,6 +480,41 @@ def mcap_out_is_a_file_of_the_run(w: World) -> Case:
     return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", mc], mc)
 
 
+@fault(2, "is an input of this run")
+def mcap_out_is_the_default_ground_truth(w: World) -> Case:
+    """`--mcap-out LOG.gt.tum`, the ground truth a run finds beside its log without `--ground-truth`:
+    refused (it is an input), the file kept"""
+    gt = w.log.with_suffix(".gt.tum")
+    gt.write_text("0 0 0 0 0 0 0 1\n")
+    return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", gt], gt)
+
+
+@fault(2, "is an input of this run")
+def mcap_out_is_the_config(w: World) -> Case:
+    """`--mcap-out` naming the `--config` file: refused, the file kept"""
+    cfg = w.tmp / "c.yaml"
+    cfg.write_text("ekf: {}\n")
+    return Case(["run", w.log, "--config", cfg, "--out", w.tmp / "out", "--mcap-out", cfg], cfg)
+
+
+@fault(2, "is not a regular file", "give the name of a file to write")
+def mcap_out_is_a_pipe_or_device(w: World) -> Case:
+    """`--mcap-out` an existing FIFO or device (`/dev/null`): refused (renaming a file onto it would
+    replace the node), before any work"""
+    fifo = w.tmp / "fifo.mcap"
+    os.mkfifo(fifo)
+    return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", fifo], fifo)
+
+
+@fault(2, "is not a regular file")
+def simulate_into_a_pipe(w: World) -> Case:
+    """`simulate OUT.mcap` where OUT.mcap (or OUT.gt.tum, OUT.corners.csv) is a FIFO or a device:
+    refused (writing a FIFO nobody reads hangs)"""
+    fifo = w.tmp / "s.gt.tum"
+    os.mkfifo(fifo)
+    return Case(["simulate", w.tmp / "s.mcap", "--beams", "11", "--rate", "1"], fifo)
+
+
 # 7. numbers on the command line; 13. --config that is not a regular file
 @fault(2, "--seed must be >= 0")
 def simulate_seed_negative(w: World) -> Case:
@@ -517,8 +563,12 @@ def valid_log(tmp_path_factory) -> Path:
 
 
 def snapshot(d: Path) -> dict[str, bytes | None]:
-    """Every entry under ``d`` (hidden ones too) with its bytes; None for a directory."""
-    return {str(p.relative_to(d)): None if p.is_dir() else p.read_bytes() for p in sorted(d.rglob("*"))}
+    """Every entry under ``d`` (hidden ones too) with its bytes; None for a directory, the mode for
+    a FIFO or device (reading one would block)."""
+    return {
+        str(p.relative_to(d)): None if p.is_dir() else p.read_bytes() if p.is_file() else p.lstat().st_mode
+        for p in sorted(d.rglob("*"))
+    }
 
 
 def leftovers(d: Path) -> list[str]:
@@ -640,6 +690,16 @@ def test_a_closed_stdout_is_no_internal_error(valid_log, tmp_path):
         err = p.stderr.read()
         assert p.wait(timeout=60) == 141, err
         assert "Traceback" not in err and "internal error" not in err and "Exception ignored" not in err, err
+    complete(out)
+
+
+def test_a_closed_stderr_is_no_internal_error(valid_log, tmp_path):
+    """`cornerslam run LOG 2>&-` (stderr closed, as some daemons start a job): the run completes
+    (exit 0, output committed), and a bad input is still exit 2 (it crashed on the progress line)."""
+    out = tmp_path / "out"
+    for args, code in ((["run", valid_log, "--out", out], 0), (["run", tmp_path / "none.mcap"], 2)):
+        line = " ".join(f"'{a}'" for a in [*CMD, *map(str, args)]) + " 2>&-"
+        assert subprocess.run(["sh", "-c", line], timeout=60).returncode == code, line
     complete(out)
 
 

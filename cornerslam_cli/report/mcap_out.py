@@ -46,6 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import display_path
 from .plots import ELLIPSE_SIGMA, ellipse_polygons, load_run
 from .tables import json_text
 
@@ -278,7 +279,7 @@ def write_results_mcap(out_dir: Path, path: Path, results: Path | None = None) -
                 "log": str(run.summary.get("input", {}).get("log", "")),
                 "assoc": run.assoc,
                 "version": str(run.summary.get("cornerslam_version", "")),
-                "results": str(out_dir if results is None else results),
+                "results": display_path(out_dir if results is None else results),  # MCAP strings are UTF-8
             },
         )
         w.finish()
