@@ -226,6 +226,18 @@ def _stdout_gone() -> None:
         pass
 
 
+def _stdout_write_failed(exc: BaseException) -> bool:
+    """Whether ``exc`` (an OSError) was raised writing to standard output (click.echo without
+    ``err``): stdout on a full disk (`> /dev/full`) or a failing device is the environment, not a bug."""
+    tb = exc.__traceback__
+    while tb is not None:
+        frame = tb.tb_frame
+        if frame.f_code.co_name == "echo" and frame.f_globals.get("__name__") == "click.utils":
+            return not frame.f_locals.get("err", False)
+        tb = tb.tb_next
+    return False
+
+
 class _Cli(click.Group):
     """The one error boundary: a CornerslamError becomes one line and exit 2; a bug exits 1 with its
     traceback saved to a file; Ctrl-C exits 130, SIGTERM 143 (the staged output directory is
@@ -260,6 +272,13 @@ class _Cli(click.Group):
             _stdout_gone()
             ctx.exit(141)
         except Exception as exc:
+            if isinstance(exc, OSError) and _stdout_write_failed(exc):
+                _stdout_gone()
+                reason = os.strerror(exc.errno) if exc.errno else str(exc)
+                click.echo(
+                    f"error: cannot write to standard output: {reason} (redirect it elsewhere)", err=True
+                )
+                ctx.exit(2)
             fd, path = tempfile.mkstemp(prefix="cornerslam-crash-", suffix=".txt")
             with os.fdopen(fd, "w") as f:
                 traceback.print_exc(file=f)

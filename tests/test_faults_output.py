@@ -703,6 +703,21 @@ def test_a_closed_stderr_is_no_internal_error(valid_log, tmp_path):
     complete(out)
 
 
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs /dev/full")
+def test_stdout_on_a_full_disk_is_exit_2(valid_log, tmp_path):
+    """`cornerslam info LOG > /dev/full`: writing stdout fails with ENOSPC. Exit 2 with one line
+    saying so, no internal error; a run's output directory is still committed."""
+    out = tmp_path / "out"
+    for args in (["info", str(valid_log)], ["run", str(valid_log), "--out", str(out)]):
+        with open("/dev/full", "w") as full:
+            res = subprocess.run([*CMD, *args], stdout=full, stderr=subprocess.PIPE, text=True, timeout=60)
+        assert res.returncode == 2, res.stderr
+        lines = res.stderr.strip().splitlines()
+        assert lines[-1].startswith("error: cannot write to standard output: No space left"), res.stderr
+        assert "Traceback" not in res.stderr and "Exception ignored" not in res.stderr, res.stderr
+    complete(out)
+
+
 def test_sigterm_while_drawing_figures_keeps_the_previous_output(valid_log, tmp_path):
     """The reported failure: SIGTERM after the tables, while ``--plot`` draws. The figures are
     drawn in the staging directory, so the previous output is still complete and untouched."""
