@@ -229,6 +229,35 @@ def out_is_an_output_of_an_older_version(w: World) -> Case:
     return Case(["run", w.log, "--out", out], after=lambda: complete(out))
 
 
+def older_version_output(d: Path, *extra: str) -> Path:
+    """A run output written before the marker (0.1.0: summary.json says cornerslam_version), plus
+    the ``extra`` files a user put there."""
+    d.mkdir(parents=True)
+    (d / "summary.json").write_text('{\n  "cornerslam_version": "0.1.0"\n}\n')
+    for name in ("map.csv", "trajectory.tum", *extra):
+        (d / name).write_text("x\n")
+    return d
+
+
+@fault(2, "holds 'thesis.tex'", "which cornerslam did not write")
+def out_is_an_older_versions_output_holding_user_files(w: World) -> Case:
+    """`--out` an unmarked output of an older version to which the user added a file: refused,
+    nothing touched (only the files such a version wrote may be replaced)"""
+    out = older_version_output(w.tmp / "old", "thesis.tex")
+    return Case(["run", w.log, "--out", out], out)
+
+
+@fault(2, "holds 'pca/notes.txt'", "which cornerslam did not write")
+def compare_into_an_older_versions_compare_holding_user_files(w: World) -> Case:
+    """`compare --out` an unmarked compare output of an older version with a user file in one of
+    its run directories: refused, nothing touched"""
+    out = w.tmp / "oldcmp"
+    out.mkdir()
+    (out / "comparison.csv").write_text("assoc,steps,landmarks,matched_total\n")
+    older_version_output(out / "pca", "notes.txt")
+    return Case(["compare", w.log, "--assoc", "pca", "--out", out], out)
+
+
 @fault(2, "is not empty and was not written by cornerslam")
 def compare_into_a_foreign_directory(w: World) -> Case:
     """`compare --out` a directory that is not a cornerslam compare output: refused before

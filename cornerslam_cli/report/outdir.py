@@ -147,12 +147,26 @@ def _entries(path: Path, prefix: str = "") -> Iterator[tuple[str, Path]]:
             yield from _entries(entry, rel + "/")
 
 
+# what a run or compare directory held before the marker existed (version 0.1.0 and earlier)
+_LEGACY_RUN_FILES = frozenset(
+    "trajectory.tum trajectory.csv map.csv lines.csv timing.csv summary.json report.html "
+    "map.png segments.png timing.png corners.png".split()
+)
+_LEGACY_COMPARE_FILES = frozenset(
+    "comparison.csv report.html compare_matching.png compare_maps.png compare_timing.png".split()
+)
+
+
 def foreign_entries(path: Path) -> list[str]:
-    """Entries of a marked output directory that its marker does not list (also inside its plain
-    subdirectories, e.g. one made by ``--mcap-out OUT/sub/r.mcap``, and inside subdirectories that
-    carry their own marker), as relative paths; the contents of a foreign directory are not listed."""
+    """Entries of an output directory that cornerslam did not write, as relative paths: those its
+    marker does not list (also inside its plain subdirectories, e.g. one made by ``--mcap-out
+    OUT/sub/r.mcap``, and inside subdirectories that carry their own marker); for an output of a
+    version before the marker, every entry but the files such a version wrote. The contents of a
+    foreign directory are not listed."""
     marker = read_marker(path)
-    if marker is None or "files" not in marker:
+    if marker is None:
+        return _foreign_legacy(path, output_kind(path))
+    if "files" not in marker:
         return []
     listed = set(marker["files"])
     out: list[str] = []
@@ -163,6 +177,24 @@ def foreign_entries(path: Path) -> list[str]:
             out.append(rel)
         elif entry.is_dir() and not entry.is_symlink() and read_marker(entry) is not None:
             out += [f"{rel}/{sub}" for sub in foreign_entries(entry)]
+    return out
+
+
+def _foreign_legacy(path: Path, kind: str | None) -> list[str]:
+    """Entries of an unmarked run or compare directory that such a version did not write (a
+    compare's run directories are checked as runs); a batch directory is checked row by row."""
+    if kind not in ("run", "compare"):
+        return []
+    own = _LEGACY_RUN_FILES if kind == "run" else _LEGACY_COMPARE_FILES
+    out: list[str] = []
+    for entry in sorted(path.iterdir()):
+        if entry.name in own and entry.is_file() and not entry.is_symlink():
+            continue
+        run_dir = kind == "compare" and entry.is_dir() and not entry.is_symlink()
+        if run_dir and output_kind(entry) == "run":
+            out += [f"{entry.name}/{sub}" for sub in foreign_entries(entry)]
+        else:
+            out.append(entry.name)
     return out
 
 
