@@ -747,6 +747,57 @@ def test_stdout_on_a_full_disk_is_exit_2(valid_log, tmp_path):
     complete(out)
 
 
+def _children(pid: int) -> list[int]:
+    """Pids of the live (not zombie) child processes of ``pid``, from /proc."""
+    out = []
+    for stat_file in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat_file.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid and fields[0] != "Z":
+            out.append(int(stat_file.parent.name))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc")
+@pytest.mark.parametrize("command", ["batch", "compare"])
+def test_workers_end_with_a_killed_parent(tmp_path, command):
+    """SIGKILL of `batch --jobs 2` / `compare --jobs 2` while its workers run: the workers exit
+    within seconds (they used to finish, commit a row of a dead batch and then wait forever)."""
+    log = write_mcap(tmp_path / "long.mcap", make_scans(600), make_odoms(601))
+    out = tmp_path / "out"
+    args = [command, str(log), "--assoc", "icnn,pca", "--jobs", "2", "--out", str(out), "-q"]
+    proc = subprocess.Popen([*CMD, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    workers: list[int] = []
+    try:
+        wait_for(lambda: len(_children(proc.pid)) >= 2 and staging_anywhere(tmp_path), proc, "the workers")
+        workers = _children(proc.pid)
+        proc.kill()
+        proc.wait(timeout=10)
+        deadline = time.monotonic() + 15
+        while any(_alive(w) for w in workers) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not [w for w in workers if _alive(w)], "workers outlived the killed parent"
+    finally:
+        proc.kill()
+        for w in workers:
+            if _alive(w):
+                os.kill(w, signal.SIGKILL)
+
+
+def staging_anywhere(d: Path) -> bool:
+    """Some run's staging directory exists under ``d`` (a worker is writing)."""
+    return any(".partial-" in p.name for p in d.rglob("*") if p.is_dir())
+
+
 def test_sigterm_while_drawing_figures_keeps_the_previous_output(valid_log, tmp_path):
     """The reported failure: SIGTERM after the tables, while ``--plot`` draws. The figures are
     drawn in the staging directory, so the previous output is still complete and untouched."""

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from ..config import Config
 from ..pipeline import Frame, Input, frames, load_reference, open_input, run_frames
+from ..workers import exit_with_parent
 from .outdir import StagedDir, mark_output
 from .tables import COMPARISON_COLUMNS, CsvTable
 
@@ -88,7 +89,9 @@ def compare(
         try:
             if jobs > 1 and len(assocs) > 1:
                 ctx = multiprocessing.get_context("fork")
-                with ProcessPoolExecutor(max_workers=min(jobs, len(assocs)), mp_context=ctx) as pool:
+                with ProcessPoolExecutor(
+                    max_workers=min(jobs, len(assocs)), mp_context=ctx, initializer=exit_with_parent
+                ) as pool:
                     summaries = list(pool.map(_run_one, assocs, dirs))
             else:
                 summaries = [_run_one(a, d) for a, d in zip(assocs, dirs, strict=True)]
