@@ -328,19 +328,26 @@ def run(
         ref = load_reference(Path(log_path), ground_truth, relations, time_offset)  # bad files fail first
         src = open_input(log_path, cfg)
         summary = run_frames(frames(src, cfg, progress), src, cfg, stage.path, ref, wall0)
-        write_extras(stage, plot, mcap_out, mcap_path)
+        write_extras(stage, plot, mcap_out, mcap_path, ref.gt_path)
         summary["out_dir"] = str(stage.commit())
     return summary
 
 
-def write_extras(stage: StagedDir, plot: bool, mcap_out: str | Path | None, mcap_path: Path | None) -> None:
+def write_extras(
+    stage: StagedDir,
+    plot: bool,
+    mcap_out: str | Path | None,
+    mcap_path: Path | None,
+    ground_truth: Path | None = None,
+) -> None:
     """What a run writes besides its tables, staged before the commit: with ``plot`` the figures and
-    report.html; the results MCAP into ``mcap_path``, the staged place of ``mcap_out``."""
+    report.html; the results MCAP into ``mcap_path``, the staged place of ``mcap_out``. Both draw
+    the ``ground_truth`` file the run was scored against."""
     if plot:
         from .report.html import write_report
         from .report.plots import plot_run
 
-        plot_run(stage.path)
+        plot_run(stage.path, ground_truth)
         write_report(stage.path)
     if mcap_path is not None:
         from .report.mcap_out import write_results_mcap
@@ -348,7 +355,7 @@ def write_extras(stage: StagedDir, plot: bool, mcap_out: str | Path | None, mcap
         if mcap_path.is_relative_to(stage.path) and mcap_path.exists():
             raise OutputError(f"--mcap-out '{mcap_out}' is a file of the run itself", "give another name")
         with output_errors(mcap_out):
-            write_results_mcap(stage.path, mcap_path, results=stage.target)
+            write_results_mcap(stage.path, mcap_path, results=stage.target, ground_truth=ground_truth)
 
 
 @dataclass(frozen=True)

@@ -104,7 +104,7 @@ def compare(
             from .html import write_report
             from .plots import plot_compare
 
-            plot_compare(stage.path)
+            plot_compare(stage.path, ref.gt_path)
             write_report(stage.path)
         for d in dirs:
             mark_output(d, "run")  # each is a complete run output

@@ -226,14 +226,17 @@ def _stamp_texts(path: Path) -> list[str]:
         return [row["stamp"] for row in reader]
 
 
-def write_results_mcap(out_dir: Path, path: Path, results: Path | None = None) -> Path:
+def write_results_mcap(
+    out_dir: Path, path: Path, results: Path | None = None, ground_truth: str | Path | None = None
+) -> Path:
     """Write a run directory's trajectory, landmarks and segment map to ``path`` (MCAP, JSON + Foxglove
     schemas); returns ``path``. See the module docstring for the topics. ``results`` is the name of
-    the run directory recorded in the metadata (default ``out_dir``; a staging directory's target)."""
+    the run directory recorded in the metadata (default ``out_dir``; a staging directory's target);
+    ``ground_truth`` the TUM file the run was scored against (default: the one its summary names)."""
     from mcap.writer import Writer
 
     out_dir, path = Path(out_dir), Path(path)
-    run = load_run(out_dir)
+    run = load_run(out_dir, ground_truth)
     stamps_ns = [stamp_to_ns(t) for t in _stamp_texts(out_dir / "trajectory.csv")]
     ns_of_step = dict(zip(run.steps.astype(int).tolist(), stamps_ns, strict=True))
     odom_raw = read_odom_raw(out_dir)  # odom-frame poses, for the map → odom transform
