@@ -367,8 +367,12 @@ def _run_local(tasks: list[tuple], jobs: int, finished: Callable[[int, dict], No
 
 
 def _init_worker(level: int) -> None:
-    """A spawned worker logs at the parent's level (-q / -v), in the CLI's format."""
+    """A spawned worker logs at the parent's level (-q / -v), in the CLI's format, and ends with the
+    batch (a killed ``cornerslam batch`` leaves no worker running)."""
+    from .workers import exit_with_parent
+
     logging.basicConfig(level=level, format="%(levelname)s: %(message)s")
+    exit_with_parent()
 
 
 def _run_dask(tasks: list[tuple], scheduler: str, finished: Callable[[int, dict], None]) -> None:

@@ -224,6 +224,18 @@ def _stdout_gone() -> None:
         pass
 
 
+def _stdout_write_failed(exc: BaseException) -> bool:
+    """Whether ``exc`` (an OSError) was raised writing to standard output (click.echo without
+    ``err``): stdout on a full disk (`> /dev/full`) or a failing device is the environment, not a bug."""
+    tb = exc.__traceback__
+    while tb is not None:
+        frame = tb.tb_frame
+        if frame.f_code.co_name == "echo" and frame.f_globals.get("__name__") == "click.utils":
+            return not frame.f_locals.get("err", False)
+        tb = tb.tb_next
+    return False
+
+
 class _Cli(click.Group):
     """The one error boundary: a CornerslamError becomes one line and exit 2; a bug exits 1 with its
     traceback saved to a file; Ctrl-C exits 130, SIGTERM 143 (the staged output directory is
@@ -231,6 +243,8 @@ class _Cli(click.Group):
     does (the output directory of a finished run is already committed)."""
 
     def invoke(self, ctx: click.Context):
+        if sys.stderr is None:  # started with stderr closed (`2>&-`): messages go nowhere, not into a crash
+            sys.stderr = open(os.devnull, "w")  # noqa: SIM115  # open until the process ends
         main_thread = threading.current_thread() is threading.main_thread()
         previous = signal.signal(signal.SIGTERM, _on_sigterm) if main_thread else None
         try:
@@ -256,6 +270,13 @@ class _Cli(click.Group):
             _stdout_gone()
             ctx.exit(141)
         except Exception as exc:
+            if isinstance(exc, OSError) and _stdout_write_failed(exc):
+                _stdout_gone()
+                reason = os.strerror(exc.errno) if exc.errno else str(exc)
+                click.echo(
+                    f"error: cannot write to standard output: {reason} (redirect it elsewhere)", err=True
+                )
+                ctx.exit(2)
             fd, path = tempfile.mkstemp(prefix="cornerslam-crash-", suffix=".txt")
             with os.fdopen(fd, "w") as f:
                 traceback.print_exc(file=f)
@@ -329,6 +350,7 @@ def run(
             time_offset=time_offset,
             plot=plot,
             mcap_out=mcap_out,
+            config_path=config_path,
         )
     finally:
         progress.close()

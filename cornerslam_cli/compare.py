@@ -21,6 +21,7 @@ from .config import Config
 from .pipeline import Frame, Input, frames, load_reference, open_input, run_frames
 from .report.comparison import write_comparison
 from .report.outdir import StagedDir, mark_output
+from .workers import exit_with_parent
 
 _SHARED: dict = {}  # what forked workers inherit: frames, input, reference
 
@@ -63,13 +64,15 @@ def compare(
         try:
             if jobs > 1 and len(assocs) > 1:
                 ctx = multiprocessing.get_context("fork")
-                with ProcessPoolExecutor(max_workers=min(jobs, len(assocs)), mp_context=ctx) as pool:
+                with ProcessPoolExecutor(
+                    max_workers=min(jobs, len(assocs)), mp_context=ctx, initializer=exit_with_parent
+                ) as pool:
                     summaries = list(pool.map(_run_one, assocs, dirs))
             else:
                 summaries = [_run_one(a, d) for a, d in zip(assocs, dirs, strict=True)]
         finally:
             _SHARED.clear()
-        write_comparison(stage.path, summaries, plots)
+        write_comparison(stage.path, summaries, plots, ref.gt_path)
         for d in dirs:
             mark_output(d, "run")  # each is a complete run output
         final = stage.commit()

@@ -309,34 +309,45 @@ def run(
     time_offset: float = 0.0,
     plot: bool = False,
     mcap_out: str | Path | None = None,
+    config_path: str | Path | None = None,
 ) -> dict:
     """Run corner EKF-SLAM on one log and write the output directory atomically: the tables, with
     ``plot`` the figures and report.html, and ``mcap_out`` beside it, all committed at once.
 
-    The output places are checked before any work (report/outdir.py). Returns the summary (also
-    written to summary.json) with ``out_dir``, the committed directory.
+    The output places are checked before any work (report/outdir.py); the run's inputs — the log,
+    the ground truth (also LOG.gt.tum found beside the log), the relations, the config file
+    ``config_path`` — are never written over. Returns the summary (also written to summary.json)
+    with ``out_dir``, the committed directory.
     """
     wall0 = time.perf_counter()
     out_dir = Path(out) if out else default_out_dir(Path(log_path), cfg.association.method)
-    inputs = [p for p in (log_path, ground_truth, relations) if p]
+    gt = ground_truth or find_ground_truth(Path(log_path))
+    inputs = [p for p in (log_path, gt, relations, config_path) if p]
     with StagedDir(out_dir, "run", inputs) as stage:
         mcap_path = stage.stage_file(mcap_out) if mcap_out else None
         ref = load_reference(Path(log_path), ground_truth, relations, time_offset)  # bad files fail first
         src = open_input(log_path, cfg)
         summary = run_frames(frames(src, cfg, progress), src, cfg, stage.path, ref, wall0)
-        write_extras(stage, plot, mcap_out, mcap_path)
+        write_extras(stage, plot, mcap_out, mcap_path, ref.gt_path)
         summary["out_dir"] = str(stage.commit())
     return summary
 
 
-def write_extras(stage: StagedDir, plot: bool, mcap_out: str | Path | None, mcap_path: Path | None) -> None:
+def write_extras(
+    stage: StagedDir,
+    plot: bool,
+    mcap_out: str | Path | None,
+    mcap_path: Path | None,
+    ground_truth: Path | None = None,
+) -> None:
     """What a run writes besides its tables, staged before the commit: with ``plot`` the figures and
-    report.html; the results MCAP into ``mcap_path``, the staged place of ``mcap_out``."""
+    report.html; the results MCAP into ``mcap_path``, the staged place of ``mcap_out``. Both draw
+    the ``ground_truth`` file the run was scored against."""
     if plot:
         from .report.html import write_report
         from .report.plots import plot_run
 
-        plot_run(stage.path)
+        plot_run(stage.path, ground_truth)
         write_report(stage.path)
     if mcap_path is not None:
         from .report.mcap_out import write_results_mcap
@@ -344,7 +355,7 @@ def write_extras(stage: StagedDir, plot: bool, mcap_out: str | Path | None, mcap
         if mcap_path.is_relative_to(stage.path) and mcap_path.exists():
             raise OutputError(f"--mcap-out '{mcap_out}' is a file of the run itself", "give another name")
         with output_errors(mcap_out):
-            write_results_mcap(stage.path, mcap_path, results=stage.target)
+            write_results_mcap(stage.path, mcap_path, results=stage.target, ground_truth=ground_truth)
 
 
 @dataclass(frozen=True)

@@ -24,6 +24,7 @@ import numpy as np
 from .errors import ConfigError
 from .geometry import compose, relative, wrap_angle
 from .logs.writers import RawScan, write_mcap
+from .report.outdir import refuse_special_file
 from .report.tables import write_tum
 from .simworld import OFFICE_LOOP, office_world, raycast, true_corners
 from .types import OdomSample
@@ -123,6 +124,8 @@ def simulate_log(
         raise ConfigError(f"simulate writes MCAP: '{out}' must end in .mcap")
     p = SimParams(rate=rate, beams=beams, speed=speed)
     check_options(seed, laps, p)
+    for path in (out, out.with_suffix(".gt.tum"), out.with_suffix(".corners.csv")):
+        refuse_special_file(path, path)
     rng = np.random.default_rng(seed)
     world = office_world()
     dt = 1.0 / p.odom_rate

@@ -130,6 +130,23 @@ def test_repeated_lines_are_dropped_and_two_poses_at_one_stamp_refused(files):
     assert "(lines 21 and 22)" in res.stderr and "Traceback" not in res.output
 
 
+def scale_quaternions(rows: list[str], k: float) -> list[str]:
+    return [" ".join([*r.split()[:4], *(f"{k * float(v):.9f}" for v in r.split()[4:])]) for r in rows]
+
+
+def test_ground_truth_quaternions_are_normalised_and_zero_ones_refused(files):
+    """A ground truth whose quaternions are ×2 scores as the unit one (the yaw formula assumes unit
+    length: RPE was off); an all-zero quaternion has no orientation: exit 2 naming the line."""
+    est, gt = files
+    unit = evaluate(est, "--ground-truth", gt)
+    rewrite(gt, lambda rows: scale_quaternions(rows, 2.0))
+    res = evaluate(est, "--ground-truth", gt)
+    assert res.exit_code == 0 and res.output == unit.output, (res.output, unit.output)
+    rewrite(gt, lambda rows: [*rows[:5], *scale_quaternions(rows[5:6], 0.0), *rows[6:]])
+    res = evaluate(est, "--ground-truth", gt)
+    assert res.exit_code == 2 and "line 6 has a zero-length quaternion" in res.stderr, res.output
+
+
 def test_ground_truth_that_does_not_overlap_is_exit_2_not_nan(files):
     est, gt = files
     rewrite(gt, lambda rows: [" ".join([f"{float(r.split()[0]) + 100:.9f}", *r.split()[1:]]) for r in rows])

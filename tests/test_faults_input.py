@@ -125,6 +125,34 @@ def test_run_and_compare_a_log_whose_name_is_not_utf8(latin1_log, tmp_path):
     assert strict_json(tmp_path / "c" / "pca" / "summary.json")["counts"]["steps"] == N
 
 
+def test_mcap_out_into_a_directory_whose_name_is_not_utf8(latin1_log, tmp_path):
+    """The results MCAP's metadata names the output directory: UTF-8 with U+FFFD (it crashed)."""
+    from mcap.reader import make_reader
+
+    out = Path(os.fsdecode(os.path.join(os.fsencode(tmp_path), b"o\xe9")))
+    res = invoke("run", latin1_log, "--out", out, "--mcap-out", out / "r.mcap", "-q")
+    assert res.exit_code == 0, res.output
+    with open(out / "r.mcap", "rb") as f:
+        meta = next(m for m in make_reader(f).iter_metadata() if m.name == "cornerslam")
+    assert meta.metadata["results"].endswith("o\ufffd") and meta.metadata["log"].endswith("log\ufffd.mcap")
+
+
+def test_figures_and_results_mcap_draw_a_ground_truth_whose_name_is_not_utf8(latin1_log, tmp_path):
+    """summary.json shows the ground truth's name with U+FFFD; the figures and the results MCAP
+    still draw it, from the file the run read (they re-read the printable name and dropped it)."""
+    from mcap.reader import make_reader
+
+    out = tmp_path / "o"
+    res = invoke("run", latin1_log, "--out", out, "--plot", "--mcap-out", tmp_path / "r.mcap")
+    assert res.exit_code == 0, res.output
+    assert "not drawn" not in res.stderr, res.stderr
+    with open(tmp_path / "r.mcap", "rb") as f:
+        topics = {c.topic for c in make_reader(f).get_summary().channels.values()}
+    assert "/cornerslam/ground_truth_path" in topics, topics
+    res = invoke("compare", latin1_log, "--assoc", "icnn", "--out", tmp_path / "c")
+    assert res.exit_code == 0 and "not drawn" not in res.stderr, res.output
+
+
 def test_info_batch_and_errors_with_a_name_that_is_not_utf8(latin1_log, tmp_path, monkeypatch):
     res = invoke("info", latin1_log)
     assert res.exit_code == 0 and "log\ufffd.mcap" in res.output and "/scan" in res.output, res.output

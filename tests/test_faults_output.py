@@ -164,6 +164,17 @@ def out_holds_user_files_beside_our_output(w: World) -> Case:
     return Case(["run", w.log, "--out", out], out)
 
 
+@fault(2, "holds 'sub/notes.txt', which cornerslam did not write")
+def out_holds_user_files_in_a_subdirectory_of_our_output(w: World) -> Case:
+    """a cornerslam output whose subdirectory (made by `--mcap-out OUT/sub/r.mcap`) holds a file it
+    did not write: refused, naming it (the marker lists the entries of plain subdirectories too)"""
+    out = w.tmp / "out"
+    res = invoke("run", w.log, "--out", out, "--mcap-out", out / "sub" / "r.mcap", "-q")
+    assert res.exit_code == 0, res.output
+    (out / "sub" / "notes.txt").write_text("keep me\n")
+    return Case(["run", w.log, "--out", out], out)
+
+
 @fault(2, "holds the input")
 def out_holds_the_log_inside_our_output(w: World) -> Case:
     """a cornerslam output that holds the run's own log: refused"""
@@ -216,6 +227,35 @@ def out_is_an_output_of_an_older_version(w: World) -> Case:
     (out / "summary.json").write_text('{\n  "cornerslam_version": "0.0.9"\n}\n')
     (out / "map.csv").write_text("id\n")
     return Case(["run", w.log, "--out", out], after=lambda: complete(out))
+
+
+def older_version_output(d: Path, *extra: str) -> Path:
+    """A run output written before the marker (0.1.0: summary.json says cornerslam_version), plus
+    the ``extra`` files a user put there."""
+    d.mkdir(parents=True)
+    (d / "summary.json").write_text('{\n  "cornerslam_version": "0.1.0"\n}\n')
+    for name in ("map.csv", "trajectory.tum", *extra):
+        (d / name).write_text("x\n")
+    return d
+
+
+@fault(2, "holds 'thesis.tex'", "which cornerslam did not write")
+def out_is_an_older_versions_output_holding_user_files(w: World) -> Case:
+    """`--out` an unmarked output of an older version to which the user added a file: refused,
+    nothing touched (only the files such a version wrote may be replaced)"""
+    out = older_version_output(w.tmp / "old", "thesis.tex")
+    return Case(["run", w.log, "--out", out], out)
+
+
+@fault(2, "holds 'pca/notes.txt'", "which cornerslam did not write")
+def compare_into_an_older_versions_compare_holding_user_files(w: World) -> Case:
+    """`compare --out` an unmarked compare output of an older version with a user file in one of
+    its run directories: refused, nothing touched"""
+    out = w.tmp / "oldcmp"
+    out.mkdir()
+    (out / "comparison.csv").write_text("assoc,steps,landmarks,matched_total\n")
+    older_version_output(out / "pca", "notes.txt")
+    return Case(["compare", w.log, "--assoc", "pca", "--out", out], out)
 
 
 @fault(2, "is not empty and was not written by cornerslam")
@@ -469,6 +509,41 @@ def mcap_out_is_a_file_of_the_run(w: World) -> Case:
     return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", mc], mc)
 
 
+@fault(2, "is an input of this run")
+def mcap_out_is_the_default_ground_truth(w: World) -> Case:
+    """`--mcap-out LOG.gt.tum`, the ground truth a run finds beside its log without `--ground-truth`:
+    refused (it is an input), the file kept"""
+    gt = w.log.with_suffix(".gt.tum")
+    gt.write_text("0 0 0 0 0 0 0 1\n")
+    return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", gt], gt)
+
+
+@fault(2, "is an input of this run")
+def mcap_out_is_the_config(w: World) -> Case:
+    """`--mcap-out` naming the `--config` file: refused, the file kept"""
+    cfg = w.tmp / "c.yaml"
+    cfg.write_text("ekf: {}\n")
+    return Case(["run", w.log, "--config", cfg, "--out", w.tmp / "out", "--mcap-out", cfg], cfg)
+
+
+@fault(2, "is not a regular file", "give the name of a file to write")
+def mcap_out_is_a_pipe_or_device(w: World) -> Case:
+    """`--mcap-out` an existing FIFO or device (`/dev/null`): refused (renaming a file onto it would
+    replace the node), before any work"""
+    fifo = w.tmp / "fifo.mcap"
+    os.mkfifo(fifo)
+    return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", fifo], fifo)
+
+
+@fault(2, "is not a regular file")
+def simulate_into_a_pipe(w: World) -> Case:
+    """`simulate OUT.mcap` where OUT.mcap (or OUT.gt.tum, OUT.corners.csv) is a FIFO or a device:
+    refused (writing a FIFO nobody reads hangs)"""
+    fifo = w.tmp / "s.gt.tum"
+    os.mkfifo(fifo)
+    return Case(["simulate", w.tmp / "s.mcap", "--beams", "11", "--rate", "1"], fifo)
+
+
 # 7. numbers on the command line; 13. --config that is not a regular file
 @fault(2, "--seed must be >= 0")
 def simulate_seed_negative(w: World) -> Case:
@@ -517,8 +592,12 @@ def valid_log(tmp_path_factory) -> Path:
 
 
 def snapshot(d: Path) -> dict[str, bytes | None]:
-    """Every entry under ``d`` (hidden ones too) with its bytes; None for a directory."""
-    return {str(p.relative_to(d)): None if p.is_dir() else p.read_bytes() for p in sorted(d.rglob("*"))}
+    """Every entry under ``d`` (hidden ones too) with its bytes; None for a directory, the mode for
+    a FIFO or device (reading one would block)."""
+    return {
+        str(p.relative_to(d)): None if p.is_dir() else p.read_bytes() if p.is_file() else p.lstat().st_mode
+        for p in sorted(d.rglob("*"))
+    }
 
 
 def leftovers(d: Path) -> list[str]:
@@ -641,6 +720,82 @@ def test_a_closed_stdout_is_no_internal_error(valid_log, tmp_path):
         assert p.wait(timeout=60) == 141, err
         assert "Traceback" not in err and "internal error" not in err and "Exception ignored" not in err, err
     complete(out)
+
+
+def test_a_closed_stderr_is_no_internal_error(valid_log, tmp_path):
+    """`cornerslam run LOG 2>&-` (stderr closed, as some daemons start a job): the run completes
+    (exit 0, output committed), and a bad input is still exit 2 (it crashed on the progress line)."""
+    out = tmp_path / "out"
+    for args, code in ((["run", valid_log, "--out", out], 0), (["run", tmp_path / "none.mcap"], 2)):
+        line = " ".join(f"'{a}'" for a in [*CMD, *map(str, args)]) + " 2>&-"
+        assert subprocess.run(["sh", "-c", line], timeout=60).returncode == code, line
+    complete(out)
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs /dev/full")
+def test_stdout_on_a_full_disk_is_exit_2(valid_log, tmp_path):
+    """`cornerslam info LOG > /dev/full`: writing stdout fails with ENOSPC. Exit 2 with one line
+    saying so, no internal error; a run's output directory is still committed."""
+    out = tmp_path / "out"
+    for args in (["info", str(valid_log)], ["run", str(valid_log), "--out", str(out)]):
+        with open("/dev/full", "w") as full:
+            res = subprocess.run([*CMD, *args], stdout=full, stderr=subprocess.PIPE, text=True, timeout=60)
+        assert res.returncode == 2, res.stderr
+        lines = res.stderr.strip().splitlines()
+        assert lines[-1].startswith("error: cannot write to standard output: No space left"), res.stderr
+        assert "Traceback" not in res.stderr and "Exception ignored" not in res.stderr, res.stderr
+    complete(out)
+
+
+def _children(pid: int) -> list[int]:
+    """Pids of the live (not zombie) child processes of ``pid``, from /proc."""
+    out = []
+    for stat_file in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat_file.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid and fields[0] != "Z":
+            out.append(int(stat_file.parent.name))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc")
+@pytest.mark.parametrize("command", ["batch", "compare"])
+def test_workers_end_with_a_killed_parent(tmp_path, command):
+    """SIGKILL of `batch --jobs 2` / `compare --jobs 2` while its workers run: the workers exit
+    within seconds (they used to finish, commit a row of a dead batch and then wait forever)."""
+    log = write_mcap(tmp_path / "long.mcap", make_scans(600), make_odoms(601))
+    out = tmp_path / "out"
+    args = [command, str(log), "--assoc", "icnn,pca", "--jobs", "2", "--out", str(out), "-q"]
+    proc = subprocess.Popen([*CMD, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    workers: list[int] = []
+    try:
+        wait_for(lambda: len(_children(proc.pid)) >= 2 and staging_anywhere(tmp_path), proc, "the workers")
+        workers = _children(proc.pid)
+        proc.kill()
+        proc.wait(timeout=10)
+        deadline = time.monotonic() + 15
+        while any(_alive(w) for w in workers) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not [w for w in workers if _alive(w)], "workers outlived the killed parent"
+    finally:
+        proc.kill()
+        for w in workers:
+            if _alive(w):
+                os.kill(w, signal.SIGKILL)
+
+
+def staging_anywhere(d: Path) -> bool:
+    """Some run's staging directory exists under ``d`` (a worker is writing)."""
+    return any(".partial-" in p.name for p in d.rglob("*") if p.is_dir())
 
 
 def test_sigterm_while_drawing_figures_keeps_the_previous_output(valid_log, tmp_path):

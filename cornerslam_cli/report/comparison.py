@@ -34,9 +34,12 @@ def comparison_row(s: dict) -> list:
     ]
 
 
-def write_comparison(out_dir: Path, summaries: list[dict], plots: bool = True) -> None:
+def write_comparison(
+    out_dir: Path, summaries: list[dict], plots: bool = True, ground_truth: str | Path | None = None
+) -> None:
     """``out_dir``/comparison.csv from the run ``summaries`` (one per associator, in order) and, with
-    ``plots``, the comparison figures and report.html drawn from the runs in ``out_dir``."""
+    ``plots``, the comparison figures and report.html drawn from the runs in ``out_dir`` (with the
+    ``ground_truth`` TUM file the runs read, if any)."""
     with CsvTable(out_dir / "comparison.csv", COMPARISON_COLUMNS) as table:
         for s in summaries:
             table.row(*comparison_row(s))
@@ -44,5 +47,5 @@ def write_comparison(out_dir: Path, summaries: list[dict], plots: bool = True) -
         from .html import write_report
         from .plots import plot_compare
 
-        plot_compare(out_dir)
+        plot_compare(out_dir, ground_truth)
         write_report(out_dir)

@@ -46,6 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import display_path
 from ..geometry import compose_inverse
 from .plots import ELLIPSE_SIGMA, ellipse_polygons, load_run
 from .tables import json_text
@@ -218,14 +219,17 @@ def _stamp_texts(path: Path) -> list[str]:
         return [row["stamp"] for row in reader]
 
 
-def write_results_mcap(out_dir: Path, path: Path, results: Path | None = None) -> Path:
+def write_results_mcap(
+    out_dir: Path, path: Path, results: Path | None = None, ground_truth: str | Path | None = None
+) -> Path:
     """Write a run directory's trajectory, landmarks and segment map to ``path`` (MCAP, JSON + Foxglove
     schemas); returns ``path``. See the module docstring for the topics. ``results`` is the name of
-    the run directory recorded in the metadata (default ``out_dir``; a staging directory's target)."""
+    the run directory recorded in the metadata (default ``out_dir``; a staging directory's target);
+    ``ground_truth`` the TUM file the run was scored against (default: the one its summary names)."""
     from mcap.writer import Writer
 
     out_dir, path = Path(out_dir), Path(path)
-    run = load_run(out_dir)
+    run = load_run(out_dir, ground_truth)
     stamps_ns = [stamp_to_ns(t) for t in _stamp_texts(out_dir / "trajectory.csv")]
     ns_of_step = dict(zip(run.steps.astype(int).tolist(), stamps_ns, strict=True))
     odom_raw = read_odom_raw(out_dir)  # odom-frame poses, for the map → odom transform
@@ -271,7 +275,7 @@ def write_results_mcap(out_dir: Path, path: Path, results: Path | None = None) -
                 "log": str(run.summary.get("input", {}).get("log", "")),
                 "assoc": run.assoc,
                 "version": str(run.summary.get("cornerslam_version", "")),
-                "results": str(out_dir if results is None else results),
+                "results": display_path(out_dir if results is None else results),  # MCAP strings are UTF-8
             },
         )
         w.finish()

@@ -131,25 +131,70 @@ def mark_output(path: Path, kind: str) -> None:
     entries it holds now (its complete contents)."""
     marker: dict = {"cornerslam": __version__, "kind": kind}
     if kind != "batch":  # a batch directory grows as it runs: its own rows are checked one by one
-        marker["files"] = sorted(p.name for p in path.iterdir() if p.name != MARKER)
+        marker["files"] = [rel for rel, _ in _entries(path)]
     (path / MARKER).write_text(json.dumps(marker, indent=1) + "\n")
 
 
-def foreign_entries(path: Path) -> list[str]:
-    """Entries of a marked output directory that its marker does not list (also in subdirectories
-    that carry their own marker), as relative paths."""
-    marker = read_marker(path)
-    if marker is None or "files" not in marker:
-        return []
-    listed = set(marker["files"])
-    out = []
+def _entries(path: Path, prefix: str = "") -> Iterator[tuple[str, Path]]:
+    """(relative path, path) of every entry under ``path`` but the marker, sorted; a subdirectory
+    is entered unless it is a symlink or carries its own marker (a compare's run directories)."""
     for entry in sorted(path.iterdir()):
         if entry.name == MARKER:
             continue
-        if entry.name not in listed:
-            out.append(entry.name)
-        elif entry.is_dir() and not entry.is_symlink():
+        rel = prefix + entry.name
+        yield rel, entry
+        if entry.is_dir() and not entry.is_symlink() and read_marker(entry) is None:
+            yield from _entries(entry, rel + "/")
+
+
+# what a run or compare directory held before the marker existed (version 0.1.0 and earlier)
+_LEGACY_RUN_FILES = frozenset(
+    "trajectory.tum trajectory.csv map.csv lines.csv timing.csv summary.json report.html "
+    "map.png segments.png timing.png corners.png".split()
+)
+_LEGACY_COMPARE_FILES = frozenset(
+    "comparison.csv report.html compare_matching.png compare_maps.png compare_timing.png".split()
+)
+
+
+def foreign_entries(path: Path) -> list[str]:
+    """Entries of an output directory that cornerslam did not write, as relative paths: those its
+    marker does not list (also inside its plain subdirectories, e.g. one made by ``--mcap-out
+    OUT/sub/r.mcap``, and inside subdirectories that carry their own marker); for an output of a
+    version before the marker, every entry but the files such a version wrote. The contents of a
+    foreign directory are not listed."""
+    marker = read_marker(path)
+    if marker is None:
+        return _foreign_legacy(path, output_kind(path))
+    if "files" not in marker:
+        return []
+    listed = set(marker["files"])
+    out: list[str] = []
+    for rel, entry in _entries(path):
+        if any(rel.startswith(f + "/") for f in out):
+            continue  # inside a foreign directory: that one is named
+        if rel not in listed:
+            out.append(rel)
+        elif entry.is_dir() and not entry.is_symlink() and read_marker(entry) is not None:
+            out += [f"{rel}/{sub}" for sub in foreign_entries(entry)]
+    return out
+
+
+def _foreign_legacy(path: Path, kind: str | None) -> list[str]:
+    """Entries of an unmarked run or compare directory that such a version did not write (a
+    compare's run directories are checked as runs); a batch directory is checked row by row."""
+    if kind not in ("run", "compare"):
+        return []
+    own = _LEGACY_RUN_FILES if kind == "run" else _LEGACY_COMPARE_FILES
+    out: list[str] = []
+    for entry in sorted(path.iterdir()):
+        if entry.name in own and entry.is_file() and not entry.is_symlink():
+            continue
+        run_dir = kind == "compare" and entry.is_dir() and not entry.is_symlink()
+        if run_dir and output_kind(entry) == "run":
             out += [f"{entry.name}/{sub}" for sub in foreign_entries(entry)]
+        else:
+            out.append(entry.name)
     return out
 
 
@@ -209,6 +254,16 @@ def check_replaceable(
         raise OutputError(
             f"'{shown}' holds '{extra[0]}'{more}, which cornerslam did not write",
             "move it out first, or give another output directory",
+        )
+
+
+def refuse_special_file(path: Path, shown: str | Path) -> None:
+    """Refuse (OutputError) to write the file ``path`` over a device, a pipe or a socket: writing one
+    hangs or goes nowhere, and renaming a file onto it would replace the node (``/dev/null``)."""
+    if os.path.exists(path) and not (path.is_file() or path.is_dir()):
+        raise OutputError(
+            f"'{shown}' is not a regular file (a device, pipe or socket)",
+            "give the name of a file to write",
         )
 
 
@@ -454,6 +509,7 @@ class StagedDir:
                 raise OutputError(f"'{shown}' is an input of this run", "give another file name")
             if final.is_dir():
                 raise OutputError(f"'{shown}' is a directory", "give a file name")
+            refuse_special_file(final, shown)
             final.parent.mkdir(parents=True, exist_ok=True)
             clear_stale(final)
             staged = staged_file(final)

@@ -77,8 +77,10 @@ class RunData:
         return f"{self.log_name} — {self.assoc}"
 
 
-def load_run(out_dir: str | Path) -> RunData:
-    """Read a run output directory for plotting."""
+def load_run(out_dir: str | Path, ground_truth: str | Path | None = None) -> RunData:
+    """Read a run output directory for plotting. ``ground_truth``: the TUM file the run was scored
+    against (default: the one its summary names, which shows a name that is not UTF-8 with U+FFFD
+    and so cannot be opened by it)."""
     out_dir = Path(out_dir)
     summary = json.loads((out_dir / "summary.json").read_text())
     traj = read_csv(out_dir / "trajectory.csv")
@@ -96,7 +98,7 @@ def load_run(out_dir: str | Path) -> RunData:
         corrected=corrected,
         odometry=odom_in_map(odom, corrected),
         scan_odometry=None if scan_odom is None else odom_in_map(scan_odom, corrected),
-        ground_truth=_aligned_ground_truth(summary, traj["stamp"], corrected),
+        ground_truth=_aligned_ground_truth(summary, traj["stamp"], corrected, ground_truth),
         landmarks=read_csv(out_dir / "map.csv"),
         lines=read_csv(out_dir / "lines.csv"),
         timing=read_csv(out_dir / "timing.csv"),
@@ -113,8 +115,11 @@ def odom_in_map(odom: np.ndarray, corrected: np.ndarray) -> np.ndarray:
     return apply_se2(ang, t, odom)
 
 
-def _aligned_ground_truth(summary: dict, stamps: np.ndarray, corrected: np.ndarray) -> np.ndarray | None:
-    path = (summary.get("accuracy") or {}).get("ground_truth")
+def _aligned_ground_truth(
+    summary: dict, stamps: np.ndarray, corrected: np.ndarray, path: str | Path | None = None
+) -> np.ndarray | None:
+    acc = summary.get("accuracy") or {}
+    path = path if path is not None and "ground_truth" in acc else acc.get("ground_truth")
     if not path or len(corrected) < 2:
         return None
     try:
@@ -312,10 +317,11 @@ def plot_corners(run: RunData, path: Path) -> Path:
     return _save(fig, path)
 
 
-def plot_run(out_dir: Path) -> list[Path]:
-    """Write map.png, segments.png, timing.png and corners.png into a run directory; return their paths."""
+def plot_run(out_dir: Path, ground_truth: str | Path | None = None) -> list[Path]:
+    """Write map.png, segments.png, timing.png and corners.png into a run directory; return their
+    paths. ``ground_truth`` as for :func:`load_run`."""
     out_dir = Path(out_dir)
-    run = load_run(out_dir)
+    run = load_run(out_dir, ground_truth)
     return [
         plot_map(run, out_dir / "map.png"),
         plot_segments(run, out_dir / "segments.png"),
@@ -334,10 +340,11 @@ def _assoc_color(assoc: str, i: int) -> str:
     return ASSOC_COLORS.get(assoc, f"C{i}")
 
 
-def plot_compare(out_dir: Path) -> list[Path]:
-    """Write the comparison figures into a compare directory and each associator's run figures."""
+def plot_compare(out_dir: Path, ground_truth: str | Path | None = None) -> list[Path]:
+    """Write the comparison figures into a compare directory and each associator's run figures
+    (``ground_truth`` as for :func:`load_run`)."""
     out_dir = Path(out_dir)
-    runs = [load_run(out_dir / a) for a in compare_assocs(out_dir)]
+    runs = [load_run(out_dir / a, ground_truth) for a in compare_assocs(out_dir)]
     log_name = runs[0].log_name if runs else out_dir.name
     written = [
         _plot_compare_matching(runs, log_name, out_dir / "compare_matching.png"),
@@ -345,7 +352,7 @@ def plot_compare(out_dir: Path) -> list[Path]:
         _plot_compare_timing(runs, log_name, out_dir / "compare_timing.png"),
     ]
     for run in runs:
-        written += plot_run(run.out_dir)
+        written += plot_run(run.out_dir, ground_truth)
     return written
 
 

@@ -155,8 +155,28 @@ def read_tum(
         keep = np.ones(len(a), dtype=bool)
         keep[same + 1] = False
         a = a[keep]
-    yaw = yaw_from_quaternion(a[:, 4], a[:, 5], a[:, 6], a[:, 7])
+    qx, qy, qz, qw = _unit_quaternions(a[:, 4:8], name, lines)
+    yaw = yaw_from_quaternion(qx, qy, qz, qw)
     return a[:, 0], np.column_stack((a[:, 1], a[:, 2], yaw))
+
+
+def _unit_quaternions(q: np.ndarray, name: str, lines: np.ndarray) -> np.ndarray:
+    """The quaternion columns (n, 4) as rows of (qx, qy, qz, qw) columns, each of unit length: the
+    yaw formula assumes it (a ×2 quaternion gives another yaw). Ones within 1e-6 of unit length are
+    kept bit for bit; a zero-length one has no orientation and raises LogError naming its line."""
+    from ..errors import LogError
+
+    norm = np.linalg.norm(q, axis=1)
+    zero = np.flatnonzero(norm < 1e-9)
+    if len(zero):
+        raise LogError(
+            f"{name} line {lines[zero[0]]} has a zero-length quaternion (no orientation)",
+            "give qx qy qz qw of unit length",
+        )
+    off = np.abs(norm - 1) > 1e-6
+    q = q.copy()
+    q[off] /= norm[off, None]
+    return q.T
 
 
 def write_json(path: Path, data: dict) -> None:
