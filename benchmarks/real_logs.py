@@ -242,11 +242,11 @@ def spread_sentence(path: Path) -> str:
         f"{k} {lo:.3f} m" if f"{lo:.3f}" == f"{hi:.3f}" else f"{k} {lo:.3f}–{hi:.3f} m"
         for k, (lo, hi) in sp["range"].items()
     )
-    same = "byte-identical trajectories" if sp["identical"] else "not identical trajectories"
+    same = "byte-identical trajectories" if sp["identical"] else "trajectories that differ"
     return (
-        f"Machine dependence ([intel_spread.md](intel_spread.md)): the Intel run under {sp['runs']} "
-        "settings — every OpenBLAS kernel set and numpy SIMD level this CPU can run, two BLAS threads, "
-        f"1 µm changes of one odometry reading — gave {same}, relation error {ranges}. Until the scan "
+        f"Machine dependence ([intel_spread.md](intel_spread.md)): every OpenBLAS kernel set and numpy SIMD "
+        f"level this CPU can run, and two BLAS threads, gave {same} on Intel, and the relation error was "
+        f"{ranges} in all {sp['runs']} runs, some with one odometry reading moved by 1 µm. Until the scan "
         "matcher's neighbourhoods included tied neighbours the same runs spread over ICNN 0.182–0.364 m, "
         "JCBB/PCA 0.165–0.268 m, scan-matched odometry 0.316–0.388 m (the cause is in intel_spread.md)."
     )
