@@ -38,7 +38,7 @@ def main() -> int:
         if not os.environ.get("CORNERSLAM_EXE")
         else [os.environ["CORNERSLAM_EXE"]]
     )
-    rows = []
+    rows, versions = [], {}
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(tmp) / "bench.mcap"
         subprocess.run(
@@ -53,7 +53,7 @@ def main() -> int:
                 )
                 wall = time.perf_counter() - t0
                 s = json.loads((out / "summary.json").read_text())
-                c, t = s["counts"], s["timing"]
+                c, t, versions = s["counts"], s["timing"], s["versions"]
                 rows.append(
                     (assoc, label, c["scans_in"], c["steps"], c["landmarks"], c["scans_in"] / t["t_total"],
                      c["scans_in"] / wall, 1000 * t["t_total"] / c["steps"], s["accuracy"]["ate"]["rmse"])
@@ -64,7 +64,8 @@ def main() -> int:
         "",
         f"`cornerslam simulate --seed 5 --laps {args.laps}` (1,081 beams over 270°, 10 Hz), "
         f"then `cornerslam run` per associator; {platform.machine()}, {os.cpu_count()} cores, "
-        f"Python {platform.python_version()}, BLAS single-threaded (the CLI's default).",
+        f"Python {platform.python_version()}, BLAS single-threaded (the CLI's default): "
+        f"{versions.get('blas', '?')}, numpy SIMD {versions.get('numpy_simd', '?')}.",
         "",
         "| assoc | scans | steps | landmarks | scans/s (processing) | scans/s (wall) | ms/step | ATE m |",
         "|---|---|---|---|---|---|---|---|",

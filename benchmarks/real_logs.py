@@ -1,7 +1,11 @@
 """Real-log benchmark: ICNN, JCBB and PCA on every recorded log in ``shared/data/real``.
 
-    /work/venv/bin/python benchmarks/real_logs.py [--logs intel,exp1,...] [--set KEY=VALUE ...]
+    python benchmarks/real_logs.py [--logs intel,exp1,...] [--set KEY=VALUE ...] [--data DIR]
         [--work DIR] [--out docs/results/real_logs.md] [--reuse]
+
+``--data`` is the folder of the real logs (``shared/data/real``); by default ``$CORNERSLAM_REAL_DATA``, else
+``shared/data/real`` beside the clone or one level above it (a git worktree). A log that is not there
+is an error, not a row left out.
 
 For each log, ``cornerslam compare LOG --assoc icnn,jcbb,pca --jobs 2`` (same extracted features for the
 three associators), then one table ``docs/results/real_logs.md`` and the segment map of the most accurate
@@ -28,6 +32,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -36,7 +41,6 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
 CLI = [str(Path(sys.executable).parent / "cornerslam")]
 TIME_OFFSET = 976052857.334
 ASSOCS = ("icnn", "jcbb", "pca")
@@ -45,12 +49,13 @@ REVISIT_CAP = 0.3  # metres
 REVISIT_BLOCK = 25  # keyframes: scans are grouped in blocks, neighbours come from blocks >= GAP away
 CELL = 0.05  # metres: grid of the map-sharpness count
 
-LOGS = {
-    "intel": (DATA / "intel" / "intel-noisy-odom.log", []),
-    "exp1": (DATA / "mines" / "exp1.mcap", []),
-    "exp2": (DATA / "mines" / "exp2.mcap", []),
-    "exp3": (DATA / "mines" / "exp3.bag", ["input.laser.x=0.145"]),  # no tf in the bag
-    "exp4": (DATA / "mines" / "exp4.mcap", []),
+INTEL = Path("intel") / "intel-noisy-odom.log"
+LOGS = {  # paths relative to the data folder
+    "intel": (INTEL, []),
+    "exp1": (Path("mines") / "exp1.mcap", []),
+    "exp2": (Path("mines") / "exp2.mcap", []),
+    "exp3": (Path("mines") / "exp3.bag", ["input.laser.x=0.145"]),  # no tf in the bag
+    "exp4": (Path("mines") / "exp4.mcap", []),
 }
 PUBLISHED = (
     "Reference (Intel, relation metric): on these 910 scans the RBPF (gmapping) trajectory of "
@@ -58,6 +63,20 @@ PUBLISHED = (
     "Published for the full 13,631-scan log (Kümmerle et al. 2009): scan matching 0.220 ± 0.296 m, "
     "RBPF 0.070 ± 0.083 m, graph mapping 0.031 ± 0.026 m."
 )
+
+
+def default_data() -> Path:
+    """The real-log folder: ``$CORNERSLAM_REAL_DATA``, else ``shared/data/real`` beside the clone or one level
+    above it (a git worktree under a folder of worktrees); the first candidate when none exists."""
+    if env := os.environ.get("CORNERSLAM_REAL_DATA"):
+        return Path(env)
+    candidates = [ROOT.parent / "shared" / "data" / "real", ROOT.parents[1] / "shared" / "data" / "real"]
+    return next((c for c in candidates if c.is_dir()), candidates[0])
+
+
+def relation_args(data: Path) -> list[str]:
+    """``--relations``/``--time-offset`` options that score a run of the Intel log (in summary.json)."""
+    return ["--relations", str(data / "intel" / "intel.relations"), "--time-offset", str(TIME_OFFSET)]
 
 
 def run_compare(name: str, log: Path, extra: list[str], sets: list[str], work: Path) -> Path:
@@ -94,10 +113,10 @@ def load_run(d: Path) -> dict:
     }
 
 
-def relation_scores(r: dict, keys=("pose", "odom")) -> tuple[dict, ...]:
+def relation_scores(r: dict, data: Path, keys=("pose", "odom")) -> tuple[dict, ...]:
     from cornerslam_cli.evaluate import read_relations, relation_error
 
-    rel = read_relations(DATA / "intel" / "intel.relations")
+    rel = read_relations(data / "intel" / "intel.relations")
     return tuple(relation_error(r["stamp"], r[k], rel, TIME_OFFSET) for k in keys)
 
 
@@ -142,10 +161,10 @@ def revisit_misalignment(pts: list[np.ndarray], poses: np.ndarray) -> tuple[floa
     return (float(d.mean()) if len(d) else float("nan")), len(d) / max(total, 1)
 
 
-def rbpf_poses(stamps: np.ndarray) -> np.ndarray:
+def rbpf_poses(stamps: np.ndarray, data: Path) -> np.ndarray:
     """Poses of ``intel.gfs.log`` (gmapping's corrected FLASER poses) at the given scan stamps."""
     by_stamp = {}
-    for line in (DATA / "intel" / "intel.gfs.log").read_text().splitlines():
+    for line in (data / "intel" / "intel.gfs.log").read_text().splitlines():
         f = line.split()
         if f and f[0] == "FLASER":
             n = int(f[1])
@@ -205,6 +224,34 @@ def small_png(src: Path, dst: Path, width: int = 640) -> None:
         small.quantize(colors=64).save(dst, optimize=True)
 
 
+def fp_env(summary: dict) -> str:
+    """The software and floating-point kernels a run's summary.json records (the digits depend on them)."""
+    v = summary.get("versions", {})
+    return (
+        f"numpy {v.get('numpy', '?')} (SIMD {v.get('numpy_simd', 'not recorded')}), scipy "
+        f"{v.get('scipy', '?')}, BLAS {v.get('blas', 'not recorded')}, Python {v.get('python', '?')}"
+    )
+
+
+def spread_sentence(path: Path) -> str:
+    """What ``benchmarks/intel_spread.py`` measured (its JSON beside the table), or where to find it."""
+    if not path.exists():
+        return "Whether the Intel figures depend on the machine: `benchmarks/intel_spread.py`."
+    sp = json.loads(path.read_text())
+    ranges = ", ".join(
+        f"{k} {lo:.3f} m" if f"{lo:.3f}" == f"{hi:.3f}" else f"{k} {lo:.3f}–{hi:.3f} m"
+        for k, (lo, hi) in sp["range"].items()
+    )
+    same = "byte-identical trajectories" if sp["identical"] else "trajectories that differ"
+    return (
+        f"Machine dependence ([intel_spread.md](intel_spread.md)): every OpenBLAS kernel set and numpy SIMD "
+        f"level this CPU can run, and two BLAS threads, gave {same} on Intel, and the relation error was "
+        f"{ranges} in all {sp['runs']} runs, some with one odometry reading moved by 1 µm. Until the scan "
+        "matcher's neighbourhoods included tied neighbours the same runs spread over ICNN 0.182–0.364 m, "
+        "JCBB/PCA 0.165–0.268 m, scan-matched odometry 0.316–0.388 m (the cause is in intel_spread.md)."
+    )
+
+
 def fmt_rel(e: dict) -> str:
     t = f"{e['trans_mean']:.3f} ± {e['trans_std']:.3f} m"
     return t + f", {e['rot_mean_deg']:.1f} ± {e['rot_std_deg']:.1f}°"
@@ -218,18 +265,23 @@ def main() -> int:
     ap.add_argument("--out", type=Path, default=ROOT / "docs" / "results" / "real_logs.md")
     ap.add_argument("--maps", type=Path, default=ROOT / "docs" / "results" / "real_maps")
     ap.add_argument("--reuse", action="store_true", help="reuse the compare runs already in --work")
+    ap.add_argument("--data", type=Path, default=default_data(), help="folder of the real logs")
     args = ap.parse_args()
+    names = args.logs.split(",")
+    if unknown := sorted(set(names) - set(LOGS)):
+        ap.error(f"unknown log {', '.join(unknown)} (choose from {', '.join(LOGS)})")
+    if missing := [str(args.data / LOGS[n][0]) for n in names if not (args.data / LOGS[n][0]).exists()]:
+        ap.error(f"{', '.join(missing)} not found (pass --data DIR or set CORNERSLAM_REAL_DATA)")
 
-    rows, notes = [], []
-    for name in args.logs.split(","):
-        log, extra = LOGS[name]
-        if not log.exists():
-            notes.append(f"- {name}: {log} not found, skipped")
-            continue
+    rows, notes, envs = [], [], set()
+    for name in names:
+        rel_path, extra = LOGS[name]
+        log = args.data / rel_path
         out = args.work / name
         if not (args.reuse and (out / "comparison.csv").exists()):
             run_compare(name, log, extra, args.set, args.work)
         runs = {a: load_run(out / a) for a in ASSOCS}
+        envs |= {fp_env(r["summary"]) for r in runs.values()}
         pts = scan_points(log, extra + args.set, runs["pca"]["stamp"])
         cells_odom = occupied_cells(pts, runs["pca"]["odom"])
         scored = {}
@@ -248,7 +300,7 @@ def main() -> int:
                 "cells": occupied_cells(pts, r["pose"]) / cells_odom,
             }
             if name == "intel":
-                est, odo = relation_scores(r)
+                est, odo = relation_scores(r, args.data)
                 row["acc"], row["odom_acc"] = fmt_rel(est), fmt_rel(odo)
                 scored[a] = est["trans_mean"]
             else:
@@ -265,7 +317,7 @@ def main() -> int:
         small_png(out / best / "segments.png", args.maps / f"{name}.png")
         panels = {"odometry": runs[best]["odom"], f"SLAM ({best})": runs[best]["pose"]}
         if name == "intel":  # the RBPF (gmapping) poses of the same scans as a reference
-            panels["RBPF (gmapping), reference"] = rbpf_poses(runs[best]["stamp"])
+            panels["RBPF (gmapping), reference"] = rbpf_poses(runs[best]["stamp"], args.data)
         points_figure(
             pts,
             panels,
@@ -274,7 +326,7 @@ def main() -> int:
         )
         sm = runs[best]
         if name == "intel":
-            (sm_acc,) = relation_scores(sm, ("scan_odom",))
+            (sm_acc,) = relation_scores(sm, args.data, ("scan_odom",))
             sm_text = fmt_rel(sm_acc)
         else:
             m, share = revisit_misalignment(pts, sm["scan_odom"])
@@ -293,7 +345,9 @@ def main() -> int:
         "per log, "
         "default config" + (f" with `{' '.join(args.set)}`" if args.set else "") + "). "
         "Times are on a shared 2-core machine (other jobs running): compare them within a log, "
-        "not across runs.",
+        "not across runs. Runs made with " + "; ".join(sorted(envs)) + ".",
+        "",
+        spread_sentence(args.out.parent / "intel_spread.json"),
         "",
         "| log | assoc | steps | landmarks | corners/step | matched/corners | ms/step | match total s "
         "| scans/s | map cells vs odometry | accuracy (SLAM) | accuracy (odometry, same run) |",

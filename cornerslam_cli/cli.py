@@ -779,4 +779,32 @@ def _print_batch(rows: list[dict], keys: list[str]) -> None:
         click.echo(f"failed ({n}x): {log_path}: {error}")
 
 
+@cli.command("config")
+@click.argument("log_path", metavar="[LOG]", required=False, type=click.Path())
+@_config_options
+@click.option(
+    "--preset",
+    default=None,
+    metavar="NAME",
+    help="Laser preset under the config: auto (chosen from LOG's scans), none, or a preset's name.",
+)
+@_verbosity
+def config_command(log_path, config_path, overrides, preset, verbose, quiet):
+    """Print the fully resolved config as YAML: built-in defaults < laser preset < --config < --set.
+
+    With LOG, the laser preset is chosen from its first scan, as `run` would; the output is a valid
+    --config file.
+
+    \b
+    Example:
+      cornerslam config sample_logs/intel_cut.clf --set association.method=jcbb > my.yaml
+    """
+    from .config import dump_config
+
+    _setup_logging(verbose, quiet)
+    extra = [*overrides, *([f"input.laser_preset={preset}"] if preset else [])]
+    cfg = _load(config_path, extra, log_path=log_path)
+    click.echo(dump_config(cfg), nl=False)
+
+
 main = cli  # the console-script entry point

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__
+from . import __version__, fpenv
 from .association import make_associator
 from .config import Config
 from .errors import ConfigError, LogError, OutputError, display_path
@@ -628,4 +628,5 @@ def _versions() -> dict:
             out[name] = md.version(name)
         except md.PackageNotFoundError:
             pass
+    out.update(fpenv.describe())  # the BLAS kernels and numpy SIMD level: the last digits depend on them
     return out

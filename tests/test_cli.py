@@ -317,3 +317,30 @@ def test_output_columns_extend_the_interface_and_never_change_it():
     ).split(",")
     assert list(TRAJECTORY_COLUMNS[: len(traj)]) == traj
     assert list(TIMING_COLUMNS[: len(timing)]) == timing
+
+
+# ---------------------------------------------------------------------------- config
+def test_config_prints_the_resolved_config_that_run_uses(tmp_path):
+    """`cornerslam config LOG --set ...` prints what `run LOG --set ...` resolves (preset chosen from
+    the log's scans); fed back as --config it gives the same config (the same hash), and without a
+    log it is configs/default.yaml without its comments."""
+    import yaml
+
+    from cornerslam_cli.config import Config, dump_config
+
+    log = Path(__file__).resolve().parents[1] / "sample_logs" / "intel_cut.clf"
+    res = invoke("config", log, "--set", "ekf.alpha1=0.07")
+    assert res.exit_code == 0, res.output
+    printed = yaml.safe_load(res.stdout)
+    assert printed["ekf"]["alpha1"] == 0.07 and printed["input"]["laser_preset"] == "sick_lms_1deg"
+    (tmp_path / "c.yaml").write_text(res.stdout)
+    direct = invoke("run", log, "--set", "ekf.alpha1=0.07", "--out", tmp_path / "a", "-q")
+    via_file = invoke("run", log, "--config", tmp_path / "c.yaml", "--out", tmp_path / "b", "-q")
+    assert direct.exit_code == 0 and via_file.exit_code == 0, (direct.output, via_file.output)
+    hashes = [json.loads((tmp_path / d / "summary.json").read_text())["hashes"]["config"] for d in "ab"]
+    assert hashes[0] == hashes[1]
+    assert invoke("config").stdout == dump_config(Config())
+    res = invoke("config", "--preset", "hokuyo_urg04lx")
+    assert yaml.safe_load(res.stdout)["input"]["laser_preset"] == "hokuyo_urg04lx"
+    one_line_error(invoke("config", "--preset", "hokuyo"), "unknown laser preset", "hokuyo_urg04lx")
+    one_line_error(invoke("config", "--set", "ekf.alpha1=nan"), "ekf.alpha1")

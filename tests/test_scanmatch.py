@@ -156,3 +156,27 @@ def test_run_reports_the_scan_matched_odometry_and_it_beats_the_wheels(sim_log, 
     assert "scan_odom_ate" not in off["accuracy"] and "scans_matched" not in off["counts"]
     traj = read_csv(tmp_path / "off" / "trajectory.csv")
     np.testing.assert_array_equal(traj["scan_odom_x"], traj["odom_x"])
+
+
+def test_normals_do_not_depend_on_which_tied_neighbour_is_fifth():
+    """A point whose 5th and 6th neighbours are equidistant (beams either side of a point with equal
+    quantised ranges): one would make the neighbourhood a line, the other not. A last-bit nudge of either,
+    or another point order, must not change the normal or whether there is one (it did: the Intel
+    figures then depended on the CPU's BLAS kernels, docs/results/intel_spread.md)."""
+    from scipy.spatial import cKDTree
+
+    from cornerslam_cli.motion.icp import line_normals
+
+    centre, on_line = [0.0, 0.0], [[0.05, 0.0], [-0.05, 0.0], [0.1, 0.0]]
+    a, b = np.array([-0.15, 0.0]), np.array([0.0, 0.15])  # both exactly 0.15 m from the centre
+    seen = set()
+    for nudge_a, nudge_b in [(0, 0), (-1, 0), (1, 0), (0, -1), (0, 1)]:
+        pa, pb = a.copy(), b.copy()
+        pa[0] = np.nextafter(pa[0], pa[0] + nudge_a) if nudge_a else pa[0]  # one ulp nearer or farther
+        pb[1] = np.nextafter(pb[1], pb[1] + nudge_b) if nudge_b else pb[1]
+        for order in ([0, 1, 2, 3, 4, 5], [5, 4, 3, 2, 1, 0], [0, 5, 1, 4, 2, 3]):
+            pts = np.array([centre, *on_line, pa, pb])[order]
+            normals, ok = line_normals(pts, cKDTree(pts))
+            i = order.index(0)
+            seen.add((bool(ok[i]), *np.round(np.abs(normals[i]), 12)))
+    assert len(seen) == 1, seen

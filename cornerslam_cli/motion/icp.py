@@ -34,6 +34,8 @@ from .params import ScanMatchConfig
 NORMAL_NEIGHBOURS = 5
 NORMAL_MAX_SPREAD = 0.5  # m: the 5th neighbour farther than this → no normal (isolated point)
 NORMAL_FLATNESS = 0.2  # smaller / larger eigenvalue of the neighbourhood scatter below this → on a line
+NORMAL_TIE = 1e-9  # relative: a neighbour this close to the 5th's distance is tied with it and joins
+NORMAL_TIED_EXTRA = 2  # neighbours queried beyond the 5th to find those tied with it
 SHRINK = 0.5
 CONVERGED = 1e-5  # largest step component (m or rad) that ends the iterations
 
@@ -50,18 +52,28 @@ def voxel_thin(points: np.ndarray, size: float) -> np.ndarray:
 
 def line_normals(points: np.ndarray, tree: cKDTree) -> tuple[np.ndarray, np.ndarray]:
     """Unit normals (k, 2) of the line each point lies on (PCA of its 5 nearest neighbours) and which
-    points have one (neighbours close and on a line; a point in clutter gets none)."""
-    k = min(NORMAL_NEIGHBOURS, len(points))
-    dist, idx = tree.query(points, k)
-    dist, idx = dist.reshape(len(points), k), idx.reshape(len(points), k)
-    nb = points[idx] - points[idx].mean(axis=1, keepdims=True)
+    points have one (neighbours close and on a line; a point in clutter gets none).
+
+    Neighbours as far as the 5th (to ``NORMAL_TIE``) join it: on a laser scan with ranges quantised to
+    1 cm, the two beams either side of a point are often exactly equidistant from it, and which one the
+    kd-tree calls 5th would otherwise be decided by the last bit of the coordinates — so by the CPU's
+    floating-point kernels (docs/results/intel_spread.md).
+    """
+    n = len(points)
+    k = min(NORMAL_NEIGHBOURS, n)
+    q = min(NORMAL_NEIGHBOURS + NORMAL_TIED_EXTRA, n)
+    dist, idx = tree.query(points, q)
+    dist, idx = dist.reshape(n, q), idx.reshape(n, q)
+    w = dist <= dist[:, k - 1 : k] * (1.0 + NORMAL_TIE)  # the k nearest and any tied with the k-th
+    mean = (points[idx] * w[..., None]).sum(axis=1, keepdims=True) / w.sum(axis=1)[:, None, None]
+    nb = (points[idx] - mean) * w[..., None]
     # 2×2 scatter [[a, b], [b, c]] in closed form (batched eigh is slower): major axis at angle ψ with
     # tan 2ψ = 2b / (a − c), eigenvalues (a + c)/2 ± h
     a, b, c = (nb[..., 0] ** 2).sum(1), (nb[..., 0] * nb[..., 1]).sum(1), (nb[..., 1] ** 2).sum(1)
     psi = 0.5 * np.arctan2(2.0 * b, a - c)
     h = np.hypot(0.5 * (a - c), b)
     small, large = 0.5 * (a + c) - h, 0.5 * (a + c) + h
-    on_line = (dist[:, -1] < NORMAL_MAX_SPREAD) & (small < NORMAL_FLATNESS * large)
+    on_line = (dist[:, k - 1] < NORMAL_MAX_SPREAD) & (small < NORMAL_FLATNESS * large)
     normals = np.column_stack((-np.sin(psi), np.cos(psi)))
     return normals, on_line & (k == NORMAL_NEIGHBOURS)
 
