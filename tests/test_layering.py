@@ -22,7 +22,7 @@ PACKAGE = Path(cornerslam_cli.__file__).resolve().parent
 
 # lowest first; a name is a module or package under cornerslam_cli ("" = the package's __init__)
 LAYERS: list[tuple[str, ...]] = [
-    ("", "blas", "errors", "types", "geometry", "ranges", "workers"),  # no dependencies but numpy
+    ("", "blas", "errors", "fpenv", "geometry", "ranges", "types", "workers"),  # stdlib, numpy
     ("textfile", "association.params", "features.params", "filter.params", "motion.params", "logs.params"),
     ("report.tables",),  # file formats (TUM, CSV, JSON), read by evaluate too
     ("logs", "features", "association", "filter", "motion", "simworld"),  # the stages, independent
