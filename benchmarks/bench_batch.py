@@ -24,8 +24,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+from cornerslam_cli.blas import single_threaded_blas  # noqa: E402
+
+single_threaded_blas()
 
 from cornerslam_cli.batch import TIMING_FIGURES, read_batch  # noqa: E402
 

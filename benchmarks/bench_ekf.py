@@ -27,7 +27,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 from _ekf_dense import DenseEkf  # noqa: E402
 
 from cornerslam_cli.filter import Ekf, EkfConfig, motion_model, motion_noise, observe  # noqa: E402
-from cornerslam_cli.types import wrap_angle  # noqa: E402
+from cornerslam_cli.geometry import wrap_angle  # noqa: E402
 
 K_STEP = 10  # matched corners in one step (the paper's Fig 18 shows ~5–12)
 

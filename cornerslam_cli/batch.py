@@ -47,6 +47,7 @@ from pathlib import Path
 from typing import Any
 
 from . import __version__
+from .blas import single_threaded_blas, single_threaded_blas_env
 from .errors import ConfigError, CornerslamError, display_path
 from .report.outdir import claim_dir, clear_stale, output_errors, staged_file
 
@@ -63,7 +64,6 @@ FIGURES = [
 ]
 TIMING_FIGURES = ("t_match", "t_total", "wall_time")  # differ between runs of the same combination
 STATUSES = ("ok", "failed", "skipped", "pending")
-_BLAS_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 _UNSAFE = re.compile(r"[^A-Za-z0-9._=+-]")
 _MAX_NAME = 180  # well under the 255-byte file name limit, leaving room for the staging prefix
 
@@ -326,8 +326,7 @@ def run_one(log: str, config: dict, out_dir: str) -> dict:
     Module-level and importing the package lazily, so spawn and Dask workers can unpickle it by name
     and set the BLAS thread count before numpy is first imported.
     """
-    for var in _BLAS_VARS:
-        os.environ.setdefault(var, "1")
+    single_threaded_blas()
     try:
         from .config import Config, from_dict
         from .pipeline import run
@@ -348,30 +347,23 @@ def _run_local(tasks: list[tuple], jobs: int, finished: Callable[[int, dict], No
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    saved = {v: os.environ.get(v) for v in _BLAS_VARS}
-    for v in _BLAS_VARS:  # spawned workers inherit this environment before they import numpy
-        os.environ.setdefault(v, "1")
-    pool = ProcessPoolExecutor(
-        max_workers=min(jobs, len(tasks)),
-        mp_context=multiprocessing.get_context("spawn"),
-        initializer=_init_worker,
-        initargs=(logging.getLogger().getEffectiveLevel(),),
-    )
-    try:
-        futures = {pool.submit(run_one, log, cfg, out): i for i, log, cfg, out in tasks}
-        for fut in as_completed(futures):
-            try:
-                result = fut.result()
-            except Exception as e:  # the worker process died (killed, out of memory)
-                result = _failed(e)
-            finished(futures[fut], result)
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
-        for v, old in saved.items():
-            if old is None:
-                os.environ.pop(v, None)
-            else:
-                os.environ[v] = old
+    with single_threaded_blas_env():  # spawned workers inherit it before they import numpy
+        pool = ProcessPoolExecutor(
+            max_workers=min(jobs, len(tasks)),
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=_init_worker,
+            initargs=(logging.getLogger().getEffectiveLevel(),),
+        )
+        try:
+            futures = {pool.submit(run_one, log, cfg, out): i for i, log, cfg, out in tasks}
+            for fut in as_completed(futures):
+                try:
+                    result = fut.result()
+                except Exception as e:  # the worker process died (killed, out of memory)
+                    result = _failed(e)
+                finished(futures[fut], result)
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _init_worker(level: int) -> None:
@@ -420,7 +412,7 @@ class _CsvWriter:
         self.last = 0.0
 
     def write(self, rows: list[dict], throttle: bool = False) -> None:
-        from .report.tables import _fmt
+        from .report.tables import csv_value
 
         now = time.monotonic()
         if throttle and now - self.last < 1.0:
@@ -433,7 +425,7 @@ class _CsvWriter:
                     w = csv.writer(f, lineterminator="\n")
                     w.writerow(self.columns)
                     for r in rows:
-                        w.writerow(["" if r.get(k) is None else _fmt(r[k]) for k in self.columns])
+                        w.writerow(["" if r.get(k) is None else csv_value(r[k]) for k in self.columns])
                     f.flush()
                     os.fsync(f.fileno())
                 os.replace(tmp, self.path)

@@ -19,11 +19,9 @@ import time
 import traceback
 from pathlib import Path
 
-# The filter's and associators' matrices are small or memory-bound: BLAS threads cost more than they
-# save (a run on the simulated sample takes 2x longer with two OpenBLAS threads). An explicit setting
-# in the environment wins. This must happen before numpy is first imported.
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+from .blas import single_threaded_blas
+
+single_threaded_blas()  # before numpy is first imported (blas.py says why)
 
 import click  # noqa: E402
 
@@ -397,8 +395,8 @@ def compare(
     Example:
       cornerslam compare sample_logs/sim_office.mcap --assoc icnn,jcbb,pca --jobs 2
     """
+    from .compare import compare as run_compare
     from .pipeline import default_out_dir
-    from .report.compare import compare as run_compare
 
     _setup_logging(verbose, quiet)
     names = [a.strip() for a in assocs.split(",") if a.strip()]

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import difflib
 import math
 import re
 import types
@@ -28,9 +27,10 @@ from typing import Any, Literal
 import yaml
 
 from .association.params import AssociationConfig
-from .errors import ConfigError
+from .errors import ConfigError, did_you_mean
 from .features.params import CornersConfig, LinesConfig, SensorConfig
 from .filter.params import EkfConfig
+from .logs.params import KeyframeConfig, OdomJumpConfig
 from .motion.params import ScanMatchConfig
 from .ranges import RangeError, check_ranges, num, short_repr, short_text
 from .textfile import read_text
@@ -49,27 +49,6 @@ class LaserMountConfig:
     y: float = num(0.0, ge=-100.0, le=100.0)  # metres
     yaw: float = num(0.0, ge=-TWO_PI, le=TWO_PI)  # radians
     from_tf: bool = True  # prefer a static transform base→laser found in the log
-
-    def __post_init__(self) -> None:
-        check_ranges(self)
-
-
-@dataclass(frozen=True)
-class OdomJumpConfig:
-    """Odometry jumps and resets (``logs/sync.py reanchor_odometry``).
-
-    Between two odometry samples dt seconds apart, a move farther than ``distance`` or a turn larger
-    than ``angle`` per ``period`` seconds (scaled by dt / period when dt > period) is not motion the
-    robot can make: it is a jump (a reset of the odometry to zero, a relocalisation). The jump is
-    not applied as motion: the odometry after it is re-anchored to continue from the pose before it,
-    and the step across it adds diag(sigma_xy², sigma_xy², sigma_theta²) to the robot covariance.
-    """
-
-    distance: float = num(2.0, ge=0.0, le=1000.0)  # metres per period; 0 = no jump detection
-    angle: float = num(math.pi / 2, ge=0.0, le=TWO_PI)  # radians per period
-    period: float = num(0.1, gt=0.0, le=1000.0)  # seconds
-    sigma_xy: float = num(0.1, ge=0.0, le=100.0)  # metres, added robot uncertainty across a jump
-    sigma_theta: float = num(0.05, ge=0.0, le=TWO_PI)  # radians
 
     def __post_init__(self) -> None:
         check_ranges(self)
@@ -99,18 +78,6 @@ class InputConfig:
 
 
 @dataclass(frozen=True)
-class KeyframeConfig:
-    """Process a scan only after the robot moved this much (gmapping linearUpdate/angularUpdate)."""
-
-    linear_update: float = num(0.0, ge=0.0, le=1000.0)  # metres; 0 with angular_update 0 = every scan
-    angular_update: float = num(0.0, ge=0.0, le=TWO_PI)  # radians
-    max_interval: float = num(0.0, ge=0.0, le=1e6)  # seconds; 0 = no time-based keyframes
-
-    def __post_init__(self) -> None:
-        check_ranges(self)
-
-
-@dataclass(frozen=True)
 class Config:
     input: InputConfig = field(default_factory=InputConfig)
     keyframes: KeyframeConfig = field(default_factory=KeyframeConfig)
@@ -134,8 +101,7 @@ def _to_plain(v: Any) -> Any:
 
 
 def _closest(key: str, valid: list[str]) -> str:
-    match = difflib.get_close_matches(key, valid, n=1, cutoff=0.5)
-    return f"did you mean '{match[0]}'?" if match else f"valid keys: {', '.join(sorted(valid))}"
+    return did_you_mean(key, valid, cutoff=0.5) or f"valid keys: {', '.join(sorted(valid))}"
 
 
 _YAML11_EXPONENT = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)[eE][+-]?\d+$")
@@ -167,8 +133,7 @@ def _coerce(value: Any, tp: Any, key: str) -> Any:
     if origin is Literal:
         choices = typing.get_args(tp)
         if not isinstance(value, str) or value not in choices:
-            hint = difflib.get_close_matches(str(value)[:100], [str(c) for c in choices], n=1, cutoff=0.5)
-            dym = f"did you mean '{hint[0]}'? " if hint else ""
+            dym = did_you_mean(str(value)[:100], map(str, choices), cutoff=0.5, then=" ")
             raise ConfigError(
                 f"config key '{key}' = {got} is not allowed",
                 f"{dym}choices: {', '.join(map(str, choices))}",

@@ -8,7 +8,9 @@ and to write to UTF-8 files and JSON (error lines are made so by ``CornerslamErr
 
 from __future__ import annotations
 
+import difflib
 import os
+from collections.abc import Iterable
 from pathlib import Path
 
 
@@ -54,3 +56,10 @@ def printable(text: str) -> str:
 def display_path(path: str | Path) -> str:
     """A path as text for messages and summaries (:func:`printable`)."""
     return printable(os.fsdecode(path))
+
+
+def did_you_mean(word: str, choices: Iterable[str], cutoff: float = 0.6, then: str = "") -> str:
+    """``"did you mean 'jcbb'?"`` + ``then`` naming the choice closest to ``word`` (difflib ratio at
+    least ``cutoff``), or ``""`` when none is that close: the start of a hint."""
+    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=cutoff)
+    return f"did you mean '{close[0]}'?{then}" if close else ""

@@ -10,23 +10,22 @@ from pathlib import Path
 import numpy as np
 
 from .errors import LogError
+from .geometry import interpolate, relative, wrap_angle
 from .report.tables import read_tum
 from .textfile import read_number_rows
-from .types import wrap_angle
 
 
-def interpolate_poses(stamps: np.ndarray, poses: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Poses at times ``t`` (linear in x, y; shorter arc in θ). Returns (mask of t inside the span, poses)."""
+def inside_span(stamps: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Mask of the times ``t`` within [stamps[0], stamps[-1]]: those a trajectory can be interpolated at."""
     t = np.asarray(t, dtype=float)
-    inside = (t >= stamps[0]) & (t <= stamps[-1])
-    tq = t[inside]
-    j = np.clip(np.searchsorted(stamps, tq, side="right"), 1, len(stamps) - 1)
-    i = j - 1
-    dt = stamps[j] - stamps[i]
-    s = np.where(dt > 0, (tq - stamps[i]) / np.where(dt > 0, dt, 1.0), 0.0)
-    xy = poses[i, :2] + s[:, None] * (poses[j, :2] - poses[i, :2])
-    th = wrap_angle(poses[i, 2] + s * wrap_angle(poses[j, 2] - poses[i, 2]))
-    return inside, np.column_stack((xy, th))
+    return (t >= stamps[0]) & (t <= stamps[-1])
+
+
+def interpolate_inside(stamps: np.ndarray, poses: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The trajectory (``stamps``, ``poses``) at the times ``t`` within its span: (mask of those t,
+    their poses (k, 3), interpolated by :func:`~cornerslam_cli.geometry.interpolate`)."""
+    inside = inside_span(stamps, t)
+    return inside, interpolate(stamps, poses, np.asarray(t, dtype=float)[inside])
 
 
 def align_se2(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray]:
@@ -52,7 +51,7 @@ def apply_se2(ang: float, t: np.ndarray, poses: np.ndarray) -> np.ndarray:
 def ate(est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray) -> dict:
     """Absolute trajectory error of ``est`` against ``gt`` (interpolated at est's stamps), after SE(2)
     alignment: RMSE, mean, max of the position error (m) and RMSE of the heading error (rad)."""
-    inside, g = interpolate_poses(gt_t, gt, est_t)
+    inside, g = interpolate_inside(gt_t, gt, est_t)
     e = est[inside]
     if len(e) < 2:
         return {"n": int(len(e)), "rmse": float("nan"), "mean": float("nan"), "max": float("nan")}
@@ -69,18 +68,11 @@ def ate(est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray) ->
     }
 
 
-def relative(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Pose of b in the frame of a, row-wise: a⁻¹ ∘ b for (n, 3) arrays."""
-    c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
-    dx, dy = b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]
-    return np.column_stack((c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[:, 2] - a[:, 2])))
-
-
 def rpe(est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray, delta_m: float = 1.0) -> dict:
     """Relative pose error. Per step: RMSE of the translational error of consecutive relative poses.
     Per metre: mean translational error of relative poses spanning ``delta_m`` metres of ground-truth
     path, divided by that span (m/m)."""
-    inside, g = interpolate_poses(gt_t, gt, est_t)
+    inside, g = interpolate_inside(gt_t, gt, est_t)
     e = est[inside]
     out = {"rpe_step_rmse": float("nan"), "rpe_step_rot_rmse": float("nan"), "rpe_per_m": float("nan")}
     if len(e) < 2:
@@ -163,13 +155,8 @@ def relation_error(
     absolute rotational (deg) errors, and how many relations could be evaluated."""
     t1 = relations[:, 0] - time_offset
     t2 = relations[:, 1] - time_offset
-    in1, p1 = interpolate_poses(est_t, est, t1)
-    in2, p2 = interpolate_poses(est_t, est, t2)
-    both = in1 & in2
-    # interpolate_poses returns only the inside rows: re-index to the relations inside both spans
-    idx1 = np.cumsum(in1) - 1
-    idx2 = np.cumsum(in2) - 1
-    a, b = p1[idx1[both]], p2[idx2[both]]
+    both = inside_span(est_t, t1) & inside_span(est_t, t2)
+    a, b = interpolate(est_t, est, t1[both]), interpolate(est_t, est, t2[both])
     gt = relations[both][:, 2:5]
     n = int(np.count_nonzero(both))
     if n == 0:

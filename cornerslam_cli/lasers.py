@@ -13,7 +13,6 @@ they can be read, copied and edited; tests check the two agree.
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import logging
 import math
 from collections.abc import Sequence
@@ -21,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .config import Config, config_from, read_config_file
-from .errors import ConfigError
+from .errors import ConfigError, did_you_mean
 from .logs import open_log
 from .types import Scan
 
@@ -131,8 +130,7 @@ def resolve_config(
     elif choice in PRESETS:
         name = choice
     else:
-        close = difflib.get_close_matches(choice, list(PRESETS), n=1)
-        hint = f"did you mean '{close[0]}'? " if close else ""
+        hint = did_you_mean(choice, PRESETS, then=" ")
         raise ConfigError(
             f"unknown laser preset 'input.laser_preset={choice}'",
             f"{hint}choices: auto, none, {', '.join(PRESETS)}",

@@ -28,10 +28,10 @@ from .errors import ConfigError, LogError, OutputError, display_path
 from .evaluate import ate, overlap_problem, read_relations, relation_error, rpe
 from .features import extract
 from .filter import Ekf
+from .geometry import matrix_from_pose, transform_points
 from .logs import check_regular, open_log
 from .logs.sync import SyncStats, reanchor_odometry, select_keyframes, synchronise
 from .motion import ScanMatcher
-from .motion.icp import se2, transform
 from .report.outdir import StagedDir, output_errors
 from .report.tables import (
     LINES_COLUMNS,
@@ -58,7 +58,7 @@ def corners_to_base(
     """
     x, y, yaw = laser2base
     J = np.eye(3)
-    J[:2, :2] = se2((0.0, 0.0, yaw))[:2, :2]
+    J[:2, :2] = matrix_from_pose((0.0, 0.0, yaw))[:2, :2]
     z = corners.z @ J.T
     z[:, 0] += x
     z[:, 1] += y
@@ -181,7 +181,7 @@ class Slam:
         self.ekf.check_health(k)
         t4 = time.perf_counter()
         pose = np.array(self.ekf.pose, dtype=float)
-        sensor2map = se2(pose) @ se2(self.laser2base)
+        sensor2map = matrix_from_pose(pose) @ matrix_from_pose(self.laser2base)
         self.n_steps += 1
         return StepRecord(
             step=k,
@@ -286,7 +286,7 @@ def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None 
             frame = replace(frame, odom_jump=True)
         if src.matcher is not None:
             t0 = time.perf_counter()
-            m = src.matcher.step(transform(scan.points(), src.laser2base), odom)
+            m = src.matcher.step(transform_points(scan.points(), src.laser2base), odom)
             frame = replace(
                 frame,
                 motion=m.pose,

@@ -22,11 +22,12 @@ from pathlib import Path
 import numpy as np
 
 from .errors import ConfigError
+from .geometry import compose, relative, wrap_angle
 from .logs.writers import RawScan, write_mcap
 from .report.outdir import refuse_special_file
 from .report.tables import write_tum
 from .simworld import OFFICE_LOOP, office_world, raycast, true_corners
-from .types import OdomSample, wrap_angle
+from .types import OdomSample
 
 EPOCH = 1_700_000_000.0  # an arbitrary fixed start time, seconds
 
@@ -83,17 +84,11 @@ def corrupt_odometry(truth: np.ndarray, p: SimParams, rng: np.random.Generator) 
     out = np.empty_like(truth)
     out[0] = truth[0]
     for i in range(1, len(truth)):
-        a, b = truth[i - 1], truth[i]
-        c, s = np.cos(a[2]), np.sin(a[2])
-        dx, dy = b[0] - a[0], b[1] - a[1]
-        fwd, side = c * dx + s * dy, -s * dx + c * dy
-        dth = float(wrap_angle(b[2] - a[2]))
+        fwd, side, dth = relative(truth[i - 1], truth[i])  # the true increment in the robot frame
         d = float(np.hypot(fwd, side))
         fwd = fwd * (1 + p.odom_scale) + rng.normal(0, p.odom_sigma_trans * np.sqrt(d))
         dth = dth + p.odom_drift * d + rng.normal(0, p.odom_sigma_rot * (np.sqrt(d) + np.sqrt(abs(dth))))
-        o = out[i - 1]
-        co, so = np.cos(o[2]), np.sin(o[2])
-        out[i] = (o[0] + co * fwd - so * side, o[1] + so * fwd + co * side, wrap_angle(o[2] + dth))
+        out[i] = compose(out[i - 1], (fwd, side, dth))
     return out
 
 

@@ -17,7 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .types import Scan, wrap_angle
+from .geometry import wrap_angle
+from .types import Scan
 
 #: two wall end points closer than this are one vertex, metres
 VERTEX_TOL = 1e-6

@@ -191,8 +191,3 @@ class AssociationResult:
     @property
     def n_matched(self) -> int:
         return int(np.count_nonzero(self.pairs >= 0))
-
-
-def wrap_angle(a):
-    """Wrap angle(s) to [-pi, pi)."""
-    return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi

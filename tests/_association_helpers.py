@@ -13,7 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cornerslam_cli.types import Prediction, wrap_angle
+from cornerslam_cli.geometry import wrap_angle
+from cornerslam_cli.types import Prediction
 
 
 def observe(pose: np.ndarray, lm: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -17,7 +17,7 @@ from cornerslam_cli.filter.models import (
     odometry_increment,
 )
 from cornerslam_cli.filter.params import EkfConfig
-from cornerslam_cli.types import wrap_angle
+from cornerslam_cli.geometry import wrap_angle
 
 
 class DenseEkf:

@@ -1,11 +1,10 @@
 """Shared fixtures: one small simulated log per test session (generated, never shipped)."""
 
-import os
+from cornerslam_cli.blas import single_threaded_blas
 
 # As the CLI does (cli.py), before numpy is imported: single-threaded BLAS, so in-process runs here
 # compute exactly what `cornerslam run` computes.
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+single_threaded_blas()
 
 from pathlib import Path  # noqa: E402
 

@@ -158,14 +158,14 @@ def _two_scan_topics(path: Path) -> None:
     """An MCAP with two LaserScan topics (/front, /rear) and /odom, built with the writers' serializer."""
     from mcap.writer import Writer
 
-    from cornerslam_cli.logs.writers import RosSerializer, _ros_messages
+    from cornerslam_cli.logs.writers import RosSerializer, RosTopics, _ros_messages
 
     ros = RosSerializer("cdr")
     r = np.full(181, 5.0)
     scans = [RawScan(T0 + 0.1 * i + 0.05, -math.pi / 2, math.pi / 180, r) for i in range(10)]
     odoms = [OdomSample(T0 + 0.1 * i, 0.0, 0.0, 0.0) for i in range(11)]
-    msgs = list(_ros_messages(ros, scans, odoms, "/front", "/odom", None, False, "odom", "base_link"))
-    msgs += list(_ros_messages(ros, scans, [], "/rear", "/odom", None, False, "odom", "base_link"))
+    msgs = list(_ros_messages(ros, scans, odoms, RosTopics(scan_topic="/front")))
+    msgs += list(_ros_messages(ros, scans, [], RosTopics(scan_topic="/rear")))
     msgs.sort(key=lambda m: m[2])
     with open(path, "wb") as f:
         w = Writer(f)
@@ -280,7 +280,7 @@ def test_compare_rejects_unknown_and_repeated_associators(sim_log, tmp_path):
 def test_relations_are_scored_in_run_and_compare(sim_log, tmp_path):
     """Relations built from the simulator's ground truth (offset by a made-up clock difference): the
     estimate must score far better than odometry, and compare tabulates the metric per associator."""
-    from cornerslam_cli.evaluate import relative
+    from cornerslam_cli.geometry import relative
     from cornerslam_cli.report.tables import read_tum
 
     t, gt = read_tum(sim_log.with_suffix(".gt.tum"))

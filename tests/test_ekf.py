@@ -22,7 +22,7 @@ from cornerslam_cli.filter import (
     observe,
     odometry_increment,
 )
-from cornerslam_cli.types import wrap_angle
+from cornerslam_cli.geometry import wrap_angle
 
 TOL = 1e-9
 

@@ -221,8 +221,8 @@ def test_runs_are_byte_identical(noisy_log, tmp_path):
 
 def test_compare_jobs_1_and_2_are_byte_identical(noisy_log, tmp_path):
     """``compare``'s library function (the CLI adds only plots, which take seconds)."""
+    from cornerslam_cli.compare import compare
     from cornerslam_cli.config import load_config
-    from cornerslam_cli.report.compare import compare
 
     for jobs in (1, 2):
         compare(noisy_log, load_config(), ["icnn", "pca"], tmp_path / f"j{jobs}", jobs=jobs)
@@ -252,7 +252,7 @@ def test_ten_thousand_filter_steps_keep_sigma_positive_definite():
     from cornerslam_cli.filter import Ekf
     from cornerslam_cli.filter.models import observe
     from cornerslam_cli.filter.params import EkfConfig
-    from cornerslam_cli.types import wrap_angle
+    from cornerslam_cli.geometry import wrap_angle
 
     rng = np.random.default_rng(11)
     ang = np.linspace(0, 2 * np.pi, 12, endpoint=False)

@@ -23,12 +23,12 @@ from click.testing import CliRunner
 from cornerslam_cli.cli import cli
 from cornerslam_cli.config import Config, from_dict, load_config
 from cornerslam_cli.filter import inverse_observe, observe
+from cornerslam_cli.geometry import matrix_from_pose, pose_from_matrix, transform_points, yaw_from_quaternion
 from cornerslam_cli.logs import open_log
-from cornerslam_cli.logs.base import chain_transform, pose2_from_matrix, transform_matrix, yaw_from_quaternion
+from cornerslam_cli.logs.ros import chain_transform, pose2_from_matrix, transform_matrix
 from cornerslam_cli.logs.sync import reanchor_odometry
 from cornerslam_cli.logs.writers import RawScan, write_mcap
 from cornerslam_cli.motion import ScanMatcher
-from cornerslam_cli.motion.icp import pose_of, se2, transform
 from cornerslam_cli.pipeline import Frame, Slam, corners_to_base, frames, open_input
 from cornerslam_cli.report.tables import read_csv, write_tum
 from cornerslam_cli.simulate import SimParams, drive
@@ -83,11 +83,11 @@ def test_corners_to_base_moves_the_position_and_turns_the_covariance():
 
 
 def test_scan_points_reach_the_base_frame_through_the_mount():
-    """The scan matcher's input (pipeline: transform(scan.points(), laser2base))."""
+    """The scan matcher's input (pipeline: transform_points(scan.points(), laser2base))."""
     pts = np.array([[1.0, 0.5], [-2.0, 3.0], [0.0, -1.5]])
-    np.testing.assert_allclose(transform(pts, MOUNT), apply(matrix(*MOUNT), pts), atol=1e-12)
-    np.testing.assert_allclose(se2(MOUNT), matrix(*MOUNT), atol=1e-15)
-    assert pose_of(matrix(*MOUNT)) == pytest.approx(MOUNT)
+    np.testing.assert_allclose(transform_points(pts, MOUNT), apply(matrix(*MOUNT), pts), atol=1e-12)
+    np.testing.assert_allclose(matrix_from_pose(MOUNT), matrix(*MOUNT), atol=1e-15)
+    assert pose_from_matrix(matrix(*MOUNT)) == pytest.approx(MOUNT)
 
 
 def test_laser_mount_from_the_config_when_the_log_has_no_tf(yawed_logs):

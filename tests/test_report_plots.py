@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cornerslam_cli.compare import compare
 from cornerslam_cli.config import load_config
-from cornerslam_cli.evaluate import relative
-from cornerslam_cli.report.compare import compare
+from cornerslam_cli.geometry import relative
 from cornerslam_cli.report.plots import (
     COMPARE_FIGURES,
     RUN_FIGURES,

@@ -7,10 +7,10 @@ import pytest
 
 from cornerslam_cli.config import load_config
 from cornerslam_cli.errors import ConfigError
+from cornerslam_cli.geometry import matrix_from_pose, pose_from_matrix, transform_points, wrap_angle
 from cornerslam_cli.motion import ScanMatchConfig, ScanMatcher
-from cornerslam_cli.motion.icp import LocalMap, pose_of, register, se2, transform, voxel_thin
+from cornerslam_cli.motion.icp import LocalMap, register, voxel_thin
 from cornerslam_cli.simworld import OFFICE_LOOP, make_world, office_world, path_poses, polyline, raycast
-from cornerslam_cli.types import wrap_angle
 
 ANGLES = np.radians(np.arange(-90.0, 90.5, 1.0))  # SICK-like: 181 beams, 1°
 
@@ -36,7 +36,7 @@ def office():
 def test_register_recovers_a_known_pose(office):
     rng = np.random.default_rng(1)
     ref_pose, true_pose = np.array([6.0, 5.0, 0.1]), np.array([6.6, 5.2, 0.45])
-    local = LocalMap.build(transform(scan_points(office, ref_pose, rng, 0.01), ref_pose))
+    local = LocalMap.build(transform_points(scan_points(office, ref_pose, rng, 0.01), ref_pose))
     points = scan_points(office, true_pose, rng, 0.01)
     guess = true_pose + [0.15, -0.1, math.radians(4.0)]
     pose, fit = register(points, local, guess, ScanMatchConfig())
@@ -92,9 +92,9 @@ def test_refined_chain_beats_drifting_odometry_on_a_loop(office):
     truth = path_poses(OFFICE_LOOP, 0.6)
     odom = [truth[0]]
     for k in range(1, len(truth)):
-        inc = pose_of(np.linalg.inv(se2(truth[k - 1])) @ se2(truth[k]))
+        inc = pose_from_matrix(np.linalg.inv(matrix_from_pose(truth[k - 1])) @ matrix_from_pose(truth[k]))
         inc = inc * [1.03, 1.03, 1.0] + [0.0, 0.0, 0.01 + rng.normal(0, 0.02)]
-        odom.append(pose_of(se2(odom[-1]) @ se2(inc)))
+        odom.append(pose_from_matrix(matrix_from_pose(odom[-1]) @ matrix_from_pose(inc)))
     m = ScanMatcher(ScanMatchConfig())
     refined = [m.step(scan_points(office, p, rng, 0.01), o).pose for p, o in zip(truth, odom, strict=True)]
     err_odom = max(pose_error(o, p)[0] for o, p in zip(odom, truth, strict=True))

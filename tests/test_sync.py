@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from fault_corpus import peak_bytes
 
-from cornerslam_cli.config import KeyframeConfig
-from cornerslam_cli.logs.sync import SyncStats, interpolate_pose, select_keyframes, synchronise
+from cornerslam_cli.logs.params import KeyframeConfig
+from cornerslam_cli.logs.sync import SyncStats, select_keyframes, synchronise
 from cornerslam_cli.types import OdomSample, Scan
 
 
@@ -15,9 +15,8 @@ def scan(t):
 
 
 def test_interpolation_is_linear_and_takes_the_short_arc():
-    a = OdomSample(0.0, 0.0, 0.0, np.pi - 0.1)
-    b = OdomSample(1.0, 2.0, -4.0, -np.pi + 0.1)
-    p = interpolate_pose(a, b, 0.25)
+    msgs = [OdomSample(0.0, 0.0, 0.0, np.pi - 0.1), scan(0.25), OdomSample(1.0, 2.0, -4.0, -np.pi + 0.1)]
+    ((_, p),) = synchronise(msgs)
     assert p[:2] == pytest.approx([0.5, -1.0])
     # from π−0.1 to −π+0.1 is +0.2 the short way round; a quarter of it lands at π−0.05
     assert p[2] == pytest.approx(np.pi - 0.05)

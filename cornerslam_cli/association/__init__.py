@@ -12,12 +12,11 @@ m = 0 or n = 0 gives an all-unmatched result, never an error.
 
 from __future__ import annotations
 
-import difflib
 from typing import Protocol
 
 import numpy as np
 
-from ..errors import ConfigError
+from ..errors import ConfigError, did_you_mean
 from ..types import AssociationResult, Prediction
 from .icnn import Icnn
 from .jcbb import Jcbb
@@ -37,8 +36,8 @@ def make_associator(cfg: AssociationConfig) -> Associator:
     cls = ASSOCIATORS.get(cfg.method)
     if cls is None:
         names = ", ".join(ASSOCIATORS)
-        close = difflib.get_close_matches(cfg.method, list(ASSOCIATORS), n=1, cutoff=0.3)
-        hint = f"did you mean '{close[0]}'? ({names})" if close else f"choose one of: {names}"
+        dym = did_you_mean(cfg.method, ASSOCIATORS, cutoff=0.3)
+        hint = f"{dym} ({names})" if dym else f"choose one of: {names}"
         raise ConfigError(f"unknown associator '{cfg.method}'", hint)
     return cls(cfg)
 

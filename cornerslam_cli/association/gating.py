@@ -26,7 +26,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import chi2
 
-from ..types import AssociationResult, Prediction, wrap_angle
+from ..geometry import wrap_angle
+from ..types import AssociationResult, Prediction
 from .params import AssociationConfig
 
 _PIVOT_RTOL = (

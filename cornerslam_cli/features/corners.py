@@ -43,7 +43,8 @@ import functools
 
 import numpy as np
 
-from ..types import Corners, Scan, Segments, wrap_angle
+from ..geometry import wrap_angle
+from ..types import Corners, Scan, Segments
 from .lines import COV_FLOOR
 from .params import CornersConfig, SensorConfig
 from .sensor import beam_variances, sigma_range

@@ -20,7 +20,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import NumericalError
-from ..types import Prediction, wrap_angle
+from ..geometry import wrap_angle
+from ..types import Prediction
 from .models import inverse_observe, motion_model, motion_noise, observe, odometry_increment
 from .params import EkfConfig
 

@@ -13,7 +13,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..types import wrap_angle
+from ..geometry import wrap_angle
 
 
 class OdometryIncrement(NamedTuple):

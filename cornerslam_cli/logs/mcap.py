@@ -28,7 +28,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import LogError
-from .base import Channel, ReadStats, RosLogReader
+from .base import Channel, ReadStats
+from .ros import RosLogReader
 
 MAGIC = b"\x89MCAP0\r\n"
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK = 0x01, 0x02, 0x03, 0x04, 0x05, 0x06
@@ -101,7 +102,7 @@ class _Index:
 
 
 class McapSource:
-    """A :class:`~cornerslam_cli.logs.base.RawSource` over one MCAP file (only ``open()`` gets a name)."""
+    """A :class:`~cornerslam_cli.logs.ros.RawSource` over one MCAP file (only ``open()`` gets a name)."""
 
     format = "mcap"
 

@@ -16,11 +16,12 @@ from rosbags.rosbag1 import Reader as Reader1
 from rosbags.rosbag2 import Reader as Reader2
 
 from ..errors import LogError
-from .base import Channel, ReadStats, RosLogReader
+from .base import Channel, ReadStats
+from .ros import RosLogReader
 
 
 class RosbagSource:
-    """A :class:`~cornerslam_cli.logs.base.RawSource` over a rosbags reader (ROS 1 or ROS 2)."""
+    """A :class:`~cornerslam_cli.logs.ros.RawSource` over a rosbags reader (ROS 1 or ROS 2)."""
 
     def __init__(self, path: Path, stats: ReadStats, ros2: bool):
         self.path = Path(path)

@@ -7,8 +7,7 @@ It streams in bounded memory: a scan waits for an odometry sample at or after it
 samples that a later scan may still need are kept (at most :data:`MAX_ODOM`).
 
 Interpolation between the two odometry samples that bracket a scan is linear in (x, y) and along the
-shorter arc in θ — the SE(2) geodesic differs from this by O(Δθ·Δd), negligible between odometry
-samples a few tens of milliseconds apart.
+shorter arc in θ (:func:`~cornerslam_cli.geometry.interpolate`).
 
 Scans that cannot be interpolated are skipped and counted in :class:`SyncStats`: before the first or
 after the last odometry sample, in a gap of the odometry (samples more than MAX_GAP apart around it),
@@ -25,8 +24,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import KeyframeConfig, OdomJumpConfig
-from ..types import OdomSample, Scan, wrap_angle
+from ..geometry import compose, interpolate, inverse, wrap_angle
+from ..types import OdomSample, Scan
+from .params import KeyframeConfig, OdomJumpConfig
 
 log = logging.getLogger(__name__)
 
@@ -55,16 +55,6 @@ class SyncStats:
         d = dict(self.__dict__)
         d["scans_skipped"] = self.scans_skipped
         return d
-
-
-def interpolate_pose(a: OdomSample, b: OdomSample, t: float) -> np.ndarray:
-    """Pose (x, y, θ) at time t between samples a and b (a.stamp <= t <= b.stamp), angle-aware."""
-    dt = b.stamp - a.stamp
-    s = 0.0 if dt <= 0.0 else (t - a.stamp) / dt
-    dth = float(wrap_angle(b.theta - a.theta))
-    return np.array(
-        [a.x + s * (b.x - a.x), a.y + s * (b.y - a.y), float(wrap_angle(a.theta + s * dth))], dtype=float
-    )
 
 
 def synchronise(
@@ -101,7 +91,8 @@ def synchronise(
                 st.odom_gap += 1
                 continue
             st.scans_out += 1
-            yield scan, interpolate_pose(a, b, t)
+            bracket = np.array([[a.x, a.y, a.theta], [b.x, b.y, b.theta]])
+            yield scan, interpolate(np.array([a.stamp, b.stamp]), bracket, t)
 
     for msg in messages:
         if isinstance(msg, Scan):
@@ -152,17 +143,6 @@ def _warn_skipped(st: SyncStats, warn: Callable[..., None]) -> None:
     )
 
 
-def _compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """SE(2) a ∘ b of poses (x, y, θ)."""
-    c, s = np.cos(a[2]), np.sin(a[2])
-    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], float(wrap_angle(a[2] + b[2]))])
-
-
-def _inverse(a: np.ndarray) -> np.ndarray:
-    c, s = np.cos(a[2]), np.sin(a[2])
-    return np.array([-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2]])
-
-
 def reanchor_odometry(
     messages: Iterable[Scan | OdomSample],
     cfg: OdomJumpConfig,
@@ -201,10 +181,10 @@ def reanchor_odometry(
                             "not applied as motion, odometry re-anchored",
                             moved, np.degrees(turned), msg.stamp - prev.stamp, msg.stamp,
                         )  # fmt: skip
-                    fix = _compose(_compose(fix, a), _inverse(raw))
+                    fix = compose(compose(fix, a), inverse(raw))
             prev = msg
             if st.odom_jumps:
-                msg = OdomSample(msg.stamp, *(float(v) for v in _compose(fix, raw)))
+                msg = OdomSample(msg.stamp, *(float(v) for v in compose(fix, raw)))
         yield msg
 
 

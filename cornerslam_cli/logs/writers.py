@@ -5,12 +5,8 @@ samples (:class:`~cornerslam_cli.types.OdomSample`) as iterables sorted by stamp
 fine: writing streams), merges them by stamp (odometry first on ties) and uses the stamp as both
 header stamp and log time. ROS messages are serialized with rosbags' typestores.
 
-Options shared by the ROS writers: ``tf_static=(x, y, yaw)`` writes one /tf_static message
-base_frame→frame_id of the scans; ``odom_as_tf=True`` writes odometry as /tf odom_frame→base_frame
-instead of a nav_msgs/Odometry topic; ``odom_quaternion(sample)`` gives the orientation quaternion
-(x, y, z, w) written for an odometry sample (default: the unit quaternion of its theta; the fault
-tests write unnormalised ones); ``log_time_offset`` seconds are added to the stamps to make the log
-(receive) times (a recording of simulated time: header stamps from 0, log time from the wall clock).
+The three ROS writers take the options they share (topics, frames, how odometry is written) as
+keyword arguments, the fields of :class:`RosTopics`.
 """
 
 from __future__ import annotations
@@ -77,6 +73,30 @@ Quaternion = tuple[float, float, float, float]
 
 def _quaternion(yaw: float) -> Quaternion:
     return (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+
+
+@dataclass(frozen=True)
+class RosTopics:
+    """What the ROS writers (MCAP, ROS 1 bag, ROS 2 bag) write where.
+
+    scan_topic, odom_topic : topic names of the LaserScan and Odometry messages
+    tf_static : (x, y, yaw) of the laser in base_frame, written once on /tf_static as
+        base_frame→frame_id of the scans; None writes no /tf_static
+    odom_as_tf : odometry as /tf odom_frame→base_frame instead of a nav_msgs/Odometry topic
+    odom_quaternion : the orientation quaternion (x, y, z, w) written for an odometry sample (default:
+        the unit quaternion of its theta; the fault tests write unnormalised ones)
+    log_time_offset : seconds added to the stamps to make the log (receive) times (a recording of
+        simulated time: header stamps from 0, log time from the wall clock)
+    """
+
+    scan_topic: str = "/scan"
+    odom_topic: str = "/odom"
+    tf_static: tuple[float, float, float] | None = None
+    odom_as_tf: bool = False
+    odom_frame: str = "odom"
+    base_frame: str = "base_link"
+    odom_quaternion: Callable[[OdomSample], Quaternion] | None = None
+    log_time_offset: float = 0.0
 
 
 class RosSerializer:
@@ -245,33 +265,22 @@ def serializer(encoding: str) -> RosSerializer | JsonSerializer:
 
 
 def _ros_messages(
-    ros: RosSerializer,
-    scans: Iterable[RawScan],
-    odoms: Iterable[OdomSample],
-    scan_topic: str,
-    odom_topic: str,
-    tf_static: tuple[float, float, float] | None,
-    odom_as_tf: bool,
-    odom_frame: str,
-    base_frame: str,
-    *,
-    odom_quaternion: Callable[[OdomSample], Quaternion] | None = None,
-    log_time_offset: float = 0.0,
+    ros: RosSerializer | JsonSerializer, scans: Iterable[RawScan], odoms: Iterable[OdomSample], o: RosTopics
 ) -> Iterator[tuple[str, str, int, bytes]]:
     """(topic, typename, log_time_ns, data) of a whole log, in stamp order."""
-    static_done = tf_static is None
+    static_done = o.tf_static is None
     for m in _merged(scans, odoms):
-        t = _ns(m.stamp + log_time_offset)
+        t = _ns(m.stamp + o.log_time_offset)
         if isinstance(m, RawScan):
             if not static_done:
-                yield "/tf_static", TFMESSAGE, t, ros.tf(m.stamp, base_frame, m.frame_id, *tf_static)
+                yield "/tf_static", TFMESSAGE, t, ros.tf(m.stamp, o.base_frame, m.frame_id, *o.tf_static)
                 static_done = True
-            yield scan_topic, LASERSCAN, t, ros.laserscan(m)
-        elif odom_as_tf:
-            yield "/tf", TFMESSAGE, t, ros.tf(m.stamp, odom_frame, base_frame, m.x, m.y, m.theta)
+            yield o.scan_topic, LASERSCAN, t, ros.laserscan(m)
+        elif o.odom_as_tf:
+            yield "/tf", TFMESSAGE, t, ros.tf(m.stamp, o.odom_frame, o.base_frame, m.x, m.y, m.theta)
         else:
-            q = odom_quaternion(m) if odom_quaternion is not None else None
-            yield odom_topic, ODOMETRY, t, ros.odometry(m, odom_frame, base_frame, q)
+            q = o.odom_quaternion(m) if o.odom_quaternion is not None else None
+            yield o.odom_topic, ODOMETRY, t, ros.odometry(m, o.odom_frame, o.base_frame, q)
 
 
 def _shuffled(messages: Iterable, block: int) -> Iterator:
@@ -288,20 +297,14 @@ def write_mcap(
     odoms: Iterable[OdomSample],
     *,
     encoding: str = "cdr",
-    scan_topic: str = "/scan",
-    odom_topic: str = "/odom",
-    tf_static: tuple[float, float, float] | None = None,
-    odom_as_tf: bool = False,
-    odom_frame: str = "odom",
-    base_frame: str = "base_link",
-    odom_quaternion: Callable[[OdomSample], Quaternion] | None = None,
-    log_time_offset: float = 0.0,
     compression: str = "zstd",
     chunk_size: int = 1024 * 1024,
     shuffle_blocks: int = 0,
+    **topics,
 ) -> Path:
     """Write an MCAP log. ``encoding``: ``cdr`` (ROS 2 profile), ``ros1`` (ROS 1 profile), ``json``
-    (foxglove_bridge / rosbridge recordings; ``json-ros1`` with ROS 1 field names).
+    (foxglove_bridge / rosbridge recordings; ``json-ros1`` with ROS 1 field names); ``topics``: the
+    fields of :class:`RosTopics`.
 
     ``shuffle_blocks`` > 0 writes the messages in blocks of that many, the blocks in a seeded random
     order, one message per chunk: a valid file whose chunks are not in log-time order (the whole log
@@ -314,10 +317,7 @@ def write_mcap(
     comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}[
         compression
     ]
-    messages = _ros_messages(
-        ros, scans, odoms, scan_topic, odom_topic, tf_static, odom_as_tf, odom_frame, base_frame,
-        odom_quaternion=odom_quaternion, log_time_offset=log_time_offset,
-    )  # fmt: skip
+    messages = _ros_messages(ros, scans, odoms, RosTopics(**topics))
     if shuffle_blocks > 0:
         messages, chunk_size = _shuffled(messages, shuffle_blocks), 1
     with open(path, "wb") as f:
@@ -344,27 +344,16 @@ def write_rosbag1(
     path: str | Path,
     scans: Iterable[RawScan],
     odoms: Iterable[OdomSample],
-    *,
-    scan_topic: str = "/scan",
-    odom_topic: str = "/odom",
-    tf_static: tuple[float, float, float] | None = None,
-    odom_as_tf: bool = False,
-    odom_frame: str = "odom",
-    base_frame: str = "base_link",
-    odom_quaternion: Callable[[OdomSample], Quaternion] | None = None,
-    log_time_offset: float = 0.0,
+    **topics,
 ) -> Path:
-    """Write a ROS 1 bag (v2.0, uncompressed chunks)."""
+    """Write a ROS 1 bag (v2.0, uncompressed chunks); ``topics``: the fields of :class:`RosTopics`."""
     from rosbags.rosbag1 import Writer
 
     ros = RosSerializer("ros1")
     path = Path(path)
     with Writer(path) as w:
         conns = {}
-        for topic, typename, t, data in _ros_messages(
-            ros, scans, odoms, scan_topic, odom_topic, tf_static, odom_as_tf, odom_frame, base_frame,
-            odom_quaternion=odom_quaternion, log_time_offset=log_time_offset,
-        ):  # fmt: skip
+        for topic, typename, t, data in _ros_messages(ros, scans, odoms, RosTopics(**topics)):
             if topic not in conns:
                 conns[topic] = w.add_connection(
                     topic, typename, typestore=ros.store, latching=1 if topic == "/tf_static" else None
@@ -379,16 +368,10 @@ def write_rosbag2(
     odoms: Iterable[OdomSample],
     *,
     storage: str = "sqlite3",
-    scan_topic: str = "/scan",
-    odom_topic: str = "/odom",
-    tf_static: tuple[float, float, float] | None = None,
-    odom_as_tf: bool = False,
-    odom_frame: str = "odom",
-    base_frame: str = "base_link",
-    odom_quaternion: Callable[[OdomSample], Quaternion] | None = None,
-    log_time_offset: float = 0.0,
+    **topics,
 ) -> Path:
-    """Write a ROS 2 bag directory (``storage`` ``sqlite3`` or ``mcap``); ``path`` must not exist."""
+    """Write a ROS 2 bag directory (``storage`` ``sqlite3`` or ``mcap``); ``path`` must not exist;
+    ``topics``: the fields of :class:`RosTopics`."""
     from rosbags.rosbag2 import StoragePlugin, Writer
 
     plugin = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}[storage]
@@ -396,10 +379,7 @@ def write_rosbag2(
     path = Path(path)
     with Writer(path, version=9, storage_plugin=plugin) as w:
         conns = {}
-        for topic, typename, t, data in _ros_messages(
-            ros, scans, odoms, scan_topic, odom_topic, tf_static, odom_as_tf, odom_frame, base_frame,
-            odom_quaternion=odom_quaternion, log_time_offset=log_time_offset,
-        ):  # fmt: skip
+        for topic, typename, t, data in _ros_messages(ros, scans, odoms, RosTopics(**topics)):
             if topic not in conns:
                 conns[topic] = w.add_connection(topic, typename, typestore=ros.store)
             w.write(conns[topic], t, data)

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..types import wrap_angle
+from ..geometry import matrix_from_pose, pose_from_matrix, transform_points, wrap_angle
 from .params import ScanMatchConfig
 
 NORMAL_NEIGHBOURS = 5
@@ -38,21 +38,6 @@ NORMAL_TIE = 1e-9  # relative: a neighbour this close to the 5th's distance is t
 NORMAL_TIED_EXTRA = 2  # neighbours queried beyond the 5th to find those tied with it
 SHRINK = 0.5
 CONVERGED = 1e-5  # largest step component (m or rad) that ends the iterations
-
-
-def se2(pose) -> np.ndarray:
-    x, y, t = pose
-    c, s = np.cos(t), np.sin(t)
-    return np.array([[c, -s, x], [s, c, y], [0.0, 0.0, 1.0]])
-
-
-def pose_of(M: np.ndarray) -> np.ndarray:
-    return np.array([M[0, 2], M[1, 2], np.arctan2(M[1, 0], M[0, 0])])
-
-
-def transform(points: np.ndarray, pose) -> np.ndarray:
-    M = se2(pose)
-    return points @ M[:2, :2].T + M[:2, 2]
 
 
 def voxel_thin(points: np.ndarray, size: float) -> np.ndarray:
@@ -129,7 +114,7 @@ def register(
     points: np.ndarray, local: LocalMap, guess: np.ndarray, cfg: ScanMatchConfig
 ) -> tuple[np.ndarray, float]:
     """ICP of ``points`` (base frame) against ``local`` from ``guess``; returns (pose, fit)."""
-    M = se2(guess)
+    M = matrix_from_pose(guess)
     prior_info = np.array([cfg.prior_sigma_xy**-2, cfg.prior_sigma_xy**-2, cfg.prior_sigma_theta**-2])
     prior_info *= cfg.robust_scale**2  # the data term below is in units of robust_scale²
     dmax = cfg.max_distance
@@ -145,18 +130,18 @@ def register(
         # origin that keeps rotation and translation decoupled): (n_x, n_y, (q − t) × n)
         rel = q - M[:2, 2]
         J = np.column_stack((n[:, 0], n[:, 1], rel[:, 0] * n[:, 1] - rel[:, 1] * n[:, 0]))
-        off = pose_of(M) - guess
+        off = pose_from_matrix(M) - guess
         off[2] = wrap_angle(off[2])
         Jw = J * w[:, None]
         H = Jw.T @ J + np.diag(prior_info)
         g = Jw.T @ r + prior_info * off
         step = -np.linalg.solve(H, g)
-        M = se2(pose_of(M) + step)
+        M = matrix_from_pose(pose_from_matrix(M) + step)
         dmax = max(cfg.min_distance, dmax * SHRINK)
         if np.abs(step).max() < CONVERGED and dmax <= cfg.min_distance:
             break
-    pose = pose_of(M)
-    dist, _ = local.tree.query(transform(points, pose), distance_upper_bound=cfg.inlier_distance)
+    pose = pose_from_matrix(M)
+    dist, _ = local.tree.query(transform_points(points, pose), distance_upper_bound=cfg.inlier_distance)
     return pose, float(np.mean(dist < cfg.inlier_distance))
 
 
@@ -184,7 +169,9 @@ class ScanMatcher:
         if self.pose is None:
             result = MatchResult(odom.copy(), 1.0, True)
         else:
-            guess = pose_of(se2(self.pose) @ np.linalg.inv(se2(self.odom)) @ se2(odom))
+            # the wheel increment applied to the previous refined pose: (pose ∘ odom_prev⁻¹) ∘ odom
+            wheel2motion = matrix_from_pose(self.pose) @ np.linalg.inv(matrix_from_pose(self.odom))
+            guess = pose_from_matrix(wheel2motion @ matrix_from_pose(odom))
             result = self._match(points, guess)
         self.pose, self.odom = result.pose, odom
         self._grow_map(points, result.pose)
@@ -223,7 +210,7 @@ class ScanMatcher:
         if len(points) < NORMAL_NEIGHBOURS:
             return
         self.last_map_pose = pose.copy()
-        placed = transform(points, pose)
+        placed = transform_points(points, pose)
         self.scans.append(placed[voxel_thin(placed, cfg.voxel)])  # thinned alone first: a smaller union
         pts = np.concatenate(self.scans)
         self.local = LocalMap.build(pts[voxel_thin(pts, cfg.voxel)])

@@ -47,6 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import display_path
+from ..geometry import compose_inverse
 from .plots import ELLIPSE_SIGMA, ellipse_polygons, load_run
 from .tables import json_text
 
@@ -212,14 +213,6 @@ def _poses_in_frame(ns: int, poses: np.ndarray) -> dict:
     return {"timestamp": _time(ns), "frame_id": MAP_FRAME, "poses": [_pose(*p) for p in poses]}
 
 
-def _compose_inverse(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise a ∘ b⁻¹ for (n, 3) poses: with a = map←base and b = odom←base, the map←odom transform."""
-    th = a[:, 2] - b[:, 2]
-    c, s = np.cos(th), np.sin(th)
-    bx, by = b[:, 0], b[:, 1]
-    return np.column_stack((a[:, 0] - (c * bx - s * by), a[:, 1] - (s * bx + c * by), th))
-
-
 def _stamp_texts(path: Path) -> list[str]:
     with open(path, newline="") as f:
         reader = csv.DictReader(f)
@@ -243,7 +236,7 @@ def write_results_mcap(
     odom_frame = str(((run.summary.get("config") or {}).get("input") or {}).get("odom_frame") or "odom")
 
     msgs: list[tuple[int, str, dict]] = []  # (log time ns, topic key, payload)
-    for ns, c, o, m in zip(stamps_ns, run.corrected, run.odometry, _compose_inverse(run.corrected, odom_raw),
+    for ns, c, o, m in zip(stamps_ns, run.corrected, run.odometry, compose_inverse(run.corrected, odom_raw),
                            strict=True):  # fmt: skip
         msgs.append((ns, "pose", {"timestamp": _time(ns), "frame_id": MAP_FRAME, "pose": _pose(*c)}))
         msgs.append((ns, "odom_pose", {"timestamp": _time(ns), "frame_id": MAP_FRAME, "pose": _pose(*o)}))

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..evaluate import align_se2, apply_se2, interpolate_poses
+from ..evaluate import align_se2, apply_se2, interpolate_inside
 from .tables import COMPARISON_COLUMNS, read_csv, read_tum
 
 log = logging.getLogger(__name__)
@@ -127,7 +127,7 @@ def _aligned_ground_truth(
     except Exception as e:  # a moved or deleted file must not stop the plots
         log.warning("ground truth '%s' not drawn: %s", path, e)
         return None
-    inside, g = interpolate_poses(gt_t, gt, stamps)
+    inside, g = interpolate_inside(gt_t, gt, stamps)
     if inside.sum() < 2:
         return None
     ang, t = align_se2(g[:, :2], corrected[inside, :2])

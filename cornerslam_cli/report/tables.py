@@ -16,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..geometry import yaw_from_quaternion
+
 log = logging.getLogger("cornerslam.report")
 
 # INTERFACE.md's columns, then (an extension) the scan-matched odometry the filter used as motion input
@@ -36,7 +38,9 @@ COMPARISON_COLUMNS = (
 ).split(",")
 
 
-def _fmt(v) -> str:
+def csv_value(v) -> str:
+    """One CSV cell: bools and integers as integers, floats rounded to 9 decimals (``nan`` for NaN;
+    ``repr`` from 1e15 up), anything else as ``str``."""
     if isinstance(v, (bool, np.bool_)):
         return str(int(v))
     if isinstance(v, (int, np.integer)):
@@ -59,14 +63,14 @@ class CsvTable:
         self._f.write(",".join(self.columns) + "\n")
 
     def row(self, *values) -> None:
-        self._f.write(",".join(_fmt(v) for v in values) + "\n")
+        self._f.write(",".join(csv_value(v) for v in values) + "\n")
 
     def rows(self, array: np.ndarray, lead: Sequence = ()) -> None:
         """Write each row of a 2D array, prefixed by the ``lead`` values."""
-        prefix = "".join(_fmt(v) + "," for v in lead)
+        prefix = "".join(csv_value(v) + "," for v in lead)
         buf = io.StringIO()
         for r in np.asarray(array, dtype=float):
-            buf.write(prefix + ",".join(_fmt(v) for v in r) + "\n")
+            buf.write(prefix + ",".join(csv_value(v) for v in r) + "\n")
         self._f.write(buf.getvalue())
 
     def close(self) -> None:
@@ -152,7 +156,7 @@ def read_tum(
         keep[same + 1] = False
         a = a[keep]
     qx, qy, qz, qw = _unit_quaternions(a[:, 4:8], name, lines)
-    yaw = np.arctan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
+    yaw = yaw_from_quaternion(qx, qy, qz, qw)
     return a[:, 0], np.column_stack((a[:, 1], a[:, 2], yaw))
 
 

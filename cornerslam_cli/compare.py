@@ -4,7 +4,8 @@ Frames are extracted once (extraction does not depend on the associator) and kep
 each associator runs the filter over them — in parallel worker processes with ``jobs`` > 1 (the
 frames reach the workers by fork, not by pickling). Each associator's run is a complete ``run``
 output directory under ``OUT/ASSOC``; ``comparison.csv`` has one row per associator; the figures and
-report.html follow. The whole of OUT is staged and committed once (report/outdir.py).
+report.html follow (report/comparison.py writes them). The whole of OUT is staged and committed once
+(report/outdir.py).
 """
 
 from __future__ import annotations
@@ -16,11 +17,11 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from ..config import Config
-from ..pipeline import Frame, Input, frames, load_reference, open_input, run_frames
-from ..workers import exit_with_parent
-from .outdir import StagedDir, mark_output
-from .tables import COMPARISON_COLUMNS, CsvTable
+from .config import Config
+from .pipeline import Frame, Input, frames, load_reference, open_input, run_frames
+from .report.comparison import write_comparison
+from .report.outdir import StagedDir, mark_output
+from .workers import exit_with_parent
 
 _SHARED: dict = {}  # what forked workers inherit: frames, input, reference
 
@@ -34,32 +35,6 @@ def _run_one(assoc: str, out_dir: Path) -> dict:
     return run_frames(
         sh["frames"], sh["src"], with_assoc(sh["cfg"], assoc), out_dir, sh["ref"], time.perf_counter()
     )
-
-
-def comparison_row(s: dict) -> list:
-    acc = s.get("accuracy") or {}
-    t = s["timing"]
-    nan = float("nan")
-    return [
-        s["assoc"],
-        s["counts"]["steps"],
-        s["counts"]["landmarks"],
-        s["counts"]["matched_total"],
-        t["t_match"],
-        t["t_match_max"],
-        t["t_total"],
-        acc.get("ate", {}).get("rmse", nan),
-        acc.get("odom_ate", {}).get("rmse", nan),
-        acc.get("rpe_per_m", nan),
-        t["wall_time"],
-        s["counts"]["budget_hits"],
-        acc.get("relations", {}).get("trans_mean", nan),
-        acc.get("relations", {}).get("trans_std", nan),
-        acc.get("relations", {}).get("rot_mean_deg", nan),
-        acc.get("odom_relations", {}).get("trans_mean", nan),
-        acc.get("scan_odom_ate", {}).get("rmse", nan),  # the motion input, the same for every associator
-        acc.get("scan_odom_relations", {}).get("trans_mean", nan),
-    ]
 
 
 def compare(
@@ -97,15 +72,7 @@ def compare(
                 summaries = [_run_one(a, d) for a, d in zip(assocs, dirs, strict=True)]
         finally:
             _SHARED.clear()
-        with CsvTable(stage.path / "comparison.csv", COMPARISON_COLUMNS) as table:
-            for s in summaries:
-                table.row(*comparison_row(s))
-        if plots:
-            from .html import write_report
-            from .plots import plot_compare
-
-            plot_compare(stage.path, ref.gt_path)
-            write_report(stage.path)
+        write_comparison(stage.path, summaries, plots, ref.gt_path)
         for d in dirs:
             mark_output(d, "run")  # each is a complete run output
         final = stage.commit()

@@ -1,0 +1,439 @@
+"""The reader of ROS-message logs (MCAP, ROS 1 bag, ROS 2 bag): :class:`RosLogReader` over the
+:class:`RawSource` a format module (``mcap.py``, ``rosbag.py``) opens.
+
+It selects the topics by message type, decodes LaserScan and Odometry messages (``cdr.py`` for CDR
+and ROS 1, ``jsonmsg.py`` for JSON), takes the laser's mounting from tf, and counts what it skips;
+the conventions it follows are listed in ``base.py``. Over 400 lines because it is one class whose
+selection, decoding and tf steps share the reader's state.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+
+from ..errors import LogError
+from ..types import OdomSample, Scan
+from .base import (
+    ENCODINGS,
+    Channel,
+    LogInfo,
+    Pose2,
+    ReadStats,
+    TopicInfo,
+    logger,
+    make_scan,
+    normalize_msgtype,
+    strip_frame,
+)
+
+LASERSCAN = "sensor_msgs/LaserScan"
+ODOMETRY = "nav_msgs/Odometry"
+TF_TYPES = ("tf2_msgs/TFMessage", "tf/tfMessage")
+
+
+# --------------------------------------------------------------------------- tf
+
+
+def transform_matrix(t: tuple[float, float, float], q: tuple[float, float, float, float]) -> np.ndarray:
+    """4x4 homogeneous matrix of translation t and quaternion q = (x, y, z, w) (normalised; not 0)."""
+    x, y, z, w = q
+    nrm = math.sqrt(x * x + y * y + z * z + w * w)
+    x, y, z, w = x / nrm, y / nrm, z / nrm, w / nrm
+    T = np.eye(4)
+    T[:3, :3] = [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ]
+    T[:3, 3] = t
+    return T
+
+
+def chain_transform(edges: dict[tuple[str, str], np.ndarray], source: str, target: str) -> np.ndarray | None:
+    """T_source_target (pose of ``target`` in ``source``) through a tree of parent→child transforms.
+
+    edges maps (parent, child) -> T_parent_child. Breadth-first search, edges usable both ways.
+    """
+    if source == target:
+        return np.eye(4)
+    nbrs: dict[str, list[tuple[str, np.ndarray]]] = {}
+    for (p, c), T in edges.items():
+        nbrs.setdefault(p, []).append((c, T))
+        nbrs.setdefault(c, []).append((p, np.linalg.inv(T)))
+    todo = [(source, np.eye(4))]
+    seen = {source}
+    while todo:
+        frame, T = todo.pop(0)
+        for nxt, Tn in nbrs.get(frame, []):
+            if nxt in seen:
+                continue
+            Tt = T @ Tn
+            if nxt == target:
+                return Tt
+            seen.add(nxt)
+            todo.append((nxt, Tt))
+    return None
+
+
+def pose2_from_matrix(T: np.ndarray) -> Pose2:
+    """2D projection (x, y, yaw) of a 4x4 transform."""
+    return float(T[0, 3]), float(T[1, 3]), math.atan2(T[1, 0], T[0, 0])
+
+
+def listing(names: list[str]) -> str:
+    """``"/a, /b"`` or ``"none"``, for error messages."""
+    return ", ".join(sorted(names)) if names else "none"
+
+
+# --------------------------------------------------------------------------- the reader
+
+
+class RawSource(Protocol):
+    """A ROS-message log opened by a format module: topics and raw serialized messages."""
+
+    format: str
+
+    def channels(self) -> list[Channel]: ...
+
+    def time_range(self) -> tuple[int, int] | None:
+        """(first, last) log time in ns, None if the log has no messages."""
+        ...
+
+    def raw_messages(self, topics: set[str]) -> Iterator[tuple[str, int, bytes | memoryview]]:
+        """(topic, log_time_ns, data) of the given topics in log-time order, streaming."""
+        ...
+
+    def close(self) -> None: ...
+
+
+@dataclass(frozen=True)
+class _OdomSel:
+    topic: str  # "" if none
+    kind: str  # "odometry" | "tf" | ""
+    problem: str = ""
+    hint: str = ""
+
+
+class RosLogReader:
+    """A :class:`LogReader` over any :class:`RawSource` (MCAP, ROS 1 bag, ROS 2 bag).
+
+    Topic selection (when not given): the only sensor_msgs/LaserScan topic; the only
+    nav_msgs/Odometry topic (several: the one named ``/odom``, else an error), else tf
+    odom_frame→base_frame transforms found on a tf2_msgs/TFMessage topic other than /tf_static.
+    Errors of selection are raised by :meth:`messages`, :meth:`check` and :meth:`laser_to_base`,
+    never by :meth:`info`, which reports them.
+    """
+
+    def __init__(
+        self,
+        source: RawSource,
+        path: Path,
+        scan_topic: str = "",
+        odom_topic: str = "",
+        odom_frame: str = "odom",
+        base_frame: str = "base_link",
+        stats: ReadStats | None = None,
+    ):
+        self.source = source
+        self.path = Path(path)
+        self.format = source.format
+        self.stats = stats if stats is not None else ReadStats()
+        self.odom_frame = strip_frame(odom_frame)
+        self.base_frame = strip_frame(base_frame)
+        self._want_scan = scan_topic
+        self._want_odom = odom_topic
+        self._channels = {c.topic: c for c in source.channels()}
+        self._scan_sel = self._select_scan()
+        self._odom_sel = self._select_odom()
+        self.scan_topic = self._scan_sel[0]
+        self.odom_topic = self._odom_sel.topic
+        self._laser2base: Pose2 | None | bool = False  # False = not computed yet
+
+    # ---------------------------------------------------------------- selection
+    def _topics_of(self, *types: str) -> list[str]:
+        return sorted(t for t, c in self._channels.items() if normalize_msgtype(c.msgtype) in types)
+
+    def _select_scan(self) -> tuple[str, str, str]:
+        """(topic, problem, hint)."""
+        name = self.path.name
+        scans = self._topics_of(LASERSCAN)
+        if self._want_scan:
+            c = self._channels.get(self._want_scan)
+            if c is None:
+                return (
+                    "",
+                    f"log '{name}' has no topic '{self._want_scan}' (LaserScan topics: {listing(scans)})",
+                    "check --scan-topic; `cornerslam info LOG` lists the topics",
+                )
+            if normalize_msgtype(c.msgtype) != LASERSCAN:
+                return (
+                    "",
+                    f"topic '{self._want_scan}' of log '{name}' is {normalize_msgtype(c.msgtype)}, "
+                    "not sensor_msgs/LaserScan",
+                    f"choose a LaserScan topic with --scan-topic ({listing(scans)})",
+                )
+            return self._want_scan, "", ""
+        if not scans:
+            return (
+                "",
+                f"log '{name}' has no sensor_msgs/LaserScan topic",
+                "record the laser as sensor_msgs/LaserScan; `cornerslam info LOG` lists the topics",
+            )
+        if len(scans) > 1:
+            return (
+                "",
+                f"log '{name}' has {len(scans)} LaserScan topics: {', '.join(scans)}",
+                "choose one with --scan-topic",
+            )
+        return scans[0], "", ""
+
+    def _select_odom(self) -> _OdomSel:
+        name = self.path.name
+        odoms = self._topics_of(ODOMETRY)
+        tfs = [t for t in self._topics_of(*TF_TYPES) if t != "/tf_static"]
+        if self._want_odom:
+            c = self._channels.get(self._want_odom)
+            if c is None:
+                return _OdomSel(
+                    "",
+                    "",
+                    f"log '{name}' has no topic '{self._want_odom}' "
+                    f"(Odometry topics: {listing(odoms)}; tf topics: {listing(tfs)})",
+                    "check --odom-topic; `cornerslam info LOG` lists the topics",
+                )
+            mt = normalize_msgtype(c.msgtype)
+            if mt == ODOMETRY:
+                return _OdomSel(self._want_odom, "odometry")
+            if mt in TF_TYPES:
+                return _OdomSel(self._want_odom, "tf")
+            return _OdomSel(
+                "",
+                "",
+                f"topic '{self._want_odom}' of log '{name}' is {mt}, "
+                "not nav_msgs/Odometry or tf2_msgs/TFMessage",
+                f"choose one with --odom-topic (Odometry: {listing(odoms)}; tf: {listing(tfs)})",
+            )
+        if len(odoms) == 1:
+            return _OdomSel(odoms[0], "odometry")
+        if len(odoms) > 1:
+            if "/odom" in odoms:
+                return _OdomSel("/odom", "odometry")
+            return _OdomSel(
+                "",
+                "",
+                f"log '{name}' has {len(odoms)} Odometry topics: {', '.join(odoms)}",
+                "choose one with --odom-topic",
+            )
+        if tfs:
+            return _OdomSel("/tf" if "/tf" in tfs else tfs[0], "tf")
+        return _OdomSel(
+            "",
+            "",
+            f"log '{name}' has no odometry: no nav_msgs/Odometry topic and no tf topic",
+            "select an odometry topic with --odom-topic (nav_msgs/Odometry or tf with "
+            f"{self.odom_frame}→{self.base_frame})",
+        )
+
+    def _odom_source_label(self) -> str:
+        if self._odom_sel.kind == "odometry":
+            return ODOMETRY
+        if self._odom_sel.kind == "tf":
+            return f"tf {self.odom_frame}→{self.base_frame}"
+        return ""
+
+    def _encoding_problem(self, topic: str) -> tuple[str, str] | None:
+        """(problem, hint) if a chosen topic's messages are in an encoding we do not decode."""
+        enc = self._channels[topic].encoding
+        if enc in ENCODINGS:
+            return None
+        return (
+            f"topic '{topic}' of log '{self.path.name}' has message encoding '{enc}', which cornerslam "
+            f"does not decode ({', '.join(ENCODINGS)})",
+            "record the ROS messages as cdr (ros2 bag record), ros1 or json (foxglove_bridge, rosbridge)",
+        )
+
+    def _problems(self) -> list[tuple[str, str]]:
+        """(problem, hint) of everything that stops a run from reading this log, in the order found."""
+        problems = [(self._scan_sel[1], self._scan_sel[2]), (self._odom_sel.problem, self._odom_sel.hint)]
+        problems = [p for p in problems if p[0]]
+        if not problems:
+            problems = [p for t in (self.scan_topic, self.odom_topic) if (p := self._encoding_problem(t))]
+        return problems
+
+    def check(self) -> None:
+        """Raise LogError if a run could not choose its scan and odometry topics or decode them."""
+        problems = self._problems()
+        if problems:
+            raise LogError(*problems[0])
+        for topic in (self.scan_topic, self.odom_topic):
+            if self._channels[topic].count == 0:
+                raise LogError(
+                    f"topic '{topic}' of log '{self.path.name}' has no messages",
+                    "it was declared but nothing was recorded on it; `cornerslam info LOG` shows the counts",
+                )
+
+    # ---------------------------------------------------------------- info
+    def info(self) -> LogInfo:
+        tr = self.source.time_range()
+        start, end = (tr[0] * 1e-9, tr[1] * 1e-9) if tr else (None, None)
+        duration = (end - start) if tr else 0.0
+        topics = []
+        for c in sorted(self._channels.values(), key=lambda c: c.topic):
+            rate = None
+            if c.count is not None and c.count > 1 and duration > 0:
+                rate = (c.count - 1) / duration
+            topics.append(TopicInfo(c.topic, normalize_msgtype(c.msgtype), c.count, rate, c.encoding))
+        problems = tuple(f"{p} ({h})" for p, h in self._problems())
+        n = sum(c.count or 0 for c in self._channels.values())
+        return LogInfo(
+            format=self.format,
+            path=str(self.path),
+            start=start,
+            end=end,
+            duration=duration,
+            n_messages=n,
+            topics=tuple(topics),
+            scan_topic=self.scan_topic,
+            odom_topic=self.odom_topic,
+            odom_source=self._odom_source_label(),
+            problems=problems,
+        )
+
+    # ---------------------------------------------------------------- decoding
+    def _decoder(self, topic: str):
+        """The decoder of a topic's messages (its encoding is one of :data:`ENCODINGS`)."""
+        channel = self._channels[topic]
+        if channel.encoding == "json":
+            from .jsonmsg import JsonDecoder  # local: keeps `import cornerslam_cli.logs` light
+
+            return JsonDecoder(channel)
+        from .cdr import Decoder
+
+        return Decoder(channel)
+
+    def laser_to_base(self) -> Pose2 | None:
+        """Pose (x, y, yaw) of the laser in base_frame from tf_static/tf, else None.
+
+        Reads from the start of the log until the first scan has been seen and, after it, either all
+        tf_static messages (when counts are known) or 2,000 more messages.
+        """
+        if self._laser2base is not False:
+            return self._laser2base  # type: ignore[return-value]
+        self.check()
+        tf_topics = set()
+        for t in self._topics_of(*TF_TYPES):
+            if self._encoding_problem(t) is None:
+                tf_topics.add(t)
+            else:
+                self.stats.warn(
+                    "%s: tf topic '%s' has message encoding '%s': not read (laser mount from the config)",
+                    self.path.name, t, self._channels[t].encoding,
+                )  # fmt: skip
+        frame = None
+        edges: dict[tuple[str, str], np.ndarray] = {}
+        static_left = sum(self._channels[t].count or 0 for t in tf_topics if t == "/tf_static")
+        counts_known = all(self._channels[t].count is not None for t in tf_topics if t == "/tf_static")
+        after = 0
+        decs = {t: self._decoder(t) for t in tf_topics | {self.scan_topic}}
+        for topic, _, data in self.source.raw_messages(tf_topics | {self.scan_topic}):
+            try:
+                if topic == self.scan_topic:
+                    if frame is None:
+                        frame = strip_frame(decs[topic].laserscan(data)[1])
+                    continue
+                static = topic == "/tf_static"
+                static_left -= static
+                for parent, child, _, t, q in decs[topic].transforms(data):
+                    if (parent, child) == (self.odom_frame, self.base_frame) or parent == child:
+                        continue
+                    if sum(v * v for v in q) < 1e-12:  # no rotation at all: not a transform
+                        self.stats.warn(
+                            "%s: tf %s→%s has a zero-length rotation quaternion: ignored",
+                            self.path.name, parent, child,
+                        )  # fmt: skip
+                        continue
+                    edges.setdefault((parent, child), transform_matrix(t, q))
+            except Exception as exc:  # noqa: BLE001 - bad bytes are counted, never raised
+                logger.debug("laser_to_base: skipping undecodable %s message: %s", topic, exc)
+            finally:
+                if frame is not None:
+                    after += 1
+            if frame is not None and ((counts_known and static_left <= 0) or after > 2000):
+                break
+        if frame is None:
+            self._laser2base = None
+            return None
+        T = chain_transform(edges, self.base_frame, frame)
+        self._laser2base = None if T is None else pose2_from_matrix(T)
+        if self._laser2base is not None and not all(math.isfinite(v) for v in self._laser2base):
+            self.stats.warn("%s: the tf %s→%s is not finite: ignored", self.path.name, self.base_frame, frame)
+            self._laser2base = None
+        return self._laser2base  # type: ignore[return-value]
+
+    def messages(self) -> Iterator[Scan | OdomSample]:
+        """Scans and odometry samples in log-time order (raises LogError now if topics are missing)."""
+        self.check()
+        return self._iter()
+
+    def _iter(self) -> Iterator[Scan | OdomSample]:
+        st = self.stats
+        scan_t, odom_t = self.scan_topic, self.odom_topic
+        scan_dec, odom_dec = self._decoder(scan_t), self._decoder(odom_t)
+        is_tf = self._odom_sel.kind == "tf"
+        where, odom_where = f"{self.path.name}:{scan_t}", f"{self.path.name}:{odom_t}"
+        n_tf_match = 0
+        for topic, log_time, data in self.source.raw_messages({scan_t, odom_t}):
+            try:
+                if topic == scan_t:
+                    (sec, nsec), frame, a_min, a_max, a_inc, r_min, r_max, ranges = scan_dec.laserscan(data)
+                    scan = make_scan(
+                        st, where, sec + nsec * 1e-9, a_min, a_max, a_inc, r_min, r_max, ranges, frame
+                    )
+                    if scan is not None:
+                        yield scan
+                    continue
+                if is_tf:
+                    poses = [
+                        (stamp, t[0], t[1], q)
+                        for parent, child, stamp, t, q in odom_dec.transforms(data)
+                        if parent == self.odom_frame and child == self.base_frame
+                    ]
+                    n_tf_match += len(poses)
+                else:
+                    poses = [odom_dec.odometry(data)]
+                for (sec, nsec), x, y, q in poses:
+                    sample = st.odometry_sample(odom_where, sec + nsec * 1e-9, float(x), float(y), q)
+                    if sample is not None:
+                        yield sample
+            except LogError:
+                raise
+            except Exception as exc:  # noqa: BLE001 - undecodable message: count, warn, go on
+                st.decode_failed += 1
+                if st.decode_failed <= 5:
+                    st.warn(
+                        "%s: cannot decode a %s message at %d ns: %s", self.path.name, topic, log_time, exc
+                    )
+        if is_tf and n_tf_match == 0:
+            raise LogError(
+                f"log '{self.path.name}': topic '{odom_t}' has no "
+                f"{self.odom_frame}→{self.base_frame} transform",
+                "set the frames (odom_frame/base_frame) or choose an Odometry topic with --odom-topic",
+            )
+        if st.decode_failed > 5:
+            st.warn("%s: %d messages could not be decoded in total", self.path.name, st.decode_failed)
+        st.check_scans_yielded(self.path.name, scan_t)
+
+    def close(self) -> None:
+        self.source.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
