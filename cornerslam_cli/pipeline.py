@@ -277,16 +277,11 @@ def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None 
         _scans_prepared(src.reader, cfg), cfg.input.odom_jump, src.stats, src.reader.stats.warn
     )
     synced = synchronise(msgs, src.stats, src.reader.stats.warn)  # its warning lands in summary.json too
-    pairs = select_keyframes(synced, cfg.keyframes, src.stats)
-    jumps = 0
-    for scan, odom in pairs:
-        frame = extract_frame(scan, odom, cfg, src.laser2base)
-        if src.stats.odom_jumps > jumps:
-            jumps = src.stats.odom_jumps
-            frame = replace(frame, odom_jump=True)
+    for pair in select_keyframes(synced, cfg.keyframes, src.stats):
+        frame = replace(extract_frame(pair.scan, pair.odom, cfg, src.laser2base), odom_jump=pair.odom_jump)
         if src.matcher is not None:
             t0 = time.perf_counter()
-            m = src.matcher.step(transform_points(scan.points(), src.laser2base), odom)
+            m = src.matcher.step(transform_points(pair.scan.points(), src.laser2base), frame.odom)
             frame = replace(
                 frame,
                 motion=m.pose,
