@@ -91,8 +91,8 @@ def test_scan_time_offset_shifts_the_stamp_used_for_interpolation(tmp_path):
     import math
 
     from cornerslam_cli.config import load_config
+    from cornerslam_cli.frontend import frames, open_input
     from cornerslam_cli.logs.writers import RawScan, write_mcap
-    from cornerslam_cli.pipeline import frames, open_input
 
     t0 = 1_700_000_000.0
     scans = [RawScan(t0 + 0.5 + i, -math.pi / 2, math.pi / 180, np.full(181, 3.0)) for i in range(3)]
