@@ -15,7 +15,6 @@ import stat
 import sys
 import tempfile
 import threading
-import time
 import traceback
 from pathlib import Path
 
@@ -27,6 +26,15 @@ import click  # noqa: E402
 
 from . import __version__  # noqa: E402
 from .errors import ConfigError, CornerslamError, display_path  # noqa: E402
+from .report.progress import BatchProgress, Progress  # noqa: E402
+from .report.text import (  # noqa: E402
+    batch_counts,
+    batch_lines,
+    comparison_lines,
+    evaluation_lines,
+    info_lines,
+    summary_lines,
+)
 
 log = logging.getLogger("cornerslam")
 
@@ -122,6 +130,11 @@ def _reference_options(f):
     return f
 
 
+def _echo(lines: list[str]) -> None:
+    for line in lines:
+        click.echo(line)
+
+
 def _setup_logging(verbose: int, quiet: bool) -> None:
     level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)]
     logging.basicConfig(level=level, format="%(levelname)s: %(message)s", stream=sys.stderr, force=True)
@@ -146,63 +159,6 @@ def _load(config_path, overrides, assoc=None, scan_topic=None, odom_topic=None, 
 
         make_associator(cfg.association)  # raises the ConfigError with the closest name
     return cfg
-
-
-class _StatusLine:
-    """One status line on stderr: redrawn in place on a terminal, a line every 10 s otherwise (CI
-    logs). Silent when not enabled (-q)."""
-
-    def __init__(self, enabled: bool):
-        self.enabled = enabled
-        self.t0 = time.monotonic()
-        self.last = 0.0
-        self.tty = sys.stderr.isatty()
-        self.drawn = False
-
-    def _due(self, now: float) -> bool:
-        return now - self.last >= (0.1 if self.tty else 10.0)
-
-    def _write(self, text: str) -> None:
-        try:
-            sys.stderr.write(text)
-            sys.stderr.flush()
-        except OSError:  # stderr closed (`2>&1 | head`): the run goes on without a status line
-            self.enabled = False
-
-    def _draw(self, text: str) -> None:
-        if self.tty:
-            self._write("\r\033[K" + text)
-            self.drawn = True
-        else:
-            self._write(text + "\n")
-
-    def close(self) -> None:
-        if self.drawn:
-            self._write("\n")
-
-
-class Progress(_StatusLine):
-    """Scans done of a run's log, with a bar and an ETA, for runs longer than ~2 s."""
-
-    def __init__(self, label: str, enabled: bool):
-        super().__init__(enabled)
-        self.label = label
-
-    def __call__(self, done: int, total: int) -> None:
-        if not self.enabled:
-            return
-        now = time.monotonic()
-        el = now - self.t0
-        if el < 2.0 or not self._due(now):
-            return
-        self.last = now
-        if total > 0:
-            frac = min(done / total, 1.0)
-            eta = el * (1 - frac) / max(frac, 1e-9)
-            bar = "#" * int(30 * frac)
-            self._draw(f"{self.label} [{bar:<30}] {done}/{total} scans {el:5.0f}s eta {eta:4.0f}s")
-        else:
-            self._draw(f"{self.label} {done} scans {el:5.0f}s")
 
 
 # ---------------------------------------------------------------------------- commands
@@ -296,12 +252,6 @@ def cli() -> None:
     """
 
 
-def _assoc_choice():
-    from .association import ASSOCIATORS
-
-    return click.Choice(sorted(ASSOCIATORS))
-
-
 @cli.command()
 @click.argument("log_path", metavar="LOG", type=click.Path())
 @_config_options
@@ -356,7 +306,7 @@ def run(
         progress.close()
     out_dir = Path(summary["out_dir"])
     if not quiet:
-        _print_summary(summary)
+        _echo(summary_lines(summary))
         if plot:
             click.echo(f"report: {out_dir / 'report.html'}")
         if mcap_out:
@@ -416,84 +366,8 @@ def compare(
     finally:
         progress.close()
     if not quiet:
-        _print_comparison(summaries)
+        _echo(comparison_lines(summaries))
         click.echo(f"wrote {out_dir} (report: {out_dir / 'report.html'})")
-
-
-def _print_comparison(summaries: list[dict]) -> None:
-    head = (
-        f"{'assoc':<6} {'steps':>6} {'landmarks':>9} {'matched':>8} "
-        f"{'t_match s':>10} {'max ms':>8} {'t_total s':>10}"
-    )
-    has_gt = any("ate" in (s.get("accuracy") or {}) for s in summaries)
-    has_rel = any("relations" in (s.get("accuracy") or {}) for s in summaries)
-    if has_gt:
-        head += f" {'ATE m':>8} {'odom ATE m':>10}"
-    if has_rel:
-        head += f" {'relations m':>16} {'odom relations m':>18}"
-    click.echo(head)
-    for s in summaries:
-        c, t = s["counts"], s["timing"]
-        line = (
-            f"{s['assoc']:<6} {c['steps']:>6} {c['landmarks']:>9} {c['matched_total']:>8} "
-            f"{t['t_match']:>10.3f} {1000 * t['t_match_max']:>8.1f} {t['t_total']:>10.2f}"
-        )
-        a = s.get("accuracy") or {}
-        if has_gt:
-            line += f" {a['ate']['rmse']:>8.3f} {a['odom_ate']['rmse']:>10.3f}"
-        if has_rel:
-            rel, odom = a["relations"], a["odom_relations"]
-            line += f" {_mean_std(rel):>16} {_mean_std(odom):>18}"
-        click.echo(line)
-    a = (summaries[0].get("accuracy") or {}) if summaries else {}
-    if "scan_odom_ate" in a or "scan_odom_relations" in a:  # the motion input: one for all associators
-        parts = []
-        if "scan_odom_ate" in a:
-            parts.append(f"ATE {a['scan_odom_ate']['rmse']:.3f} m")
-        if "scan_odom_relations" in a:
-            parts.append(f"relations {_mean_std(a['scan_odom_relations'])} m")
-        click.echo("scan-matched odometry (the filter's motion input): " + ", ".join(parts))
-
-
-def _mean_std(e: dict) -> str:
-    """Translational relation error as 'mean ± std' (m)."""
-    return f"{e['trans_mean']:.3f} ± {e['trans_std']:.3f}" if e["n"] else "-"
-
-
-def _relation_text(e: dict) -> str:
-    if e["n"] == 0:
-        return "no relation falls inside the trajectory's time span (check --time-offset)"
-    return (
-        f"translation {_mean_std(e)} m, rotation {e['rot_mean_deg']:.2f} ± {e['rot_std_deg']:.2f} deg "
-        f"({e['n']}/{e['n_total']} relations)"
-    )
-
-
-def _print_summary(s: dict) -> None:
-    c, t = s["counts"], s["timing"]
-    click.echo(
-        f"{s['input']['log']}: {c['steps']} steps ({c['scans_in']} scans, {c['scans_skipped']} skipped, "
-        f"{c['keyframes_skipped']} between keyframes), {c['landmarks']} landmarks, "
-        f"{c['matched_total']} matches with {s['assoc']}"
-    )
-    click.echo(
-        f"time: extract {t['t_extract']:.2f}s scan match {t.get('t_scan_match', 0.0):.2f}s "
-        f"predict {t['t_predict']:.2f}s match {t['t_match']:.2f}s "
-        f"update {t['t_update']:.2f}s ({t['scans_per_second']:.0f} steps/s), wall {t['wall_time']:.1f}s"
-    )
-    acc = s.get("accuracy") or {}
-    if "ate" in acc:
-        click.echo(
-            f"ATE RMSE {acc['ate']['rmse']:.3f} m (odometry {acc['odom_ate']['rmse']:.3f} m"
-            + (f", scan-matched {acc['scan_odom_ate']['rmse']:.3f} m" if "scan_odom_ate" in acc else "")
-            + f") against {acc['ground_truth']}"
-        )
-    if "relations" in acc:
-        click.echo(f"relations: {_relation_text(acc['relations'])}")
-        click.echo(f"  odometry: {_relation_text(acc['odom_relations'])}")
-        if "scan_odom_relations" in acc:
-            click.echo(f"  scan-matched odometry: {_relation_text(acc['scan_odom_relations'])}")
-    click.echo(f"wrote {s['out_dir']}")
 
 
 @cli.command()
@@ -506,29 +380,7 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
 
     _setup_logging(verbose, quiet)
     reader = open_log(Path(log_path), scan_topic=scan_topic or "", odom_topic=odom_topic or "")
-    i = reader.info()
-    click.echo(f"file:      {display_path(log_path)}")
-    click.echo(f"format:    {i.format}")
-    click.echo(f"messages:  {i.n_messages}")
-    if i.start is not None:
-        click.echo(f"start:     {i.start:.3f} s")
-        click.echo(f"duration:  {i.duration:.2f} s")
-    click.echo("topics:")
-    for t in i.topics:
-        count = "?" if t.count is None else str(t.count)
-        rate = f"{t.rate_hz:8.2f} Hz" if t.rate_hz else ""
-        note = f" [{t.encoding_note}]" if t.encoding_note else ""
-        click.echo(f"  {t.name:<28} {t.msgtype:<30} {count:>8} msgs {rate}{note}")
-    click.echo("run would use:")
-    click.echo(f"  scans     {i.scan_topic or '-'}")
-    click.echo(f"  odometry  {i.odom_topic or '-'} ({i.odom_source or 'none found'})")
-    laser = reader.laser_to_base()
-    if laser is not None:
-        click.echo(f"  laser     x={laser[0]:.3f} m y={laser[1]:.3f} m yaw={laser[2]:.3f} rad (from tf)")
-    for text in i.problems:
-        click.echo(f"problem:   {text}")
-    for text in i.notes:
-        click.echo(f"note:      {text}")
+    _echo(info_lines(log_path, reader.info(), reader.laser_to_base()))
 
 
 @cli.command()
@@ -574,8 +426,6 @@ def evaluate(out_dir, ground_truth, relations, time_offset, verbose, quiet):
     Example:
       cornerslam evaluate cornerslam_out/intel_pca --relations intel.relations --time-offset 976052857.334
     """
-    import math
-
     from .evaluate import evaluate_files
 
     _setup_logging(verbose, quiet)
@@ -583,15 +433,7 @@ def evaluate(out_dir, ground_truth, relations, time_offset, verbose, quiet):
         raise click.UsageError("give --ground-truth FILE.tum or --relations FILE")
     traj = Path(out_dir) / "trajectory.tum" if Path(out_dir).is_dir() else Path(out_dir)
     res = evaluate_files(traj, ground_truth, relations, time_offset)
-    if "ate" in res:
-        a, r = res["ate"], res["rpe"]
-        per_m = "-" if math.isnan(r["rpe_per_m"]) else f"{r['rpe_per_m']:.4f}"  # path shorter than 1 m
-        click.echo(
-            f"ATE  rmse {a['rmse']:.4f} m  mean {a['mean']:.4f} m  max {a['max']:.4f} m  (n={a['n']})\n"
-            f"RPE  per step {r['rpe_step_rmse']:.4f} m  per metre {per_m} m/m"
-        )
-    if "relations" in res:
-        click.echo(f"relations: {_relation_text(res['relations'])}")
+    _echo(evaluation_lines(res))
 
 
 @cli.command()
@@ -641,25 +483,6 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
         with output_errors(plot_path):
             plot_extraction(scan, segments, corners, plot_path)
         click.echo(f"wrote {plot_path}")
-
-
-class BatchProgress(_StatusLine):
-    """The whole batch's progress: finished/failed/skipped/remaining and an ETA from the rate of the
-    combinations run so far (skipped ones cost nothing)."""
-
-    def __call__(self, s) -> None:
-        now = time.monotonic()
-        if not self.enabled or (s.remaining and not self._due(now)):
-            return
-        self.last = now
-        el = now - self.t0
-        ran = s.ok + s.failed
-        eta = f"eta {el / ran * s.remaining:4.0f}s" if ran and s.remaining else "eta    ?"
-        text = (
-            f"batch {s.finished}/{s.total}: {s.ok} ok, {s.failed} failed, {s.skipped} skipped, "
-            f"{s.remaining} remaining {el:5.0f}s {eta if s.remaining else ''}"
-        ).rstrip()
-        self._draw(text)
 
 
 def _parse_sweeps(texts) -> dict[str, list[str]]:
@@ -737,46 +560,12 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
         )
         raise click.exceptions.Exit(130) from None
     progress.close()
-    failed = sum(r["status"] == "failed" for r in rows)
+    failed, _ = batch_counts(rows)
     if not quiet:
-        _print_batch(rows, [k for k, _ in combos[0].sweep])
-        skipped = sum(r["status"] == "skipped" for r in rows)
-        click.echo(
-            f"{len(rows)} combinations: {len(rows) - failed - skipped} ran, {skipped} skipped (complete), "
-            f"{failed} failed"
-        )
+        _echo(batch_lines(rows, [k for k, _ in combos[0].sweep]))
         click.echo(f"wrote {Path(out) / BATCH_CSV}")
     elif failed:
         click.echo(f"{failed} of {len(rows)} combinations failed (see {Path(out) / BATCH_CSV})", err=True)
-
-
-def _print_batch(rows: list[dict], keys: list[str]) -> None:
-    def num(v, fmt):
-        return "-" if v is None else format(v, fmt)
-
-    head = ["log", "assoc", *(k.rsplit(".", 1)[-1] for k in keys), "status", "steps", "landmarks", "ATE m"]
-    table = [
-        [
-            Path(r["log"]).name,
-            r["assoc"],
-            *(str(r[k]) for k in keys),
-            r["status"],
-            num(r["steps"], "d"),
-            num(r["landmarks"], "d"),
-            num(r["ate_rmse"], ".3f"),
-        ]
-        for r in rows
-    ]
-    widths = [max(len(str(x)) for x in col) for col in zip(head, *table, strict=True)]
-    for line in [head, *table]:
-        click.echo("  ".join(str(x).ljust(w) for x, w in zip(line, widths, strict=True)).rstrip())
-    failures: dict[tuple[str, str], int] = {}
-    for r in rows:
-        if r["status"] == "failed":
-            key = (r["log"], r["error"])
-            failures[key] = failures.get(key, 0) + 1
-    for (log_path, error), n in failures.items():
-        click.echo(f"failed ({n}x): {log_path}: {error}")
 
 
 @cli.command("config")

@@ -28,7 +28,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("logs", "features", "association", "filter", "motion", "simworld"),  # the stages, independent
     ("config",),  # the stages' sections assembled, loaded, validated
     ("lasers", "evaluate"),
-    ("report",),  # run writer, figures, MCAP out, output directories
+    ("report",),  # run writer, figures, MCAP out, output directories, printed text, progress display
     ("pipeline", "simulate"),  # a run; the simulated log
     ("compare", "batch"),
     ("cli",),
