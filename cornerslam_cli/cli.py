@@ -152,13 +152,29 @@ def _load(config_path, overrides, assoc=None, scan_topic=None, odom_topic=None, 
     if odom_topic:
         extra.append(f"input.odom_topic={odom_topic}")
     cfg = resolve_config(log_path, config_path, extra)
-    from .association import ASSOCIATORS
+    from .association import associator_class
 
-    if cfg.association.method not in ASSOCIATORS:
-        from .association import make_associator
-
-        make_associator(cfg.association)  # raises the ConfigError with the closest name
+    associator_class(cfg.association.method)  # a --set name: the ConfigError with the closest one
     return cfg
+
+
+def parse_assocs(text: str | None, allow_many: bool) -> list[str]:
+    """The associators an ``--assoc`` value names, each checked against ``association.ASSOCIATORS``
+    (an unknown one: ConfigError with the closest name). ``None`` (and ``""`` for a single name) is
+    ``[]``: the config's. A list is comma-separated, blanks ignored, and must name distinct
+    associators (a usage error otherwise); a single name is taken whole, spaces around it ignored."""
+    from .association import associator_class
+
+    if text is None or (not allow_many and not text):
+        return []
+    names = [a.strip() for a in text.split(",") if a.strip()] if allow_many else [text.strip()]
+    if not names or len(set(names)) != len(names):
+        raise click.BadParameter(
+            f"'{text}' must list distinct associators, e.g. icnn,jcbb,pca", param_hint="--assoc"
+        )
+    for name in names:
+        associator_class(name)
+    return names
 
 
 # ---------------------------------------------------------------------------- commands
@@ -287,7 +303,8 @@ def run(
     from .pipeline import run as run_pipeline
 
     _setup_logging(verbose, quiet)
-    cfg = _load(config_path, overrides, assoc, scan_topic, odom_topic, log_path)
+    names = parse_assocs(assoc, allow_many=False)
+    cfg = _load(config_path, overrides, names[0] if names else None, scan_topic, odom_topic, log_path)
     progress = Progress(f"{display_path(Path(log_path).name)} ({cfg.association.method})", not quiet)
     try:
         summary = run_pipeline(
@@ -349,14 +366,8 @@ def compare(
     from .pipeline import default_out_dir
 
     _setup_logging(verbose, quiet)
-    names = [a.strip() for a in assocs.split(",") if a.strip()]
-    if not names or len(set(names)) != len(names):
-        raise click.BadParameter(
-            f"'{assocs}' must list distinct associators, e.g. icnn,jcbb,pca", param_hint="--assoc"
-        )
+    names = parse_assocs(assocs, allow_many=True)
     cfg = _load(config_path, overrides, None, scan_topic, odom_topic, log_path)
-    for a in names:
-        _load(config_path, overrides, a)  # unknown names fail here, with the closest valid one
     out_dir = Path(out) if out else default_out_dir(Path(log_path), "compare")
     progress = Progress(f"{display_path(Path(log_path).name)} (extract)", not quiet)
     try:
@@ -536,14 +547,7 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
     from .report.outdir import check_claimable
 
     _setup_logging(verbose, quiet)
-    if assocs is None:
-        names = [_load(config_path, overrides).association.method]
-    else:
-        names = [a.strip() for a in assocs.split(",") if a.strip()]
-        if not names or len(set(names)) != len(names):
-            raise click.BadParameter(
-                f"'{assocs}' must list distinct associators, e.g. icnn,jcbb,pca", param_hint="--assoc"
-            )
+    names = parse_assocs(assocs, allow_many=True) or [_load(config_path, overrides).association.method]
     if scheduler and jobs:
         log.warning("--jobs is ignored with --scheduler (the cluster's workers run the batch)")
     check_claimable(out, "batch")  # a directory that is not a batch's: refused before any work

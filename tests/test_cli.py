@@ -4,10 +4,13 @@ import json
 import math
 from pathlib import Path
 
+import click
 import numpy as np
+import pytest
 from click.testing import CliRunner
 
-from cornerslam_cli.cli import cli
+from cornerslam_cli.cli import cli, parse_assocs
+from cornerslam_cli.errors import ConfigError
 from cornerslam_cli.logs.writers import RawScan, write_mcap
 from cornerslam_cli.report.outdir import MARKER
 from cornerslam_cli.report.tables import TIMING_COLUMNS, TRAJECTORY_COLUMNS, read_csv
@@ -275,6 +278,62 @@ def test_compare_rejects_unknown_and_repeated_associators(sim_log, tmp_path):
     res = invoke("compare", sim_log, "--assoc", "pca,pca", "--out", tmp_path / "c")
     assert res.exit_code == 2 and "distinct" in res.output
     assert not (tmp_path / "c").exists()
+
+
+def test_parse_assocs_good_names():
+    assert parse_assocs("icnn,jcbb,pca", allow_many=True) == ["icnn", "jcbb", "pca"]
+    assert parse_assocs(" pca , icnn,,", allow_many=True) == ["pca", "icnn"]  # blanks and spaces dropped
+    assert parse_assocs(" jcbb", allow_many=False) == ["jcbb"]
+    assert parse_assocs(None, allow_many=True) == parse_assocs(None, allow_many=False) == []
+    assert parse_assocs("", allow_many=False) == []  # run's default: the config's associator
+
+
+@pytest.mark.parametrize("text", ["pca,pca", " icnn,icnn ", "", ",", " , "])
+def test_parse_assocs_repeated_or_empty_list_is_a_usage_error(text):
+    with pytest.raises(click.BadParameter) as e:
+        parse_assocs(text, allow_many=True)
+    assert e.value.format_message() == (
+        f"Invalid value for --assoc: '{text}' must list distinct associators, e.g. icnn,jcbb,pca"
+    )
+
+
+@pytest.mark.parametrize(
+    ("text", "allow_many", "line"),
+    [
+        ("icnn,jbcc", True, "unknown associator 'jbcc' (did you mean 'jcbb'? (icnn, jcbb, pca))"),
+        ("icnn,qqqq", True, "unknown associator 'qqqq' (choose one of: icnn, jcbb, pca)"),
+        ("jbcc", False, "unknown associator 'jbcc' (did you mean 'jcbb'? (icnn, jcbb, pca))"),
+        ("icnn,pca", False, "unknown associator 'icnn,pca' (did you mean 'icnn'? (icnn, jcbb, pca))"),
+        ("  ", False, "unknown associator '' (choose one of: icnn, jcbb, pca)"),
+        ("PCA", False, "unknown associator 'PCA' (choose one of: icnn, jcbb, pca)"),
+    ],
+)
+def test_parse_assocs_unknown_name_names_the_closest(text, allow_many, line, monkeypatch):
+    import cornerslam_cli.association as association
+
+    def never(*args):
+        raise AssertionError("an associator was built to check a name")
+
+    for name in association.ASSOCIATORS:
+        monkeypatch.setitem(association.ASSOCIATORS, name, never)
+    with pytest.raises(ConfigError) as e:
+        parse_assocs(text, allow_many)
+    assert str(e.value) == line
+
+
+@pytest.mark.parametrize("command", ["run", "compare", "batch"])
+def test_every_command_reports_a_bad_assoc_in_the_same_words(command, sim_log, tmp_path):
+    out = ["--out", tmp_path / "o"]
+    res = invoke(command, sim_log, "--assoc", "icnn,jbcc" if command != "run" else "jbcc", *out)
+    assert res.stderr == "error: unknown associator 'jbcc' (did you mean 'jcbb'? (icnn, jcbb, pca))\n"
+    assert res.exit_code == 2 and not (tmp_path / "o").exists()
+    if command != "run":
+        res = invoke(command, sim_log, "--assoc", "pca,pca", *out)
+        assert res.exit_code == 2 and res.stderr.endswith(
+            "Error: Invalid value for --assoc: 'pca,pca' must list distinct associators, e.g. icnn,jcbb,pca\n"
+        )
+    res = invoke(command, sim_log, "--set", "association.method=pcaa", *out)
+    assert res.stderr == "error: unknown associator 'pcaa' (did you mean 'pca'? (icnn, jcbb, pca))\n"
 
 
 def test_relations_are_scored_in_run_and_compare(sim_log, tmp_path):
