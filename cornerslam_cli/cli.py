@@ -25,7 +25,7 @@ single_threaded_blas()  # before numpy is first imported (blas.py says why)
 import click  # noqa: E402
 
 from . import __version__  # noqa: E402
-from .errors import ConfigError, CornerslamError, display_path  # noqa: E402
+from .errors import CornerslamError, display_path  # noqa: E402
 from .report.progress import BatchProgress, Progress  # noqa: E402
 from .report.text import (  # noqa: E402
     batch_counts,
@@ -33,6 +33,7 @@ from .report.text import (  # noqa: E402
     comparison_lines,
     evaluation_lines,
     info_lines,
+    scan_heading,
     summary_lines,
 )
 
@@ -442,8 +443,7 @@ def evaluate(out_dir, ground_truth, relations, time_offset, verbose, quiet):
     _setup_logging(verbose, quiet)
     if not ground_truth and not relations:
         raise click.UsageError("give --ground-truth FILE.tum or --relations FILE")
-    traj = Path(out_dir) / "trajectory.tum" if Path(out_dir).is_dir() else Path(out_dir)
-    res = evaluate_files(traj, ground_truth, relations, time_offset)
+    res = evaluate_files(out_dir, ground_truth, relations, time_offset)
     _echo(evaluation_lines(res))
 
 
@@ -465,28 +465,13 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
     Example:
       cornerslam extract sample_logs/sim_office.mcap --step 40 --plot scan40.png
     """
-    from .features import extract as extract_features
-    from .logs import open_log
+    from .extract import extract_step
     from .report.extract_plot import format_extraction, plot_extraction
-    from .types import Scan
 
     _setup_logging(verbose, quiet)
     cfg = _load(config_path, overrides, None, scan_topic, odom_topic, log_path)
-    reader = open_log(Path(log_path), scan_topic=cfg.input.scan_topic, odom_topic=cfg.input.odom_topic)
-    scan = None
-    i = -1
-    for msg in reader.messages():
-        if isinstance(msg, Scan):
-            i += 1
-            if i == step:
-                scan = msg
-                break
-    if scan is None:
-        raise ConfigError(
-            f"--step {step} is past the end of '{log_path}' ({i + 1} scans)", f"use 0..{max(i, 0)}"
-        )
-    segments, corners = extract_features(scan, cfg.sensor, cfg.lines, cfg.corners)
-    click.echo(f"scan {step} at {scan.stamp:.3f} s: {len(scan.ranges)} valid of {scan.n_beams} beams")
+    scan, segments, corners = extract_step(log_path, step, cfg)
+    click.echo(scan_heading(step, scan))
     click.echo(format_extraction(segments, corners))
     if plot_path:
         from .report.outdir import output_errors

@@ -113,6 +113,30 @@ def test_extract_prints_and_plots(sim_log, tmp_path):
     assert png.stat().st_size > 10_000
 
 
+def test_extract_step_is_the_steps_scan_and_its_features(tmp_path):
+    """extract_step counts scans from 0 and extracts them as the filter's front end does; a step
+    past the end is a ConfigError naming the valid range, and the CLI prints it as one line."""
+    from cornerslam_cli.config import load_config
+    from cornerslam_cli.extract import extract_step
+    from cornerslam_cli.features import extract
+
+    room = np.concatenate([np.full(91, 3.0), np.linspace(3.0, 1.5, 90)])  # a wall meeting a slanted one
+    log = small_log(tmp_path / "s.mcap", n=6, ranges=room)
+    cfg = load_config(None, [])
+    scan, segments, corners = extract_step(log, 4, cfg)
+    assert scan.stamp == pytest.approx(T0 + 0.45)
+    ref_segments, ref_corners = extract(scan, cfg.sensor, cfg.lines, cfg.corners)
+    assert len(segments) == len(ref_segments) > 0 and np.array_equal(corners.z, ref_corners.z)
+    with pytest.raises(ConfigError) as e:
+        extract_step(log, 6, cfg)
+    assert str(e.value) == f"--step 6 is past the end of '{log}' (6 scans) (use 0..5)"
+    res = invoke("extract", log, "--step", 4)
+    assert res.stdout.startswith("scan 4 at 1700000000.450 s: 181 valid of 181 beams\n")
+    assert invoke("extract", log, "--step", 9).stderr == (
+        f"error: --step 9 is past the end of '{log}' (6 scans) (use 0..5)\n"
+    )
+
+
 def test_simulate_is_reproducible(tmp_path):
     a, b = tmp_path / "a.mcap", tmp_path / "b.mcap"
     for p in (a, b):

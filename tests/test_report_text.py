@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from cornerslam_cli.logs.base import LogInfo, TopicInfo
 from cornerslam_cli.report.text import (
     batch_counts,
@@ -13,8 +15,10 @@ from cornerslam_cli.report.text import (
     info_lines,
     mean_std,
     relation_text,
+    scan_heading,
     summary_lines,
 )
+from cornerslam_cli.types import Scan
 
 REL = {
     "n": 3,
@@ -219,3 +223,9 @@ def test_evaluation_lines():
         "RPE  per step 0.0032 m  per metre - m/m"
     )
     assert evaluation_lines({}) == []
+
+
+def test_scan_heading():
+    k = 170
+    scan = Scan(1700000000.4567, np.full(k, 2.0), np.zeros(k), np.arange(k), 181, 0.1, 30.0, 0.01)
+    assert scan_heading(40, scan) == "scan 40 at 1700000000.457 s: 170 valid of 181 beams"

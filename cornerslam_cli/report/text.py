@@ -15,6 +15,7 @@ from ..errors import display_path
 
 if TYPE_CHECKING:
     from ..logs.base import LogInfo
+    from ..types import Scan
 
 
 def mean_std(e: dict) -> str:
@@ -178,3 +179,8 @@ def evaluation_lines(res: dict) -> list[str]:
     if "relations" in res:
         lines.append(f"relations: {relation_text(res['relations'])}")
     return lines
+
+
+def scan_heading(step: int, scan: Scan) -> str:
+    """``cornerslam extract``: which scan, when, and how many of its beams are valid."""
+    return f"scan {step} at {scan.stamp:.3f} s: {len(scan.ranges)} valid of {scan.n_beams} beams"
