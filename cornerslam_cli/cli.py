@@ -1,4 +1,5 @@
-"""The ``cornerslam`` command line: a click group, shared options, and the one error boundary.
+"""The ``cornerslam`` command line: the click group, one small function per command that calls the
+library and echoes its text (report/text.py), and the one error boundary. Shared options: options.py.
 
 Exit codes (INTERFACE.md): 0 success; 1 internal error (traceback saved to a file); 2 bad input or
 usage, reported as one line naming the file, key or topic and what to do.
@@ -8,10 +9,8 @@ from __future__ import annotations
 
 import io
 import logging
-import math
 import os
 import signal
-import stat
 import sys
 import tempfile
 import threading
@@ -26,6 +25,18 @@ import click  # noqa: E402
 
 from . import __version__  # noqa: E402
 from .errors import CornerslamError, display_path  # noqa: E402
+from .options import (  # noqa: E402
+    CONFIG_COPIES,
+    FINITE,
+    command_config,
+    config_options,
+    parse_assocs,
+    parse_sweeps,
+    reference_options,
+    setup_logging,
+    topic_options,
+    verbosity_options,
+)
 from .report.progress import BatchProgress, Progress  # noqa: E402
 from .report.text import (  # noqa: E402
     batch_counts,
@@ -40,145 +51,7 @@ from .report.text import (  # noqa: E402
 log = logging.getLogger("cornerslam")
 
 
-# ---------------------------------------------------------------------------- shared options
-def _verbosity(f):
-    f = click.option("-v", "--verbose", count=True, help="More log output (-v steps, -vv debug).")(f)
-    f = click.option("-q", "--quiet", is_flag=True, help="Only errors; no progress bar.")(f)
-    return f
-
-
-def _config_options(f):
-    f = click.option(
-        "--set",
-        "overrides",
-        multiple=True,
-        metavar="KEY=VALUE",
-        help="Override a config key, e.g. --set association.pca.group_size=5 (repeatable).",
-    )(f)
-    f = click.option(
-        "--config",
-        "config_path",
-        type=click.Path(),
-        callback=_config_read_once,
-        help="YAML config (default: built-in).",
-    )(f)
-    return f
-
-
-def _config_read_once(ctx: click.Context, param, value: str | None) -> str | None:
-    """A ``--config`` that is not a regular file — a pipe, ``<(...)``, ``/dev/null`` — is read once
-    into a temporary copy (removed when the command ends): ``compare`` and ``batch`` load the config
-    once per associator or combination, and a pipe gives its text only once. The copy is as large
-    as the loader accepts plus a byte (it then says "too large"); errors name the path as given
-    (see ``_Cli``)."""
-    from .config import MAX_CONFIG_BYTES
-
-    try:
-        mode = os.stat(value).st_mode if value else 0
-    except OSError:
-        return value  # missing: the config loader says so
-    if not mode or stat.S_ISREG(mode) or stat.S_ISDIR(mode):
-        return value
-    with open(value, "rb") as f:
-        data = f.read(MAX_CONFIG_BYTES + 1)
-    fd, copy = tempfile.mkstemp(prefix="cornerslam-config-", suffix=".yaml")
-    with os.fdopen(fd, "wb") as f:
-        f.write(data)
-    ctx.call_on_close(lambda: os.unlink(copy))
-    ctx.meta.setdefault("config_copies", {})[copy] = value
-    return copy
-
-
-def _topic_options(f):
-    f = click.option(
-        "--odom-topic", default=None, help="Odometry topic (default: by message type, else tf)."
-    )(f)
-    f = click.option("--scan-topic", default=None, help="LaserScan topic (default: the only one).")(f)
-    return f
-
-
-class _Finite(click.ParamType):
-    """A float that must be finite (click's FLOAT takes 'nan' and 'inf')."""
-
-    name = "float"
-
-    def convert(self, value, param, ctx):
-        v = click.FLOAT.convert(value, param, ctx)
-        if not math.isfinite(v):
-            self.fail(f"{value!r} is not a finite number", param, ctx)
-        return v
-
-
-FINITE = _Finite()
-
-
-def _reference_options(f):
-    f = click.option(
-        "--time-offset",
-        default=0.0,
-        type=FINITE,
-        show_default=True,
-        help="With --relations: relation time − log time, s.",
-    )(f)
-    f = click.option(
-        "--relations",
-        type=click.Path(dir_okay=False),
-        help="Kümmerle et al. 2009 .relations file to score against.",
-    )(f)
-    f = click.option(
-        "--ground-truth", type=click.Path(dir_okay=False), help="TUM ground truth (default: LOG.gt.tum)."
-    )(f)
-    return f
-
-
-def _echo(lines: list[str]) -> None:
-    for line in lines:
-        click.echo(line)
-
-
-def _setup_logging(verbose: int, quiet: bool) -> None:
-    level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)]
-    logging.basicConfig(level=level, format="%(levelname)s: %(message)s", stream=sys.stderr, force=True)
-
-
-def _load(config_path, overrides, assoc=None, scan_topic=None, odom_topic=None, log_path=None):
-    """The resolved config: user layers over the laser preset chosen for ``log_path``'s scans."""
-    from .lasers import resolve_config
-
-    extra = list(overrides)
-    if assoc:
-        extra.append(f"association.method={assoc}")
-    if scan_topic:
-        extra.append(f"input.scan_topic={scan_topic}")
-    if odom_topic:
-        extra.append(f"input.odom_topic={odom_topic}")
-    cfg = resolve_config(log_path, config_path, extra)
-    from .association import associator_class
-
-    associator_class(cfg.association.method)  # a --set name: the ConfigError with the closest one
-    return cfg
-
-
-def parse_assocs(text: str | None, allow_many: bool) -> list[str]:
-    """The associators an ``--assoc`` value names, each checked against ``association.ASSOCIATORS``
-    (an unknown one: ConfigError with the closest name). ``None`` (and ``""`` for a single name) is
-    ``[]``: the config's. A list is comma-separated, blanks ignored, and must name distinct
-    associators (a usage error otherwise); a single name is taken whole, spaces around it ignored."""
-    from .association import associator_class
-
-    if text is None or (not allow_many and not text):
-        return []
-    names = [a.strip() for a in text.split(",") if a.strip()] if allow_many else [text.strip()]
-    if not names or len(set(names)) != len(names):
-        raise click.BadParameter(
-            f"'{text}' must list distinct associators, e.g. icnn,jcbb,pca", param_hint="--assoc"
-        )
-    for name in names:
-        associator_class(name)
-    return names
-
-
-# ---------------------------------------------------------------------------- commands
+# ---------------------------------------------------------------------------- the error boundary
 class _Terminated(KeyboardInterrupt):
     """SIGTERM (kill) taken down the Ctrl-C path, so the staged output directory is removed too."""
 
@@ -224,7 +97,7 @@ class _Cli(click.Group):
             return super().invoke(ctx)
         except CornerslamError as e:
             text = str(e)
-            for copy, given in ctx.meta.get("config_copies", {}).items():
+            for copy, given in ctx.meta.get(CONFIG_COPIES, {}).items():
                 text = text.replace(copy, given)  # a --config pipe read into a temporary copy
             click.echo(f"error: {text}", err=True)
             ctx.exit(2)
@@ -260,6 +133,12 @@ class _Cli(click.Group):
                 signal.signal(signal.SIGTERM, previous)
 
 
+# ---------------------------------------------------------------------------- commands
+def _echo(lines: list[str]) -> None:
+    for line in lines:
+        click.echo(line)
+
+
 @click.group(cls=_Cli, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="cornerslam")
 def cli() -> None:
@@ -271,14 +150,14 @@ def cli() -> None:
 
 @cli.command()
 @click.argument("log_path", metavar="LOG", type=click.Path())
-@_config_options
+@config_options
 @click.option("--assoc", default=None, help="Associator: icnn, jcbb or pca (default: config, pca).")
 @click.option("--out", type=click.Path(), help="Output directory (default ./cornerslam_out/LOG_ASSOC).")
-@_topic_options
-@_reference_options
+@topic_options
+@reference_options
 @click.option("--plot", is_flag=True, help="Also draw the map, timing and corner plots and report.html.")
 @click.option("--mcap-out", type=click.Path(), help="Also write the results as MCAP for Foxglove.")
-@_verbosity
+@verbosity_options
 def run(
     log_path,
     config_path,
@@ -303,9 +182,11 @@ def run(
     """
     from .pipeline import run as run_pipeline
 
-    _setup_logging(verbose, quiet)
+    setup_logging(verbose, quiet)
     names = parse_assocs(assoc, allow_many=False)
-    cfg = _load(config_path, overrides, names[0] if names else None, scan_topic, odom_topic, log_path)
+    cfg = command_config(
+        config_path, overrides, names[0] if names else None, scan_topic, odom_topic, log_path
+    )
     progress = Progress(f"{display_path(Path(log_path).name)} ({cfg.association.method})", not quiet)
     try:
         summary = run_pipeline(
@@ -336,12 +217,12 @@ def run(
 @click.option(
     "--assoc", "assocs", default="icnn,jcbb,pca", show_default=True, help="Comma-separated associators."
 )
-@_config_options
+@config_options
 @click.option("--out", type=click.Path(), help="Output directory (default ./cornerslam_out/LOG_compare).")
-@_topic_options
-@_reference_options
+@topic_options
+@reference_options
 @click.option("--jobs", default=1, show_default=True, type=click.IntRange(1, 64), help="Parallel processes.")
-@_verbosity
+@verbosity_options
 def compare(
     log_path,
     assocs,
@@ -366,9 +247,9 @@ def compare(
     from .compare import compare as run_compare
     from .pipeline import default_out_dir
 
-    _setup_logging(verbose, quiet)
+    setup_logging(verbose, quiet)
     names = parse_assocs(assocs, allow_many=True)
-    cfg = _load(config_path, overrides, None, scan_topic, odom_topic, log_path)
+    cfg = command_config(config_path, overrides, None, scan_topic, odom_topic, log_path)
     out_dir = Path(out) if out else default_out_dir(Path(log_path), "compare")
     progress = Progress(f"{display_path(Path(log_path).name)} (extract)", not quiet)
     try:
@@ -384,13 +265,13 @@ def compare(
 
 @cli.command()
 @click.argument("log_path", metavar="LOG", type=click.Path())
-@_topic_options
-@_verbosity
+@topic_options
+@verbosity_options
 def info(log_path, scan_topic, odom_topic, verbose, quiet):
     """Show what is in LOG: format, topics, types, counts, rates, and what `run` would use."""
     from .logs import open_log
 
-    _setup_logging(verbose, quiet)
+    setup_logging(verbose, quiet)
     reader = open_log(Path(log_path), scan_topic=scan_topic or "", odom_topic=odom_topic or "")
     _echo(info_lines(log_path, reader.info(), reader.laser_to_base()))
 
@@ -402,7 +283,7 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
 @click.option("--rate", default=10.0, show_default=True, help="Scan rate, Hz.")
 @click.option("--beams", default=1081, show_default=True, help="Beams per scan (over 270°).")
 @click.option("--speed", default=0.5, show_default=True, help="Robot speed, m/s.")
-@_verbosity
+@verbosity_options
 def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
     """Write a synthetic indoor log OUT.mcap with ground truth OUT.gt.tum and true corners.
 
@@ -413,7 +294,7 @@ def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
     from .report.outdir import output_errors
     from .simulate import simulate_log
 
-    _setup_logging(verbose, quiet)
+    setup_logging(verbose, quiet)
     with output_errors(out_path):
         res = simulate_log(Path(out_path), seed=seed, laps=laps, rate=rate, beams=beams, speed=speed)
     if not quiet:
@@ -430,7 +311,7 @@ def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
 @click.option(
     "--time-offset", default=0.0, type=FINITE, show_default=True, help="Relation time − log time, seconds."
 )
-@_verbosity
+@verbosity_options
 def evaluate(out_dir, ground_truth, relations, time_offset, verbose, quiet):
     """Accuracy of a run's trajectory.tum against ground truth or relations.
 
@@ -440,7 +321,7 @@ def evaluate(out_dir, ground_truth, relations, time_offset, verbose, quiet):
     """
     from .evaluate import evaluate_files
 
-    _setup_logging(verbose, quiet)
+    setup_logging(verbose, quiet)
     if not ground_truth and not relations:
         raise click.UsageError("give --ground-truth FILE.tum or --relations FILE")
     res = evaluate_files(out_dir, ground_truth, relations, time_offset)
@@ -455,9 +336,9 @@ def evaluate(out_dir, ground_truth, relations, time_offset, verbose, quiet):
 @click.option(
     "--plot", "plot_path", type=click.Path(dir_okay=False), help="Draw the scan and features to a PNG."
 )
-@_config_options
-@_topic_options
-@_verbosity
+@config_options
+@topic_options
+@verbosity_options
 def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_topic, verbose, quiet):
     """Print the segments and corners of one scan (and draw them with 3σ ellipses).
 
@@ -468,8 +349,8 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
     from .extract import extract_step
     from .report.extract_plot import format_extraction, plot_extraction
 
-    _setup_logging(verbose, quiet)
-    cfg = _load(config_path, overrides, None, scan_topic, odom_topic, log_path)
+    setup_logging(verbose, quiet)
+    cfg = command_config(config_path, overrides, None, scan_topic, odom_topic, log_path)
     scan, segments, corners = extract_step(log_path, step, cfg)
     click.echo(scan_heading(step, scan))
     click.echo(format_extraction(segments, corners))
@@ -479,21 +360,6 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
         with output_errors(plot_path):
             plot_extraction(scan, segments, corners, plot_path)
         click.echo(f"wrote {plot_path}")
-
-
-def _parse_sweeps(texts) -> dict[str, list[str]]:
-    sweeps: dict[str, list[str]] = {}
-    for text in texts:
-        key, sep, values = text.partition("=")
-        key = key.strip()
-        if not sep or not key or not values.strip():
-            raise click.BadParameter(f"'{text}' is not KEY=V1,V2,...", param_hint="--sweep")
-        if key in sweeps:
-            raise click.BadParameter(
-                f"'{key}' is swept twice; give all its values at once", param_hint="--sweep"
-            )
-        sweeps[key] = [v.strip() for v in values.split(",") if v.strip()]
-    return sweeps
 
 
 @cli.command()
@@ -508,7 +374,7 @@ def _parse_sweeps(texts) -> dict[str, list[str]]:
     metavar="KEY=V1,V2,...",
     help="Run each value of a config key; repeat for a grid, e.g. --sweep association.pca.group_size=3,5.",
 )
-@_config_options
+@config_options
 @click.option("--out", required=True, type=click.Path(), help="Batch directory (resumable).")
 @click.option(
     "--jobs", default=None, type=click.IntRange(1, 256), help="Local worker processes [default: CPUs]."
@@ -516,7 +382,7 @@ def _parse_sweeps(texts) -> dict[str, list[str]]:
 @click.option(
     "--scheduler", default=None, metavar="tcp://HOST:PORT", help="Run on this Dask scheduler instead."
 )
-@_verbosity
+@verbosity_options
 def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, verbose, quiet):
     """Run every LOG × associator × swept config value into OUT/<name>/ and tabulate in OUT/batch.csv.
 
@@ -531,12 +397,14 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
     from .batch import BATCH_CSV, plan, run_batch
     from .report.outdir import check_claimable
 
-    _setup_logging(verbose, quiet)
-    names = parse_assocs(assocs, allow_many=True) or [_load(config_path, overrides).association.method]
+    setup_logging(verbose, quiet)
+    names = parse_assocs(assocs, allow_many=True) or [
+        command_config(config_path, overrides).association.method
+    ]
     if scheduler and jobs:
         log.warning("--jobs is ignored with --scheduler (the cluster's workers run the batch)")
     check_claimable(out, "batch")  # a directory that is not a batch's: refused before any work
-    combos = plan(logs, names, _parse_sweeps(sweeps), overrides, config_path)
+    combos = plan(logs, names, parse_sweeps(sweeps), overrides, config_path)
     progress = BatchProgress(not quiet)
     try:
         rows = run_batch(combos, out, jobs, scheduler, progress)
@@ -559,14 +427,14 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
 
 @cli.command("config")
 @click.argument("log_path", metavar="[LOG]", required=False, type=click.Path())
-@_config_options
+@config_options
 @click.option(
     "--preset",
     default=None,
     metavar="NAME",
     help="Laser preset under the config: auto (chosen from LOG's scans), none, or a preset's name.",
 )
-@_verbosity
+@verbosity_options
 def config_command(log_path, config_path, overrides, preset, verbose, quiet):
     """Print the fully resolved config as YAML: built-in defaults < laser preset < --config < --set.
 
@@ -579,9 +447,9 @@ def config_command(log_path, config_path, overrides, preset, verbose, quiet):
     """
     from .config import dump_config
 
-    _setup_logging(verbose, quiet)
+    setup_logging(verbose, quiet)
     extra = [*overrides, *([f"input.laser_preset={preset}"] if preset else [])]
-    cfg = _load(config_path, extra, log_path=log_path)
+    cfg = command_config(config_path, extra, log_path=log_path)
     click.echo(dump_config(cfg), nl=False)
 
 

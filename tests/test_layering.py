@@ -31,6 +31,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("report",),  # run writer, figures, MCAP out, output directories, printed text, progress display
     ("pipeline", "simulate"),  # a run; the simulated log
     ("compare", "batch"),
+    ("options",),  # the command line's shared options and option parsers
     ("cli",),
     ("__main__",),
 ]
