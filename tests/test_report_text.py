@@ -59,6 +59,19 @@ def summary(assoc="pca", accuracy=None, t_match=0.5, t_match_max=0.0123) -> dict
     }
 
 
+def accuracy(scan_odom_relations: dict) -> dict:
+    """A summary's accuracy section with ground truth and relations."""
+    return {
+        "ground_truth": "gt.tum",
+        "ate": {"rmse": 0.0123},
+        "odom_ate": {"rmse": 1.4249},
+        "scan_odom_ate": {"rmse": 0.0816},
+        "relations": REL,
+        "odom_relations": NO_REL,
+        "scan_odom_relations": scan_odom_relations,
+    }
+
+
 def test_relation_text_and_mean_std():
     assert mean_std(REL) == "0.123 ± 0.046"
     assert mean_std(NO_REL) == "-"
@@ -81,15 +94,7 @@ def test_summary_lines_without_reference():
 
 
 def test_summary_lines_with_ground_truth_and_relations():
-    acc = {
-        "ground_truth": "gt.tum",
-        "ate": {"rmse": 0.0123},
-        "odom_ate": {"rmse": 1.4249},
-        "scan_odom_ate": {"rmse": 0.0816},
-        "relations": REL,
-        "odom_relations": NO_REL,
-        "scan_odom_relations": REL,
-    }
+    acc = accuracy(scan_odom_relations=REL)
     lines = summary_lines(summary(accuracy=acc))
     assert lines[2:] == [
         "ATE RMSE 0.012 m (odometry 1.425 m, scan-matched 0.082 m) against gt.tum",
@@ -111,14 +116,7 @@ def test_comparison_lines_columns_follow_the_references():
         "icnn      500        88     2777      0.500     12.3       4.57",
         "jcbb      500        88     2777     12.346    100.0       4.57",
     ]
-    acc = {
-        "ate": {"rmse": 0.0123},
-        "odom_ate": {"rmse": 1.4249},
-        "scan_odom_ate": {"rmse": 0.0816},
-        "relations": REL,
-        "odom_relations": NO_REL,
-        "scan_odom_relations": NO_REL,
-    }
+    acc = accuracy(scan_odom_relations=NO_REL)
     assert comparison_lines([summary("pca", acc)]) == [
         "assoc   steps landmarks  matched  t_match s   max ms  t_total s    ATE m odom ATE m"
         "      relations m   odom relations m",
