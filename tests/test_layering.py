@@ -27,10 +27,11 @@ LAYERS: list[tuple[str, ...]] = [
     ("report.tables",),  # file formats (TUM, CSV, JSON), read by evaluate too
     ("logs", "features", "association", "filter", "motion", "simworld"),  # the stages, independent
     ("config",),  # the stages' sections assembled, loaded, validated
-    ("lasers", "evaluate"),
-    ("report",),  # run writer, figures, MCAP out, output directories
+    ("lasers", "evaluate", "extract"),  # a run's config; scoring a trajectory; one scan's features
+    ("report",),  # run writer, figures, MCAP out, output directories, printed text, progress display
     ("pipeline", "simulate"),  # a run; the simulated log
     ("compare", "batch"),
+    ("options",),  # the command line's shared options and option parsers
     ("cli",),
     ("__main__",),
 ]
