@@ -115,7 +115,7 @@ def plan(
     preset matching the log's first scan under the user's layers); a log that cannot be opened is not
     an error here but failed rows in :func:`run_batch`. Logs listed twice are run once.
     """
-    from .association import make_associator
+    from .association import associator_class
     from .config import load_config
     from .errors import LogError
     from .lasers import resolve_config
@@ -145,7 +145,7 @@ def plan(
                 cfg = resolve_config(log, config_path, sets)
             except LogError as e:  # the log's rows fail; the batch goes on
                 cfg, error = load_config(config_path, sets), _failed(e)["error"]
-            make_associator(cfg.association)  # an unknown name: ConfigError with the closest one
+            associator_class(cfg.association.method)  # an unknown name: ConfigError with the closest one
             name = _dir_name(labels[log], assoc, sweep)
             combos.append(Combo(log, assoc, sweep, name, cfg.to_dict(), error))
     names = [c.name for c in combos]

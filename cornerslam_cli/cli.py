@@ -1,4 +1,5 @@
-"""The ``cornerslam`` command line: a click group, shared options, and the one error boundary.
+"""The ``cornerslam`` command line: the click group, one small function per command that calls the
+library and echoes its text (report/text.py), and the one error boundary. Shared options: options.py.
 
 Exit codes (INTERFACE.md): 0 success; 1 internal error (traceback saved to a file); 2 bad input or
 usage, reported as one line naming the file, key or topic and what to do.
@@ -8,14 +9,11 @@ from __future__ import annotations
 
 import io
 import logging
-import math
 import os
 import signal
-import stat
 import sys
 import tempfile
 import threading
-import time
 import traceback
 from pathlib import Path
 
@@ -26,186 +24,34 @@ single_threaded_blas()  # before numpy is first imported (blas.py says why)
 import click  # noqa: E402
 
 from . import __version__  # noqa: E402
-from .errors import ConfigError, CornerslamError, display_path  # noqa: E402
+from .errors import CornerslamError, display_path  # noqa: E402
+from .options import (  # noqa: E402
+    CONFIG_COPIES,
+    FINITE,
+    command_config,
+    config_options,
+    parse_assocs,
+    parse_sweeps,
+    reference_options,
+    setup_logging,
+    topic_options,
+    verbosity_options,
+)
+from .report.progress import BatchProgress, Progress  # noqa: E402
+from .report.text import (  # noqa: E402
+    batch_counts,
+    batch_lines,
+    comparison_lines,
+    evaluation_lines,
+    info_lines,
+    scan_heading,
+    summary_lines,
+)
 
 log = logging.getLogger("cornerslam")
 
 
-# ---------------------------------------------------------------------------- shared options
-def _verbosity(f):
-    f = click.option("-v", "--verbose", count=True, help="More log output (-v steps, -vv debug).")(f)
-    f = click.option("-q", "--quiet", is_flag=True, help="Only errors; no progress bar.")(f)
-    return f
-
-
-def _config_options(f):
-    f = click.option(
-        "--set",
-        "overrides",
-        multiple=True,
-        metavar="KEY=VALUE",
-        help="Override a config key, e.g. --set association.pca.group_size=5 (repeatable).",
-    )(f)
-    f = click.option(
-        "--config",
-        "config_path",
-        type=click.Path(),
-        callback=_config_read_once,
-        help="YAML config (default: built-in).",
-    )(f)
-    return f
-
-
-def _config_read_once(ctx: click.Context, param, value: str | None) -> str | None:
-    """A ``--config`` that is not a regular file — a pipe, ``<(...)``, ``/dev/null`` — is read once
-    into a temporary copy (removed when the command ends): ``compare`` and ``batch`` load the config
-    once per associator or combination, and a pipe gives its text only once. The copy is as large
-    as the loader accepts plus a byte (it then says "too large"); errors name the path as given
-    (see ``_Cli``)."""
-    from .config import MAX_CONFIG_BYTES
-
-    try:
-        mode = os.stat(value).st_mode if value else 0
-    except OSError:
-        return value  # missing: the config loader says so
-    if not mode or stat.S_ISREG(mode) or stat.S_ISDIR(mode):
-        return value
-    with open(value, "rb") as f:
-        data = f.read(MAX_CONFIG_BYTES + 1)
-    fd, copy = tempfile.mkstemp(prefix="cornerslam-config-", suffix=".yaml")
-    with os.fdopen(fd, "wb") as f:
-        f.write(data)
-    ctx.call_on_close(lambda: os.unlink(copy))
-    ctx.meta.setdefault("config_copies", {})[copy] = value
-    return copy
-
-
-def _topic_options(f):
-    f = click.option(
-        "--odom-topic", default=None, help="Odometry topic (default: by message type, else tf)."
-    )(f)
-    f = click.option("--scan-topic", default=None, help="LaserScan topic (default: the only one).")(f)
-    return f
-
-
-class _Finite(click.ParamType):
-    """A float that must be finite (click's FLOAT takes 'nan' and 'inf')."""
-
-    name = "float"
-
-    def convert(self, value, param, ctx):
-        v = click.FLOAT.convert(value, param, ctx)
-        if not math.isfinite(v):
-            self.fail(f"{value!r} is not a finite number", param, ctx)
-        return v
-
-
-FINITE = _Finite()
-
-
-def _reference_options(f):
-    f = click.option(
-        "--time-offset",
-        default=0.0,
-        type=FINITE,
-        show_default=True,
-        help="With --relations: relation time − log time, s.",
-    )(f)
-    f = click.option(
-        "--relations",
-        type=click.Path(dir_okay=False),
-        help="Kümmerle et al. 2009 .relations file to score against.",
-    )(f)
-    f = click.option(
-        "--ground-truth", type=click.Path(dir_okay=False), help="TUM ground truth (default: LOG.gt.tum)."
-    )(f)
-    return f
-
-
-def _setup_logging(verbose: int, quiet: bool) -> None:
-    level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)]
-    logging.basicConfig(level=level, format="%(levelname)s: %(message)s", stream=sys.stderr, force=True)
-
-
-def _load(config_path, overrides, assoc=None, scan_topic=None, odom_topic=None, log_path=None):
-    """The resolved config: user layers over the laser preset chosen for ``log_path``'s scans."""
-    from .lasers import resolve_config
-
-    extra = list(overrides)
-    if assoc:
-        extra.append(f"association.method={assoc}")
-    if scan_topic:
-        extra.append(f"input.scan_topic={scan_topic}")
-    if odom_topic:
-        extra.append(f"input.odom_topic={odom_topic}")
-    cfg = resolve_config(log_path, config_path, extra)
-    from .association import ASSOCIATORS
-
-    if cfg.association.method not in ASSOCIATORS:
-        from .association import make_associator
-
-        make_associator(cfg.association)  # raises the ConfigError with the closest name
-    return cfg
-
-
-class _StatusLine:
-    """One status line on stderr: redrawn in place on a terminal, a line every 10 s otherwise (CI
-    logs). Silent when not enabled (-q)."""
-
-    def __init__(self, enabled: bool):
-        self.enabled = enabled
-        self.t0 = time.monotonic()
-        self.last = 0.0
-        self.tty = sys.stderr.isatty()
-        self.drawn = False
-
-    def _due(self, now: float) -> bool:
-        return now - self.last >= (0.1 if self.tty else 10.0)
-
-    def _write(self, text: str) -> None:
-        try:
-            sys.stderr.write(text)
-            sys.stderr.flush()
-        except OSError:  # stderr closed (`2>&1 | head`): the run goes on without a status line
-            self.enabled = False
-
-    def _draw(self, text: str) -> None:
-        if self.tty:
-            self._write("\r\033[K" + text)
-            self.drawn = True
-        else:
-            self._write(text + "\n")
-
-    def close(self) -> None:
-        if self.drawn:
-            self._write("\n")
-
-
-class Progress(_StatusLine):
-    """Scans done of a run's log, with a bar and an ETA, for runs longer than ~2 s."""
-
-    def __init__(self, label: str, enabled: bool):
-        super().__init__(enabled)
-        self.label = label
-
-    def __call__(self, done: int, total: int) -> None:
-        if not self.enabled:
-            return
-        now = time.monotonic()
-        el = now - self.t0
-        if el < 2.0 or not self._due(now):
-            return
-        self.last = now
-        if total > 0:
-            frac = min(done / total, 1.0)
-            eta = el * (1 - frac) / max(frac, 1e-9)
-            bar = "#" * int(30 * frac)
-            self._draw(f"{self.label} [{bar:<30}] {done}/{total} scans {el:5.0f}s eta {eta:4.0f}s")
-        else:
-            self._draw(f"{self.label} {done} scans {el:5.0f}s")
-
-
-# ---------------------------------------------------------------------------- commands
+# ---------------------------------------------------------------------------- the error boundary
 class _Terminated(KeyboardInterrupt):
     """SIGTERM (kill) taken down the Ctrl-C path, so the staged output directory is removed too."""
 
@@ -251,7 +97,7 @@ class _Cli(click.Group):
             return super().invoke(ctx)
         except CornerslamError as e:
             text = str(e)
-            for copy, given in ctx.meta.get("config_copies", {}).items():
+            for copy, given in ctx.meta.get(CONFIG_COPIES, {}).items():
                 text = text.replace(copy, given)  # a --config pipe read into a temporary copy
             click.echo(f"error: {text}", err=True)
             ctx.exit(2)
@@ -287,6 +133,12 @@ class _Cli(click.Group):
                 signal.signal(signal.SIGTERM, previous)
 
 
+# ---------------------------------------------------------------------------- commands
+def _echo(lines: list[str]) -> None:
+    for line in lines:
+        click.echo(line)
+
+
 @click.group(cls=_Cli, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="cornerslam")
 def cli() -> None:
@@ -296,22 +148,16 @@ def cli() -> None:
     """
 
 
-def _assoc_choice():
-    from .association import ASSOCIATORS
-
-    return click.Choice(sorted(ASSOCIATORS))
-
-
 @cli.command()
 @click.argument("log_path", metavar="LOG", type=click.Path())
-@_config_options
+@config_options
 @click.option("--assoc", default=None, help="Associator: icnn, jcbb or pca (default: config, pca).")
 @click.option("--out", type=click.Path(), help="Output directory (default ./cornerslam_out/LOG_ASSOC).")
-@_topic_options
-@_reference_options
+@topic_options
+@reference_options
 @click.option("--plot", is_flag=True, help="Also draw the map, timing and corner plots and report.html.")
 @click.option("--mcap-out", type=click.Path(), help="Also write the results as MCAP for Foxglove.")
-@_verbosity
+@verbosity_options
 def run(
     log_path,
     config_path,
@@ -336,8 +182,11 @@ def run(
     """
     from .pipeline import run as run_pipeline
 
-    _setup_logging(verbose, quiet)
-    cfg = _load(config_path, overrides, assoc, scan_topic, odom_topic, log_path)
+    setup_logging(verbose, quiet)
+    names = parse_assocs(assoc, allow_many=False)
+    cfg = command_config(
+        config_path, overrides, names[0] if names else None, scan_topic, odom_topic, log_path
+    )
     progress = Progress(f"{display_path(Path(log_path).name)} ({cfg.association.method})", not quiet)
     try:
         summary = run_pipeline(
@@ -356,7 +205,7 @@ def run(
         progress.close()
     out_dir = Path(summary["out_dir"])
     if not quiet:
-        _print_summary(summary)
+        _echo(summary_lines(summary))
         if plot:
             click.echo(f"report: {out_dir / 'report.html'}")
         if mcap_out:
@@ -368,12 +217,12 @@ def run(
 @click.option(
     "--assoc", "assocs", default="icnn,jcbb,pca", show_default=True, help="Comma-separated associators."
 )
-@_config_options
+@config_options
 @click.option("--out", type=click.Path(), help="Output directory (default ./cornerslam_out/LOG_compare).")
-@_topic_options
-@_reference_options
+@topic_options
+@reference_options
 @click.option("--jobs", default=1, show_default=True, type=click.IntRange(1, 64), help="Parallel processes.")
-@_verbosity
+@verbosity_options
 def compare(
     log_path,
     assocs,
@@ -398,15 +247,9 @@ def compare(
     from .compare import compare as run_compare
     from .pipeline import default_out_dir
 
-    _setup_logging(verbose, quiet)
-    names = [a.strip() for a in assocs.split(",") if a.strip()]
-    if not names or len(set(names)) != len(names):
-        raise click.BadParameter(
-            f"'{assocs}' must list distinct associators, e.g. icnn,jcbb,pca", param_hint="--assoc"
-        )
-    cfg = _load(config_path, overrides, None, scan_topic, odom_topic, log_path)
-    for a in names:
-        _load(config_path, overrides, a)  # unknown names fail here, with the closest valid one
+    setup_logging(verbose, quiet)
+    names = parse_assocs(assocs, allow_many=True)
+    cfg = command_config(config_path, overrides, None, scan_topic, odom_topic, log_path)
     out_dir = Path(out) if out else default_out_dir(Path(log_path), "compare")
     progress = Progress(f"{display_path(Path(log_path).name)} (extract)", not quiet)
     try:
@@ -416,119 +259,21 @@ def compare(
     finally:
         progress.close()
     if not quiet:
-        _print_comparison(summaries)
+        _echo(comparison_lines(summaries))
         click.echo(f"wrote {out_dir} (report: {out_dir / 'report.html'})")
-
-
-def _print_comparison(summaries: list[dict]) -> None:
-    head = (
-        f"{'assoc':<6} {'steps':>6} {'landmarks':>9} {'matched':>8} "
-        f"{'t_match s':>10} {'max ms':>8} {'t_total s':>10}"
-    )
-    has_gt = any("ate" in (s.get("accuracy") or {}) for s in summaries)
-    has_rel = any("relations" in (s.get("accuracy") or {}) for s in summaries)
-    if has_gt:
-        head += f" {'ATE m':>8} {'odom ATE m':>10}"
-    if has_rel:
-        head += f" {'relations m':>16} {'odom relations m':>18}"
-    click.echo(head)
-    for s in summaries:
-        c, t = s["counts"], s["timing"]
-        line = (
-            f"{s['assoc']:<6} {c['steps']:>6} {c['landmarks']:>9} {c['matched_total']:>8} "
-            f"{t['t_match']:>10.3f} {1000 * t['t_match_max']:>8.1f} {t['t_total']:>10.2f}"
-        )
-        a = s.get("accuracy") or {}
-        if has_gt:
-            line += f" {a['ate']['rmse']:>8.3f} {a['odom_ate']['rmse']:>10.3f}"
-        if has_rel:
-            rel, odom = a["relations"], a["odom_relations"]
-            line += f" {_mean_std(rel):>16} {_mean_std(odom):>18}"
-        click.echo(line)
-    a = (summaries[0].get("accuracy") or {}) if summaries else {}
-    if "scan_odom_ate" in a or "scan_odom_relations" in a:  # the motion input: one for all associators
-        parts = []
-        if "scan_odom_ate" in a:
-            parts.append(f"ATE {a['scan_odom_ate']['rmse']:.3f} m")
-        if "scan_odom_relations" in a:
-            parts.append(f"relations {_mean_std(a['scan_odom_relations'])} m")
-        click.echo("scan-matched odometry (the filter's motion input): " + ", ".join(parts))
-
-
-def _mean_std(e: dict) -> str:
-    """Translational relation error as 'mean ± std' (m)."""
-    return f"{e['trans_mean']:.3f} ± {e['trans_std']:.3f}" if e["n"] else "-"
-
-
-def _relation_text(e: dict) -> str:
-    if e["n"] == 0:
-        return "no relation falls inside the trajectory's time span (check --time-offset)"
-    return (
-        f"translation {_mean_std(e)} m, rotation {e['rot_mean_deg']:.2f} ± {e['rot_std_deg']:.2f} deg "
-        f"({e['n']}/{e['n_total']} relations)"
-    )
-
-
-def _print_summary(s: dict) -> None:
-    c, t = s["counts"], s["timing"]
-    click.echo(
-        f"{s['input']['log']}: {c['steps']} steps ({c['scans_in']} scans, {c['scans_skipped']} skipped, "
-        f"{c['keyframes_skipped']} between keyframes), {c['landmarks']} landmarks, "
-        f"{c['matched_total']} matches with {s['assoc']}"
-    )
-    click.echo(
-        f"time: extract {t['t_extract']:.2f}s scan match {t.get('t_scan_match', 0.0):.2f}s "
-        f"predict {t['t_predict']:.2f}s match {t['t_match']:.2f}s "
-        f"update {t['t_update']:.2f}s ({t['scans_per_second']:.0f} steps/s), wall {t['wall_time']:.1f}s"
-    )
-    acc = s.get("accuracy") or {}
-    if "ate" in acc:
-        click.echo(
-            f"ATE RMSE {acc['ate']['rmse']:.3f} m (odometry {acc['odom_ate']['rmse']:.3f} m"
-            + (f", scan-matched {acc['scan_odom_ate']['rmse']:.3f} m" if "scan_odom_ate" in acc else "")
-            + f") against {acc['ground_truth']}"
-        )
-    if "relations" in acc:
-        click.echo(f"relations: {_relation_text(acc['relations'])}")
-        click.echo(f"  odometry: {_relation_text(acc['odom_relations'])}")
-        if "scan_odom_relations" in acc:
-            click.echo(f"  scan-matched odometry: {_relation_text(acc['scan_odom_relations'])}")
-    click.echo(f"wrote {s['out_dir']}")
 
 
 @cli.command()
 @click.argument("log_path", metavar="LOG", type=click.Path())
-@_topic_options
-@_verbosity
+@topic_options
+@verbosity_options
 def info(log_path, scan_topic, odom_topic, verbose, quiet):
     """Show what is in LOG: format, topics, types, counts, rates, and what `run` would use."""
     from .logs import open_log
 
-    _setup_logging(verbose, quiet)
+    setup_logging(verbose, quiet)
     reader = open_log(Path(log_path), scan_topic=scan_topic or "", odom_topic=odom_topic or "")
-    i = reader.info()
-    click.echo(f"file:      {display_path(log_path)}")
-    click.echo(f"format:    {i.format}")
-    click.echo(f"messages:  {i.n_messages}")
-    if i.start is not None:
-        click.echo(f"start:     {i.start:.3f} s")
-        click.echo(f"duration:  {i.duration:.2f} s")
-    click.echo("topics:")
-    for t in i.topics:
-        count = "?" if t.count is None else str(t.count)
-        rate = f"{t.rate_hz:8.2f} Hz" if t.rate_hz else ""
-        note = f" [{t.encoding_note}]" if t.encoding_note else ""
-        click.echo(f"  {t.name:<28} {t.msgtype:<30} {count:>8} msgs {rate}{note}")
-    click.echo("run would use:")
-    click.echo(f"  scans     {i.scan_topic or '-'}")
-    click.echo(f"  odometry  {i.odom_topic or '-'} ({i.odom_source or 'none found'})")
-    laser = reader.laser_to_base()
-    if laser is not None:
-        click.echo(f"  laser     x={laser[0]:.3f} m y={laser[1]:.3f} m yaw={laser[2]:.3f} rad (from tf)")
-    for text in i.problems:
-        click.echo(f"problem:   {text}")
-    for text in i.notes:
-        click.echo(f"note:      {text}")
+    _echo(info_lines(log_path, reader.info(), reader.laser_to_base()))
 
 
 @cli.command()
@@ -538,7 +283,7 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
 @click.option("--rate", default=10.0, show_default=True, help="Scan rate, Hz.")
 @click.option("--beams", default=1081, show_default=True, help="Beams per scan (over 270°).")
 @click.option("--speed", default=0.5, show_default=True, help="Robot speed, m/s.")
-@_verbosity
+@verbosity_options
 def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
     """Write a synthetic indoor log OUT.mcap with ground truth OUT.gt.tum and true corners.
 
@@ -549,7 +294,7 @@ def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
     from .report.outdir import output_errors
     from .simulate import simulate_log
 
-    _setup_logging(verbose, quiet)
+    setup_logging(verbose, quiet)
     with output_errors(out_path):
         res = simulate_log(Path(out_path), seed=seed, laps=laps, rate=rate, beams=beams, speed=speed)
     if not quiet:
@@ -566,7 +311,7 @@ def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
 @click.option(
     "--time-offset", default=0.0, type=FINITE, show_default=True, help="Relation time − log time, seconds."
 )
-@_verbosity
+@verbosity_options
 def evaluate(out_dir, ground_truth, relations, time_offset, verbose, quiet):
     """Accuracy of a run's trajectory.tum against ground truth or relations.
 
@@ -574,24 +319,13 @@ def evaluate(out_dir, ground_truth, relations, time_offset, verbose, quiet):
     Example:
       cornerslam evaluate cornerslam_out/intel_pca --relations intel.relations --time-offset 976052857.334
     """
-    import math
-
     from .evaluate import evaluate_files
 
-    _setup_logging(verbose, quiet)
+    setup_logging(verbose, quiet)
     if not ground_truth and not relations:
         raise click.UsageError("give --ground-truth FILE.tum or --relations FILE")
-    traj = Path(out_dir) / "trajectory.tum" if Path(out_dir).is_dir() else Path(out_dir)
-    res = evaluate_files(traj, ground_truth, relations, time_offset)
-    if "ate" in res:
-        a, r = res["ate"], res["rpe"]
-        per_m = "-" if math.isnan(r["rpe_per_m"]) else f"{r['rpe_per_m']:.4f}"  # path shorter than 1 m
-        click.echo(
-            f"ATE  rmse {a['rmse']:.4f} m  mean {a['mean']:.4f} m  max {a['max']:.4f} m  (n={a['n']})\n"
-            f"RPE  per step {r['rpe_step_rmse']:.4f} m  per metre {per_m} m/m"
-        )
-    if "relations" in res:
-        click.echo(f"relations: {_relation_text(res['relations'])}")
+    res = evaluate_files(out_dir, ground_truth, relations, time_offset)
+    _echo(evaluation_lines(res))
 
 
 @cli.command()
@@ -602,9 +336,9 @@ def evaluate(out_dir, ground_truth, relations, time_offset, verbose, quiet):
 @click.option(
     "--plot", "plot_path", type=click.Path(dir_okay=False), help="Draw the scan and features to a PNG."
 )
-@_config_options
-@_topic_options
-@_verbosity
+@config_options
+@topic_options
+@verbosity_options
 def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_topic, verbose, quiet):
     """Print the segments and corners of one scan (and draw them with 3σ ellipses).
 
@@ -612,28 +346,13 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
     Example:
       cornerslam extract sample_logs/sim_office.mcap --step 40 --plot scan40.png
     """
-    from .features import extract as extract_features
-    from .logs import open_log
+    from .extract import extract_step
     from .report.extract_plot import format_extraction, plot_extraction
-    from .types import Scan
 
-    _setup_logging(verbose, quiet)
-    cfg = _load(config_path, overrides, None, scan_topic, odom_topic, log_path)
-    reader = open_log(Path(log_path), scan_topic=cfg.input.scan_topic, odom_topic=cfg.input.odom_topic)
-    scan = None
-    i = -1
-    for msg in reader.messages():
-        if isinstance(msg, Scan):
-            i += 1
-            if i == step:
-                scan = msg
-                break
-    if scan is None:
-        raise ConfigError(
-            f"--step {step} is past the end of '{log_path}' ({i + 1} scans)", f"use 0..{max(i, 0)}"
-        )
-    segments, corners = extract_features(scan, cfg.sensor, cfg.lines, cfg.corners)
-    click.echo(f"scan {step} at {scan.stamp:.3f} s: {len(scan.ranges)} valid of {scan.n_beams} beams")
+    setup_logging(verbose, quiet)
+    cfg = command_config(config_path, overrides, None, scan_topic, odom_topic, log_path)
+    scan, segments, corners = extract_step(log_path, step, cfg)
+    click.echo(scan_heading(step, scan))
     click.echo(format_extraction(segments, corners))
     if plot_path:
         from .report.outdir import output_errors
@@ -641,40 +360,6 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
         with output_errors(plot_path):
             plot_extraction(scan, segments, corners, plot_path)
         click.echo(f"wrote {plot_path}")
-
-
-class BatchProgress(_StatusLine):
-    """The whole batch's progress: finished/failed/skipped/remaining and an ETA from the rate of the
-    combinations run so far (skipped ones cost nothing)."""
-
-    def __call__(self, s) -> None:
-        now = time.monotonic()
-        if not self.enabled or (s.remaining and not self._due(now)):
-            return
-        self.last = now
-        el = now - self.t0
-        ran = s.ok + s.failed
-        eta = f"eta {el / ran * s.remaining:4.0f}s" if ran and s.remaining else "eta    ?"
-        text = (
-            f"batch {s.finished}/{s.total}: {s.ok} ok, {s.failed} failed, {s.skipped} skipped, "
-            f"{s.remaining} remaining {el:5.0f}s {eta if s.remaining else ''}"
-        ).rstrip()
-        self._draw(text)
-
-
-def _parse_sweeps(texts) -> dict[str, list[str]]:
-    sweeps: dict[str, list[str]] = {}
-    for text in texts:
-        key, sep, values = text.partition("=")
-        key = key.strip()
-        if not sep or not key or not values.strip():
-            raise click.BadParameter(f"'{text}' is not KEY=V1,V2,...", param_hint="--sweep")
-        if key in sweeps:
-            raise click.BadParameter(
-                f"'{key}' is swept twice; give all its values at once", param_hint="--sweep"
-            )
-        sweeps[key] = [v.strip() for v in values.split(",") if v.strip()]
-    return sweeps
 
 
 @cli.command()
@@ -689,7 +374,7 @@ def _parse_sweeps(texts) -> dict[str, list[str]]:
     metavar="KEY=V1,V2,...",
     help="Run each value of a config key; repeat for a grid, e.g. --sweep association.pca.group_size=3,5.",
 )
-@_config_options
+@config_options
 @click.option("--out", required=True, type=click.Path(), help="Batch directory (resumable).")
 @click.option(
     "--jobs", default=None, type=click.IntRange(1, 256), help="Local worker processes [default: CPUs]."
@@ -697,7 +382,7 @@ def _parse_sweeps(texts) -> dict[str, list[str]]:
 @click.option(
     "--scheduler", default=None, metavar="tcp://HOST:PORT", help="Run on this Dask scheduler instead."
 )
-@_verbosity
+@verbosity_options
 def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, verbose, quiet):
     """Run every LOG × associator × swept config value into OUT/<name>/ and tabulate in OUT/batch.csv.
 
@@ -712,19 +397,14 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
     from .batch import BATCH_CSV, plan, run_batch
     from .report.outdir import check_claimable
 
-    _setup_logging(verbose, quiet)
-    if assocs is None:
-        names = [_load(config_path, overrides).association.method]
-    else:
-        names = [a.strip() for a in assocs.split(",") if a.strip()]
-        if not names or len(set(names)) != len(names):
-            raise click.BadParameter(
-                f"'{assocs}' must list distinct associators, e.g. icnn,jcbb,pca", param_hint="--assoc"
-            )
+    setup_logging(verbose, quiet)
+    names = parse_assocs(assocs, allow_many=True) or [
+        command_config(config_path, overrides).association.method
+    ]
     if scheduler and jobs:
         log.warning("--jobs is ignored with --scheduler (the cluster's workers run the batch)")
     check_claimable(out, "batch")  # a directory that is not a batch's: refused before any work
-    combos = plan(logs, names, _parse_sweeps(sweeps), overrides, config_path)
+    combos = plan(logs, names, parse_sweeps(sweeps), overrides, config_path)
     progress = BatchProgress(not quiet)
     try:
         rows = run_batch(combos, out, jobs, scheduler, progress)
@@ -737,58 +417,24 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
         )
         raise click.exceptions.Exit(130) from None
     progress.close()
-    failed = sum(r["status"] == "failed" for r in rows)
+    failed, _ = batch_counts(rows)
     if not quiet:
-        _print_batch(rows, [k for k, _ in combos[0].sweep])
-        skipped = sum(r["status"] == "skipped" for r in rows)
-        click.echo(
-            f"{len(rows)} combinations: {len(rows) - failed - skipped} ran, {skipped} skipped (complete), "
-            f"{failed} failed"
-        )
+        _echo(batch_lines(rows, [k for k, _ in combos[0].sweep]))
         click.echo(f"wrote {Path(out) / BATCH_CSV}")
     elif failed:
         click.echo(f"{failed} of {len(rows)} combinations failed (see {Path(out) / BATCH_CSV})", err=True)
 
 
-def _print_batch(rows: list[dict], keys: list[str]) -> None:
-    def num(v, fmt):
-        return "-" if v is None else format(v, fmt)
-
-    head = ["log", "assoc", *(k.rsplit(".", 1)[-1] for k in keys), "status", "steps", "landmarks", "ATE m"]
-    table = [
-        [
-            Path(r["log"]).name,
-            r["assoc"],
-            *(str(r[k]) for k in keys),
-            r["status"],
-            num(r["steps"], "d"),
-            num(r["landmarks"], "d"),
-            num(r["ate_rmse"], ".3f"),
-        ]
-        for r in rows
-    ]
-    widths = [max(len(str(x)) for x in col) for col in zip(head, *table, strict=True)]
-    for line in [head, *table]:
-        click.echo("  ".join(str(x).ljust(w) for x, w in zip(line, widths, strict=True)).rstrip())
-    failures: dict[tuple[str, str], int] = {}
-    for r in rows:
-        if r["status"] == "failed":
-            key = (r["log"], r["error"])
-            failures[key] = failures.get(key, 0) + 1
-    for (log_path, error), n in failures.items():
-        click.echo(f"failed ({n}x): {log_path}: {error}")
-
-
 @cli.command("config")
 @click.argument("log_path", metavar="[LOG]", required=False, type=click.Path())
-@_config_options
+@config_options
 @click.option(
     "--preset",
     default=None,
     metavar="NAME",
     help="Laser preset under the config: auto (chosen from LOG's scans), none, or a preset's name.",
 )
-@_verbosity
+@verbosity_options
 def config_command(log_path, config_path, overrides, preset, verbose, quiet):
     """Print the fully resolved config as YAML: built-in defaults < laser preset < --config < --set.
 
@@ -801,9 +447,9 @@ def config_command(log_path, config_path, overrides, preset, verbose, quiet):
     """
     from .config import dump_config
 
-    _setup_logging(verbose, quiet)
+    setup_logging(verbose, quiet)
     extra = [*overrides, *([f"input.laser_preset={preset}"] if preset else [])]
-    cfg = _load(config_path, extra, log_path=log_path)
+    cfg = command_config(config_path, extra, log_path=log_path)
     click.echo(dump_config(cfg), nl=False)
 
 

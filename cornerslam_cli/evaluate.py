@@ -122,11 +122,14 @@ def evaluate_files(
     relations: str | Path | None = None,
     time_offset: float = 0.0,
 ) -> dict:
-    """``cornerslam evaluate``: the TUM ``trajectory`` scored against a TUM ``ground_truth`` (keys
-    ``ate``, ``rpe``) and/or a ``relations`` file (key ``relations``).
+    """``cornerslam evaluate``: the TUM ``trajectory`` (or a run's output directory: its
+    trajectory.tum) scored against a TUM ``ground_truth`` (keys ``ate``, ``rpe``) and/or a
+    ``relations`` file (key ``relations``).
 
     Raises ``LogError`` when the ground truth does not overlap the trajectory in time or no relation
     falls inside it: there is nothing to score, and a NaN is not a score."""
+    if Path(trajectory).is_dir():
+        trajectory = Path(trajectory) / "trajectory.tum"
     t, est = read_tum(trajectory)
     out: dict = {}
     if ground_truth:

@@ -4,11 +4,15 @@ import json
 import math
 from pathlib import Path
 
+import click
 import numpy as np
+import pytest
 from click.testing import CliRunner
 
 from cornerslam_cli.cli import cli
+from cornerslam_cli.errors import ConfigError
 from cornerslam_cli.logs.writers import RawScan, write_mcap
+from cornerslam_cli.options import parse_assocs
 from cornerslam_cli.report.outdir import MARKER
 from cornerslam_cli.report.tables import TIMING_COLUMNS, TRAJECTORY_COLUMNS, read_csv
 from cornerslam_cli.types import OdomSample
@@ -108,6 +112,30 @@ def test_extract_prints_and_plots(sim_log, tmp_path):
     res = invoke("extract", sim_log, "--step", 3, "--plot", png)
     assert res.exit_code == 0, res.output
     assert png.stat().st_size > 10_000
+
+
+def test_extract_step_is_the_steps_scan_and_its_features(tmp_path):
+    """extract_step counts scans from 0 and extracts them as the filter's front end does; a step
+    past the end is a ConfigError naming the valid range, and the CLI prints it as one line."""
+    from cornerslam_cli.config import load_config
+    from cornerslam_cli.extract import extract_step
+    from cornerslam_cli.features import extract
+
+    room = np.concatenate([np.full(91, 3.0), np.linspace(3.0, 1.5, 90)])  # a wall meeting a slanted one
+    log = small_log(tmp_path / "s.mcap", n=6, ranges=room)
+    cfg = load_config(None, [])
+    scan, segments, corners = extract_step(log, 4, cfg)
+    assert scan.stamp == pytest.approx(T0 + 0.45)
+    ref_segments, ref_corners = extract(scan, cfg.sensor, cfg.lines, cfg.corners)
+    assert len(segments) == len(ref_segments) > 0 and np.array_equal(corners.z, ref_corners.z)
+    with pytest.raises(ConfigError) as e:
+        extract_step(log, 6, cfg)
+    assert str(e.value) == f"--step 6 is past the end of '{log}' (6 scans) (use 0..5)"
+    res = invoke("extract", log, "--step", 4)
+    assert res.stdout.startswith("scan 4 at 1700000000.450 s: 181 valid of 181 beams\n")
+    assert invoke("extract", log, "--step", 9).stderr == (
+        f"error: --step 9 is past the end of '{log}' (6 scans) (use 0..5)\n"
+    )
 
 
 def test_simulate_is_reproducible(tmp_path):
@@ -275,6 +303,62 @@ def test_compare_rejects_unknown_and_repeated_associators(sim_log, tmp_path):
     res = invoke("compare", sim_log, "--assoc", "pca,pca", "--out", tmp_path / "c")
     assert res.exit_code == 2 and "distinct" in res.output
     assert not (tmp_path / "c").exists()
+
+
+def test_parse_assocs_good_names():
+    assert parse_assocs("icnn,jcbb,pca", allow_many=True) == ["icnn", "jcbb", "pca"]
+    assert parse_assocs(" pca , icnn,,", allow_many=True) == ["pca", "icnn"]  # blanks and spaces dropped
+    assert parse_assocs(" jcbb", allow_many=False) == ["jcbb"]
+    assert parse_assocs(None, allow_many=True) == parse_assocs(None, allow_many=False) == []
+    assert parse_assocs("", allow_many=False) == []  # run's default: the config's associator
+
+
+@pytest.mark.parametrize("text", ["pca,pca", " icnn,icnn ", "", ",", " , "])
+def test_parse_assocs_repeated_or_empty_list_is_a_usage_error(text):
+    with pytest.raises(click.BadParameter) as e:
+        parse_assocs(text, allow_many=True)
+    assert e.value.format_message() == (
+        f"Invalid value for --assoc: '{text}' must list distinct associators, e.g. icnn,jcbb,pca"
+    )
+
+
+@pytest.mark.parametrize(
+    ("text", "allow_many", "line"),
+    [
+        ("icnn,jbcc", True, "unknown associator 'jbcc' (did you mean 'jcbb'? (icnn, jcbb, pca))"),
+        ("icnn,qqqq", True, "unknown associator 'qqqq' (choose one of: icnn, jcbb, pca)"),
+        ("jbcc", False, "unknown associator 'jbcc' (did you mean 'jcbb'? (icnn, jcbb, pca))"),
+        ("icnn,pca", False, "unknown associator 'icnn,pca' (did you mean 'icnn'? (icnn, jcbb, pca))"),
+        ("  ", False, "unknown associator '' (choose one of: icnn, jcbb, pca)"),
+        ("PCA", False, "unknown associator 'PCA' (choose one of: icnn, jcbb, pca)"),
+    ],
+)
+def test_parse_assocs_unknown_name_names_the_closest(text, allow_many, line, monkeypatch):
+    import cornerslam_cli.association as association
+
+    def never(*args):
+        raise AssertionError("an associator was built to check a name")
+
+    for name in association.ASSOCIATORS:
+        monkeypatch.setitem(association.ASSOCIATORS, name, never)
+    with pytest.raises(ConfigError) as e:
+        parse_assocs(text, allow_many)
+    assert str(e.value) == line
+
+
+@pytest.mark.parametrize("command", ["run", "compare", "batch"])
+def test_every_command_reports_a_bad_assoc_in_the_same_words(command, sim_log, tmp_path):
+    out = ["--out", tmp_path / "o"]
+    res = invoke(command, sim_log, "--assoc", "icnn,jbcc" if command != "run" else "jbcc", *out)
+    assert res.stderr == "error: unknown associator 'jbcc' (did you mean 'jcbb'? (icnn, jcbb, pca))\n"
+    assert res.exit_code == 2 and not (tmp_path / "o").exists()
+    if command != "run":
+        res = invoke(command, sim_log, "--assoc", "pca,pca", *out)
+        assert res.exit_code == 2 and res.stderr.endswith(
+            "Error: Invalid value for --assoc: 'pca,pca' must list distinct associators, e.g. icnn,jcbb,pca\n"
+        )
+    res = invoke(command, sim_log, "--set", "association.method=pcaa", *out)
+    assert res.stderr == "error: unknown associator 'pcaa' (did you mean 'pca'? (icnn, jcbb, pca))\n"
 
 
 def test_relations_are_scored_in_run_and_compare(sim_log, tmp_path):

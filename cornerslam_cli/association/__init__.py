@@ -6,7 +6,8 @@ Every associator is a callable ``assoc(z, C, pred) -> AssociationResult``:
     C : (m, 3, 3) their covariances
     pred : :class:`~cornerslam_cli.types.Prediction` of the n landmarks
 
-``ASSOCIATORS`` maps config/CLI names to classes; ``make_associator(cfg)`` builds the configured one.
+``ASSOCIATORS`` maps config/CLI names to classes; ``make_associator(cfg)`` builds the configured one,
+``associator_class(name)`` checks a name without building one.
 m = 0 or n = 0 gives an all-unmatched result, never an error.
 """
 
@@ -31,15 +32,29 @@ class Associator(Protocol):
 ASSOCIATORS: dict[str, type] = {"icnn": Icnn, "jcbb": Jcbb, "pca": Pca}
 
 
-def make_associator(cfg: AssociationConfig) -> Associator:
-    """The associator named by ``cfg.method``, configured by ``cfg``; ConfigError for an unknown name."""
-    cls = ASSOCIATORS.get(cfg.method)
+def associator_class(method: str) -> type:
+    """The class ``ASSOCIATORS`` names ``method``; ConfigError with the closest name for an unknown one."""
+    cls = ASSOCIATORS.get(method)
     if cls is None:
         names = ", ".join(ASSOCIATORS)
-        dym = did_you_mean(cfg.method, ASSOCIATORS, cutoff=0.3)
+        dym = did_you_mean(method, ASSOCIATORS, cutoff=0.3)
         hint = f"{dym} ({names})" if dym else f"choose one of: {names}"
-        raise ConfigError(f"unknown associator '{cfg.method}'", hint)
-    return cls(cfg)
+        raise ConfigError(f"unknown associator '{method}'", hint)
+    return cls
 
 
-__all__ = ["ASSOCIATORS", "AssociationConfig", "Associator", "Icnn", "Jcbb", "Pca", "make_associator"]
+def make_associator(cfg: AssociationConfig) -> Associator:
+    """The associator named by ``cfg.method``, configured by ``cfg``; ConfigError for an unknown name."""
+    return associator_class(cfg.method)(cfg)
+
+
+__all__ = [
+    "ASSOCIATORS",
+    "AssociationConfig",
+    "Associator",
+    "Icnn",
+    "Jcbb",
+    "Pca",
+    "associator_class",
+    "make_associator",
+]

@@ -1,0 +1,25 @@
+"""One scan's features (``cornerslam extract``): the step-th scan of a log and its segments and corners."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .config import Config
+from .errors import ConfigError
+from .features import extract
+from .logs import open_log
+from .types import Corners, Scan, Segments
+
+
+def extract_step(log_path: str | Path, step: int, cfg: Config) -> tuple[Scan, Segments, Corners]:
+    """The log's scan number ``step`` (0 = first, counting the scans the reader yields) with its line
+    segments and natural corners in the sensor frame, extracted with ``cfg``'s sensor, lines and
+    corners sections. ConfigError when the log has no such scan, naming the valid range."""
+    with open_log(Path(log_path), scan_topic=cfg.input.scan_topic, odom_topic=cfg.input.odom_topic) as reader:
+        scans = (msg for msg in reader.messages() if isinstance(msg, Scan))
+        n = 0
+        for scan in scans:
+            if n == step:
+                return (scan, *extract(scan, cfg.sensor, cfg.lines, cfg.corners))
+            n += 1
+    raise ConfigError(f"--step {step} is past the end of '{log_path}' ({n} scans)", f"use 0..{max(n - 1, 0)}")

@@ -1,0 +1,174 @@
+"""The command line's shared options, defined once, and the parsers of option values.
+
+Decorators add an option group to a command (``config_options``: ``--config`` / ``--set``;
+``topic_options``; ``reference_options``: ``--ground-truth`` / ``--relations`` / ``--time-offset``;
+``verbosity_options``). ``parse_assocs`` reads every command's ``--assoc``, ``parse_sweeps`` batch's
+``--sweep``; ``command_config`` resolves a command's config from the options as ``run`` does. A bad
+value is a click usage error or a ConfigError, which ``cli.py``'s error boundary prints.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import stat
+import sys
+import tempfile
+
+import click
+
+CONFIG_COPIES = "config_copies"  # ctx.meta: temporary copy of a piped --config -> the path as given
+
+
+def verbosity_options(f):
+    """``-v`` (repeatable) and ``-q``."""
+    f = click.option("-v", "--verbose", count=True, help="More log output (-v steps, -vv debug).")(f)
+    f = click.option("-q", "--quiet", is_flag=True, help="Only errors; no progress bar.")(f)
+    return f
+
+
+def config_options(f):
+    """``--config FILE`` and ``--set KEY=VALUE`` (repeatable)."""
+    f = click.option(
+        "--set",
+        "overrides",
+        multiple=True,
+        metavar="KEY=VALUE",
+        help="Override a config key, e.g. --set association.pca.group_size=5 (repeatable).",
+    )(f)
+    f = click.option(
+        "--config",
+        "config_path",
+        type=click.Path(),
+        callback=_config_read_once,
+        help="YAML config (default: built-in).",
+    )(f)
+    return f
+
+
+def _config_read_once(ctx: click.Context, param, value: str | None) -> str | None:
+    """A ``--config`` that is not a regular file — a pipe, ``<(...)``, ``/dev/null`` — is read once
+    into a temporary copy (removed when the command ends): ``compare`` and ``batch`` load the config
+    once per associator or combination, and a pipe gives its text only once. The copy is as large
+    as the loader accepts plus a byte (it then says "too large"); errors name the path as given
+    (see ``cli._Cli``)."""
+    from .config import MAX_CONFIG_BYTES
+
+    try:
+        mode = os.stat(value).st_mode if value else 0
+    except OSError:
+        return value  # missing: the config loader says so
+    if not mode or stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return value
+    with open(value, "rb") as f:
+        data = f.read(MAX_CONFIG_BYTES + 1)
+    fd, copy = tempfile.mkstemp(prefix="cornerslam-config-", suffix=".yaml")
+    with os.fdopen(fd, "wb") as f:
+        f.write(data)
+    ctx.call_on_close(lambda: os.unlink(copy))
+    ctx.meta.setdefault(CONFIG_COPIES, {})[copy] = value
+    return copy
+
+
+def topic_options(f):
+    """``--scan-topic`` and ``--odom-topic``."""
+    f = click.option(
+        "--odom-topic", default=None, help="Odometry topic (default: by message type, else tf)."
+    )(f)
+    f = click.option("--scan-topic", default=None, help="LaserScan topic (default: the only one).")(f)
+    return f
+
+
+class _Finite(click.ParamType):
+    """A float that must be finite (click's FLOAT takes 'nan' and 'inf')."""
+
+    name = "float"
+
+    def convert(self, value, param, ctx):
+        v = click.FLOAT.convert(value, param, ctx)
+        if not math.isfinite(v):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        return v
+
+
+FINITE = _Finite()
+
+
+def reference_options(f):
+    """What a run is scored against: ``--ground-truth``, ``--relations``, ``--time-offset``."""
+    f = click.option(
+        "--time-offset",
+        default=0.0,
+        type=FINITE,
+        show_default=True,
+        help="With --relations: relation time − log time, s.",
+    )(f)
+    f = click.option(
+        "--relations",
+        type=click.Path(dir_okay=False),
+        help="Kümmerle et al. 2009 .relations file to score against.",
+    )(f)
+    f = click.option(
+        "--ground-truth", type=click.Path(dir_okay=False), help="TUM ground truth (default: LOG.gt.tum)."
+    )(f)
+    return f
+
+
+def setup_logging(verbose: int, quiet: bool) -> None:
+    """Log to stderr: warnings by default, ``-v`` info, ``-vv`` debug, ``-q`` errors only."""
+    level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)]
+    logging.basicConfig(level=level, format="%(levelname)s: %(message)s", stream=sys.stderr, force=True)
+
+
+def command_config(config_path, overrides, assoc=None, scan_topic=None, odom_topic=None, log_path=None):
+    """The resolved config: user layers over the laser preset chosen for ``log_path``'s scans."""
+    from .lasers import resolve_config
+
+    extra = list(overrides)
+    if assoc:
+        extra.append(f"association.method={assoc}")
+    if scan_topic:
+        extra.append(f"input.scan_topic={scan_topic}")
+    if odom_topic:
+        extra.append(f"input.odom_topic={odom_topic}")
+    cfg = resolve_config(log_path, config_path, extra)
+    from .association import associator_class
+
+    associator_class(cfg.association.method)  # a --set name: the ConfigError with the closest one
+    return cfg
+
+
+def parse_assocs(text: str | None, allow_many: bool) -> list[str]:
+    """The associators an ``--assoc`` value names, each checked against ``association.ASSOCIATORS``
+    (an unknown one: ConfigError with the closest name). ``None`` (and ``""`` for a single name) is
+    ``[]``: the config's. A list is comma-separated, blanks ignored, and must name distinct
+    associators (a usage error otherwise); a single name is taken whole, spaces around it ignored."""
+    from .association import associator_class
+
+    if text is None or (not allow_many and not text):
+        return []
+    names = [a.strip() for a in text.split(",") if a.strip()] if allow_many else [text.strip()]
+    if not names or len(set(names)) != len(names):
+        raise click.BadParameter(
+            f"'{text}' must list distinct associators, e.g. icnn,jcbb,pca", param_hint="--assoc"
+        )
+    for name in names:
+        associator_class(name)
+    return names
+
+
+def parse_sweeps(texts) -> dict[str, list[str]]:
+    """``--sweep KEY=V1,V2,...`` values as {key: [values]}; a malformed or repeated key is a usage error."""
+    sweeps: dict[str, list[str]] = {}
+    for text in texts:
+        key, sep, values = text.partition("=")
+        key = key.strip()
+        if not sep or not key or not values.strip():
+            raise click.BadParameter(f"'{text}' is not KEY=V1,V2,...", param_hint="--sweep")
+        if key in sweeps:
+            raise click.BadParameter(
+                f"'{key}' is swept twice; give all its values at once", param_hint="--sweep"
+            )
+        sweeps[key] = [v.strip() for v in values.split(",") if v.strip()]
+    return sweeps

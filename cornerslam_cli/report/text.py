@@ -1,0 +1,186 @@
+"""What the commands print on standard output, as lines of text (the CLI echoes them).
+
+Each function takes a result — a run's summary dict (summary.json), a comparison's summaries, a
+batch's rows, a log's ``LogInfo``, ``evaluate_files``' result — and returns the lines, without a
+trailing newline, so the wording and the column layout are tested without a terminal.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from ..errors import display_path
+
+if TYPE_CHECKING:
+    from ..logs.base import LogInfo
+    from ..types import Scan
+
+
+def mean_std(e: dict) -> str:
+    """Translational relation error as 'mean ± std' (m); '-' without relations."""
+    return f"{e['trans_mean']:.3f} ± {e['trans_std']:.3f}" if e["n"] else "-"
+
+
+def relation_text(e: dict) -> str:
+    """A relation error (``evaluate.relation_error``) in words: translation, rotation, how many."""
+    if e["n"] == 0:
+        return "no relation falls inside the trajectory's time span (check --time-offset)"
+    return (
+        f"translation {mean_std(e)} m, rotation {e['rot_mean_deg']:.2f} ± {e['rot_std_deg']:.2f} deg "
+        f"({e['n']}/{e['n_total']} relations)"
+    )
+
+
+def summary_lines(s: dict) -> list[str]:
+    """``cornerslam run``: counts, stage times, accuracy when there is a reference, the output."""
+    c, t = s["counts"], s["timing"]
+    lines = [
+        f"{s['input']['log']}: {c['steps']} steps ({c['scans_in']} scans, {c['scans_skipped']} skipped, "
+        f"{c['keyframes_skipped']} between keyframes), {c['landmarks']} landmarks, "
+        f"{c['matched_total']} matches with {s['assoc']}",
+        f"time: extract {t['t_extract']:.2f}s scan match {t.get('t_scan_match', 0.0):.2f}s "
+        f"predict {t['t_predict']:.2f}s match {t['t_match']:.2f}s "
+        f"update {t['t_update']:.2f}s ({t['scans_per_second']:.0f} steps/s), wall {t['wall_time']:.1f}s",
+    ]
+    acc = s.get("accuracy") or {}
+    if "ate" in acc:
+        lines.append(
+            f"ATE RMSE {acc['ate']['rmse']:.3f} m (odometry {acc['odom_ate']['rmse']:.3f} m"
+            + (f", scan-matched {acc['scan_odom_ate']['rmse']:.3f} m" if "scan_odom_ate" in acc else "")
+            + f") against {acc['ground_truth']}"
+        )
+    if "relations" in acc:
+        lines.append(f"relations: {relation_text(acc['relations'])}")
+        lines.append(f"  odometry: {relation_text(acc['odom_relations'])}")
+        if "scan_odom_relations" in acc:
+            lines.append(f"  scan-matched odometry: {relation_text(acc['scan_odom_relations'])}")
+    lines.append(f"wrote {s['out_dir']}")
+    return lines
+
+
+def comparison_lines(summaries: list[dict]) -> list[str]:
+    """``cornerslam compare``: one row per associator (accuracy columns when any run has a
+    reference), then the scan-matched odometry's accuracy, the same for every associator."""
+    head = (
+        f"{'assoc':<6} {'steps':>6} {'landmarks':>9} {'matched':>8} "
+        f"{'t_match s':>10} {'max ms':>8} {'t_total s':>10}"
+    )
+    has_gt = any("ate" in (s.get("accuracy") or {}) for s in summaries)
+    has_rel = any("relations" in (s.get("accuracy") or {}) for s in summaries)
+    if has_gt:
+        head += f" {'ATE m':>8} {'odom ATE m':>10}"
+    if has_rel:
+        head += f" {'relations m':>16} {'odom relations m':>18}"
+    lines = [head]
+    for s in summaries:
+        c, t = s["counts"], s["timing"]
+        line = (
+            f"{s['assoc']:<6} {c['steps']:>6} {c['landmarks']:>9} {c['matched_total']:>8} "
+            f"{t['t_match']:>10.3f} {1000 * t['t_match_max']:>8.1f} {t['t_total']:>10.2f}"
+        )
+        a = s.get("accuracy") or {}
+        if has_gt:
+            line += f" {a['ate']['rmse']:>8.3f} {a['odom_ate']['rmse']:>10.3f}"
+        if has_rel:
+            rel, odom = a["relations"], a["odom_relations"]
+            line += f" {mean_std(rel):>16} {mean_std(odom):>18}"
+        lines.append(line)
+    a = (summaries[0].get("accuracy") or {}) if summaries else {}
+    if "scan_odom_ate" in a or "scan_odom_relations" in a:  # the motion input: one for all associators
+        parts = []
+        if "scan_odom_ate" in a:
+            parts.append(f"ATE {a['scan_odom_ate']['rmse']:.3f} m")
+        if "scan_odom_relations" in a:
+            parts.append(f"relations {mean_std(a['scan_odom_relations'])} m")
+        lines.append("scan-matched odometry (the filter's motion input): " + ", ".join(parts))
+    return lines
+
+
+def batch_lines(rows: list[dict], keys: list[str]) -> list[str]:
+    """``cornerslam batch``: a table of the combinations (a column per swept key, by its last dotted
+    part), each distinct failure once with its count, and the totals."""
+
+    def num(v, fmt):
+        return "-" if v is None else format(v, fmt)
+
+    head = ["log", "assoc", *(k.rsplit(".", 1)[-1] for k in keys), "status", "steps", "landmarks", "ATE m"]
+    table = [
+        [
+            Path(r["log"]).name,
+            r["assoc"],
+            *(str(r[k]) for k in keys),
+            r["status"],
+            num(r["steps"], "d"),
+            num(r["landmarks"], "d"),
+            num(r["ate_rmse"], ".3f"),
+        ]
+        for r in rows
+    ]
+    widths = [max(len(str(x)) for x in col) for col in zip(head, *table, strict=True)]
+    lines = [
+        "  ".join(str(x).ljust(w) for x, w in zip(line, widths, strict=True)).rstrip()
+        for line in [head, *table]
+    ]
+    failures: dict[tuple[str, str], int] = {}
+    for r in rows:
+        if r["status"] == "failed":
+            key = (r["log"], r["error"])
+            failures[key] = failures.get(key, 0) + 1
+    lines += [f"failed ({n}x): {log_path}: {error}" for (log_path, error), n in failures.items()]
+    failed, skipped = batch_counts(rows)
+    lines.append(
+        f"{len(rows)} combinations: {len(rows) - failed - skipped} ran, {skipped} skipped (complete), "
+        f"{failed} failed"
+    )
+    return lines
+
+
+def batch_counts(rows: list[dict]) -> tuple[int, int]:
+    """(failed, skipped) combinations of a batch's rows."""
+    return sum(r["status"] == "failed" for r in rows), sum(r["status"] == "skipped" for r in rows)
+
+
+def info_lines(log_path: str | Path, i: LogInfo, laser: tuple[float, float, float] | None) -> list[str]:
+    """``cornerslam info``: the log's format, topics with counts and rates, what a run would use
+    (``laser``: the laser's (x, y, yaw) in the base frame from tf, or None), problems and notes."""
+    lines = [f"file:      {display_path(log_path)}", f"format:    {i.format}", f"messages:  {i.n_messages}"]
+    if i.start is not None:
+        lines.append(f"start:     {i.start:.3f} s")
+        lines.append(f"duration:  {i.duration:.2f} s")
+    lines.append("topics:")
+    for t in i.topics:
+        count = "?" if t.count is None else str(t.count)
+        rate = f"{t.rate_hz:8.2f} Hz" if t.rate_hz else ""
+        note = f" [{t.encoding_note}]" if t.encoding_note else ""
+        lines.append(f"  {t.name:<28} {t.msgtype:<30} {count:>8} msgs {rate}{note}")
+    lines.append("run would use:")
+    lines.append(f"  scans     {i.scan_topic or '-'}")
+    lines.append(f"  odometry  {i.odom_topic or '-'} ({i.odom_source or 'none found'})")
+    if laser is not None:
+        lines.append(f"  laser     x={laser[0]:.3f} m y={laser[1]:.3f} m yaw={laser[2]:.3f} rad (from tf)")
+    lines += [f"problem:   {text}" for text in i.problems]
+    lines += [f"note:      {text}" for text in i.notes]
+    return lines
+
+
+def evaluation_lines(res: dict) -> list[str]:
+    """``cornerslam evaluate``: ATE and RPE against ground truth, the relation error, as present in
+    ``res`` (``evaluate.evaluate_files``)."""
+    lines = []
+    if "ate" in res:
+        a, r = res["ate"], res["rpe"]
+        per_m = "-" if math.isnan(r["rpe_per_m"]) else f"{r['rpe_per_m']:.4f}"  # path shorter than 1 m
+        lines.append(
+            f"ATE  rmse {a['rmse']:.4f} m  mean {a['mean']:.4f} m  max {a['max']:.4f} m  (n={a['n']})"
+        )
+        lines.append(f"RPE  per step {r['rpe_step_rmse']:.4f} m  per metre {per_m} m/m")
+    if "relations" in res:
+        lines.append(f"relations: {relation_text(res['relations'])}")
+    return lines
+
+
+def scan_heading(step: int, scan: Scan) -> str:
+    """``cornerslam extract``: which scan, when, and how many of its beams are valid."""
+    return f"scan {step} at {scan.stamp:.3f} s: {len(scan.ranges)} valid of {scan.n_beams} beams"

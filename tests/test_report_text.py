@@ -1,0 +1,229 @@
+"""The commands' printed text (report/text.py), line by line, from hand-made results."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from cornerslam_cli.logs.base import LogInfo, TopicInfo
+from cornerslam_cli.report.text import (
+    batch_counts,
+    batch_lines,
+    comparison_lines,
+    evaluation_lines,
+    info_lines,
+    mean_std,
+    relation_text,
+    scan_heading,
+    summary_lines,
+)
+from cornerslam_cli.types import Scan
+
+REL = {
+    "n": 3,
+    "n_total": 4,
+    "trans_mean": 0.1234,
+    "trans_std": 0.0456,
+    "rot_mean_deg": 1.234,
+    "rot_std_deg": 0.5,
+}
+NO_REL = {"n": 0, "n_total": 4}
+
+
+def summary(assoc="pca", accuracy=None, t_match=0.5, t_match_max=0.0123) -> dict:
+    return {
+        "input": {"log": "logs/office.mcap"},
+        "assoc": assoc,
+        "out_dir": "out/office_pca",
+        "counts": {
+            "steps": 500,
+            "scans_in": 502,
+            "scans_skipped": 2,
+            "keyframes_skipped": 7,
+            "landmarks": 88,
+            "matched_total": 2777,
+        },
+        "timing": {
+            "t_extract": 1.234,
+            "t_scan_match": 2.0,
+            "t_predict": 0.04,
+            "t_match": t_match,
+            "t_match_max": t_match_max,
+            "t_update": 0.375,
+            "t_total": 4.5678,
+            "scans_per_second": 118.4,
+            "wall_time": 4.56,
+        },
+        "accuracy": accuracy,
+    }
+
+
+def accuracy(scan_odom_relations: dict) -> dict:
+    """A summary's accuracy section with ground truth and relations."""
+    return {
+        "ground_truth": "gt.tum",
+        "ate": {"rmse": 0.0123},
+        "odom_ate": {"rmse": 1.4249},
+        "scan_odom_ate": {"rmse": 0.0816},
+        "relations": REL,
+        "odom_relations": NO_REL,
+        "scan_odom_relations": scan_odom_relations,
+    }
+
+
+def test_relation_text_and_mean_std():
+    assert mean_std(REL) == "0.123 ± 0.046"
+    assert mean_std(NO_REL) == "-"
+    assert relation_text(REL) == "translation 0.123 ± 0.046 m, rotation 1.23 ± 0.50 deg (3/4 relations)"
+    assert relation_text(NO_REL) == (
+        "no relation falls inside the trajectory's time span (check --time-offset)"
+    )
+
+
+def test_summary_lines_without_reference():
+    s = summary()
+    del s["timing"]["t_scan_match"]  # a summary written before scan matching existed
+    assert summary_lines(s) == [
+        "logs/office.mcap: 500 steps (502 scans, 2 skipped, 7 between keyframes), 88 landmarks, "
+        "2777 matches with pca",
+        "time: extract 1.23s scan match 0.00s predict 0.04s match 0.50s update 0.38s (118 steps/s), "
+        "wall 4.6s",
+        "wrote out/office_pca",
+    ]
+
+
+def test_summary_lines_with_ground_truth_and_relations():
+    acc = accuracy(scan_odom_relations=REL)
+    lines = summary_lines(summary(accuracy=acc))
+    assert lines[2:] == [
+        "ATE RMSE 0.012 m (odometry 1.425 m, scan-matched 0.082 m) against gt.tum",
+        "relations: translation 0.123 ± 0.046 m, rotation 1.23 ± 0.50 deg (3/4 relations)",
+        "  odometry: no relation falls inside the trajectory's time span (check --time-offset)",
+        "  scan-matched odometry: translation 0.123 ± 0.046 m, rotation 1.23 ± 0.50 deg (3/4 relations)",
+        "wrote out/office_pca",
+    ]
+    del acc["scan_odom_ate"], acc["scan_odom_relations"]
+    lines = summary_lines(summary(accuracy=acc))
+    assert lines[2] == "ATE RMSE 0.012 m (odometry 1.425 m) against gt.tum"
+    assert not any("scan-matched" in line for line in lines)
+
+
+def test_comparison_lines_columns_follow_the_references():
+    plain = [summary("icnn"), summary("jcbb", t_match=12.3456, t_match_max=0.1)]
+    assert comparison_lines(plain) == [
+        "assoc   steps landmarks  matched  t_match s   max ms  t_total s",
+        "icnn      500        88     2777      0.500     12.3       4.57",
+        "jcbb      500        88     2777     12.346    100.0       4.57",
+    ]
+    acc = accuracy(scan_odom_relations=NO_REL)
+    assert comparison_lines([summary("pca", acc)]) == [
+        "assoc   steps landmarks  matched  t_match s   max ms  t_total s    ATE m odom ATE m"
+        "      relations m   odom relations m",
+        "pca       500        88     2777      0.500     12.3       4.57    0.012      1.425"
+        "    0.123 ± 0.046                  -",
+        "scan-matched odometry (the filter's motion input): ATE 0.082 m, relations - m",
+    ]
+    assert comparison_lines([]) == comparison_lines(plain)[:1]  # the header alone
+
+
+def test_batch_lines_table_failures_and_totals():
+    def row(log, assoc, size, status, steps=None, landmarks=None, ate=None, error=""):
+        return {
+            "log": log,
+            "assoc": assoc,
+            "association.pca.group_size": size,
+            "status": status,
+            "steps": steps,
+            "landmarks": landmarks,
+            "ate_rmse": ate,
+            "error": error,
+        }
+
+    rows = [
+        row("/data/office.mcap", "pca", 3, "ok", 501, 88, 0.01234),
+        row("/data/office.mcap", "icnn", 5, "skipped", 501, 85, math.nan),
+        row("/data/bad.bag", "pca", 3, "failed", error="no scans (check --scan-topic)"),
+        row("/data/bad.bag", "icnn", 5, "failed", error="no scans (check --scan-topic)"),
+    ]
+    assert batch_counts(rows) == (2, 1)
+    assert batch_lines(rows, ["association.pca.group_size"]) == [
+        "log          assoc  group_size  status   steps  landmarks  ATE m",
+        "office.mcap  pca    3           ok       501    88         0.012",
+        "office.mcap  icnn   5           skipped  501    85         nan",
+        "bad.bag      pca    3           failed   -      -          -",
+        "bad.bag      icnn   5           failed   -      -          -",
+        "failed (2x): /data/bad.bag: no scans (check --scan-topic)",
+        "4 combinations: 1 ran, 1 skipped (complete), 2 failed",
+    ]
+
+
+def test_info_lines():
+    info = LogInfo(
+        format="mcap",
+        path="office.mcap",
+        start=1700000000.0061,
+        end=1700000050.0,
+        duration=49.9939,
+        n_messages=1503,
+        topics=(
+            TopicInfo("/scan", "sensor_msgs/LaserScan", 501, 10.0, "cdr"),
+            TopicInfo("/tf", "tf2_msgs/TFMessage", None, None, "protobuf"),
+        ),
+        scan_topic="/scan",
+        odom_topic="",
+        odom_source="",
+        problems=("no odometry",),
+        notes=("a note",),
+    )
+    assert info_lines("office.mcap", info, (0.1, -0.02, math.pi / 2)) == [
+        "file:      office.mcap",
+        "format:    mcap",
+        "messages:  1503",
+        "start:     1700000000.006 s",
+        "duration:  49.99 s",
+        "topics:",
+        "  /scan                        sensor_msgs/LaserScan               501 msgs    10.00 Hz",
+        "  /tf                          tf2_msgs/TFMessage                    ? msgs "
+        " [protobuf: not readable]",
+        "run would use:",
+        "  scans     /scan",
+        "  odometry  - (none found)",
+        "  laser     x=0.100 m y=-0.020 m yaw=1.571 rad (from tf)",
+        "problem:   no odometry",
+        "note:      a note",
+    ]
+    empty = LogInfo("carmen", "x.clf", None, None, 0.0, 0, (), "", "", "")
+    assert info_lines("x.clf", empty, None) == [
+        "file:      x.clf",
+        "format:    carmen",
+        "messages:  0",
+        "topics:",
+        "run would use:",
+        "  scans     -",
+        "  odometry  - (none found)",
+    ]
+
+
+def test_evaluation_lines():
+    res = {
+        "ate": {"rmse": 0.01234, "mean": 0.01, "max": 0.05, "n": 501},
+        "rpe": {"rpe_step_rmse": 0.00321, "rpe_per_m": 0.0456},
+        "relations": REL,
+    }
+    assert evaluation_lines(res) == [
+        "ATE  rmse 0.0123 m  mean 0.0100 m  max 0.0500 m  (n=501)",
+        "RPE  per step 0.0032 m  per metre 0.0456 m/m",
+        "relations: translation 0.123 ± 0.046 m, rotation 1.23 ± 0.50 deg (3/4 relations)",
+    ]
+    res["rpe"]["rpe_per_m"] = math.nan  # a path shorter than 1 m
+    assert evaluation_lines({"ate": res["ate"], "rpe": res["rpe"]})[1] == (
+        "RPE  per step 0.0032 m  per metre - m/m"
+    )
+    assert evaluation_lines({}) == []
+
+
+def test_scan_heading():
+    k = 170
+    scan = Scan(1700000000.4567, np.full(k, 2.0), np.zeros(k), np.arange(k), 181, 0.1, 30.0, 0.01)
+    assert scan_heading(40, scan) == "scan 40 at 1700000000.457 s: 170 valid of 181 beams"
