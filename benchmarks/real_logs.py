@@ -122,8 +122,8 @@ def relation_scores(r: dict, data: Path, keys=("pose", "odom")) -> tuple[dict, .
 
 def scan_points(log: Path, extra: list[str], stamps: np.ndarray) -> list[np.ndarray]:
     """Valid beam end points (sensor frame → base frame) of the keyframe scans, by stamp."""
+    from cornerslam_cli.frontend import _scans_prepared, open_input
     from cornerslam_cli.lasers import resolve_config
-    from cornerslam_cli.pipeline import _scans_prepared, open_input
     from cornerslam_cli.types import Scan
 
     cfg = resolve_config(log, None, extra)

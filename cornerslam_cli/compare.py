@@ -18,9 +18,11 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from .config import Config
-from .pipeline import Frame, Input, frames, load_reference, open_input, run_frames
+from .frontend import Frame, Input, frames, open_input
+from .pipeline import run_filter
 from .report.comparison import write_comparison
 from .report.outdir import StagedDir, mark_output
+from .report.run_writer import load_reference
 from .workers import exit_with_parent
 
 _SHARED: dict = {}  # what forked workers inherit: frames, input, reference
@@ -32,7 +34,7 @@ def with_assoc(cfg: Config, assoc: str) -> Config:
 
 def _run_one(assoc: str, out_dir: Path) -> dict:
     sh = _SHARED
-    return run_frames(
+    return run_filter(
         sh["frames"], sh["src"], with_assoc(sh["cfg"], assoc), out_dir, sh["ref"], time.perf_counter()
     )
 

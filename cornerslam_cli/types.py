@@ -48,6 +48,7 @@ class OdomSample:
     x: float
     y: float
     theta: float
+    jumped: bool = False  # re-anchored across an odometry jump (logs/sync.py reanchor_odometry)
 
 
 @dataclass(frozen=True)

@@ -258,12 +258,12 @@ def test_truncated_mcap_processes_what_is_readable(sim_log, tmp_path):
 
 
 def test_an_internal_error_exits_1_with_the_traceback_saved(tmp_path, sim_log, monkeypatch):
-    import cornerslam_cli.pipeline as pipeline
+    from cornerslam_cli.slam import Slam
 
     def boom(*a, **k):
         raise ZeroDivisionError("synthetic bug")
 
-    monkeypatch.setattr(pipeline.Slam, "step", boom)
+    monkeypatch.setattr(Slam, "step", boom)
     res = invoke("run", sim_log, "--out", tmp_path / "o")
     assert res.exit_code == 1
     assert "internal error: ZeroDivisionError" in res.stderr and "traceback saved to" in res.stderr

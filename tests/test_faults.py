@@ -6,6 +6,7 @@ with exit 2 before anything is written, and runs are byte-for-byte deterministic
 from __future__ import annotations
 
 import atexit
+import dataclasses
 import json
 import os
 import shutil
@@ -110,9 +111,9 @@ def test_the_jump_is_not_applied_as_motion(corpus, tmp_path, scan_match):
 def test_nan_in_the_filter_stops_with_exit_2_and_writes_nothing(corpus, tmp_path, monkeypatch):
     """A corner covariance turned NaN at step 5 (as a broken extractor would produce): check_health
     names the step, the staged output is discarded."""
-    import cornerslam_cli.pipeline as pipeline
+    import cornerslam_cli.frontend as frontend
 
-    real = pipeline.extract_frame
+    real = frontend.extract_frame
     calls = []
 
     def poisoned(scan, odom, cfg, laser2base):
@@ -122,7 +123,7 @@ def test_nan_in_the_filter_stops_with_exit_2_and_writes_nothing(corpus, tmp_path
             f.C[:] = np.nan
         return f
 
-    monkeypatch.setattr(pipeline, "extract_frame", poisoned)
+    monkeypatch.setattr(frontend, "extract_frame", poisoned)
     path, _ = corpus["valid"]
     out = tmp_path / "out"
     res = invoke("run", path, "--out", out)
@@ -132,16 +133,16 @@ def test_nan_in_the_filter_stops_with_exit_2_and_writes_nothing(corpus, tmp_path
 
 def test_corrupt_covariance_stops_the_run_naming_the_step(corpus, tmp_path, monkeypatch):
     """Corner covariances made hugely negative at step 3: the run stops with exit 2 at step 3."""
-    import cornerslam_cli.pipeline as pipeline
+    from cornerslam_cli.slam import Slam
 
-    real = pipeline.Slam.step
+    real = Slam.step
 
     def step(self, frame):
         if self.n_steps == 3 and len(frame.C):
-            frame = pipeline.replace(frame, C=-np.abs(frame.C) * 1e6)
+            frame = dataclasses.replace(frame, C=-np.abs(frame.C) * 1e6)
         return real(self, frame)
 
-    monkeypatch.setattr(pipeline.Slam, "step", step)
+    monkeypatch.setattr(Slam, "step", step)
     path, _ = corpus["valid"]
     out = tmp_path / "out"
     res = invoke("run", path, "--out", out)
@@ -152,24 +153,24 @@ def test_corrupt_covariance_stops_the_run_naming_the_step(corpus, tmp_path, monk
 def test_bad_pairing_from_an_associator_is_caught(corpus, tmp_path, monkeypatch):
     """An associator pairing every corner with landmark 0, with a corner covariance that makes the
     innovation covariance S indefinite: exit 2 naming the step, not a crash, nothing written."""
-    import cornerslam_cli.pipeline as pipeline
+    from cornerslam_cli.slam import Slam
     from cornerslam_cli.types import AssociationResult
 
-    real = pipeline.Slam.step
+    real = Slam.step
 
     def step(self, frame):
         if self.n_steps == 4 and len(frame.C) and self.ekf.n_landmarks:
             m = len(frame.z)
             C = frame.C.copy()
             C[0] = -1e3 * np.eye(3)
-            frame = pipeline.replace(frame, C=C)
+            frame = dataclasses.replace(frame, C=C)
             pairs = np.zeros(m, dtype=np.int64)
             self.associate = lambda z, C, pred: AssociationResult(
                 pairs=pairs, d2=np.zeros(m), n_candidates=np.ones(m, dtype=np.int64)
             )
         return real(self, frame)
 
-    monkeypatch.setattr(pipeline.Slam, "step", step)
+    monkeypatch.setattr(Slam, "step", step)
     path, _ = corpus["valid"]
     out = tmp_path / "out"
     res = invoke("run", path, "--out", out)

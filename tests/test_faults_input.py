@@ -175,7 +175,7 @@ def test_scans_without_odometry_do_not_grow_memory(tmp_path):
     612 MB vs 129 MB on 20,000 real scans); each is counted. Small chunks, so that both logs have
     many (the reader holds one decompressed chunk)."""
     from cornerslam_cli.config import load_config
-    from cornerslam_cli.pipeline import frames, open_input
+    from cornerslam_cli.frontend import frames, open_input
 
     cfg = load_config()
 

@@ -23,16 +23,17 @@ from click.testing import CliRunner
 from cornerslam_cli.cli import cli
 from cornerslam_cli.config import Config, from_dict, load_config
 from cornerslam_cli.filter import inverse_observe, observe
+from cornerslam_cli.frontend import Frame, corners_to_base, frames, open_input
 from cornerslam_cli.geometry import matrix_from_pose, pose_from_matrix, transform_points, yaw_from_quaternion
 from cornerslam_cli.logs import open_log
 from cornerslam_cli.logs.ros import chain_transform, pose2_from_matrix, transform_matrix
 from cornerslam_cli.logs.sync import reanchor_odometry
 from cornerslam_cli.logs.writers import RawScan, write_mcap
 from cornerslam_cli.motion import ScanMatcher
-from cornerslam_cli.pipeline import Frame, Slam, corners_to_base, frames, open_input
 from cornerslam_cli.report.tables import read_csv, write_tum
 from cornerslam_cli.simulate import SimParams, drive
 from cornerslam_cli.simworld import office_world, raycast, true_corners
+from cornerslam_cli.slam import Slam
 from cornerslam_cli.types import Corners, OdomSample, Scan, Segments
 
 MOUNT = (0.2, -0.1, 0.3)  # laser in the base frame: x, y (m), yaw (rad)
@@ -166,7 +167,7 @@ def test_reanchored_odometry_continues_from_the_pose_before_the_jump():
 
 def test_segments_of_a_step_go_to_the_map_through_pose_and_mount():
     """lines.csv: a segment seen at filter pose p is map ← base (p) ← laser (MOUNT) of its end points."""
-    slam = Slam(load_config(), MOUNT)
+    slam = Slam.from_config(load_config(), MOUNT)
     p1, p2 = np.array([[1.0, 0.5]]), np.array([[2.0, -0.5]])
     one = Segments(
         np.ones(1), np.zeros(1), np.eye(2)[None], p1, p2, np.full(1, 5), np.zeros(1, int), np.ones(1, int)
@@ -260,7 +261,7 @@ def test_map_csv_covariance_columns_are_the_landmark_blocks_of_sigma(yawed_logs,
     summary = json.loads((yawed_run / "summary.json").read_text())
     cfg = from_dict(Config, summary["config"])  # the run's resolved config (laser preset included)
     src = open_input(yawed_logs["tf"], cfg)
-    slam = Slam(cfg, src.laser2base)
+    slam = Slam.from_config(cfg, src.laser2base)
     for frame in frames(src, cfg):
         slam.step(frame)
     mu, P = slam.ekf.mu, slam.ekf.P

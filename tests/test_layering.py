@@ -28,6 +28,8 @@ LAYERS: list[tuple[str, ...]] = [
     ("logs", "features", "association", "filter", "motion", "simworld"),  # the stages, independent
     ("config",),  # the stages' sections assembled, loaded, validated
     ("lasers", "evaluate", "extract"),  # a run's config; scoring a trajectory; one scan's features
+    ("frontend",),  # a run's front end: log → synchronised frames → features → scan-matched motion
+    ("slam",),  # the filter over the frames: steps, landmarks
     ("report",),  # run writer, figures, MCAP out, output directories, printed text, progress display
     ("pipeline", "simulate"),  # a run; the simulated log
     ("compare", "batch"),

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from fault_corpus import peak_bytes
 
-from cornerslam_cli.logs.params import KeyframeConfig
-from cornerslam_cli.logs.sync import SyncStats, select_keyframes, synchronise
+from cornerslam_cli.logs.params import KeyframeConfig, OdomJumpConfig
+from cornerslam_cli.logs.sync import Synced, SyncStats, reanchor_odometry, select_keyframes, synchronise
 from cornerslam_cli.types import OdomSample, Scan
 
 
@@ -16,7 +16,7 @@ def scan(t):
 
 def test_interpolation_is_linear_and_takes_the_short_arc():
     msgs = [OdomSample(0.0, 0.0, 0.0, np.pi - 0.1), scan(0.25), OdomSample(1.0, 2.0, -4.0, -np.pi + 0.1)]
-    ((_, p),) = synchronise(msgs)
+    ((p),) = [s.odom for s in synchronise(msgs)]
     assert p[:2] == pytest.approx([0.5, -1.0])
     # from π−0.1 to −π+0.1 is +0.2 the short way round; a quarter of it lands at π−0.05
     assert p[2] == pytest.approx(np.pi - 0.05)
@@ -33,9 +33,9 @@ def test_scans_outside_the_odometry_span_are_skipped_and_counted():
     ]
     st = SyncStats()
     out = list(synchronise(msgs, st))
-    assert [s.stamp for s, _ in out] == [1.5, 2.0]
-    assert out[0][1] == pytest.approx([0.5, 0.0, 0.0])
-    assert out[1][1] == pytest.approx([1.0, 0.0, 0.0])
+    assert [s.scan.stamp for s in out] == [1.5, 2.0]
+    assert out[0].odom == pytest.approx([0.5, 0.0, 0.0])
+    assert out[1].odom == pytest.approx([1.0, 0.0, 0.0])
     assert (st.before_first_odom, st.after_last_odom, st.scans_in, st.scans_out) == (1, 1, 4, 2)
 
 
@@ -45,7 +45,7 @@ def test_scan_stamped_before_odometry_that_arrived_earlier_still_interpolates():
     msgs.insert(2, scan(0.5))
     msgs.append(OdomSample(3.0, 3.0, 0.0, 0.0))
     out = list(synchronise(msgs))
-    assert len(out) == 1 and out[0][1][0] == pytest.approx(0.5)
+    assert len(out) == 1 and out[0].odom[0] == pytest.approx(0.5)
 
 
 def test_backwards_and_duplicate_stamps_are_dropped():
@@ -53,27 +53,46 @@ def test_backwards_and_duplicate_stamps_are_dropped():
     msgs += [OdomSample(1.9, 9, 9, 0), scan(1.5)]
     st = SyncStats()
     out = list(synchronise(msgs, st))
-    assert [s.stamp for s, _ in out] == [1.0, 1.5]
+    assert [s.scan.stamp for s in out] == [1.0, 1.5]
     assert st.scan_time_backwards == 2 and st.odom_time_backwards == 1
-    assert out[0][1][0] == pytest.approx(1.0)
+    assert out[0].odom[0] == pytest.approx(1.0)
 
 
 def test_keyframes_by_distance_and_rotation():
     poses = [np.array([0.1 * i, 0.0, 0.0]) for i in range(11)] + [np.array([1.0, 0.0, 0.6])]
-    pairs = [(scan(float(i)), p) for i, p in enumerate(poses)]
+    pairs = [Synced(scan(float(i)), p) for i, p in enumerate(poses)]
     st = SyncStats()
     kept = list(select_keyframes(pairs, KeyframeConfig(linear_update=0.35, angular_update=0.5), st))
-    assert [s.stamp for s, _ in kept] == [0.0, 4.0, 8.0, 11.0]
+    assert [s.scan.stamp for s in kept] == [0.0, 4.0, 8.0, 11.0]
     assert st.keyframes_skipped == 8
     assert len(list(select_keyframes(pairs, KeyframeConfig()))) == len(pairs)
+
+
+def test_an_odometry_jump_travels_with_the_next_pair_and_the_next_keyframe():
+    """The jump between odometry samples at 2 s and 3 s flags the scan that sample 3 releases (2.5 s),
+    not the others; when that scan is not a keyframe the flag moves on to the next keyframe."""
+    odom = [OdomSample(float(t), 0.1 * t, 0.0, 0.0) for t in range(6)]
+    odom[3:] = [OdomSample(o.stamp, o.x + 50.0, o.y, o.theta) for o in odom[3:]]  # a 50 m reset
+    msgs = [m for t in range(6) for m in ([odom[t], scan(t + 0.5)] if t < 5 else [odom[t]])]
+    st = SyncStats()
+    synced = list(synchronise(reanchor_odometry(msgs, OdomJumpConfig(), st)))
+    assert st.odom_jumps == 1
+    assert [(s.scan.stamp, s.odom_jump) for s in synced] == [
+        (0.5, False), (1.5, False), (2.5, True), (3.5, False), (4.5, False),
+    ]  # fmt: skip
+    assert synced[2].odom[0] == pytest.approx(0.2)  # re-anchored: no 50 m of motion
+    kept = list(select_keyframes(synced, KeyframeConfig(max_interval=2.0)))
+    assert [(s.scan.stamp, s.odom_jump) for s in kept] == [(0.5, False), (2.5, True), (4.5, False)]
+    kept = list(select_keyframes(synced, KeyframeConfig(max_interval=3.0)))
+    assert [(s.scan.stamp, s.odom_jump) for s in kept] == [(0.5, False), (3.5, True)]
 
 
 def test_scan_time_offset_shifts_the_stamp_used_for_interpolation(tmp_path):
     import math
 
     from cornerslam_cli.config import load_config
+    from cornerslam_cli.frontend import frames, open_input
     from cornerslam_cli.logs.writers import RawScan, write_mcap
-    from cornerslam_cli.pipeline import frames, open_input
 
     t0 = 1_700_000_000.0
     scans = [RawScan(t0 + 0.5 + i, -math.pi / 2, math.pi / 180, np.full(181, 3.0)) for i in range(3)]
@@ -93,7 +112,7 @@ def test_scans_in_a_gap_of_the_odometry_are_skipped_and_counted():
     msgs = sorted(odoms + scans, key=lambda m: m.stamp)
     st, warned = SyncStats(), []
     out = list(synchronise(msgs, st, lambda fmt, *a: warned.append(fmt % a)))
-    assert [s.stamp for s, _ in out] == [0.25, 0.75, 100.25, 100.75]
+    assert [s.scan.stamp for s in out] == [0.25, 0.75, 100.25, 100.75]
     assert (st.odom_gap, st.after_last_odom, st.scans_skipped) == (198, 1, 199)  # 1.25 .. 99.75 s; 101.25 s
     assert len(warned) == 1 and "1 after the last odometry sample, 198 in gaps of the odometry" in warned[0]
 

@@ -1,7 +1,8 @@
 """Scan/odometry synchronisation and keyframe selection.
 
 ``synchronise(messages)`` turns the time-ordered stream of :class:`Scan` and :class:`OdomSample`
-from a log reader into ``(scan, odom_pose)`` pairs, the odometry interpolated at the scan's stamp.
+from a log reader into :class:`Synced` pairs (scan, odometry pose), the odometry interpolated at the
+scan's stamp, each flagged when the odometry jumped since the previous pair (``reanchor_odometry``).
 It streams in bounded memory: a scan waits for an odometry sample at or after its stamp for at most
 :data:`MAX_GAP` seconds of later scans (and :data:`MAX_PENDING` scans), and only the odometry
 samples that a later scan may still need are kept (at most :data:`MAX_ODOM`).
@@ -20,7 +21,7 @@ from __future__ import annotations
 import logging
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -33,6 +34,16 @@ log = logging.getLogger(__name__)
 MAX_GAP = 30.0  # s: odometry this far apart does not bracket a scan; a scan waits this long for odometry
 MAX_PENDING = 1000  # scans waiting for odometry at most
 MAX_ODOM = 10_000  # odometry samples kept ahead of the scans at most
+
+
+@dataclass(frozen=True)
+class Synced:
+    """A scan and the odometry pose at its stamp; ``odom_jump``: the odometry jumped (and was
+    re-anchored, :func:`reanchor_odometry`) since the previous pair was yielded."""
+
+    scan: Scan
+    odom: np.ndarray
+    odom_jump: bool = False
 
 
 @dataclass
@@ -61,8 +72,8 @@ def synchronise(
     messages: Iterable[Scan | OdomSample],
     stats: SyncStats | None = None,
     warn: Callable[..., None] = log.warning,
-) -> Iterator[tuple[Scan, np.ndarray]]:
-    """Yield ``(scan, odom_pose)`` for every scan that lies within the odometry's time span; what is
+) -> Iterator[Synced]:
+    """Yield a :class:`Synced` for every scan that lies within the odometry's time span; what is
     skipped is counted in ``stats`` and summed up in one call of ``warn`` at the end."""
     st = stats if stats is not None else SyncStats()
     odom: deque[OdomSample] = deque()  # samples a later scan may still need, increasing stamps
@@ -71,8 +82,10 @@ def synchronise(
     last_odom_stamp = -np.inf
     first_odom_stamp = np.inf
     waited_out = 0  # scans that waited too long since the last odometry sample
+    jumped = False  # an odometry sample since the last pair yielded was re-anchored across a jump
 
-    def emit_ready() -> Iterator[tuple[Scan, np.ndarray]]:
+    def emit_ready() -> Iterator[Synced]:
+        nonlocal jumped
         while pending and odom and odom[-1].stamp >= pending[0].stamp:
             scan = pending.popleft()
             t = scan.stamp
@@ -92,7 +105,8 @@ def synchronise(
                 continue
             st.scans_out += 1
             bracket = np.array([[a.x, a.y, a.theta], [b.x, b.y, b.theta]])
-            yield scan, interpolate(np.array([a.stamp, b.stamp]), bracket, t)
+            yield Synced(scan, interpolate(np.array([a.stamp, b.stamp]), bracket, t), jumped)
+            jumped = False
 
     for msg in messages:
         if isinstance(msg, Scan):
@@ -109,6 +123,7 @@ def synchronise(
                 pending.popleft()  # no odometry came for it: dropped now, counted when it is known why
                 waited_out += 1
         elif isinstance(msg, OdomSample):
+            jumped |= msg.jumped
             if msg.stamp <= last_odom_stamp:
                 st.odom_time_backwards += 1
                 continue
@@ -153,7 +168,8 @@ def reanchor_odometry(
 
     A jump between consecutive odometry samples a, b (see :class:`OdomJumpConfig`) is not applied as
     motion: from b on, odometry is re-anchored so that b continues from a's pose, F ← (F ∘ a) ∘ b⁻¹
-    with corrected = F ∘ raw. Counted in ``stats.odom_jumps`` and warned; scans pass unchanged.
+    with corrected = F ∘ raw. Marked ``jumped`` (the sample b), counted in ``stats.odom_jumps`` and
+    warned; scans pass unchanged.
     Samples whose stamps do not increase pass through untouched (``synchronise`` drops them).
     """
     st = stats if stats is not None else SyncStats()
@@ -168,12 +184,14 @@ def reanchor_odometry(
                 yield msg
                 continue
             raw = np.array([msg.x, msg.y, msg.theta])
+            jumped = False
             if prev is not None:
                 a = np.array([prev.x, prev.y, prev.theta])
                 scale = max(1.0, (msg.stamp - prev.stamp) / cfg.period)
                 moved = float(np.hypot(*(raw[:2] - a[:2])))
                 turned = abs(float(wrap_angle(raw[2] - a[2])))
                 if moved > cfg.distance * scale or turned > cfg.angle * scale:
+                    jumped = True
                     st.odom_jumps += 1
                     if st.odom_jumps <= 5:
                         warn(
@@ -184,20 +202,24 @@ def reanchor_odometry(
                     fix = compose(compose(fix, a), inverse(raw))
             prev = msg
             if st.odom_jumps:
-                msg = OdomSample(msg.stamp, *(float(v) for v in compose(fix, raw)))
+                msg = OdomSample(msg.stamp, *(float(v) for v in compose(fix, raw)), jumped=jumped)
         yield msg
 
 
 def select_keyframes(
-    pairs: Iterable[tuple[Scan, np.ndarray]], cfg: KeyframeConfig, stats: SyncStats | None = None
-) -> Iterator[tuple[Scan, np.ndarray]]:
+    pairs: Iterable[Synced], cfg: KeyframeConfig, stats: SyncStats | None = None
+) -> Iterator[Synced]:
     """Keep a scan when the robot moved ``linear_update`` metres or turned ``angular_update`` radians
     since the last kept one (gmapping's linearUpdate/angularUpdate), or ``max_interval`` seconds
-    passed. The first scan is always kept; with all three at 0 every scan is kept."""
+    passed. The first scan is always kept; with all three at 0 every scan is kept. A kept pair carries
+    the odometry jumps of the pairs skipped before it."""
     every = cfg.linear_update <= 0.0 and cfg.angular_update <= 0.0 and cfg.max_interval <= 0.0
     last: np.ndarray | None = None
     last_t = 0.0
-    for scan, pose in pairs:
+    jumped = False
+    for pair in pairs:
+        scan, pose = pair.scan, pair.odom
+        jumped |= pair.odom_jump
         if every or last is None:
             keep = True
         else:
@@ -210,6 +232,7 @@ def select_keyframes(
             )
         if keep:
             last, last_t = pose, scan.stamp
-            yield scan, pose
+            yield replace(pair, odom_jump=jumped)
+            jumped = False
         elif stats is not None:
             stats.keyframes_skipped += 1

@@ -11,7 +11,7 @@ import io
 import json
 import logging
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -64,6 +64,12 @@ class CsvTable:
 
     def row(self, *values) -> None:
         self._f.write(",".join(csv_value(v) for v in values) + "\n")
+
+    def write(self, row: Mapping[str, object]) -> None:
+        """One row given by column name: a value for every column and for no other name."""
+        if len(row) != len(self.columns):
+            raise ValueError(f"{self.path.name}: row {sorted(row)} is not the columns {self.columns}")
+        self.row(*(row[name] for name in self.columns))
 
     def rows(self, array: np.ndarray, lead: Sequence = ()) -> None:
         """Write each row of a 2D array, prefixed by the ``lead`` values."""

@@ -1,0 +1,203 @@
+"""The front end of a run: log → synchronised keyframes → features → scan-matched motion.
+
+:func:`open_input` opens the log and finds the laser mount; :func:`frames` streams its keyframes as
+:class:`Frame` s, each with its corners in the base frame, the odometry jump flag of the synchroniser
+(logs/sync.py) and, with ``scan_match.enabled``, the scan-matched pose chain (motion/icp.py) that the
+filter (slam.py) takes as its motion input.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from .config import Config
+from .errors import ConfigError, LogError
+from .features import extract
+from .geometry import matrix_from_pose, transform_points
+from .logs import open_log
+from .logs.sync import SyncStats, reanchor_odometry, select_keyframes, synchronise
+from .motion import ScanMatcher
+from .types import Corners, Scan, Segments
+
+
+def corners_to_base(
+    corners: Corners, laser2base: tuple[float, float, float]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Corner measurements and covariances moved from the sensor frame to the base frame.
+
+    z_base = [t + R z_xy; φ] (φ, an angle between two lines, is frame-invariant); C_base = J C Jᵀ with
+    J = blockdiag(R, 1).
+    """
+    x, y, yaw = laser2base
+    J = np.eye(3)
+    J[:2, :2] = matrix_from_pose((0.0, 0.0, yaw))[:2, :2]
+    z = corners.z @ J.T
+    z[:, 0] += x
+    z[:, 1] += y
+    C = J @ corners.cov @ J.T
+    return z, C
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One keyframe after feature extraction: all that the filter and the associators need.
+
+    odom : (3,) odometry pose at the scan's stamp; segments in the sensor frame;
+    z : (m, 3), C : (m, 3, 3) corners and their covariances in the base frame.
+    Extraction does not depend on the associator, so ``compare`` computes frames once for all.
+    """
+
+    stamp: float
+    odom: np.ndarray
+    n_points: int
+    segments: Segments
+    z: np.ndarray
+    C: np.ndarray
+    t_extract: float
+    odom_jump: bool = False  # the odometry jumped since the previous keyframe (logs/sync.py)
+    # motion input of the filter: the scan-matched pose chain (motion/icp.py), or None = ``odom``
+    motion: np.ndarray | None = None
+    scan_matched: bool = False  # the increment into this frame came from scan matching
+    scan_fit: float = float("nan")  # share of the scan's points on the local map after matching
+    t_scan_match: float = 0.0
+
+
+def extract_frame(scan: Scan, odom: np.ndarray, cfg: Config, laser2base: tuple[float, float, float]) -> Frame:
+    t0 = time.perf_counter()
+    segments, corners = extract(scan, cfg.sensor, cfg.lines, cfg.corners)  # Alg 1-2
+    z, C = corners_to_base(corners, laser2base)
+    C[:, 0, 0] += cfg.corners.model_sigma**2
+    C[:, 1, 1] += cfg.corners.model_sigma**2
+    return Frame(scan.stamp, odom, len(scan.ranges), segments, z, C, time.perf_counter() - t0)
+
+
+@dataclass
+class Input:
+    """An opened log and what a run takes from it besides the frames."""
+
+    path: Path
+    reader: object
+    info: object
+    laser2base: tuple[float, float, float]
+    laser_source: str
+    total_scans: int
+    stats: SyncStats
+    matcher: ScanMatcher | None = None  # scan matching of the motion input (scan_match.enabled)
+
+
+def open_input(log_path: str | Path, cfg: Config) -> Input:
+    """Open the log, check its topics (exit-2 errors before any work) and find the laser mount."""
+    inp = cfg.input
+    reader = open_log(
+        Path(log_path),
+        scan_topic=inp.scan_topic,
+        odom_topic=inp.odom_topic,
+        odom_frame=inp.odom_frame,
+        base_frame=inp.base_frame,
+    )
+    reader.check()
+    info = reader.info()
+    laser2base, source = _laser_mount(reader, cfg)
+    matcher = ScanMatcher(cfg.scan_match) if cfg.scan_match.enabled else None
+    return Input(Path(log_path), reader, info, laser2base, source, _scan_count(info), SyncStats(), matcher)
+
+
+def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None = None) -> Iterator[Frame]:
+    """Synchronised keyframes of the log, features extracted, motion scan-matched (streaming)."""
+    msgs = reanchor_odometry(
+        _scans_prepared(src.reader, cfg), cfg.input.odom_jump, src.stats, src.reader.stats.warn
+    )
+    synced = synchronise(msgs, src.stats, src.reader.stats.warn)  # its warning lands in summary.json too
+    for pair in select_keyframes(synced, cfg.keyframes, src.stats):
+        frame = replace(extract_frame(pair.scan, pair.odom, cfg, src.laser2base), odom_jump=pair.odom_jump)
+        if src.matcher is not None:
+            frame = _scan_matched(frame, pair.scan, src.matcher, src.laser2base)
+        yield frame
+        if progress is not None:
+            progress(src.stats.scans_in, src.total_scans)
+
+
+def check_processed(src: Input, n_frames: int, n_points: int) -> None:
+    """A LogError when the log gave no frame, or frames whose every beam was invalid (``n_points``
+    valid beams in ``n_frames`` frames): the synchroniser's counts say why."""
+    stats = src.stats
+    if n_frames > 0 and n_points == 0:
+        raise LogError(
+            f"log '{src.path}': every beam of every scan is invalid (NaN, inf, zero or out of range)",
+            "check the scan topic, range_min/range_max and input.max_range",
+        )
+    if n_frames == 0:
+        raise LogError(
+            f"log '{src.path}': no scan could be processed ({stats.scans_in} scans read, "
+            f"{stats.before_first_odom} before the first and {stats.after_last_odom} "
+            f"after the last odometry sample, {stats.odom_gap} in gaps of the odometry, "
+            f"{stats.scan_time_backwards} with a stamp that went backwards or repeated)",
+            "check that the scan and odometry topics overlap in time and that their header stamps increase",
+        )
+
+
+def _scan_matched(
+    frame: Frame, scan: Scan, matcher: ScanMatcher, laser2base: tuple[float, float, float]
+) -> Frame:
+    """The frame with its motion input from the scan matcher (motion/icp.py), timed."""
+    t0 = time.perf_counter()
+    m = matcher.step(transform_points(scan.points(), laser2base), frame.odom)
+    return replace(
+        frame, motion=m.pose, scan_matched=m.matched, scan_fit=m.fit, t_scan_match=time.perf_counter() - t0
+    )
+
+
+def _scans_prepared(reader, cfg: Config):
+    """The reader's messages with each scan prepared as configured: beams at the ends removed (robot
+    body), beams at or beyond ``input.max_range`` dropped, ``input.scan_time_offset`` added to the
+    stamp (a laser whose stamps lag or lead the odometry clock). Skipping every beam of the first
+    scan is a ConfigError naming the keys."""
+    inp = cfg.input
+    lo, hi, max_range, dt = inp.skip_beams_start, inp.skip_beams_end, inp.max_range, inp.scan_time_offset
+    if lo == 0 and hi == 0 and max_range <= 0.0 and dt == 0.0:
+        yield from reader.messages()
+        return
+    first = True
+    for msg in reader.messages():
+        if isinstance(msg, Scan):
+            if first and lo + hi >= msg.n_beams:
+                raise ConfigError(
+                    f"input.skip_beams_start={lo} and input.skip_beams_end={hi} skip all "
+                    f"{msg.n_beams} beams of the scans on '{reader.scan_topic}'",
+                    f"keep their sum below {msg.n_beams} (beams skipped at each end of a scan)",
+                )
+            first = False
+            keep = (msg.beam_index >= lo) & (msg.beam_index < msg.n_beams - hi)
+            if max_range > 0.0:
+                keep &= msg.ranges < max_range
+            msg = dataclasses.replace(
+                msg,
+                stamp=msg.stamp + dt,
+                ranges=msg.ranges[keep],
+                angles=msg.angles[keep],
+                beam_index=msg.beam_index[keep],
+                range_max=msg.range_max if max_range <= 0.0 else min(max_range, msg.range_max),
+            )
+        yield msg
+
+
+def _laser_mount(reader, cfg: Config) -> tuple[tuple[float, float, float], str]:
+    mount = cfg.input.laser
+    if mount.from_tf:
+        tf = reader.laser_to_base()
+        if tf is not None:
+            return (float(tf[0]), float(tf[1]), float(tf[2])), "tf"
+    return (mount.x, mount.y, mount.yaw), "config"
+
+
+def _scan_count(info) -> int:
+    for t in info.topics:
+        if t.name == info.scan_topic:
+            return int(t.count or 0)
+    return 0

@@ -1,0 +1,310 @@
+"""A run's output files: the per-step tables written row by row, map.csv, trajectory.tum and the
+summary (counts, timing totals, accuracy, hashes, versions) in summary.json.
+
+Every row is a dict keyed by its table's column names (report/tables.py ``*_COLUMNS``), so a column
+is written by name, never by position. The accuracy is measured against a :class:`Reference`
+(ground truth and/or relations) read before the run starts.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import platform
+import time
+from array import array
+from contextlib import ExitStack
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .. import __version__, fpenv
+from ..errors import display_path
+from ..evaluate import ate, overlap_problem, read_relations, relation_error, rpe
+from ..logs import check_regular
+from .tables import (
+    LINES_COLUMNS,
+    MAP_COLUMNS,
+    TIMING_COLUMNS,
+    TRAJECTORY_COLUMNS,
+    CsvTable,
+    read_tum,
+    write_json,
+    write_tum,
+)
+
+if TYPE_CHECKING:
+    from ..config import Config
+    from ..frontend import Input
+    from ..slam import StepRecord
+
+
+def trajectory_row(r: StepRecord) -> dict:
+    """One row of trajectory.csv: the filter's pose, odometry, the pose variances, the motion input."""
+    return {
+        "step": r.step,
+        "stamp": f"{r.stamp:.9f}",
+        **dict(zip(("x", "y", "theta"), r.pose, strict=True)),
+        **dict(zip(("odom_x", "odom_y", "odom_theta"), r.odom, strict=True)),
+        **dict(zip(("var_x", "var_y", "var_theta"), r.pose_var, strict=True)),
+        **dict(zip(("scan_odom_x", "scan_odom_y", "scan_odom_theta"), r.motion, strict=True)),
+    }
+
+
+def timing_row(r: StepRecord) -> dict:
+    """One row of timing.csv: the step's counts and stage times (every column is a StepRecord field)."""
+    return {name: f"{r.stamp:.9f}" if name == "stamp" else getattr(r, name) for name in TIMING_COLUMNS}
+
+
+@dataclass
+class Totals:
+    """What summary.json sums over the steps."""
+
+    steps: int = 0
+    times: np.ndarray = field(default_factory=lambda: np.zeros(5))  # extract, predict, match, update, ICP
+    t_match_max: float = 0.0
+    budget_hits: int = 0  # steps where the associator ran out of its search budget
+    matched: int = 0  # corners matched to a landmark
+    points: int = 0  # valid beams
+
+    def add(self, r: StepRecord) -> None:
+        self.steps += 1
+        self.times += (r.t_extract, r.t_predict, r.t_match, r.t_update, r.t_scan_match)
+        self.t_match_max = max(self.t_match_max, r.t_match)
+        self.budget_hits += r.budget_hit
+        self.matched += r.n_matched
+        self.points += r.n_points
+
+
+class RunWriter:
+    """A run's files in the (staging) directory ``dest``: :meth:`step` writes one step's rows,
+    :meth:`close_steps` completes the per-step tables, :meth:`finish` the map, trajectory.tum and
+    summary.json. A context manager: on an error the open files are closed without a second error."""
+
+    def __init__(self, dest: Path):
+        self.dest = dest
+        self._files = ExitStack()
+        self.trajectory = self._open("trajectory.csv", TRAJECTORY_COLUMNS)
+        self.timing = self._open("timing.csv", TIMING_COLUMNS)
+        self.lines = self._open("lines.csv", LINES_COLUMNS)
+        self.track = array("d")  # stamp, pose, odom, motion per step: 80 bytes (a list of arrays: ~400)
+        self.totals = Totals()
+
+    def _open(self, name: str, columns: list[str]) -> CsvTable:
+        return self._files.enter_context(CsvTable(self.dest / name, columns))
+
+    def __enter__(self) -> RunWriter:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._files.__exit__(*exc)
+
+    def step(self, r: StepRecord) -> None:
+        self.trajectory.write(trajectory_row(r))
+        self.timing.write(timing_row(r))
+        self.lines.rows(r.segments_map, lead=(r.step,))
+        self.track.append(r.stamp)
+        self.track.extend(r.pose)
+        self.track.extend(r.odom)
+        self.track.extend(r.motion)
+        self.totals.add(r)
+
+    def close_steps(self) -> None:
+        for table in (self.trajectory, self.timing, self.lines):
+            table.close()
+
+    def finish(
+        self, landmarks: dict[str, np.ndarray], src: Input, cfg: Config, ref: Reference, wall0: float
+    ) -> dict:
+        """map.csv from the filter's ``landmarks`` (columns by name), trajectory.tum, the accuracy
+        against ``ref`` and summary.json; returns the summary."""
+        with self._open("map.csv", MAP_COLUMNS) as mp:
+            for i in range(len(landmarks["id"])):
+                mp.write({name: landmarks[name][i] for name in MAP_COLUMNS})
+        track = np.frombuffer(self.track, dtype=float).reshape(-1, 10)
+        stamps, poses, odoms = track[:, 0], track[:, 1:4], track[:, 4:7]
+        motions = track[:, 7:10] if src.matcher is not None else None
+        write_tum(self.dest / "trajectory.tum", stamps, poses)
+        accuracy, notes = accuracy_of(stamps, poses, odoms, ref, motions)
+        for text in notes:
+            src.reader.stats.warn(text)
+        summary = build_summary(src, cfg, self.totals, len(landmarks["id"]), poses[-1], accuracy, wall0)
+        write_json(self.dest / "summary.json", summary)
+        return summary
+
+
+def build_summary(
+    src: Input,
+    cfg: Config,
+    totals: Totals,
+    n_landmarks: int,
+    final_pose: np.ndarray,
+    accuracy: dict | None,
+    wall0: float,
+) -> dict:
+    """summary.json of a run (INTERFACE.md): input, counts, timing totals, accuracy, hashes, versions."""
+    reader, info, times = src.reader, src.info, totals.times
+    return {
+        "cornerslam_version": __version__,
+        "mode": "slam",
+        "input": {
+            "log": display_path(src.path),
+            "format": info.format,
+            "scan_topic": info.scan_topic,
+            "odom_topic": info.odom_topic,
+            "odom_source": info.odom_source,
+            "laser_to_base": list(src.laser2base),
+            "laser_to_base_source": src.laser_source,
+        },
+        "assoc": cfg.association.method,
+        "counts": {
+            "steps": totals.steps,
+            "landmarks": n_landmarks,
+            "matched_total": totals.matched,
+            "beams_total": reader.stats.beams,
+            "beams_invalid": reader.stats.beams_dropped,
+            "scans_bad_geometry": reader.stats.scans_skipped,
+            "scans_size_mismatch": reader.stats.size_mismatch,
+            "messages_failed": reader.stats.decode_failed,
+            **src.stats.as_dict(),
+            "budget_hits": int(totals.budget_hits),
+            **_scan_match_counts(src.matcher),
+        },
+        "timing": {
+            "t_extract": times[0],
+            "t_predict": times[1],
+            "t_match": times[2],
+            "t_update": times[3],
+            "t_scan_match": times[4],
+            "t_total": float(times.sum()),
+            "t_match_max": totals.t_match_max,
+            "wall_time": time.perf_counter() - wall0,
+            "scans_per_second": totals.steps / max(float(times.sum()), 1e-12),
+        },
+        "final_pose": final_pose.tolist(),
+        "warnings": list(reader.stats.warnings),
+        "accuracy": accuracy,
+        "hashes": {"input": input_hash(src.path), "config": config_hash(cfg), "version": __version__},
+        "config": cfg.to_dict(),
+        "versions": _versions(),
+    }
+
+
+def _scan_match_counts(matcher) -> dict:
+    if matcher is None:
+        return {}
+    return {"scans_matched": matcher.n_matched, "scans_match_retried": matcher.n_retried,
+            "scans_match_fallback": matcher.n_fallback}  # fmt: skip
+
+
+def find_ground_truth(log_path: Path) -> Path | None:
+    """``LOG.gt.tum`` beside the log (also without the log's extension), if present."""
+    candidates = [log_path.with_name(log_path.name + ".gt.tum"), log_path.with_suffix(".gt.tum")]
+    return next((c for c in candidates if c.is_file()), None)
+
+
+@dataclass(frozen=True)
+class Reference:
+    """What a run's accuracy is measured against: a TUM ground truth (stamps, poses) and/or a
+    Kümmerle et al. 2009 relations table with its time offset (relation time − log time)."""
+
+    gt_path: Path | None = None
+    gt: tuple[np.ndarray, np.ndarray] | None = None
+    relations_path: Path | None = None
+    relations: np.ndarray | None = None
+    time_offset: float = 0.0
+    notes: tuple[str, ...] = ()  # warnings from reading them (ground truth out of time order)
+
+
+def load_reference(
+    log_path: Path,
+    ground_truth: str | Path | None = None,
+    relations: str | Path | None = None,
+    time_offset: float = 0.0,
+) -> Reference:
+    """The given ground truth, else LOG.gt.tum if present; the given relations file, if any."""
+    gt_path = Path(ground_truth) if ground_truth else find_ground_truth(log_path)
+    rel_path = Path(relations) if relations else None
+    notes: list[str] = []
+    return Reference(
+        gt_path,
+        read_tum(gt_path, "ground truth", notes.append) if gt_path else None,
+        rel_path,
+        read_relations(rel_path) if rel_path else None,
+        time_offset,
+        tuple(notes),
+    )
+
+
+def accuracy_of(
+    stamps: np.ndarray,
+    poses: np.ndarray,
+    odoms: np.ndarray,
+    ref: Reference,
+    scan_odoms: np.ndarray | None = None,
+) -> tuple[dict | None, list[str]]:
+    """ATE/RPE against the ground truth and the relation metric, for the estimate and for odometry (and
+    for the scan-matched odometry when there is one: what the corners add on top of it), and the
+    warnings about them: a ground truth read out of time order, a ground truth that does not overlap
+    the run in time (then there is no ATE/RPE, rather than NaN), no relation inside the run."""
+    acc: dict = {}
+    notes = list(ref.notes)
+    problem = ref.gt is not None and overlap_problem(stamps, ref.gt[0], f"ground truth '{ref.gt_path}'")
+    if problem:
+        notes.append(f"{problem}: no ATE/RPE")
+    elif ref.gt is not None:
+        acc.update(
+            ground_truth=display_path(ref.gt_path),
+            ate=ate(stamps, poses, *ref.gt),
+            odom_ate=ate(stamps, odoms, *ref.gt),
+            **rpe(stamps, poses, *ref.gt),
+        )
+        if scan_odoms is not None:
+            acc["scan_odom_ate"] = ate(stamps, scan_odoms, *ref.gt)
+    if ref.relations is not None:
+        acc.update(
+            relations_file=display_path(ref.relations_path),
+            relations=relation_error(stamps, poses, ref.relations, ref.time_offset),
+            odom_relations=relation_error(stamps, odoms, ref.relations, ref.time_offset),
+        )
+        if scan_odoms is not None:
+            acc["scan_odom_relations"] = relation_error(stamps, scan_odoms, ref.relations, ref.time_offset)
+        if acc["relations"]["n"] == 0:
+            notes.append(f"no relation in '{ref.relations_path}' falls inside the run (check --time-offset)")
+    return acc or None, notes
+
+
+def config_hash(cfg: Config) -> str:
+    """sha256 of the resolved config (canonical JSON): equal configs, equal hashes."""
+    text = json.dumps(cfg.to_dict(), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def input_hash(path: Path) -> str:
+    """sha256 of the log's bytes (every file, in name order, for a ROS 2 bag directory); a LogError
+    for a pipe or a device (reading it would consume or hang on it)."""
+    check_regular(path)
+    h = hashlib.sha256()
+    files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+    for f in files:
+        h.update(os.fsencode(f.relative_to(path) if path.is_dir() else f.name))
+        with open(f, "rb") as fh:
+            while chunk := fh.read(1 << 20):
+                h.update(chunk)
+    return h.hexdigest()
+
+
+def _versions() -> dict:
+    import importlib.metadata as md
+
+    out = {"python": platform.python_version()}
+    for name in ("numpy", "scipy", "mcap", "rosbags", "click", "pyyaml"):
+        try:
+            out[name] = md.version(name)
+        except md.PackageNotFoundError:
+            pass
+    out.update(fpenv.describe())  # the BLAS kernels and numpy SIMD level: the last digits depend on them
+    return out
