@@ -404,6 +404,7 @@ def build_corpus(d: str | Path) -> dict[str, tuple[Path, Expected]]:
     _config_faults(d, add)
     _ground_truth_faults(d, add)
     _input_faults_ii(d, add)
+    _probe2_faults(d, add)
     return out
 
 
@@ -678,6 +679,43 @@ def _input_faults_ii(d: Path, add: Callable[[str, Path, Expected], None]) -> Non
             2,
             ("input.skip_beams_start=100", "input.skip_beams_end=81", "all 181 beams"),
             args=("--set", "input.skip_beams_start=100", "--set", "input.skip_beams_end=81"),
+        ),
+    )
+
+
+def _probe2_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
+    """Faults found by the second probe of issue 13: quaternions with inf or overflowing components,
+    far-future stamps, logs whose every message fails to decode, long topic names."""
+
+    def unit(o):
+        return (0.0, 0.0, math.sin(o.theta / 2), math.cos(o.theta / 2))
+
+    def inf_in_one(o):
+        return (0.0, 0.0, math.inf, 1.0) if round((o.stamp - T0) * RATE) == 5 else unit(o)
+
+    add(
+        "odom_quaternion_inf",
+        write_mcap(d / "quat_inf.mcap", make_scans(), make_odoms(), odom_quaternion=inf_in_one),
+        Expected(
+            "processed; a sample with an inf quaternion component skipped, counted, warned",
+            0,
+            ("non-finite orientation quaternion",),
+            dict(VALID_COUNTS, messages_failed=1),
+        ),
+    )
+    add(
+        "odom_quaternion_1e200",
+        write_mcap(
+            d / "quat_1e200.mcap",
+            make_scans(),
+            make_odoms(),
+            odom_quaternion=lambda o: tuple(1e200 * v for v in unit(o)),
+        ),
+        Expected(
+            "processed; quaternions whose squared length overflows normalised, warned",
+            0,
+            ("not of unit length: normalised",),
+            VALID_COUNTS,
         ),
     )
 

@@ -149,19 +149,25 @@ class ReadStats:
         self, where: str, stamp: float, x: float, y: float, q: tuple[float, float, float, float]
     ) -> OdomSample | None:
         """The sample of a pose whose orientation is the quaternion q = (x, y, z, w), counted in
-        ``odoms``; None (counted in ``decode_failed``, warned) if q has no direction (length ~0) or a
-        field is not finite. A q not of unit length is normalised (warned once if off by more than
-        0.1 %: float32 round-off is not worth a warning)."""
-        n2 = sum(v * v for v in q)
-        if n2 < 1e-12:
+        ``odoms``; None (counted in ``decode_failed``, warned) if q has no direction (length ~0), a
+        component of q is not finite, or a field is not finite. A q not of unit length is normalised
+        (warned once if off by more than 0.1 %: float32 round-off is not worth a warning); one so long
+        that its squared length overflows is first divided by its largest component."""
+        finite = all(math.isfinite(v) for v in q)
+        n2 = sum(v * v for v in q) if finite else math.nan
+        if finite and not math.isfinite(n2):
+            big = max(abs(v) for v in q)
+            q = tuple(v / big for v in q)
+            n2 = sum(v * v for v in q)
+        if not n2 >= 1e-12:  # zero length, or NaN/inf in q
             self.decode_failed += 1
             if self.decode_failed <= 5:
                 self.warn(
-                    "%s: odometry sample at %r has a zero-length orientation quaternion %r: skipped",
-                    where, stamp, tuple(q),
+                    "%s: odometry sample at %r has a %s orientation quaternion %r: skipped",
+                    where, stamp, "zero-length" if finite else "non-finite", tuple(q),
                 )  # fmt: skip
             return None
-        if math.isfinite(n2) and abs(n2 - 1.0) > 2e-3:
+        if abs(n2 - 1.0) > 2e-3:
             self.warn("%s: odometry orientation quaternions are not of unit length: normalised", where)
         pose = (x, y, yaw_from_quaternion(*normalize_quaternion(*q)))  # unit within 1e-9: used as it is
         if self.bad_odometry(where, stamp, pose):
