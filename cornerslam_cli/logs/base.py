@@ -162,9 +162,10 @@ class ReadStats:
         if not n2 >= 1e-12:  # zero length, or NaN/inf in q
             self.decode_failed += 1
             if self.decode_failed <= 5:
+                what = "a zero-length orientation quaternion" if finite else "a non-finite pose (quaternion"
                 self.warn(
-                    "%s: odometry sample at %r has a %s orientation quaternion %r: skipped",
-                    where, stamp, "zero-length" if finite else "non-finite", tuple(q),
+                    "%s: odometry sample at %r has %s %r%s: skipped",
+                    where, stamp, what, tuple(q), "" if finite else ")",
                 )  # fmt: skip
             return None
         if abs(n2 - 1.0) > 2e-3:
