@@ -683,6 +683,39 @@ def _input_faults_ii(d: Path, add: Callable[[str, Path, Expected], None]) -> Non
     )
 
 
+def _far_stamp_json_mcap(path: Path, far: int) -> Path:
+    """The valid log as JSON MCAP with scan ``far``'s header stamp at 1e18 s (its log time unchanged:
+    a clock glitch in one message; CDR cannot hold such a stamp)."""
+    from mcap.writer import Writer
+
+    from cornerslam_cli.logs.writers import LASERSCAN, ODOMETRY, JsonSerializer
+
+    js = JsonSerializer()
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start(profile="", library="fault_corpus")
+        ids = {
+            name: w.register_channel(
+                topic=name,
+                message_encoding="json",
+                schema_id=w.register_schema(name=typ, encoding="jsonschema", data=js.msgdef(typ).encode()),
+            )
+            for name, typ in (("/scan", LASERSCAN), ("/odom", ODOMETRY))
+        }
+        scans = [replace(s, stamp=1e18) if i == far else s for i, s in enumerate(make_scans())]
+        for m, t in sorted(
+            [*zip(scans, map(scan_stamp, range(N)), strict=True), *((o, o.stamp) for o in make_odoms())],
+            key=lambda mt: mt[1],
+        ):
+            ns = int(round(t * 1e9))
+            if isinstance(m, OdomSample):
+                w.add_message(ids["/odom"], ns, js.odometry(m, "odom", "base_link"), ns)
+            else:
+                w.add_message(ids["/scan"], ns, js.laserscan(m), ns)
+        w.finish()
+    return path
+
+
 def _probe2_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
     """Faults found by the second probe of issue 13: quaternions with inf or overflowing components,
     far-future stamps, logs whose every message fails to decode, long topic names."""
@@ -699,7 +732,7 @@ def _probe2_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
         Expected(
             "processed; a sample with an inf quaternion component skipped, counted, warned",
             0,
-            ("non-finite orientation quaternion",),
+            ("non-finite pose (quaternion (0.0, 0.0, inf, 1.0))",),
             dict(VALID_COUNTS, messages_failed=1),
         ),
     )
@@ -716,6 +749,30 @@ def _probe2_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
             0,
             ("not of unit length: normalised",),
             VALID_COUNTS,
+        ),
+    )
+
+    # -- one scan whose header stamp is 1e18 s: skipped alone, the later scans are not "backwards"
+    for where, far in (("first", 0), ("mid", 10)):
+        add(
+            f"stamp_far_future_{where}_scan_json_mcap",
+            _far_stamp_json_mcap(d / f"far_stamp_{where}.mcap", far),
+            Expected(
+                "processed; the one scan skipped, counted (no odometry near it), warned",
+                0,
+                ("1 in gaps of the odometry",),
+                {"steps": N - 1, "scans_skipped": 1, "scan_time_backwards": 0},
+            ),
+        )
+    far_scan = (replace(s, stamp=1e18) if i == 10 else s for i, s in enumerate(make_scans()))
+    add(
+        "stamp_far_future_scan_carmen",
+        write_carmen(d / "far_stamp.clf", far_scan, make_odoms()),
+        Expected(
+            "processed; the one scan skipped, counted, warned",
+            0,
+            ("1 after the last odometry sample",),
+            {"steps": N - 1, "scans_skipped": 1, "scan_time_backwards": 0},
         ),
     )
 
