@@ -29,7 +29,7 @@ from .evaluate import ate, overlap_problem, read_relations, relation_error, rpe
 from .features import extract
 from .filter import Ekf
 from .geometry import matrix_from_pose, transform_points
-from .logs import check_regular, open_log
+from .logs import ReadStats, check_regular, open_log
 from .logs.sync import SyncStats, reanchor_odometry, select_keyframes, synchronise
 from .motion import ScanMatcher
 from .report.outdir import StagedDir, output_errors
@@ -429,6 +429,18 @@ def accuracy_of(
     return acc or None, notes
 
 
+def undecoded_error(log_path: Path, rs: ReadStats) -> None:
+    """Raise LogError naming the decoding failures when they left no scan or no odometry sample (then
+    they, not the stamps, are why no scan could be processed)."""
+    if rs.decode_failed and not (rs.scans and rs.odoms):
+        raise LogError(
+            f"log '{log_path}': no scan could be processed: {rs.decode_failed} messages could not be decoded "
+            f"({rs.scans} scans and {rs.odoms} odometry samples were usable; the first failure: "
+            f"{rs.first_failure})",
+            "check the scan and odometry messages; `cornerslam info LOG` lists the topics and their types",
+        )
+
+
 def run_frames(
     frame_iter: Iterable[Frame],
     src: Input,
@@ -474,6 +486,7 @@ def run_frames(
                 "check the scan topic, range_min/range_max and input.max_range",
             )
         if slam.n_steps == 0:
+            undecoded_error(log_path, reader.stats)
             raise LogError(
                 f"log '{log_path}': no scan could be processed ({stats.scans_in} scans read, "
                 f"{stats.before_first_odom} before the first and {stats.after_last_odom} "

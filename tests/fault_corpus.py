@@ -683,14 +683,16 @@ def _input_faults_ii(d: Path, add: Callable[[str, Path, Expected], None]) -> Non
     )
 
 
-def _far_stamp_json_mcap(path: Path, far: int) -> Path:
-    """The valid log as JSON MCAP with scan ``far``'s header stamp at 1e18 s (its log time unchanged:
-    a clock glitch in one message; CDR cannot hold such a stamp)."""
+def _json_mcap(path: Path, scans: list[RawScan], scan_data: Callable[[RawScan], bytes] | None = None) -> Path:
+    """A JSON MCAP of ``scans`` (scan i logged at ``scan_stamp(i)`` whatever its header stamp: a
+    clock glitch in one message; CDR cannot hold a stamp of 1e18) and the valid odometry;
+    ``scan_data`` replaces the scans' message bytes."""
     from mcap.writer import Writer
 
     from cornerslam_cli.logs.writers import LASERSCAN, ODOMETRY, JsonSerializer
 
     js = JsonSerializer()
+    scan_data = scan_data or js.laserscan
     with open(path, "wb") as f:
         w = Writer(f)
         w.start(profile="", library="fault_corpus")
@@ -702,16 +704,16 @@ def _far_stamp_json_mcap(path: Path, far: int) -> Path:
             )
             for name, typ in (("/scan", LASERSCAN), ("/odom", ODOMETRY))
         }
-        scans = [replace(s, stamp=1e18) if i == far else s for i, s in enumerate(make_scans())]
-        for m, t in sorted(
-            [*zip(scans, map(scan_stamp, range(N)), strict=True), *((o, o.stamp) for o in make_odoms())],
-            key=lambda mt: mt[1],
-        ):
+        logged = [
+            *zip(scans, map(scan_stamp, range(len(scans))), strict=True),
+            *((o, o.stamp) for o in make_odoms()),
+        ]
+        for m, t in sorted(logged, key=lambda mt: mt[1]):
             ns = int(round(t * 1e9))
             if isinstance(m, OdomSample):
                 w.add_message(ids["/odom"], ns, js.odometry(m, "odom", "base_link"), ns)
             else:
-                w.add_message(ids["/scan"], ns, js.laserscan(m), ns)
+                w.add_message(ids["/scan"], ns, scan_data(m), ns)
         w.finish()
     return path
 
@@ -754,9 +756,10 @@ def _probe2_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
 
     # -- one scan whose header stamp is 1e18 s: skipped alone, the later scans are not "backwards"
     for where, far in (("first", 0), ("mid", 10)):
+        scans = [replace(s, stamp=1e18) if i == far else s for i, s in enumerate(make_scans())]
         add(
             f"stamp_far_future_{where}_scan_json_mcap",
-            _far_stamp_json_mcap(d / f"far_stamp_{where}.mcap", far),
+            _json_mcap(d / f"far_stamp_{where}.mcap", scans),
             Expected(
                 "processed; the one scan skipped, counted (no odometry near it), warned",
                 0,
@@ -773,6 +776,32 @@ def _probe2_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
             0,
             ("1 after the last odometry sample",),
             {"steps": N - 1, "scans_skipped": 1, "scan_time_backwards": 0},
+        ),
+    )
+
+    # -- nothing decodes: every scan, or every odometry sample; the error names the failures
+    add(
+        "scans_all_undecodable",
+        _json_mcap(d / "scans_undecodable.mcap", list(make_scans()), lambda s: b"{not json"),
+        Expected(
+            "exit 2: names the decoding failures and the first one",
+            2,
+            ("scans_undecodable.mcap", f"{N} messages could not be decoded", "cannot decode a /scan message"),
+        ),
+    )
+    add(
+        "odom_quaternions_all_zero",
+        write_mcap(
+            d / "quat_all_zero.mcap", make_scans(), make_odoms(), odom_quaternion=lambda o: (0.0,) * 4
+        ),
+        Expected(
+            "exit 2: names the decoding failures and the first one",
+            2,
+            (
+                "quat_all_zero.mcap",
+                f"{N + 1} messages could not be decoded",
+                "zero-length orientation quaternion",
+            ),
         ),
     )
 

@@ -122,6 +122,7 @@ class ReadStats:
     scans_skipped: int = 0  # scans not yielded: bad angle_increment, no beams
     size_mismatch: int = 0  # scans whose ranges count disagreed with angle_min/max/increment
     decode_failed: int = 0  # messages / lines that could not be decoded (skipped)
+    first_failure: str = ""  # what the first of them was (the error names it when nothing was usable)
     warnings: list[str] = field(default_factory=list)
 
     def warn(self, msg: str, *args: object) -> None:
@@ -136,13 +137,21 @@ class ReadStats:
         if len(self.warnings) < 100:
             self.warnings.append(text)
 
+    def failed(self, msg: str, *args: object) -> None:
+        """Count one message / line that could not be decoded (skipped); warn about the first five and
+        keep the first's text (its first 200 characters) in ``first_failure``."""
+        self.decode_failed += 1
+        if self.decode_failed == 1:
+            text = printable(msg % args if args else msg)
+            self.first_failure = text if len(text) <= 200 else text[:197] + "..."
+        if self.decode_failed <= 5:
+            self.warn(msg, *args)
+
     def bad_odometry(self, where: str, stamp: float, pose: tuple[float, float, float]) -> bool:
         """True (counted in ``decode_failed``, warned) if an odometry sample has a non-finite field."""
         if math.isfinite(stamp) and all(math.isfinite(v) for v in pose):
             return False
-        self.decode_failed += 1
-        if self.decode_failed <= 5:
-            self.warn("%s: odometry sample at %r has a non-finite pose %r: skipped", where, stamp, pose)
+        self.failed("%s: odometry sample at %r has a non-finite pose %r: skipped", where, stamp, pose)
         return True
 
     def odometry_sample(
@@ -160,13 +169,15 @@ class ReadStats:
             q = tuple(v / big for v in q)
             n2 = sum(v * v for v in q)
         if not n2 >= 1e-12:  # zero length, or NaN/inf in q
-            self.decode_failed += 1
-            if self.decode_failed <= 5:
-                what = "a zero-length orientation quaternion" if finite else "a non-finite pose (quaternion"
-                self.warn(
-                    "%s: odometry sample at %r has %s %r%s: skipped",
-                    where, stamp, what, tuple(q), "" if finite else ")",
-                )  # fmt: skip
+            what = "a zero-length orientation quaternion" if finite else "a non-finite pose (quaternion"
+            self.failed(
+                "%s: odometry sample at %r has %s %r%s: skipped",
+                where,
+                stamp,
+                what,
+                tuple(q),
+                "" if finite else ")",
+            )
             return None
         if abs(n2 - 1.0) > 2e-3:
             self.warn("%s: odometry orientation quaternions are not of unit length: normalised", where)

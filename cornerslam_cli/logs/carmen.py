@@ -300,9 +300,7 @@ class CarmenReader:
                     continue
                 las = parse_laser(tok, max_range)
             except (ValueError, IndexError) as exc:
-                st.decode_failed += 1
-                if st.decode_failed <= 5:
-                    st.warn("%s:%d: malformed %s line skipped (%s)", where, lineno, tag, exc)
+                st.failed("%s:%d: malformed %s line skipped (%s)", where, lineno, tag, exc)
                 continue
             if tag == odom_tag and not st.bad_odometry(f"{where}:{lineno}", las.stamp, las.robot):
                 st.odoms += 1

@@ -414,11 +414,7 @@ class RosLogReader:
             except LogError:
                 raise
             except Exception as exc:  # noqa: BLE001 - undecodable message: count, warn, go on
-                st.decode_failed += 1
-                if st.decode_failed <= 5:
-                    st.warn(
-                        "%s: cannot decode a %s message at %d ns: %s", self.path.name, topic, log_time, exc
-                    )
+                st.failed("%s: cannot decode a %s message at %d ns: %s", self.path.name, topic, log_time, exc)
         if is_tf and n_tf_match == 0:
             raise LogError(
                 f"log '{self.path.name}': topic '{odom_t}' has no "

@@ -13,8 +13,8 @@ Scans that cannot be interpolated are skipped and counted in :class:`SyncStats`:
 after the last odometry sample, in a gap of the odometry (samples more than MAX_GAP apart around it),
 stamps that go backwards or repeat. "Backwards" is relative to the last scan that could still be
 paired: a scan before all odometry, or more than MAX_GAP after the newest sample (one far-future
-stamp, 1e18), is skipped without becoming the reference, so it cannot make the later scans look late. Odometry samples that go back in
-time are dropped and counted too. One warning sums them up.
+stamp, 1e18), is skipped without becoming the reference, so it cannot make the later scans look late.
+Odometry samples that go back in time are dropped and counted too. One warning sums them up.
 """
 
 from __future__ import annotations
