@@ -32,6 +32,7 @@ from .geometry import matrix_from_pose, transform_points
 from .logs import ReadStats, check_regular, open_log
 from .logs.sync import SyncStats, reanchor_odometry, select_keyframes, synchronise
 from .motion import ScanMatcher
+from .ranges import short_text
 from .report.outdir import StagedDir, output_errors
 from .report.tables import (
     LINES_COLUMNS,
@@ -571,7 +572,7 @@ def _scans_prepared(reader, cfg: Config):
             if first and lo + hi >= msg.n_beams:
                 raise ConfigError(
                     f"input.skip_beams_start={lo} and input.skip_beams_end={hi} skip all "
-                    f"{msg.n_beams} beams of the scans on '{reader.scan_topic}'",
+                    f"{msg.n_beams} beams of the scans on '{short_text(reader.scan_topic)}'",
                     f"keep their sum below {msg.n_beams} (beams skipped at each end of a scan)",
                 )
             first = False

@@ -37,6 +37,7 @@ import numpy as np
 
 from ..errors import LogError, printable
 from ..geometry import normalize_quaternion, yaw_from_quaternion
+from ..ranges import short_text
 from ..types import OdomSample, Scan
 
 logger = logging.getLogger("cornerslam.logs")
@@ -191,7 +192,7 @@ class ReadStats:
         """Raise LogError at the end of a read in which scans were seen but none was usable."""
         if self.scans == 0 and self.scans_skipped > 0:
             raise LogError(
-                f"log '{name}': all {self.scans_skipped} scans on '{topic}' were skipped "
+                f"log '{name}': all {self.scans_skipped} scans on '{short_text(topic)}' were skipped "
                 "(angle_increment <= 0 or not finite, no beams, or no valid stamp)",
                 "check the LaserScan messages' angle_min/angle_increment; `cornerslam extract` shows one",
             )
