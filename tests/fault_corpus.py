@@ -779,6 +779,21 @@ def _probe2_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
         ),
     )
 
+    # -- chunks not in time order and no summary (no chunk index): read in file order; the warning
+    # says so instead of only blaming the stamps
+    add(
+        "mcap_chunks_unsorted_no_summary",
+        write_mcap(
+            d / "unsorted_no_summary.mcap", make_scans(), make_odoms(), shuffle_blocks=8, summary=False
+        ),
+        Expected(
+            "processed; messages stored out of order skipped, counted, warned as such (no chunk index)",
+            0,
+            ("messages of '/scan' are stored after later ones", "no chunk index"),
+            {"steps": (1, N - 1), "scan_time_backwards": (1, N - 1)},
+        ),
+    )
+
     # -- nothing decodes: every scan, or every odometry sample; the error names the failures
     add(
         "scans_all_undecodable",
