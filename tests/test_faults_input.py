@@ -228,3 +228,44 @@ def test_a_100000_character_topic_in_the_log_is_listed_shortened(tmp_path):
         res, ("long.mcap", "'/scan'", "LaserScan topics: /xxxxxxxxxx", "xxxxxxxxxx...xxxxxxxxxx")
     )
     assert len(res.stderr.strip().splitlines()[-1]) < 400
+
+
+# ---------------------------------------------------------------------------- endless text inputs
+@contextmanager
+def endless_fifo(path: Path, line: bytes):
+    """A FIFO at ``path`` fed ``line`` forever by a thread (``yes LINE > path``) until the reader
+    closes it."""
+    os.mkfifo(path)
+
+    def feed():
+        try:
+            with open(path, "wb") as f:
+                while True:
+                    f.write(line * 4096)
+        except (BrokenPipeError, OSError):
+            pass
+
+    t = threading.Thread(target=feed, daemon=True)
+    t.start()
+    try:
+        yield path
+    finally:
+        t.join(10)
+        assert not t.is_alive()
+
+
+@pytest.mark.parametrize(
+    "option, what", [("--ground-truth", "ground truth"), ("--relations", "relations file")]
+)
+def test_an_endless_ground_truth_or_relations_pipe_is_refused_at_the_limit(
+    option, what, good, tmp_path, monkeypatch
+):
+    """`--ground-truth <(yes "1 2 3 4 0 0 0 1")` read whole ran out of memory (exit 1): refused once
+    it passes MAX_ROWS_BYTES (1 MiB here)."""
+    import cornerslam_cli.textfile as textfile
+
+    monkeypatch.setattr(textfile, "MAX_ROWS_BYTES", 1 << 20)
+    with endless_fifo(tmp_path / "endless", b"1 2 3 4 0 0 0 1\n") as p:
+        res = invoke("run", good, "--out", tmp_path / "out", option, p)
+    check_error_line(res, (f"{what} '{p}'", "is larger than 1024 KiB"))
+    assert not (tmp_path / "out").exists()
