@@ -560,15 +560,16 @@ def _scans_prepared(reader, cfg: Config):
     """The reader's messages with each scan prepared as configured: beams at the ends removed (robot
     body), beams at or beyond ``input.max_range`` dropped, ``input.scan_time_offset`` added to the
     stamp (a laser whose stamps lag or lead the odometry clock). Skipping every beam of the first
-    scan is a ConfigError naming the keys."""
+    scan is a ConfigError naming the keys; of a later, shorter scan, counted and warned at the end."""
     inp = cfg.input
     lo, hi, max_range, dt = inp.skip_beams_start, inp.skip_beams_end, inp.max_range, inp.scan_time_offset
     if lo == 0 and hi == 0 and max_range <= 0.0 and dt == 0.0:
         yield from reader.messages()
         return
-    first = True
+    first, emptied = True, 0
     for msg in reader.messages():
         if isinstance(msg, Scan):
+            emptied += not first and lo + hi >= msg.n_beams
             if first and lo + hi >= msg.n_beams:
                 raise ConfigError(
                     f"input.skip_beams_start={lo} and input.skip_beams_end={hi} skip all "
@@ -588,6 +589,12 @@ def _scans_prepared(reader, cfg: Config):
                 range_max=msg.range_max if max_range <= 0.0 else min(max_range, msg.range_max),
             )
         yield msg
+    if emptied:
+        reader.stats.warn(
+            "input.skip_beams_start=%d and input.skip_beams_end=%d skip all beams of %d shorter scans on "
+            "'%s': processed without beams (odometry only)",
+            lo, hi, emptied, short_text(reader.scan_topic),
+        )  # fmt: skip
 
 
 def _scan_match_counts(matcher: ScanMatcher | None) -> dict:

@@ -794,6 +794,23 @@ def _probe2_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
         ),
     )
 
+    # -- skip_beams_* leave beams in the first scan but none in later, shorter ones: warned
+    def quarter(s: RawScan) -> RawScan:  # every 4th beam: 46 beams over the same 270°
+        return replace(s, ranges=s.ranges[::4], angle_increment=4 * s.angle_increment)
+
+    mixed = (s if i % 2 == 0 else quarter(s) for i, s in enumerate(make_scans()))
+    add(
+        "skip_beams_all_of_shorter_scans",
+        write_mcap(d / "mixed_beams.mcap", mixed, make_odoms()),
+        Expected(
+            "processed; the later scans left without beams counted, warned",
+            0,
+            ("skip all beams of 20 shorter scans",),
+            {"steps": N},
+            args=("--set", "input.skip_beams_start=50"),
+        ),
+    )
+
     # -- nothing decodes: every scan, or every odometry sample; the error names the failures
     add(
         "scans_all_undecodable",
