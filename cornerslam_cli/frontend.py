@@ -20,9 +20,10 @@ from .config import Config
 from .errors import ConfigError, LogError
 from .features import extract
 from .geometry import matrix_from_pose, transform_points
-from .logs import open_log
+from .logs import ReadStats, open_log
 from .logs.sync import SyncStats, reanchor_odometry, select_keyframes, synchronise
 from .motion import ScanMatcher
+from .ranges import short_text
 from .types import Corners, Scan, Segments
 
 
@@ -133,12 +134,25 @@ def check_processed(src: Input, n_frames: int, n_points: int) -> None:
             "check the scan topic, range_min/range_max and input.max_range",
         )
     if n_frames == 0:
+        _undecoded_error(src.path, src.reader.stats)
         raise LogError(
             f"log '{src.path}': no scan could be processed ({stats.scans_in} scans read, "
             f"{stats.before_first_odom} before the first and {stats.after_last_odom} "
             f"after the last odometry sample, {stats.odom_gap} in gaps of the odometry, "
             f"{stats.scan_time_backwards} with a stamp that went backwards or repeated)",
             "check that the scan and odometry topics overlap in time and that their header stamps increase",
+        )
+
+
+def _undecoded_error(log_path: Path, rs: ReadStats) -> None:
+    """Raise LogError naming the decoding failures when they left no scan or no odometry sample (then
+    they, not the stamps, are why no scan could be processed)."""
+    if rs.decode_failed and not (rs.scans and rs.odoms):
+        raise LogError(
+            f"log '{log_path}': no scan could be processed: {rs.decode_failed} messages could not be decoded "
+            f"({rs.scans} scans and {rs.odoms} odometry samples were usable; the first failure: "
+            f"{rs.first_failure})",
+            "check the scan and odometry messages; `cornerslam info LOG` lists the topics and their types",
         )
 
 
@@ -157,19 +171,20 @@ def _scans_prepared(reader, cfg: Config):
     """The reader's messages with each scan prepared as configured: beams at the ends removed (robot
     body), beams at or beyond ``input.max_range`` dropped, ``input.scan_time_offset`` added to the
     stamp (a laser whose stamps lag or lead the odometry clock). Skipping every beam of the first
-    scan is a ConfigError naming the keys."""
+    scan is a ConfigError naming the keys; of a later, shorter scan, counted and warned at the end."""
     inp = cfg.input
     lo, hi, max_range, dt = inp.skip_beams_start, inp.skip_beams_end, inp.max_range, inp.scan_time_offset
     if lo == 0 and hi == 0 and max_range <= 0.0 and dt == 0.0:
         yield from reader.messages()
         return
-    first = True
+    first, emptied = True, 0
     for msg in reader.messages():
         if isinstance(msg, Scan):
+            emptied += not first and lo + hi >= msg.n_beams
             if first and lo + hi >= msg.n_beams:
                 raise ConfigError(
                     f"input.skip_beams_start={lo} and input.skip_beams_end={hi} skip all "
-                    f"{msg.n_beams} beams of the scans on '{reader.scan_topic}'",
+                    f"{msg.n_beams} beams of the scans on '{short_text(reader.scan_topic)}'",
                     f"keep their sum below {msg.n_beams} (beams skipped at each end of a scan)",
                 )
             first = False
@@ -185,6 +200,12 @@ def _scans_prepared(reader, cfg: Config):
                 range_max=msg.range_max if max_range <= 0.0 else min(max_range, msg.range_max),
             )
         yield msg
+    if emptied:
+        reader.stats.warn(
+            "input.skip_beams_start=%d and input.skip_beams_end=%d skip all beams of %d shorter scans on "
+            "'%s': processed without beams (odometry only)",
+            lo, hi, emptied, short_text(reader.scan_topic),
+        )  # fmt: skip
 
 
 def _laser_mount(reader, cfg: Config) -> tuple[tuple[float, float, float], str]:

@@ -33,8 +33,12 @@ def short_repr(value: Any, limit: int = 60) -> str:
 
 
 def short_text(text: str, limit: int = 60) -> str:
-    """``text`` cut to about ``limit`` characters, as :func:`short_repr` shows it but without quotes."""
-    return short_repr(text, limit + 2)[1:-1]
+    """``text`` cut to about ``limit`` characters (its start and end kept, ``...`` between them; escaped
+    as ``repr`` does), without quotes: for names given by the user or read from a file (a topic name of
+    100,000 characters) in one-line messages."""
+    r = reprlib.Repr()
+    r.maxstring = limit
+    return r.repr(text)[1:-1]
 
 
 @dataclass(frozen=True)

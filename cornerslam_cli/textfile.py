@@ -22,6 +22,7 @@ from .errors import CornerslamError
 
 UTF16_BOMS = (codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)
 SNIFF_BYTES = 1 << 16  # a binary file (a multi-GB bag given as ground truth) is refused on these
+MAX_ROWS_BYTES = 256 << 20  # a table of numbers (3 million TUM poses): an endless pipe stops here
 
 
 def read_text(
@@ -84,13 +85,15 @@ def read_number_rows(
     more_ok: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Rows of ``n`` finite numbers (``more_ok``: at least ``n``, the first ``n`` kept), separated by
-    spaces or commas; blank lines and ``#`` comments skipped. Returns the values (k, n) and each row's
+    spaces or commas; blank lines and ``#`` comments skipped; a file (or endless pipe) beyond
+    :data:`MAX_ROWS_BYTES` is refused. Returns the values (k, n) and each row's
     line number (k,). ``item`` names one row ("TUM pose"), ``layout`` its columns; ``error`` is raised
     naming the file and line."""
     p = Path(path)
     name = f"{what} '{p}'"
     rows, lines = [], []
-    for lineno, line in enumerate(read_text(p, what, error, f"a text file of {layout}").splitlines(), 1):
+    text = read_text(p, what, error, f"a text file of {layout}", MAX_ROWS_BYTES)
+    for lineno, line in enumerate(text.splitlines(), 1):
         s = line.strip()
         if not s or s.startswith("#"):
             continue

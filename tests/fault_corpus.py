@@ -404,6 +404,7 @@ def build_corpus(d: str | Path) -> dict[str, tuple[Path, Expected]]:
     _config_faults(d, add)
     _ground_truth_faults(d, add)
     _input_faults_ii(d, add)
+    _probe2_faults(d, add)
     return out
 
 
@@ -678,6 +679,161 @@ def _input_faults_ii(d: Path, add: Callable[[str, Path, Expected], None]) -> Non
             2,
             ("input.skip_beams_start=100", "input.skip_beams_end=81", "all 181 beams"),
             args=("--set", "input.skip_beams_start=100", "--set", "input.skip_beams_end=81"),
+        ),
+    )
+
+
+def _json_mcap(path: Path, scans: list[RawScan], scan_data: Callable[[RawScan], bytes] | None = None) -> Path:
+    """A JSON MCAP of ``scans`` (scan i logged at ``scan_stamp(i)`` whatever its header stamp: a
+    clock glitch in one message; CDR cannot hold a stamp of 1e18) and the valid odometry;
+    ``scan_data`` replaces the scans' message bytes."""
+    from mcap.writer import Writer
+
+    from cornerslam_cli.logs.writers import LASERSCAN, ODOMETRY, JsonSerializer
+
+    js = JsonSerializer()
+    scan_data = scan_data or js.laserscan
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start(profile="", library="fault_corpus")
+        ids = {
+            name: w.register_channel(
+                topic=name,
+                message_encoding="json",
+                schema_id=w.register_schema(name=typ, encoding="jsonschema", data=js.msgdef(typ).encode()),
+            )
+            for name, typ in (("/scan", LASERSCAN), ("/odom", ODOMETRY))
+        }
+        logged = [
+            *zip(scans, map(scan_stamp, range(len(scans))), strict=True),
+            *((o, o.stamp) for o in make_odoms()),
+        ]
+        for m, t in sorted(logged, key=lambda mt: mt[1]):
+            ns = int(round(t * 1e9))
+            if isinstance(m, OdomSample):
+                w.add_message(ids["/odom"], ns, js.odometry(m, "odom", "base_link"), ns)
+            else:
+                w.add_message(ids["/scan"], ns, scan_data(m), ns)
+        w.finish()
+    return path
+
+
+def _probe2_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
+    """Faults found by the second probe of issue 13: quaternions with inf or overflowing components,
+    far-future stamps, logs whose every message fails to decode, long topic names."""
+
+    def unit(o):
+        return (0.0, 0.0, math.sin(o.theta / 2), math.cos(o.theta / 2))
+
+    def inf_in_one(o):
+        return (0.0, 0.0, math.inf, 1.0) if round((o.stamp - T0) * RATE) == 5 else unit(o)
+
+    add(
+        "odom_quaternion_inf",
+        write_mcap(d / "quat_inf.mcap", make_scans(), make_odoms(), odom_quaternion=inf_in_one),
+        Expected(
+            "processed; a sample with an inf quaternion component skipped, counted, warned",
+            0,
+            ("non-finite pose (quaternion (0.0, 0.0, inf, 1.0))",),
+            dict(VALID_COUNTS, messages_failed=1),
+        ),
+    )
+    add(
+        "odom_quaternion_1e200",
+        write_mcap(
+            d / "quat_1e200.mcap",
+            make_scans(),
+            make_odoms(),
+            odom_quaternion=lambda o: tuple(1e200 * v for v in unit(o)),
+        ),
+        Expected(
+            "processed; quaternions whose squared length overflows normalised, warned",
+            0,
+            ("not of unit length: normalised",),
+            VALID_COUNTS,
+        ),
+    )
+
+    # -- one scan whose header stamp is 1e18 s: skipped alone, the later scans are not "backwards"
+    for where, far in (("first", 0), ("mid", 10)):
+        scans = [replace(s, stamp=1e18) if i == far else s for i, s in enumerate(make_scans())]
+        add(
+            f"stamp_far_future_{where}_scan_json_mcap",
+            _json_mcap(d / f"far_stamp_{where}.mcap", scans),
+            Expected(
+                "processed; the one scan skipped, counted (no odometry near it), warned",
+                0,
+                ("1 in gaps of the odometry",),
+                {"steps": N - 1, "scans_skipped": 1, "scan_time_backwards": 0},
+            ),
+        )
+    far_scan = (replace(s, stamp=1e18) if i == 10 else s for i, s in enumerate(make_scans()))
+    add(
+        "stamp_far_future_scan_carmen",
+        write_carmen(d / "far_stamp.clf", far_scan, make_odoms()),
+        Expected(
+            "processed; the one scan skipped, counted, warned",
+            0,
+            ("1 after the last odometry sample",),
+            {"steps": N - 1, "scans_skipped": 1, "scan_time_backwards": 0},
+        ),
+    )
+
+    # -- chunks not in time order and no summary (no chunk index): read in file order; the warning
+    # says so instead of only blaming the stamps
+    add(
+        "mcap_chunks_unsorted_no_summary",
+        write_mcap(
+            d / "unsorted_no_summary.mcap", make_scans(), make_odoms(), shuffle_blocks=8, summary=False
+        ),
+        Expected(
+            "processed; messages stored out of order skipped, counted, warned as such (no chunk index)",
+            0,
+            ("messages of '/scan' are stored after later ones", "no chunk index"),
+            {"steps": (1, N - 1), "scan_time_backwards": (1, N - 1)},
+        ),
+    )
+
+    # -- skip_beams_* leave beams in the first scan but none in later, shorter ones: warned
+    def quarter(s: RawScan) -> RawScan:  # every 4th beam: 46 beams over the same 270°
+        return replace(s, ranges=s.ranges[::4], angle_increment=4 * s.angle_increment)
+
+    mixed = (s if i % 2 == 0 else quarter(s) for i, s in enumerate(make_scans()))
+    add(
+        "skip_beams_all_of_shorter_scans",
+        write_mcap(d / "mixed_beams.mcap", mixed, make_odoms()),
+        Expected(
+            "processed; the later scans left without beams counted, warned",
+            0,
+            ("skip all beams of 20 shorter scans",),
+            {"steps": N},
+            args=("--set", "input.skip_beams_start=50"),
+        ),
+    )
+
+    # -- nothing decodes: every scan, or every odometry sample; the error names the failures
+    add(
+        "scans_all_undecodable",
+        _json_mcap(d / "scans_undecodable.mcap", list(make_scans()), lambda s: b"{not json"),
+        Expected(
+            "exit 2: names the decoding failures and the first one",
+            2,
+            ("scans_undecodable.mcap", f"{N} messages could not be decoded", "cannot decode a /scan message"),
+        ),
+    )
+    add(
+        "odom_quaternions_all_zero",
+        write_mcap(
+            d / "quat_all_zero.mcap", make_scans(), make_odoms(), odom_quaternion=lambda o: (0.0,) * 4
+        ),
+        Expected(
+            "exit 2: names the decoding failures and the first one",
+            2,
+            (
+                "quat_all_zero.mcap",
+                f"{N + 1} messages could not be decoded",
+                "zero-length orientation quaternion",
+            ),
         ),
     )
 

@@ -188,3 +188,84 @@ def test_scans_without_odometry_do_not_grow_memory(tmp_path):
 
     small, large = run(1500), run(4500)
     assert large < 1.3 * small, (small, large)
+
+
+# ---------------------------------------------------------------------------- long names in errors
+LONG = "/" + "x" * 100_000
+
+
+@pytest.fixture(scope="module")
+def tf_log(tmp_path_factory) -> Path:
+    return write_mcap(tmp_path_factory.mktemp("tf") / "tf.mcap", make_scans(), make_odoms(), odom_as_tf=True)
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ("--scan-topic", LONG),
+        ("--odom-topic", LONG),
+        ("--set", f"input.odom_frame={LONG[1:]}"),
+        ("--set", f"input.base_frame={LONG[1:]}"),
+    ],
+    ids=["scan_topic", "odom_topic", "odom_frame", "base_frame"],
+)
+@pytest.mark.parametrize("command", ["run", "info"])
+def test_a_100000_character_topic_or_frame_is_quoted_shortened(command, args, tf_log, tmp_path):
+    """The error line names the topic/frame by its start and end, not all 100,000 characters."""
+    if command == "info" and args[0] == "--set":
+        pytest.skip("info has no --set")
+    out = ("--out", tmp_path / "out") if command == "run" else ()
+    res = invoke(command, tf_log, *out, *args)
+    check_error_line(res, ("tf.mcap", "xxxxxxxxxx...xxxxxxxxxx"))
+    assert len(res.stderr.strip().splitlines()[-1]) < 400
+
+
+def test_a_100000_character_topic_in_the_log_is_listed_shortened(tmp_path):
+    """The log's LaserScan topic is named with 100,000 characters: the error listing it shortens it."""
+    log = write_mcap(tmp_path / "long.mcap", make_scans(), make_odoms(), scan_topic=LONG)
+    res = invoke("run", log, "--out", tmp_path / "out", "--scan-topic", "/scan")
+    check_error_line(
+        res, ("long.mcap", "'/scan'", "LaserScan topics: /xxxxxxxxxx", "xxxxxxxxxx...xxxxxxxxxx")
+    )
+    assert len(res.stderr.strip().splitlines()[-1]) < 400
+
+
+# ---------------------------------------------------------------------------- endless text inputs
+@contextmanager
+def endless_fifo(path: Path, line: bytes):
+    """A FIFO at ``path`` fed ``line`` forever by a thread (``yes LINE > path``) until the reader
+    closes it."""
+    os.mkfifo(path)
+
+    def feed():
+        try:
+            with open(path, "wb") as f:
+                while True:
+                    f.write(line * 4096)
+        except (BrokenPipeError, OSError):
+            pass
+
+    t = threading.Thread(target=feed, daemon=True)
+    t.start()
+    try:
+        yield path
+    finally:
+        t.join(10)
+        assert not t.is_alive()
+
+
+@pytest.mark.parametrize(
+    "option, what", [("--ground-truth", "ground truth"), ("--relations", "relations file")]
+)
+def test_an_endless_ground_truth_or_relations_pipe_is_refused_at_the_limit(
+    option, what, good, tmp_path, monkeypatch
+):
+    """`--ground-truth <(yes "1 2 3 4 0 0 0 1")` read whole ran out of memory (exit 1): refused once
+    it passes MAX_ROWS_BYTES (1 MiB here)."""
+    import cornerslam_cli.textfile as textfile
+
+    monkeypatch.setattr(textfile, "MAX_ROWS_BYTES", 1 << 20)
+    with endless_fifo(tmp_path / "endless", b"1 2 3 4 0 0 0 1\n") as p:
+        res = invoke("run", good, "--out", tmp_path / "out", option, p)
+    check_error_line(res, (f"{what} '{p}'", "is larger than 1024 KiB"))
+    assert not (tmp_path / "out").exists()

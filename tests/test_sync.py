@@ -58,6 +58,19 @@ def test_backwards_and_duplicate_stamps_are_dropped():
     assert out[0].odom[0] == pytest.approx(1.0)
 
 
+@pytest.mark.parametrize("far", [0, 2])
+def test_one_far_future_scan_does_not_make_the_later_scans_late(far):
+    """A scan stamped 1e18 (before the fix it became the reference and every later scan was counted
+    as going backwards) is skipped alone."""
+    msgs = [OdomSample(t, t, 0.0, 0.0) for t in range(6)]
+    stamps = [1e18 if i == far else i + 0.5 for i in range(5)]
+    msgs = sorted(msgs + [scan(t) for t in stamps], key=lambda m: m.stamp if m.stamp < 1e9 else far + 0.5)
+    st = SyncStats()
+    out = [s.scan.stamp for s in synchronise(msgs, st)]
+    assert out == [t for t in stamps if t < 1e9]
+    assert (st.scan_time_backwards, st.scans_skipped) == (0, 1)
+
+
 def test_keyframes_by_distance_and_rotation():
     poses = [np.array([0.1 * i, 0.0, 0.0]) for i in range(11)] + [np.array([1.0, 0.0, 0.6])]
     pairs = [Synced(scan(float(i)), p) for i, p in enumerate(poses)]

@@ -37,6 +37,7 @@ import numpy as np
 
 from ..errors import LogError, printable
 from ..geometry import normalize_quaternion, yaw_from_quaternion
+from ..ranges import short_text
 from ..types import OdomSample, Scan
 
 logger = logging.getLogger("cornerslam.logs")
@@ -122,6 +123,7 @@ class ReadStats:
     scans_skipped: int = 0  # scans not yielded: bad angle_increment, no beams
     size_mismatch: int = 0  # scans whose ranges count disagreed with angle_min/max/increment
     decode_failed: int = 0  # messages / lines that could not be decoded (skipped)
+    first_failure: str = ""  # what the first of them was (the error names it when nothing was usable)
     warnings: list[str] = field(default_factory=list)
 
     def warn(self, msg: str, *args: object) -> None:
@@ -136,32 +138,49 @@ class ReadStats:
         if len(self.warnings) < 100:
             self.warnings.append(text)
 
+    def failed(self, msg: str, *args: object) -> None:
+        """Count one message / line that could not be decoded (skipped); warn about the first five and
+        keep the first's text (its first 200 characters) in ``first_failure``."""
+        self.decode_failed += 1
+        if self.decode_failed == 1:
+            text = printable(msg % args if args else msg)
+            self.first_failure = text if len(text) <= 200 else text[:197] + "..."
+        if self.decode_failed <= 5:
+            self.warn(msg, *args)
+
     def bad_odometry(self, where: str, stamp: float, pose: tuple[float, float, float]) -> bool:
         """True (counted in ``decode_failed``, warned) if an odometry sample has a non-finite field."""
         if math.isfinite(stamp) and all(math.isfinite(v) for v in pose):
             return False
-        self.decode_failed += 1
-        if self.decode_failed <= 5:
-            self.warn("%s: odometry sample at %r has a non-finite pose %r: skipped", where, stamp, pose)
+        self.failed("%s: odometry sample at %r has a non-finite pose %r: skipped", where, stamp, pose)
         return True
 
     def odometry_sample(
         self, where: str, stamp: float, x: float, y: float, q: tuple[float, float, float, float]
     ) -> OdomSample | None:
         """The sample of a pose whose orientation is the quaternion q = (x, y, z, w), counted in
-        ``odoms``; None (counted in ``decode_failed``, warned) if q has no direction (length ~0) or a
-        field is not finite. A q not of unit length is normalised (warned once if off by more than
-        0.1 %: float32 round-off is not worth a warning)."""
-        n2 = sum(v * v for v in q)
-        if n2 < 1e-12:
-            self.decode_failed += 1
-            if self.decode_failed <= 5:
-                self.warn(
-                    "%s: odometry sample at %r has a zero-length orientation quaternion %r: skipped",
-                    where, stamp, tuple(q),
-                )  # fmt: skip
+        ``odoms``; None (counted in ``decode_failed``, warned) if q has no direction (length ~0), a
+        component of q is not finite, or a field is not finite. A q not of unit length is normalised
+        (warned once if off by more than 0.1 %: float32 round-off is not worth a warning); one so long
+        that its squared length overflows is first divided by its largest component."""
+        finite = all(math.isfinite(v) for v in q)
+        n2 = sum(v * v for v in q) if finite else math.nan
+        if finite and not math.isfinite(n2):
+            big = max(abs(v) for v in q)
+            q = tuple(v / big for v in q)
+            n2 = sum(v * v for v in q)
+        if not n2 >= 1e-12:  # zero length, or NaN/inf in q
+            what = "a zero-length orientation quaternion" if finite else "a non-finite pose (quaternion"
+            self.failed(
+                "%s: odometry sample at %r has %s %r%s: skipped",
+                where,
+                stamp,
+                what,
+                tuple(q),
+                "" if finite else ")",
+            )
             return None
-        if math.isfinite(n2) and abs(n2 - 1.0) > 2e-3:
+        if abs(n2 - 1.0) > 2e-3:
             self.warn("%s: odometry orientation quaternions are not of unit length: normalised", where)
         pose = (x, y, yaw_from_quaternion(*normalize_quaternion(*q)))  # unit within 1e-9: used as it is
         if self.bad_odometry(where, stamp, pose):
@@ -173,7 +192,7 @@ class ReadStats:
         """Raise LogError at the end of a read in which scans were seen but none was usable."""
         if self.scans == 0 and self.scans_skipped > 0:
             raise LogError(
-                f"log '{name}': all {self.scans_skipped} scans on '{topic}' were skipped "
+                f"log '{name}': all {self.scans_skipped} scans on '{short_text(topic)}' were skipped "
                 "(angle_increment <= 0 or not finite, no beams, or no valid stamp)",
                 "check the LaserScan messages' angle_min/angle_increment; `cornerslam extract` shows one",
             )

@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import LogError
+from ..ranges import short_text
 from ..types import OdomSample, Scan
 from .base import LogInfo, Pose2, ReadStats, TopicInfo, make_scan
 
@@ -176,7 +177,7 @@ class CarmenReader:
             else:
                 problems.append(
                     (
-                        f"CARMEN log '{name}' has no '{self._want_scan}' lines (laser lines: "
+                        f"CARMEN log '{name}' has no '{short_text(self._want_scan)}' lines (laser lines: "
                         f"{', '.join(lasers) or 'none'})",
                         "choose one of them with --scan-topic",
                     )
@@ -194,7 +195,7 @@ class CarmenReader:
             else:
                 problems.append(
                     (
-                        f"CARMEN log '{name}' has no '{self._want_odom}' lines",
+                        f"CARMEN log '{name}' has no '{short_text(self._want_odom)}' lines",
                         f"choose --odom-topic ODOM or a laser tag ({', '.join(lasers) or 'none'})",
                     )
                 )
@@ -300,9 +301,7 @@ class CarmenReader:
                     continue
                 las = parse_laser(tok, max_range)
             except (ValueError, IndexError) as exc:
-                st.decode_failed += 1
-                if st.decode_failed <= 5:
-                    st.warn("%s:%d: malformed %s line skipped (%s)", where, lineno, tag, exc)
+                st.failed("%s:%d: malformed %s line skipped (%s)", where, lineno, tag, exc)
                 continue
             if tag == odom_tag and not st.bad_odometry(f"{where}:{lineno}", las.stamp, las.robot):
                 st.odoms += 1

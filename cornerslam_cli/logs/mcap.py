@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import LogError
+from ..ranges import short_text
 from .base import Channel, ReadStats
 from .ros import RosLogReader
 
@@ -363,6 +364,26 @@ class McapSource:
         return self.index.start, self.index.end
 
     def raw_messages(self, topics: set[str]) -> Iterator[tuple[str, int, memoryview]]:
+        """Messages of ``topics`` in log-time order (see :meth:`_merged`). Warns at the end if some
+        still came after a later message of their topic: a file without a chunk index whose chunks
+        (or lone messages) are not in time order, read in file order; the synchroniser then skips
+        them as going backwards, and the warning says why."""
+        last: dict[str, int] = {}
+        late: dict[str, int] = {}
+        for topic, t, data in self._merged(topics):
+            if t < last.get(topic, -1):
+                late[topic] = late.get(topic, 0) + 1
+            else:
+                last[topic] = t
+            yield topic, t, data
+        for topic, n in sorted(late.items()):
+            self.stats.warn(
+                "%s: %d messages of '%s' are stored after later ones and there is no chunk index to read "
+                "them in log-time order (rewrite the file with an index, e.g. `mcap recover`)",
+                self.name, n, short_text(topic),
+            )  # fmt: skip
+
+    def _merged(self, topics: set[str]) -> Iterator[tuple[str, int, memoryview]]:
         """Messages of ``topics`` in log-time order: a heap releases the messages not newer than the
         first message of the next chunk, so overlapping chunks are merged in bounded memory."""
         ids = {cid: topic for cid, (topic, _, _) in self.index.channels.items() if topic in topics}

@@ -18,6 +18,7 @@ from typing import Protocol
 import numpy as np
 
 from ..errors import LogError
+from ..ranges import short_text
 from ..types import OdomSample, Scan
 from .base import (
     ENCODINGS,
@@ -86,9 +87,10 @@ def pose2_from_matrix(T: np.ndarray) -> Pose2:
     return float(T[0, 3]), float(T[1, 3]), math.atan2(T[1, 0], T[0, 0])
 
 
-def listing(names: list[str]) -> str:
-    """``"/a, /b"`` or ``"none"``, for error messages."""
-    return ", ".join(sorted(names)) if names else "none"
+def listing(names: list[str], most: int = 10) -> str:
+    """``"/a, /b"`` or ``"none"``, for error messages: long names shortened, at most ``most`` of them."""
+    shown = ", ".join(short_text(n) for n in sorted(names)[:most])
+    return (shown + (f" and {len(names) - most} more" if len(names) > most else "")) if names else "none"
 
 
 # --------------------------------------------------------------------------- the reader
@@ -164,17 +166,18 @@ class RosLogReader:
         name = self.path.name
         scans = self._topics_of(LASERSCAN)
         if self._want_scan:
+            want = short_text(self._want_scan)
             c = self._channels.get(self._want_scan)
             if c is None:
                 return (
                     "",
-                    f"log '{name}' has no topic '{self._want_scan}' (LaserScan topics: {listing(scans)})",
+                    f"log '{name}' has no topic '{want}' (LaserScan topics: {listing(scans)})",
                     "check --scan-topic; `cornerslam info LOG` lists the topics",
                 )
             if normalize_msgtype(c.msgtype) != LASERSCAN:
                 return (
                     "",
-                    f"topic '{self._want_scan}' of log '{name}' is {normalize_msgtype(c.msgtype)}, "
+                    f"topic '{want}' of log '{name}' is {normalize_msgtype(c.msgtype)}, "
                     "not sensor_msgs/LaserScan",
                     f"choose a LaserScan topic with --scan-topic ({listing(scans)})",
                 )
@@ -188,7 +191,7 @@ class RosLogReader:
         if len(scans) > 1:
             return (
                 "",
-                f"log '{name}' has {len(scans)} LaserScan topics: {', '.join(scans)}",
+                f"log '{name}' has {len(scans)} LaserScan topics: {listing(scans)}",
                 "choose one with --scan-topic",
             )
         return scans[0], "", ""
@@ -198,12 +201,13 @@ class RosLogReader:
         odoms = self._topics_of(ODOMETRY)
         tfs = [t for t in self._topics_of(*TF_TYPES) if t != "/tf_static"]
         if self._want_odom:
+            want = short_text(self._want_odom)
             c = self._channels.get(self._want_odom)
             if c is None:
                 return _OdomSel(
                     "",
                     "",
-                    f"log '{name}' has no topic '{self._want_odom}' "
+                    f"log '{name}' has no topic '{want}' "
                     f"(Odometry topics: {listing(odoms)}; tf topics: {listing(tfs)})",
                     "check --odom-topic; `cornerslam info LOG` lists the topics",
                 )
@@ -215,8 +219,7 @@ class RosLogReader:
             return _OdomSel(
                 "",
                 "",
-                f"topic '{self._want_odom}' of log '{name}' is {mt}, "
-                "not nav_msgs/Odometry or tf2_msgs/TFMessage",
+                f"topic '{want}' of log '{name}' is {mt}, not nav_msgs/Odometry or tf2_msgs/TFMessage",
                 f"choose one with --odom-topic (Odometry: {listing(odoms)}; tf: {listing(tfs)})",
             )
         if len(odoms) == 1:
@@ -227,7 +230,7 @@ class RosLogReader:
             return _OdomSel(
                 "",
                 "",
-                f"log '{name}' has {len(odoms)} Odometry topics: {', '.join(odoms)}",
+                f"log '{name}' has {len(odoms)} Odometry topics: {listing(odoms)}",
                 "choose one with --odom-topic",
             )
         if tfs:
@@ -237,7 +240,7 @@ class RosLogReader:
             "",
             f"log '{name}' has no odometry: no nav_msgs/Odometry topic and no tf topic",
             "select an odometry topic with --odom-topic (nav_msgs/Odometry or tf with "
-            f"{self.odom_frame}→{self.base_frame})",
+            f"{short_text(self.odom_frame)}→{short_text(self.base_frame)})",
         )
 
     def _odom_source_label(self) -> str:
@@ -253,8 +256,8 @@ class RosLogReader:
         if enc in ENCODINGS:
             return None
         return (
-            f"topic '{topic}' of log '{self.path.name}' has message encoding '{enc}', which cornerslam "
-            f"does not decode ({', '.join(ENCODINGS)})",
+            f"topic '{short_text(topic)}' of log '{self.path.name}' has message encoding "
+            f"'{short_text(enc)}', which cornerslam does not decode ({', '.join(ENCODINGS)})",
             "record the ROS messages as cdr (ros2 bag record), ros1 or json (foxglove_bridge, rosbridge)",
         )
 
@@ -274,7 +277,7 @@ class RosLogReader:
         for topic in (self.scan_topic, self.odom_topic):
             if self._channels[topic].count == 0:
                 raise LogError(
-                    f"topic '{topic}' of log '{self.path.name}' has no messages",
+                    f"topic '{short_text(topic)}' of log '{self.path.name}' has no messages",
                     "it was declared but nothing was recorded on it; `cornerslam info LOG` shows the counts",
                 )
 
@@ -414,15 +417,11 @@ class RosLogReader:
             except LogError:
                 raise
             except Exception as exc:  # noqa: BLE001 - undecodable message: count, warn, go on
-                st.decode_failed += 1
-                if st.decode_failed <= 5:
-                    st.warn(
-                        "%s: cannot decode a %s message at %d ns: %s", self.path.name, topic, log_time, exc
-                    )
+                st.failed("%s: cannot decode a %s message at %d ns: %s", self.path.name, topic, log_time, exc)
         if is_tf and n_tf_match == 0:
             raise LogError(
-                f"log '{self.path.name}': topic '{odom_t}' has no "
-                f"{self.odom_frame}→{self.base_frame} transform",
+                f"log '{self.path.name}': topic '{short_text(odom_t)}' has no "
+                f"{short_text(self.odom_frame)}→{short_text(self.base_frame)} transform",
                 "set the frames (odom_frame/base_frame) or choose an Odometry topic with --odom-topic",
             )
         if st.decode_failed > 5:

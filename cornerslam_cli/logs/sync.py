@@ -12,8 +12,10 @@ shorter arc in θ (:func:`~cornerslam_cli.geometry.interpolate`).
 
 Scans that cannot be interpolated are skipped and counted in :class:`SyncStats`: before the first or
 after the last odometry sample, in a gap of the odometry (samples more than MAX_GAP apart around it),
-stamps that go backwards or repeat. Odometry samples that go back in
-time are dropped and counted too. One warning sums them up.
+stamps that go backwards or repeat. "Backwards" is relative to the last scan that could still be
+paired: a scan before all odometry, or more than MAX_GAP after the newest sample (one far-future
+stamp, 1e18), is skipped without becoming the reference, so it cannot make the later scans look late.
+Odometry samples that go back in time are dropped and counted too. One warning sums them up.
 """
 
 from __future__ import annotations
@@ -114,10 +116,13 @@ def synchronise(
             if msg.stamp <= last_scan_stamp:
                 st.scan_time_backwards += 1
                 continue
-            last_scan_stamp = msg.stamp
             if not odom:
                 st.before_first_odom += 1
                 continue
+            if msg.stamp - last_odom_stamp > MAX_GAP:  # no odometry near it: dropped now, counted later
+                waited_out += 1  # and not the reference for "backwards": one far-future stamp
+                continue  # would otherwise skip every later scan
+            last_scan_stamp = msg.stamp
             pending.append(msg)
             while len(pending) > MAX_PENDING or msg.stamp - pending[0].stamp > MAX_GAP:
                 pending.popleft()  # no odometry came for it: dropped now, counted when it is known why

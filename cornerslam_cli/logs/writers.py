@@ -300,6 +300,7 @@ def write_mcap(
     compression: str = "zstd",
     chunk_size: int = 1024 * 1024,
     shuffle_blocks: int = 0,
+    summary: bool = True,
     **topics,
 ) -> Path:
     """Write an MCAP log. ``encoding``: ``cdr`` (ROS 2 profile), ``ros1`` (ROS 1 profile), ``json``
@@ -308,9 +309,10 @@ def write_mcap(
 
     ``shuffle_blocks`` > 0 writes the messages in blocks of that many, the blocks in a seeded random
     order, one message per chunk: a valid file whose chunks are not in log-time order (the whole log
-    is held in memory to do so).
+    is held in memory to do so). ``summary=False`` writes no summary section (no chunk index, no
+    statistics), as some recorders do.
     """
-    from mcap.writer import CompressionType, Writer
+    from mcap.writer import CompressionType, IndexType, Writer
 
     ros = serializer(encoding)
     path = Path(path)
@@ -321,7 +323,11 @@ def write_mcap(
     if shuffle_blocks > 0:
         messages, chunk_size = _shuffled(messages, shuffle_blocks), 1
     with open(path, "wb") as f:
-        w = Writer(f, chunk_size=chunk_size, compression=comp)
+        no_summary = dict.fromkeys(
+            ("repeat_channels", "repeat_schemas", "use_statistics", "use_summary_offsets"), False
+        )
+        kw = {} if summary else dict(no_summary, index_types=IndexType.NONE)
+        w = Writer(f, chunk_size=chunk_size, compression=comp, **kw)
         w.start(profile=ros.profile, library="cornerslam")
         channels: dict[str, int] = {}
         for topic, typename, t, data in messages:
