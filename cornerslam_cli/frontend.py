@@ -12,6 +12,7 @@ import dataclasses
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +20,7 @@ import numpy as np
 from .config import Config
 from .errors import ConfigError, LogError
 from .features import extract
+from .filter.models import increment_noise
 from .geometry import matrix_from_pose, transform_points
 from .logs import ReadStats, open_log
 from .logs.sync import SyncStats, reanchor_odometry, select_keyframes, synchronise
@@ -62,9 +64,12 @@ class Frame:
     C: np.ndarray
     t_extract: float
     odom_jump: bool = False  # the odometry jumped since the previous keyframe (logs/sync.py)
-    # motion input of the filter: the scan-matched pose chain (motion/icp.py), or None = ``odom``
+    # motion input of the filter: the pose chain fused from odometry and scan matches (motion/), or
+    # None = ``odom``; ``motion_cov``: the covariance of the increment into this frame (previous frame's
+    # frame), None = the filter's odometry noise model
     motion: np.ndarray | None = None
-    scan_matched: bool = False  # the increment into this frame came from scan matching
+    motion_cov: np.ndarray | None = None
+    scan_matched: bool = False  # a scan match was fused into the increment into this frame
     scan_fit: float = float("nan")  # share of the scan's points on the local map after matching
     t_scan_match: float = 0.0
 
@@ -105,8 +110,22 @@ def open_input(log_path: str | Path, cfg: Config) -> Input:
     reader.check()
     info = reader.info()
     laser2base, source = _laser_mount(reader, cfg)
-    matcher = ScanMatcher(cfg.scan_match) if cfg.scan_match.enabled else None
+    matcher = ScanMatcher(cfg.scan_match, odometry_noise(cfg)) if cfg.scan_match.enabled else None
     return Input(Path(log_path), reader, info, laser2base, source, _scan_count(info), SyncStats(), matcher)
+
+
+def odometry_noise(cfg: Config) -> Callable[[np.ndarray], np.ndarray]:
+    """The covariance of an odometry increment under the filter's noise model (``ekf.alpha*`` and its
+    floor): the prior the scan matcher fuses its matches with."""
+    e = cfg.ekf
+    return partial(
+        increment_noise,
+        alphas=e.alphas,
+        min_sigma_xy=e.min_sigma_xy,
+        min_sigma_theta=e.min_sigma_theta,
+        eps_trans=e.pure_rotation_eps,
+        reverse=e.reverse_motion,
+    )
 
 
 def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None = None) -> Iterator[Frame]:
@@ -163,7 +182,12 @@ def _scan_matched(
     t0 = time.perf_counter()
     m = matcher.step(transform_points(scan.points(), laser2base), frame.odom)
     return replace(
-        frame, motion=m.pose, scan_matched=m.matched, scan_fit=m.fit, t_scan_match=time.perf_counter() - t0
+        frame,
+        motion=m.pose,
+        motion_cov=m.cov,
+        scan_matched=m.matched,
+        scan_fit=m.fit,
+        t_scan_match=time.perf_counter() - t0,
     )
 
 

@@ -185,6 +185,7 @@ def build_summary(
             "scans_per_second": totals.steps / max(float(times.sum()), 1e-12),
         },
         "final_pose": final_pose.tolist(),
+        **_odometry_model(src.matcher),
         "warnings": list(reader.stats.warnings),
         "accuracy": accuracy,
         "hashes": {"input": input_hash(src.path), "config": config_hash(cfg), "version": __version__},
@@ -196,8 +197,18 @@ def build_summary(
 def _scan_match_counts(matcher) -> dict:
     if matcher is None:
         return {}
-    return {"scans_matched": matcher.n_matched, "scans_match_retried": matcher.n_retried,
-            "scans_match_fallback": matcher.n_fallback}  # fmt: skip
+    # "retried": the correlative search over the odometry's window ran (it replaced the heading retries)
+    return {"scans_matched": matcher.n_matched, "scans_match_retried": matcher.n_searched,
+            "scans_match_rejected": matcher.n_rejected, "scans_match_fallback": matcher.n_fallback}  # fmt: skip
+
+
+def _odometry_model(matcher) -> dict:
+    """What the fusion learnt about the odometry (motion/fusion.py), at the end of the run."""
+    if matcher is None:
+        return {}
+    f = matcher.fusion
+    return {"odometry_model": {"odom_noise_scale": f.k, "match_noise_scale": f.s,
+                               "odom_scale_error": float(f.c[0]), "heading_drift_per_m": float(f.c[1])}}  # fmt: skip
 
 
 def find_ground_truth(log_path: Path) -> Path | None:
