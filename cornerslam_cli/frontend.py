@@ -9,6 +9,7 @@ filter (slam.py) takes as its motion input.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
@@ -134,7 +135,12 @@ def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None 
         _scans_prepared(src.reader, cfg), cfg.input.odom_jump, src.stats, src.reader.stats.warn
     )
     synced = synchronise(msgs, src.stats, src.reader.stats.warn)  # its warning lands in summary.json too
-    for pair in select_keyframes(synced, cfg.keyframes, src.stats):
+    pairs = select_keyframes(synced, cfg.keyframes, src.stats)
+    if src.matcher is not None and cfg.scan_match.warmup > 0:
+        head = list(itertools.islice(pairs, cfg.scan_match.warmup))
+        src.matcher.warm_up([(transform_points(p.scan.points(), src.laser2base), p.odom) for p in head])
+        pairs = itertools.chain(head, pairs)
+    for pair in pairs:
         frame = replace(extract_frame(pair.scan, pair.odom, cfg, src.laser2base), odom_jump=pair.odom_jump)
         if src.matcher is not None:
             frame = _scan_matched(frame, pair.scan, src.matcher, src.laser2base)

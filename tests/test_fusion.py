@@ -76,11 +76,16 @@ def test_the_fused_increment_is_the_information_weighted_mean():
     np.testing.assert_allclose(got.cov, np.linalg.inv(info), atol=1e-12)
 
 
-def test_a_match_far_beyond_both_covariances_is_rejected():
+def test_a_match_far_beyond_both_covariances_is_rejected_once_the_scales_are_learnt():
+    rng = np.random.default_rng(14)
+    noise = odometry_noise(load_config(None))
     f = fusion()
     o = np.array([0.5, 0.0, 0.1])
-    So = odometry_noise(load_config(None))(o)
-    got = f.fuse(o, So, o + [0.0, 0.0, 1.2], np.diag([1e-4, 1e-4, 1e-5]))  # 69° off: a wrong basin
+    wrong = o + [0.0, 0.0, 1.2]  # 69° off: a wrong basin
+    assert f.fuse(o, noise(o), wrong, np.diag([1e-4, 1e-4, 1e-5])).accepted  # nothing to judge it by yet
+    for oi, So, m, Sm in draw(rng, 0.05, 3.0, np.zeros(2), f.min_samples, noise):
+        assert f.fuse(oi, So, m, Sm).accepted
+    got = f.fuse(o, noise(o), wrong, np.diag([1e-4, 1e-4, 1e-5]))
     assert not got.accepted and f.n_rejected == 1
     np.testing.assert_array_equal(got.inc, o)
 

@@ -27,7 +27,7 @@ keyframes have been seen the model itself is used (k = s = 1, no bias); then the
 at every keyframe up to 2·``adapt_every`` samples, every ``adapt_every`` after that. Nothing here looks at a
 reference trajectory.
 
-**Gate.** A match whose disagreement with the corrected odometry exceeds the χ²₃ ``gate`` under
+**Gate.** Once the scales are learnt, a match whose disagreement with the corrected odometry exceeds the χ²₃ ``gate`` under
 max(k, 1)·Σ_o + s·Σ_m is not taken on trust: the odometry increment is used alone (counted as
 rejected). The gate keeps the configured model as a floor: real odometry errors are heavy-tailed (a
 wheel slipping in a turn), and a scale learnt on the bulk of the increments would reject the true match
@@ -105,14 +105,21 @@ class OdometryFusion:
         # the gate: the configured model (or the learnt scale, if larger) — a learnt k fits the bulk of
         # the increments and would reject the true match of a rare large odometry error
         score = float(dc @ np.linalg.solve(max(self.k, 1.0) * cov_o + Sm, dc))
-        if not np.isfinite(score) or score > self.gate:
-            self.n_rejected += 1
-            return Fused(oc, So, False, score)
+        learnt = len(self.samples) >= self.min_samples  # before that, no basis to judge a match on
+        if not np.isfinite(score) or (learnt and score > self.gate):
+            self.n_rejected += (
+                1  # the odometry alone, as uncertain as the gate's model: one of the two is wrong
+            )
+            return Fused(oc, self.fallback_cov(cov_o), False, score)
         K = So @ np.linalg.inv(S)  # Kalman gain of the odometry prior updated by the match
         inc = oc + K @ dc
         inc[2] = wrap_angle(inc[2])
         cov = (np.eye(3) - K) @ So
         return Fused(inc, 0.5 * (cov + cov.T), True, score)
+
+    def fallback_cov(self, cov_o: np.ndarray) -> np.ndarray:
+        """Covariance of an odometry increment used without a match: the configured model at least."""
+        return max(self.k, 1.0) * cov_o
 
     def _learn(self) -> None:
         d = np.array([x[0] for x in self.samples])

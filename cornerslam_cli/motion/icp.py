@@ -239,6 +239,17 @@ class ScanMatcher:
         """The learnt scale of the odometry's noise model (motion/fusion.py)."""
         return self.fusion.k
 
+    def warm_up(self, scans: list[tuple[np.ndarray, np.ndarray]]) -> None:
+        """Learn the noise scales and bias (motion/fusion.py) on the first keyframes before matching
+        them for real: a throw-away pass over ``scans`` (points, odometry pose), whose learnt state
+        (and samples) this matcher starts from — so the first matches are judged like later ones."""
+        probe = ScanMatcher(self.cfg, self.odometry_noise)
+        for points, odom in scans:
+            probe.step(points, odom)
+        if len(probe.fusion.samples) >= self.cfg.adapt_min_samples:
+            self.fusion.k, self.fusion.s, self.fusion.c = probe.fusion.k, probe.fusion.s, probe.fusion.c
+            self.fusion.samples = probe.fusion.samples
+
     def step(self, points: np.ndarray, odom: np.ndarray) -> MatchResult:
         """Fused pose of the scan whose base-frame ``points`` were taken at wheel pose ``odom``.
 
@@ -268,7 +279,8 @@ class ScanMatcher:
             # the odometry may be outside ICP's basin: ICP also from the best pose of the whole window,
             # kept when it fits clearly better (near-equal fits: the one from the odometry, e.g. along
             # a corridor where the search's cells are as good as each other)
-            found = search(points, self.local.points, guess, window, cfg.search_resolution, cfg.search_sigma)
+            near = points[np.einsum("ij,ij->i", points, points) <= cfg.search_range**2]
+            found = search(near, self.local.points, guess, window, cfg.search_resolution, cfg.search_sigma)
             other = register(points, self.local, found.pose, cfg, prior=guess)
             if other.fit > reg.fit + FIT_MARGIN:
                 reg = other
@@ -280,7 +292,8 @@ class ScanMatcher:
         R = _rotation3(-self.pose[2])  # motion frame → previous scan's frame
         fused = self.fusion.fuse(o, cov_o, m, R @ reg.cov @ R.T)
         self.n_matched += fused.accepted
-        return MatchResult(compose(self.pose, fused.inc), reg.fit, fused.accepted, fused.cov, searched)
+        cov = fused.cov + np.diag([cfg.sigma_xy**2, cfg.sigma_xy**2, cfg.sigma_theta**2])
+        return MatchResult(compose(self.pose, fused.inc), reg.fit, fused.accepted, cov, searched)
 
     def _fallback(self, o: np.ndarray, cov_o: np.ndarray, fit: float, searched: bool = False) -> MatchResult:
         self.n_fallback += 1

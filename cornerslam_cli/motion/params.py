@@ -27,7 +27,7 @@ class ScanMatchConfig:
             "the correlative search over the odometry's uncertainty window replaced the heading retries",
         ),
         **dict.fromkeys(
-            ("alpha1", "alpha2", "alpha3", "alpha4", "sigma_xy", "sigma_theta"),
+            ("alpha1", "alpha2", "alpha3", "alpha4"),
             "each match now brings its own covariance, fused with the odometry's (ekf.alpha*)",
         ),
     }
@@ -68,13 +68,27 @@ class ScanMatchConfig:
     search_max_theta: float = num(0.6, gt=0.0, le=math.pi)  # rad
     search_resolution: float = num(0.1, ge=0.01, le=10.0)  # m: grid cell of the likelihood field
     search_sigma: float = num(0.1, gt=0.0, le=10.0)  # m: its blur exp(−d²/2σ²)
+    # m: only scan points this close to the robot are searched with (the grid's area, so its cost, grows
+    # with the square of it); ICP then refines with all of them
+    search_range: float = num(20.0, gt=0.0, le=1000.0)
     # --- fusion with the odometry (motion/fusion.py)
-    gate: float = num(16.27, gt=0.0, le=1e9)  # χ²₃ of a match's disagreement with the odometry (99.9 %)
+    # χ²₃ of a match's disagreement with the odometry beyond which it is rejected: 30.7 = a 10⁻⁶ tail,
+    # "far beyond" — real odometry errors are heavy-tailed (17° in one 30° turn on Intel)
+    gate: float = num(30.7, gt=0.0, le=1e9)
     adapt_window: int = num(
         100, ge=1, le=100000
     )  # keyframes whose disagreements set the noise scales and bias
+    warmup: int = num(
+        20, ge=0, le=10000
+    )  # keyframes matched once to learn the scales before the run; 0 = off
     adapt_every: int = num(10, ge=1, le=100000)  # keyframes between two re-estimates
     adapt_min_samples: int = num(5, ge=2, le=100000)  # ... the model itself (scale 1) until this many
+    # floor added to each fused increment's covariance for the filter: the local map drifts with the
+    # chain it is matched against, so per-increment errors are not independent and the filter's
+    # uncertainty must grow faster than their covariances alone say (or it cannot re-associate landmarks
+    # after a loop)
+    sigma_xy: float = num(0.01, ge=0.0, le=100.0)  # m per increment
+    sigma_theta: float = num(0.005, ge=0.0, le=math.pi)  # rad per increment
     adapt_min: float = num(1e-6, gt=0.0, le=1.0)  # bounds of the learnt odometry noise scale
     adapt_max: float = num(100.0, ge=1.0, le=1e6)
 
