@@ -132,7 +132,7 @@ def odometry_noise(cfg: Config) -> Callable[[np.ndarray], np.ndarray]:
 def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None = None) -> Iterator[Frame]:
     """Synchronised keyframes of the log, features extracted, motion scan-matched (streaming)."""
     msgs = reanchor_odometry(
-        _scans_prepared(src.reader, cfg), cfg.input.odom_jump, src.stats, src.reader.stats.warn
+        scans_prepared(src.reader, cfg), cfg.input.odom_jump, src.stats, src.reader.stats.warn
     )
     synced = synchronise(msgs, src.stats, src.reader.stats.warn)  # its warning lands in summary.json too
     pairs = select_keyframes(synced, cfg.keyframes, src.stats)
@@ -197,7 +197,7 @@ def _scan_matched(
     )
 
 
-def _scans_prepared(reader, cfg: Config):
+def scans_prepared(reader, cfg: Config):
     """The reader's messages with each scan prepared as configured: beams at the ends removed (robot
     body), beams at or beyond ``input.max_range`` dropped, ``input.scan_time_offset`` added to the
     stamp (a laser whose stamps lag or lead the odometry clock). Skipping every beam of the first

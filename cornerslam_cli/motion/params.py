@@ -83,12 +83,11 @@ class ScanMatchConfig:
     )  # keyframes matched once to learn the scales before the run; 0 = off
     adapt_every: int = num(10, ge=1, le=100000)  # keyframes between two re-estimates
     adapt_min_samples: int = num(5, ge=2, le=100000)  # ... the model itself (scale 1) until this many
-    # floor added to each fused increment's covariance for the filter: the local map drifts with the
-    # chain it is matched against, so per-increment errors are not independent and the filter's
-    # uncertainty must grow faster than their covariances alone say (or it cannot re-associate landmarks
-    # after a loop)
-    sigma_xy: float = num(0.01, ge=0.0, le=100.0)  # m per increment
-    sigma_theta: float = num(0.005, ge=0.0, le=math.pi)  # rad per increment
+    # floor added to each fused increment's covariance for the filter (0: none; the learnt scales make
+    # the covariance honest per increment: a floor lets corner updates pull an exact chain off, measured
+    # on the exact-odometry logs, docs/results/frontend_panel.md)
+    sigma_xy: float = num(0.0, ge=0.0, le=100.0)  # m per increment
+    sigma_theta: float = num(0.0, ge=0.0, le=math.pi)  # rad per increment
     adapt_min: float = num(1e-6, gt=0.0, le=1.0)  # bounds of the learnt odometry noise scale
     adapt_max: float = num(100.0, ge=1.0, le=1e6)
 
