@@ -36,7 +36,6 @@ from __future__ import annotations
 import csv
 import hashlib
 import itertools
-import json
 import logging
 import os
 import re
@@ -48,8 +47,9 @@ from typing import Any
 
 from . import __version__
 from .blas import single_threaded_blas, single_threaded_blas_env
-from .errors import ConfigError, CornerslamError, display_path
+from .errors import ConfigError, CornerslamError, ResultsError, display_path
 from .report.outdir import claim_dir, clear_stale, output_errors, staged_file
+from .results import Hashes, RunSummary
 
 BATCH_CSV = "batch.csv"
 FIGURES = [
@@ -241,12 +241,11 @@ def run_batch(
                 log_hashes[c.log] = input_hash(Path(c.log))
             except (OSError, CornerslamError):
                 log_hashes[c.log] = None  # the run reports the unreadable log (or pipe)
-        expect = {
-            "input": log_hashes[c.log],
-            "config": config_hash(from_dict(Config, c.config)),
-            "version": __version__,
-        }
-        figures = _resumable(out / c.name, expect, find_ground_truth(Path(c.log)) is not None)
+        figures = None
+        if log_hashes[c.log] is not None:
+            expect = Hashes(input=log_hashes[c.log], config=config_hash(from_dict(Config, c.config)),
+                            version=__version__)  # fmt: skip
+            figures = _resumable(out / c.name, expect, find_ground_truth(Path(c.log)) is not None)
         if figures is not None:
             rows[i] = _row(c, "skipped", figures=figures)
             state.skipped += 1
@@ -290,34 +289,31 @@ def _row(c: Combo, status: str, error: str = "", figures: dict | None = None) ->
     return row
 
 
-def figures_from_summary(s: dict) -> dict:
-    """The batch.csv figures of one run's summary (the returned dict or summary.json)."""
-    acc = s.get("accuracy") or {}
-    c, t = s["counts"], s["timing"]
+def figures_from_summary(s: RunSummary) -> dict:
+    """The batch.csv figures of one run's summary (returned by the run or read from summary.json)."""
+    c, t, acc = s.counts, s.timing, s.accuracy
     nan = float("nan")
     return {
-        "steps": int(c["steps"]),
-        "landmarks": int(c["landmarks"]),
-        "matched_total": int(c["matched_total"]),
-        "t_match": float(t["t_match"]),
-        "t_total": float(t["t_total"]),
-        "wall_time": float(t["wall_time"]),
-        "ate_rmse": float(acc["ate"]["rmse"]) if acc else nan,
-        "odom_ate_rmse": float(acc["odom_ate"]["rmse"]) if acc else nan,
+        "steps": c.steps,
+        "landmarks": c.landmarks,
+        "matched_total": c.matched_total,
+        "t_match": float(t.t_match),
+        "t_total": float(t.t_total),
+        "wall_time": float(t.wall_time),
+        "ate_rmse": acc.ate.rmse if acc and acc.ate else nan,
+        "odom_ate_rmse": acc.odom_ate.rmse if acc and acc.odom_ate else nan,
     }
 
 
-def _resumable(run_dir: Path, expect: dict, has_gt: bool) -> dict | None:
+def _resumable(run_dir: Path, expect: Hashes, has_gt: bool) -> dict | None:
     """The figures of a complete earlier run of the same log, config and version, else None."""
-    if expect["input"] is None:
-        return None
     try:
-        s = json.loads((run_dir / "summary.json").read_text())
-        if s.get("hashes") != expect or (s.get("accuracy") is not None) != has_gt:
-            return None
-        return figures_from_summary(s)
-    except (OSError, ValueError, KeyError, TypeError):
+        s = RunSummary.read(run_dir)
+    except ResultsError:
         return None  # missing, unreadable or from an older layout: run it again
+    if s.hashes != expect or (s.accuracy is not None) != has_gt:
+        return None
+    return figures_from_summary(s)
 
 
 def run_one(log: str, config: dict, out_dir: str) -> dict:

@@ -203,7 +203,7 @@ def run(
         )
     finally:
         progress.close()
-    out_dir = Path(summary["out_dir"])
+    out_dir = Path(summary.out_dir)
     if not quiet:
         _echo(summary_lines(summary))
         if plot:

@@ -39,6 +39,11 @@ class OutputError(CornerslamError):
     too long) or must not be replaced (a directory cornerslam did not write)."""
 
 
+class ResultsError(CornerslamError):
+    """A run's results file (summary.json) cannot be read: missing, not JSON, or a key missing,
+    unknown or of the wrong type (written by another version, or edited)."""
+
+
 class NumericalError(CornerslamError):
     """The filter state became invalid (non-finite or non-symmetric covariance)."""
 

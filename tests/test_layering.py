@@ -24,7 +24,7 @@ PACKAGE = Path(cornerslam_cli.__file__).resolve().parent
 LAYERS: list[tuple[str, ...]] = [
     ("", "blas", "errors", "fpenv", "geometry", "ranges", "types", "workers"),  # stdlib, numpy
     ("textfile", "association.params", "features.params", "filter.params", "motion.params", "logs.params"),
-    ("report.tables",),  # file formats (TUM, CSV, JSON), read by evaluate too
+    ("report.tables", "results"),  # file formats (TUM, CSV, JSON); a run's results (summary.json's fields)
     ("logs", "features", "association", "filter", "motion", "simworld"),  # the stages, independent
     ("config",),  # the stages' sections assembled, loaded, validated
     ("lasers", "evaluate", "extract"),  # a run's config; scoring a trajectory; one scan's features

@@ -22,14 +22,15 @@ matplotlib is imported inside the functions (Agg backend), so importing this mod
 
 from __future__ import annotations
 
-import json
 import logging
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..evaluate import align_se2, apply_se2, interpolate_inside
+from ..results import RunSummary
 from .tables import COMPARISON_COLUMNS, read_csv, read_tum
 
 log = logging.getLogger(__name__)
@@ -60,7 +61,7 @@ class RunData:
     """
 
     out_dir: Path
-    summary: dict
+    summary: RunSummary
     log_name: str
     assoc: str
     steps: np.ndarray
@@ -82,18 +83,18 @@ def load_run(out_dir: str | Path, ground_truth: str | Path | None = None) -> Run
     against (default: the one its summary names, which shows a name that is not UTF-8 with U+FFFD
     and so cannot be opened by it)."""
     out_dir = Path(out_dir)
-    summary = json.loads((out_dir / "summary.json").read_text())
+    summary = RunSummary.read(out_dir)
     traj = read_csv(out_dir / "trajectory.csv")
     corrected = np.column_stack((traj["x"], traj["y"], traj["theta"]))
     odom = np.column_stack((traj["odom_x"], traj["odom_y"], traj["odom_theta"]))
     scan_odom = None
-    if "scan_odom_x" in traj and (summary.get("config", {}).get("scan_match", {}).get("enabled")):
+    if "scan_odom_x" in traj and summary.scan_matching:
         scan_odom = np.column_stack((traj["scan_odom_x"], traj["scan_odom_y"], traj["scan_odom_theta"]))
     return RunData(
         out_dir=out_dir,
         summary=summary,
-        log_name=Path(str(summary.get("input", {}).get("log", out_dir.name))).name,
-        assoc=str(summary.get("assoc", "")),
+        log_name=Path(summary.input.log).name,
+        assoc=summary.assoc,
         steps=traj["step"],
         corrected=corrected,
         odometry=odom_in_map(odom, corrected),
@@ -116,10 +117,10 @@ def odom_in_map(odom: np.ndarray, corrected: np.ndarray) -> np.ndarray:
 
 
 def _aligned_ground_truth(
-    summary: dict, stamps: np.ndarray, corrected: np.ndarray, path: str | Path | None = None
+    summary: RunSummary, stamps: np.ndarray, corrected: np.ndarray, path: str | Path | None = None
 ) -> np.ndarray | None:
-    acc = summary.get("accuracy") or {}
-    path = path if path is not None and "ground_truth" in acc else acc.get("ground_truth")
+    named = summary.accuracy.ground_truth if summary.accuracy else None
+    path = path if path is not None and named is not None else named
     if not path or len(corrected) < 2:
         return None
     try:
@@ -226,14 +227,13 @@ def _map_axes(ax) -> None:
     ax.grid(True, lw=0.3, alpha=0.5)
 
 
-def _accuracy_note(summary: dict) -> str:
-    acc = summary.get("accuracy") or {}
-    ate, odom = (acc.get("ate") or {}).get("rmse"), (acc.get("odom_ate") or {}).get("rmse")
-    if ate is None:
+def _accuracy_note(summary: RunSummary) -> str:
+    acc = summary.accuracy
+    if acc is None or acc.ate is None or math.isnan(acc.ate.rmse):  # null in summary.json: not drawn
         return ""
-    text = f"ATE RMSE {ate:.3f} m"
-    if odom is not None:
-        text += f" (odometry {odom:.3f} m)"
+    text = f"ATE RMSE {acc.ate.rmse:.3f} m"
+    if acc.odom_ate is not None and not math.isnan(acc.odom_ate.rmse):
+        text += f" (odometry {acc.odom_ate.rmse:.3f} m)"
     return text
 
 
