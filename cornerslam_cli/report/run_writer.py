@@ -271,18 +271,20 @@ def accuracy_of(
             ate=ate(stamps, poses, *ref.gt),
             odom_ate=ate(stamps, odoms, *ref.gt),
             **vars(rpe(stamps, poses, *ref.gt)),
+            scan_odom_ate=None if scan_odoms is None else ate(stamps, scan_odoms, *ref.gt),
         )
-        if scan_odoms is not None:
-            acc["scan_odom_ate"] = ate(stamps, scan_odoms, *ref.gt)
     if ref.relations is not None:
+        rel, offset = ref.relations, ref.time_offset
+        relations = relation_error(stamps, poses, rel, offset)
         acc.update(
             relations_file=display_path(ref.relations_path),
-            relations=relation_error(stamps, poses, ref.relations, ref.time_offset),
-            odom_relations=relation_error(stamps, odoms, ref.relations, ref.time_offset),
+            relations=relations,
+            odom_relations=relation_error(stamps, odoms, rel, offset),
+            scan_odom_relations=None
+            if scan_odoms is None
+            else relation_error(stamps, scan_odoms, rel, offset),
         )
-        if scan_odoms is not None:
-            acc["scan_odom_relations"] = relation_error(stamps, scan_odoms, ref.relations, ref.time_offset)
-        if acc["relations"].n == 0:
+        if relations.n == 0:
             notes.append(f"no relation in '{ref.relations_path}' falls inside the run (check --time-offset)")
     return Accuracy(**acc) if acc else None, notes
 
