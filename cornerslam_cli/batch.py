@@ -20,7 +20,7 @@ second) and at the end; while the batch runs, or after it was interrupted, the c
 finished have status ``pending``. Paths in it are as given (``log``) or relative to OUT (``out_dir``).
 
 OUT must be new, empty or a batch directory already (its ``.cornerslam-output`` marker, or the
-batch.csv of an older version): any other directory is refused before any work (report/outdir.py).
+batch.csv of an older version): any other directory is refused before any work (report/ownership.py).
 A combination's directory is replaced only if it is a cornerslam run output; anything else there
 fails that row.
 
@@ -48,7 +48,9 @@ from typing import Any
 from . import __version__
 from .blas import single_threaded_blas, single_threaded_blas_env
 from .errors import ConfigError, CornerslamError, ResultsError, display_path
-from .report.outdir import claim_dir, clear_stale, output_errors, staged_file
+from .report.oserrors import output_errors
+from .report.outdir import clear_stale, staged_file
+from .report.ownership import claim_dir
 from .results import Hashes, RunSummary
 
 BATCH_CSV = "batch.csv"

@@ -291,7 +291,7 @@ def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
     Example:
       cornerslam simulate sim.mcap --seed 3 && cornerslam run sim.mcap
     """
-    from .report.outdir import output_errors
+    from .report.oserrors import output_errors
     from .simulate import simulate_log
 
     setup_logging(verbose, quiet)
@@ -355,7 +355,7 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
     click.echo(scan_heading(step, scan))
     click.echo(format_extraction(segments, corners))
     if plot_path:
-        from .report.outdir import output_errors
+        from .report.oserrors import output_errors
 
         with output_errors(plot_path):
             plot_extraction(scan, segments, corners, plot_path)
@@ -395,7 +395,7 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
           --out sweep/ --jobs 2
     """
     from .batch import BATCH_CSV, plan, run_batch
-    from .report.outdir import check_claimable
+    from .report.ownership import check_claimable
 
     setup_logging(verbose, quiet)
     names = parse_assocs(assocs, allow_many=True) or [

@@ -21,7 +21,8 @@ from .config import Config
 from .frontend import Frame, Input, frames, open_input
 from .pipeline import run_filter
 from .report.comparison import write_comparison
-from .report.outdir import StagedDir, mark_output
+from .report.outdir import StagedDir
+from .report.ownership import mark_output
 from .report.run_writer import load_reference
 from .results import RunSummary
 from .workers import exit_with_parent

@@ -15,7 +15,8 @@ from pathlib import Path
 from .config import Config
 from .errors import OutputError, display_path
 from .frontend import Frame, Input, check_processed, frames, open_input
-from .report.outdir import StagedDir, output_errors
+from .report.oserrors import output_errors
+from .report.outdir import StagedDir
 from .report.run_writer import Reference, RunWriter, find_ground_truth, load_reference
 from .results import RunSummary
 from .slam import Slam
@@ -41,7 +42,7 @@ def run(
     """Run corner EKF-SLAM on one log and write the output directory atomically: the tables, with
     ``plot`` the figures and report.html, and ``mcap_out`` beside it, all committed at once.
 
-    The output places are checked before any work (report/outdir.py); the run's inputs — the log,
+    The output places are checked before any work (report/ownership.py); the run's inputs — the log,
     the ground truth (also LOG.gt.tum found beside the log), the relations, the config file
     ``config_path`` — are never written over. Returns the summary (also written to summary.json)
     with ``out_dir``, the committed directory.

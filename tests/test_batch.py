@@ -15,7 +15,7 @@ from cornerslam_cli import batch as batch_mod
 from cornerslam_cli.batch import TIMING_FIGURES, batch_columns, plan, read_batch, run_batch
 from cornerslam_cli.cli import cli
 from cornerslam_cli.errors import ConfigError, CornerslamError
-from cornerslam_cli.report.outdir import MARKER
+from cornerslam_cli.report.ownership import MARKER
 from cornerslam_cli.simulate import simulate_log
 
 SWEEP = ["--sweep", "association.pca.group_size=3,5"]

@@ -13,7 +13,7 @@ from cornerslam_cli.cli import cli
 from cornerslam_cli.errors import ConfigError
 from cornerslam_cli.logs.writers import RawScan, write_mcap
 from cornerslam_cli.options import parse_assocs
-from cornerslam_cli.report.outdir import MARKER
+from cornerslam_cli.report.ownership import MARKER
 from cornerslam_cli.report.tables import TIMING_COLUMNS, TRAJECTORY_COLUMNS, read_csv
 from cornerslam_cli.types import OdomSample
 
