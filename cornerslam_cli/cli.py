@@ -394,8 +394,9 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
       cornerslam batch sample_logs/*.mcap --assoc icnn,pca --sweep association.pca.group_size=3,5 \\
           --out sweep/ --jobs 2
     """
-    from .batch import BATCH_CSV, plan, run_batch
+    from .batch import BATCH_CSV, run_batch
     from .report.ownership import check_claimable
+    from .sweep import plan
 
     setup_logging(verbose, quiet)
     names = parse_assocs(assocs, allow_many=True) or [

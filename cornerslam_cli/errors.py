@@ -48,6 +48,12 @@ class NumericalError(CornerslamError):
     """The filter state became invalid (non-finite or non-symmetric covariance)."""
 
 
+def one_line(e: BaseException) -> str:
+    """An error as one line: a CornerslamError's message (and hint), a bug's type and message."""
+    text = str(e) if isinstance(e, CornerslamError) else f"{type(e).__name__}: {e}"
+    return " ".join(text.split())
+
+
 def printable(text: str) -> str:
     """``text`` with the undecodable bytes of a file name (``os.fsdecode``'s surrogate escapes) shown
     as U+FFFD, so that it can be printed and written to UTF-8 files and strict JSON."""

@@ -12,11 +12,12 @@ import pytest
 from click.testing import CliRunner
 
 from cornerslam_cli import batch as batch_mod
-from cornerslam_cli.batch import TIMING_FIGURES, batch_columns, plan, read_batch, run_batch
+from cornerslam_cli.batch import TIMING_FIGURES, batch_columns, read_batch, run_batch
 from cornerslam_cli.cli import cli
 from cornerslam_cli.errors import ConfigError, CornerslamError
 from cornerslam_cli.report.ownership import MARKER
 from cornerslam_cli.simulate import simulate_log
+from cornerslam_cli.sweep import plan
 
 SWEEP = ["--sweep", "association.pca.group_size=3,5"]
 KEY = "association.pca.group_size"

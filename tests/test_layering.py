@@ -31,7 +31,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("frontend",),  # a run's front end: log → synchronised frames → features → scan-matched motion
     ("slam",),  # the filter over the frames: steps, landmarks
     ("report",),  # run writer, figures, MCAP out, output directories, printed text, progress display
-    ("pipeline", "simulate"),  # a run; the simulated log
+    ("pipeline", "simulate", "sweep"),  # a run; the simulated log; a batch's plan
     ("compare", "batch"),
     ("options",),  # the command line's shared options and option parsers
     ("cli",),
