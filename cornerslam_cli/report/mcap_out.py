@@ -48,7 +48,7 @@ import numpy as np
 
 from ..errors import display_path
 from ..geometry import compose_inverse
-from .plots import ELLIPSE_SIGMA, ellipse_polygons, load_run
+from .run_dir import ELLIPSE_SIGMA, ellipse_polygons, load_run
 from .tables import json_text
 
 MAP_FRAME = "map"
