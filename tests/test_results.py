@@ -153,6 +153,8 @@ def test_summary_json_of_a_simulated_run_has_the_layout_and_values_it_always_had
     assert c["steps"] == len(traj["step"]) == c["scans_in"] == c["scans_matched"] + 1
     assert c["landmarks"] == len(lm["id"]) and c["matched_total"] == timing["n_matched"].sum()
     assert c["scans_skipped"] == c["keyframes_skipped"] == c["budget_hits"] == c["scans_match_fallback"] == 0
+    assert c["beams_total"] == 541 * c["scans_in"] > c["beams_invalid"] > 0  # the fixture's 541 beams a scan
+    assert c["messages_failed"] == c["scans_size_mismatch"] == c["scans_bad_geometry"] == 0
     t, rounding = s["timing"], 1e-9 * c["steps"]  # timing.csv has 9 decimals
     for name in ("t_extract", "t_predict", "t_match", "t_update", "t_scan_match"):
         assert t[name] == pytest.approx(timing[name].sum(), abs=rounding)
