@@ -268,4 +268,7 @@ def _value(tp: Any, v: Any, where: str, hint: str) -> Any:
     }[origin]
     if not isinstance(v, expect) or isinstance(v, bool):
         raise ResultsError(f"{where} is {type(v).__name__}, not {origin.__name__}", hint)
-    return tuple(v) if origin is tuple else v
+    if origin is tuple:  # tuple[float, float, float] or tuple[str, ...]: every item of its type
+        item = typing.get_args(tp)[0]
+        return tuple(_value(item, x, f"{where}[{i}]", hint) for i, x in enumerate(v))
+    return v

@@ -7,6 +7,7 @@ import hashlib
 import json
 import math
 import platform
+import re
 from pathlib import Path
 
 import pytest
@@ -81,6 +82,8 @@ def test_a_misspelt_or_written_field_fails_loudly():
         (lambda d: d["counts"].update(steps=True), "RunSummary.counts.steps is bool, not int"),
         (lambda d: d.update(input=None), "RunSummary.input is null"),
         (lambda d: d.update(final_pose={}), "RunSummary.final_pose is dict, not tuple"),
+        (lambda d: d.update(final_pose=[1.0, "2", 0.0]), "RunSummary.final_pose[1] is str, not float"),
+        (lambda d: d.update(warnings=[3]), "RunSummary.warnings[0] is int, not str"),
         (lambda d: d["accuracy"]["relations"].update(n=None), "RunSummary.accuracy.relations.n is null"),
         (lambda d: d.update(accuracy=[]), "RunSummary.accuracy is list, not an object"),
     ],
@@ -88,7 +91,7 @@ def test_a_misspelt_or_written_field_fails_loudly():
 def test_from_json_names_the_key_it_cannot_read(edit, message):
     data = make_summary(accuracy=FULL_ACCURACY).to_json()
     edit(data)
-    with pytest.raises(ResultsError, match="^" + message.replace(".", r"\.")):
+    with pytest.raises(ResultsError, match="^" + re.escape(message)):
         RunSummary.from_json(data)
 
 
