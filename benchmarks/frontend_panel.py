@@ -96,7 +96,7 @@ def score(args: tuple[Path, Path, list[str]]) -> dict:
     ref = reference(log, data, c["stamp"])
     row = {"log": log.name.removesuffix(".log"), "steps": len(ref), **c}
     for name in ("chain", "odom"):
-        row[f"{name}_ate"] = ate(c["stamp"], c[name], c["stamp"], ref)["rmse"]
+        row[f"{name}_ate"] = ate(c["stamp"], c[name], c["stamp"], ref).rmse
         for k in SPANS:
             row[f"{name}_{k}"] = span_errors(c[name], ref, k)
     return row

@@ -117,12 +117,12 @@ def relation_scores(r: dict, data: Path, keys=("pose", "odom")) -> tuple[dict, .
     from cornerslam_cli.evaluate import read_relations, relation_error
 
     rel = read_relations(data / "intel" / "intel.relations")
-    return tuple(relation_error(r["stamp"], r[k], rel, TIME_OFFSET) for k in keys)
+    return tuple(relation_error(r["stamp"], r[k], rel, TIME_OFFSET).to_json() for k in keys)
 
 
 def scan_points(log: Path, extra: list[str], stamps: np.ndarray) -> list[np.ndarray]:
     """Valid beam end points (sensor frame → base frame) of the keyframe scans, by stamp."""
-    from cornerslam_cli.frontend import scans_prepared, open_input
+    from cornerslam_cli.frontend import open_input, scans_prepared
     from cornerslam_cli.lasers import resolve_config
     from cornerslam_cli.types import Scan
 

@@ -114,10 +114,20 @@ def test_more_samples_to_learn_from_than_the_window_holds_are_refused():
     assert load_config(None, ["scan_match.adapt_min_samples=100"])
 
 
-def test_keys_of_earlier_versions_are_ignored_with_a_warning(caplog):
-    cfg = load_config(None, ["scan_match.retry_angle=0.2", "scan_match.alpha1=0.5"])
+def test_keys_of_earlier_versions_are_ignored_with_a_warning():
+    import io
+    import logging
+
+    stream = io.StringIO()
+    handler = logging.StreamHandler(stream)  # on the module's logger: the CLI may stop propagation above it
+    logger = logging.getLogger("cornerslam.config")
+    logger.addHandler(handler)
+    try:
+        cfg = load_config(None, ["scan_match.retry_angle=0.2", "scan_match.alpha1=0.5"])
+    finally:
+        logger.removeHandler(handler)
     assert cfg == load_config(None)
-    text = caplog.text
+    text = stream.getvalue()
     assert "'scan_match.retry_angle' is no longer used" in text and "correlative search" in text
     assert "'scan_match.alpha1' is no longer used" in text and "its own covariance" in text
 

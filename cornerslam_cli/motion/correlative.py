@@ -9,11 +9,11 @@ the odometry is uncertain.
 
 Score of a pose: the mean over the scan's points of a likelihood field L = exp(−d² / 2σ²), d the
 distance from the point's cell to the nearest map point (a Euclidean distance transform on a grid
-cropped to where the scan can land), minus a small pull towards the guess (``PULL``). Search as Olson's multi-resolution method: every rotation of
-the window is scored on a coarse grid whose cells hold the maximum of ``BLOCK`` × ``BLOCK`` fine
-cells — an upper bound of every fine translation inside — and coarse cells are expanded best first
-until no bound beats the best fine score found (branch and bound: the result equals the exhaustive
-fine search, which a test checks).
+cropped to where the scan can land), minus a small pull towards the guess (``PULL``). Search as Olson's
+multi-resolution method: every rotation of the window is scored on a coarse grid whose cells hold the
+maximum of ``BLOCK`` × ``BLOCK`` fine cells — an upper bound of every fine translation inside — and
+coarse cells are expanded best first until no bound beats the best fine score found (branch and bound:
+the result equals the exhaustive fine search, which a test checks).
 """
 
 from __future__ import annotations

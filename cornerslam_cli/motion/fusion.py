@@ -27,11 +27,11 @@ keyframes have been seen the model itself is used (k = s = 1, no bias); then the
 at every keyframe up to 2·``adapt_every`` samples, every ``adapt_every`` after that. Nothing here looks at a
 reference trajectory.
 
-**Gate.** Once the scales are learnt, a match whose disagreement with the corrected odometry exceeds the χ²₃ ``gate`` under
-max(k, 1)·Σ_o + s·Σ_m is not taken on trust: the odometry increment is used alone (counted as
-rejected). The gate keeps the configured model as a floor: real odometry errors are heavy-tailed (a
-wheel slipping in a turn), and a scale learnt on the bulk of the increments would reject the true match
-of such a turn.
+**Gate.** Once the scales are learnt, a match whose disagreement with the corrected odometry exceeds the
+χ²₃ ``gate`` under max(k, 1)·Σ_o + s·Σ_m is not taken on trust: the odometry increment is used alone
+(counted as rejected). The gate keeps the configured model as a floor: real odometry errors are
+heavy-tailed (a wheel slipping in a turn), and a scale learnt on the bulk of the increments would reject
+the true match of such a turn.
 """
 
 from __future__ import annotations

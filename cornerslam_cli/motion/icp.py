@@ -42,7 +42,7 @@ NORMAL_TIED_EXTRA = 2  # neighbours queried beyond the 5th to find those tied wi
 SHRINK = 0.5
 MAX_RHO = 0.98  # residual correlation used at most: an inflation of 99
 FIT_MARGIN = 0.02  # a fit better by more than this replaces the match from the odometry's guess
-CONVERGED = 1e-5  # largest step component (m or rad) that ends the iterations
+CONVERGED = 1e-4  # largest step component (m or rad) that ends the iterations
 
 
 def voxel_thin(points: np.ndarray, size: float) -> np.ndarray:
@@ -144,10 +144,11 @@ def register(
         dmax = max(cfg.min_distance, dmax * SHRINK)
         if np.abs(step).max() < CONVERGED and dmax <= cfg.min_distance:
             break
-    pose = pose_from_matrix(M)
-    dist, _ = local.tree.query(transform_points(points, pose), distance_upper_bound=cfg.inlier_distance)
+    q = points @ M[:2, :2].T + M[:2, 2]
+    dist, idx = local.tree.query(q, distance_upper_bound=cfg.inlier_distance)
     fit = float(np.mean(dist < cfg.inlier_distance))
-    return Registration(pose, fit, _covariance(points, local, M, prior_info, cfg))
+    terms = _line_terms(q, idx, local, M, cfg.robust_scale)
+    return Registration(pose_from_matrix(M), fit, _covariance(terms, prior_info, cfg))
 
 
 def _point_to_line(points: np.ndarray, local: LocalMap, M: np.ndarray, dmax: float, scale: float):
@@ -155,6 +156,11 @@ def _point_to_line(points: np.ndarray, local: LocalMap, M: np.ndarray, dmax: flo
     against their nearest map point within ``dmax``; None with fewer than 3 usable correspondences."""
     q = points @ M[:2, :2].T + M[:2, 2]
     _, idx = local.tree.query(q, distance_upper_bound=dmax)
+    return _line_terms(q, idx, local, M, scale)
+
+
+def _line_terms(q: np.ndarray, idx: np.ndarray, local: LocalMap, M: np.ndarray, scale: float):
+    """:func:`_point_to_line` of points ``q`` already placed, given their nearest map points ``idx``."""
     n = local.padded_normals[idx]  # zero rows: no neighbour in range, or a neighbour with no normal
     if np.count_nonzero(np.abs(n).sum(axis=1)) < 3:
         return None
@@ -167,10 +173,9 @@ def _point_to_line(points: np.ndarray, local: LocalMap, M: np.ndarray, dmax: flo
     return J, w, r
 
 
-def _covariance(
-    points: np.ndarray, local: LocalMap, M: np.ndarray, prior_info: np.ndarray, cfg
-) -> np.ndarray:
-    """Covariance of the registered pose: (JᵀWJ / (σ̂²·c) + prior)⁻¹ at the solution.
+def _covariance(terms, prior_info: np.ndarray, cfg) -> np.ndarray:
+    """Covariance of the registered pose: (JᵀWJ / (σ̂²·c) + prior)⁻¹ at the solution, from the
+    point-to-line ``terms`` (J, w, r) of the correspondences within ``inlier_distance``.
 
     σ̂² is the weighted mean squared point-to-line residual (the scan's own noise, not a configured
     one). c corrects for residuals that are not independent: neighbouring points of a scan are
@@ -178,8 +183,7 @@ def _covariance(
     correlation of the residuals in beam order (an AR(1) model), n points carry the information of
     n·(1 − ρ)/(1 + ρ) independent ones, so c = (1 + ρ)/(1 − ρ) (at least ``cov_inflation``).
     """
-    terms = _point_to_line(points, local, M, cfg.inlier_distance, cfg.robust_scale)
-    if terms is None:
+    if terms is None:  # fewer than 3 usable correspondences within inlier_distance
         return np.diag(1.0 / prior_info)
     J, w, r = terms
     used = np.abs(J[:, :2]).sum(axis=1) > 0
@@ -275,11 +279,11 @@ class ScanMatcher:
             return self._fallback(o, cov_o, 0.0)
         reg, searched = register(points, self.local, guess, cfg), False
         window = self._window(cov_o)
-        if window.xy > cfg.search_min_xy or window.theta > cfg.search_min_theta:
+        near = points[np.einsum("ij,ij->i", points, points) <= cfg.search_range**2]
+        if (window.xy > cfg.search_min_xy or window.theta > cfg.search_min_theta) and len(near) >= 3:
             # the odometry may be outside ICP's basin: ICP also from the best pose of the whole window,
             # kept when it fits clearly better (near-equal fits: the one from the odometry, e.g. along
             # a corridor where the search's cells are as good as each other)
-            near = points[np.einsum("ij,ij->i", points, points) <= cfg.search_range**2]
             found = search(near, self.local.points, guess, window, cfg.search_resolution, cfg.search_sigma)
             other = register(points, self.local, found.pose, cfg, prior=guess)
             if other.fit > reg.fit + FIT_MARGIN:

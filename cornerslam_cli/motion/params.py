@@ -81,7 +81,7 @@ class ScanMatchConfig:
     warmup: int = num(
         20, ge=0, le=10000
     )  # keyframes matched once to learn the scales before the run; 0 = off
-    adapt_every: int = num(10, ge=1, le=100000)  # keyframes between two re-estimates
+    adapt_every: int = num(25, ge=1, le=100000)  # keyframes between two re-estimates
     adapt_min_samples: int = num(5, ge=2, le=100000)  # ... the model itself (scale 1) until this many
     # floor added to each fused increment's covariance for the filter (0: none; the learnt scales make
     # the covariance honest per increment: a floor lets corner updates pull an exact chain off, measured

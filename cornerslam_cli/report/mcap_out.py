@@ -48,7 +48,7 @@ import numpy as np
 
 from ..errors import display_path
 from ..geometry import compose_inverse
-from .plots import ELLIPSE_SIGMA, ellipse_polygons, load_run
+from .run_dir import ELLIPSE_SIGMA, ellipse_polygons, load_run
 from .tables import json_text
 
 MAP_FRAME = "map"
@@ -233,7 +233,7 @@ def write_results_mcap(
     stamps_ns = [stamp_to_ns(t) for t in _stamp_texts(out_dir / "trajectory.csv")]
     ns_of_step = dict(zip(run.steps.astype(int).tolist(), stamps_ns, strict=True))
     odom_raw = read_odom_raw(out_dir)  # odom-frame poses, for the map → odom transform
-    odom_frame = str(((run.summary.get("config") or {}).get("input") or {}).get("odom_frame") or "odom")
+    odom_frame = str(run.summary.config.get("input", {}).get("odom_frame") or "odom")  # the run's config
 
     msgs: list[tuple[int, str, dict]] = []  # (log time ns, topic key, payload)
     for ns, c, o, m in zip(stamps_ns, run.corrected, run.odometry, compose_inverse(run.corrected, odom_raw),
@@ -272,9 +272,9 @@ def write_results_mcap(
         w.add_metadata(
             "cornerslam",
             {
-                "log": str(run.summary.get("input", {}).get("log", "")),
+                "log": run.summary.input.log,
                 "assoc": run.assoc,
-                "version": str(run.summary.get("cornerslam_version", "")),
+                "version": run.summary.cornerslam_version,
                 "results": display_path(out_dir if results is None else results),  # MCAP strings are UTF-8
             },
         )

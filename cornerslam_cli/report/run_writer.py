@@ -25,6 +25,7 @@ from .. import __version__, fpenv
 from ..errors import display_path
 from ..evaluate import ate, overlap_problem, read_relations, relation_error, rpe
 from ..logs import check_regular
+from ..results import Accuracy, Counts, Hashes, OdometryModel, RunInput, RunSummary, Timing
 from .tables import (
     LINES_COLUMNS,
     MAP_COLUMNS,
@@ -118,7 +119,7 @@ class RunWriter:
 
     def finish(
         self, landmarks: dict[str, np.ndarray], src: Input, cfg: Config, ref: Reference, wall0: float
-    ) -> dict:
+    ) -> RunSummary:
         """map.csv from the filter's ``landmarks`` (columns by name), trajectory.tum, the accuracy
         against ``ref`` and summary.json; returns the summary."""
         with self._open("map.csv", MAP_COLUMNS) as mp:
@@ -132,7 +133,7 @@ class RunWriter:
         for text in notes:
             src.reader.stats.warn(text)
         summary = build_summary(src, cfg, self.totals, len(landmarks["id"]), poses[-1], accuracy, wall0)
-        write_json(self.dest / "summary.json", summary)
+        write_json(self.dest / "summary.json", summary.to_json())
         return summary
 
 
@@ -142,73 +143,87 @@ def build_summary(
     totals: Totals,
     n_landmarks: int,
     final_pose: np.ndarray,
-    accuracy: dict | None,
+    accuracy: Accuracy | None,
     wall0: float,
-) -> dict:
-    """summary.json of a run (INTERFACE.md): input, counts, timing totals, accuracy, hashes, versions."""
-    reader, info, times = src.reader, src.info, totals.times
-    return {
-        "cornerslam_version": __version__,
-        "mode": "slam",
-        "input": {
-            "log": display_path(src.path),
-            "format": info.format,
-            "scan_topic": info.scan_topic,
-            "odom_topic": info.odom_topic,
-            "odom_source": info.odom_source,
-            "laser_to_base": list(src.laser2base),
-            "laser_to_base_source": src.laser_source,
-        },
-        "assoc": cfg.association.method,
-        "counts": {
-            "steps": totals.steps,
-            "landmarks": n_landmarks,
-            "matched_total": totals.matched,
-            "beams_total": reader.stats.beams,
-            "beams_invalid": reader.stats.beams_dropped,
-            "scans_bad_geometry": reader.stats.scans_skipped,
-            "scans_size_mismatch": reader.stats.size_mismatch,
-            "messages_failed": reader.stats.decode_failed,
-            **src.stats.as_dict(),
-            "budget_hits": int(totals.budget_hits),
-            **_scan_match_counts(src.matcher),
-        },
-        "timing": {
-            "t_extract": times[0],
-            "t_predict": times[1],
-            "t_match": times[2],
-            "t_update": times[3],
-            "t_scan_match": times[4],
-            "t_total": float(times.sum()),
-            "t_match_max": totals.t_match_max,
-            "wall_time": time.perf_counter() - wall0,
-            "scans_per_second": totals.steps / max(float(times.sum()), 1e-12),
-        },
-        "final_pose": final_pose.tolist(),
-        **_odometry_model(src.matcher),
-        "warnings": list(reader.stats.warnings),
-        "accuracy": accuracy,
-        "hashes": {"input": input_hash(src.path), "config": config_hash(cfg), "version": __version__},
-        "config": cfg.to_dict(),
-        "versions": _versions(),
-    }
+) -> RunSummary:
+    """The summary of a run (summary.json, INTERFACE.md): input, counts, timing totals, accuracy,
+    hashes, versions."""
+    info = src.info
+    return RunSummary(
+        cornerslam_version=__version__,
+        mode="slam",
+        input=RunInput(
+            log=display_path(src.path),
+            format=info.format,
+            scan_topic=info.scan_topic,
+            odom_topic=info.odom_topic,
+            odom_source=info.odom_source,
+            laser_to_base=tuple(float(v) for v in src.laser2base),
+            laser_to_base_source=src.laser_source,
+        ),
+        assoc=cfg.association.method,
+        counts=run_counts(src, totals, n_landmarks),
+        timing=run_timing(totals, wall0),
+        final_pose=tuple(final_pose.tolist()),
+        odometry_model=odometry_model(src.matcher),
+        warnings=tuple(src.reader.stats.warnings),
+        accuracy=accuracy,
+        hashes=Hashes(input=input_hash(src.path), config=config_hash(cfg), version=__version__),
+        config=cfg.to_dict(),
+        versions=_versions(),
+    )
 
 
-def _scan_match_counts(matcher) -> dict:
+def run_counts(src: Input, totals: Totals, n_landmarks: int) -> Counts:
+    """What the run counted: the filter's steps and matches, the reader's beams and scans, the
+    synchroniser's scans and odometry, the associator's budget hits, the scan matcher's outcomes."""
+    stats, matcher = src.reader.stats, src.matcher
+    return Counts(
+        steps=totals.steps,
+        landmarks=n_landmarks,
+        matched_total=totals.matched,
+        beams_total=stats.beams,
+        beams_invalid=stats.beams_dropped,
+        scans_bad_geometry=stats.scans_skipped,
+        scans_size_mismatch=stats.size_mismatch,
+        messages_failed=stats.decode_failed,
+        **src.stats.as_dict(),
+        budget_hits=int(totals.budget_hits),
+        scans_matched=None if matcher is None else matcher.n_matched,
+        # "retried": the correlative search over the odometry's window ran (it replaced the heading retries)
+        scans_match_retried=None if matcher is None else matcher.n_searched,
+        scans_match_rejected=None if matcher is None else matcher.n_rejected,
+        scans_match_fallback=None if matcher is None else matcher.n_fallback,
+    )
+
+
+def odometry_model(matcher) -> OdometryModel | None:
+    """What the fusion learnt about the odometry and the matches (motion/fusion.py) by the run's end."""
     if matcher is None:
-        return {}
-    # "retried": the correlative search over the odometry's window ran (it replaced the heading retries)
-    return {"scans_matched": matcher.n_matched, "scans_match_retried": matcher.n_searched,
-            "scans_match_rejected": matcher.n_rejected, "scans_match_fallback": matcher.n_fallback}  # fmt: skip
-
-
-def _odometry_model(matcher) -> dict:
-    """What the fusion learnt about the odometry (motion/fusion.py), at the end of the run."""
-    if matcher is None:
-        return {}
+        return None
     f = matcher.fusion
-    return {"odometry_model": {"odom_noise_scale": f.k, "match_noise_scale": f.s,
-                               "odom_scale_error": float(f.c[0]), "heading_drift_per_m": float(f.c[1])}}  # fmt: skip
+    return OdometryModel(
+        odom_noise_scale=f.k,
+        match_noise_scale=f.s,
+        odom_scale_error=float(f.c[0]),
+        heading_drift_per_m=float(f.c[1]),
+    )
+
+
+def run_timing(totals: Totals, wall0: float) -> Timing:
+    """The stage times summed over the steps, the slowest matching step, the wall time since ``wall0``."""
+    times = totals.times
+    return Timing(
+        t_extract=float(times[0]),
+        t_predict=float(times[1]),
+        t_match=float(times[2]),
+        t_update=float(times[3]),
+        t_scan_match=float(times[4]),
+        t_total=float(times.sum()),
+        t_match_max=totals.t_match_max,
+        wall_time=time.perf_counter() - wall0,
+        scans_per_second=totals.steps / max(float(times.sum()), 1e-12),
+    )
 
 
 def find_ground_truth(log_path: Path) -> Path | None:
@@ -256,12 +271,12 @@ def accuracy_of(
     odoms: np.ndarray,
     ref: Reference,
     scan_odoms: np.ndarray | None = None,
-) -> tuple[dict | None, list[str]]:
+) -> tuple[Accuracy | None, list[str]]:
     """ATE/RPE against the ground truth and the relation metric, for the estimate and for odometry (and
     for the scan-matched odometry when there is one: what the corners add on top of it), and the
     warnings about them: a ground truth read out of time order, a ground truth that does not overlap
     the run in time (then there is no ATE/RPE, rather than NaN), no relation inside the run."""
-    acc: dict = {}
+    acc: dict = {}  # Accuracy's fields
     notes = list(ref.notes)
     problem = ref.gt is not None and overlap_problem(stamps, ref.gt[0], f"ground truth '{ref.gt_path}'")
     if problem:
@@ -271,21 +286,23 @@ def accuracy_of(
             ground_truth=display_path(ref.gt_path),
             ate=ate(stamps, poses, *ref.gt),
             odom_ate=ate(stamps, odoms, *ref.gt),
-            **rpe(stamps, poses, *ref.gt),
+            **vars(rpe(stamps, poses, *ref.gt)),
+            scan_odom_ate=None if scan_odoms is None else ate(stamps, scan_odoms, *ref.gt),
         )
-        if scan_odoms is not None:
-            acc["scan_odom_ate"] = ate(stamps, scan_odoms, *ref.gt)
     if ref.relations is not None:
+        rel, offset = ref.relations, ref.time_offset
+        relations = relation_error(stamps, poses, rel, offset)
         acc.update(
             relations_file=display_path(ref.relations_path),
-            relations=relation_error(stamps, poses, ref.relations, ref.time_offset),
-            odom_relations=relation_error(stamps, odoms, ref.relations, ref.time_offset),
+            relations=relations,
+            odom_relations=relation_error(stamps, odoms, rel, offset),
+            scan_odom_relations=None
+            if scan_odoms is None
+            else relation_error(stamps, scan_odoms, rel, offset),
         )
-        if scan_odoms is not None:
-            acc["scan_odom_relations"] = relation_error(stamps, scan_odoms, ref.relations, ref.time_offset)
-        if acc["relations"]["n"] == 0:
+        if relations.n == 0:
             notes.append(f"no relation in '{ref.relations_path}' falls inside the run (check --time-offset)")
-    return acc or None, notes
+    return Accuracy(**acc) if acc else None, notes
 
 
 def config_hash(cfg: Config) -> str:
