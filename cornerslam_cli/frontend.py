@@ -67,6 +67,7 @@ class Frame:
     scan_matched: bool = False  # the increment into this frame came from scan matching
     scan_fit: float = float("nan")  # share of the scan's points on the local map after matching
     t_scan_match: float = 0.0
+    points: np.ndarray | None = None  # (k, 2) float32 valid beam end points, sensor frame (occupancy grid)
 
 
 def extract_frame(scan: Scan, odom: np.ndarray, cfg: Config, laser2base: tuple[float, float, float]) -> Frame:
@@ -75,7 +76,9 @@ def extract_frame(scan: Scan, odom: np.ndarray, cfg: Config, laser2base: tuple[f
     z, C = corners_to_base(corners, laser2base)
     C[:, 0, 0] += cfg.corners.model_sigma**2
     C[:, 1, 1] += cfg.corners.model_sigma**2
-    return Frame(scan.stamp, odom, len(scan.ranges), segments, z, C, time.perf_counter() - t0)
+    t_extract = time.perf_counter() - t0
+    points = scan.points().astype(np.float32)
+    return Frame(scan.stamp, odom, len(scan.ranges), segments, z, C, t_extract, points=points)
 
 
 @dataclass

@@ -95,9 +95,9 @@ def run_filter(
     """The filter over the front end's frames, a run's files written into the (staging) directory
     ``dest``; returns the summary."""
     slam = Slam.from_config(cfg, src.laser2base)
-    with RunWriter(dest) as writer:
+    with RunWriter(dest, src.laser2base, cfg.grid) as writer:
         for frame in frame_iter:
-            writer.step(slam.step(frame))
+            writer.step(slam.step(frame), frame.points)
         writer.close_steps()
         check_processed(src, slam.n_steps, writer.totals.points)
         return writer.finish(slam.landmark_table(), src, cfg, ref, wall0)

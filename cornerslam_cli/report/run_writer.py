@@ -1,5 +1,11 @@
-"""A run's output files: the per-step tables written row by row, map.csv, trajectory.tum and the
-summary (counts, timing totals, accuracy, hashes, versions) in summary.json.
+"""A run's output files: the per-step tables written row by row, map.csv, trajectory.tum (with
+odometry.tum and scan_matched.tum beside it), the occupancy grid (report/occupancy.py) and the summary (counts, timing totals, accuracy,
+hashes, versions) in summary.json.
+
+Frames: every pose, segment and landmark is written in the log's odometry frame. The filter works in
+its map frame, the base at the first scan (the EKF starts at zero); placed in the odometry frame, that
+is the first odometry pose, ``map2odom``, so the first pose written equals the first odometry pose and
+``evo_traj tum odometry.tum trajectory.tum --ref gt.tum`` needs no alignment to compare them.
 
 Every row is a dict keyed by its table's column names (report/tables.py ``*_COLUMNS``), so a column
 is written by name, never by position. The accuracy is measured against a :class:`Reference`
@@ -15,7 +21,7 @@ import platform
 import time
 from array import array
 from contextlib import ExitStack
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -24,7 +30,9 @@ import numpy as np
 from .. import __version__, fpenv
 from ..errors import display_path
 from ..evaluate import ate, overlap_problem, read_relations, relation_error, rpe
+from ..geometry import compose, rotate_covariance, transform_points
 from ..logs import check_regular
+from .occupancy import ScanStore, build_grid, draw_grid, write_grid
 from .tables import (
     LINES_COLUMNS,
     MAP_COLUMNS,
@@ -37,7 +45,7 @@ from .tables import (
 )
 
 if TYPE_CHECKING:
-    from ..config import Config
+    from ..config import Config, GridConfig
     from ..frontend import Input
     from ..slam import StepRecord
 
@@ -52,6 +60,43 @@ def trajectory_row(r: StepRecord) -> dict:
         **dict(zip(("var_x", "var_y", "var_theta"), r.pose_var, strict=True)),
         **dict(zip(("scan_odom_x", "scan_odom_y", "scan_odom_theta"), r.motion, strict=True)),
     }
+
+
+def in_odom_frame(r: StepRecord, map2odom: np.ndarray) -> StepRecord:
+    """The step's record with its pose, pose variances and segments moved from the filter's map frame
+    into the odometry frame by ``map2odom`` (the first odometry pose). A map frame that is the
+    odometry frame (odometry starting at zero) leaves the record exactly as the filter gave it."""
+    if not np.any(map2odom):
+        return r
+    cov = np.array([[[r.pose_var[0], r.cov_xy], [r.cov_xy, r.pose_var[1]]]])
+    cov = rotate_covariance(cov, float(map2odom[2]))[0]
+    return replace(
+        r,
+        pose=compose(map2odom, r.pose),
+        pose_var=np.array([cov[0, 0], cov[1, 1], r.pose_var[2]]),
+        cov_xy=float(cov[0, 1]),
+        segments_map=transform_points(r.segments_map.reshape(-1, 2), map2odom).reshape(-1, 4),
+    )
+
+
+def landmarks_in_odom_frame(landmarks: dict[str, np.ndarray], map2odom: np.ndarray) -> dict[str, np.ndarray]:
+    """map.csv's columns moved like :func:`in_odom_frame`: positions and their covariances (φ, an
+    angle between two lines, does not depend on the frame)."""
+    if not np.any(map2odom) or len(landmarks["id"]) == 0:
+        return landmarks
+    cov = np.stack(
+        (landmarks["var_x"], landmarks["cov_xy"], landmarks["cov_xy"], landmarks["var_y"]), axis=-1
+    )
+    cov = rotate_covariance(cov.reshape(-1, 2, 2), float(map2odom[2]))
+    xy = transform_points(np.column_stack((landmarks["x"], landmarks["y"])), map2odom)
+    moved = {
+        "x": xy[:, 0],
+        "y": xy[:, 1],
+        "var_x": cov[:, 0, 0],
+        "var_y": cov[:, 1, 1],
+        "cov_xy": cov[:, 0, 1],
+    }
+    return {**landmarks, **moved}
 
 
 def timing_row(r: StepRecord) -> dict:
@@ -82,16 +127,22 @@ class Totals:
 class RunWriter:
     """A run's files in the (staging) directory ``dest``: :meth:`step` writes one step's rows,
     :meth:`close_steps` completes the per-step tables, :meth:`finish` the map, trajectory.tum and
-    summary.json. A context manager: on an error the open files are closed without a second error."""
+    summary.json. A context manager: on an error the open files are closed without a second error.
+    The scans given to :meth:`step` (the laser at ``laser2base`` on the robot) make the occupancy
+    grid (``grid``: its resolution and size cap)."""
 
-    def __init__(self, dest: Path):
+    def __init__(self, dest: Path, laser2base: tuple[float, float, float], grid: GridConfig):
         self.dest = dest
+        self.laser2base = laser2base
+        self.grid = grid
+        self.scans = ScanStore()
         self._files = ExitStack()
         self.trajectory = self._open("trajectory.csv", TRAJECTORY_COLUMNS)
         self.timing = self._open("timing.csv", TIMING_COLUMNS)
         self.lines = self._open("lines.csv", LINES_COLUMNS)
         self.track = array("d")  # stamp, pose, odom, motion per step: 80 bytes (a list of arrays: ~400)
         self.totals = Totals()
+        self.map2odom: np.ndarray | None = None  # the filter's map frame in the odometry frame
 
     def _open(self, name: str, columns: list[str]) -> CsvTable:
         return self._files.enter_context(CsvTable(self.dest / name, columns))
@@ -102,7 +153,14 @@ class RunWriter:
     def __exit__(self, *exc) -> None:
         self._files.__exit__(*exc)
 
-    def step(self, r: StepRecord) -> None:
+    def step(self, r: StepRecord, points: np.ndarray | None = None) -> None:
+        """Write one step's rows, in the odometry frame (the first step's odometry pose places it);
+        keep its scan's ``points`` (k, 2, laser frame) for the occupancy grid."""
+        if self.map2odom is None:
+            self.map2odom = np.array(r.odom, dtype=float)
+        r = in_odom_frame(r, self.map2odom)
+        if points is not None:
+            self.scans.add(compose(r.pose, self.laser2base), points)
         self.trajectory.write(trajectory_row(r))
         self.timing.write(timing_row(r))
         self.lines.rows(r.segments_map, lead=(r.step,))
@@ -119,8 +177,11 @@ class RunWriter:
     def finish(
         self, landmarks: dict[str, np.ndarray], src: Input, cfg: Config, ref: Reference, wall0: float
     ) -> dict:
-        """map.csv from the filter's ``landmarks`` (columns by name), trajectory.tum, the accuracy
-        against ``ref`` and summary.json; returns the summary."""
+        """map.csv from the filter's ``landmarks`` (columns by name), trajectory.tum, odometry.tum and
+        (with scan matching) scan_matched.tum, the accuracy against ``ref`` and summary.json; returns
+        the summary."""
+        if self.map2odom is not None:
+            landmarks = landmarks_in_odom_frame(landmarks, self.map2odom)
         with self._open("map.csv", MAP_COLUMNS) as mp:
             for i in range(len(landmarks["id"])):
                 mp.write({name: landmarks[name][i] for name in MAP_COLUMNS})
@@ -128,12 +189,24 @@ class RunWriter:
         stamps, poses, odoms = track[:, 0], track[:, 1:4], track[:, 4:7]
         motions = track[:, 7:10] if src.matcher is not None else None
         write_tum(self.dest / "trajectory.tum", stamps, poses)
+        write_tum(self.dest / "odometry.tum", stamps, odoms)
+        if motions is not None:
+            write_tum(self.dest / "scan_matched.tum", stamps, motions)
         accuracy, notes = accuracy_of(stamps, poses, odoms, ref, motions)
         for text in notes:
             src.reader.stats.warn(text)
+        self.write_grid(poses, src.reader.stats.warn)
         summary = build_summary(src, cfg, self.totals, len(landmarks["id"]), poses[-1], accuracy, wall0)
         write_json(self.dest / "summary.json", summary)
         return summary
+
+
+    def write_grid(self, poses: np.ndarray, warn) -> None:
+        """map.pgm, map.yaml and map_grid.png from the kept scans (their warnings through ``warn``)."""
+        grid = build_grid(self.scans, self.grid.resolution, self.grid.max_cells, warn)
+        self.scans = ScanStore()  # the memory back before the summary
+        write_grid(self.dest, grid)
+        draw_grid(self.dest / "map_grid.png", grid, poses)
 
 
 def build_summary(
