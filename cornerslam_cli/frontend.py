@@ -20,6 +20,7 @@ from .config import Config
 from .errors import ConfigError, LogError
 from .features import extract
 from .geometry import matrix_from_pose, transform_points
+from .lasers import mount_source
 from .logs import ReadStats, open_log
 from .logs.sync import SyncStats, reanchor_odometry, select_keyframes, synchronise
 from .motion import ScanMatcher
@@ -89,10 +90,11 @@ class Input:
     reader: object
     info: object
     laser2base: tuple[float, float, float]
-    laser_source: str
+    laser_source: str  # where laser2base came from: tf, config, preset or default (lasers.mount_source)
     total_scans: int
     stats: SyncStats
     matcher: ScanMatcher | None = None  # scan matching of the motion input (scan_match.enabled)
+    odom_on_tf: bool = False  # the log's tf carries odom→base (odometry from tf, or seen beside it)
 
 
 def open_input(log_path: str | Path, cfg: Config) -> Input:
@@ -109,7 +111,10 @@ def open_input(log_path: str | Path, cfg: Config) -> Input:
     info = reader.info()
     laser2base, source = _laser_mount(reader, cfg)
     matcher = ScanMatcher(cfg.scan_match) if cfg.scan_match.enabled else None
-    return Input(Path(log_path), reader, info, laser2base, source, _scan_count(info), SyncStats(), matcher)
+    odom_on_tf = info.odom_source.startswith("tf") or reader.odom_on_tf
+    return Input(
+        Path(log_path), reader, info, laser2base, source, _scan_count(info), SyncStats(), matcher, odom_on_tf
+    )
 
 
 def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None = None) -> Iterator[Frame]:
@@ -212,12 +217,21 @@ def _scans_prepared(reader, cfg: Config):
 
 
 def _laser_mount(reader, cfg: Config) -> tuple[tuple[float, float, float], str]:
+    """The laser's pose on the robot and where it came from: tf when the log has it, else the
+    config's ``input.laser`` (:func:`lasers.mount_source`), warned when that is the built-in default."""
     mount = cfg.input.laser
     if mount.from_tf:
         tf = reader.laser_to_base()
         if tf is not None:
             return (float(tf[0]), float(tf[1]), float(tf[2])), "tf"
-    return (mount.x, mount.y, mount.yaw), "config"
+    source = mount_source(cfg)
+    if source == "default":
+        reader.stats.warn(
+            "log '%s' has no tf %s→laser: the laser is taken at the built-in default x=0 y=0 yaw=0 on "
+            "the robot (set input.laser.x/y/yaw to its mount, or input.laser.from_tf=false to keep it)",
+            reader.path.name, short_text(cfg.input.base_frame),
+        )  # fmt: skip
+    return (mount.x, mount.y, mount.yaw), source
 
 
 def _scan_count(info) -> int:

@@ -30,7 +30,7 @@ OCCUPIED, FREE, UNKNOWN = 0, 254, 205  # map_saver's trinary pixel values
 OCCUPIED_THRESH, FREE_THRESH = 0.65, 0.196  # map_saver's thresholds: 0 → occupied, 254 → free, 205 → unknown
 HIT_RATIO = 0.25  # share of the beams reaching a cell that end in it for it to be occupied
 MAX_POINTS = 8_000_000  # end points kept (64 MB as float32) before the store is thinned
-CHUNK = 2_000_000  # ray samples traced at once (~100 MB of temporaries)
+CHUNK = 500_000  # ray samples traced at once (~40 MB of temporaries)
 PNG_COLOURS = {OCCUPIED: (0, 0, 0), FREE: (255, 255, 255), UNKNOWN: (190, 190, 190)}
 PATH_COLOUR = (31, 119, 180)  # the trajectory in map_grid.png
 
@@ -102,20 +102,20 @@ def line_cells(start: np.ndarray, end: np.ndarray, lo: np.ndarray, resolution: f
     """Flat cell indices along the segments ``start`` → ``end`` (n, 2), one sample per cell along each
     segment's major axis, the end itself excluded; and the end's own flat cell per segment. Returns
     (beam of each sample, flat cell of each sample, flat cell of each end)."""
-    a, b = (start - lo) / resolution, (end - lo) / resolution
+    a = ((start - lo) / resolution).astype(np.float32)  # cell units: float32 is exact to 1/1000 cell
+    b = ((end - lo) / resolution).astype(np.float32)
     d = b - a
     n = np.maximum(np.ceil(np.abs(d).max(axis=1)), 1.0).astype(np.int64)  # samples per segment
     beam = np.repeat(np.arange(len(n)), n)
     first = np.cumsum(n) - n
-    t = (np.arange(len(beam)) - first[beam]) / n[beam]
-    cells = _flat(a[beam] + t[:, None] * d[beam], cols)
-    return beam, cells, _flat(b, cols)
+    t = (np.arange(len(beam)) - first[beam]).astype(np.float32) / n[beam].astype(np.float32)
+    cells = _flat(a[beam, 0] + t * d[beam, 0], a[beam, 1] + t * d[beam, 1], cols)
+    return beam, cells, _flat(b[:, 0], b[:, 1], cols)
 
 
-def _flat(uv: np.ndarray, cols: int) -> np.ndarray:
-    """Flat index (row · cols + col) of the cells holding points ``uv`` in cell units."""
-    ij = np.floor(uv).astype(np.int64)
-    return ij[:, 1] * cols + ij[:, 0]
+def _flat(u: np.ndarray, v: np.ndarray, cols: int) -> np.ndarray:
+    """Flat index (row · cols + col) of the cells holding the points (u, v), in cell units."""
+    return np.floor(v).astype(np.int64) * cols + np.floor(u).astype(np.int64)
 
 
 def _chunks(start: np.ndarray, end: np.ndarray, resolution: float) -> list[slice]:
@@ -153,10 +153,16 @@ def build_grid(store: ScanStore, resolution: float, max_cells: int, warn: Callab
         beam, cells, ends = line_cells(start[part], end[part], lo, fit, cols)
         np.add.at(hits, ends, 1)
         np.add.at(passes, cells[cells != ends[beam]], 1)
-    seen = hits + passes
-    cells = np.where(hits >= HIT_RATIO * seen, OCCUPIED, FREE).astype(np.uint8)
-    cells[seen == 0] = UNKNOWN
-    return Grid(cells.reshape(rows, cols), fit, (float(lo[0]), float(lo[1])))
+    return Grid(classify(hits, passes).reshape(rows, cols), fit, (float(lo[0]), float(lo[1])))
+
+
+def classify(hits: np.ndarray, passes: np.ndarray) -> np.ndarray:
+    """OCCUPIED / FREE / UNKNOWN per cell from the beams ending in it (``hits``) and passing it."""
+    cells = np.full(len(hits), UNKNOWN, dtype=np.uint8)
+    cells[passes > 0] = FREE
+    passes += hits  # the beams reaching the cell, in place: the grid's largest array is not copied
+    cells[(hits > 0) & (hits >= np.float32(HIT_RATIO) * passes)] = OCCUPIED
+    return cells
 
 
 def write_grid(dest: Path, grid: Grid, name: str = "map") -> None:

@@ -1,6 +1,6 @@
 """A run's output files: the per-step tables written row by row, map.csv, trajectory.tum (with
-odometry.tum and scan_matched.tum beside it), the occupancy grid (report/occupancy.py) and the summary (counts, timing totals, accuracy,
-hashes, versions) in summary.json.
+odometry.tum and scan_matched.tum beside it), the occupancy grid (report/occupancy.py) and the
+summary (counts, timing totals, accuracy, hashes, versions) in summary.json.
 
 Frames: every pose, segment and landmark is written in the log's odometry frame. The filter works in
 its map frame, the base at the first scan (the EKF starts at zero); placed in the odometry frame, that
@@ -129,13 +129,19 @@ class RunWriter:
     :meth:`close_steps` completes the per-step tables, :meth:`finish` the map, trajectory.tum and
     summary.json. A context manager: on an error the open files are closed without a second error.
     The scans given to :meth:`step` (the laser at ``laser2base`` on the robot) make the occupancy
-    grid (``grid``: its resolution and size cap)."""
+    grid (``grid``: its resolution and size cap); they are kept in ``scans`` (a new store if None)."""
 
-    def __init__(self, dest: Path, laser2base: tuple[float, float, float], grid: GridConfig):
+    def __init__(
+        self,
+        dest: Path,
+        laser2base: tuple[float, float, float],
+        grid: GridConfig,
+        scans: ScanStore | None = None,
+    ):
         self.dest = dest
         self.laser2base = laser2base
         self.grid = grid
-        self.scans = ScanStore()
+        self.scans = ScanStore() if scans is None else scans
         self._files = ExitStack()
         self.trajectory = self._open("trajectory.csv", TRAJECTORY_COLUMNS)
         self.timing = self._open("timing.csv", TIMING_COLUMNS)
@@ -195,16 +201,17 @@ class RunWriter:
         accuracy, notes = accuracy_of(stamps, poses, odoms, ref, motions)
         for text in notes:
             src.reader.stats.warn(text)
+        t_grid = time.perf_counter()
         self.write_grid(poses, src.reader.stats.warn)
+        t_grid = time.perf_counter() - t_grid
         summary = build_summary(src, cfg, self.totals, len(landmarks["id"]), poses[-1], accuracy, wall0)
+        summary["timing"]["t_grid"] = t_grid  # ray tracing and writing the occupancy grid
         write_json(self.dest / "summary.json", summary)
         return summary
-
 
     def write_grid(self, poses: np.ndarray, warn) -> None:
         """map.pgm, map.yaml and map_grid.png from the kept scans (their warnings through ``warn``)."""
         grid = build_grid(self.scans, self.grid.resolution, self.grid.max_cells, warn)
-        self.scans = ScanStore()  # the memory back before the summary
         write_grid(self.dest, grid)
         draw_grid(self.dest / "map_grid.png", grid, poses)
 
@@ -231,6 +238,7 @@ def build_summary(
             "odom_source": info.odom_source,
             "laser_to_base": list(src.laser2base),
             "laser_to_base_source": src.laser_source,
+            "odom_on_tf": src.odom_on_tf,
         },
         "assoc": cfg.association.method,
         "counts": {
