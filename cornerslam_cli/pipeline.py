@@ -50,7 +50,7 @@ def run(
     out_dir = Path(out) if out else default_out_dir(Path(log_path), cfg.association.method)
     gt = ground_truth or find_ground_truth(Path(log_path))
     inputs = [p for p in (log_path, gt, relations, config_path) if p]
-    with StagedDir(out_dir, "run", inputs) as stage:
+    with StagedDir(out_dir, "run", inputs, log_path, own_log_only=not out) as stage:
         mcap_path = stage.stage_file(mcap_out) if mcap_out else None
         ref = load_reference(Path(log_path), ground_truth, relations, time_offset)  # bad files fail first
         src = open_input(log_path, cfg)

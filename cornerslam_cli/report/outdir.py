@@ -1,15 +1,18 @@
 """Output places: which directories cornerslam may replace, and writing one atomically.
 
 Ownership. Every output directory cornerslam writes carries a marker file, ``.cornerslam-output``:
-JSON with the version, the kind (``run``, ``compare``, ``batch``) and, for runs and comparisons, the
-names of the entries written. An existing directory is replaced only when it is empty, or when it is
-a cornerslam output of the same kind that holds nothing its marker does not list (subdirectories
-with their own marker are checked against theirs); never when it holds an input of the run or the
-working directory, and never at a mount point. Outputs of versions before the marker count by their
-own files: a ``summary.json`` beginning with ``cornerslam_version`` (run), ``comparison.csv`` or
-``batch.csv`` with our header. Anything else is refused with an :class:`OutputError` (exit 2) before
-any work. Replacing one's own output needs no flag: rerunning into the same ``--out`` is the usual
-case.
+JSON with the version, the kind (``run``, ``compare``, ``batch``), the log it was made from (resolved
+path) and, for runs and comparisons, the names of the entries written. An existing directory is
+replaced only when it is empty, or when it is a cornerslam output of the same kind that holds nothing
+its marker does not list (subdirectories with their own marker are checked against theirs); never
+when it holds an input of the run or the working directory, and never at a mount point. Outputs of
+versions before the marker count by their own files: a ``summary.json`` beginning with
+``cornerslam_version`` (run), ``comparison.csv`` or ``batch.csv`` with our header. Anything else is
+refused with an :class:`OutputError` (exit 2) before any work. Replacing one's own output needs no
+flag: rerunning into the same ``--out`` is the usual case. The default place
+(``cornerslam_out/<stem>_<assoc>``) is named after the log's stem, which two logs can share
+(``a/aces.log``, ``b/aces.log``): there, an output of another log is refused too, naming both
+(:func:`check_same_log`), rather than silently replaced.
 
 Staging. :class:`StagedDir` builds the directory in a hidden sibling ``.NAME.partial-HOST-PID-XXXX``
 (HOST: 8 hex digits of the host name's hash; PID: the writing process) and renames it onto NAME in
@@ -126,10 +129,12 @@ def output_kind(path: Path) -> str | None:
     return None
 
 
-def mark_output(path: Path, kind: str) -> None:
-    """Mark the directory ``path`` as a cornerslam output of ``kind``; a run or comparison lists the
-    entries it holds now (its complete contents)."""
+def mark_output(path: Path, kind: str, log: Path | None = None) -> None:
+    """Mark the directory ``path`` as a cornerslam output of ``kind`` made from ``log`` (recorded
+    resolved); a run or comparison lists the entries it holds now (its complete contents)."""
     marker: dict = {"cornerslam": __version__, "kind": kind}
+    if log is not None:
+        marker["log"] = os.fsdecode(log.resolve())
     if kind != "batch":  # a batch directory grows as it runs: its own rows are checked one by one
         marker["files"] = [rel for rel, _ in _entries(path)]
     (path / MARKER).write_text(json.dumps(marker, indent=1) + "\n")
@@ -254,6 +259,35 @@ def check_replaceable(
         raise OutputError(
             f"'{shown}' holds '{extra[0]}'{more}, which cornerslam did not write",
             "move it out first, or give another output directory",
+        )
+
+
+def recorded_log(path: Path) -> Path | None:
+    """The log the output directory ``path`` was made from: its marker's, else (an output of a
+    version before it was recorded) the one its run's summary.json names, resolved from the working
+    directory; None when neither says."""
+    marker = read_marker(path) or {}
+    if isinstance(marker.get("log"), str):
+        return Path(marker["log"])
+    summaries = [path / "summary.json", *sorted(path.glob("*/summary.json"))]  # a run; a compare's runs
+    for summary in summaries:
+        try:
+            log = json.loads(summary.read_bytes()[: 1 << 24])["input"]["log"]
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+        return Path(log).resolve() if isinstance(log, str) else None
+    return None
+
+
+def check_same_log(target: Path, log: Path, shown: Path) -> None:
+    """Refuse (OutputError) to replace at ``target`` an output made from another log than ``log``:
+    for the default place, named after the log's stem, which two logs may share."""
+    other = recorded_log(target) if target.is_dir() else None
+    if other is not None and other != log.resolve():
+        raise OutputError(
+            f"'{shown}' holds the output of '{other}', not of '{log}': the default output "
+            "directory of both logs",
+            "give this run its own --out, or remove the other output first",
         )
 
 
@@ -438,15 +472,24 @@ class StagedDir:
     environment fault inside the block (disk full, ...) leaves as the OutputError naming the path.
     """
 
-    def __init__(self, target: str | Path, kind: str = "run", inputs: Sequence[str | Path] = ()):
+    def __init__(
+        self,
+        target: str | Path,
+        kind: str = "run",
+        inputs: Sequence[str | Path] = (),
+        log: str | Path | None = None,
+        own_log_only: bool = False,
+    ):
         self.shown = Path(target)
         self.target = self.shown.resolve()
         self.kind = kind
         self.inputs = [Path(p) for p in inputs]
+        self.log = None if log is None else Path(log)  # recorded in the marker
+        self.own_log_only = own_log_only  # the default place: refuse another log's output there
         self.files: list[tuple[Path, Path]] = []  # (staged, final) files renamed by commit()
         self.committed = False
         with output_errors(self.shown):
-            check_replaceable(self.target, kind, self.inputs, self.shown)
+            self._check_replaceable()
             self.target.parent.mkdir(parents=True, exist_ok=True)
             _check_name(self.target, self.shown)
             with target_lock(self.target):
@@ -464,6 +507,11 @@ class StagedDir:
             except BaseException:
                 _remove(self.path)
                 raise
+
+    def _check_replaceable(self) -> None:
+        check_replaceable(self.target, self.kind, self.inputs, self.shown)
+        if self.own_log_only and self.log is not None:
+            check_same_log(self.target, self.log, self.shown)
 
     def __enter__(self) -> StagedDir:
         return self
@@ -520,8 +568,8 @@ class StagedDir:
         """Rename the finished staging directory onto the target, and each staged file onto its own
         target, under the target's lock; returns the target."""
         with target_lock(self.target):
-            check_replaceable(self.target, self.kind, self.inputs, self.shown)  # it may have changed
-            mark_output(self.path, self.kind)
+            self._check_replaceable()  # it may have changed
+            mark_output(self.path, self.kind, self.log)
             with _signals_deferred():
                 old = self._swap()
                 for staged, final in self.files:
