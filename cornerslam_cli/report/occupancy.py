@@ -2,9 +2,9 @@
 
 Every keyframe's valid beams are ray traced from the laser's pose at the step's estimate (the pose
 trajectory.csv holds, in the odometry frame): the cells a beam passes through count as passes, the
-cell it ends in as a hit. A cell is occupied when at least ``HIT_RATIO`` of the beams that reach it
-end in it (gmapping's ``occ_thresh``), free when beams reach it and fewer end there, unknown when no
-beam reaches it. Beams without a return (NaN, inf, out of range) mark nothing.
+cell it ends in as a hit. A cell is occupied when at least one in ``HIT_SHARE`` of the beams that
+reach it end in it (gmapping's ``occ_thresh`` of 0.25), free when beams reach it and fewer end there,
+unknown when no beam reaches it. Beams without a return (NaN, inf, out of range) mark nothing.
 
 The scans are kept (float32, the odometry frame) until the run ends, when the map's extent is known;
 past ``MAX_POINTS`` end points the store keeps every second beam (and so on), and a grid of more than
@@ -28,11 +28,11 @@ import numpy as np
 
 OCCUPIED, FREE, UNKNOWN = 0, 254, 205  # map_saver's trinary pixel values
 OCCUPIED_THRESH, FREE_THRESH = 0.65, 0.196  # map_saver's thresholds: 0 → occupied, 254 → free, 205 → unknown
-HIT_RATIO = 0.25  # share of the beams reaching a cell that end in it for it to be occupied
+HIT_SHARE = 4  # a cell is occupied when at least 1 in HIT_SHARE of the beams reaching it end in it
 MAX_POINTS = 8_000_000  # end points kept (64 MB as float32) before the store is thinned
 CHUNK = 500_000  # ray samples traced at once (~40 MB of temporaries)
-PNG_COLOURS = {OCCUPIED: (0, 0, 0), FREE: (255, 255, 255), UNKNOWN: (190, 190, 190)}
-PATH_COLOUR = (31, 119, 180)  # the trajectory in map_grid.png
+PATH = 1  # the trajectory's pixels in map_grid.png (a palette image: one byte per cell)
+PNG_COLOURS = {OCCUPIED: (0, 0, 0), FREE: (255, 255, 255), UNKNOWN: (190, 190, 190), PATH: (31, 119, 180)}
 
 
 class ScanStore:
@@ -170,11 +170,13 @@ def build_grid(store: ScanStore, resolution: float, max_cells: int, warn: Callab
 
 
 def classify(hits: np.ndarray, passes: np.ndarray) -> np.ndarray:
-    """OCCUPIED / FREE / UNKNOWN per cell from the beams ending in it (``hits``) and passing it."""
+    """OCCUPIED / FREE / UNKNOWN per cell from the beams ending in it (``hits``) and passing it
+    (``passes``); both are overwritten."""
     cells = np.full(len(hits), UNKNOWN, dtype=np.uint8)
     cells[passes > 0] = FREE
-    passes += hits  # the beams reaching the cell, in place: the grid's largest array is not copied
-    cells[(hits > 0) & (hits >= np.float32(HIT_RATIO) * passes)] = OCCUPIED
+    passes += hits  # the beams reaching each cell; in place, as below: the counts are not copied
+    hits *= HIT_SHARE
+    cells[(hits > 0) & (hits >= passes)] = OCCUPIED
     return cells
 
 
@@ -200,13 +202,16 @@ def draw_grid(path: Path, grid: Grid, poses: np.ndarray) -> None:
     trajectory ``poses`` (n, 3) drawn in blue; one pixel per cell."""
     from PIL import Image  # matplotlib's own image library, without matplotlib's import time
 
-    rgb = np.zeros((*grid.cells.shape, 3), dtype=np.uint8)
-    for value, colour in PNG_COLOURS.items():
-        rgb[grid.cells == value] = colour
+    pixels = grid.cells.copy()
     if len(poses) > 1:
         rows, cols = grid.cells.shape
         lo = np.asarray(grid.origin)
         xy = np.clip(poses[:, :2], lo, lo + (np.array([cols, rows]) - 0.5) * grid.resolution)
         _, cells, ends = line_cells(xy[:-1], xy[1:], lo, grid.resolution, cols)
-        rgb.reshape(-1, 3)[np.concatenate((cells, ends))] = PATH_COLOUR
-    Image.fromarray(np.ascontiguousarray(rgb[::-1])).save(path)
+        pixels.reshape(-1)[np.concatenate((cells, ends))] = PATH
+    palette = np.zeros((256, 3), dtype=np.uint8)
+    for value, colour in PNG_COLOURS.items():
+        palette[value] = colour
+    image = Image.fromarray(np.ascontiguousarray(pixels[::-1]), mode="P")
+    image.putpalette(palette.tobytes())
+    image.save(path)
