@@ -218,20 +218,25 @@ def _scans_prepared(reader, cfg: Config):
 
 def _laser_mount(reader, cfg: Config) -> tuple[tuple[float, float, float], str]:
     """The laser's pose on the robot and where it came from: tf when the log has it, else the
-    config's ``input.laser`` (:func:`lasers.mount_source`), warned when that is the built-in default."""
+    config's ``input.laser`` (:func:`lasers.mount_source`)."""
     mount = cfg.input.laser
     if mount.from_tf:
         tf = reader.laser_to_base()
         if tf is not None:
             return (float(tf[0]), float(tf[1]), float(tf[2])), "tf"
-    source = mount_source(cfg)
-    if source == "default":
-        reader.stats.warn(
+    return (mount.x, mount.y, mount.yaw), mount_source(cfg)
+
+
+def warn_default_mount(src: Input, cfg: Config) -> None:
+    """Warn (into summary.json too) when the laser mount is the built-in default: the log has no tf
+    for it and the config does not set it. Called once the run has its frames, so that a log that
+    fails gives its one-line error alone."""
+    if src.laser_source == "default":
+        src.reader.stats.warn(
             "log '%s' has no tf %s→laser: the laser is taken at the built-in default x=0 y=0 yaw=0 on "
             "the robot (set input.laser.x/y/yaw to its mount, or input.laser.from_tf=false to keep it)",
-            reader.path.name, short_text(cfg.input.base_frame),
+            src.path.name, short_text(cfg.input.base_frame),
         )  # fmt: skip
-    return (mount.x, mount.y, mount.yaw), source
 
 
 def _scan_count(info) -> int:

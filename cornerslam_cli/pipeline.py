@@ -14,7 +14,7 @@ from pathlib import Path
 
 from .config import Config
 from .errors import OutputError, display_path
-from .frontend import Frame, Input, check_processed, frames, open_input
+from .frontend import Frame, Input, check_processed, frames, open_input, warn_default_mount
 from .report.occupancy import ScanStore
 from .report.outdir import StagedDir, output_errors
 from .report.run_writer import Reference, RunWriter, find_ground_truth, load_reference
@@ -104,4 +104,5 @@ def run_filter(
             writer.step(slam.step(frame), frame.points)
         writer.close_steps()
         check_processed(src, slam.n_steps, writer.totals.points)
+        warn_default_mount(src, cfg)
         return writer.finish(slam.landmark_table(), src, cfg, ref, wall0)

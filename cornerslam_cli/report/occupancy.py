@@ -4,7 +4,8 @@ Every keyframe's valid beams are ray traced from the laser's pose at the step's 
 trajectory.csv holds, in the odometry frame): the cells a beam passes through count as passes, the
 cell it ends in as a hit. A cell is occupied when at least one in ``HIT_SHARE`` of the beams that
 reach it end in it (gmapping's ``occ_thresh`` of 0.25), free when beams reach it and fewer end there,
-unknown when no beam reaches it. Beams without a return (NaN, inf, out of range) mark nothing.
+unknown when no beam reaches it. Beams without a return (NaN, inf, out of range) mark nothing, nor do
+beams longer than ``MAX_BEAM`` (a range no laser measures: 1e30 m in a log with range_max = inf).
 
 The scans are kept (float32, the odometry frame) until the run ends, when the map's extent is known;
 past ``MAX_POINTS`` end points the store keeps every second beam (and so on), and a grid of more than
@@ -30,6 +31,7 @@ OCCUPIED, FREE, UNKNOWN = 0, 254, 205  # map_saver's trinary pixel values
 OCCUPIED_THRESH, FREE_THRESH = 0.65, 0.196  # map_saver's thresholds: 0 → occupied, 254 → free, 205 → unknown
 HIT_SHARE = 4  # a cell is occupied when at least 1 in HIT_SHARE of the beams reaching it end in it
 MAX_POINTS = 8_000_000  # end points kept (64 MB as float32) before the store is thinned
+MAX_BEAM = 1000.0  # m: longer beams (a range of 1e30 m in a log with range_max = inf) are not traced
 CHUNK = 500_000  # ray samples traced at once (~40 MB of temporaries)
 PATH = 1  # the trajectory's pixels in map_grid.png (a palette image: one byte per cell)
 PNG_COLOURS = {OCCUPIED: (0, 0, 0), FREE: (255, 255, 255), UNKNOWN: (190, 190, 190), PATH: (31, 119, 180)}
@@ -52,6 +54,7 @@ class ScanStore:
         self.n_seen += len(points)
         c, s = math.cos(laser2odom[2]), math.sin(laser2odom[2])
         p = np.asarray(points, dtype=float)[:: self.stride]
+        p = p[np.hypot(p[:, 0], p[:, 1]) <= MAX_BEAM]
         moved = np.column_stack((c * p[:, 0] - s * p[:, 1], s * p[:, 0] + c * p[:, 1])) + laser2odom[:2]
         self.origins.append(np.asarray(laser2odom[:2], dtype=np.float32))
         self.points.append(moved.astype(np.float32))
