@@ -82,7 +82,7 @@ class GridConfig:
     """The occupancy grid every run writes (map.pgm + map.yaml for ROS map_server / nav2, map_grid.png)."""
 
     resolution: float = num(0.05, ge=0.001, le=100.0)  # metres per cell
-    # cells at most (~16 bytes each while it is built): a larger map is written coarser, warned
+    # cells at most (~6 bytes each while it is built): a larger map is written coarser, warned
     max_cells: int = num(10_000_000, ge=100, le=200_000_000)
 
     def __post_init__(self) -> None:

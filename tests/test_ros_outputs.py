@@ -22,10 +22,11 @@ import pytest
 import yaml
 from click.testing import CliRunner
 from mcap.reader import make_reader
+from test_report_mcap import validate
 
 from cornerslam_cli.cli import cli
 from cornerslam_cli.logs.writers import RawScan, write_mcap
-from cornerslam_cli.report.occupancy import FREE, OCCUPIED, UNKNOWN, ScanStore, count, line_cells
+from cornerslam_cli.report.occupancy import FREE, OCCUPIED, UNKNOWN, ScanStore, classify, count, line_cells
 from cornerslam_cli.report.outdir import MARKER
 from cornerslam_cli.report.run_writer import in_odom_frame, landmarks_in_odom_frame
 from cornerslam_cli.report.tables import read_csv, read_tum, write_tum
@@ -177,8 +178,7 @@ def read_pgm(path: Path) -> np.ndarray:
 
 
 def load_map(out: Path) -> tuple[dict, np.ndarray, np.ndarray]:
-    """(map.yaml, the image as map_server reads it (row 0 = top), (rows, cols) → cell centre in the
-    odometry frame as a function)."""
+    """(map.yaml as a dict, the image of its ``image`` file as map_server reads it: row 0 at the top)."""
     meta = yaml.safe_load((out / "map.yaml").read_text())
     image = read_pgm(out / meta["image"])
     return meta, image
@@ -295,10 +295,13 @@ def test_scan_store_thins_beyond_its_cap():
 
 # ----------------------------------------------------------------------------- 3: the results MCAP
 def read_mcap(path: Path) -> dict[str, list[dict]]:
+    """{topic: [payload]} of a results MCAP, each payload checked against the schema embedded with it."""
     out: dict[str, list[dict]] = {}
     with open(path, "rb") as f:
-        for _s, channel, message in make_reader(f).iter_messages():
-            out.setdefault(channel.topic, []).append(json.loads(message.data))
+        for schema, channel, message in make_reader(f).iter_messages():
+            payload = json.loads(message.data)
+            validate(payload, json.loads(schema.data), channel.topic)
+            out.setdefault(channel.topic, []).append(payload)
     return out
 
 
@@ -435,9 +438,19 @@ def test_an_output_without_the_log_in_its_marker_is_judged_by_its_summary(far_lo
 
 
 @pytest.mark.parametrize("span", [1_000, 10_000_000])  # bincount over the span; a sort (span ≫ len)
-def test_count_equals_add_at(span):
+def test_count_equals_add_at_and_saturates(span):
     idx = np.random.default_rng(2).integers(0, span, 5_000)
-    got, want = np.zeros(span, np.int32), np.zeros(span, np.int32)
+    got, want = np.zeros(span, np.uint16), np.zeros(span, np.int64)
     count(got, idx)
     np.add.at(want, idx, 1)
     assert np.array_equal(got, want)
+    got[idx[0]] = 65_530
+    count(got, np.full(10, idx[0]))
+    assert got[idx[0]] == 65_535  # not wrapped round to 4
+
+
+def test_classify_by_hand():
+    hits = np.array([0, 0, 1, 1, 2, 7_000], dtype=np.uint16)
+    passes = np.array([0, 5, 3, 4, 6, 21_000], dtype=np.uint16)
+    # unknown, free, 1 of 4 beams end here: occupied, 1 of 5: free, 2 of 8: occupied, 1 of 4: occupied
+    assert classify(hits, passes).tolist() == [UNKNOWN, FREE, OCCUPIED, FREE, OCCUPIED, OCCUPIED]

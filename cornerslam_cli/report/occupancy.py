@@ -9,7 +9,8 @@ beams longer than ``MAX_BEAM`` (a range no laser measures: 1e30 m in a log with 
 
 The scans are kept (float32, the odometry frame) until the run ends, when the map's extent is known;
 past ``MAX_POINTS`` end points the store keeps every second beam (and so on), and a grid of more than
-``grid.max_cells`` cells is written at a coarser resolution: both with a warning. Ray tracing is
+``grid.max_cells`` cells is written at a coarser resolution: both with a warning. A cell costs five
+bytes (two uint16 counts, saturating at 65,535 beams, and its value) plus the PNG's one or two. Ray tracing is
 vectorised: each beam is sampled once per cell along its major axis (a DDA line), in chunks of at
 most ``CHUNK`` samples.
 
@@ -32,7 +33,8 @@ OCCUPIED_THRESH, FREE_THRESH = 0.65, 0.196  # map_saver's thresholds: 0 → occu
 HIT_SHARE = 4  # a cell is occupied when at least 1 in HIT_SHARE of the beams reaching it end in it
 MAX_POINTS = 8_000_000  # end points kept (64 MB as float32) before the store is thinned
 MAX_BEAM = 1000.0  # m: longer beams (a range of 1e30 m in a log with range_max = inf) are not traced
-CHUNK = 500_000  # ray samples traced at once (~40 MB of temporaries)
+CHUNK = 500_000  # ray samples traced (or cells classified) at once: ~40 MB of temporaries
+COUNT_MAX = np.iinfo(np.uint16).max  # beams ending in / passing a cell are counted up to this
 PATH = 1  # the trajectory's pixels in map_grid.png (a palette image: one byte per cell)
 PNG_COLOURS = {OCCUPIED: (0, 0, 0), FREE: (255, 255, 255), UNKNOWN: (190, 190, 190), PATH: (31, 119, 180)}
 
@@ -130,16 +132,17 @@ def _chunks(start: np.ndarray, end: np.ndarray, resolution: float) -> list[slice
 
 
 def count(counts: np.ndarray, idx: np.ndarray) -> None:
-    """``counts[i] += (number of times i occurs in idx)``: ``np.add.at``, ten times faster, by a
-    bincount over the span of ``idx`` (by sorting when that span is much wider than ``idx`` is long)."""
+    """``counts[i] += (number of times i occurs in idx)``, saturating at COUNT_MAX (uint16 counts):
+    ``np.add.at``, ten times faster, by a bincount over the span of ``idx`` (by sorting when that span
+    is much wider than ``idx`` is long)."""
     if len(idx) == 0:
         return
     lo, hi = int(idx.min()), int(idx.max())
-    if hi - lo < 8 * len(idx):
-        counts[lo : hi + 1] += np.bincount(idx - lo, minlength=hi - lo + 1).astype(counts.dtype)
+    if hi - lo < 2 * len(idx):  # temporaries of ~20 bytes per cell of the span: ~40 per index
+        cells, n = slice(lo, hi + 1), np.bincount(idx - lo, minlength=hi - lo + 1)
     else:
         cells, n = np.unique(idx, return_counts=True)
-        counts[cells] += n.astype(counts.dtype)
+    counts[cells] = np.minimum(counts[cells] + n.astype(np.int32), COUNT_MAX)
 
 
 def build_grid(store: ScanStore, resolution: float, max_cells: int, warn: Callable[[str], None]) -> Grid:
@@ -163,8 +166,8 @@ def build_grid(store: ScanStore, resolution: float, max_cells: int, warn: Callab
         )
     rows, cols = grid_shape(lo, hi, fit)
     lo = lo - fit / 2  # half a cell of margin on each side
-    hits = np.zeros(rows * cols, dtype=np.int32)
-    passes = np.zeros(rows * cols, dtype=np.int32)
+    hits = np.zeros(rows * cols, dtype=np.uint16)
+    passes = np.zeros(rows * cols, dtype=np.uint16)
     for part in _chunks(start, end, fit):
         beam, cells, ends = line_cells(start[part], end[part], lo, fit, cols)
         count(hits, ends)
@@ -174,12 +177,14 @@ def build_grid(store: ScanStore, resolution: float, max_cells: int, warn: Callab
 
 def classify(hits: np.ndarray, passes: np.ndarray) -> np.ndarray:
     """OCCUPIED / FREE / UNKNOWN per cell from the beams ending in it (``hits``) and passing it
-    (``passes``); both are overwritten."""
+    (``passes``): occupied when hits ≥ (hits + passes) / HIT_SHARE. In slices of CHUNK cells, so the
+    temporaries stay small next to the counts."""
     cells = np.full(len(hits), UNKNOWN, dtype=np.uint8)
-    cells[passes > 0] = FREE
-    passes += hits  # the beams reaching each cell; in place, as below: the counts are not copied
-    hits *= HIT_SHARE
-    cells[(hits > 0) & (hits >= passes)] = OCCUPIED
+    for lo in range(0, len(cells), CHUNK):
+        h, p = hits[lo : lo + CHUNK].astype(np.int32), passes[lo : lo + CHUNK].astype(np.int32)
+        part = cells[lo : lo + CHUNK]
+        part[p > 0] = FREE
+        part[(h > 0) & ((HIT_SHARE - 1) * h >= p)] = OCCUPIED
     return cells
 
 
