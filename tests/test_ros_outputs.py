@@ -454,3 +454,17 @@ def test_classify_by_hand():
     passes = np.array([0, 5, 3, 4, 6, 21_000], dtype=np.uint16)
     # unknown, free, 1 of 4 beams end here: occupied, 1 of 5: free, 2 of 8: occupied, 1 of 4: occupied
     assert classify(hits, passes).tolist() == [UNKNOWN, FREE, OCCUPIED, FREE, OCCUPIED, OCCUPIED]
+
+
+def test_without_scan_matching_there_is_no_scan_matched_trajectory(far_log, tmp_path):
+    out = tmp_path / "o"
+    res = CliRunner().invoke(
+        cli, ["run", str(far_log["log"]), "--out", str(out), "-q", "--set", "scan_match.enabled=false"]
+    )
+    assert res.exit_code == 0, res.output
+    assert not (out / "scan_matched.tum").exists()
+    _, est = read_tum(out / "trajectory.tum")
+    _, odom = read_tum(out / "odometry.tum")
+    np.testing.assert_allclose(est[0], odom[0], atol=1e-8)
+    np.testing.assert_allclose(odom[0], far_log["gt"][0], atol=1e-8)  # the log's first odometry pose
+    assert "scan_matched.tum" not in json.loads((out / MARKER).read_text())["files"]
