@@ -117,7 +117,7 @@ def relation_scores(r: dict, data: Path, keys=("pose", "odom")) -> tuple[dict, .
     from cornerslam_cli.evaluate import read_relations, relation_error
 
     rel = read_relations(data / "intel" / "intel.relations")
-    return tuple(relation_error(r["stamp"], r[k], rel, TIME_OFFSET) for k in keys)
+    return tuple(relation_error(r["stamp"], r[k], rel, TIME_OFFSET).to_json() for k in keys)
 
 
 def scan_points(log: Path, extra: list[str], stamps: np.ndarray) -> list[np.ndarray]:

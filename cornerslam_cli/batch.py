@@ -1,14 +1,9 @@
 """``cornerslam batch``: many logs × associators × a grid of config values, locally or on Dask.
 
-:func:`plan` expands the grid into :class:`Combo` s (validating every key and value before any work);
-:func:`run_batch` runs each into ``OUT/<name>/`` — a complete ``run`` output directory — and writes
-``OUT/batch.csv`` with one row per combination, in the plan's order.
-
-Directory names: ``<log>__<assoc>[__<key>=<value>]...`` with the swept keys in the order given, the
-values as written, and any character outside ``[A-Za-z0-9._=+-]`` replaced by ``_``, e.g.
-``sim_office__pca__association.pca.group_size=5``. ``<log>`` is the file name up to its first dot;
-logs sharing that stem use their whole file name, and logs sharing that too add a short hash of their
-absolute path. Base ``--set`` overrides do not appear in names (they are in each summary.json).
+:func:`sweep.plan` expands the grid into combinations (validating every key and value before any
+work; sweep.py also names their directories); :func:`run_batch` runs each into ``OUT/<name>/`` — a
+complete ``run`` output directory — and writes ``OUT/batch.csv`` with one row per combination, in
+the plan's order.
 
 Resume: a combination is skipped (status ``skipped``, its figures re-read) when ``OUT/<name>/summary.json``
 is complete and its ``hashes`` (sha256 of the log's bytes, sha256 of the resolved config, version)
@@ -20,7 +15,7 @@ second) and at the end; while the batch runs, or after it was interrupted, the c
 finished have status ``pending``. Paths in it are as given (``log``) or relative to OUT (``out_dir``).
 
 OUT must be new, empty or a batch directory already (its ``.cornerslam-output`` marker, or the
-batch.csv of an older version): any other directory is refused before any work (report/outdir.py).
+batch.csv of an older version): any other directory is refused before any work (report/ownership.py).
 A combination's directory is replaced only if it is a cornerslam run output; anything else there
 fails that row.
 
@@ -34,22 +29,21 @@ already starts workers with OPENBLAS_NUM_THREADS=1.
 from __future__ import annotations
 
 import csv
-import hashlib
-import itertools
-import json
 import logging
 import os
-import re
 import time
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from . import __version__
 from .blas import single_threaded_blas, single_threaded_blas_env
-from .errors import ConfigError, CornerslamError, display_path
-from .report.outdir import claim_dir, clear_stale, output_errors, staged_file
+from .errors import CornerslamError, ResultsError, display_path, one_line
+from .report.oserrors import output_errors
+from .report.outdir import clear_stale, staged_file
+from .report.ownership import claim_dir
+from .results import Hashes, RunSummary
+from .sweep import Combo
 
 BATCH_CSV = "batch.csv"
 FIGURES = [
@@ -64,129 +58,11 @@ FIGURES = [
 ]
 TIMING_FIGURES = ("t_match", "t_total", "wall_time")  # differ between runs of the same combination
 STATUSES = ("ok", "failed", "skipped", "pending")
-_UNSAFE = re.compile(r"[^A-Za-z0-9._=+-]")
-_MAX_NAME = 180  # well under the 255-byte file name limit, leaving room for the staging prefix
-
-
-@dataclass(frozen=True)
-class Combo:
-    """One point of the batch: a log, an associator and one value for each swept key.
-
-    ``config`` is the fully resolved config as plain data (``Config.to_dict()``), laser preset included
-    as ``run`` would choose it, so workers rebuild it without the config file; ``sweep`` holds (dotted
-    key, value as written) in the order swept. ``error`` is set when the log could not be opened to
-    choose its laser preset: the combination is reported failed without running.
-    """
-
-    log: str
-    assoc: str
-    sweep: tuple[tuple[str, str], ...]
-    name: str
-    config: dict = field(compare=False, repr=False)
-    error: str = ""
 
 
 def batch_columns(sweep_keys: Sequence[str]) -> list[str]:
     """The header of batch.csv for a batch sweeping ``sweep_keys``."""
     return ["log", "assoc", *sweep_keys, "status", "error", *FIGURES, "out_dir"]
-
-
-def value_text(v: Any) -> str:
-    """A sweep value as ``--set`` text (strings as written; true/false/null as YAML spells them)."""
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if v is None:
-        return "null"
-    return str(v)
-
-
-def plan(
-    logs: Sequence[str | Path],
-    assocs: Sequence[str],
-    sweeps: Mapping[str, Sequence[Any]] | None = None,
-    overrides: Sequence[str] = (),
-    config_path: str | Path | None = None,
-) -> list[Combo]:
-    """Every log × associator × point of the sweep grid (the last swept key varies fastest).
-
-    Each swept value is checked against the config schema first (ConfigError naming ``--sweep
-    key=value``); unknown associators raise ConfigError with the closest name. Each combination's
-    config is resolved as ``cornerslam run`` resolves it (:func:`lasers.resolve_config`: the laser
-    preset matching the log's first scan under the user's layers); a log that cannot be opened is not
-    an error here but failed rows in :func:`run_batch`. Logs listed twice are run once.
-    """
-    from .association import associator_class
-    from .config import load_config
-    from .errors import LogError
-    from .lasers import resolve_config
-
-    sweeps = {k: list(dict.fromkeys(value_text(v) for v in vs)) for k, vs in (sweeps or {}).items()}
-    for key, values in sweeps.items():
-        if key == "association.method":
-            raise ConfigError("--sweep association.method is not allowed", "list associators with --assoc")
-        if not values:
-            raise ConfigError(f"--sweep {key} has no values", f"e.g. --sweep {key}=V1,V2")
-        for v in values:
-            try:
-                load_config(config_path, [*overrides, f"{key}={v}"])
-            except ConfigError as e:
-                raise ConfigError(f"--sweep {key}={v}: {e.msg}", e.hint) from None
-    if not assocs or len(set(assocs)) != len(assocs):
-        raise ConfigError(f"associators {','.join(assocs)!r} must be distinct and non-empty")
-    logs = list(dict.fromkeys(str(p) for p in logs))
-    labels = _log_labels(logs)
-    combos = []
-    for log, assoc in itertools.product(logs, assocs):
-        for values in itertools.product(*sweeps.values()):
-            sweep = tuple(zip(sweeps, values, strict=True))
-            sets = [*overrides, f"association.method={assoc}", *(f"{k}={v}" for k, v in sweep)]
-            error = ""
-            try:
-                cfg = resolve_config(log, config_path, sets)
-            except LogError as e:  # the log's rows fail; the batch goes on
-                cfg, error = load_config(config_path, sets), _failed(e)["error"]
-            associator_class(cfg.association.method)  # an unknown name: ConfigError with the closest one
-            name = _dir_name(labels[log], assoc, sweep)
-            combos.append(Combo(log, assoc, sweep, name, cfg.to_dict(), error))
-    names = [c.name for c in combos]
-    if len(set(names)) != len(names):
-        dup = next(n for n in names if names.count(n) > 1)
-        raise ConfigError(
-            f"two combinations map to the directory name '{dup}'", "sweep values differing only in symbols"
-        )
-    return combos
-
-
-def _safe(text: str) -> str:
-    return _UNSAFE.sub("_", text)
-
-
-def _short_hash(text: str) -> str:
-    return hashlib.sha1(os.fsencode(text)).hexdigest()[:8]
-
-
-def _log_labels(logs: Sequence[str]) -> dict[str, str]:
-    """Log → its part of the directory name: stem, else file name, else file name + path hash."""
-    out: dict[str, str] = {}
-    tiers = [
-        lambda p: _safe(Path(p).name.split(".")[0] or "log"),
-        lambda p: _safe(Path(p).name or "log"),
-        lambda p: _safe(Path(p).name or "log") + "-" + _short_hash(str(Path(p).resolve())),
-    ]
-    for log in logs:
-        for tier in tiers:
-            label = tier(log)
-            if sum(tier(other) == label for other in logs) == 1 or tier is tiers[-1]:
-                out[log] = label
-                break
-    return out
-
-
-def _dir_name(log_label: str, assoc: str, sweep: tuple[tuple[str, str], ...]) -> str:
-    name = "__".join([log_label, _safe(assoc), *(_safe(f"{k}={v}") for k, v in sweep)])
-    if len(name) > _MAX_NAME:
-        name = name[: _MAX_NAME - 9] + "-" + _short_hash(name)
-    return name
 
 
 @dataclass
@@ -241,12 +117,11 @@ def run_batch(
                 log_hashes[c.log] = input_hash(Path(c.log))
             except (OSError, CornerslamError):
                 log_hashes[c.log] = None  # the run reports the unreadable log (or pipe)
-        expect = {
-            "input": log_hashes[c.log],
-            "config": config_hash(from_dict(Config, c.config)),
-            "version": __version__,
-        }
-        figures = _resumable(out / c.name, expect, find_ground_truth(Path(c.log)) is not None)
+        figures = None
+        if log_hashes[c.log] is not None:
+            expect = Hashes(input=log_hashes[c.log], config=config_hash(from_dict(Config, c.config)),
+                            version=__version__)  # fmt: skip
+            figures = _resumable(out / c.name, expect, find_ground_truth(Path(c.log)) is not None)
         if figures is not None:
             rows[i] = _row(c, "skipped", figures=figures)
             state.skipped += 1
@@ -290,34 +165,31 @@ def _row(c: Combo, status: str, error: str = "", figures: dict | None = None) ->
     return row
 
 
-def figures_from_summary(s: dict) -> dict:
-    """The batch.csv figures of one run's summary (the returned dict or summary.json)."""
-    acc = s.get("accuracy") or {}
-    c, t = s["counts"], s["timing"]
+def figures_from_summary(s: RunSummary) -> dict:
+    """The batch.csv figures of one run's summary (returned by the run or read from summary.json)."""
+    c, t, acc = s.counts, s.timing, s.accuracy
     nan = float("nan")
     return {
-        "steps": int(c["steps"]),
-        "landmarks": int(c["landmarks"]),
-        "matched_total": int(c["matched_total"]),
-        "t_match": float(t["t_match"]),
-        "t_total": float(t["t_total"]),
-        "wall_time": float(t["wall_time"]),
-        "ate_rmse": float(acc["ate"]["rmse"]) if acc else nan,
-        "odom_ate_rmse": float(acc["odom_ate"]["rmse"]) if acc else nan,
+        "steps": c.steps,
+        "landmarks": c.landmarks,
+        "matched_total": c.matched_total,
+        "t_match": float(t.t_match),
+        "t_total": float(t.t_total),
+        "wall_time": float(t.wall_time),
+        "ate_rmse": acc.ate.rmse if acc and acc.ate else nan,
+        "odom_ate_rmse": acc.odom_ate.rmse if acc and acc.odom_ate else nan,
     }
 
 
-def _resumable(run_dir: Path, expect: dict, has_gt: bool) -> dict | None:
+def _resumable(run_dir: Path, expect: Hashes, has_gt: bool) -> dict | None:
     """The figures of a complete earlier run of the same log, config and version, else None."""
-    if expect["input"] is None:
-        return None
     try:
-        s = json.loads((run_dir / "summary.json").read_text())
-        if s.get("hashes") != expect or (s.get("accuracy") is not None) != has_gt:
-            return None
-        return figures_from_summary(s)
-    except (OSError, ValueError, KeyError, TypeError):
+        s = RunSummary.read(run_dir)
+    except ResultsError:
         return None  # missing, unreadable or from an older layout: run it again
+    if s.hashes != expect or (s.accuracy is not None) != has_gt:
+        return None
+    return figures_from_summary(s)
 
 
 def run_one(log: str, config: dict, out_dir: str) -> dict:
@@ -338,9 +210,8 @@ def run_one(log: str, config: dict, out_dir: str) -> dict:
 
 
 def _failed(e: BaseException) -> dict:
-    """The failure row's status and one-line error: a CornerslamError's message, a bug's type and message."""
-    text = str(e) if isinstance(e, CornerslamError) else f"{type(e).__name__}: {e}"
-    return {"status": "failed", "error": " ".join(text.split())}
+    """The failure row's status and one-line error."""
+    return {"status": "failed", "error": one_line(e)}
 
 
 def _run_local(tasks: list[tuple], jobs: int, finished: Callable[[int, dict], None]) -> None:

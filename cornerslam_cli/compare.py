@@ -21,8 +21,10 @@ from .config import Config
 from .frontend import Frame, Input, frames, open_input
 from .pipeline import run_filter
 from .report.comparison import write_comparison
-from .report.outdir import StagedDir, mark_output
+from .report.outdir import StagedDir
+from .report.ownership import mark_output
 from .report.run_writer import load_reference
+from .results import RunSummary
 from .workers import exit_with_parent
 
 _SHARED: dict = {}  # what forked workers inherit: frames, input, reference
@@ -32,7 +34,7 @@ def with_assoc(cfg: Config, assoc: str) -> Config:
     return dataclasses.replace(cfg, association=dataclasses.replace(cfg.association, method=assoc))
 
 
-def _run_one(assoc: str, out_dir: Path) -> dict:
+def _run_one(assoc: str, out_dir: Path) -> RunSummary:
     sh = _SHARED
     return run_filter(
         sh["frames"], sh["src"], with_assoc(sh["cfg"], assoc), out_dir, sh["ref"], time.perf_counter()
@@ -51,7 +53,7 @@ def compare(
     time_offset: float = 0.0,
     plots: bool = True,
     default_place: bool = False,
-) -> list[dict]:
+) -> list[RunSummary]:
     """Run each associator in ``assocs`` on ``log_path``; write OUT/ASSOC/, OUT/comparison.csv and
     (``plots``) the figures and OUT/report.html, committed together. The output place is checked
     before any work (``default_place``: OUT is named after the log: another log's output there is
@@ -80,6 +82,4 @@ def compare(
         for d in dirs:
             mark_output(d, "run", Path(log_path))  # each is a complete run output
         final = stage.commit()
-    for s, a in zip(summaries, assocs, strict=True):
-        s["out_dir"] = str(final / a)
-    return summaries
+    return [s.with_out_dir(final / a) for s, a in zip(summaries, assocs, strict=True)]

@@ -39,8 +39,19 @@ class OutputError(CornerslamError):
     too long) or must not be replaced (a directory cornerslam did not write)."""
 
 
+class ResultsError(CornerslamError):
+    """A run's results file (summary.json) cannot be read: missing, not JSON, or a key missing,
+    unknown or of the wrong type (written by another version, or edited)."""
+
+
 class NumericalError(CornerslamError):
     """The filter state became invalid (non-finite or non-symmetric covariance)."""
+
+
+def one_line(e: BaseException) -> str:
+    """An error as one line: a CornerslamError's message (and hint), a bug's type and message."""
+    text = str(e) if isinstance(e, CornerslamError) else f"{type(e).__name__}: {e}"
+    return " ".join(text.split())
 
 
 def printable(text: str) -> str:

@@ -9,9 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import LogError
+from .errors import LogError, display_path
 from .geometry import interpolate, relative, wrap_angle
 from .report.tables import read_tum
+from .results import Accuracy, Ate, RelationError, Rpe
 from .textfile import read_number_rows
 
 
@@ -48,38 +49,39 @@ def apply_se2(ang: float, t: np.ndarray, poses: np.ndarray) -> np.ndarray:
     return np.column_stack((xy, wrap_angle(poses[:, 2] + ang)))
 
 
-def ate(est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray) -> dict:
+def ate(est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray) -> Ate:
     """Absolute trajectory error of ``est`` against ``gt`` (interpolated at est's stamps), after SE(2)
     alignment: RMSE, mean, max of the position error (m) and RMSE of the heading error (rad)."""
     inside, g = interpolate_inside(gt_t, gt, est_t)
     e = est[inside]
     if len(e) < 2:
-        return {"n": int(len(e)), "rmse": float("nan"), "mean": float("nan"), "max": float("nan")}
+        return Ate(n=int(len(e)), rmse=float("nan"), mean=float("nan"), max=float("nan"))
     ang, t = align_se2(e[:, :2], g[:, :2])
     ea = apply_se2(ang, t, e)
     d = np.linalg.norm(ea[:, :2] - g[:, :2], axis=1)
     dth = wrap_angle(ea[:, 2] - g[:, 2])
-    return {
-        "n": int(len(e)),
-        "rmse": float(np.sqrt(np.mean(d**2))),
-        "mean": float(np.mean(d)),
-        "max": float(np.max(d)),
-        "rot_rmse": float(np.sqrt(np.mean(dth**2))),
-    }
+    return Ate(
+        n=int(len(e)),
+        rmse=float(np.sqrt(np.mean(d**2))),
+        mean=float(np.mean(d)),
+        max=float(np.max(d)),
+        rot_rmse=float(np.sqrt(np.mean(dth**2))),
+    )
 
 
-def rpe(est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray, delta_m: float = 1.0) -> dict:
+def rpe(est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray, delta_m: float = 1.0) -> Rpe:
     """Relative pose error. Per step: RMSE of the translational error of consecutive relative poses.
     Per metre: mean translational error of relative poses spanning ``delta_m`` metres of ground-truth
     path, divided by that span (m/m)."""
     inside, g = interpolate_inside(gt_t, gt, est_t)
     e = est[inside]
-    out = {"rpe_step_rmse": float("nan"), "rpe_step_rot_rmse": float("nan"), "rpe_per_m": float("nan")}
+    nan = float("nan")
     if len(e) < 2:
-        return out
+        return Rpe(rpe_step_rmse=nan, rpe_step_rot_rmse=nan, rpe_per_m=nan)
     err = relative(relative(g[:-1], g[1:]), relative(e[:-1], e[1:]))
-    out["rpe_step_rmse"] = float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1))))
-    out["rpe_step_rot_rmse"] = float(np.sqrt(np.mean(err[:, 2] ** 2)))
+    step_rmse = float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1))))
+    step_rot_rmse = float(np.sqrt(np.mean(err[:, 2] ** 2)))
+    per_m = nan
     dist = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(g[:, :2], axis=0), axis=1))))
     j = np.searchsorted(dist, dist + delta_m)
     ok = j < len(g)
@@ -87,8 +89,8 @@ def rpe(est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray, de
         i, j = np.nonzero(ok)[0], j[ok]
         span = dist[j] - dist[i]
         err = relative(relative(g[i], g[j]), relative(e[i], e[j]))
-        out["rpe_per_m"] = float(np.mean(np.linalg.norm(err[:, :2], axis=1) / span))
-    return out
+        per_m = float(np.mean(np.linalg.norm(err[:, :2], axis=1) / span))
+    return Rpe(rpe_step_rmse=step_rmse, rpe_step_rot_rmse=step_rot_rmse, rpe_per_m=per_m)
 
 
 RELATIONS_LAYOUT = "t1 t2 x y z roll pitch yaw"
@@ -121,37 +123,38 @@ def evaluate_files(
     ground_truth: str | Path | None = None,
     relations: str | Path | None = None,
     time_offset: float = 0.0,
-) -> dict:
+) -> Accuracy:
     """``cornerslam evaluate``: the TUM ``trajectory`` (or a run's output directory: its
-    trajectory.tum) scored against a TUM ``ground_truth`` (keys ``ate``, ``rpe``) and/or a
-    ``relations`` file (key ``relations``).
+    trajectory.tum) scored against a TUM ``ground_truth`` (``ate`` and the ``rpe_*`` fields) and/or a
+    ``relations`` file (``relations``).
 
     Raises ``LogError`` when the ground truth does not overlap the trajectory in time or no relation
     falls inside it: there is nothing to score, and a NaN is not a score."""
     if Path(trajectory).is_dir():
         trajectory = Path(trajectory) / "trajectory.tum"
     t, est = read_tum(trajectory)
-    out: dict = {}
+    out: dict = {}  # Accuracy's fields
     if ground_truth:
         gt_t, gt = read_tum(ground_truth, "ground truth")
         problem = overlap_problem(t, gt_t, f"ground truth '{ground_truth}'")
         if problem:
             raise LogError(problem, "is it this log's ground truth? Its stamps must use the log's clock")
-        out.update(ate=ate(t, est, gt_t, gt), rpe=rpe(t, est, gt_t, gt))
+        out.update(ground_truth=display_path(ground_truth), ate=ate(t, est, gt_t, gt))
+        out.update(vars(rpe(t, est, gt_t, gt)))
     if relations:
         e = relation_error(t, est, read_relations(relations), time_offset)
-        if e["n"] == 0:
+        if e.n == 0:
             raise LogError(
                 f"no relation in '{relations}' falls inside the trajectory's time span",
                 "check --time-offset (relation time − log time)",
             )
-        out["relations"] = e
-    return out
+        out.update(relations_file=display_path(relations), relations=e)
+    return Accuracy(**out)
 
 
 def relation_error(
     est_t: np.ndarray, est: np.ndarray, relations: np.ndarray, time_offset: float = 0.0
-) -> dict:
+) -> RelationError:
     """Kümmerle et al. 2009 metric: for each relation (t1, t2, δ), the error of the estimated relative
     pose est(t1)⁻¹ ∘ est(t2) against δ. Relation times are shifted by ``-time_offset`` to log time;
     poses between processed scans are interpolated. Returns mean ± std of the translational (m) and
@@ -163,15 +166,15 @@ def relation_error(
     gt = relations[both][:, 2:5]
     n = int(np.count_nonzero(both))
     if n == 0:
-        return {"n": 0, "n_total": int(len(relations))}
+        return RelationError(n=0, n_total=int(len(relations)))
     err = relative(gt, relative(a, b))
     trans = np.linalg.norm(err[:, :2], axis=1)
     rot = np.degrees(np.abs(err[:, 2]))
-    return {
-        "n": n,
-        "n_total": int(len(relations)),
-        "trans_mean": float(trans.mean()),
-        "trans_std": float(trans.std()),
-        "rot_mean_deg": float(rot.mean()),
-        "rot_std_deg": float(rot.std()),
-    }
+    return RelationError(
+        n=n,
+        n_total=int(len(relations)),
+        trans_mean=float(trans.mean()),
+        trans_std=float(trans.std()),
+        rot_mean_deg=float(rot.mean()),
+        rot_std_deg=float(rot.std()),
+    )

@@ -16,8 +16,10 @@ from .config import Config
 from .errors import OutputError, display_path
 from .frontend import Frame, Input, check_processed, frames, open_input, warn_default_mount
 from .report.occupancy import ScanStore
-from .report.outdir import StagedDir, output_errors
+from .report.oserrors import output_errors
+from .report.outdir import StagedDir
 from .report.run_writer import Reference, RunWriter, find_ground_truth, load_reference
+from .results import RunSummary
 from .slam import Slam
 
 
@@ -37,11 +39,11 @@ def run(
     plot: bool = False,
     mcap_out: str | Path | None = None,
     config_path: str | Path | None = None,
-) -> dict:
+) -> RunSummary:
     """Run corner EKF-SLAM on one log and write the output directory atomically: the tables, with
     ``plot`` the figures and report.html, and ``mcap_out`` beside it, all committed at once.
 
-    The output places are checked before any work (report/outdir.py); the run's inputs — the log,
+    The output places are checked before any work (report/ownership.py); the run's inputs — the log,
     the ground truth (also LOG.gt.tum found beside the log), the relations, the config file
     ``config_path`` — are never written over. Returns the summary (also written to summary.json)
     with ``out_dir``, the committed directory.
@@ -57,7 +59,7 @@ def run(
         scans = ScanStore() if mcap_path else None  # kept for the results MCAP's scans
         summary = run_filter(frames(src, cfg, progress), src, cfg, stage.path, ref, wall0, scans)
         write_extras(stage, plot, mcap_out, mcap_path, ref.gt_path, scans)
-        summary["out_dir"] = str(stage.commit())
+        summary = summary.with_out_dir(stage.commit())
     return summary
 
 
@@ -95,7 +97,7 @@ def run_filter(
     ref: Reference,
     wall0: float,
     scans: ScanStore | None = None,
-) -> dict:
+) -> RunSummary:
     """The filter over the front end's frames, a run's files written into the (staging) directory
     ``dest`` (the scans kept in ``scans`` when given); returns the summary."""
     slam = Slam.from_config(cfg, src.laser2base)

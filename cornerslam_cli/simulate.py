@@ -24,7 +24,7 @@ import numpy as np
 from .errors import ConfigError
 from .geometry import compose, relative, wrap_angle
 from .logs.writers import RawScan, write_mcap
-from .report.outdir import refuse_special_file
+from .report.ownership import refuse_special_file
 from .report.tables import write_tum
 from .simworld import OFFICE_LOOP, office_world, raycast, true_corners
 from .types import OdomSample

@@ -3,6 +3,7 @@ equal results whatever the parallelism (1 or 2 processes, a Dask cluster), and r
 
 from __future__ import annotations
 
+import json
 import re
 import sys
 from pathlib import Path
@@ -11,11 +12,12 @@ import pytest
 from click.testing import CliRunner
 
 from cornerslam_cli import batch as batch_mod
-from cornerslam_cli.batch import TIMING_FIGURES, batch_columns, plan, read_batch, run_batch
+from cornerslam_cli.batch import TIMING_FIGURES, batch_columns, read_batch, run_batch
 from cornerslam_cli.cli import cli
 from cornerslam_cli.errors import ConfigError, CornerslamError
-from cornerslam_cli.report.outdir import MARKER
+from cornerslam_cli.report.ownership import MARKER
 from cornerslam_cli.simulate import simulate_log
+from cornerslam_cli.sweep import plan
 
 SWEEP = ["--sweep", "association.pca.group_size=3,5"]
 KEY = "association.pca.group_size"
@@ -172,6 +174,13 @@ def test_resume_skips_complete_unchanged_and_reruns_changed(first, logs, tmp_pat
     summary.write_text(summary.read_text().replace('"version": "', '"version": "0.0.0-'))
     statuses = [r["status"] for r in run_batch(changed, out, jobs=2)]
     assert statuses == ["skipped"] * 3 + ["ok"]
+    # nor is one of an older layout with the same hashes (a count it did not have yet), nor a broken one
+    older = json.loads(summary.read_text())
+    del older["counts"]["scans_size_mismatch"]
+    summary.write_text(json.dumps(older))
+    (out / changed[0].name / "summary.json").write_text('{"counts": ')
+    statuses = [r["status"] for r in run_batch(changed, out, jobs=2)]
+    assert statuses == ["ok", "skipped", "skipped", "ok"]
 
 
 def test_dask_cluster_gives_the_same_batch_csv(first, logs, tmp_path):

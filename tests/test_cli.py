@@ -13,7 +13,7 @@ from cornerslam_cli.cli import cli
 from cornerslam_cli.errors import ConfigError
 from cornerslam_cli.logs.writers import RawScan, write_mcap
 from cornerslam_cli.options import parse_assocs
-from cornerslam_cli.report.outdir import MARKER
+from cornerslam_cli.report.ownership import MARKER
 from cornerslam_cli.report.tables import TIMING_COLUMNS, TRAJECTORY_COLUMNS, read_csv
 from cornerslam_cli.types import OdomSample
 
@@ -187,14 +187,14 @@ def _two_scan_topics(path: Path) -> None:
     """An MCAP with two LaserScan topics (/front, /rear) and /odom, built with the writers' serializer."""
     from mcap.writer import Writer
 
-    from cornerslam_cli.logs.writers import RosSerializer, RosTopics, _ros_messages
+    from cornerslam_cli.logs.writers.ros import RosSerializer, RosTopics, ros_messages
 
     ros = RosSerializer("cdr")
     r = np.full(181, 5.0)
     scans = [RawScan(T0 + 0.1 * i + 0.05, -math.pi / 2, math.pi / 180, r) for i in range(10)]
     odoms = [OdomSample(T0 + 0.1 * i, 0.0, 0.0, 0.0) for i in range(11)]
-    msgs = list(_ros_messages(ros, scans, odoms, RosTopics(scan_topic="/front")))
-    msgs += list(_ros_messages(ros, scans, [], RosTopics(scan_topic="/rear")))
+    msgs = list(ros_messages(ros, scans, odoms, RosTopics(scan_topic="/front")))
+    msgs += list(ros_messages(ros, scans, [], RosTopics(scan_topic="/rear")))
     msgs.sort(key=lambda m: m[2])
     with open(path, "wb") as f:
         w = Writer(f)

@@ -17,7 +17,7 @@ def test_ate_is_zero_for_a_rigidly_moved_copy():
     t, gt = square()
     est = apply_se2(0.7, np.array([3.0, -2.0]), gt)
     r = ate(t, est, t, gt)
-    assert r["rmse"] == pytest.approx(0.0, abs=1e-9) and r["n"] == len(t)
+    assert r.rmse == pytest.approx(0.0, abs=1e-9) and r.n == len(t)
 
 
 def test_ate_of_a_constant_offset_in_one_axis_after_alignment():
@@ -28,8 +28,8 @@ def test_ate_of_a_constant_offset_in_one_axis_after_alignment():
     est = gt.copy()
     est[:, 1] = np.where(np.arange(10) % 2 == 0, 0.1, -0.1)
     r = ate(t, est, t, gt)
-    assert r["rmse"] == pytest.approx(0.1, rel=1e-6)
-    assert r["max"] == pytest.approx(0.1, rel=1e-6)
+    assert r.rmse == pytest.approx(0.1, rel=1e-6)
+    assert r.max == pytest.approx(0.1, rel=1e-6)
 
 
 def test_align_se2_recovers_a_known_transform():
@@ -47,8 +47,8 @@ def test_rpe_per_step_of_a_scaled_trajectory():
     gt = np.column_stack((t, np.zeros(11), np.zeros(11)))
     est = gt * [1.1, 1, 1]  # each 1 m step measured as 1.1 m
     r = rpe(t, est, t, gt, delta_m=2.0)
-    assert r["rpe_step_rmse"] == pytest.approx(0.1)
-    assert r["rpe_per_m"] == pytest.approx(0.1)
+    assert r.rpe_step_rmse == pytest.approx(0.1)
+    assert r.rpe_per_m == pytest.approx(0.1)
 
 
 def test_relation_error_with_time_offset_and_interpolation():
@@ -60,9 +60,9 @@ def test_relation_error_with_time_offset_and_interpolation():
         [[100.5, 101.5, 1.2, 0.0, 0.0], [100.0, 102.0, 2.0, 0.0, np.radians(10)], [50, 51, 0, 0, 0]]
     )
     e = relation_error(t, est, rel, time_offset=off)
-    assert e["n"] == 2 and e["n_total"] == 3
-    assert e["trans_mean"] == pytest.approx(0.1)
-    assert e["rot_mean_deg"] == pytest.approx(5.0)
+    assert e.n == 2 and e.n_total == 3
+    assert e.trans_mean == pytest.approx(0.1)
+    assert e.rot_mean_deg == pytest.approx(5.0)
 
 
 # ---------------------------------------------------------------------------- files as users give them

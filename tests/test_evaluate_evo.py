@@ -49,6 +49,6 @@ def test_ate_matches_evo_ape_aligned(tmp_path, seed):
 
     ours = ate(*read_tum(est_path), *read_tum(gt_path))
     theirs = evo_ate_rmse(est_path, gt_path)
-    assert ours["n"] == n
-    assert ours["rmse"] > 0.05  # not trivially zero: the drift survives alignment
-    assert ours["rmse"] == pytest.approx(theirs, rel=1e-6, abs=1e-9)
+    assert ours.n == n
+    assert ours.rmse > 0.05  # not trivially zero: the drift survives alignment
+    assert ours.rmse == pytest.approx(theirs, rel=1e-6, abs=1e-9)

@@ -33,7 +33,8 @@ from fault_corpus import Expected, make_odoms, make_scans
 from cornerslam_cli.cli import cli
 from cornerslam_cli.errors import OutputError
 from cornerslam_cli.logs.writers import write_mcap
-from cornerslam_cli.report.outdir import HOST, MARKER, StagedDir, clear_stale, mark_output, target_lock
+from cornerslam_cli.report.outdir import HOST, StagedDir, clear_stale, target_lock
+from cornerslam_cli.report.ownership import MARKER, mark_output
 
 CMD = [sys.executable, "-c", "from cornerslam_cli.cli import main; main()"]
 KEPT = "no output written (a previous complete output directory is kept)"

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from cornerslam_cli.report.outdir import MARKER, mark_output
+from cornerslam_cli.report.ownership import MARKER, mark_output
 from cornerslam_cli.simulate import simulate_log
 
 CMD = [sys.executable, "-c", "from cornerslam_cli.cli import main; main()"]

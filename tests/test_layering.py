@@ -1,4 +1,5 @@
-"""Every import in cornerslam_cli points down a declared layer order, and none closes a cycle.
+"""Every import in cornerslam_cli points down a declared layer order, and none closes a cycle; a
+module over 400 lines says why at its top.
 
 The imports are read with ``ast`` from the source, function-level (deferred) ones included, so a cycle
 cannot hide behind an import inside a function. Rules:
@@ -24,14 +25,14 @@ PACKAGE = Path(cornerslam_cli.__file__).resolve().parent
 LAYERS: list[tuple[str, ...]] = [
     ("", "blas", "errors", "fpenv", "geometry", "ranges", "types", "workers"),  # stdlib, numpy
     ("textfile", "association.params", "features.params", "filter.params", "motion.params", "logs.params"),
-    ("report.tables",),  # file formats (TUM, CSV, JSON), read by evaluate too
+    ("report.tables", "results"),  # file formats (TUM, CSV, JSON); a run's results (summary.json's fields)
     ("logs", "features", "association", "filter", "motion", "simworld"),  # the stages, independent
     ("config",),  # the stages' sections assembled, loaded, validated
     ("lasers", "evaluate", "extract"),  # a run's config; scoring a trajectory; one scan's features
     ("frontend",),  # a run's front end: log → synchronised frames → features → scan-matched motion
     ("slam",),  # the filter over the frames: steps, landmarks
     ("report",),  # run writer, figures, MCAP out, output directories, printed text, progress display
-    ("pipeline", "simulate"),  # a run; the simulated log
+    ("pipeline", "simulate", "sweep"),  # a run; the simulated log; a batch's plan
     ("compare", "batch"),
     ("options",),  # the command line's shared options and option parsers
     ("cli",),
@@ -172,3 +173,17 @@ def test_the_check_sees_deferred_imports_cycles_and_private_names(tmp_path):
     assert any("private name _hidden" in p for p in problems)
     assert any("errors (layer 0) imports cornerslam_cli.config (layer 4)" in p for p in problems)
     assert len(problems) == 3
+
+
+MAX_LINES = 400  # issue 14: a longer module says why at its top
+
+
+def test_a_module_over_400_lines_says_why_at_its_top():
+    """Every module over MAX_LINES lines has "Over 400 lines because ..." in its docstring."""
+    silent = []
+    for name, path in module_names(PACKAGE).items():
+        text = path.read_text()
+        doc = ast.get_docstring(ast.parse(text)) or ""
+        if len(text.splitlines()) > MAX_LINES and "Over 400 lines because" not in doc:
+            silent.append(f"{name}: {len(text.splitlines())} lines")
+    assert silent == []

@@ -12,15 +12,8 @@ import pytest
 from cornerslam_cli.compare import compare
 from cornerslam_cli.config import load_config
 from cornerslam_cli.geometry import relative
-from cornerslam_cli.report.plots import (
-    COMPARE_FIGURES,
-    RUN_FIGURES,
-    ellipse_polygons,
-    load_run,
-    odom_in_map,
-    plot_compare,
-    plot_run,
-)
+from cornerslam_cli.report.plots import COMPARE_FIGURES, RUN_FIGURES, plot_compare, plot_run
+from cornerslam_cli.report.run_dir import ellipse_polygons, load_run, odom_in_map
 
 ASSOCS = ["icnn", "pca"]
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"

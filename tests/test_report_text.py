@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from dataclasses import replace
 
 import numpy as np
+from _results_helpers import NO_REL, REL, ate, make_summary
 
 from cornerslam_cli.logs.base import LogInfo, TopicInfo
 from cornerslam_cli.report.text import (
@@ -18,58 +21,25 @@ from cornerslam_cli.report.text import (
     scan_heading,
     summary_lines,
 )
+from cornerslam_cli.results import Accuracy, Ate, RelationError
 from cornerslam_cli.types import Scan
 
-REL = {
-    "n": 3,
-    "n_total": 4,
-    "trans_mean": 0.1234,
-    "trans_std": 0.0456,
-    "rot_mean_deg": 1.234,
-    "rot_std_deg": 0.5,
-}
-NO_REL = {"n": 0, "n_total": 4}
+
+def summary(assoc="pca", accuracy=None, t_match=0.5, t_match_max=0.0123):
+    return make_summary(assoc, accuracy, t_match, t_match_max)
 
 
-def summary(assoc="pca", accuracy=None, t_match=0.5, t_match_max=0.0123) -> dict:
-    return {
-        "input": {"log": "logs/office.mcap", "laser_to_base": [0.1, 0.0, 0.0], "laser_to_base_source": "tf"},
-        "assoc": assoc,
-        "out_dir": "out/office_pca",
-        "counts": {
-            "steps": 500,
-            "scans_in": 502,
-            "scans_skipped": 2,
-            "keyframes_skipped": 7,
-            "landmarks": 88,
-            "matched_total": 2777,
-        },
-        "timing": {
-            "t_extract": 1.234,
-            "t_scan_match": 2.0,
-            "t_predict": 0.04,
-            "t_match": t_match,
-            "t_match_max": t_match_max,
-            "t_update": 0.375,
-            "t_total": 4.5678,
-            "scans_per_second": 118.4,
-            "wall_time": 4.56,
-        },
-        "accuracy": accuracy,
-    }
-
-
-def accuracy(scan_odom_relations: dict) -> dict:
+def accuracy(scan_odom_relations: RelationError | None) -> Accuracy:
     """A summary's accuracy section with ground truth and relations."""
-    return {
-        "ground_truth": "gt.tum",
-        "ate": {"rmse": 0.0123},
-        "odom_ate": {"rmse": 1.4249},
-        "scan_odom_ate": {"rmse": 0.0816},
-        "relations": REL,
-        "odom_relations": NO_REL,
-        "scan_odom_relations": scan_odom_relations,
-    }
+    return Accuracy(
+        ground_truth="gt.tum",
+        ate=ate(0.0123),
+        odom_ate=ate(1.4249),
+        scan_odom_ate=ate(0.0816),
+        relations=REL,
+        odom_relations=NO_REL,
+        scan_odom_relations=scan_odom_relations,
+    )
 
 
 def test_relation_text_and_mean_std():
@@ -82,21 +52,18 @@ def test_relation_text_and_mean_std():
 
 
 def test_summary_lines_without_reference():
-    s = summary()
-    del s["timing"]["t_scan_match"]  # a summary written before scan matching existed
+    s = make_summary(t_scan_match=None)  # a summary written before scan matching existed
     assert summary_lines(s) == [
         "logs/office.mcap: 500 steps (502 scans, 2 skipped, 7 between keyframes), 88 landmarks, "
         "2777 matches with pca",
-        "laser mount: x=0.100 m y=0.000 m yaw=0.000 rad (from the log's tf)",
+        "laser mount: x=0.000 m y=0.000 m yaw=0.000 rad (the built-in default: not on the log's tf, "
+        "not in the config)",
         "time: extract 1.23s scan match 0.00s predict 0.04s match 0.50s update 0.38s (118 steps/s), "
         "wall 4.6s",
         "wrote out/office_pca",
     ]
-    s["input"].update(laser_to_base=[0.0, 0.0, 0.0], laser_to_base_source="default")
-    assert summary_lines(s)[1] == (
-        "laser mount: x=0.000 m y=0.000 m yaw=0.000 rad (the built-in default: not on the log's tf, "
-        "not in the config)"
-    )
+    tf = replace(s, input=replace(s.input, laser_to_base=(0.1, 0.0, 0.0), laser_to_base_source="tf"))
+    assert summary_lines(tf)[1] == "laser mount: x=0.100 m y=0.000 m yaw=0.000 rad (from the log's tf)"
 
 
 def test_summary_lines_with_ground_truth_and_relations():
@@ -109,7 +76,7 @@ def test_summary_lines_with_ground_truth_and_relations():
         "  scan-matched odometry: translation 0.123 ± 0.046 m, rotation 1.23 ± 0.50 deg (3/4 relations)",
         "wrote out/office_pca",
     ]
-    del acc["scan_odom_ate"], acc["scan_odom_relations"]
+    acc = dataclasses.replace(acc, scan_odom_ate=None, scan_odom_relations=None)
     lines = summary_lines(summary(accuracy=acc))
     assert lines[3] == "ATE RMSE 0.012 m (odometry 1.425 m) against gt.tum"
     assert not any("scan-matched" in line for line in lines)
@@ -213,21 +180,21 @@ def test_info_lines():
 
 
 def test_evaluation_lines():
-    res = {
-        "ate": {"rmse": 0.01234, "mean": 0.01, "max": 0.05, "n": 501},
-        "rpe": {"rpe_step_rmse": 0.00321, "rpe_per_m": 0.0456},
-        "relations": REL,
-    }
+    res = Accuracy(
+        ate=Ate(rmse=0.01234, mean=0.01, max=0.05, n=501),
+        rpe_step_rmse=0.00321,
+        rpe_step_rot_rmse=0.001,
+        rpe_per_m=0.0456,
+        relations=REL,
+    )
     assert evaluation_lines(res) == [
         "ATE  rmse 0.0123 m  mean 0.0100 m  max 0.0500 m  (n=501)",
         "RPE  per step 0.0032 m  per metre 0.0456 m/m",
         "relations: translation 0.123 ± 0.046 m, rotation 1.23 ± 0.50 deg (3/4 relations)",
     ]
-    res["rpe"]["rpe_per_m"] = math.nan  # a path shorter than 1 m
-    assert evaluation_lines({"ate": res["ate"], "rpe": res["rpe"]})[1] == (
-        "RPE  per step 0.0032 m  per metre - m/m"
-    )
-    assert evaluation_lines({}) == []
+    res = dataclasses.replace(res, rpe_per_m=math.nan, relations=None)  # a path shorter than 1 m
+    assert evaluation_lines(res)[1] == "RPE  per step 0.0032 m  per metre - m/m"
+    assert evaluation_lines(Accuracy()) == []
 
 
 def test_scan_heading():

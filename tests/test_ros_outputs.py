@@ -27,8 +27,8 @@ from test_report_mcap import validate
 from cornerslam_cli.cli import cli
 from cornerslam_cli.logs.writers import RawScan, write_mcap
 from cornerslam_cli.report.occupancy import FREE, OCCUPIED, UNKNOWN, ScanStore, classify, count, line_cells
-from cornerslam_cli.report.outdir import MARKER
-from cornerslam_cli.report.run_writer import in_odom_frame, landmarks_in_odom_frame
+from cornerslam_cli.report.odom_frame import in_odom_frame, landmarks_in_odom_frame
+from cornerslam_cli.report.ownership import MARKER
 from cornerslam_cli.report.tables import read_csv, read_tum, write_tum
 from cornerslam_cli.simulate import SimParams, drive
 from cornerslam_cli.simworld import office_world, raycast

@@ -145,15 +145,13 @@ def test_run_reports_the_scan_matched_odometry_and_it_beats_the_wheels(sim_log, 
     from cornerslam_cli.report.tables import read_csv
 
     s = run(sim_log, load_config(None), out=tmp_path / "on")
-    acc = s["accuracy"]
-    assert acc["scan_odom_ate"]["rmse"] < 0.5 * acc["odom_ate"]["rmse"]
-    assert (
-        s["counts"]["scans_matched"] == s["counts"]["steps"] - 1 and s["counts"]["scans_match_fallback"] == 0
-    )
+    acc = s.accuracy
+    assert acc.scan_odom_ate.rmse < 0.5 * acc.odom_ate.rmse
+    assert s.counts.scans_matched == s.counts.steps - 1 and s.counts.scans_match_fallback == 0
     traj = read_csv(tmp_path / "on" / "trajectory.csv")
     assert not np.allclose(traj["scan_odom_x"], traj["odom_x"])
     off = run(sim_log, load_config(None, ["scan_match.enabled=false"]), out=tmp_path / "off")
-    assert "scan_odom_ate" not in off["accuracy"] and "scans_matched" not in off["counts"]
+    assert off.accuracy.scan_odom_ate is None and off.counts.scans_matched is None and not off.scan_matching
     traj = read_csv(tmp_path / "off" / "trajectory.csv")
     np.testing.assert_array_equal(traj["scan_odom_x"], traj["odom_x"])
 

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from cornerslam_cli.errors import LogError
-from cornerslam_cli.report.outdir import MARKER, StagedDir, mark_output
+from cornerslam_cli.report.outdir import StagedDir
+from cornerslam_cli.report.ownership import MARKER, mark_output
 from cornerslam_cli.report.tables import CsvTable, read_csv, read_tum, write_tum
 
 

@@ -24,6 +24,9 @@ dependence of r on α through the centroid that the paper's eq 7 drops:
     ∂α/∂p_i = −w_i (u_i n + e_i d) / (S_dd − S_nn),   ∂r/∂p_i = (w_i / W) n + (p̄·d) ∂α/∂p_i
 n = (cos α, sin α), d = (−sin α, cos α), e_i, u_i the residual and along-line coordinate of p_i − p̄,
 S_nn, S_dd = Σ w e², Σ w u² (the scatter matrix's eigenvalues); then ∂p_i/∂ρ_i, ∂p_i/∂θ_i.
+
+Over 400 lines because Algorithm 1 is one pipeline: the steps above share the vectorised range
+bookkeeping (``starts``/``ends``) and the weighted fit, and read best in order.
 """
 
 from __future__ import annotations

@@ -13,6 +13,9 @@ Costs per call, N landmarks, k matched corners:
 
 Σ is kept *exactly* symmetric: every O(N²) write computes the upper triangle in row panels and
 mirrors it into the lower one, prediction and augmentation write cross blocks as transposes.
+
+Over 400 lines because it is the one class that owns μ and Σ: predict, the block update and
+augment share the buffers and the symmetric panel writes.
 """
 
 from __future__ import annotations

@@ -15,6 +15,9 @@ warning; a record whose length runs past the end of the file ends the read with 
 
 Summary (statistics, channels, chunk indexes) is used when present for ``info()``; without it the
 data section is scanned once (no message decoding). Record layouts: https://mcap.dev/spec.
+
+Over 400 lines because it is one streaming reader (:class:`McapSource`) whose record parsing, chunk
+index, reorder heap and damage handling share the position in the file.
 """
 
 from __future__ import annotations

@@ -5,37 +5,45 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..results import Accuracy, Ate, RelationError, RunSummary
 from .tables import COMPARISON_COLUMNS, CsvTable
 
+NAN = float("nan")
 
-def comparison_row(s: dict) -> list:
-    acc = s.get("accuracy") or {}
-    t = s["timing"]
-    nan = float("nan")
+
+def comparison_row(s: RunSummary) -> list:
+    """One row of comparison.csv (``COMPARISON_COLUMNS``); NaN for what the run did not measure."""
+    c, t, acc = s.counts, s.timing, s.accuracy or Accuracy()
     return [
-        s["assoc"],
-        s["counts"]["steps"],
-        s["counts"]["landmarks"],
-        s["counts"]["matched_total"],
-        t["t_match"],
-        t["t_match_max"],
-        t["t_total"],
-        acc.get("ate", {}).get("rmse", nan),
-        acc.get("odom_ate", {}).get("rmse", nan),
-        acc.get("rpe_per_m", nan),
-        t["wall_time"],
-        s["counts"]["budget_hits"],
-        acc.get("relations", {}).get("trans_mean", nan),
-        acc.get("relations", {}).get("trans_std", nan),
-        acc.get("relations", {}).get("rot_mean_deg", nan),
-        acc.get("odom_relations", {}).get("trans_mean", nan),
-        acc.get("scan_odom_ate", {}).get("rmse", nan),  # the motion input, the same for every associator
-        acc.get("scan_odom_relations", {}).get("trans_mean", nan),
+        s.assoc,
+        c.steps,
+        c.landmarks,
+        c.matched_total,
+        t.t_match,
+        t.t_match_max,
+        t.t_total,
+        _or_nan(acc.ate, "rmse"),
+        _or_nan(acc.odom_ate, "rmse"),
+        NAN if acc.rpe_per_m is None else acc.rpe_per_m,
+        t.wall_time,
+        c.budget_hits,
+        _or_nan(acc.relations, "trans_mean"),
+        _or_nan(acc.relations, "trans_std"),
+        _or_nan(acc.relations, "rot_mean_deg"),
+        _or_nan(acc.odom_relations, "trans_mean"),
+        _or_nan(acc.scan_odom_ate, "rmse"),  # the motion input, the same for every associator
+        _or_nan(acc.scan_odom_relations, "trans_mean"),
     ]
 
 
+def _or_nan(result: Ate | RelationError | None, name: str) -> float:
+    """A figure of an accuracy result, NaN when there is no result or it lacks the figure."""
+    value = None if result is None else getattr(result, name)
+    return NAN if value is None else value
+
+
 def write_comparison(
-    out_dir: Path, summaries: list[dict], plots: bool = True, ground_truth: str | Path | None = None
+    out_dir: Path, summaries: list[RunSummary], plots: bool = True, ground_truth: str | Path | None = None
 ) -> None:
     """``out_dir``/comparison.csv from the run ``summaries`` (one per associator, in order) and, with
     ``plots``, the comparison figures and report.html drawn from the runs in ``out_dir`` (with the

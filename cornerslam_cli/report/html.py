@@ -15,6 +15,7 @@ import math
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
+from ..results import Ate, RunSummary, to_json
 from .plots import COMPARE_FIGURES, RUN_FIGURES, compare_assocs, plot_compare, plot_run
 from .tables import COMPARISON_COLUMNS, read_csv
 
@@ -121,61 +122,60 @@ def _kv_table(pairs: list[tuple[str, object]]) -> str:
     return f"<table>{rows}</table>"
 
 
-def _summary_section(summary: dict) -> list[str]:
-    inp, counts, timing = summary.get("input", {}), summary.get("counts", {}), summary.get("timing", {})
+def _summary_section(summary: RunSummary) -> list[str]:
+    inp, counts, timing = summary.input, summary.counts, summary.timing
     pairs: list[tuple[str, object]] = [
-        ("log", inp.get("log", "")),
-        ("format", inp.get("format", "")),
-        ("scan topic", inp.get("scan_topic", "")),
-        ("odometry", f"{inp.get('odom_topic', '')} ({inp.get('odom_source', '')})"),
-        ("associator", summary.get("assoc", "")),
-        ("steps", counts.get("steps", "")),
-        ("landmarks", counts.get("landmarks", "")),
-        ("matched corners", counts.get("matched_total", "")),
+        ("log", inp.log),
+        ("format", inp.format),
+        ("scan topic", inp.scan_topic),
+        ("odometry", f"{inp.odom_topic} ({inp.odom_source})"),
+        ("associator", summary.assoc),
+        ("steps", counts.steps),
+        ("landmarks", counts.landmarks),
+        ("matched corners", counts.matched_total),
     ]
     for key in ("t_extract", "t_scan_match", "t_predict", "t_match", "t_update", "t_total", "wall_time"):
-        if key in timing:
-            pairs.append((f"{key.removeprefix('t_')} time [s]", float(timing[key])))
-    if "t_match_max" in timing:
-        pairs.append(("max matching time per step [ms]", 1e3 * float(timing["t_match_max"])))
-    if "scans_per_second" in timing:
-        pairs.append(("scans per second", float(timing["scans_per_second"])))
-    if summary.get("final_pose") is not None:
-        pairs.append(("final pose x, y [m], θ [rad]", ", ".join(f"{v:.3f}" for v in summary["final_pose"])))
+        if getattr(timing, key) is not None:  # no scan matching time in a summary from before it
+            pairs.append((f"{key.removeprefix('t_')} time [s]", float(getattr(timing, key))))
+    pairs.append(("max matching time per step [ms]", 1e3 * timing.t_match_max))
+    pairs.append(("scans per second", timing.scans_per_second))
+    pairs.append(("final pose x, y [m], θ [rad]", ", ".join(f"{v:.3f}" for v in summary.final_pose)))
     out = ["<h2>Summary</h2>", _kv_table(pairs)]
-    acc = summary.get("accuracy")
-    if acc:
-        rows = []
-        for name, key in (("corrected", "ate"), ("odometry", "odom_ate")):
-            a = acc.get(key) or {}
-            rows.append([name, a.get("rmse", math.nan), a.get("mean", math.nan), a.get("max", math.nan),
-                         a.get("rot_rmse", math.nan), a.get("n", "")])  # fmt: skip
+    acc = summary.accuracy
+    if acc is not None:
+        rows = [[name, *_ate_cells(a)] for name, a in (("corrected", acc.ate), ("odometry", acc.odom_ate))]
         out += [
             "<h3>Accuracy</h3>",
-            f'<p class="muted">against {esc(acc.get("ground_truth", ""))} (SE(2)-aligned)</p>',
+            f'<p class="muted">against {esc(acc.ground_truth or "")} (SE(2)-aligned)</p>',
             table(["trajectory", "ATE RMSE [m]", "mean [m]", "max [m]", "heading RMSE [rad]", "poses"], rows),
         ]
-        extra = [(k, v) for k, v in acc.items() if k.startswith("rpe") and isinstance(v, (int, float))]
+        extra = [(k, getattr(acc, k)) for k in ("rpe_step_rmse", "rpe_step_rot_rmse", "rpe_per_m")]
+        extra = [(k, v) for k, v in extra if v is not None and math.isfinite(v)]  # null in summary.json
         if extra:
-            out.append(_kv_table([(k, float(v)) for k, v in extra]))
-    warnings = summary.get("warnings") or []
+            out.append(_kv_table(extra))
     out.append("<h3>Warnings</h3>")
-    if warnings:
-        out.append("<ul>" + "".join(f'<li class="warn">{esc(w)}</li>' for w in warnings) + "</ul>")
+    if summary.warnings:
+        out.append("<ul>" + "".join(f'<li class="warn">{esc(w)}</li>' for w in summary.warnings) + "</ul>")
     else:
         out.append('<p class="muted">none</p>')
-    if counts:
-        out.append("<details><summary>All counts</summary>")
-        out.append(_kv_table(list(counts.items())) + "</details>")
+    out.append("<details><summary>All counts</summary>")
+    out.append(_kv_table(list(to_json(counts).items())) + "</details>")
     return out
+
+
+def _ate_cells(a: Ate | None) -> list:
+    """ATE RMSE, mean, max, heading RMSE, poses: NaN (and no count) for what was not measured."""
+    if a is None:
+        return [math.nan] * 4 + [""]
+    return [a.rmse, a.mean, a.max, math.nan if a.rot_rmse is None else a.rot_rmse, a.n]
 
 
 def _figures(run_dir: Path, label: str) -> list[str]:
     return [figure(run_dir / name, f"{label}: {name}") for name in RUN_FIGURES if (run_dir / name).is_file()]
 
 
-def _config_section(summary: dict) -> list[str]:
-    config = {k: summary[k] for k in ("config", "versions") if k in summary}
+def _config_section(summary: RunSummary) -> list[str]:
+    config = {"config": summary.config, "versions": summary.versions}
     text = json.dumps(config, indent=2, default=str)
     return [
         f"<details><summary>Resolved configuration and versions</summary><pre>{esc(text)}</pre></details>"
@@ -188,12 +188,11 @@ def _ensure_figures(out_dir: Path, names: Iterable[str], draw: Callable[[Path], 
 
 
 def _run_report(out_dir: Path) -> str:
-    summary = json.loads((out_dir / "summary.json").read_text())
-    log_name = Path(str(summary.get("input", {}).get("log", out_dir.name))).name
-    title = f"cornerslam run — {log_name} ({summary.get('assoc', '')})"
+    summary = RunSummary.read(out_dir)
+    title = f"cornerslam run — {Path(summary.input.log).name} ({summary.assoc})"
     body = [f"<h1>{esc(title)}</h1>"]
     body += _summary_section(summary)
-    body += ["<h2>Figures</h2>", *_figures(out_dir, summary.get("assoc", ""))]
+    body += ["<h2>Figures</h2>", *_figures(out_dir, summary.assoc)]
     body += ["<h2>Configuration</h2>", *_config_section(summary)]
     return _page(title, body)
 
@@ -220,16 +219,15 @@ def _compare_report(out_dir: Path) -> str:
     assocs = compare_assocs(out_dir)
     n = len(assocs)
     rows = [[columns[c][i] for c in COMPARISON_COLUMNS] for i in range(n)]
-    summaries = {a: json.loads((out_dir / a / "summary.json").read_text()) for a in assocs}
-    first = summaries[assocs[0]] if assocs else {}
-    log_name = Path(str(first.get("input", {}).get("log", out_dir.name))).name
+    summaries = {a: RunSummary.read(out_dir / a) for a in assocs}
+    log = summaries[assocs[0]].input.log if assocs else ""
+    log_name = Path(log).name if assocs else out_dir.name
     title = f"cornerslam compare — {log_name} ({', '.join(assocs)})"
     body = [
         f"<h1>{esc(title)}</h1>",
         "<nav>" + "".join(f'<a href="#assoc-{esc(a)}">{esc(a)}</a>' for a in assocs) + "</nav>",
         "<h2>Comparison</h2>",
-        f'<p class="muted">log {esc(first.get("input", {}).get("log", ""))}; times in seconds; '
-        "best value per column highlighted.</p>",
+        f'<p class="muted">log {esc(log)}; times in seconds; best value per column highlighted.</p>',
         table(COMPARISON_COLUMNS, rows, best=best_cells(columns, n)),
         "<h2>Figures</h2>",
         *[figure(out_dir / name, name) for name in COMPARE_FIGURES if (out_dir / name).is_file()],

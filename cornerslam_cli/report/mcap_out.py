@@ -45,6 +45,9 @@ nav_msgs/Odometry only, CARMEN) gets it here, from the odometry the run used, so
 alone places the robot; with the scans in ``map`` it shows the robot moving through its map. The
 poses are in the log's odometry frame, so ``map`` and odom coincide at the first scan.
 Landmarks are the final estimates (map.csv holds only the final map), shown from their creation on.
+
+Over 400 lines because the Foxglove schemas (trimmed JSON schemas, one per message type written) are
+declared here beside the builders that fill them, so a field is added to both in one place.
 """
 
 from __future__ import annotations
@@ -60,7 +63,7 @@ import numpy as np
 from ..errors import display_path
 from ..geometry import compose_inverse
 from .occupancy import ScanStore
-from .plots import ELLIPSE_SIGMA, ellipse_polygons, load_run
+from .run_dir import ELLIPSE_SIGMA, ellipse_polygons, load_run
 from .tables import json_text
 
 MAP_FRAME = "map"
@@ -290,9 +293,9 @@ def write_results_mcap(
     stamps_ns = [stamp_to_ns(t) for t in _stamp_texts(out_dir / "trajectory.csv")]
     ns_of_step = dict(zip(run.steps.astype(int).tolist(), stamps_ns, strict=True))
     odom_raw = read_odom_raw(out_dir)  # odom-frame poses, for the map → odom transform
-    inp = (run.summary.get("config") or {}).get("input") or {}
+    inp = run.summary.config.get("input", {})  # the run's config
     odom_frame, base_frame = str(inp.get("odom_frame") or "odom"), str(inp.get("base_frame") or "base_link")
-    odom_tf = not (run.summary.get("input") or {}).get("odom_on_tf", True)  # the log lacks it
+    odom_tf = not run.summary.input.odom_on_tf  # the log lacks odom → base on tf (or did not say)
 
     msgs: list[tuple[int, str, dict]] = []  # (log time ns, topic key, payload)
     for ns, c, o, m in zip(stamps_ns, run.corrected, run.odometry, compose_inverse(run.corrected, odom_raw),
@@ -336,9 +339,9 @@ def write_results_mcap(
         w.add_metadata(
             "cornerslam",
             {
-                "log": str(run.summary.get("input", {}).get("log", "")),
+                "log": run.summary.input.log,
                 "assoc": run.assoc,
-                "version": str(run.summary.get("cornerslam_version", "")),
+                "version": run.summary.cornerslam_version,
                 "results": display_path(out_dir if results is None else results),  # MCAP strings are UTF-8
             },
         )

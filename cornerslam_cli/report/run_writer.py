@@ -21,7 +21,7 @@ import platform
 import time
 from array import array
 from contextlib import ExitStack
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -30,9 +30,11 @@ import numpy as np
 from .. import __version__, fpenv
 from ..errors import display_path
 from ..evaluate import ate, overlap_problem, read_relations, relation_error, rpe
-from ..geometry import compose, rotate_covariance, transform_points
+from ..geometry import compose
 from ..logs import check_regular
+from ..results import Accuracy, Counts, Hashes, RunInput, RunSummary, Timing
 from .occupancy import ScanStore, build_grid, draw_grid, write_grid
+from .odom_frame import in_odom_frame, landmarks_in_odom_frame
 from .tables import (
     LINES_COLUMNS,
     MAP_COLUMNS,
@@ -60,43 +62,6 @@ def trajectory_row(r: StepRecord) -> dict:
         **dict(zip(("var_x", "var_y", "var_theta"), r.pose_var, strict=True)),
         **dict(zip(("scan_odom_x", "scan_odom_y", "scan_odom_theta"), r.motion, strict=True)),
     }
-
-
-def in_odom_frame(r: StepRecord, map2odom: np.ndarray) -> StepRecord:
-    """The step's record with its pose, pose variances and segments moved from the filter's map frame
-    into the odometry frame by ``map2odom`` (the first odometry pose). A map frame that is the
-    odometry frame (odometry starting at zero) leaves the record exactly as the filter gave it."""
-    if not np.any(map2odom):
-        return r
-    cov = np.array([[[r.pose_var[0], r.cov_xy], [r.cov_xy, r.pose_var[1]]]])
-    cov = rotate_covariance(cov, float(map2odom[2]))[0]
-    return replace(
-        r,
-        pose=compose(map2odom, r.pose),
-        pose_var=np.array([cov[0, 0], cov[1, 1], r.pose_var[2]]),
-        cov_xy=float(cov[0, 1]),
-        segments_map=transform_points(r.segments_map.reshape(-1, 2), map2odom).reshape(-1, 4),
-    )
-
-
-def landmarks_in_odom_frame(landmarks: dict[str, np.ndarray], map2odom: np.ndarray) -> dict[str, np.ndarray]:
-    """map.csv's columns moved like :func:`in_odom_frame`: positions and their covariances (φ, an
-    angle between two lines, does not depend on the frame)."""
-    if not np.any(map2odom) or len(landmarks["id"]) == 0:
-        return landmarks
-    cov = np.stack(
-        (landmarks["var_x"], landmarks["cov_xy"], landmarks["cov_xy"], landmarks["var_y"]), axis=-1
-    )
-    cov = rotate_covariance(cov.reshape(-1, 2, 2), float(map2odom[2]))
-    xy = transform_points(np.column_stack((landmarks["x"], landmarks["y"])), map2odom)
-    moved = {
-        "x": xy[:, 0],
-        "y": xy[:, 1],
-        "var_x": cov[:, 0, 0],
-        "var_y": cov[:, 1, 1],
-        "cov_xy": cov[:, 0, 1],
-    }
-    return {**landmarks, **moved}
 
 
 def timing_row(r: StepRecord) -> dict:
@@ -182,10 +147,10 @@ class RunWriter:
 
     def finish(
         self, landmarks: dict[str, np.ndarray], src: Input, cfg: Config, ref: Reference, wall0: float
-    ) -> dict:
+    ) -> RunSummary:
         """map.csv from the filter's ``landmarks`` (columns by name), trajectory.tum, odometry.tum and
-        (with scan matching) scan_matched.tum, the accuracy against ``ref`` and summary.json; returns
-        the summary."""
+        (with scan matching) scan_matched.tum, the occupancy grid, the accuracy against ``ref`` and
+        summary.json; returns the summary."""
         if self.map2odom is not None:
             landmarks = landmarks_in_odom_frame(landmarks, self.map2odom)
         with self._open("map.csv", MAP_COLUMNS) as mp:
@@ -204,9 +169,10 @@ class RunWriter:
         t_grid = time.perf_counter()
         self.write_grid(poses, src.reader.stats.warn)
         t_grid = time.perf_counter() - t_grid
-        summary = build_summary(src, cfg, self.totals, len(landmarks["id"]), poses[-1], accuracy, wall0)
-        summary["timing"]["t_grid"] = t_grid  # ray tracing and writing the occupancy grid
-        write_json(self.dest / "summary.json", summary)
+        summary = build_summary(
+            src, cfg, self.totals, len(landmarks["id"]), poses[-1], accuracy, wall0, t_grid
+        )
+        write_json(self.dest / "summary.json", summary.to_json())
         return summary
 
     def write_grid(self, poses: np.ndarray, warn) -> None:
@@ -222,63 +188,75 @@ def build_summary(
     totals: Totals,
     n_landmarks: int,
     final_pose: np.ndarray,
-    accuracy: dict | None,
+    accuracy: Accuracy | None,
     wall0: float,
-) -> dict:
-    """summary.json of a run (INTERFACE.md): input, counts, timing totals, accuracy, hashes, versions."""
-    reader, info, times = src.reader, src.info, totals.times
-    return {
-        "cornerslam_version": __version__,
-        "mode": "slam",
-        "input": {
-            "log": display_path(src.path),
-            "format": info.format,
-            "scan_topic": info.scan_topic,
-            "odom_topic": info.odom_topic,
-            "odom_source": info.odom_source,
-            "laser_to_base": list(src.laser2base),
-            "laser_to_base_source": src.laser_source,
-            "odom_on_tf": src.odom_on_tf,
-        },
-        "assoc": cfg.association.method,
-        "counts": {
-            "steps": totals.steps,
-            "landmarks": n_landmarks,
-            "matched_total": totals.matched,
-            "beams_total": reader.stats.beams,
-            "beams_invalid": reader.stats.beams_dropped,
-            "scans_bad_geometry": reader.stats.scans_skipped,
-            "scans_size_mismatch": reader.stats.size_mismatch,
-            "messages_failed": reader.stats.decode_failed,
-            **src.stats.as_dict(),
-            "budget_hits": int(totals.budget_hits),
-            **_scan_match_counts(src.matcher),
-        },
-        "timing": {
-            "t_extract": times[0],
-            "t_predict": times[1],
-            "t_match": times[2],
-            "t_update": times[3],
-            "t_scan_match": times[4],
-            "t_total": float(times.sum()),
-            "t_match_max": totals.t_match_max,
-            "wall_time": time.perf_counter() - wall0,
-            "scans_per_second": totals.steps / max(float(times.sum()), 1e-12),
-        },
-        "final_pose": final_pose.tolist(),
-        "warnings": list(reader.stats.warnings),
-        "accuracy": accuracy,
-        "hashes": {"input": input_hash(src.path), "config": config_hash(cfg), "version": __version__},
-        "config": cfg.to_dict(),
-        "versions": _versions(),
-    }
+    t_grid: float | None = None,
+) -> RunSummary:
+    """The summary of a run (summary.json, INTERFACE.md): input, counts, timing totals (``t_grid``:
+    the occupancy grid's), accuracy, hashes, versions."""
+    info = src.info
+    return RunSummary(
+        cornerslam_version=__version__,
+        mode="slam",
+        input=RunInput(
+            log=display_path(src.path),
+            format=info.format,
+            scan_topic=info.scan_topic,
+            odom_topic=info.odom_topic,
+            odom_source=info.odom_source,
+            laser_to_base=tuple(float(v) for v in src.laser2base),
+            laser_to_base_source=src.laser_source,
+            odom_on_tf=src.odom_on_tf,
+        ),
+        assoc=cfg.association.method,
+        counts=run_counts(src, totals, n_landmarks),
+        timing=run_timing(totals, wall0, t_grid),
+        final_pose=tuple(final_pose.tolist()),
+        warnings=tuple(src.reader.stats.warnings),
+        accuracy=accuracy,
+        hashes=Hashes(input=input_hash(src.path), config=config_hash(cfg), version=__version__),
+        config=cfg.to_dict(),
+        versions=_versions(),
+    )
 
 
-def _scan_match_counts(matcher) -> dict:
-    if matcher is None:
-        return {}
-    return {"scans_matched": matcher.n_matched, "scans_match_retried": matcher.n_retried,
-            "scans_match_fallback": matcher.n_fallback}  # fmt: skip
+def run_counts(src: Input, totals: Totals, n_landmarks: int) -> Counts:
+    """What the run counted: the filter's steps and matches, the reader's beams and scans, the
+    synchroniser's scans and odometry, the associator's budget hits, the scan matcher's outcomes."""
+    stats, matcher = src.reader.stats, src.matcher
+    return Counts(
+        steps=totals.steps,
+        landmarks=n_landmarks,
+        matched_total=totals.matched,
+        beams_total=stats.beams,
+        beams_invalid=stats.beams_dropped,
+        scans_bad_geometry=stats.scans_skipped,
+        scans_size_mismatch=stats.size_mismatch,
+        messages_failed=stats.decode_failed,
+        **src.stats.as_dict(),
+        budget_hits=int(totals.budget_hits),
+        scans_matched=None if matcher is None else matcher.n_matched,
+        scans_match_retried=None if matcher is None else matcher.n_retried,
+        scans_match_fallback=None if matcher is None else matcher.n_fallback,
+    )
+
+
+def run_timing(totals: Totals, wall0: float, t_grid: float | None = None) -> Timing:
+    """The stage times summed over the steps, the slowest matching step, the wall time since ``wall0``
+    and the occupancy grid's time ``t_grid``."""
+    times = totals.times
+    return Timing(
+        t_extract=float(times[0]),
+        t_predict=float(times[1]),
+        t_match=float(times[2]),
+        t_update=float(times[3]),
+        t_scan_match=float(times[4]),
+        t_total=float(times.sum()),
+        t_match_max=totals.t_match_max,
+        wall_time=time.perf_counter() - wall0,
+        scans_per_second=totals.steps / max(float(times.sum()), 1e-12),
+        t_grid=t_grid,
+    )
 
 
 def find_ground_truth(log_path: Path) -> Path | None:
@@ -326,12 +304,12 @@ def accuracy_of(
     odoms: np.ndarray,
     ref: Reference,
     scan_odoms: np.ndarray | None = None,
-) -> tuple[dict | None, list[str]]:
+) -> tuple[Accuracy | None, list[str]]:
     """ATE/RPE against the ground truth and the relation metric, for the estimate and for odometry (and
     for the scan-matched odometry when there is one: what the corners add on top of it), and the
     warnings about them: a ground truth read out of time order, a ground truth that does not overlap
     the run in time (then there is no ATE/RPE, rather than NaN), no relation inside the run."""
-    acc: dict = {}
+    acc: dict = {}  # Accuracy's fields
     notes = list(ref.notes)
     problem = ref.gt is not None and overlap_problem(stamps, ref.gt[0], f"ground truth '{ref.gt_path}'")
     if problem:
@@ -341,21 +319,23 @@ def accuracy_of(
             ground_truth=display_path(ref.gt_path),
             ate=ate(stamps, poses, *ref.gt),
             odom_ate=ate(stamps, odoms, *ref.gt),
-            **rpe(stamps, poses, *ref.gt),
+            **vars(rpe(stamps, poses, *ref.gt)),
+            scan_odom_ate=None if scan_odoms is None else ate(stamps, scan_odoms, *ref.gt),
         )
-        if scan_odoms is not None:
-            acc["scan_odom_ate"] = ate(stamps, scan_odoms, *ref.gt)
     if ref.relations is not None:
+        rel, offset = ref.relations, ref.time_offset
+        relations = relation_error(stamps, poses, rel, offset)
         acc.update(
             relations_file=display_path(ref.relations_path),
-            relations=relation_error(stamps, poses, ref.relations, ref.time_offset),
-            odom_relations=relation_error(stamps, odoms, ref.relations, ref.time_offset),
+            relations=relations,
+            odom_relations=relation_error(stamps, odoms, rel, offset),
+            scan_odom_relations=None
+            if scan_odoms is None
+            else relation_error(stamps, scan_odoms, rel, offset),
         )
-        if scan_odoms is not None:
-            acc["scan_odom_relations"] = relation_error(stamps, scan_odoms, ref.relations, ref.time_offset)
-        if acc["relations"]["n"] == 0:
+        if relations.n == 0:
             notes.append(f"no relation in '{ref.relations_path}' falls inside the run (check --time-offset)")
-    return acc or None, notes
+    return Accuracy(**acc) if acc else None, notes
 
 
 def config_hash(cfg: Config) -> str:

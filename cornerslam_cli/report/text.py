@@ -1,7 +1,7 @@
 """What the commands print on standard output, as lines of text (the CLI echoes them).
 
-Each function takes a result — a run's summary dict (summary.json), a comparison's summaries, a
-batch's rows, a log's ``LogInfo``, ``evaluate_files``' result — and returns the lines, without a
+Each function takes a result — a run's ``RunSummary`` (summary.json), a comparison's summaries, a
+batch's rows, a log's ``LogInfo``, ``evaluate_files``' ``Accuracy`` — and returns the lines, without a
 trailing newline, so the wording and the column layout are tested without a terminal.
 """
 
@@ -15,49 +15,50 @@ from ..errors import display_path
 
 if TYPE_CHECKING:
     from ..logs.base import LogInfo
+    from ..results import Accuracy, RelationError, RunInput, RunSummary
     from ..types import Scan
 
 
-def mean_std(e: dict) -> str:
+def mean_std(e: RelationError | None) -> str:
     """Translational relation error as 'mean ± std' (m); '-' without relations."""
-    return f"{e['trans_mean']:.3f} ± {e['trans_std']:.3f}" if e["n"] else "-"
+    return f"{e.trans_mean:.3f} ± {e.trans_std:.3f}" if e is not None and e.n else "-"
 
 
-def relation_text(e: dict) -> str:
+def relation_text(e: RelationError) -> str:
     """A relation error (``evaluate.relation_error``) in words: translation, rotation, how many."""
-    if e["n"] == 0:
+    if e.n == 0:
         return "no relation falls inside the trajectory's time span (check --time-offset)"
     return (
-        f"translation {mean_std(e)} m, rotation {e['rot_mean_deg']:.2f} ± {e['rot_std_deg']:.2f} deg "
-        f"({e['n']}/{e['n_total']} relations)"
+        f"translation {mean_std(e)} m, rotation {e.rot_mean_deg:.2f} ± {e.rot_std_deg:.2f} deg "
+        f"({e.n}/{e.n_total} relations)"
     )
 
 
-def summary_lines(s: dict) -> list[str]:
+def summary_lines(s: RunSummary) -> list[str]:
     """``cornerslam run``: counts, stage times, accuracy when there is a reference, the output."""
-    c, t = s["counts"], s["timing"]
+    c, t = s.counts, s.timing
     lines = [
-        f"{s['input']['log']}: {c['steps']} steps ({c['scans_in']} scans, {c['scans_skipped']} skipped, "
-        f"{c['keyframes_skipped']} between keyframes), {c['landmarks']} landmarks, "
-        f"{c['matched_total']} matches with {s['assoc']}",
-        mount_line(s["input"]),
-        f"time: extract {t['t_extract']:.2f}s scan match {t.get('t_scan_match', 0.0):.2f}s "
-        f"predict {t['t_predict']:.2f}s match {t['t_match']:.2f}s "
-        f"update {t['t_update']:.2f}s ({t['scans_per_second']:.0f} steps/s), wall {t['wall_time']:.1f}s",
+        f"{s.input.log}: {c.steps} steps ({c.scans_in} scans, {c.scans_skipped} skipped, "
+        f"{c.keyframes_skipped} between keyframes), {c.landmarks} landmarks, "
+        f"{c.matched_total} matches with {s.assoc}",
+        mount_line(s.input),
+        f"time: extract {t.t_extract:.2f}s scan match {t.t_scan_match or 0.0:.2f}s "
+        f"predict {t.t_predict:.2f}s match {t.t_match:.2f}s "
+        f"update {t.t_update:.2f}s ({t.scans_per_second:.0f} steps/s), wall {t.wall_time:.1f}s",
     ]
-    acc = s.get("accuracy") or {}
-    if "ate" in acc:
+    acc = s.accuracy
+    if acc is not None and acc.ate is not None:
         lines.append(
-            f"ATE RMSE {acc['ate']['rmse']:.3f} m (odometry {acc['odom_ate']['rmse']:.3f} m"
-            + (f", scan-matched {acc['scan_odom_ate']['rmse']:.3f} m" if "scan_odom_ate" in acc else "")
-            + f") against {acc['ground_truth']}"
+            f"ATE RMSE {acc.ate.rmse:.3f} m (odometry {acc.odom_ate.rmse:.3f} m"
+            + (f", scan-matched {acc.scan_odom_ate.rmse:.3f} m" if acc.scan_odom_ate else "")
+            + f") against {acc.ground_truth}"
         )
-    if "relations" in acc:
-        lines.append(f"relations: {relation_text(acc['relations'])}")
-        lines.append(f"  odometry: {relation_text(acc['odom_relations'])}")
-        if "scan_odom_relations" in acc:
-            lines.append(f"  scan-matched odometry: {relation_text(acc['scan_odom_relations'])}")
-    lines.append(f"wrote {s['out_dir']}")
+    if acc is not None and acc.relations is not None:
+        lines.append(f"relations: {relation_text(acc.relations)}")
+        lines.append(f"  odometry: {relation_text(acc.odom_relations)}")
+        if acc.scan_odom_relations is not None:
+            lines.append(f"  scan-matched odometry: {relation_text(acc.scan_odom_relations)}")
+    lines.append(f"wrote {s.out_dir}")
     return lines
 
 
@@ -69,47 +70,46 @@ MOUNT_SOURCES = {
 }
 
 
-def mount_line(inp: dict) -> str:
+def mount_line(inp: RunInput) -> str:
     """Where the run's laser mount came from (summary.json's ``input``)."""
-    x, y, yaw = inp["laser_to_base"]
-    source = inp["laser_to_base_source"]
-    return f"laser mount: x={x:.3f} m y={y:.3f} m yaw={yaw:.3f} rad ({MOUNT_SOURCES.get(source, source)})"
+    x, y, yaw = inp.laser_to_base
+    source = MOUNT_SOURCES.get(inp.laser_to_base_source, inp.laser_to_base_source)
+    return f"laser mount: x={x:.3f} m y={y:.3f} m yaw={yaw:.3f} rad ({source})"
 
 
-def comparison_lines(summaries: list[dict]) -> list[str]:
+def comparison_lines(summaries: list[RunSummary]) -> list[str]:
     """``cornerslam compare``: one row per associator (accuracy columns when any run has a
     reference), then the scan-matched odometry's accuracy, the same for every associator."""
     head = (
         f"{'assoc':<6} {'steps':>6} {'landmarks':>9} {'matched':>8} "
         f"{'t_match s':>10} {'max ms':>8} {'t_total s':>10}"
     )
-    has_gt = any("ate" in (s.get("accuracy") or {}) for s in summaries)
-    has_rel = any("relations" in (s.get("accuracy") or {}) for s in summaries)
+    has_gt = any(s.accuracy is not None and s.accuracy.ate is not None for s in summaries)
+    has_rel = any(s.accuracy is not None and s.accuracy.relations is not None for s in summaries)
     if has_gt:
         head += f" {'ATE m':>8} {'odom ATE m':>10}"
     if has_rel:
         head += f" {'relations m':>16} {'odom relations m':>18}"
     lines = [head]
     for s in summaries:
-        c, t = s["counts"], s["timing"]
+        c, t = s.counts, s.timing
         line = (
-            f"{s['assoc']:<6} {c['steps']:>6} {c['landmarks']:>9} {c['matched_total']:>8} "
-            f"{t['t_match']:>10.3f} {1000 * t['t_match_max']:>8.1f} {t['t_total']:>10.2f}"
+            f"{s.assoc:<6} {c.steps:>6} {c.landmarks:>9} {c.matched_total:>8} "
+            f"{t.t_match:>10.3f} {1000 * t.t_match_max:>8.1f} {t.t_total:>10.2f}"
         )
-        a = s.get("accuracy") or {}
+        a = s.accuracy
         if has_gt:
-            line += f" {a['ate']['rmse']:>8.3f} {a['odom_ate']['rmse']:>10.3f}"
+            line += f" {a.ate.rmse:>8.3f} {a.odom_ate.rmse:>10.3f}"
         if has_rel:
-            rel, odom = a["relations"], a["odom_relations"]
-            line += f" {mean_std(rel):>16} {mean_std(odom):>18}"
+            line += f" {mean_std(a.relations):>16} {mean_std(a.odom_relations):>18}"
         lines.append(line)
-    a = (summaries[0].get("accuracy") or {}) if summaries else {}
-    if "scan_odom_ate" in a or "scan_odom_relations" in a:  # the motion input: one for all associators
+    a = summaries[0].accuracy if summaries else None
+    if a is not None and (a.scan_odom_ate or a.scan_odom_relations):  # the motion input: one for all
         parts = []
-        if "scan_odom_ate" in a:
-            parts.append(f"ATE {a['scan_odom_ate']['rmse']:.3f} m")
-        if "scan_odom_relations" in a:
-            parts.append(f"relations {mean_std(a['scan_odom_relations'])} m")
+        if a.scan_odom_ate is not None:
+            parts.append(f"ATE {a.scan_odom_ate.rmse:.3f} m")
+        if a.scan_odom_relations is not None:
+            parts.append(f"relations {mean_std(a.scan_odom_relations)} m")
         lines.append("scan-matched odometry (the filter's motion input): " + ", ".join(parts))
     return lines
 
@@ -183,19 +183,17 @@ def info_lines(log_path: str | Path, i: LogInfo, laser: tuple[float, float, floa
     return lines
 
 
-def evaluation_lines(res: dict) -> list[str]:
+def evaluation_lines(res: Accuracy) -> list[str]:
     """``cornerslam evaluate``: ATE and RPE against ground truth, the relation error, as present in
     ``res`` (``evaluate.evaluate_files``)."""
     lines = []
-    if "ate" in res:
-        a, r = res["ate"], res["rpe"]
-        per_m = "-" if math.isnan(r["rpe_per_m"]) else f"{r['rpe_per_m']:.4f}"  # path shorter than 1 m
-        lines.append(
-            f"ATE  rmse {a['rmse']:.4f} m  mean {a['mean']:.4f} m  max {a['max']:.4f} m  (n={a['n']})"
-        )
-        lines.append(f"RPE  per step {r['rpe_step_rmse']:.4f} m  per metre {per_m} m/m")
-    if "relations" in res:
-        lines.append(f"relations: {relation_text(res['relations'])}")
+    if res.ate is not None:
+        a = res.ate
+        per_m = "-" if math.isnan(res.rpe_per_m) else f"{res.rpe_per_m:.4f}"  # path shorter than 1 m
+        lines.append(f"ATE  rmse {a.rmse:.4f} m  mean {a.mean:.4f} m  max {a.max:.4f} m  (n={a.n})")
+        lines.append(f"RPE  per step {res.rpe_step_rmse:.4f} m  per metre {per_m} m/m")
+    if res.relations is not None:
+        lines.append(f"relations: {relation_text(res.relations)}")
     return lines
 
 

@@ -1,9 +1,6 @@
-"""Log writers for test fixtures and ``cornerslam simulate``: MCAP, ROS 1 bag, ROS 2 bag, CARMEN.
-
-Every writer takes full-beam scans (:class:`RawScan`, inf/NaN allowed = no return) and odometry
-samples (:class:`~cornerslam_cli.types.OdomSample`) as iterables sorted by stamp (generators are
-fine: writing streams), merges them by stamp (odometry first on ties) and uses the stamp as both
-header stamp and log time. ROS messages are serialized with rosbags' typestores.
+"""ROS messages for the ROS log writers (MCAP, ROS 1 bag, ROS 2 bag): LaserScan, Odometry and tf
+built and serialized in one encoding (CDR or ROS 1 with rosbags' typestores, or JSON as
+foxglove_bridge / rosbridge record it), and a whole log's messages in stamp order.
 
 The three ROS writers take the options they share (topics, frames, how odometry is written) as
 keyword arguments, the fields of :class:`RosTopics`.
@@ -11,67 +8,26 @@ keyword arguments, the fields of :class:`RosTopics`.
 
 from __future__ import annotations
 
-import gzip as _gzip
-import heapq
 import json
 import math
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from ..types import OdomSample
-from .carmen import DEFAULT_MAX_RANGE, flaser_increment
-from .cdr import typestore
+from ...types import OdomSample
+from ..cdr import typestore
+from .base import RawScan, merged, stamp_ns, stamp_parts
 
 LASERSCAN = "sensor_msgs/msg/LaserScan"
 ODOMETRY = "nav_msgs/msg/Odometry"
 TFMESSAGE = "tf2_msgs/msg/TFMessage"
 _TF_MSGDEF = "geometry_msgs/TransformStamped[] transforms\n"
 
-
-@dataclass(frozen=True)
-class RawScan:
-    """A scan to write: every beam of the message, in bearing order.
-
-    ranges : (n,) metres, inf/NaN or >= range_max = no return; beam i at angle_min + i * angle_increment.
-    """
-
-    stamp: float
-    angle_min: float
-    angle_increment: float
-    ranges: np.ndarray
-    range_min: float = 0.0
-    range_max: float = 30.0
-    frame_id: str = "laser"
-
-    @property
-    def angle_max(self) -> float:
-        return self.angle_min + (len(self.ranges) - 1) * self.angle_increment
-
-
-def _stamp(t: float) -> tuple[int, int]:
-    sec = math.floor(t)
-    nsec = int(round((t - sec) * 1e9))
-    if nsec >= 1_000_000_000:
-        sec, nsec = sec + 1, nsec - 1_000_000_000
-    return sec, nsec
-
-
-def _ns(t: float) -> int:
-    sec, nsec = _stamp(t)
-    return sec * 1_000_000_000 + nsec
-
-
-def _merged(scans: Iterable[RawScan], odoms: Iterable[OdomSample]) -> Iterator[RawScan | OdomSample]:
-    return heapq.merge(odoms, scans, key=lambda m: m.stamp)
-
-
 Quaternion = tuple[float, float, float, float]
 
 
-def _quaternion(yaw: float) -> Quaternion:
+def quaternion_of_yaw(yaw: float) -> Quaternion:
     return (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
 
 
@@ -131,7 +87,7 @@ class RosSerializer:
         return self.store.generate_msgdef(typename, ros_version=1 if self.ros1 else 2)[0]
 
     def header(self, stamp: float, frame: str):
-        sec, nsec = _stamp(stamp)
+        sec, nsec = stamp_parts(stamp)
         t = self._Time(sec=sec, nanosec=nsec)
         if self.ros1:
             return self._Header(seq=0, stamp=t, frame_id=frame)
@@ -155,7 +111,7 @@ class RosSerializer:
 
     def _pose(self, x: float, y: float, yaw: float, q: Quaternion | None = None):
         T = self._T
-        qx, qy, qz, qw = _quaternion(yaw) if q is None else q
+        qx, qy, qz, qw = quaternion_of_yaw(yaw) if q is None else q
         return T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0), T["geometry_msgs/msg/Quaternion"](
             x=qx, y=qy, z=qz, w=qw
         )
@@ -209,7 +165,7 @@ class JsonSerializer:
         return json.dumps({"title": self.schema_name(typename), "type": "object"})
 
     def header(self, stamp: float, frame: str) -> dict:
-        sec, nsec = _stamp(stamp)
+        sec, nsec = stamp_parts(stamp)
         if self.ros1:
             return {"seq": 0, "stamp": {"secs": sec, "nsecs": nsec}, "frame_id": frame}
         return {"stamp": {"sec": sec, "nanosec": nsec}, "frame_id": frame}
@@ -229,7 +185,7 @@ class JsonSerializer:
         return json.dumps(msg, allow_nan=False).encode()
 
     def odometry(self, o: OdomSample, odom_frame: str, base_frame: str, q: Quaternion | None = None) -> bytes:
-        q = _quaternion(o.theta) if q is None else q
+        q = quaternion_of_yaw(o.theta) if q is None else q
         zero = dict.fromkeys("xyz", 0.0)
         msg = {
             "header": self.header(o.stamp, odom_frame),
@@ -251,7 +207,7 @@ class JsonSerializer:
             "child_frame_id": child,
             "transform": {
                 "translation": {"x": x, "y": y, "z": 0.0},
-                "rotation": dict(zip("xyzw", _quaternion(yaw), strict=True)),
+                "rotation": dict(zip("xyzw", quaternion_of_yaw(yaw), strict=True)),
             },
         }
         return json.dumps({"transforms": [ts]}).encode()
@@ -264,13 +220,13 @@ def serializer(encoding: str) -> RosSerializer | JsonSerializer:
     return RosSerializer(encoding)
 
 
-def _ros_messages(
+def ros_messages(
     ros: RosSerializer | JsonSerializer, scans: Iterable[RawScan], odoms: Iterable[OdomSample], o: RosTopics
 ) -> Iterator[tuple[str, str, int, bytes]]:
     """(topic, typename, log_time_ns, data) of a whole log, in stamp order."""
     static_done = o.tf_static is None
-    for m in _merged(scans, odoms):
-        t = _ns(m.stamp + o.log_time_offset)
+    for m in merged(scans, odoms):
+        t = stamp_ns(m.stamp + o.log_time_offset)
         if isinstance(m, RawScan):
             if not static_done:
                 yield "/tf_static", TFMESSAGE, t, ros.tf(m.stamp, o.base_frame, m.frame_id, *o.tf_static)
@@ -283,177 +239,9 @@ def _ros_messages(
             yield o.odom_topic, ODOMETRY, t, ros.odometry(m, o.odom_frame, o.base_frame, q)
 
 
-def _shuffled(messages: Iterable, block: int) -> Iterator:
+def shuffled(messages: Iterable, block: int) -> Iterator:
     """The messages in blocks of ``block``, the blocks in a seeded random order."""
     items = list(messages)
     blocks = [items[i : i + block] for i in range(0, len(items), block)]
     for i in np.random.default_rng(0).permutation(len(blocks)):
         yield from blocks[i]
-
-
-def write_mcap(
-    path: str | Path,
-    scans: Iterable[RawScan],
-    odoms: Iterable[OdomSample],
-    *,
-    encoding: str = "cdr",
-    compression: str = "zstd",
-    chunk_size: int = 1024 * 1024,
-    shuffle_blocks: int = 0,
-    summary: bool = True,
-    **topics,
-) -> Path:
-    """Write an MCAP log. ``encoding``: ``cdr`` (ROS 2 profile), ``ros1`` (ROS 1 profile), ``json``
-    (foxglove_bridge / rosbridge recordings; ``json-ros1`` with ROS 1 field names); ``topics``: the
-    fields of :class:`RosTopics`.
-
-    ``shuffle_blocks`` > 0 writes the messages in blocks of that many, the blocks in a seeded random
-    order, one message per chunk: a valid file whose chunks are not in log-time order (the whole log
-    is held in memory to do so). ``summary=False`` writes no summary section (no chunk index, no
-    statistics), as some recorders do.
-    """
-    from mcap.writer import CompressionType, IndexType, Writer
-
-    ros = serializer(encoding)
-    path = Path(path)
-    comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}[
-        compression
-    ]
-    messages = _ros_messages(ros, scans, odoms, RosTopics(**topics))
-    if shuffle_blocks > 0:
-        messages, chunk_size = _shuffled(messages, shuffle_blocks), 1
-    with open(path, "wb") as f:
-        no_summary = dict.fromkeys(
-            ("repeat_channels", "repeat_schemas", "use_statistics", "use_summary_offsets"), False
-        )
-        kw = {} if summary else dict(no_summary, index_types=IndexType.NONE)
-        w = Writer(f, chunk_size=chunk_size, compression=comp, **kw)
-        w.start(profile=ros.profile, library="cornerslam")
-        channels: dict[str, int] = {}
-        for topic, typename, t, data in messages:
-            cid = channels.get(topic)
-            if cid is None:
-                sid = w.register_schema(
-                    name=ros.schema_name(typename),
-                    encoding=ros.schema_encoding,
-                    data=ros.msgdef(typename).encode(),
-                )
-                cid = channels[topic] = w.register_channel(
-                    topic=topic, message_encoding=ros.message_encoding, schema_id=sid
-                )
-            w.add_message(channel_id=cid, log_time=t, data=data, publish_time=t)
-        w.finish()
-    return path
-
-
-def write_rosbag1(
-    path: str | Path,
-    scans: Iterable[RawScan],
-    odoms: Iterable[OdomSample],
-    **topics,
-) -> Path:
-    """Write a ROS 1 bag (v2.0, uncompressed chunks); ``topics``: the fields of :class:`RosTopics`."""
-    from rosbags.rosbag1 import Writer
-
-    ros = RosSerializer("ros1")
-    path = Path(path)
-    with Writer(path) as w:
-        conns = {}
-        for topic, typename, t, data in _ros_messages(ros, scans, odoms, RosTopics(**topics)):
-            if topic not in conns:
-                conns[topic] = w.add_connection(
-                    topic, typename, typestore=ros.store, latching=1 if topic == "/tf_static" else None
-                )
-            w.write(conns[topic], t, data)
-    return path
-
-
-def write_rosbag2(
-    path: str | Path,
-    scans: Iterable[RawScan],
-    odoms: Iterable[OdomSample],
-    *,
-    storage: str = "sqlite3",
-    **topics,
-) -> Path:
-    """Write a ROS 2 bag directory (``storage`` ``sqlite3`` or ``mcap``); ``path`` must not exist;
-    ``topics``: the fields of :class:`RosTopics`."""
-    from rosbags.rosbag2 import StoragePlugin, Writer
-
-    plugin = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}[storage]
-    ros = RosSerializer("cdr")
-    path = Path(path)
-    with Writer(path, version=9, storage_plugin=plugin) as w:
-        conns = {}
-        for topic, typename, t, data in _ros_messages(ros, scans, odoms, RosTopics(**topics)):
-            if topic not in conns:
-                conns[topic] = w.add_connection(topic, typename, typestore=ros.store)
-            w.write(conns[topic], t, data)
-    return path
-
-
-def _fmt(values) -> str:
-    return " ".join(repr(float(v)) for v in values)
-
-
-class _Separated:
-    """A text file whose writes have their spaces replaced by ``sep``."""
-
-    def __init__(self, f, sep: str):
-        self.f, self.sep = f, sep
-
-    def write(self, line: str) -> None:
-        self.f.write(line if self.sep == " " else line.replace(" ", self.sep))
-
-
-def write_carmen(
-    path: str | Path,
-    scans: Iterable[RawScan],
-    odoms: Iterable[OdomSample],
-    *,
-    gzip: bool = False,
-    odom_lines: bool = True,
-    laser: str = "auto",
-    hostname: str = "cornerslam",
-    sep: str = " ",
-) -> Path:
-    """Write a CARMEN log: ODOM lines (unless ``odom_lines=False``) and one laser line per scan.
-
-    laser ``FLASER`` needs CARMEN's implied angles (angle_min = −π/2, the increment of
-    :func:`~cornerslam_cli.logs.carmen.flaser_increment`) and no-return = 81.83 m; ``ROBOTLASER1``
-    stores angles and max range; ``auto`` picks FLASER when the scan fits it. The laser line's pose
-    fields hold the latest odometry pose (so a log without ODOM lines still has odometry).
-    No-return readings (inf, NaN, >= range_max) are written as the max range. ``sep`` separates the
-    fields (logs in the wild also use tabs).
-    """
-    path = Path(path)
-    opener = _gzip.open if gzip else open
-    pose = (0.0, 0.0, 0.0)
-    with opener(path, "wt", encoding="ascii") as out:
-        f = _Separated(out, sep)
-        f.write("# written by cornerslam write_carmen\n")
-        for m in _merged(scans, odoms):
-            ts = repr(float(m.stamp))
-            if isinstance(m, OdomSample):
-                pose = (m.x, m.y, m.theta)
-                if odom_lines:
-                    f.write(f"ODOM {_fmt(pose)} 0 0 0 {ts} {hostname} {ts}\n")
-                continue
-            n = len(m.ranges)
-            flaser_ok = (
-                abs(m.angle_min + math.pi / 2) < 1e-9
-                and abs(m.angle_increment - flaser_increment(n)) < 1e-9
-                and m.range_max == DEFAULT_MAX_RANGE
-            )
-            tag = ("FLASER" if flaser_ok else "ROBOTLASER1") if laser == "auto" else laser
-            if tag == "FLASER" and not flaser_ok:
-                raise ValueError("scan does not fit FLASER's implied angles / max range; use ROBOTLASER1")
-            r = np.asarray(m.ranges, dtype=np.float64).copy()
-            r[~np.isfinite(r) | (r >= m.range_max)] = m.range_max
-            if tag == "FLASER":
-                f.write(f"FLASER {n} {_fmt(r)} {_fmt(pose)} {_fmt(pose)} {ts} {hostname} {ts}\n")
-            else:
-                fov = n * m.angle_increment
-                head = f"ROBOTLASER1 0 {_fmt((m.angle_min, fov, m.angle_increment, m.range_max))} 0.01 0"
-                f.write(f"{head} {n} {_fmt(r)} 0 {_fmt(pose)} {_fmt(pose)} 0 0 0 0 0 {ts} {hostname} {ts}\n")
-    return path

@@ -1,0 +1,65 @@
+"""MCAP logs (ROS 2 or ROS 1 profile, or JSON as foxglove_bridge / rosbridge record them)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from pathlib import Path
+
+from ...types import OdomSample
+from .base import RawScan
+from .ros import RosTopics, ros_messages, serializer, shuffled
+
+
+def write_mcap(
+    path: str | Path,
+    scans: Iterable[RawScan],
+    odoms: Iterable[OdomSample],
+    *,
+    encoding: str = "cdr",
+    compression: str = "zstd",
+    chunk_size: int = 1024 * 1024,
+    shuffle_blocks: int = 0,
+    summary: bool = True,
+    **topics,
+) -> Path:
+    """Write an MCAP log. ``encoding``: ``cdr`` (ROS 2 profile), ``ros1`` (ROS 1 profile), ``json``
+    (foxglove_bridge / rosbridge recordings; ``json-ros1`` with ROS 1 field names); ``topics``: the
+    fields of :class:`RosTopics`.
+
+    ``shuffle_blocks`` > 0 writes the messages in blocks of that many, the blocks in a seeded random
+    order, one message per chunk: a valid file whose chunks are not in log-time order (the whole log
+    is held in memory to do so). ``summary=False`` writes no summary section (no chunk index, no
+    statistics), as some recorders do.
+    """
+    from mcap.writer import CompressionType, IndexType, Writer
+
+    ros = serializer(encoding)
+    path = Path(path)
+    comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}[
+        compression
+    ]
+    messages = ros_messages(ros, scans, odoms, RosTopics(**topics))
+    if shuffle_blocks > 0:
+        messages, chunk_size = shuffled(messages, shuffle_blocks), 1
+    with open(path, "wb") as f:
+        no_summary = dict.fromkeys(
+            ("repeat_channels", "repeat_schemas", "use_statistics", "use_summary_offsets"), False
+        )
+        kw = {} if summary else dict(no_summary, index_types=IndexType.NONE)
+        w = Writer(f, chunk_size=chunk_size, compression=comp, **kw)
+        w.start(profile=ros.profile, library="cornerslam")
+        channels: dict[str, int] = {}
+        for topic, typename, t, data in messages:
+            cid = channels.get(topic)
+            if cid is None:
+                sid = w.register_schema(
+                    name=ros.schema_name(typename),
+                    encoding=ros.schema_encoding,
+                    data=ros.msgdef(typename).encode(),
+                )
+                cid = channels[topic] = w.register_channel(
+                    topic=topic, message_encoding=ros.message_encoding, schema_id=sid
+                )
+            w.add_message(channel_id=cid, log_time=t, data=data, publish_time=t)
+        w.finish()
+    return path

@@ -1,0 +1,52 @@
+"""An output's OSErrors as one-line errors (exit 2): the environment faults of writing.
+
+:func:`output_error` maps the OSErrors of a hostile environment — read-only file
+system, permission denied, disk full or over quota, a busy mount point, a cross-device rename, a name
+too long, a file where a directory should be — to an OutputError naming the path; others stay bugs.
+"""
+
+from __future__ import annotations
+
+import errno
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from ..errors import OutputError
+
+_DISK = "free some space, or write to another disk"
+_MOUNT = "give a new directory inside it"
+_REASONS = {
+    errno.EROFS: ("read-only file system", "write to a writable file system"),
+    errno.EACCES: ("permission denied", "write where you have permission, or fix the permissions"),
+    errno.EPERM: ("operation not permitted", "write where you have permission, or fix the permissions"),
+    errno.ENOSPC: ("no space left on device", _DISK),
+    errno.EDQUOT: ("disk quota exceeded", _DISK),
+    errno.EBUSY: ("busy (a mount point?)", _MOUNT),
+    errno.EXDEV: ("on another file system than its parent (a mount point?)", _MOUNT),
+    errno.ENAMETOOLONG: ("name too long", "use a shorter name: at most 255 bytes"),
+    errno.ENOTDIR: ("a part of the path is a file, not a directory", "check the path"),
+    errno.EEXIST: ("a part of the path is a file, not a directory", "check the path"),
+    errno.EISDIR: ("it is a directory", "give a file name"),
+}
+
+
+def output_error(exc: OSError, path: str | Path) -> OutputError | None:
+    """The one-line error for an OSError while writing ``path``; None when ``exc`` is not an
+    environment fault (a bug stays a bug)."""
+    reason = _REASONS.get(exc.errno)  # type: ignore[arg-type]
+    if reason is None:
+        return None
+    return OutputError(f"cannot write '{path}': {reason[0]}", reason[1])
+
+
+@contextmanager
+def output_errors(path: str | Path) -> Iterator[None]:
+    """Turn an environment fault while writing ``path`` into its OutputError."""
+    try:
+        yield
+    except OSError as exc:
+        err = output_error(exc, path)
+        if err is None:
+            raise
+        raise err from None

@@ -1,0 +1,119 @@
+"""A run output directory read back for drawing (report/plots.py) and for the results MCAP
+(report/mcap_out.py): its tables and summary, the trajectories in the map frame, landmark ellipses.
+
+Frames: the corrected trajectory and the map are in the map frame (the first corrected pose). The
+odometry is drawn in the map frame by anchoring its first pose on the first corrected pose, and the
+ground truth by the SE(2) alignment the ATE uses (``evaluate.align_se2``), so the three overlay.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..evaluate import align_se2, apply_se2, interpolate_inside
+from ..results import RunSummary
+from .tables import read_csv, read_tum
+
+log = logging.getLogger(__name__)
+
+ELLIPSE_SIGMA = 3.0  # ellipses are drawn at ±3σ along each principal axis
+
+
+@dataclass(frozen=True)
+class RunData:
+    """One run directory's tables, with the trajectories expressed in the map frame.
+
+    corrected, odometry : (n, 3) x, y [m], θ [rad] per step, map frame.
+    scan_odometry : (n, 3) the scan-matched odometry (map frame), or None when scan matching was off.
+    ground_truth : (g, 3) SE(2)-aligned onto ``corrected``, or None.
+    landmarks : map.csv columns; lines : lines.csv columns; timing : timing.csv columns.
+    """
+
+    out_dir: Path
+    summary: RunSummary
+    log_name: str
+    assoc: str
+    steps: np.ndarray
+    corrected: np.ndarray
+    odometry: np.ndarray
+    scan_odometry: np.ndarray | None
+    ground_truth: np.ndarray | None
+    landmarks: dict[str, np.ndarray]
+    lines: dict[str, np.ndarray]
+    timing: dict[str, np.ndarray]
+
+    @property
+    def title(self) -> str:
+        return f"{self.log_name} — {self.assoc}"
+
+
+def load_run(out_dir: str | Path, ground_truth: str | Path | None = None) -> RunData:
+    """Read a run output directory for plotting. ``ground_truth``: the TUM file the run was scored
+    against (default: the one its summary names, which shows a name that is not UTF-8 with U+FFFD
+    and so cannot be opened by it)."""
+    out_dir = Path(out_dir)
+    summary = RunSummary.read(out_dir)
+    traj = read_csv(out_dir / "trajectory.csv")
+    corrected = np.column_stack((traj["x"], traj["y"], traj["theta"]))
+    odom = np.column_stack((traj["odom_x"], traj["odom_y"], traj["odom_theta"]))
+    scan_odom = None
+    if "scan_odom_x" in traj and summary.scan_matching:
+        scan_odom = np.column_stack((traj["scan_odom_x"], traj["scan_odom_y"], traj["scan_odom_theta"]))
+    return RunData(
+        out_dir=out_dir,
+        summary=summary,
+        log_name=Path(summary.input.log).name,
+        assoc=summary.assoc,
+        steps=traj["step"],
+        corrected=corrected,
+        odometry=odom_in_map(odom, corrected),
+        scan_odometry=None if scan_odom is None else odom_in_map(scan_odom, corrected),
+        ground_truth=_aligned_ground_truth(summary, traj["stamp"], corrected, ground_truth),
+        landmarks=read_csv(out_dir / "map.csv"),
+        lines=read_csv(out_dir / "lines.csv"),
+        timing=read_csv(out_dir / "timing.csv"),
+    )
+
+
+def odom_in_map(odom: np.ndarray, corrected: np.ndarray) -> np.ndarray:
+    """Odometry poses (odom frame) re-expressed in the map frame: map←odom puts odom[0] on corrected[0]."""
+    if len(odom) == 0:
+        return odom
+    ang = float(corrected[0, 2] - odom[0, 2])
+    c, s = np.cos(ang), np.sin(ang)
+    t = corrected[0, :2] - np.array([[c, -s], [s, c]]) @ odom[0, :2]
+    return apply_se2(ang, t, odom)
+
+
+def _aligned_ground_truth(
+    summary: RunSummary, stamps: np.ndarray, corrected: np.ndarray, path: str | Path | None = None
+) -> np.ndarray | None:
+    named = summary.accuracy.ground_truth if summary.accuracy else None
+    path = path if path is not None and named is not None else named
+    if not path or len(corrected) < 2:
+        return None
+    try:
+        gt_t, gt = read_tum(path)
+    except Exception as e:  # a moved or deleted file must not stop the plots
+        log.warning("ground truth '%s' not drawn: %s", path, e)
+        return None
+    inside, g = interpolate_inside(gt_t, gt, stamps)
+    if inside.sum() < 2:
+        return None
+    ang, t = align_se2(g[:, :2], corrected[inside, :2])
+    return apply_se2(ang, t, gt[(gt_t >= stamps[inside][0]) & (gt_t <= stamps[inside][-1])])
+
+
+def ellipse_polygons(
+    xy: np.ndarray, cov: np.ndarray, n_sigma: float = ELLIPSE_SIGMA, k: int = 32
+) -> np.ndarray:
+    """Polygons (n, k, 2) of the n_sigma ellipses of (n, 2, 2) position covariances centred at xy."""
+    lam, vec = np.linalg.eigh(cov)
+    axes = vec * np.sqrt(np.clip(lam, 0.0, None))[:, None, :]  # columns: principal semi-axes at 1σ
+    a = np.linspace(0, 2 * np.pi, k, endpoint=False)
+    circle = np.column_stack((np.cos(a), np.sin(a)))  # (k, 2)
+    return xy[:, None, :] + n_sigma * np.einsum("kj,nij->nki", circle, axes)

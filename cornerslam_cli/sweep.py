@@ -1,0 +1,141 @@
+"""The plan of ``cornerslam batch``: many logs × associators × a grid of config values, each
+combination a :class:`Combo` with its resolved config and the name of its output directory.
+
+Directory names: ``<log>__<assoc>[__<key>=<value>]...`` with the swept keys in the order given, the
+values as written, and any character outside ``[A-Za-z0-9._=+-]`` replaced by ``_``, e.g.
+``sim_office__pca__association.pca.group_size=5``. ``<log>`` is the file name up to its first dot;
+logs sharing that stem use their whole file name, and logs sharing that too add a short hash of their
+absolute path. Base ``--set`` overrides do not appear in names (they are in each summary.json).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import os
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from .errors import ConfigError, one_line
+
+_UNSAFE = re.compile(r"[^A-Za-z0-9._=+-]")
+_MAX_NAME = 180  # well under the 255-byte file name limit, leaving room for the staging prefix
+
+
+@dataclass(frozen=True)
+class Combo:
+    """One point of the batch: a log, an associator and one value for each swept key.
+
+    ``config`` is the fully resolved config as plain data (``Config.to_dict()``), laser preset included
+    as ``run`` would choose it, so workers rebuild it without the config file; ``sweep`` holds (dotted
+    key, value as written) in the order swept. ``error`` is set when the log could not be opened to
+    choose its laser preset: the combination is reported failed without running.
+    """
+
+    log: str
+    assoc: str
+    sweep: tuple[tuple[str, str], ...]
+    name: str
+    config: dict = field(compare=False, repr=False)
+    error: str = ""
+
+
+def value_text(v: Any) -> str:
+    """A sweep value as ``--set`` text (strings as written; true/false/null as YAML spells them)."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if v is None:
+        return "null"
+    return str(v)
+
+
+def plan(
+    logs: Sequence[str | Path],
+    assocs: Sequence[str],
+    sweeps: Mapping[str, Sequence[Any]] | None = None,
+    overrides: Sequence[str] = (),
+    config_path: str | Path | None = None,
+) -> list[Combo]:
+    """Every log × associator × point of the sweep grid (the last swept key varies fastest).
+
+    Each swept value is checked against the config schema first (ConfigError naming ``--sweep
+    key=value``); unknown associators raise ConfigError with the closest name. Each combination's
+    config is resolved as ``cornerslam run`` resolves it (:func:`lasers.resolve_config`: the laser
+    preset matching the log's first scan under the user's layers); a log that cannot be opened is not
+    an error here but failed rows in :func:`run_batch`. Logs listed twice are run once.
+    """
+    from .association import associator_class
+    from .config import load_config
+    from .errors import LogError
+    from .lasers import resolve_config
+
+    sweeps = {k: list(dict.fromkeys(value_text(v) for v in vs)) for k, vs in (sweeps or {}).items()}
+    for key, values in sweeps.items():
+        if key == "association.method":
+            raise ConfigError("--sweep association.method is not allowed", "list associators with --assoc")
+        if not values:
+            raise ConfigError(f"--sweep {key} has no values", f"e.g. --sweep {key}=V1,V2")
+        for v in values:
+            try:
+                load_config(config_path, [*overrides, f"{key}={v}"])
+            except ConfigError as e:
+                raise ConfigError(f"--sweep {key}={v}: {e.msg}", e.hint) from None
+    if not assocs or len(set(assocs)) != len(assocs):
+        raise ConfigError(f"associators {','.join(assocs)!r} must be distinct and non-empty")
+    logs = list(dict.fromkeys(str(p) for p in logs))
+    labels = _log_labels(logs)
+    combos = []
+    for log, assoc in itertools.product(logs, assocs):
+        for values in itertools.product(*sweeps.values()):
+            sweep = tuple(zip(sweeps, values, strict=True))
+            sets = [*overrides, f"association.method={assoc}", *(f"{k}={v}" for k, v in sweep)]
+            error = ""
+            try:
+                cfg = resolve_config(log, config_path, sets)
+            except LogError as e:  # the log's rows fail; the batch goes on
+                cfg, error = load_config(config_path, sets), one_line(e)
+            associator_class(cfg.association.method)  # an unknown name: ConfigError with the closest one
+            name = _dir_name(labels[log], assoc, sweep)
+            combos.append(Combo(log, assoc, sweep, name, cfg.to_dict(), error))
+    names = [c.name for c in combos]
+    if len(set(names)) != len(names):
+        dup = next(n for n in names if names.count(n) > 1)
+        raise ConfigError(
+            f"two combinations map to the directory name '{dup}'", "sweep values differing only in symbols"
+        )
+    return combos
+
+
+def _safe(text: str) -> str:
+    return _UNSAFE.sub("_", text)
+
+
+def _short_hash(text: str) -> str:
+    return hashlib.sha1(os.fsencode(text)).hexdigest()[:8]
+
+
+def _log_labels(logs: Sequence[str]) -> dict[str, str]:
+    """Log → its part of the directory name: stem, else file name, else file name + path hash."""
+    out: dict[str, str] = {}
+    tiers = [
+        lambda p: _safe(Path(p).name.split(".")[0] or "log"),
+        lambda p: _safe(Path(p).name or "log"),
+        lambda p: _safe(Path(p).name or "log") + "-" + _short_hash(str(Path(p).resolve())),
+    ]
+    for log in logs:
+        for tier in tiers:
+            label = tier(log)
+            if sum(tier(other) == label for other in logs) == 1 or tier is tiers[-1]:
+                out[log] = label
+                break
+    return out
+
+
+def _dir_name(log_label: str, assoc: str, sweep: tuple[tuple[str, str], ...]) -> str:
+    name = "__".join([log_label, _safe(assoc), *(_safe(f"{k}={v}") for k, v in sweep)])
+    if len(name) > _MAX_NAME:
+        name = name[: _MAX_NAME - 9] + "-" + _short_hash(name)
+    return name
