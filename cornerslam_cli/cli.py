@@ -257,8 +257,9 @@ def compare(
     progress = Progress(f"{display_path(Path(log_path).name)} (extract)", not quiet)
     try:
         summaries = run_compare(
-            log_path, cfg, names, out_dir, ground_truth, jobs, progress, relations, time_offset
-        )
+            log_path, cfg, names, out_dir, ground_truth, jobs, progress, relations, time_offset,
+            default_place=not out,
+        )  # fmt: skip
     finally:
         progress.close()
     if not quiet:

@@ -52,12 +52,14 @@ def compare(
     relations: str | Path | None = None,
     time_offset: float = 0.0,
     plots: bool = True,
+    default_place: bool = False,
 ) -> list[RunSummary]:
     """Run each associator in ``assocs`` on ``log_path``; write OUT/ASSOC/, OUT/comparison.csv and
     (``plots``) the figures and OUT/report.html, committed together. The output place is checked
-    before any work."""
+    before any work (``default_place``: OUT is named after the log: another log's output there is
+    refused, not replaced)."""
     inputs = [p for p in (log_path, ground_truth, relations) if p]
-    with StagedDir(out, "compare", inputs) as stage:
+    with StagedDir(out, "compare", inputs, log_path, own_log_only=default_place) as stage:
         ref = load_reference(Path(log_path), ground_truth, relations, time_offset)
         src: Input = open_input(log_path, cfg)
         frame_list: list[Frame] = list(frames(src, cfg, progress))
@@ -78,6 +80,6 @@ def compare(
             _SHARED.clear()
         write_comparison(stage.path, summaries, plots, ref.gt_path)
         for d in dirs:
-            mark_output(d, "run")  # each is a complete run output
+            mark_output(d, "run", Path(log_path))  # each is a complete run output
         final = stage.commit()
     return [s.with_out_dir(final / a) for s, a in zip(summaries, assocs, strict=True)]

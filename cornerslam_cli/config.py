@@ -81,6 +81,18 @@ class InputConfig:
 
 
 @dataclass(frozen=True)
+class GridConfig:
+    """The occupancy grid every run writes (map.pgm + map.yaml for ROS map_server / nav2, map_grid.png)."""
+
+    resolution: float = num(0.05, ge=0.001, le=100.0)  # metres per cell
+    # cells at most (~6 bytes each while it is built): a larger map is written coarser, warned
+    max_cells: int = num(10_000_000, ge=100, le=200_000_000)
+
+    def __post_init__(self) -> None:
+        check_ranges(self)
+
+
+@dataclass(frozen=True)
 class Config:
     input: InputConfig = field(default_factory=InputConfig)
     keyframes: KeyframeConfig = field(default_factory=KeyframeConfig)
@@ -90,6 +102,7 @@ class Config:
     corners: CornersConfig = field(default_factory=CornersConfig)
     association: AssociationConfig = field(default_factory=AssociationConfig)
     ekf: EkfConfig = field(default_factory=EkfConfig)
+    grid: GridConfig = field(default_factory=GridConfig)
 
     def to_dict(self) -> dict:
         return _to_plain(dataclasses.asdict(self))

@@ -23,6 +23,7 @@ from .errors import ConfigError, LogError
 from .features import extract
 from .filter.models import increment_noise
 from .geometry import matrix_from_pose, transform_points
+from .lasers import mount_source
 from .logs import ReadStats, open_log
 from .logs.sync import SyncStats, reanchor_odometry, select_keyframes, synchronise
 from .motion import ScanMatcher
@@ -73,6 +74,7 @@ class Frame:
     scan_matched: bool = False  # a scan match was fused into the increment into this frame
     scan_fit: float = float("nan")  # share of the scan's points on the local map after matching
     t_scan_match: float = 0.0
+    points: np.ndarray | None = None  # (k, 2) float32 valid beam end points, sensor frame (occupancy grid)
 
 
 def extract_frame(scan: Scan, odom: np.ndarray, cfg: Config, laser2base: tuple[float, float, float]) -> Frame:
@@ -81,7 +83,9 @@ def extract_frame(scan: Scan, odom: np.ndarray, cfg: Config, laser2base: tuple[f
     z, C = corners_to_base(corners, laser2base)
     C[:, 0, 0] += cfg.corners.model_sigma**2
     C[:, 1, 1] += cfg.corners.model_sigma**2
-    return Frame(scan.stamp, odom, len(scan.ranges), segments, z, C, time.perf_counter() - t0)
+    t_extract = time.perf_counter() - t0
+    points = scan.points().astype(np.float32)
+    return Frame(scan.stamp, odom, len(scan.ranges), segments, z, C, t_extract, points=points)
 
 
 @dataclass
@@ -92,10 +96,11 @@ class Input:
     reader: object
     info: object
     laser2base: tuple[float, float, float]
-    laser_source: str
+    laser_source: str  # where laser2base came from: tf, config, preset or default (lasers.mount_source)
     total_scans: int
     stats: SyncStats
     matcher: ScanMatcher | None = None  # scan matching of the motion input (scan_match.enabled)
+    odom_on_tf: bool = False  # the log's tf carries odom→base (odometry from tf, or seen beside it)
 
 
 def open_input(log_path: str | Path, cfg: Config) -> Input:
@@ -112,7 +117,10 @@ def open_input(log_path: str | Path, cfg: Config) -> Input:
     info = reader.info()
     laser2base, source = _laser_mount(reader, cfg)
     matcher = ScanMatcher(cfg.scan_match, odometry_noise(cfg)) if cfg.scan_match.enabled else None
-    return Input(Path(log_path), reader, info, laser2base, source, _scan_count(info), SyncStats(), matcher)
+    odom_on_tf = info.odom_source.startswith("tf") or reader.odom_on_tf
+    return Input(
+        Path(log_path), reader, info, laser2base, source, _scan_count(info), SyncStats(), matcher, odom_on_tf
+    )
 
 
 def odometry_noise(cfg: Config) -> Callable[[np.ndarray], np.ndarray]:
@@ -239,12 +247,26 @@ def scans_prepared(reader, cfg: Config):
 
 
 def _laser_mount(reader, cfg: Config) -> tuple[tuple[float, float, float], str]:
+    """The laser's pose on the robot and where it came from: tf when the log has it, else the
+    config's ``input.laser`` (:func:`lasers.mount_source`)."""
     mount = cfg.input.laser
     if mount.from_tf:
         tf = reader.laser_to_base()
         if tf is not None:
             return (float(tf[0]), float(tf[1]), float(tf[2])), "tf"
-    return (mount.x, mount.y, mount.yaw), "config"
+    return (mount.x, mount.y, mount.yaw), mount_source(cfg)
+
+
+def warn_default_mount(src: Input, cfg: Config) -> None:
+    """Warn (into summary.json too) when the laser mount is the built-in default: the log has no tf
+    for it and the config does not set it. Called once the run has its frames, so that a log that
+    fails gives its one-line error alone."""
+    if src.laser_source == "default":
+        src.reader.stats.warn(
+            "log '%s' has no tf %s→laser: the laser is taken at the built-in default x=0 y=0 yaw=0 on "
+            "the robot (set input.laser.x/y/yaw to its mount, or input.laser.from_tf=false to keep it)",
+            src.path.name, short_text(cfg.input.base_frame),
+        )  # fmt: skip
 
 
 def _scan_count(info) -> int:

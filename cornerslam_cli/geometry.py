@@ -44,6 +44,12 @@ def transform_points(points: np.ndarray, pose) -> np.ndarray:
     return points @ M[:2, :2].T + M[:2, 2]
 
 
+def rotate_covariance(cov: np.ndarray, yaw: float) -> np.ndarray:
+    """(n, 2, 2) position covariances of points moved into a frame turned by ``yaw``: R Σ Rᵀ."""
+    R = matrix_from_pose((0.0, 0.0, yaw))[:2, :2]
+    return R @ np.asarray(cov, dtype=float) @ R.T
+
+
 def compose(a, b) -> np.ndarray:
     """a ∘ b: with a = ``base2map`` and b = ``laser2base``, ``laser2map``. Row-wise for (n, 3)."""
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)

@@ -19,7 +19,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from .config import Config, config_from, read_config_file
+from .config import Config, LaserMountConfig, config_from, read_config_file
 from .errors import ConfigError, did_you_mean
 from .logs import open_log
 from .types import Scan
@@ -75,6 +75,18 @@ PRESETS: dict[str, LaserPreset] = {
         {"sensor": {"model": "piecewise", "sigma_r_near": 0.03, "near_range": 1.0, "sigma_r_rel": 0.03}},
     ),
 }
+
+
+def mount_source(cfg: Config) -> str:
+    """Where the config's laser mount (``input.laser``) came from, for a log without one on tf:
+    ``preset`` (the laser preset's), ``default`` (the built-in one: nobody chose it; turning
+    ``input.laser.from_tf`` off says the config's mount is meant), else ``config``."""
+    mount = cfg.input.laser
+    preset = PRESETS.get(cfg.input.laser_preset)
+    preset_mount = preset.config.get("input", {}).get("laser") if preset else None
+    if preset_mount and all(getattr(mount, k) == v for k, v in preset_mount.items()):
+        return "preset"
+    return "default" if mount == LaserMountConfig() else "config"
 
 
 def detect_preset(n_beams: int, angle_increment: float) -> str | None:

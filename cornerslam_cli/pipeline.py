@@ -14,7 +14,8 @@ from pathlib import Path
 
 from .config import Config
 from .errors import OutputError, display_path
-from .frontend import Frame, Input, check_processed, frames, open_input
+from .frontend import Frame, Input, check_processed, frames, open_input, warn_default_mount
+from .report.occupancy import ScanStore
 from .report.oserrors import output_errors
 from .report.outdir import StagedDir
 from .report.run_writer import Reference, RunWriter, find_ground_truth, load_reference
@@ -51,12 +52,13 @@ def run(
     out_dir = Path(out) if out else default_out_dir(Path(log_path), cfg.association.method)
     gt = ground_truth or find_ground_truth(Path(log_path))
     inputs = [p for p in (log_path, gt, relations, config_path) if p]
-    with StagedDir(out_dir, "run", inputs) as stage:
+    with StagedDir(out_dir, "run", inputs, log_path, own_log_only=not out) as stage:
         mcap_path = stage.stage_file(mcap_out) if mcap_out else None
         ref = load_reference(Path(log_path), ground_truth, relations, time_offset)  # bad files fail first
         src = open_input(log_path, cfg)
-        summary = run_filter(frames(src, cfg, progress), src, cfg, stage.path, ref, wall0)
-        write_extras(stage, plot, mcap_out, mcap_path, ref.gt_path)
+        scans = ScanStore() if mcap_path else None  # kept for the results MCAP's scans
+        summary = run_filter(frames(src, cfg, progress), src, cfg, stage.path, ref, wall0, scans)
+        write_extras(stage, plot, mcap_out, mcap_path, ref.gt_path, scans)
         summary = summary.with_out_dir(stage.commit())
     return summary
 
@@ -67,10 +69,11 @@ def write_extras(
     mcap_out: str | Path | None,
     mcap_path: Path | None,
     ground_truth: Path | None = None,
+    scans: ScanStore | None = None,
 ) -> None:
     """What a run writes besides its tables, staged before the commit: with ``plot`` the figures and
-    report.html; the results MCAP into ``mcap_path``, the staged place of ``mcap_out``. Both draw
-    the ``ground_truth`` file the run was scored against."""
+    report.html; the results MCAP into ``mcap_path``, the staged place of ``mcap_out``, with the
+    run's ``scans``. Both draw the ``ground_truth`` file the run was scored against."""
     if plot:
         from .report.html import write_report
         from .report.plots import plot_run
@@ -83,7 +86,7 @@ def write_extras(
         if mcap_path.is_relative_to(stage.path) and mcap_path.exists():
             raise OutputError(f"--mcap-out '{mcap_out}' is a file of the run itself", "give another name")
         with output_errors(mcap_out):
-            write_results_mcap(stage.path, mcap_path, results=stage.target, ground_truth=ground_truth)
+            write_results_mcap(stage.path, mcap_path, stage.target, ground_truth, scans)
 
 
 def run_filter(
@@ -93,13 +96,15 @@ def run_filter(
     dest: Path,
     ref: Reference,
     wall0: float,
+    scans: ScanStore | None = None,
 ) -> RunSummary:
     """The filter over the front end's frames, a run's files written into the (staging) directory
-    ``dest``; returns the summary."""
+    ``dest`` (the scans kept in ``scans`` when given); returns the summary."""
     slam = Slam.from_config(cfg, src.laser2base)
-    with RunWriter(dest) as writer:
+    with RunWriter(dest, src.laser2base, cfg.grid, scans) as writer:
         for frame in frame_iter:
-            writer.step(slam.step(frame))
+            writer.step(slam.step(frame), frame.points)
         writer.close_steps()
         check_processed(src, slam.n_steps, writer.totals.points)
+        warn_default_mount(src, cfg)
         return writer.finish(slam.landmark_table(), src, cfg, ref, wall0)

@@ -107,7 +107,8 @@ class RunInput(JsonResult):
     odom_topic: str | None
     odom_source: str | None
     laser_to_base: tuple[float, float, float]
-    laser_to_base_source: str
+    laser_to_base_source: str  # tf, config, preset or default (lasers.mount_source)
+    odom_on_tf: bool | None = optional()  # the log's tf carries odom → base (absent before issue 17)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -165,6 +166,7 @@ class Timing(JsonResult):
     t_match_max: float
     wall_time: float
     scans_per_second: float
+    t_grid: float | None = optional()  # ray tracing and writing the occupancy grid (absent before it)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -260,7 +262,7 @@ def from_json(cls: type, data: Any, where: str) -> Any:
 
 
 def _value(tp: Any, v: Any, where: str, hint: str) -> Any:
-    """``v`` as the field type ``tp`` (a dataclass, a tuple, int, float, str, dict, or X | None)."""
+    """``v`` as the field type ``tp`` (a dataclass, a tuple, int, float, str, bool, dict, or X | None)."""
     options = typing.get_args(tp) if isinstance(tp, types.UnionType) else (tp,)
     if v is None:
         if float in options:
@@ -277,9 +279,10 @@ def _value(tp: Any, v: Any, where: str, hint: str) -> Any:
         int: int,
         float: (int, float),
         str: str,
+        bool: bool,
         dict: dict,
     }[origin]
-    if not isinstance(v, expect) or isinstance(v, bool):
+    if not isinstance(v, expect) or (isinstance(v, bool) and origin is not bool):
         raise ResultsError(f"{where} is {type(v).__name__}, not {origin.__name__}", hint)
     if origin is tuple:  # tuple[float, float, float] or tuple[str, ...]: every item of its type
         item = typing.get_args(tp)[0]

@@ -59,6 +59,7 @@ class StepRecord:
     budget_hit: bool = False
     t_scan_match: float = 0.0
     scan_fit: float = float("nan")
+    cov_xy: float = 0.0  # the robot's x-y covariance (pose_var holds the diagonal)
 
     @property
     def t_total(self) -> float:
@@ -146,6 +147,7 @@ class Slam:
             stamp=frame.stamp,
             pose=pose,
             pose_var=np.diag(self.ekf.P[:3, :3]).copy(),
+            cov_xy=float(self.ekf.P[0, 1]),
             odom=frame.odom,
             motion=m.cur,
             n_points=frame.n_points,

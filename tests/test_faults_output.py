@@ -230,6 +230,20 @@ def out_is_an_output_of_an_older_version(w: World) -> Case:
     return Case(["run", w.log, "--out", out], after=lambda: complete(out))
 
 
+@fault(2, "holds the output of", "not of", "the default output directory of both logs", "its own --out")
+def default_out_of_another_log_with_the_same_name(w: World) -> Case:
+    """two logs of one name (`a/x.mcap`, `logs/x.mcap`) run without `--out`: the second is refused,
+    naming both, the first's output kept (`--out` replaces as usual; the same log again replaces its
+    own output)"""
+    first = w.tmp / "a" / "x.mcap"
+    first.parent.mkdir()
+    shutil.copy(w.log, first)
+    w.mp.chdir(w.tmp)
+    res = invoke("run", first, "-q")
+    assert res.exit_code == 0, res.output
+    return Case(["run", w.log], str(first.resolve()))
+
+
 def older_version_output(d: Path, *extra: str) -> Path:
     """A run output written before the marker (0.1.0: summary.json says cornerslam_version), plus
     the ``extra`` files a user put there."""

@@ -7,7 +7,9 @@ the wrong order fails here. The last tests run a whole log recorded by a laser w
 cast from the true laser pose in the simulated office) and check the outputs in the world: the
 trajectory, every lines.csv segment, every landmark; and map.csv's covariance columns against Σ.
 
-Frames (types.py): sensor = laser, base = robot, map = the SLAM frame (the base at the first scan).
+Frames (types.py): sensor = laser, base = robot, map = the SLAM frame (the base at the first scan);
+the outputs are written in the odometry frame (the map frame placed at the first odometry pose), which
+for these logs, whose odometry is the true pose, is the world frame.
 """
 
 from __future__ import annotations
@@ -237,20 +239,18 @@ def test_run_with_a_yawed_laser_puts_trajectory_segments_and_landmarks_on_the_wo
     assert summary["input"]["laser_to_base"] == pytest.approx(MOUNT) and summary["counts"]["steps"] == len(
         truth
     )
-    world_from_map = matrix(*truth[0])  # the map frame is the base at the first scan
-    tr = read_csv(yawed_run / "trajectory.csv")
-    est = np.array(
-        [pose_from(world_from_map @ matrix(*p)) for p in zip(tr["x"], tr["y"], tr["theta"], strict=True)]
-    )
+    tr = read_csv(yawed_run / "trajectory.csv")  # in the odometry frame: here the world's
+    est = np.column_stack((tr["x"], tr["y"], tr["theta"]))
+    assert est[0] == pytest.approx(truth[0], abs=1e-8)  # the first pose is the first odometry pose
     assert np.abs(est[:, :2] - truth[:, :2]).max() < 0.05
     assert np.abs(np.angle(np.exp(1j * (est[:, 2] - truth[:, 2])))).max() < 0.02
     walls = yawed_logs["world"].walls
     ln = read_csv(yawed_run / "lines.csv")
-    ends = apply(world_from_map, np.column_stack((np.r_[ln["x1"], ln["x2"]], np.r_[ln["y1"], ln["y2"]])))
+    ends = np.column_stack((np.r_[ln["x1"], ln["x2"]], np.r_[ln["y1"], ln["y2"]]))
     d = distance_to_walls(ends, walls)
     assert len(d) > 500 and np.percentile(d, 95) < 0.05 and d.max() < 0.1
     lm = read_csv(yawed_run / "map.csv")
-    xy = apply(world_from_map, np.column_stack((lm["x"], lm["y"])))
+    xy = np.column_stack((lm["x"], lm["y"]))
     assert len(xy) > 20 and distance_to_walls(xy, walls).max() < 0.1  # corners lie on walls
     corners = true_corners(yawed_logs["world"])
     nearest = np.linalg.norm(xy[:, None] - corners[None, :, :2], axis=-1).min(axis=1)
@@ -258,7 +258,8 @@ def test_run_with_a_yawed_laser_puts_trajectory_segments_and_landmarks_on_the_wo
 
 
 def test_map_csv_covariance_columns_are_the_landmark_blocks_of_sigma(yawed_logs, yawed_run):
-    """map.csv's var_x, var_y, cov_xy, var_phi against the final Σ of the same run, replayed."""
+    """map.csv's var_x, var_y, cov_xy, var_phi against the final Σ of the same run, replayed, moved by
+    hand from the filter's map frame into the odometry frame (by the first odometry pose)."""
     summary = json.loads((yawed_run / "summary.json").read_text())
     cfg = from_dict(Config, summary["config"])  # the run's resolved config (laser preset included)
     src = open_input(yawed_logs["tf"], cfg)
@@ -266,6 +267,8 @@ def test_map_csv_covariance_columns_are_the_landmark_blocks_of_sigma(yawed_logs,
     for frame in frames(src, cfg):
         slam.step(frame)
     mu, P = slam.ekf.mu, slam.ekf.P
+    odom2world = matrix(*yawed_logs["truth"][0])  # the filter's map frame in the odometry (world) frame
+    R = odom2world[:2, :2]
     lm = read_csv(yawed_run / "map.csv")
     assert len(lm["id"]) == summary["counts"]["landmarks"] > 20
     ratio = lm["var_x"] / lm["var_y"]
@@ -273,8 +276,8 @@ def test_map_csv_covariance_columns_are_the_landmark_blocks_of_sigma(yawed_logs,
     for row, i in enumerate(lm["id"].astype(int)):
         block = P[3 + 3 * i : 6 + 3 * i, 3 + 3 * i : 6 + 3 * i]
         got = [lm[k][row] for k in ("var_x", "var_y", "cov_xy", "var_phi")]
-        np.testing.assert_allclose(
-            got, [block[0, 0], block[1, 1], block[0, 1], block[2, 2]], rtol=1e-6, atol=1e-9
-        )
+        cov = R @ block[:2, :2] @ R.T
+        np.testing.assert_allclose(got, [cov[0, 0], cov[1, 1], cov[0, 1], block[2, 2]], rtol=1e-6, atol=1e-9)
         got = [lm[k][row] for k in ("x", "y", "phi")]
-        np.testing.assert_allclose(got, mu[3 + 3 * i : 6 + 3 * i], rtol=0, atol=1e-8)
+        want = [*apply(odom2world, mu[3 + 3 * i : 5 + 3 * i])[0], mu[5 + 3 * i]]
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-8)

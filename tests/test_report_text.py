@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from dataclasses import replace
 
 import numpy as np
 from _results_helpers import NO_REL, REL, ate, make_summary
@@ -55,16 +56,20 @@ def test_summary_lines_without_reference():
     assert summary_lines(s) == [
         "logs/office.mcap: 500 steps (502 scans, 2 skipped, 7 between keyframes), 88 landmarks, "
         "2777 matches with pca",
+        "laser mount: x=0.000 m y=0.000 m yaw=0.000 rad (the built-in default: not on the log's tf, "
+        "not in the config)",
         "time: extract 1.23s scan match 0.00s predict 0.04s match 0.50s update 0.38s (118 steps/s), "
         "wall 4.6s",
         "wrote out/office_pca",
     ]
+    tf = replace(s, input=replace(s.input, laser_to_base=(0.1, 0.0, 0.0), laser_to_base_source="tf"))
+    assert summary_lines(tf)[1] == "laser mount: x=0.100 m y=0.000 m yaw=0.000 rad (from the log's tf)"
 
 
 def test_summary_lines_with_ground_truth_and_relations():
     acc = accuracy(scan_odom_relations=REL)
     lines = summary_lines(summary(accuracy=acc))
-    assert lines[2:] == [
+    assert lines[3:] == [
         "ATE RMSE 0.012 m (odometry 1.425 m, scan-matched 0.082 m) against gt.tum",
         "relations: translation 0.123 ± 0.046 m, rotation 1.23 ± 0.50 deg (3/4 relations)",
         "  odometry: no relation falls inside the trajectory's time span (check --time-offset)",
@@ -73,7 +78,7 @@ def test_summary_lines_with_ground_truth_and_relations():
     ]
     acc = dataclasses.replace(acc, scan_odom_ate=None, scan_odom_relations=None)
     lines = summary_lines(summary(accuracy=acc))
-    assert lines[2] == "ATE RMSE 0.012 m (odometry 1.425 m) against gt.tum"
+    assert lines[3] == "ATE RMSE 0.012 m (odometry 1.425 m) against gt.tum"
     assert not any("scan-matched" in line for line in lines)
 
 
@@ -170,6 +175,7 @@ def test_info_lines():
         "run would use:",
         "  scans     -",
         "  odometry  - (none found)",
+        "  laser     not on tf: from the config's input.laser (built-in default x=0 y=0 yaw=0)",
     ]
 
 

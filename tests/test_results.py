@@ -116,6 +116,7 @@ INPUT_KEYS = [
     "odom_source",
     "laser_to_base",
     "laser_to_base_source",
+    "odom_on_tf",  # appended (issue 17): the log's tf carries odom → base
 ]
 COUNT_KEYS = [
     "steps", "landmarks", "matched_total", "beams_total", "beams_invalid", "scans_bad_geometry",
@@ -126,7 +127,7 @@ COUNT_KEYS = [
 ]  # fmt: skip
 TIMING_KEYS = [
     "t_extract", "t_predict", "t_match", "t_update", "t_scan_match", "t_total", "t_match_max", "wall_time",
-    "scans_per_second",
+    "scans_per_second", "t_grid",  # t_grid appended (issue 17): the occupancy grid
 ]  # fmt: skip
 ACCURACY_KEYS = [
     "ground_truth", "ate", "odom_ate", "rpe_step_rmse", "rpe_step_rot_rmse", "rpe_per_m", "scan_odom_ate",

@@ -206,6 +206,7 @@ class LogReader(Protocol):
     stats: ReadStats
     scan_topic: str
     odom_topic: str
+    odom_on_tf: bool  # the log's tf carries odom→base (seen by laser_to_base())
 
     def info(self) -> LogInfo: ...
 

@@ -244,6 +244,8 @@ class CarmenReader:
         except (KeyError, ValueError):
             return DEFAULT_MAX_RANGE
 
+    odom_on_tf = False  # CARMEN has no tf
+
     def laser_to_base(self) -> Pose2 | None:
         """Laser pose in the robot frame from ROBOTLASER1 laser/robot poses (first 50 lines), else None."""
         self.check()

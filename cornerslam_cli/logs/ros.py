@@ -156,6 +156,7 @@ class RosLogReader:
         self.scan_topic = self._scan_sel[0]
         self.odom_topic = self._odom_sel.topic
         self._laser2base: Pose2 | None | bool = False  # False = not computed yet
+        self.odom_on_tf = False  # laser_to_base() saw tf odom_frame→base_frame (a results MCAP need not)
 
     # ---------------------------------------------------------------- selection
     def _topics_of(self, *types: str) -> list[str]:
@@ -353,7 +354,10 @@ class RosLogReader:
                 static = topic == "/tf_static"
                 static_left -= static
                 for parent, child, _, t, q in decs[topic].transforms(data):
-                    if (parent, child) == (self.odom_frame, self.base_frame) or parent == child:
+                    if (parent, child) == (self.odom_frame, self.base_frame):
+                        self.odom_on_tf = True
+                        continue
+                    if parent == child:
                         continue
                     if sum(v * v for v in q) < 1e-12:  # no rotation at all: not a transform
                         self.stats.warn(

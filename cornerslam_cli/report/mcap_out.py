@@ -24,6 +24,12 @@ topic                                  schema                     messages
 ``/cornerslam/ground_truth_path``      foxglove.PosesInFrame      one, only with ground truth (SE(2)-
                                                                   aligned like the ATE)
 ``/cornerslam/tf``                     foxglove.FrameTransform    one per step: ``map`` → odom frame
+``/cornerslam/odom_tf``                foxglove.FrameTransform    one per step, only when the log has no
+                                                                  tf odom → base: odom → base frame
+                                                                  from the log's odometry
+``/cornerslam/scan``                   foxglove.PointCloud        one per step (when the run passes its
+                                                                  scans): the scan's end points in
+                                                                  ``map`` at the corrected pose
 ``/cornerslam/landmarks``              foxglove.SceneUpdate       one per landmark, at the stamp of the
                                                                   step that created it: sphere, 3σ
                                                                   ellipse (line loop), corner direction
@@ -33,12 +39,20 @@ topic                                  schema                     messages
 
 The transform is ``map`` → odom (REP 105: corrected pose ∘ odometry⁻¹), not ``map`` → base: the input
 log usually already carries odom → base_link, and a second parent for base_link would make Foxglove's
-transform tree flip between the two. With both files open, base_link sits at the corrected pose.
+transform tree flip between the two. With both files open, base_link sits at the corrected pose. A log
+without odom → base_link on tf (``input.odom_on_tf`` false in summary.json: odometry from
+nav_msgs/Odometry only, CARMEN) gets it here, from the odometry the run used, so the results MCAP
+alone places the robot; with the scans in ``map`` it shows the robot moving through its map. The
+poses are in the log's odometry frame, so ``map`` and odom coincide at the first scan.
 Landmarks are the final estimates (map.csv holds only the final map), shown from their creation on.
+
+Over 400 lines because the Foxglove schemas (trimmed JSON schemas, one per message type written) are
+declared here beside the builders that fill them, so a field is added to both in one place.
 """
 
 from __future__ import annotations
 
+import base64
 import csv
 import json
 from decimal import Decimal
@@ -48,6 +62,7 @@ import numpy as np
 
 from ..errors import display_path
 from ..geometry import compose_inverse
+from .occupancy import ScanStore
 from .run_dir import ELLIPSE_SIGMA, ellipse_polygons, load_run
 from .tables import json_text
 
@@ -59,6 +74,8 @@ TOPICS = {
     "odom_path": "/cornerslam/odom_path",
     "ground_truth_path": "/cornerslam/ground_truth_path",
     "tf": "/cornerslam/tf",
+    "odom_tf": "/cornerslam/odom_tf",
+    "scan": "/cornerslam/scan",
     "landmarks": "/cornerslam/landmarks",
     "segments": "/cornerslam/segments",
 }
@@ -139,6 +156,26 @@ SCHEMAS: dict[str, dict] = {
             "rotation": _QUATERNION,
         },
     ),
+    "foxglove.PointCloud": _obj(
+        "foxglove.PointCloud",
+        {
+            "timestamp": _TIME,
+            "frame_id": _STRING,
+            "pose": _POSE,
+            "point_stride": {"type": "integer", "minimum": 0},
+            "fields": _arr(
+                _obj(
+                    "foxglove.PackedElementField",
+                    {
+                        "name": _STRING,
+                        "offset": {"type": "integer", "minimum": 0},
+                        "type": {"type": "integer"},
+                    },
+                )
+            ),
+            "data": {"type": "string", "contentEncoding": "base64"},
+        },
+    ),
     "foxglove.SceneUpdate": _obj(
         "foxglove.SceneUpdate",
         {"deletions": _arr({"type": "object"}), "entities": _arr(_SCENE_ENTITY)},
@@ -151,6 +188,8 @@ TOPIC_SCHEMAS = {
     "odom_path": "foxglove.PosesInFrame",
     "ground_truth_path": "foxglove.PosesInFrame",
     "tf": "foxglove.FrameTransform",
+    "odom_tf": "foxglove.FrameTransform",
+    "scan": "foxglove.PointCloud",
     "landmarks": "foxglove.SceneUpdate",
     "segments": "foxglove.SceneUpdate",
 }
@@ -209,6 +248,22 @@ def _entity(ns: int, ident: str, spheres: list, lines: list, metadata: dict | No
     }
 
 
+def _transform(ns: int, parent: str, child: str, pose) -> dict:
+    return {"timestamp": _time(ns), "parent_frame_id": parent, "child_frame_id": child,
+            "translation": _point(pose[0], pose[1]), "rotation": _quat(pose[2])}  # fmt: skip
+
+
+FLOAT32 = 7  # foxglove.NumericType
+
+
+def _point_cloud(ns: int, xy: np.ndarray) -> dict:
+    """A foxglove.PointCloud of the points ``xy`` (k, 2) in ``map``: float32 x, y per point."""
+    fields = [{"name": "x", "offset": 0, "type": FLOAT32}, {"name": "y", "offset": 4, "type": FLOAT32}]
+    data = np.ascontiguousarray(xy, dtype="<f4").tobytes()
+    return {"timestamp": _time(ns), "frame_id": MAP_FRAME, "pose": _pose(0.0, 0.0), "point_stride": 8,
+            "fields": fields, "data": base64.b64encode(data).decode()}  # fmt: skip
+
+
 def _poses_in_frame(ns: int, poses: np.ndarray) -> dict:
     return {"timestamp": _time(ns), "frame_id": MAP_FRAME, "poses": [_pose(*p) for p in poses]}
 
@@ -220,12 +275,17 @@ def _stamp_texts(path: Path) -> list[str]:
 
 
 def write_results_mcap(
-    out_dir: Path, path: Path, results: Path | None = None, ground_truth: str | Path | None = None
+    out_dir: Path,
+    path: Path,
+    results: Path | None = None,
+    ground_truth: str | Path | None = None,
+    scans: ScanStore | None = None,
 ) -> Path:
     """Write a run directory's trajectory, landmarks and segment map to ``path`` (MCAP, JSON + Foxglove
     schemas); returns ``path``. See the module docstring for the topics. ``results`` is the name of
     the run directory recorded in the metadata (default ``out_dir``; a staging directory's target);
-    ``ground_truth`` the TUM file the run was scored against (default: the one its summary names)."""
+    ``ground_truth`` the TUM file the run was scored against (default: the one its summary names);
+    ``scans`` the run's scans, one per step (occupancy.ScanStore), published on ``/cornerslam/scan``."""
     from mcap.writer import Writer
 
     out_dir, path = Path(out_dir), Path(path)
@@ -233,16 +293,23 @@ def write_results_mcap(
     stamps_ns = [stamp_to_ns(t) for t in _stamp_texts(out_dir / "trajectory.csv")]
     ns_of_step = dict(zip(run.steps.astype(int).tolist(), stamps_ns, strict=True))
     odom_raw = read_odom_raw(out_dir)  # odom-frame poses, for the map → odom transform
-    odom_frame = str(run.summary.config.get("input", {}).get("odom_frame") or "odom")  # the run's config
+    inp = run.summary.config.get("input", {})  # the run's config
+    odom_frame, base_frame = str(inp.get("odom_frame") or "odom"), str(inp.get("base_frame") or "base_link")
+    odom_tf = not run.summary.input.odom_on_tf  # the log lacks odom → base on tf (or did not say)
 
     msgs: list[tuple[int, str, dict]] = []  # (log time ns, topic key, payload)
     for ns, c, o, m in zip(stamps_ns, run.corrected, run.odometry, compose_inverse(run.corrected, odom_raw),
                            strict=True):  # fmt: skip
         msgs.append((ns, "pose", {"timestamp": _time(ns), "frame_id": MAP_FRAME, "pose": _pose(*c)}))
         msgs.append((ns, "odom_pose", {"timestamp": _time(ns), "frame_id": MAP_FRAME, "pose": _pose(*o)}))
-        tf = {"timestamp": _time(ns), "parent_frame_id": MAP_FRAME, "child_frame_id": odom_frame,
-              "translation": _point(m[0], m[1]), "rotation": _quat(m[2])}  # fmt: skip
-        msgs.append((ns, "tf", tf))
+        msgs.append((ns, "tf", _transform(ns, MAP_FRAME, odom_frame, m)))
+    if odom_tf:
+        msgs += [
+            (ns, "odom_tf", _transform(ns, odom_frame, base_frame, o))
+            for ns, o in zip(stamps_ns, odom_raw, strict=True)
+        ]
+    if scans is not None:
+        msgs += [(ns, "scan", _point_cloud(ns, xy)) for ns, xy in zip(stamps_ns, scans.points, strict=True)]
     if stamps_ns:
         t0 = stamps_ns[0]
         msgs.append((t0, "path", _poses_in_frame(t0, run.corrected)))

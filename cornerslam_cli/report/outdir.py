@@ -36,7 +36,7 @@ from pathlib import Path
 
 from ..errors import OutputError
 from .oserrors import output_error, output_errors
-from .ownership import check_replaceable, is_within, mark_output, refuse_special_file
+from .ownership import check_replaceable, check_same_log, is_within, mark_output, refuse_special_file
 
 _NAME_KEEP = 200  # bytes of a name kept in its sibling names (+ at most 45 of suffix: within 255)
 HOST = hashlib.sha1(socket.gethostname().encode()).hexdigest()[:8]  # leftovers are judged on their host
@@ -193,15 +193,24 @@ class StagedDir:
     environment fault inside the block (disk full, ...) leaves as the OutputError naming the path.
     """
 
-    def __init__(self, target: str | Path, kind: str = "run", inputs: Sequence[str | Path] = ()):
+    def __init__(
+        self,
+        target: str | Path,
+        kind: str = "run",
+        inputs: Sequence[str | Path] = (),
+        log: str | Path | None = None,
+        own_log_only: bool = False,
+    ):
         self.shown = Path(target)
         self.target = self.shown.resolve()
         self.kind = kind
         self.inputs = [Path(p) for p in inputs]
+        self.log = None if log is None else Path(log)  # recorded in the marker
+        self.own_log_only = own_log_only  # the default place: refuse another log's output there
         self.files: list[tuple[Path, Path]] = []  # (staged, final) files renamed by commit()
         self.committed = False
         with output_errors(self.shown):
-            check_replaceable(self.target, kind, self.inputs, self.shown)
+            self._check_replaceable()
             self.target.parent.mkdir(parents=True, exist_ok=True)
             _check_name(self.target, self.shown)
             with target_lock(self.target):
@@ -219,6 +228,11 @@ class StagedDir:
             except BaseException:
                 _remove(self.path)
                 raise
+
+    def _check_replaceable(self) -> None:
+        check_replaceable(self.target, self.kind, self.inputs, self.shown)
+        if self.own_log_only and self.log is not None:
+            check_same_log(self.target, self.log, self.shown)
 
     def __enter__(self) -> StagedDir:
         return self
@@ -275,8 +289,8 @@ class StagedDir:
         """Rename the finished staging directory onto the target, and each staged file onto its own
         target, under the target's lock; returns the target."""
         with target_lock(self.target):
-            check_replaceable(self.target, self.kind, self.inputs, self.shown)  # it may have changed
-            mark_output(self.path, self.kind)
+            self._check_replaceable()  # it may have changed
+            mark_output(self.path, self.kind, self.log)
             with _signals_deferred():
                 old = self._swap()
                 for staged, final in self.files:

@@ -1,15 +1,19 @@
 """Which output places cornerslam may replace: the ownership marker of its output directories.
 
-Every output directory cornerslam writes carries a marker file, ``.cornerslam-output``:
-JSON with the version, the kind (``run``, ``compare``, ``batch``) and, for runs and comparisons, the
-names of the entries written. An existing directory is replaced only when it is empty, or when it is
-a cornerslam output of the same kind that holds nothing its marker does not list (subdirectories
-with their own marker are checked against theirs); never when it holds an input of the run or the
-working directory, and never at a mount point. Outputs of versions before the marker count by their
-own files: a ``summary.json`` beginning with ``cornerslam_version`` (run), ``comparison.csv`` or
-``batch.csv`` with our header. Anything else is refused with an :class:`OutputError` (exit 2) before
-any work. Replacing one's own output needs no flag: rerunning into the same ``--out`` is the usual
-case. Staging and committing an output: report/outdir.py.
+Every output directory cornerslam writes carries a marker file, ``.cornerslam-output``: JSON with
+the version, the kind (``run``, ``compare``, ``batch``), the log it was made from (resolved path)
+and, for runs and comparisons, the names of the entries written. An existing directory is replaced
+only when it is empty, or when it is a cornerslam output of the same kind that holds nothing its
+marker does not list (subdirectories with their own marker are checked against theirs); never when
+it holds an input of the run or the working directory, and never at a mount point. Outputs of
+versions before the marker count by their own files: a ``summary.json`` beginning with
+``cornerslam_version`` (run), ``comparison.csv`` or ``batch.csv`` with our header. Anything else is
+refused with an :class:`OutputError` (exit 2) before any work. Replacing one's own output needs no
+flag: rerunning into the same ``--out`` is the usual case. The default place
+(``cornerslam_out/<stem>_<assoc>``) is named after the log's stem, which two logs can share
+(``a/aces.log``, ``b/aces.log``): there, an output of another log is refused too, naming both
+(:func:`check_same_log`), rather than silently replaced. Staging and committing an
+output: report/outdir.py.
 """
 
 from __future__ import annotations
@@ -58,10 +62,12 @@ def output_kind(path: Path) -> str | None:
     return None
 
 
-def mark_output(path: Path, kind: str) -> None:
-    """Mark the directory ``path`` as a cornerslam output of ``kind``; a run or comparison lists the
-    entries it holds now (its complete contents)."""
+def mark_output(path: Path, kind: str, log: Path | None = None) -> None:
+    """Mark the directory ``path`` as a cornerslam output of ``kind`` made from ``log`` (recorded
+    resolved); a run or comparison lists the entries it holds now (its complete contents)."""
     marker: dict = {"cornerslam": __version__, "kind": kind}
+    if log is not None:
+        marker["log"] = os.fsdecode(log.resolve())
     if kind != "batch":  # a batch directory grows as it runs: its own rows are checked one by one
         marker["files"] = [rel for rel, _ in _entries(path)]
     (path / MARKER).write_text(json.dumps(marker, indent=1) + "\n")
@@ -187,6 +193,35 @@ def check_replaceable(
         raise OutputError(
             f"'{shown}' holds '{extra[0]}'{more}, which cornerslam did not write",
             "move it out first, or give another output directory",
+        )
+
+
+def recorded_log(path: Path) -> Path | None:
+    """The log the output directory ``path`` was made from: its marker's, else (an output of a
+    version before it was recorded) the one its run's summary.json names, resolved from the working
+    directory; None when neither says."""
+    marker = read_marker(path) or {}
+    if isinstance(marker.get("log"), str):
+        return Path(marker["log"])
+    summaries = [path / "summary.json", *sorted(path.glob("*/summary.json"))]  # a run; a compare's runs
+    for summary in summaries:
+        try:
+            log = json.loads(summary.read_bytes()[: 1 << 24])["input"]["log"]
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+        return Path(log).resolve() if isinstance(log, str) else None
+    return None
+
+
+def check_same_log(target: Path, log: Path, shown: Path) -> None:
+    """Refuse (OutputError) to replace at ``target`` an output made from another log than ``log``:
+    for the default place, named after the log's stem, which two logs may share."""
+    other = recorded_log(target) if target.is_dir() else None
+    if other is not None and other != log.resolve():
+        raise OutputError(
+            f"'{shown}' holds the output of '{other}', not of '{log}': the default output "
+            "directory of both logs",
+            "give this run its own --out, or remove the other output first",
         )
 
 

@@ -1,5 +1,11 @@
-"""A run's output files: the per-step tables written row by row, map.csv, trajectory.tum and the
+"""A run's output files: the per-step tables written row by row, map.csv, trajectory.tum (with
+odometry.tum and scan_matched.tum beside it), the occupancy grid (report/occupancy.py) and the
 summary (counts, timing totals, accuracy, hashes, versions) in summary.json.
+
+Frames: every pose, segment and landmark is written in the log's odometry frame. The filter works in
+its map frame, the base at the first scan (the EKF starts at zero); placed in the odometry frame, that
+is the first odometry pose, ``map2odom``, so the first pose written equals the first odometry pose and
+``evo_traj tum odometry.tum trajectory.tum --ref gt.tum`` needs no alignment to compare them.
 
 Every row is a dict keyed by its table's column names (report/tables.py ``*_COLUMNS``), so a column
 is written by name, never by position. The accuracy is measured against a :class:`Reference`
@@ -24,8 +30,11 @@ import numpy as np
 from .. import __version__, fpenv
 from ..errors import display_path
 from ..evaluate import ate, overlap_problem, read_relations, relation_error, rpe
+from ..geometry import compose
 from ..logs import check_regular
 from ..results import Accuracy, Counts, Hashes, OdometryModel, RunInput, RunSummary, Timing
+from .occupancy import ScanStore, build_grid, draw_grid, write_grid
+from .odom_frame import in_odom_frame, landmarks_in_odom_frame
 from .tables import (
     LINES_COLUMNS,
     MAP_COLUMNS,
@@ -38,7 +47,7 @@ from .tables import (
 )
 
 if TYPE_CHECKING:
-    from ..config import Config
+    from ..config import Config, GridConfig
     from ..frontend import Input
     from ..slam import StepRecord
 
@@ -83,16 +92,28 @@ class Totals:
 class RunWriter:
     """A run's files in the (staging) directory ``dest``: :meth:`step` writes one step's rows,
     :meth:`close_steps` completes the per-step tables, :meth:`finish` the map, trajectory.tum and
-    summary.json. A context manager: on an error the open files are closed without a second error."""
+    summary.json. A context manager: on an error the open files are closed without a second error.
+    The scans given to :meth:`step` (the laser at ``laser2base`` on the robot) make the occupancy
+    grid (``grid``: its resolution and size cap); they are kept in ``scans`` (a new store if None)."""
 
-    def __init__(self, dest: Path):
+    def __init__(
+        self,
+        dest: Path,
+        laser2base: tuple[float, float, float],
+        grid: GridConfig,
+        scans: ScanStore | None = None,
+    ):
         self.dest = dest
+        self.laser2base = laser2base
+        self.grid = grid
+        self.scans = ScanStore() if scans is None else scans
         self._files = ExitStack()
         self.trajectory = self._open("trajectory.csv", TRAJECTORY_COLUMNS)
         self.timing = self._open("timing.csv", TIMING_COLUMNS)
         self.lines = self._open("lines.csv", LINES_COLUMNS)
         self.track = array("d")  # stamp, pose, odom, motion per step: 80 bytes (a list of arrays: ~400)
         self.totals = Totals()
+        self.map2odom: np.ndarray | None = None  # the filter's map frame in the odometry frame
 
     def _open(self, name: str, columns: list[str]) -> CsvTable:
         return self._files.enter_context(CsvTable(self.dest / name, columns))
@@ -103,7 +124,14 @@ class RunWriter:
     def __exit__(self, *exc) -> None:
         self._files.__exit__(*exc)
 
-    def step(self, r: StepRecord) -> None:
+    def step(self, r: StepRecord, points: np.ndarray | None = None) -> None:
+        """Write one step's rows, in the odometry frame (the first step's odometry pose places it);
+        keep its scan's ``points`` (k, 2, laser frame) for the occupancy grid."""
+        if self.map2odom is None:
+            self.map2odom = np.array(r.odom, dtype=float)
+        r = in_odom_frame(r, self.map2odom)
+        if points is not None:
+            self.scans.add(compose(r.pose, self.laser2base), points)
         self.trajectory.write(trajectory_row(r))
         self.timing.write(timing_row(r))
         self.lines.rows(r.segments_map, lead=(r.step,))
@@ -120,8 +148,11 @@ class RunWriter:
     def finish(
         self, landmarks: dict[str, np.ndarray], src: Input, cfg: Config, ref: Reference, wall0: float
     ) -> RunSummary:
-        """map.csv from the filter's ``landmarks`` (columns by name), trajectory.tum, the accuracy
-        against ``ref`` and summary.json; returns the summary."""
+        """map.csv from the filter's ``landmarks`` (columns by name), trajectory.tum, odometry.tum and
+        (with scan matching) scan_matched.tum, the occupancy grid, the accuracy against ``ref`` and
+        summary.json; returns the summary."""
+        if self.map2odom is not None:
+            landmarks = landmarks_in_odom_frame(landmarks, self.map2odom)
         with self._open("map.csv", MAP_COLUMNS) as mp:
             for i in range(len(landmarks["id"])):
                 mp.write({name: landmarks[name][i] for name in MAP_COLUMNS})
@@ -129,12 +160,26 @@ class RunWriter:
         stamps, poses, odoms = track[:, 0], track[:, 1:4], track[:, 4:7]
         motions = track[:, 7:10] if src.matcher is not None else None
         write_tum(self.dest / "trajectory.tum", stamps, poses)
+        write_tum(self.dest / "odometry.tum", stamps, odoms)
+        if motions is not None:
+            write_tum(self.dest / "scan_matched.tum", stamps, motions)
         accuracy, notes = accuracy_of(stamps, poses, odoms, ref, motions)
         for text in notes:
             src.reader.stats.warn(text)
-        summary = build_summary(src, cfg, self.totals, len(landmarks["id"]), poses[-1], accuracy, wall0)
+        t_grid = time.perf_counter()
+        self.write_grid(poses, src.reader.stats.warn)
+        t_grid = time.perf_counter() - t_grid
+        summary = build_summary(
+            src, cfg, self.totals, len(landmarks["id"]), poses[-1], accuracy, wall0, t_grid
+        )
         write_json(self.dest / "summary.json", summary.to_json())
         return summary
+
+    def write_grid(self, poses: np.ndarray, warn) -> None:
+        """map.pgm, map.yaml and map_grid.png from the kept scans (their warnings through ``warn``)."""
+        grid = build_grid(self.scans, self.grid.resolution, self.grid.max_cells, warn)
+        write_grid(self.dest, grid)
+        draw_grid(self.dest / "map_grid.png", grid, poses)
 
 
 def build_summary(
@@ -145,9 +190,10 @@ def build_summary(
     final_pose: np.ndarray,
     accuracy: Accuracy | None,
     wall0: float,
+    t_grid: float | None = None,
 ) -> RunSummary:
-    """The summary of a run (summary.json, INTERFACE.md): input, counts, timing totals, accuracy,
-    hashes, versions."""
+    """The summary of a run (summary.json, INTERFACE.md): input, counts, timing totals (``t_grid``:
+    the occupancy grid's), accuracy, hashes, versions."""
     info = src.info
     return RunSummary(
         cornerslam_version=__version__,
@@ -160,10 +206,11 @@ def build_summary(
             odom_source=info.odom_source,
             laser_to_base=tuple(float(v) for v in src.laser2base),
             laser_to_base_source=src.laser_source,
+            odom_on_tf=src.odom_on_tf,
         ),
         assoc=cfg.association.method,
         counts=run_counts(src, totals, n_landmarks),
-        timing=run_timing(totals, wall0),
+        timing=run_timing(totals, wall0, t_grid),
         final_pose=tuple(final_pose.tolist()),
         odometry_model=odometry_model(src.matcher),
         warnings=tuple(src.reader.stats.warnings),
@@ -210,8 +257,9 @@ def odometry_model(matcher) -> OdometryModel | None:
     )
 
 
-def run_timing(totals: Totals, wall0: float) -> Timing:
-    """The stage times summed over the steps, the slowest matching step, the wall time since ``wall0``."""
+def run_timing(totals: Totals, wall0: float, t_grid: float | None = None) -> Timing:
+    """The stage times summed over the steps, the slowest matching step, the wall time since ``wall0``
+    and the occupancy grid's time ``t_grid``."""
     times = totals.times
     return Timing(
         t_extract=float(times[0]),
@@ -223,6 +271,7 @@ def run_timing(totals: Totals, wall0: float) -> Timing:
         t_match_max=totals.t_match_max,
         wall_time=time.perf_counter() - wall0,
         scans_per_second=totals.steps / max(float(times.sum()), 1e-12),
+        t_grid=t_grid,
     )
 
 

@@ -15,7 +15,7 @@ from ..errors import display_path
 
 if TYPE_CHECKING:
     from ..logs.base import LogInfo
-    from ..results import Accuracy, RelationError, RunSummary
+    from ..results import Accuracy, RelationError, RunInput, RunSummary
     from ..types import Scan
 
 
@@ -41,6 +41,7 @@ def summary_lines(s: RunSummary) -> list[str]:
         f"{s.input.log}: {c.steps} steps ({c.scans_in} scans, {c.scans_skipped} skipped, "
         f"{c.keyframes_skipped} between keyframes), {c.landmarks} landmarks, "
         f"{c.matched_total} matches with {s.assoc}",
+        mount_line(s.input),
         f"time: extract {t.t_extract:.2f}s scan match {t.t_scan_match or 0.0:.2f}s "
         f"predict {t.t_predict:.2f}s match {t.t_match:.2f}s "
         f"update {t.t_update:.2f}s ({t.scans_per_second:.0f} steps/s), wall {t.wall_time:.1f}s",
@@ -59,6 +60,21 @@ def summary_lines(s: RunSummary) -> list[str]:
             lines.append(f"  scan-matched odometry: {relation_text(acc.scan_odom_relations)}")
     lines.append(f"wrote {s.out_dir}")
     return lines
+
+
+MOUNT_SOURCES = {
+    "tf": "from the log's tf",
+    "config": "from the config's input.laser",
+    "preset": "from the laser preset",
+    "default": "the built-in default: not on the log's tf, not in the config",
+}
+
+
+def mount_line(inp: RunInput) -> str:
+    """Where the run's laser mount came from (summary.json's ``input``)."""
+    x, y, yaw = inp.laser_to_base
+    source = MOUNT_SOURCES.get(inp.laser_to_base_source, inp.laser_to_base_source)
+    return f"laser mount: x={x:.3f} m y={y:.3f} m yaw={yaw:.3f} rad ({source})"
 
 
 def comparison_lines(summaries: list[RunSummary]) -> list[str]:
@@ -160,6 +176,8 @@ def info_lines(log_path: str | Path, i: LogInfo, laser: tuple[float, float, floa
     lines.append(f"  odometry  {i.odom_topic or '-'} ({i.odom_source or 'none found'})")
     if laser is not None:
         lines.append(f"  laser     x={laser[0]:.3f} m y={laser[1]:.3f} m yaw={laser[2]:.3f} rad (from tf)")
+    else:
+        lines.append("  laser     not on tf: from the config's input.laser (built-in default x=0 y=0 yaw=0)")
     lines += [f"problem:   {text}" for text in i.problems]
     lines += [f"note:      {text}" for text in i.notes]
     return lines
