@@ -138,8 +138,8 @@ class Counts(JsonResult):
     budget_hits: int
     scans_matched: int | None = optional()
     scans_match_retried: int | None = optional()
-    scans_match_rejected: int | None = optional()
     scans_match_fallback: int | None = optional()
+    scans_match_rejected: int | None = optional()  # appended (issue 15): matches the fusion's gate refused
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -190,12 +190,12 @@ class RunSummary(JsonResult):
     counts: Counts
     timing: Timing
     final_pose: tuple[float, float, float]
-    odometry_model: OdometryModel | None = optional()
     warnings: tuple[str, ...]
     accuracy: Accuracy | None
     hashes: Hashes
     config: dict
     versions: dict
+    odometry_model: OdometryModel | None = optional()  # appended (issue 15): what the front end learnt
     out_dir: str | None = field(default=None, metadata={"json": False})
 
     @classmethod
