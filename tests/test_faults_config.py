@@ -122,10 +122,13 @@ def test_keys_of_earlier_versions_are_ignored_with_a_warning():
     handler = logging.StreamHandler(stream)  # on the module's logger: the CLI may stop propagation above it
     logger = logging.getLogger("cornerslam.config")
     logger.addHandler(handler)
+    level = logger.level
+    logger.setLevel(logging.WARNING)  # a CLI test's -q may have raised the level above it
     try:
         cfg = load_config(None, ["scan_match.retry_angle=0.2", "scan_match.alpha1=0.5"])
     finally:
         logger.removeHandler(handler)
+        logger.setLevel(level)
     assert cfg == load_config(None)
     text = stream.getvalue()
     assert "'scan_match.retry_angle' is no longer used" in text and "correlative search" in text

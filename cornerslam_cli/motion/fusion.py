@@ -57,6 +57,7 @@ class Fused:
     cov: np.ndarray  # its covariance (3, 3)
     accepted: bool  # False: the match failed the gate and the odometry increment was used alone
     nis: float  # dᵀ(k·Σ_o + Σ_m)⁻¹d of the match against the odometry
+    gain: np.ndarray  # (3, 3) the weight the match got: inc = corrected odometry + gain·(m − it)
 
 
 def nis(d: np.ndarray, S: np.ndarray) -> np.ndarray:
@@ -110,12 +111,12 @@ class OdometryFusion:
             self.n_rejected += (
                 1  # the odometry alone, as uncertain as the gate's model: one of the two is wrong
             )
-            return Fused(oc, self.fallback_cov(cov_o), False, score)
+            return Fused(oc, self.fallback_cov(cov_o), False, score, np.zeros((3, 3)))
         K = So @ np.linalg.inv(S)  # Kalman gain of the odometry prior updated by the match
         inc = oc + K @ dc
         inc[2] = wrap_angle(inc[2])
         cov = (np.eye(3) - K) @ So
-        return Fused(inc, 0.5 * (cov + cov.T), True, score)
+        return Fused(inc, 0.5 * (cov + cov.T), True, score, K)
 
     def fallback_cov(self, cov_o: np.ndarray) -> np.ndarray:
         """Covariance of an odometry increment used without a match: the configured model at least."""

@@ -296,7 +296,10 @@ class ScanMatcher:
         R = _rotation3(-self.pose[2])  # motion frame → previous scan's frame
         fused = self.fusion.fuse(o, cov_o, m, R @ reg.cov @ R.T)
         self.n_matched += fused.accepted
-        cov = fused.cov + np.diag([cfg.sigma_xy**2, cfg.sigma_xy**2, cfg.sigma_theta**2])
+        # the match's error its fit cannot see, passed on with the weight the match got (none when the
+        # odometry is exact and the fusion hardly weighs the match)
+        floor = np.diag([cfg.sigma_xy**2, cfg.sigma_xy**2, cfg.sigma_theta**2])
+        cov = fused.cov + fused.gain @ floor @ fused.gain.T
         return MatchResult(compose(self.pose, fused.inc), reg.fit, fused.accepted, cov, searched)
 
     def _fallback(self, o: np.ndarray, cov_o: np.ndarray, fit: float, searched: bool = False) -> MatchResult:

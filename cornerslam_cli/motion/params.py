@@ -83,11 +83,14 @@ class ScanMatchConfig:
     )  # keyframes matched once to learn the scales before the run; 0 = off
     adapt_every: int = num(25, ge=1, le=100000)  # keyframes between two re-estimates
     adapt_min_samples: int = num(5, ge=2, le=100000)  # ... the model itself (scale 1) until this many
-    # floor added to each fused increment's covariance for the filter (0: none; the learnt scales make
-    # the covariance honest per increment: a floor lets corner updates pull an exact chain off, measured
-    # on the exact-odometry logs, docs/results/frontend_panel.md)
-    sigma_xy: float = num(0.0, ge=0.0, le=100.0)  # m per increment
-    sigma_theta: float = num(0.0, ge=0.0, le=math.pi)  # rad per increment
+    # error of a match that its fit cannot see, added to the fused increment's covariance with the weight
+    # the match got (K·F·Kᵀ): the local map drifts with the chain it is matched against, so match errors
+    # are correlated from one keyframe to the next and the corners need room to correct them; an exact
+    # odometry, which the fusion hardly corrects, stays exact in the filter. Default 0: measured on the
+    # panel, no floor serves the exact-odometry logs best and the noisy ones no worse
+    # (docs/results/frontend_panel.md); 0.01 / 0.005 lets the corners correct the simulated lap more
+    sigma_xy: float = num(0.0, ge=0.0, le=100.0)  # m per match
+    sigma_theta: float = num(0.0, ge=0.0, le=math.pi)  # rad per match
     adapt_min: float = num(1e-6, gt=0.0, le=1.0)  # bounds of the learnt odometry noise scale
     adapt_max: float = num(100.0, ge=1.0, le=1e6)
 
