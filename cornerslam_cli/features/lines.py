@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..types import Scan, Segments
+from . import segment_kernels
 from .params import LinesConfig, SensorConfig
 from .sensor import beam_variances
 
@@ -457,10 +458,9 @@ def extract_segments(scan: Scan, sensor: SensorConfig, cfg: LinesConfig) -> tupl
     starts = angle_split_starts(
         x, y, rho, theta, starts, cfg, 1.0 / np.sqrt(w), scan.angle_increment
     )  # step 2
-    starts = distance_split_starts(x, y, w, starts, cfg)  # step 3
-    starts = merge_starts(x, y, w, starts, cfg)  # step 4
-    starts = refine_boundaries(x, y, w, starts, cfg)  # step 5
-    starts = trim_ends(x, y, w, starts, cfg)  # step 6
+    starts = segment_kernels.split_and_merge(  # steps 3-6, compiled (same decisions as the functions above)
+        x, y, w, starts, cfg.split_distance, cfg.merge_angle, cfg.merge_gap, cfg.min_points
+    )
     ends = _ends(starts, n)
 
     sel = (ends - starts) >= cfg.min_points  # step 7
