@@ -24,7 +24,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import gammaincinv
 
 from ..geometry import wrap_angle
 from ..types import AssociationResult, Prediction
@@ -37,8 +37,10 @@ _PIVOT_RTOL = (
 
 @functools.lru_cache(maxsize=32)
 def _chi2_table(alpha: float, size: int) -> np.ndarray:
+    # scipy.stats.chi2.ppf(q, dof) is 2·gammaincinv(dof/2, q), the same digits, without importing
+    # scipy.stats (~0.4 s of every command's start-up)
     dof = np.arange(size)
-    return np.where(dof > 0, chi2.ppf(1.0 - alpha, np.maximum(dof, 1)), 0.0)
+    return np.where(dof > 0, 2.0 * gammaincinv(np.maximum(dof, 1) / 2, 1.0 - alpha), 0.0)
 
 
 def chi2_gate(dof: int | np.ndarray, alpha: float) -> np.ndarray:
