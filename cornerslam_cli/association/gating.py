@@ -84,13 +84,28 @@ def mahalanobis2(nu: np.ndarray, S: np.ndarray) -> np.ndarray:
 
 
 def _tril_inv_small(L: list[list[float]], d: int) -> list[list[float]]:
-    """Inverse of a d × d (d ≤ 3) lower-triangular matrix with positive diagonal, by substitution."""
-    inv = [[0.0] * d for _ in range(d)]
-    for a in range(d):
-        inv[a][a] = 1.0 / L[a][a]
-        for b in range(a):
-            inv[a][b] = -sum(L[a][c] * inv[c][b] for c in range(b, a)) / L[a][a]
-    return inv
+    """Inverse of a d × d (d ≤ 3) lower-triangular matrix with positive diagonal, by substitution
+    (written out: this runs for every pairing a search tries)."""
+    i11 = 1.0 / L[0][0]
+    if d == 1:
+        return [[i11]]
+    i22 = 1.0 / L[1][1]
+    i21 = -(L[1][0] * i11) / L[1][1]
+    if d == 2:
+        return [[i11, 0.0], [i21, i22]]
+    i33 = 1.0 / L[2][2]
+    i31 = -(L[2][0] * i11 + L[2][1] * i21) / L[2][2]
+    i32 = -(L[2][1] * i22) / L[2][2]
+    return [[i11, 0.0, 0.0], [i21, i22, 0.0], [i31, i32, i33]]
+
+
+def _lower_times(M: list[list[float]], r: list[float], d: int) -> list[float]:
+    """M r for a lower-triangular d × d M (d ≤ 3), written out."""
+    if d == 1:
+        return [M[0][0] * r[0]]
+    if d == 2:
+        return [M[0][0] * r[0], M[1][0] * r[0] + M[1][1] * r[1]]
+    return [M[0][0] * r[0], M[1][0] * r[0] + M[1][1] * r[1], M[2][0] * r[0] + M[2][1] * r[1] + M[2][2] * r[2]]
 
 
 def scan_order(z: np.ndarray) -> list[int]:
@@ -272,8 +287,7 @@ class JointCompatibility:
         if Lnew is None:
             return math.inf
         Minv = _tril_inv_small(Lnew, d)
-        r = r.tolist()
-        ynew = [sum(Minv[a][b] * r[b] for b in range(a + 1)) for a in range(d)]
+        ynew = _lower_times(Minv, r.tolist(), d)
         d2 = self.d2[h] + sum(v * v for v in ynew)
         if not math.isfinite(d2):
             return math.inf
