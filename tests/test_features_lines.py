@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -184,3 +185,59 @@ def test_breakpoint_breaks_across_runs_of_no_return_beams():
     r_same = np.full(6, 2.0)
     xs, ys = r_same * np.cos(t2), r_same * np.sin(t2)
     assert list(breakpoint_starts(xs, ys, r_same, t2, LinesConfig(max_missing_beams=3), few)) == [0]
+
+
+SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"
+
+
+def _partition_scans():
+    """Scans that exercise every step of the partition: the simulated office (1,081 beams), with beams
+    dropped at random (gaps); the real scans of the sample logs (Intel: 180 beams, centimetre-quantised
+    ranges, so exact ties between farthest points; Mines: URG-04LX with dropouts); random clutter.
+    All noisy: on a noiseless scan the residuals are rounding noise (~1e-16 m), and whether a boundary
+    beam is 1 ulp closer to one line than the other, or an end beam 4 "RMS" off, is decided by the last
+    bit of numpy's pairwise sums and SIMD arctan2 against the kernels' sequential sums and libm — either
+    answer is arbitrary there."""
+    from cornerslam_cli.logs import open_log
+    from cornerslam_cli.types import Scan
+
+    rng = np.random.default_rng(7)
+    world = sw.office_world()
+    scans = []
+    for pose in sw.path_poses(sw.OFFICE_LOOP, 2.0):
+        scan = sw.simulate_scan(world, pose, HOKUYO, 30.0, 0.01, math.radians(0.05), rng)
+        dropped = np.where(rng.random(len(scan.ranges)) > 0.1, scan.ranges, np.inf)
+        scans += [scan, sw.scan_from_ranges(dropped, scan.angles)]
+    for log in ("intel_cut.clf", "mines_exp3_cut.bag"):
+        scans += [m for m in open_log(SAMPLES / log).messages() if isinstance(m, Scan)][::5]
+    for _ in range(20):
+        world = sw.make_world(
+            [sw.room(0, 0, 10, 8)]
+            + [sw.rectangle(*rng.uniform(1, 7, 2), *rng.uniform(0.2, 1.5, 2), rng.uniform(0, 3)) for _ in range(4)],
+            "random",
+        )
+        scans.append(sw.simulate_scan(world, (5.0, 4.0, rng.uniform(-3, 3)), HOKUYO, 30.0, 0.02, 0.001, rng))
+    return scans
+
+
+@pytest.mark.parametrize(
+    "cfg",
+    [LinesConfig(), LinesConfig(split_distance=0.02, min_points=3, max_missing_beams=0),
+     LinesConfig(merge_angle=0.2, merge_gap=0.5, angle_split_max=0.3, angle_split_sigmas=5.0)],
+)  # fmt: skip
+def test_compiled_partition_makes_the_numpy_reference_decisions(cfg):
+    """segment_kernels (Numba) against the numpy steps 1–6 of lines.py: the same range starts on every
+    scan, so the fitted segments and corners cannot differ."""
+    from cornerslam_cli.features.lines import beam_weights, partition
+
+    n_ranges = 0
+    for scan in _partition_scans():
+        rho, theta = scan.ranges, scan.angles
+        var_rho, var_theta = beam_variances(rho, PRECISE)
+        x, y, w = rho * np.cos(theta), rho * np.sin(theta), beam_weights(rho, var_rho, var_theta)
+        args = (x, y, rho, theta, w, scan.beam_index, scan.angle_increment, cfg)
+        with np.errstate(all="ignore"):
+            ref = partition(*args, compiled=False)
+        np.testing.assert_array_equal(partition(*args), ref)
+        n_ranges += len(ref)
+    assert n_ranges > 2000  # the scans were not trivial
