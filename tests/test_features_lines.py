@@ -211,11 +211,11 @@ def _partition_scans():
     for log in ("intel_cut.clf", "mines_exp3_cut.bag"):
         scans += [m for m in open_log(SAMPLES / log).messages() if isinstance(m, Scan)][::5]
     for _ in range(20):
-        world = sw.make_world(
-            [sw.room(0, 0, 10, 8)]
-            + [sw.rectangle(*rng.uniform(1, 7, 2), *rng.uniform(0.2, 1.5, 2), rng.uniform(0, 3)) for _ in range(4)],
-            "random",
-        )
+        boxes = [
+            sw.rectangle(*rng.uniform(1, 7, 2), *rng.uniform(0.2, 1.5, 2), rng.uniform(0, 3))
+            for _ in range(4)
+        ]
+        world = sw.make_world([sw.room(0, 0, 10, 8), *boxes], "random")
         scans.append(sw.simulate_scan(world, (5.0, 4.0, rng.uniform(-3, 3)), HOKUYO, 30.0, 0.02, 0.001, rng))
     return scans
 
