@@ -241,3 +241,29 @@ def test_compiled_partition_makes_the_numpy_reference_decisions(cfg):
         np.testing.assert_array_equal(partition(*args), ref)
         n_ranges += len(ref)
     assert n_ranges > 2000  # the scans were not trivial
+
+
+@pytest.mark.parametrize("sensor", [PRECISE, SensorConfig()], ids=["linear", "piecewise"])
+def test_compiled_fit_equals_the_numpy_fit_bit_for_bit(sensor):
+    """fit_kernels (Numba, with numpy's arctan2/hypot between the kernels) against the numpy two-pass fit:
+    every r, α, covariance, end point and end-beam Jacobian equal to the last bit (bytes compared, so a
+    signed zero counts), on the ranges the partition finds and on ranges of one and two beams."""
+    from cornerslam_cli.features.lines import beam_weights, partition
+
+    n_lines = 0
+    for scan in _partition_scans():
+        rho, theta = scan.ranges, scan.angles
+        var_rho, var_theta = beam_variances(rho, sensor)
+        w = beam_weights(rho, var_rho, var_theta)
+        x, y = rho * np.cos(theta), rho * np.sin(theta)
+        starts = partition(x, y, rho, theta, w, scan.beam_index, scan.angle_increment, LinesConfig())
+        ends = np.append(starts[1:], len(rho))
+        wide = starts[:-1][np.diff(starts) >= 2][:3]  # ranges must not overlap (a partition's never do)
+        for s, e in ((starts, ends), (starts[:3], starts[:3] + 1), (wide, wide + 2)):
+            with np.errstate(all="ignore"):
+                ref = fit_ranges(rho, theta, sensor, s, e, compiled=False)
+                got = fit_ranges(rho, theta, sensor, s, e)
+            for name in ("r", "alpha", "cov", "p1", "p2", "jac_ends", "ok"):
+                assert getattr(got, name).tobytes() == getattr(ref, name).tobytes(), name
+        n_lines += len(starts)
+    assert n_lines > 2000

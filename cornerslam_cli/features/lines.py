@@ -35,12 +35,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..types import Scan, Segments
-from . import segment_kernels
+from . import fit_kernels, segment_kernels
 from .params import LinesConfig, SensorConfig
-from .sensor import beam_variances
-
-#: added to covariance diagonals (m², rad²) so they stay positive definite when the sensor model is noiseless
-COV_FLOOR = 1e-12
+from .sensor import COV_FLOOR, beam_variances
 
 
 @dataclass(frozen=True)
@@ -164,7 +161,7 @@ def fit_lines(rho, theta, var_rho, var_theta, starts, ends, w=None) -> LineFits:
     return LineFits(r, alpha, cov, p1, p2, jac_ends, ok)
 
 
-def fit_ranges(rho, theta, sensor: SensorConfig, starts, ends) -> LineFits:
+def fit_ranges(rho, theta, sensor: SensorConfig, starts, ends, compiled: bool = True) -> LineFits:
     """Fit the ranges [starts, ends) of a scan's beams with the sensor model, in two passes.
 
     Weights and variances computed from the measured ranges correlate with their noise (σρ grows with ρ,
@@ -172,8 +169,10 @@ def fit_ranges(rho, theta, sensor: SensorConfig, starts, ends) -> LineFits:
     3 %-of-range model. The second pass evaluates the model at the range the first line predicts for each
     beam, ρ̂_i = r / cos(θ_i − α), which does not depend on that beam's noise.
     """
-    var_rho, var_theta = beam_variances(rho, sensor)
     starts, ends = np.asarray(starts, dtype=np.int64), np.asarray(ends, dtype=np.int64)
+    if compiled and len(starts):
+        return _fit_ranges_compiled(rho, theta, sensor, starts, ends)
+    var_rho, var_theta = beam_variances(rho, sensor)
     if len(starts) == 0:
         return fit_lines(rho, theta, var_rho, var_theta, starts, ends)
     cnt = ends - starts
@@ -192,6 +191,22 @@ def fit_ranges(rho, theta, sensor: SensorConfig, starts, ends) -> LineFits:
     full_vr[idx] = vr
     full_w[idx] = beam_weights(rho_hat, vr, vt)
     return fit_lines(rho, theta, full_vr, var_theta, starts, ends, full_w)
+
+
+def _fit_ranges_compiled(rho, theta, sensor: SensorConfig, starts, ends) -> LineFits:
+    """:func:`fit_ranges` by the kernels of ``fit_kernels.py``: the same numbers, bit for bit (numpy's
+    arctan2 and hypot between the kernels; tests/test_features_lines.py compares the two)."""
+    model = (sensor.model == "linear", sensor.a, sensor.b, sensor.near_range, sensor.sigma_r_near,
+             sensor.sigma_r_rel, sensor.sigma_theta)  # fmt: skip
+    rho, theta = np.ascontiguousarray(rho, dtype=float), np.ascontiguousarray(theta, dtype=float)
+    gathered = fit_kernels.first_pass(rho, theta, starts, ends, model)  # idx, seg, offs, cnt, x, y, vt
+    _, mx, my, sxx, syy, sxy = gathered[-1]
+    half = 0.5 * np.arctan2(-2.0 * sxy, syy - sxx)
+    vr, w, mom = fit_kernels.second_pass(rho, theta, *gathered[:-1], half, mx, my, model)
+    _, _, _, sxx, syy, sxy = mom
+    half, rad = 0.5 * np.arctan2(-2.0 * sxy, syy - sxx), np.hypot(0.5 * (sxx - syy), sxy)
+    idx, seg, offs, cnt, x, y, vt = gathered[:-1]
+    return LineFits(*fit_kernels.covariance(rho, theta, idx, seg, offs, cnt, x, y, vr, vt, w, half, rad, mom))
 
 
 # ---------------------------------------------------------------------------------------------------------
