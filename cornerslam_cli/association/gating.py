@@ -229,10 +229,11 @@ def gate(z: np.ndarray, C: np.ndarray, pred: Prediction, cfg: AssociationConfig)
             hph[:] = pred.hph_diag()
             d2[:] = mahalanobis2(nu[..., :d], hph[None, :, :d, :d] + C[:, None, :d, :d])  # (m, n)
     threshold = float(chi2_gate(d, cfg.alpha))
-    candidates = []
-    for i in range(m):
-        ks = np.flatnonzero(d2[i] < threshold)
-        candidates.append(ks[np.argsort(d2[i, ks], kind="stable")])
+    # each row by increasing D² (stable: ties by landmark id); its first `count` entries pass the gate
+    # (d2 holds no NaN: mahalanobis2 returns inf for those)
+    order = np.argsort(d2, axis=1, kind="stable")
+    count = (d2 < threshold).sum(axis=1).tolist()
+    candidates = [order[i, : count[i]] for i in range(m)]
     return Gated(z, C, pred, d, cfg.alpha, nu, d2, candidates, hph)
 
 
