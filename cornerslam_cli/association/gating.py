@@ -159,6 +159,7 @@ class Gated:
     _universe: list[int] = field(default_factory=list, repr=False)
     _loc: dict[int, int] = field(default_factory=dict, repr=False)
     _rows: dict[int, np.ndarray] = field(default_factory=dict, repr=False)
+    _factors: tuple | None = field(default=None, repr=False)  # Prediction.row_factors of the universe
 
     def __post_init__(self):
         universe = np.unique(np.concatenate([np.zeros(0, np.int64), *self.candidates]))
@@ -173,6 +174,7 @@ class Gated:
             self._universe.append(k)
             self._loc[k] = j
             self._rows.clear()
+            self._factors = None
         return j
 
     def cross_row(self, k: int) -> np.ndarray:
@@ -182,8 +184,10 @@ class Gated:
         """
         row = self._rows.get(k)
         if row is None:
-            d = self.d
-            row = self.pred.hph_blocks(np.asarray(self._universe), np.array([k]))[:, 0, :d, :d]
+            d, universe = self.d, np.asarray(self._universe)
+            if self._factors is None:
+                self._factors = self.pred.row_factors(universe)
+            row = self.pred.hph_blocks(universe, np.array([k]), self._factors)[:, 0, :d, :d]
             self._rows[k] = row
         return row
 
