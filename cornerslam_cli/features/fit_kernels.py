@@ -75,15 +75,17 @@ def _variance_range(rho, linear, a, b, near, sr_near, sr_rel):
 @njit(cache=True)
 def _moments(x, y, w, offs, cnt, seg):
     """``lines._moments`` of the gathered beams: W, mx, my, sxx, syy, sxy per range."""
+    total = len(x)
+    a, b, c = np.empty(total), np.empty(total), np.empty(total)
+    for t in range(total):
+        a[t], b[t] = w[t] * x[t], w[t] * y[t]
     W = _segment_sums(w, offs, cnt)
-    mx = _segment_sums(w * x, offs, cnt) / W
-    my = _segment_sums(w * y, offs, cnt) / W
-    dx = x - mx[seg]
-    dy = y - my[seg]
-    sxx = _segment_sums(w * dx * dx, offs, cnt)
-    syy = _segment_sums(w * dy * dy, offs, cnt)
-    sxy = _segment_sums(w * dx * dy, offs, cnt)
-    return W, mx, my, sxx, syy, sxy
+    mx = _segment_sums(a, offs, cnt) / W
+    my = _segment_sums(b, offs, cnt) / W
+    for t in range(total):
+        dx, dy = x[t] - mx[seg[t]], y[t] - my[seg[t]]
+        a[t], b[t], c[t] = w[t] * dx * dx, w[t] * dy * dy, w[t] * dx * dy
+    return W, mx, my, _segment_sums(a, offs, cnt), _segment_sums(b, offs, cnt), _segment_sums(c, offs, cnt)
 
 
 @njit(cache=True)
@@ -111,11 +113,14 @@ def first_pass(rho, theta, starts, ends, sensor):
     moments of :func:`_moments`.
     """
     linear, a, b, near, sr_near, sr_rel, sigma_theta = sensor
-    cnt = ends - starts
-    offs = np.cumsum(cnt) - cnt
-    total = cnt.sum()
+    k = len(starts)
+    cnt, offs = np.empty(k, np.int64), np.empty(k, np.int64)
+    total = 0
+    for j in range(k):
+        cnt[j], offs[j] = ends[j] - starts[j], total
+        total += cnt[j]
     idx, seg = np.empty(total, np.int64), np.empty(total, np.int64)
-    for j in range(len(starts)):
+    for j in range(k):
         for t in range(cnt[j]):
             idx[offs[j] + t] = starts[j] + t
             seg[offs[j] + t] = j
@@ -194,9 +199,16 @@ def covariance(rho, theta, idx, seg, offs, cnt, x, y, vr, vt, w, half_atan, rad,
         da_drho[t] = ga_x * cos_t + ga_y * sin_t
         dr_dth[t] = rho_t * (-gr_x * sin_t + gr_y * cos_t)
         da_dth[t] = rho_t * (-ga_x * sin_t + ga_y * cos_t)
-    crr = _segment_sums(dr_drho**2 * vr + dr_dth**2 * vt, offs, cnt)
-    cra = _segment_sums(dr_drho * da_drho * vr + dr_dth * da_dth * vt, offs, cnt)
-    caa = _segment_sums(da_drho**2 * vr + da_dth**2 * vt, offs, cnt)
+    terms = np.empty((3, total))  # summands of C_l = J_ρ C_ρ J_ρᵀ + J_θ C_θ J_θᵀ (rr, rα, αα)
+    for t in range(total):
+        terms[0, t] = dr_drho[t] * dr_drho[t] * vr[t] + dr_dth[t] * dr_dth[t] * vt
+        terms[1, t] = dr_drho[t] * da_drho[t] * vr[t] + dr_dth[t] * da_dth[t] * vt
+        terms[2, t] = da_drho[t] * da_drho[t] * vr[t] + da_dth[t] * da_dth[t] * vt
+    crr, cra, caa = (
+        _segment_sums(terms[0], offs, cnt),
+        _segment_sums(terms[1], offs, cnt),
+        _segment_sums(terms[2], offs, cnt),
+    )
     cov = np.empty((k, 2, 2))
     jac = np.empty((k, 2, 2, 2))
     p1, p2 = np.empty((k, 2)), np.empty((k, 2))
@@ -212,12 +224,6 @@ def covariance(rho, theta, idx, seg, offs, cnt, x, y, vr, vt, w, half_atan, rad,
             p = p1 if end == 0 else p2
             p[j, 0] = x[t] - e[t] * c[j]
             p[j, 1] = y[t] - e[t] * s[j]
-        fin = True
-        for v in (cov[j, 0, 0], cov[j, 0, 1], cov[j, 1, 1], p1[j, 0], p1[j, 1], p2[j, 0], p2[j, 1]):
-            fin = fin and math.isfinite(v)
-        for end in range(2):
-            for a in range(2):
-                for b in range(2):
-                    fin = fin and math.isfinite(jac[j, end, a, b])
-        ok[j] = ok[j] and fin
+        ok[j] = ok[j] and np.isfinite(cov[j]).all() and np.isfinite(jac[j]).all()
+        ok[j] = ok[j] and np.isfinite(p1[j]).all() and np.isfinite(p2[j]).all()
     return r, alpha, cov, p1, p2, jac, ok

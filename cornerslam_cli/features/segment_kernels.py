@@ -23,20 +23,42 @@ from numba import njit
 
 
 @njit(cache=True)
+def _mask_of(starts, n):
+    """(n,) bool, True at the given starts."""
+    mask = np.zeros(n, np.bool_)
+    for s in starts:
+        mask[s] = True
+    return mask
+
+
+@njit(cache=True)
+def _starts_of(mask):
+    """The sorted indices where ``mask`` is True (int64)."""
+    out = np.empty(mask.sum(), np.int64)
+    k = 0
+    for i in range(len(mask)):
+        if mask[i]:
+            out[k] = i
+            k += 1
+    return out
+
+
+@njit(cache=True)
 def breakpoints(x, y, rho, theta, beam_index, lam, sigma, max_missing):
     """Step 1 (``lines.breakpoint_starts``): starts of the point sets split by the adaptive breakpoint
     d_max = ρ sin Δφ / sin(λ − Δφ) + σ, or by more than ``max_missing`` dropped beams (0: not checked)."""
-    out = [0]
-    for i in range(len(x) - 1):
+    n = len(x)
+    is_start = np.zeros(n, np.bool_)
+    is_start[0] = True
+    for i in range(n - 1):
         dphi = theta[i + 1] - theta[i]
         gap = math.hypot(x[i + 1] - x[i], y[i + 1] - y[i])
         d_max = min(rho[i], rho[i + 1]) * math.sin(dphi) / math.sin(max(lam - dphi, 1e-12)) + sigma
         brk = dphi >= lam or not gap <= d_max
         if max_missing > 0 and beam_index[i + 1] - beam_index[i] - 1 > max_missing:
             brk = True
-        if brk:
-            out.append(i + 1)
-    return np.array(out, dtype=np.int64)
+        is_start[i + 1] = brk
+    return _starts_of(is_start)
 
 
 @njit(cache=True)
@@ -48,8 +70,8 @@ def angle_splits(x, y, rho, w, starts, dphi, a_max, chord_min, chord_sigmas):
     if n < 3:
         return starts
     ends = _ends(starts, n)
-    out = list(starts)
-    best, best_ang = -1, 0.0
+    is_start = _mask_of(starts, n)
+    best, best_ang, ang = -1, 0.0, 0.0
     for j in range(len(starts)):
         for i in range(starts[j], ends[j]):
             chord = max(chord_min, chord_sigmas * (1.0 / math.sqrt(w[i])))
@@ -65,10 +87,9 @@ def angle_splits(x, y, rho, w, starts, dphi, a_max, chord_min, chord_sigmas):
             if sharp and (best < 0 or ang > best_ang):
                 best, best_ang = i, ang
             if best >= 0 and (not sharp or i == ends[j] - 1):  # the run ended: keep its sharpest beam
-                if best > 0:
-                    out.append(best)
+                is_start[best] = True  # (beam 0 is a start already)
                 best = -1
-    return np.unique(np.array(out, dtype=np.int64))
+    return _starts_of(is_start)
 
 
 @njit(cache=True)
@@ -146,11 +167,13 @@ def distance_split(x, y, w, starts, split_distance, min_points):
     n = len(x)
     min_split = max(3, min_points)
     ends = _ends(starts, n)
-    stack_s = list(starts)
-    stack_e = list(ends)
-    out = list(starts)
-    while len(stack_s):
-        s, e = stack_s.pop(), stack_e.pop()
+    is_start = _mask_of(starts, n)
+    stack = np.empty((len(starts) + 2 * n + 2, 2), np.int64)  # ranges to check: each split pushes two
+    top = len(starts)
+    stack[:top, 0], stack[:top, 1] = starts[::-1], ends[::-1]  # popped left to right
+    while top:
+        top -= 1
+        s, e = stack[top, 0], stack[top, 1]
         if e - s < min_split:
             continue
         r, alpha = _range_line(x, y, w, s, e)
@@ -165,12 +188,11 @@ def distance_split(x, y, w, starts, split_distance, min_points):
         k = _farthest_from_chord(x, y, s, e)
         if k < 0:
             continue
-        out.append(k)
-        stack_s.append(s)
-        stack_e.append(k)
-        stack_s.append(k)
-        stack_e.append(e)
-    return np.unique(np.array(out, dtype=np.int64))
+        is_start[k] = True
+        stack[top, 0], stack[top, 1] = k, e
+        stack[top + 1, 0], stack[top + 1, 1] = s, k
+        top += 2
+    return _starts_of(is_start)
 
 
 @njit(cache=True)
@@ -206,12 +228,14 @@ def merge(x, y, w, starts, split_distance, merge_angle, merge_gap, min_points):
     verts = np.empty((m, 2, 2))
     for j in range(m):
         W, mx, my, sxx, syy, sxy = _moments(x, y, w, starts[j], ends[j])
-        mom[j] = (W, mx, my, sxx, syy, sxy)
+        mom[j, 0], mom[j, 1], mom[j, 2], mom[j, 3], mom[j, 4], mom[j, 5] = W, mx, my, sxx, syy, sxy
         r, alpha[j] = _line(mx, my, sxx, syy, sxy)
         sdd[j] = 0.5 * (sxx + syy) + math.hypot(0.5 * (sxx - syy), sxy)
         verts[j] = _vertices(x, y, starts[j], ends[j], r, alpha[j])
-    keep = [0]
+    keep = np.zeros(m, np.bool_)
+    keep[0] = True
     cur = mom[0].copy()
+    new = np.empty(6)
     cur_alpha, cur_n, cur_sdd = alpha[0], ends[0] - starts[0], sdd[0]
     group = np.empty((2 * m, 2))  # the vertices of the ranges merged into the current one
     group[:2] = verts[0]
@@ -229,16 +253,12 @@ def merge(x, y, w, starts, split_distance, merge_angle, merge_gap, min_points):
                 Wt = W1 + Wj
                 f = W1 * Wj / Wt
                 ddx, ddy = x1 - mom[j, 1], y1 - mom[j, 2]
-                new = np.array(
-                    (
-                        Wt,
-                        (W1 * x1 + Wj * mom[j, 1]) / Wt,
-                        (W1 * y1 + Wj * mom[j, 2]) / Wt,
-                        a1 + mom[j, 3] + f * ddx * ddx,
-                        b1 + mom[j, 4] + f * ddy * ddy,
-                        c1 + mom[j, 5] + f * ddx * ddy,
-                    )
-                )
+                new[0] = Wt
+                new[1] = (W1 * x1 + Wj * mom[j, 1]) / Wt
+                new[2] = (W1 * y1 + Wj * mom[j, 2]) / Wt
+                new[3] = a1 + mom[j, 3] + f * ddx * ddx
+                new[4] = b1 + mom[j, 4] + f * ddy * ddy
+                new[5] = c1 + mom[j, 5] + f * ddx * ddy
                 rm, am = _line(new[1], new[2], new[3], new[4], new[5])
                 ca, sa = math.cos(am), math.sin(am)
                 group[n_verts : n_verts + 2] = verts[j]
@@ -249,18 +269,18 @@ def merge(x, y, w, starts, split_distance, merge_angle, merge_gap, min_points):
                         break
                 if within:
                     merged = True
-                    cur = new
+                    cur[:] = new
                     cur_alpha = am
                     cur_n += cnt_j
                     n_verts += 2
                     cur_sdd = 0.5 * (new[3] + new[4]) + math.hypot(0.5 * (new[3] - new[4]), new[5])
         if not merged:
-            keep.append(j)
-            cur = mom[j].copy()
+            keep[j] = True
+            cur[:] = mom[j]
             cur_alpha, cur_n, cur_sdd = alpha[j], ends[j] - starts[j], sdd[j]
             group[:2] = verts[j]
             n_verts = 2
-    return starts[np.array(keep)]
+    return starts[keep]
 
 
 @njit(cache=True)
@@ -317,7 +337,8 @@ def trim(x, y, w, starts, min_points, sweeps=2):
     for _ in range(sweeps):
         m = len(starts)
         ends = _ends(starts, n)
-        out = list(starts)
+        is_start = _mask_of(starts, n)
+        cut = False
         for j in range(m):
             s, e = starts[j], ends[j]
             r, alpha = _range_line(x, y, w, s, e)
@@ -332,12 +353,12 @@ def trim(x, y, w, starts, min_points, sweeps=2):
             e1 = x[e - 1] * c + y[e - 1] * sn - r
             rest = max(e - s - 1, 1)
             if e0 * e0 > 16.0 * (sse - e0 * e0) / rest:
-                out.append(s + 1)
+                is_start[s + 1] = cut = True
             if e1 * e1 > 16.0 * (sse - e1 * e1) / rest:
-                out.append(e - 1)
-        if len(out) == m:
+                is_start[e - 1] = cut = True
+        if not cut:
             return starts
-        starts = np.unique(np.array(out, dtype=np.int64))
+        starts = _starts_of(is_start)
     return starts
 
 
