@@ -267,3 +267,26 @@ def test_compiled_fit_equals_the_numpy_fit_bit_for_bit(sensor):
                 assert getattr(got, name).tobytes() == getattr(ref, name).tobytes(), name
         n_lines += len(starts)
     assert n_lines > 2000
+
+
+def test_kernels_compile_without_a_writable_cache(monkeypatch, caplog):
+    """Where Numba can write no cache (a read-only install and no writable home: here no cache locator
+    at all), a kernel is compiled uncached, with one warning naming NUMBA_CACHE_DIR, instead of the
+    import failing."""
+    import logging
+
+    import numba.core.caching as caching
+
+    from cornerslam_cli.features import jit
+
+    def twice(v):
+        return 2.0 * v
+
+    monkeypatch.setattr(caching.CacheImpl, "_locator_classes", [])
+    monkeypatch.setattr(jit, "_warned", [])
+    with pytest.raises(RuntimeError):  # what kernel() guards against
+        jit.njit(cache=True)(twice)
+    with caplog.at_level(logging.WARNING, logger="cornerslam.features"):
+        assert jit.kernel(twice)(1.5) == 3.0
+        jit.kernel(twice)
+    assert caplog.text.count("NUMBA_CACHE_DIR") == 1

@@ -14,14 +14,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from .jit import kernel
 from .sensor import COV_FLOOR
 
 _PW_BLOCK = 128  # numpy's PW_BLOCKSIZE
 
 
-@njit(cache=True)
+@kernel
 def _pairwise(a, s, n):
     """numpy's pairwise summation of a[s:s + n] (``pairwise_sum`` in its float64 add loop)."""
     if n < 8:
@@ -53,7 +53,7 @@ def _pairwise(a, s, n):
     return _pairwise(a, s, n2) + _pairwise(a, s + n2, n - n2)
 
 
-@njit(cache=True)
+@kernel
 def _segment_sums(a, offs, cnt):
     """``np.add.reduceat(a, offs)`` for ranges [offs, offs + cnt), every cnt >= 1."""
     out = np.empty(len(offs))
@@ -62,7 +62,7 @@ def _segment_sums(a, offs, cnt):
     return out
 
 
-@njit(cache=True)
+@kernel
 def _variance_range(rho, linear, a, b, near, sr_near, sr_rel):
     """σρ(ρ)² of ``sensor.sigma_range`` (squared as numpy's ``**2``: one product)."""
     if linear:
@@ -72,7 +72,7 @@ def _variance_range(rho, linear, a, b, near, sr_near, sr_rel):
     return sd * sd
 
 
-@njit(cache=True)
+@kernel
 def _moments(x, y, w, offs, cnt, seg):
     """``lines._moments`` of the gathered beams: W, mx, my, sxx, syy, sxy per range."""
     total = len(x)
@@ -88,7 +88,7 @@ def _moments(x, y, w, offs, cnt, seg):
     return W, mx, my, _segment_sums(a, offs, cnt), _segment_sums(b, offs, cnt), _segment_sums(c, offs, cnt)
 
 
-@njit(cache=True)
+@kernel
 def _line(half_atan, mx, my):
     """The rest of ``lines._line_from_moments`` once α = ½·atan2(…) is known: r >= 0, α in (−π, π]."""
     k = len(mx)
@@ -105,7 +105,7 @@ def _line(half_atan, mx, my):
     return r, alpha
 
 
-@njit(cache=True)
+@kernel
 def first_pass(rho, theta, starts, ends, sensor):
     """Gather the ranges' beams and their first-pass moments (``fit_ranges`` up to the first line).
 
@@ -133,7 +133,7 @@ def first_pass(rho, theta, starts, ends, sensor):
     return idx, seg, offs, cnt, x, y, vt, _moments(x, y, w, offs, cnt, seg)
 
 
-@njit(cache=True)
+@kernel
 def second_pass(rho, theta, idx, seg, offs, cnt, x, y, vt, half_atan, mx, my, sensor):
     """The beams' variances and weights at the ranges the first line predicts, and the moments again.
 
@@ -154,7 +154,7 @@ def second_pass(rho, theta, idx, seg, offs, cnt, x, y, vt, half_atan, mx, my, se
     return vr, w, _moments(x, y, w, offs, cnt, seg)
 
 
-@njit(cache=True)
+@kernel
 def covariance(rho, theta, idx, seg, offs, cnt, x, y, vr, vt, w, half_atan, rad, moments):
     """``lines.fit_lines`` after the line: r, α, cov (k, 2, 2), p1, p2, jac_ends (k, 2, 2, 2), ok (k,).
 

@@ -11,7 +11,7 @@ partitioned the beams — unless a sum or an arctan2/hypot lands within the last
 sums pairwise and uses SIMD arctan2/hypot, these kernels sum in order and call libm); the tests compare
 the two partitions on simulated, real and random scans.
 
-Compiled once per machine (``cache=True``: ``__pycache__`` beside this file; a few seconds on first use).
+Compiled once per machine and cached (``jit.kernel``: ``__pycache__`` beside this file; 10–30 s on first use).
 """
 
 from __future__ import annotations
@@ -19,10 +19,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from .jit import kernel
 
 
-@njit(cache=True)
+@kernel
 def _mask_of(starts, n):
     """(n,) bool, True at the given starts."""
     mask = np.zeros(n, np.bool_)
@@ -31,7 +32,7 @@ def _mask_of(starts, n):
     return mask
 
 
-@njit(cache=True)
+@kernel
 def _starts_of(mask):
     """The sorted indices where ``mask`` is True (int64)."""
     out = np.empty(mask.sum(), np.int64)
@@ -43,7 +44,7 @@ def _starts_of(mask):
     return out
 
 
-@njit(cache=True)
+@kernel
 def breakpoints(x, y, rho, theta, beam_index, lam, sigma, max_missing):
     """Step 1 (``lines.breakpoint_starts``): starts of the point sets split by the adaptive breakpoint
     d_max = ρ sin Δφ / sin(λ − Δφ) + σ, or by more than ``max_missing`` dropped beams (0: not checked)."""
@@ -61,7 +62,7 @@ def breakpoints(x, y, rho, theta, beam_index, lam, sigma, max_missing):
     return _starts_of(is_start)
 
 
-@njit(cache=True)
+@kernel
 def angle_splits(x, y, rho, w, starts, dphi, a_max, chord_min, chord_sigmas):
     """Step 2 (``lines.angle_split_starts``): a start at the sharpest beam of every run of beams whose
     chords (p_i−k, p_i), (p_i, p_i+k) — k beams spanning chord_i = max(chord_min, chord_sigmas·σ_i),
@@ -92,7 +93,7 @@ def angle_splits(x, y, rho, w, starts, dphi, a_max, chord_min, chord_sigmas):
     return _starts_of(is_start)
 
 
-@njit(cache=True)
+@kernel
 def _moments(x, y, w, s, e):
     """Weighted centroid and central scatter (two-pass) of beams [s, e): (W, mx, my, sxx, syy, sxy)."""
     W = 0.0
@@ -114,7 +115,7 @@ def _moments(x, y, w, s, e):
     return W, mx, my, sxx, syy, sxy
 
 
-@njit(cache=True)
+@kernel
 def _line(mx, my, sxx, syy, sxy):
     """Eq 3–4 on one range's moments: (r, α) with r >= 0, α in (−π, π] (``lines._line_from_moments``)."""
     alpha = 0.5 * math.atan2(-2.0 * sxy, syy - sxx)
@@ -127,14 +128,14 @@ def _line(mx, my, sxx, syy, sxy):
     return r, alpha
 
 
-@njit(cache=True)
+@kernel
 def _range_line(x, y, w, s, e):
     """(r, α) of the weighted TLS line through beams [s, e)."""
     _, mx, my, sxx, syy, sxy = _moments(x, y, w, s, e)
     return _line(mx, my, sxx, syy, sxy)
 
 
-@njit(cache=True)
+@kernel
 def _ends(starts, n):
     ends = np.empty_like(starts)
     ends[:-1] = starts[1:]
@@ -142,7 +143,7 @@ def _ends(starts, n):
     return ends
 
 
-@njit(cache=True)
+@kernel
 def _farthest_from_chord(x, y, s, e):
     """Index of the first beam of [s, e) farthest from the chord of its end beams (ends excluded,
     NaN distances count as −1); −1 when no interior beam has a distance >= 0."""
@@ -160,7 +161,7 @@ def _farthest_from_chord(x, y, s, e):
     return best if top >= 0 else -1
 
 
-@njit(cache=True)
+@kernel
 def distance_split(x, y, w, starts, split_distance, min_points):
     """Step 3 (``lines.distance_split_starts``): split each range at the beam farthest from its chord
     while its TLS line leaves a beam farther than l_max; ranges are independent, so depth first."""
@@ -195,7 +196,7 @@ def distance_split(x, y, w, starts, split_distance, min_points):
     return _starts_of(is_start)
 
 
-@njit(cache=True)
+@kernel
 def _vertices(x, y, s, e, r, alpha):
     """First and last beam of [s, e) projected on its line (raw points for fewer than 3 beams)."""
     c, sn = math.cos(alpha), math.sin(alpha)
@@ -208,14 +209,14 @@ def _vertices(x, y, s, e, r, alpha):
     return out
 
 
-@njit(cache=True)
+@kernel
 def _remainder_2pi(a):
     """IEEE remainder of ``a`` by 2π (``math.remainder``): in [−π, π]."""
     two_pi = 2.0 * math.pi
     return a - two_pi * round(a / two_pi)
 
 
-@njit(cache=True)
+@kernel
 def merge(x, y, w, starts, split_distance, merge_angle, merge_gap, min_points):
     """Step 4 (``lines.merge_starts``): merge adjacent ranges left to right while the merged line stays
     within l_max of every merged range's vertices; moments of a merge from its parts (parallel axes)."""
@@ -283,7 +284,7 @@ def merge(x, y, w, starts, split_distance, merge_angle, merge_gap, min_points):
     return starts[keep]
 
 
-@njit(cache=True)
+@kernel
 def _lines_of(x, y, w, starts, ends):
     """(r, α) of every range, each (m,)."""
     m = len(starts)
@@ -293,12 +294,12 @@ def _lines_of(x, y, w, starts, ends):
     return r, alpha
 
 
-@njit(cache=True)
+@kernel
 def _off_line(x, y, i, r, alpha):
     return abs(x[i] * math.cos(alpha) + y[i] * math.sin(alpha) - r)
 
 
-@njit(cache=True)
+@kernel
 def refine(x, y, w, starts, merge_gap, sweeps=2):
     """Step 5 (``lines.refine_boundaries``): the beam at the border of two touching ranges (>= 4 beams
     each, nearer than d_mergeMax) goes to the line it is closer to; all borders of a sweep at once."""
@@ -329,7 +330,7 @@ def refine(x, y, w, starts, merge_gap, sweeps=2):
     return starts
 
 
-@njit(cache=True)
+@kernel
 def trim(x, y, w, starts, min_points, sweeps=2):
     """Step 6 (``lines.trim_ends``): split off a range's first or last beam lying more than 4 RMS
     residuals (of the range's other beams) off its line."""
@@ -362,7 +363,7 @@ def trim(x, y, w, starts, min_points, sweeps=2):
     return starts
 
 
-@njit(cache=True)
+@kernel
 def partition(x, y, rho, theta, w, beam_index, dphi, lam, bp_sigma, max_missing, a_max, chord_min,
               chord_sigmas, split_distance, merge_angle, merge_gap, min_points):  # fmt: skip
     """Steps 1–6: the starts of the ranges (``lines.extract_segments`` documents the parameters)."""
