@@ -53,6 +53,48 @@ def run_once(env: dict, log: Path, out: Path, assoc: str, extra: list[str]) -> d
             "ate": s["accuracy"]["ate"]["rmse"], "versions": s["versions"], "out": out}  # fmt: skip
 
 
+PROFILED = [  # (file under cornerslam_cli/, function, what it is)
+    ("motion/icp.py", "register", "scan matching: ICP registration"),
+    ("features/lines.py", "extract_segments", "extraction: line segments"),
+    ("features/lines.py", "partition", "  partition (steps 1-6, compiled)"),
+    ("features/lines.py", "fit_ranges", "  two-pass line fit (compiled)"),
+    ("features/corners.py", "extract_corners", "extraction: corners"),
+    ("features/corners.py", "type_one", "  type I (intersections)"),
+    ("features/corners.py", "type_two", "  type II (end points)"),
+    ("features/corners.py", "seen_through", "  free-space check"),
+    ("association/gating.py", "gate", "association: gating"),
+    ("association/jcbb.py", "jcbb_search", "association: JCBB per group"),
+    ("association/pca.py", "combine_groups", "association: PCBB/NUBB combination"),
+    ("filter/ekf.py", "update", "update: EKF correction"),
+    ("filter/ekf.py", "_gain_terms", "  Cholesky, gain, mean"),
+    ("filter/ekf.py", "_apply_low_rank", "  Σ − U Yᵀ"),
+    ("filter/ekf.py", "check_health", "update: health check of Σ"),
+    ("filter/ekf.py", "predict", "prediction"),
+    ("logs/sync.py", "synchronise", "outside the stages: reading + synchronising"),
+    ("report/run_writer.py", "step", "outside the stages: writing the tables"),
+]
+
+
+def profile(env: dict, log: Path, out: Path, extra: list[str]) -> list[tuple[str, float, float]]:
+    """(what, ms per scan, calls per scan) of the functions in PROFILED, from cProfile of one run
+    (cumulative time: a function's callees included)."""
+    import pstats
+
+    prof = out.with_suffix(".prof")
+    cmd = [sys.executable, "-m", "cProfile", "-o", str(prof), "-m", "cornerslam_cli", "run", str(log),
+           "--out", str(out), "-q", *extra]  # fmt: skip
+    subprocess.run(cmd, check=True, env=env)
+    n = json.loads((out / "summary.json").read_text())["counts"]["scans_in"]
+    found = {}
+    for (file, _, name), (_, calls, _, cum, _) in pstats.Stats(str(prof)).stats.items():
+        key = (file.split("cornerslam_cli/")[-1], name)
+        if "cornerslam_cli/" in file and (key not in found or cum > found[key][0]):
+            found[key] = (cum, calls)
+    return [
+        (what, 1e3 * found[f, fn][0] / n, found[f, fn][1] / n) for f, fn, what in PROFILED if (f, fn) in found
+    ]
+
+
 def same_outputs(a: Path, b: Path) -> bool:
     return all((a / f).read_bytes() == (b / f).read_bytes() for f in OUTPUTS)
 
@@ -94,19 +136,23 @@ def main() -> int:
         for assoc in ("icnn", "jcbb"):
             r = run_once(cur_env, log, tmp / f"assoc-{assoc}", assoc, [])
             assoc_rows.append((assoc, r))
+        profiles = [
+            (label, profile(cur_env, log, tmp / f"prof-{i}", extra))
+            for i, (label, extra) in enumerate(CASES[:2])
+        ]
         identical = {
             label: same_outputs(*(r["out"] for case, _, r in rows if case == label))
             for label, _ in CASES
             if args.baseline
         }
         versions = rows[-1][2]["versions"]
-        text = report(args, rows, assoc_rows, identical, versions, this)
+        text = report(args, rows, assoc_rows, identical, versions, this, profiles)
     (ROOT / "docs" / "results" / "run.md").write_text(text)
     print(text)
     return 0
 
 
-def report(args, rows, assoc_rows, identical, versions, this) -> str:
+def report(args, rows, assoc_rows, identical, versions, this, profiles) -> str:
     lines = [
         "# Whole-run throughput (benchmarks/bench_run.py)",
         "",
@@ -154,6 +200,16 @@ def report(args, rows, assoc_rows, identical, versions, this) -> str:
             f"| {assoc} | {r['sps']:.0f} | {r['wall_sps']:.0f} | {m['t_match']:.2f} | {m['t_total']:.2f} "
             f"| {r['ate']:.3f} |"
         )
+    lines += ["", f"Where the time goes, {this} (cProfile of one run, PCA: cumulative ms per scan, callees "
+              "included; the profiler's overhead inflates Python-heavy code, so read the shares, not the "
+              "absolute times):", "",
+              "| function | " + " | ".join(f"{label}: ms/scan | calls/scan" for label, _ in profiles) + " |",
+              "|---|" + "---:|---:|" * len(profiles)]  # fmt: skip
+    whats = [w for w, _, _ in profiles[0][1]]
+    table = [{w: (ms, calls) for w, ms, calls in prof} for _, prof in profiles]
+    for w in whats:
+        cells = [f"{t[w][0]:.3f} | {t[w][1]:.1f}" if w in t else "– | –" for t in table]
+        lines.append(f"| {w} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 

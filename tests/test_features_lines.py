@@ -290,3 +290,26 @@ def test_kernels_compile_without_a_writable_cache(monkeypatch, caplog):
         assert jit.kernel(twice)(1.5) == 3.0
         jit.kernel(twice)
     assert caplog.text.count("NUMBA_CACHE_DIR") == 1
+
+
+@pytest.mark.skipif(not hasattr(__import__("signal"), "pthread_sigmask"), reason="POSIX signal masks")
+def test_a_signal_waits_until_the_kernels_are_loaded(monkeypatch):
+    """Ctrl-C inside Numba's compiler breaks it half-way (an internal error instead of exit 130), so
+    load_kernels holds SIGINT until the kernels are loaded, then it interrupts as usual."""
+    import os
+    import signal
+    import time
+
+    from cornerslam_cli import features
+
+    real, finished = features.extract_segments, []
+
+    def interrupted_while_loading(*args):
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.05)  # a SIGINT delivered now would raise KeyboardInterrupt here
+        finished.append(real(*args))
+
+    monkeypatch.setattr(features, "extract_segments", interrupted_while_loading)
+    with pytest.raises(KeyboardInterrupt):
+        features.load_kernels(SensorConfig(), LinesConfig())
+    assert len(finished) == 1 and len(finished[0][0]) == 1  # the kernels ran to the end first
