@@ -109,8 +109,8 @@ def _line(half_atan, mx, my):
 def first_pass(rho, theta, starts, ends, sensor):
     """Gather the ranges' beams and their first-pass moments (``fit_ranges`` up to the first line).
 
-    Returns idx, seg, offs, cnt (the ranges' beams as in ``fit_lines``), x, y, vt (σθ²) and the
-    moments of :func:`_moments`.
+    Returns idx, seg, offs, cnt (the ranges' beams as in ``fit_lines``), x, y, cos θ, sin θ, vt (σθ²)
+    and the moments of :func:`_moments`.
     """
     linear, a, b, near, sr_near, sr_rel, sigma_theta = sensor
     k = len(starts)
@@ -126,11 +126,13 @@ def first_pass(rho, theta, starts, ends, sensor):
             seg[offs[j] + t] = j
     vt = sigma_theta * sigma_theta
     x, y, w = np.empty(total), np.empty(total), np.empty(total)
+    cos_t, sin_t = np.empty(total), np.empty(total)
     for t in range(total):
         r, th = rho[idx[t]], theta[idx[t]]
-        x[t], y[t] = r * math.cos(th), r * math.sin(th)
+        cos_t[t], sin_t[t] = math.cos(th), math.sin(th)
+        x[t], y[t] = r * cos_t[t], r * sin_t[t]
         w[t] = 1.0 / (_variance_range(r, linear, a, b, near, sr_near, sr_rel) + r * r * vt + COV_FLOOR)
-    return idx, seg, offs, cnt, x, y, vt, _moments(x, y, w, offs, cnt, seg)
+    return idx, seg, offs, cnt, x, y, cos_t, sin_t, vt, _moments(x, y, w, offs, cnt, seg)
 
 
 @kernel
@@ -155,7 +157,7 @@ def second_pass(rho, theta, idx, seg, offs, cnt, x, y, vt, half_atan, mx, my, se
 
 
 @kernel
-def covariance(rho, theta, idx, seg, offs, cnt, x, y, vr, vt, w, half_atan, rad, moments):
+def covariance(rho, idx, seg, offs, cnt, x, y, cos_t, sin_t, vr, vt, w, half_atan, rad, moments):
     """``lines.fit_lines`` after the line: r, α, cov (k, 2, 2), p1, p2, jac_ends (k, 2, 2, 2), ok (k,).
 
     ``rad`` = hypot(½(Sxx − Syy), Sxy) (numpy's), half of S_dd − S_nn.
@@ -192,13 +194,11 @@ def covariance(rho, theta, idx, seg, offs, cnt, x, y, vr, vt, w, half_atan, rad,
         wn = w[t] / W[j]
         gr_x = wn * cs + pd * ga_x
         gr_y = wn * ss + pd * ga_y
-        th = theta[idx[t]]
-        cos_t, sin_t = math.cos(th), math.sin(th)
-        rho_t = rho[idx[t]]
-        dr_drho[t] = gr_x * cos_t + gr_y * sin_t
-        da_drho[t] = ga_x * cos_t + ga_y * sin_t
-        dr_dth[t] = rho_t * (-gr_x * sin_t + gr_y * cos_t)
-        da_dth[t] = rho_t * (-ga_x * sin_t + ga_y * cos_t)
+        ct, st, rho_t = cos_t[t], sin_t[t], rho[idx[t]]
+        dr_drho[t] = gr_x * ct + gr_y * st
+        da_drho[t] = ga_x * ct + ga_y * st
+        dr_dth[t] = rho_t * (-gr_x * st + gr_y * ct)
+        da_dth[t] = rho_t * (-ga_x * st + ga_y * ct)
     terms = np.empty((3, total))  # summands of C_l = J_ρ C_ρ J_ρᵀ + J_θ C_θ J_θᵀ (rr, rα, αα)
     for t in range(total):
         terms[0, t] = dr_drho[t] * dr_drho[t] * vr[t] + dr_dth[t] * dr_dth[t] * vt

@@ -199,14 +199,14 @@ def _fit_ranges_compiled(rho, theta, sensor: SensorConfig, starts, ends) -> Line
     model = (sensor.model == "linear", sensor.a, sensor.b, sensor.near_range, sensor.sigma_r_near,
              sensor.sigma_r_rel, sensor.sigma_theta)  # fmt: skip
     rho, theta = np.ascontiguousarray(rho, dtype=float), np.ascontiguousarray(theta, dtype=float)
-    gathered = fit_kernels.first_pass(rho, theta, starts, ends, model)  # idx, seg, offs, cnt, x, y, vt
-    _, mx, my, sxx, syy, sxy = gathered[-1]
+    beams = fit_kernels.first_pass(rho, theta, starts, ends, model)
+    idx, seg, offs, cnt, x, y, cos_t, sin_t, vt, (_, mx, my, sxx, syy, sxy) = beams
     half = 0.5 * np.arctan2(-2.0 * sxy, syy - sxx)
-    vr, w, mom = fit_kernels.second_pass(rho, theta, *gathered[:-1], half, mx, my, model)
+    vr, w, mom = fit_kernels.second_pass(rho, theta, idx, seg, offs, cnt, x, y, vt, half, mx, my, model)
     _, _, _, sxx, syy, sxy = mom
     half, rad = 0.5 * np.arctan2(-2.0 * sxy, syy - sxx), np.hypot(0.5 * (sxx - syy), sxy)
-    idx, seg, offs, cnt, x, y, vt = gathered[:-1]
-    return LineFits(*fit_kernels.covariance(rho, theta, idx, seg, offs, cnt, x, y, vr, vt, w, half, rad, mom))
+    fit = fit_kernels.covariance(rho, idx, seg, offs, cnt, x, y, cos_t, sin_t, vr, vt, w, half, rad, mom)
+    return LineFits(*fit)
 
 
 # ---------------------------------------------------------------------------------------------------------

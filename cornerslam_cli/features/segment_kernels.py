@@ -51,10 +51,13 @@ def breakpoints(x, y, rho, theta, beam_index, lam, sigma, max_missing):
     n = len(x)
     is_start = np.zeros(n, np.bool_)
     is_start[0] = True
+    last_dphi, sin_dphi, sin_rest = math.nan, 0.0, 1.0
     for i in range(n - 1):
         dphi = theta[i + 1] - theta[i]
+        if dphi != last_dphi:  # the spacing repeats from beam to beam: its sines only when it changes
+            last_dphi, sin_dphi, sin_rest = dphi, math.sin(dphi), math.sin(max(lam - dphi, 1e-12))
         gap = math.hypot(x[i + 1] - x[i], y[i + 1] - y[i])
-        d_max = min(rho[i], rho[i + 1]) * math.sin(dphi) / math.sin(max(lam - dphi, 1e-12)) + sigma
+        d_max = min(rho[i], rho[i + 1]) * sin_dphi / sin_rest + sigma
         brk = dphi >= lam or not gap <= d_max
         if max_missing > 0 and beam_index[i + 1] - beam_index[i] - 1 > max_missing:
             brk = True
