@@ -296,8 +296,8 @@ def test_kernels_compile_without_a_writable_cache(monkeypatch, caplog):
 def test_a_signal_waits_until_the_kernels_are_loaded(monkeypatch):
     """Ctrl-C inside Numba's compiler breaks it half-way (an internal error instead of exit 130), so
     load_kernels holds SIGINT until the kernels are loaded; then it is delivered as usual."""
-    import os
     import signal
+    import threading
     import time
 
     from cornerslam_cli import features
@@ -305,7 +305,8 @@ def test_a_signal_waits_until_the_kernels_are_loaded(monkeypatch):
     real, delivered, seen_while_loading = features.extract_segments, [], []
 
     def interrupted_while_loading(*args):
-        os.kill(os.getpid(), signal.SIGINT)
+        # to this (the main) thread: a process-wide kill may go to a thread of an earlier test instead
+        signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
         time.sleep(0.05)  # an unblocked SIGINT reaches the handler by now
         seen_while_loading.extend(delivered)
         return real(*args)
