@@ -20,7 +20,7 @@ import numpy as np
 
 from .config import Config
 from .errors import ConfigError, LogError
-from .features import extract
+from .features import extract, load_kernels
 from .filter.models import increment_noise
 from .geometry import matrix_from_pose, transform_points
 from .lasers import mount_source
@@ -104,7 +104,8 @@ class Input:
 
 
 def open_input(log_path: str | Path, cfg: Config) -> Input:
-    """Open the log, check its topics (exit-2 errors before any work) and find the laser mount."""
+    """Open the log, check its topics (exit-2 errors before any work), find the laser mount and load the
+    extractor's compiled kernels (start-up work, not the first step's)."""
     inp = cfg.input
     reader = open_log(
         Path(log_path),
@@ -117,6 +118,7 @@ def open_input(log_path: str | Path, cfg: Config) -> Input:
     info = reader.info()
     laser2base, source = _laser_mount(reader, cfg)
     matcher = ScanMatcher(cfg.scan_match, odometry_noise(cfg)) if cfg.scan_match.enabled else None
+    load_kernels(cfg.sensor, cfg.lines)
     odom_on_tf = info.odom_source.startswith("tf") or reader.odom_on_tf
     return Input(
         Path(log_path), reader, info, laser2base, source, _scan_count(info), SyncStats(), matcher, odom_on_tf

@@ -135,10 +135,13 @@ class Prediction:
         """(n, 3, 3) H_k P H_kᵀ for every landmark, O(n)."""
         return self.hph_blocks(np.arange(len(self)), None)
 
-    def hph_blocks(self, I: np.ndarray, J: np.ndarray | None = None) -> np.ndarray:
+    def hph_blocks(
+        self, I: np.ndarray, J: np.ndarray | None = None, factors: tuple | None = None
+    ) -> np.ndarray:
         """Blocks H_i P H_jᵀ for landmark index arrays I (a,) and J (b,).
 
-        Returns (a, b, 3, 3); with J None, the diagonal blocks (a, 3, 3) for i = j.
+        Returns (a, b, 3, 3); with J None, the diagonal blocks (a, 3, 3) for i = j. ``factors``:
+        :meth:`row_factors` (I), computed once when the same I meets many J.
         Costs O(a·b) 3×3 products plus O((a + b)·N) to gather the rows of P.
         """
         I = np.asarray(I, dtype=np.int64)
@@ -156,17 +159,24 @@ class Prediction:
             return out
         J = np.asarray(J, dtype=np.int64)
         rj = 3 + 3 * J[:, None] + np.arange(3)
-        Hri, Hli = self.H_r[I], self.H_l[I]
+        ri, Hri, Hli, HriPrr, HliPlir = factors if factors is not None else self.row_factors(I)
         Hrj, Hlj = self.H_r[J], self.H_l[J]
-        Prr = P[:3, :3]
         Pr_lj = P[:3][:, rj].transpose(1, 0, 2)  # (b, 3, 3)
-        Pli_r = P[ri][:, :, :3]  # (a, 3, 3)
         Pli_lj = P[ri[:, None, :, None], rj[None, :, None, :]]  # (a, b, 3, 3)
-        out = (Hri @ Prr)[:, None] @ Hrj.transpose(0, 2, 1)[None]
+        out = HriPrr[:, None] @ Hrj.transpose(0, 2, 1)[None]
         out = out + Hri[:, None] @ (Pr_lj @ Hlj.transpose(0, 2, 1))[None]
-        out = out + (Hli @ Pli_r)[:, None] @ Hrj.transpose(0, 2, 1)[None]
+        out = out + HliPlir[:, None] @ Hrj.transpose(0, 2, 1)[None]
         out = out + Hli[:, None] @ Pli_lj @ Hlj.transpose(0, 2, 1)[None]
         return out
+
+    def row_factors(self, I: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The parts of :meth:`hph_blocks` (I, J) that depend on I only — its state rows, H_r,i, H_l,i,
+        H_r,i P_rr and H_l,i P_li,r — to pass back as ``factors`` for many J."""
+        I = np.asarray(I, dtype=np.int64)
+        P = self.P
+        ri = 3 + 3 * I[:, None] + np.arange(3)
+        Hri, Hli = self.H_r[I], self.H_l[I]
+        return ri, Hri, Hli, Hri @ P[:3, :3], Hli @ P[ri][:, :, :3]
 
 
 @dataclass(frozen=True)

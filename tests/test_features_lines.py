@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -184,3 +185,137 @@ def test_breakpoint_breaks_across_runs_of_no_return_beams():
     r_same = np.full(6, 2.0)
     xs, ys = r_same * np.cos(t2), r_same * np.sin(t2)
     assert list(breakpoint_starts(xs, ys, r_same, t2, LinesConfig(max_missing_beams=3), few)) == [0]
+
+
+SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"
+
+
+def _partition_scans():
+    """Scans that exercise every step of the partition: the simulated office (1,081 beams), with beams
+    dropped at random (gaps); the real scans of the sample logs (Intel: 180 beams, centimetre-quantised
+    ranges, so exact ties between farthest points; Mines: URG-04LX with dropouts); random clutter.
+    All noisy: on a noiseless scan the residuals are rounding noise (~1e-16 m), and whether a boundary
+    beam is 1 ulp closer to one line than the other, or an end beam 4 "RMS" off, is decided by the last
+    bit of numpy's pairwise sums and SIMD arctan2 against the kernels' sequential sums and libm — either
+    answer is arbitrary there."""
+    from cornerslam_cli.logs import open_log
+    from cornerslam_cli.types import Scan
+
+    rng = np.random.default_rng(7)
+    world = sw.office_world()
+    scans = []
+    for pose in sw.path_poses(sw.OFFICE_LOOP, 2.0):
+        scan = sw.simulate_scan(world, pose, HOKUYO, 30.0, 0.01, math.radians(0.05), rng)
+        dropped = np.where(rng.random(len(scan.ranges)) > 0.1, scan.ranges, np.inf)
+        scans += [scan, sw.scan_from_ranges(dropped, scan.angles)]
+    for log in ("intel_cut.clf", "mines_exp3_cut.bag"):
+        scans += [m for m in open_log(SAMPLES / log).messages() if isinstance(m, Scan)][::5]
+    for _ in range(20):
+        boxes = [
+            sw.rectangle(*rng.uniform(1, 7, 2), *rng.uniform(0.2, 1.5, 2), rng.uniform(0, 3))
+            for _ in range(4)
+        ]
+        world = sw.make_world([sw.room(0, 0, 10, 8), *boxes], "random")
+        scans.append(sw.simulate_scan(world, (5.0, 4.0, rng.uniform(-3, 3)), HOKUYO, 30.0, 0.02, 0.001, rng))
+    return scans
+
+
+@pytest.mark.parametrize(
+    "cfg",
+    [LinesConfig(), LinesConfig(split_distance=0.02, min_points=3, max_missing_beams=0),
+     LinesConfig(merge_angle=0.2, merge_gap=0.5, angle_split_max=0.3, angle_split_sigmas=5.0)],
+)  # fmt: skip
+def test_compiled_partition_makes_the_numpy_reference_decisions(cfg):
+    """segment_kernels (Numba) against the numpy steps 1–6 of lines.py: the same range starts on every
+    scan, so the fitted segments and corners cannot differ."""
+    from cornerslam_cli.features.lines import beam_weights, partition
+
+    n_ranges = 0
+    for scan in _partition_scans():
+        rho, theta = scan.ranges, scan.angles
+        var_rho, var_theta = beam_variances(rho, PRECISE)
+        x, y, w = rho * np.cos(theta), rho * np.sin(theta), beam_weights(rho, var_rho, var_theta)
+        args = (x, y, rho, theta, w, scan.beam_index, scan.angle_increment, cfg)
+        with np.errstate(all="ignore"):
+            ref = partition(*args, compiled=False)
+        np.testing.assert_array_equal(partition(*args), ref)
+        n_ranges += len(ref)
+    assert n_ranges > 2000  # the scans were not trivial
+
+
+@pytest.mark.parametrize("sensor", [PRECISE, SensorConfig()], ids=["linear", "piecewise"])
+def test_compiled_fit_equals_the_numpy_fit_bit_for_bit(sensor):
+    """fit_kernels (Numba, with numpy's arctan2/hypot between the kernels) against the numpy two-pass fit:
+    every r, α, covariance, end point and end-beam Jacobian equal to the last bit (bytes compared, so a
+    signed zero counts), on the ranges the partition finds and on ranges of one and two beams."""
+    from cornerslam_cli.features.lines import beam_weights, partition
+
+    n_lines = 0
+    for scan in _partition_scans():
+        rho, theta = scan.ranges, scan.angles
+        var_rho, var_theta = beam_variances(rho, sensor)
+        w = beam_weights(rho, var_rho, var_theta)
+        x, y = rho * np.cos(theta), rho * np.sin(theta)
+        starts = partition(x, y, rho, theta, w, scan.beam_index, scan.angle_increment, LinesConfig())
+        ends = np.append(starts[1:], len(rho))
+        wide = starts[:-1][np.diff(starts) >= 2][:3]  # ranges must not overlap (a partition's never do)
+        for s, e in ((starts, ends), (starts[:3], starts[:3] + 1), (wide, wide + 2)):
+            with np.errstate(all="ignore"):
+                ref = fit_ranges(rho, theta, sensor, s, e, compiled=False)
+                got = fit_ranges(rho, theta, sensor, s, e)
+            for name in ("r", "alpha", "cov", "p1", "p2", "jac_ends", "ok"):
+                assert getattr(got, name).tobytes() == getattr(ref, name).tobytes(), name
+        n_lines += len(starts)
+    assert n_lines > 2000
+
+
+def test_kernels_compile_without_a_writable_cache(monkeypatch, caplog):
+    """Where Numba can write no cache (a read-only install and no writable home: here no cache locator
+    at all), a kernel is compiled uncached, with one warning naming NUMBA_CACHE_DIR, instead of the
+    import failing."""
+    import logging
+
+    import numba.core.caching as caching
+
+    from cornerslam_cli.features import jit
+
+    def twice(v):
+        return 2.0 * v
+
+    monkeypatch.setattr(caching.CacheImpl, "_locator_classes", [])
+    monkeypatch.setattr(jit, "_warned", [])
+    with pytest.raises(RuntimeError):  # what kernel() guards against
+        jit.njit(cache=True)(twice)
+    with caplog.at_level(logging.WARNING, logger="cornerslam.features"):
+        assert jit.kernel(twice)(1.5) == 3.0
+        jit.kernel(twice)
+    assert caplog.text.count("NUMBA_CACHE_DIR") == 1
+
+
+@pytest.mark.skipif(not hasattr(__import__("signal"), "pthread_sigmask"), reason="POSIX signal masks")
+def test_a_signal_waits_until_the_kernels_are_loaded(monkeypatch):
+    """Ctrl-C inside Numba's compiler breaks it half-way (an internal error instead of exit 130), so
+    load_kernels holds SIGINT until the kernels are loaded; then it is delivered as usual."""
+    import signal
+    import threading
+    import time
+
+    from cornerslam_cli import features
+
+    real, delivered, seen_while_loading = features.extract_segments, [], []
+
+    def interrupted_while_loading(*args):
+        # to this (the main) thread: a process-wide kill may go to a thread of an earlier test instead
+        signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
+        time.sleep(0.05)  # an unblocked SIGINT reaches the handler by now
+        seen_while_loading.extend(delivered)
+        return real(*args)
+
+    monkeypatch.setattr(features, "extract_segments", interrupted_while_loading)
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: delivered.append(signum))
+    try:
+        features.load_kernels(SensorConfig(), LinesConfig())
+        time.sleep(0.05)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert seen_while_loading == [] and delivered == [signal.SIGINT]

@@ -6,6 +6,9 @@ import numpy as np
 
 from .params import SensorConfig
 
+#: added to covariance diagonals (m², rad²) so they stay positive definite when the sensor model is noiseless
+COV_FLOOR = 1e-12
+
 
 def sigma_range(rho: np.ndarray, sensor: SensorConfig) -> np.ndarray:
     """σρ(ρ) in metres for ranges ``rho`` (any shape, metres).

@@ -25,10 +25,20 @@ import numpy as np
 from ..errors import NumericalError
 from ..geometry import wrap_angle
 from ..types import Prediction
-from .models import inverse_observe, motion_model, motion_noise, observe, odometry_increment
+from .models import (
+    inverse_observe,
+    motion_model,
+    motion_noise,
+    observe,
+    observe_one,
+    odometry_increment,
+)
 from .params import EkfConfig
 
 _PANEL = 128  # rows per panel of the O(N²) passes: a panel of Σ and its product stay in cache
+# state columns of the robot and of landmark k: _ROBOT_AND_LANDMARK + _LANDMARK_OFFSET * k
+_ROBOT_AND_LANDMARK = np.array([0, 1, 2, 3, 4, 5])
+_LANDMARK_OFFSET = np.array([0, 0, 0, 3, 3, 3])
 
 
 class Ekf:
@@ -184,16 +194,15 @@ class Ekf:
             Y = np.empty_like(U) if self.cfg.joseph else U  # standard form: U Yᵀ = V Vᵀ
         r = 0  # pending rank
         nis = 0.0
-        for k, z_i, C_i in zip(ids, z, C, strict=True):
-            cols = np.array([0, 1, 2, 3 + 3 * k, 4 + 3 * k, 5 + 3 * k])
+        for k, z_i, C_i in zip(ids.tolist(), z, C, strict=True):
+            cols = _ROBOT_AND_LANDMARK + _LANDMARK_OFFSET * k
             A = P[:, cols]  # (d, 6) column blocks A_0, A_k of eq 29 (a copy)
             if r:
                 A -= U[:, :r] @ Y[cols, :r].T  # the same columns of Σ with the pending terms applied
-            h, H_r, H_l = observe(mu[:3], mu[3 + 3 * k : 6 + 3 * k])
-            H = np.hstack((H_r[0], H_l[0]))  # (3, 6), eq 26 restricted to its non-zero blocks
+            h, H = observe_one(mu[:3], mu[3 + 3 * k : 6 + 3 * k])  # H (3, 6): eq 26's non-zero blocks
             PHt = A @ H.T  # eq 30: A_0 H_rᵀ + A_k H_kᵀ, (d, 3)
             S = H @ PHt[cols] + C_i  # eq 31
-            nu = z_i - h[0]
+            nu = z_i - h
             nu[2] = wrap_angle(nu[2])
             U_i, Y_i, nis_i = self._gain_terms(PHt, 0.5 * (S + S.T), nu[:, None], mu, d)
             nis += nis_i

@@ -9,6 +9,7 @@ Nothing here keeps state; :mod:`cornerslam_cli.filter.ekf` owns the filter.
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -133,6 +134,23 @@ def observe(pose: np.ndarray, landmarks: np.ndarray) -> tuple[np.ndarray, np.nda
     H_r[:, 1, 2] = -hx
     H_l = np.broadcast_to(np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]), (n, 3, 3)).copy()
     return h, H_r, H_l
+
+
+def observe_one(pose: np.ndarray, landmark: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`observe` of one landmark (3,) with its Jacobian stacked as H = [H_r, H_l] (3, 6).
+
+    The same arithmetic, operation for operation, on Python floats (``math.cos``/``sin`` round as
+    numpy's float64 loops do): the per-pair step of the sequential update, where building and slicing
+    (1, 3, 3) arrays cost more than the maths.
+    """
+    x, y, theta = pose.tolist()
+    mx, my, mphi = landmark.tolist()
+    c, s = math.cos(theta), math.sin(theta)
+    dx, dy = mx - x, my - y
+    hx = c * dx + s * dy
+    hy = -s * dx + c * dy
+    H = np.array([[-c, -s, hy, c, s, 0.0], [s, -c, -hx, -s, c, 0.0], [0.0, 0.0, 0.0, 0.0, 0.0, 1.0]])
+    return np.array([hx, hy, mphi]), H
 
 
 def inverse_observe(pose: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -57,10 +57,13 @@ def trajectory_row(r: StepRecord) -> dict:
     return {
         "step": r.step,
         "stamp": f"{r.stamp:.9f}",
-        **dict(zip(("x", "y", "theta"), r.pose, strict=True)),
-        **dict(zip(("odom_x", "odom_y", "odom_theta"), r.odom, strict=True)),
-        **dict(zip(("var_x", "var_y", "var_theta"), r.pose_var, strict=True)),
-        **dict(zip(("scan_odom_x", "scan_odom_y", "scan_odom_theta"), r.motion, strict=True)),
+        # Python floats (tolist): the same cells, formatted without numpy-scalar overhead
+        **dict(zip(("x", "y", "theta"), r.pose.tolist(), strict=True)),
+        **dict(zip(("odom_x", "odom_y", "odom_theta"), np.asarray(r.odom).tolist(), strict=True)),
+        **dict(zip(("var_x", "var_y", "var_theta"), r.pose_var.tolist(), strict=True)),
+        **dict(
+            zip(("scan_odom_x", "scan_odom_y", "scan_odom_theta"), np.asarray(r.motion).tolist(), strict=True)
+        ),
     }
 
 

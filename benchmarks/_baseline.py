@@ -1,0 +1,48 @@
+"""Another build of cornerslam beside this one, for side-by-side benchmarks in one run.
+
+    with source_tree("main") as src:          # the package sources of a git revision, in a temp dir
+        subprocess.run(..., env=build_env(src))   # python -m cornerslam_cli ... runs *that* build
+
+``build_env(ROOT)`` runs this checkout. The other build is imported from ``PYTHONPATH``, which Python
+searches before the editable install's finder, with this environment's packages (numpy, scipy, …).
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import tarfile
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@contextmanager
+def source_tree(rev: str) -> Iterator[Path]:
+    """The files of git revision ``rev`` of this repository (``git archive``), removed afterwards."""
+    with tempfile.TemporaryDirectory(prefix="cornerslam-baseline-") as tmp:
+        archive = Path(tmp) / "src.tar"
+        subprocess.run(["git", "-C", str(ROOT), "archive", "-o", str(archive), rev], check=True)
+        with tarfile.open(archive) as tar:
+            tar.extractall(Path(tmp) / "src", filter="data")
+        yield Path(tmp) / "src"
+
+
+def build_env(src: Path) -> dict[str, str]:
+    """The environment that makes ``python -m cornerslam_cli`` import the package under ``src``."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(src), *filter(None, [env.get("PYTHONPATH")])])
+    return env
+
+
+def revision(rev: str = "HEAD") -> str:
+    """Short commit hash of ``rev``; HEAD gets "+changes" when the working tree has uncommitted ones."""
+    git = ["git", "-C", str(ROOT)]
+    head = subprocess.run([*git, "rev-parse", "--short", rev], capture_output=True, text=True).stdout.strip()
+    dirty = subprocess.run(
+        [*git, "status", "--porcelain", "--untracked-files=no"], capture_output=True, text=True
+    )
+    return head + ("+changes" if rev == "HEAD" and dirty.stdout.strip() else "")
