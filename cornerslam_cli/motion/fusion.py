@@ -29,14 +29,17 @@ reference trajectory.
 
 **Gate.** Once the scales are learnt, a match whose disagreement with the corrected odometry exceeds the
 χ²₃ ``gate`` under max(k, 1)·Σ_o + s·Σ_m is not taken on trust: the odometry increment is used alone
-(counted as rejected). The gate keeps the configured model as a floor: real odometry errors are
-heavy-tailed (a wheel slipping in a turn), and a scale learnt on the bulk of the increments would reject
-the true match of such a turn.
+(counted as rejected) — unless the scans themselves clearly prefer the match (they fit the map better at
+its pose than at the odometry's): then the odometry is the outlier (a wheel slip) and the match is used
+alone. The gate keeps the configured model as a floor: real odometry errors are heavy-tailed (a wheel
+slipping in a turn), and a scale learnt on the bulk of the increments would reject the true match of
+such a turn.
 """
 
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,15 +83,28 @@ class OdometryFusion:
         self.c = np.zeros(2)
         self.samples: deque[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = deque(maxlen=window)
         self.n_rejected = 0
+        self.n_odometry_outliers = 0
         self._since = 0
 
     def corrected(self, o: np.ndarray) -> np.ndarray:
         """The odometry increment with the learnt scale error and drift taken out."""
         return o - bias_matrix(o) @ self.c
 
-    def fuse(self, o: np.ndarray, cov_o: np.ndarray, m: np.ndarray, cov_m: np.ndarray) -> Fused:
+    def fuse(
+        self,
+        o: np.ndarray,
+        cov_o: np.ndarray,
+        m: np.ndarray,
+        cov_m: np.ndarray,
+        scans_prefer_match: Callable[[], bool] | None = None,
+    ) -> Fused:
         """The fused increment of odometry ``o`` (model covariance ``cov_o``) and match ``m``
-        (covariance ``cov_m`` from its fit), both in the previous keyframe's frame."""
+        (covariance ``cov_m`` from its fit), both in the previous keyframe's frame.
+
+        When the two disagree beyond the gate one of them is an outlier, and the scans decide which:
+        ``scans_prefer_match`` (the scan fits the map clearly better at the match than at the
+        odometry's pose) keeps the match alone — the odometry slipped —, otherwise the odometry is kept
+        alone and the match is counted as rejected. (A callable: asked only past the gate.)"""
         d = m - o
         d[2] = wrap_angle(d[2])
         self.samples.append((d, cov_o, cov_m, bias_matrix(o)))
@@ -108,9 +124,10 @@ class OdometryFusion:
         score = float(dc @ np.linalg.solve(max(self.k, 1.0) * cov_o + Sm, dc))
         learnt = len(self.samples) >= self.min_samples  # before that, no basis to judge a match on
         if not np.isfinite(score) or (learnt and score > self.gate):
-            self.n_rejected += (
-                1  # the odometry alone, as uncertain as the gate's model: one of the two is wrong
-            )
+            if np.isfinite(score) and scans_prefer_match is not None and scans_prefer_match():
+                self.n_odometry_outliers += 1  # the match alone: the odometry is the outlier
+                return Fused(oc + dc, 0.5 * (Sm + Sm.T), True, score, np.eye(3))
+            self.n_rejected += 1  # the odometry alone, as uncertain as the gate's model
             return Fused(oc, self.fallback_cov(cov_o), False, score, np.zeros((3, 3)))
         K = So @ np.linalg.inv(S)  # Kalman gain of the odometry prior updated by the match
         inc = oc + K @ dc

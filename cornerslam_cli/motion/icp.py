@@ -41,6 +41,7 @@ NORMAL_TIE = 1e-9  # relative: a neighbour this close to the 5th's distance is t
 NORMAL_TIED_EXTRA = 2  # neighbours queried beyond the 5th to find those tied with it
 SHRINK = 0.5
 MAX_RHO = 0.98  # residual correlation used at most: an inflation of 99
+FIT_EVIDENCE = 0.1  # a match fitting this much better than the odometry's pose outvotes it past the gate
 FIT_MARGIN = 0.02  # a fit better by more than this replaces the match from the odometry's guess
 CONVERGED = 1e-4  # largest step component (m or rad) that ends the iterations
 
@@ -294,13 +295,22 @@ class ScanMatcher:
             return self._fallback(o, cov_o, reg.fit, searched)
         m = relative(self.pose, reg.pose)
         R = _rotation3(-self.pose[2])  # motion frame → previous scan's frame
-        fused = self.fusion.fuse(o, cov_o, m, R @ reg.cov @ R.T)
+        fused = self.fusion.fuse(
+            o, cov_o, m, R @ reg.cov @ R.T, lambda: reg.fit >= self._fit_at(points, guess) + FIT_EVIDENCE
+        )
         self.n_matched += fused.accepted
         # the match's error its fit cannot see, passed on with the weight the match got (none when the
         # odometry is exact and the fusion hardly weighs the match)
         floor = np.diag([cfg.sigma_xy**2, cfg.sigma_xy**2, cfg.sigma_theta**2])
         cov = fused.cov + fused.gain @ floor @ fused.gain.T
         return MatchResult(compose(self.pose, fused.inc), reg.fit, fused.accepted, cov, searched)
+
+    def _fit_at(self, points: np.ndarray, pose: np.ndarray) -> float:
+        """Share of ``points`` within ``inlier_distance`` of the local map at ``pose``."""
+        dist, _ = self.local.tree.query(
+            transform_points(points, pose), distance_upper_bound=self.cfg.inlier_distance
+        )
+        return float(np.mean(dist < self.cfg.inlier_distance))
 
     def _fallback(self, o: np.ndarray, cov_o: np.ndarray, fit: float, searched: bool = False) -> MatchResult:
         self.n_fallback += 1

@@ -78,9 +78,10 @@ class ScanMatchConfig:
     adapt_window: int = num(
         100, ge=1, le=100000
     )  # keyframes whose disagreements set the noise scales and bias
-    warmup: int = num(
-        20, ge=0, le=10000
-    )  # keyframes matched once to learn the scales before the run; 0 = off
+    # keyframes matched once to learn the scales before the run (0 = off: learnt as the run goes). Off by
+    # default: over the whole panel (docs/results/frontend_panel.md) it did not pay — the first matches
+    # judged with learnt scales changed which marginal ones were kept, for better or worse per log
+    warmup: int = num(0, ge=0, le=10000)
     adapt_every: int = num(25, ge=1, le=100000)  # keyframes between two re-estimates
     adapt_min_samples: int = num(5, ge=2, le=100000)  # ... the model itself (scale 1) until this many
     # error of a match that its fit cannot see, added to the fused increment's covariance with the weight
