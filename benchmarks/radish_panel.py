@@ -22,6 +22,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from real_logs import CLI, INTEL, ROOT, default_data, relation_args  # noqa: E402
 
+INTEL_GFS = INTEL.with_name("intel.gfs.log")
+
 BUILDINGS = ("aces", "csail", "edmonton", "fhw", "freiburg-101", "infinite-corridor", "orebro")
 
 
@@ -64,6 +66,18 @@ def table(rows: list[dict]) -> list[str]:
     return out
 
 
+def relation_line(s: dict) -> str:
+    """The relation errors of a run's summary: SLAM, its odometry, its scan-matched odometry."""
+    a = s["accuracy"]
+    rel, odom, scan = a["relations"], a["odom_relations"], a.get("scan_odom_relations")
+    return (
+        f"{s['counts']['steps']} steps: translation {rel['trans_mean']:.3f} ± {rel['trans_std']:.3f} m, "
+        f"rotation {rel['rot_mean_deg']:.2f} ± {rel['rot_std_deg']:.2f}° (odometry {odom['trans_mean']:.3f} m"
+        + (f", scan-matched odometry {scan['trans_mean']:.3f} m" if scan else "")
+        + ")."
+    )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=default_data(), help="folder of the real logs")
@@ -78,15 +92,14 @@ def main() -> None:
         ap.error(f"{', '.join(missing)} not found (pass --data DIR)")
     with ThreadPoolExecutor(args.jobs) as pool:
         jobs = [pool.submit(run, p, args.work / n, extra) for n, p in logs]
-        intel_job = pool.submit(
-            run, args.data / INTEL, args.work / "intel", [*relation_args(args.data), *extra]
-        )
+        intel_jobs = [
+            pool.submit(run, args.data / log, args.work / name, [*relation_args(args.data), *extra])
+            for name, log in (("intel", INTEL), ("intel-gfs", INTEL_GFS))
+        ]
         summaries = [j.result() for j in jobs]
-        intel = intel_job.result()
+        intel, gfs = (j.result() for j in intel_jobs)
     rows = [ate_row(n, s) for (n, _), s in zip(logs, summaries, strict=True)]
     noisy, exact = rows[: len(BUILDINGS)], rows[len(BUILDINGS) :]
-    rel, odom_rel = intel["accuracy"]["relations"], intel["accuracy"]["odom_relations"]
-    scan_rel = intel["accuracy"].get("scan_odom_relations")
     text = [
         "# Accuracy over the real-log panel",
         "",
@@ -106,11 +119,10 @@ def main() -> None:
         "",
         "## Intel (relation metric, Kümmerle et al. 2009)",
         "",
-        f"{intel['counts']['steps']} steps: translation {rel['trans_mean']:.3f} ± {rel['trans_std']:.3f} m, "
-        f"rotation {rel['rot_mean_deg']:.2f} ± {rel['rot_std_deg']:.2f}° (odometry "
-        f"{odom_rel['trans_mean']:.3f} m"
-        + (f", scan-matched odometry {scan_rel['trans_mean']:.3f} m" if scan_rel else "")
-        + ").",
+        "Noisy odometry (intel-noisy-odom.log): " + relation_line(intel),
+        "",
+        "gmapping's (RBPF) corrected poses as odometry (intel.gfs.log: the input scores as below under "
+        "'odometry'): " + relation_line(gfs),
         "",
     ]
     args.out.write_text("\n".join(text))

@@ -122,7 +122,7 @@ def relation_scores(r: dict, data: Path, keys=("pose", "odom")) -> tuple[dict, .
 
 def scan_points(log: Path, extra: list[str], stamps: np.ndarray) -> list[np.ndarray]:
     """Valid beam end points (sensor frame → base frame) of the keyframe scans, by stamp."""
-    from cornerslam_cli.frontend import _scans_prepared, open_input
+    from cornerslam_cli.frontend import open_input, scans_prepared
     from cornerslam_cli.lasers import resolve_config
     from cornerslam_cli.types import Scan
 
@@ -131,7 +131,7 @@ def scan_points(log: Path, extra: list[str], stamps: np.ndarray) -> list[np.ndar
     lx, ly, lyaw = src.laser2base
     want = {round(float(s), 6): i for i, s in enumerate(stamps)}
     pts: list[np.ndarray] = [np.zeros((0, 2))] * len(stamps)
-    for m in _scans_prepared(src.reader, cfg):
+    for m in scans_prepared(src.reader, cfg):
         if isinstance(m, Scan) and (i := want.get(round(float(m.stamp), 6))) is not None:
             a = m.angles + lyaw
             p = np.column_stack((lx + m.ranges * np.cos(a), ly + m.ranges * np.sin(a)))

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import logging
 import math
 import re
 import types
@@ -34,6 +35,8 @@ from .logs.params import KeyframeConfig, OdomJumpConfig
 from .motion.params import ScanMatchConfig
 from .ranges import RangeError, check_ranges, num, short_repr, short_text
 from .textfile import read_text
+
+log = logging.getLogger("cornerslam.config")
 
 TWO_PI = 2.0 * math.pi
 MAX_CONFIG_BYTES = 1 << 20  # configs/default.yaml, every key, is 2.5 KB
@@ -197,7 +200,11 @@ def from_dict(cls: type, data: dict, prefix: str = "") -> Any:
     hints = typing.get_type_hints(cls)
     names = [f.name for f in dataclasses.fields(cls)]
     kwargs = {}
+    retired = getattr(cls, "RETIRED", {})
     for key, value in data.items():
+        if key in retired and key not in names:
+            log.warning("config key '%s%s' is no longer used and was ignored: %s", prefix, key, retired[key])
+            continue
         if key not in names:
             name = short_text(key) if isinstance(key, str) else short_repr(key)
             raise ConfigError(f"unknown config key '{prefix}{name}'", _closest(str(key)[:100], names))

@@ -9,9 +9,11 @@ filter (slam.py) takes as its motion input.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +21,7 @@ import numpy as np
 from .config import Config
 from .errors import ConfigError, LogError
 from .features import extract, load_kernels
+from .filter.models import increment_noise
 from .geometry import matrix_from_pose, transform_points
 from .lasers import mount_source
 from .logs import ReadStats, open_log
@@ -63,9 +66,12 @@ class Frame:
     C: np.ndarray
     t_extract: float
     odom_jump: bool = False  # the odometry jumped since the previous keyframe (logs/sync.py)
-    # motion input of the filter: the scan-matched pose chain (motion/icp.py), or None = ``odom``
+    # motion input of the filter: the pose chain fused from odometry and scan matches (motion/), or
+    # None = ``odom``; ``motion_cov``: the covariance of the increment into this frame (previous frame's
+    # frame), None = the filter's odometry noise model
     motion: np.ndarray | None = None
-    scan_matched: bool = False  # the increment into this frame came from scan matching
+    motion_cov: np.ndarray | None = None
+    scan_matched: bool = False  # a scan match was fused into the increment into this frame
     scan_fit: float = float("nan")  # share of the scan's points on the local map after matching
     t_scan_match: float = 0.0
     points: np.ndarray | None = None  # (k, 2) float32 valid beam end points, sensor frame (occupancy grid)
@@ -111,7 +117,7 @@ def open_input(log_path: str | Path, cfg: Config) -> Input:
     reader.check()
     info = reader.info()
     laser2base, source = _laser_mount(reader, cfg)
-    matcher = ScanMatcher(cfg.scan_match) if cfg.scan_match.enabled else None
+    matcher = ScanMatcher(cfg.scan_match, odometry_noise(cfg)) if cfg.scan_match.enabled else None
     load_kernels(cfg.sensor, cfg.lines)
     odom_on_tf = info.odom_source.startswith("tf") or reader.odom_on_tf
     return Input(
@@ -119,13 +125,32 @@ def open_input(log_path: str | Path, cfg: Config) -> Input:
     )
 
 
+def odometry_noise(cfg: Config) -> Callable[[np.ndarray], np.ndarray]:
+    """The covariance of an odometry increment under the filter's noise model (``ekf.alpha*`` and its
+    floor): the prior the scan matcher fuses its matches with."""
+    e = cfg.ekf
+    return partial(
+        increment_noise,
+        alphas=e.alphas,
+        min_sigma_xy=e.min_sigma_xy,
+        min_sigma_theta=e.min_sigma_theta,
+        eps_trans=e.pure_rotation_eps,
+        reverse=e.reverse_motion,
+    )
+
+
 def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None = None) -> Iterator[Frame]:
     """Synchronised keyframes of the log, features extracted, motion scan-matched (streaming)."""
     msgs = reanchor_odometry(
-        _scans_prepared(src.reader, cfg), cfg.input.odom_jump, src.stats, src.reader.stats.warn
+        scans_prepared(src.reader, cfg), cfg.input.odom_jump, src.stats, src.reader.stats.warn
     )
     synced = synchronise(msgs, src.stats, src.reader.stats.warn)  # its warning lands in summary.json too
-    for pair in select_keyframes(synced, cfg.keyframes, src.stats):
+    pairs = select_keyframes(synced, cfg.keyframes, src.stats)
+    if src.matcher is not None and cfg.scan_match.warmup > 0:
+        head = list(itertools.islice(pairs, cfg.scan_match.warmup))
+        src.matcher.warm_up([(transform_points(p.scan.points(), src.laser2base), p.odom) for p in head])
+        pairs = itertools.chain(head, pairs)
+    for pair in pairs:
         frame = replace(extract_frame(pair.scan, pair.odom, cfg, src.laser2base), odom_jump=pair.odom_jump)
         if src.matcher is not None:
             frame = _scan_matched(frame, pair.scan, src.matcher, src.laser2base)
@@ -173,11 +198,16 @@ def _scan_matched(
     t0 = time.perf_counter()
     m = matcher.step(transform_points(scan.points(), laser2base), frame.odom)
     return replace(
-        frame, motion=m.pose, scan_matched=m.matched, scan_fit=m.fit, t_scan_match=time.perf_counter() - t0
+        frame,
+        motion=m.pose,
+        motion_cov=m.cov,
+        scan_matched=m.matched,
+        scan_fit=m.fit,
+        t_scan_match=time.perf_counter() - t0,
     )
 
 
-def _scans_prepared(reader, cfg: Config):
+def scans_prepared(reader, cfg: Config):
     """The reader's messages with each scan prepared as configured: beams at the ends removed (robot
     body), beams at or beyond ``input.max_range`` dropped, ``input.scan_time_offset`` added to the
     stamp (a laser whose stamps lag or lead the odometry clock). Skipping every beam of the first

@@ -139,6 +139,18 @@ class Counts(JsonResult):
     scans_matched: int | None = optional()
     scans_match_retried: int | None = optional()
     scans_match_fallback: int | None = optional()
+    scans_match_rejected: int | None = optional()  # appended (issue 15): matches the fusion's gate refused
+
+
+@dataclass(frozen=True, kw_only=True)
+class OdometryModel(JsonResult):
+    """What the front end learnt by the end of the run (motion/fusion.py): the odometry's noise scale
+    and the scan match's (times their models), the odometer scale error and the heading drift (rad/m)."""
+
+    odom_noise_scale: float
+    match_noise_scale: float
+    odom_scale_error: float
+    heading_drift_per_m: float
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -183,6 +195,7 @@ class RunSummary(JsonResult):
     hashes: Hashes
     config: dict
     versions: dict
+    odometry_model: OdometryModel | None = optional()  # appended (issue 15): what the front end learnt
     out_dir: str | None = field(default=None, metadata={"json": False})
 
     @classmethod

@@ -21,7 +21,6 @@ from .filter.params import EkfConfig
 from .frontend import Frame
 from .geometry import matrix_from_pose
 from .logs.params import OdomJumpConfig
-from .motion.params import ScanMatchConfig
 from .types import Segments
 
 if TYPE_CHECKING:
@@ -70,14 +69,13 @@ class StepRecord:
 @dataclass(frozen=True)
 class Motion:
     """The filter's motion input into one frame and its noise: the increment ``prev`` → ``cur``
-    (keyframe poses; ``prev`` None at the first frame: nothing to predict), its noise ``alphas``,
-    ``floor`` (None: the filter's own, ``ekf.alpha*``) and ``inflate`` = (σ_xy, σ_θ) added to the
-    robot's covariance after it, or None."""
+    (keyframe poses; ``prev`` None at the first frame: nothing to predict), its covariance ``cov`` in
+    the frame of ``prev`` (None: the filter's odometry noise model, ``ekf.alpha*``) and ``inflate`` =
+    (σ_xy, σ_θ) added to the robot's covariance after it, or None."""
 
     prev: np.ndarray | None
     cur: np.ndarray
-    alphas: tuple[float, float, float, float] | None = None
-    floor: tuple[float, float] | None = None
+    cov: np.ndarray | None = None
     inflate: tuple[float, float] | None = None
 
 
@@ -88,11 +86,9 @@ class Slam:
         self,
         ekf: EkfConfig,
         association: AssociationConfig,
-        scan_match: ScanMatchConfig,
         odom_jump: OdomJumpConfig,
         laser2base: tuple[float, float, float],
     ):
-        self.scan_match = scan_match  # the noise of scan-matched increments
         self.odom_jump = odom_jump  # the robot uncertainty added across an odometry jump
         self.laser2base = laser2base
         self.ekf = Ekf(ekf)
@@ -105,21 +101,21 @@ class Slam:
     @classmethod
     def from_config(cls, cfg: Config, laser2base: tuple[float, float, float]) -> Slam:
         """The filter with the sections of a run's config that it uses."""
-        return cls(cfg.ekf, cfg.association, cfg.scan_match, cfg.input.odom_jump, laser2base)
+        return cls(cfg.ekf, cfg.association, cfg.input.odom_jump, laser2base)
 
     def motion(self, frame: Frame) -> Motion:
         """The motion input into ``frame`` and its noise.
 
-        The input is the scan-matched pose chain when the front end has one, else odometry; a
-        scan-matched increment brings the scan matcher's noise (``scan_match.alphas``, ``floor``); an
-        odometry increment across a jump was re-anchored (logs/sync.py), so the motion over it is
-        unknown: the robot's covariance is inflated by ``input.odom_jump.sigma_*``.
+        The input is the pose chain the front end fused from odometry and scan matches, with the
+        covariance of each increment (motion/fusion.py), when it has one; else the odometry with the
+        filter's own noise model. An odometry increment across a jump was re-anchored (logs/sync.py),
+        so unless a scan match measured it the motion over it is unknown: the robot's covariance is
+        inflated by ``input.odom_jump.sigma_*``.
         """
         cur = frame.odom if frame.motion is None else frame.motion
-        if frame.scan_matched:
-            return Motion(self.prev_motion, cur, self.scan_match.alphas, self.scan_match.floor)
-        jump = (self.odom_jump.sigma_xy, self.odom_jump.sigma_theta) if frame.odom_jump else None
-        return Motion(self.prev_motion, cur, inflate=jump)
+        jump = frame.odom_jump and not frame.scan_matched
+        inflate = (self.odom_jump.sigma_xy, self.odom_jump.sigma_theta) if jump else None
+        return Motion(self.prev_motion, cur, frame.motion_cov, inflate)
 
     def step(self, frame: Frame) -> StepRecord:
         """One step of the paper's loop on an extracted frame: predict, associate, update, augment."""
@@ -128,7 +124,7 @@ class Slam:
         t1 = time.perf_counter()
         m = self.motion(frame)
         if m.prev is not None:
-            self.ekf.predict(m.prev, m.cur, m.alphas, m.floor)  # eq 19-22, O(N)
+            self.ekf.predict(m.prev, m.cur, m.cov)  # eq 19-22, O(N)
             if m.inflate is not None:
                 self.ekf.inflate_pose(*m.inflate)
         self.prev_motion = m.cur

@@ -464,7 +464,7 @@ def _config_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
         ("capacity", "ekf.initial_capacity=10000000000", ("'ekf.initial_capacity' = 1000000", "[1, 1000]")),
         ("sigma_1e300", "sensor.sigma_r_near=1e300", ("'sensor.sigma_r_near' = 1e+300 is out of range",)),
         ("group_size", "association.pca.group_size=1000000", ("'association.pca.group_size'", "[1, 1000]")),
-        ("retries", "scan_match.retry_step=1e-9", ("retry_angle / retry_step = 3.5e+08", "at most 100")),
+        ("adapt_samples", "scan_match.adapt_min_samples=1000", ("adapt_min_samples = 1000 exceeds",)),
         ("on_as_string", "input.odom_frame=on", ("'input.odom_frame' must be a string, got True", "quote")),
         ("no_equals", "ekf.alpha1", ("is not key=value",)),
         ("empty_key", "=0.1", ("has an empty key",)),

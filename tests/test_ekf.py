@@ -22,7 +22,8 @@ from cornerslam_cli.filter import (
     observe,
     odometry_increment,
 )
-from cornerslam_cli.geometry import wrap_angle
+from cornerslam_cli.filter.models import increment_noise
+from cornerslam_cli.geometry import relative, wrap_angle
 
 TOL = 1e-9
 
@@ -139,7 +140,7 @@ def test_odometry_increment_reproduces_the_odometry_pose(x, y, th, dx, dy, dth):
     cur = np.array([x + dx, y + dy, wrap_angle(th + dth)])
     u = odometry_increment(prev, cur, eps_trans=1e-3)
     pose, _, _ = motion_model(prev, u)
-    if np.hypot(dx, dy) >= 1e-3:
+    if np.hypot(*(cur[:2] - prev[:2])) >= 1e-3:  # as rounded in cur, which is what the increment sees
         np.testing.assert_allclose(pose[:2], cur[:2], atol=1e-9)
     else:  # pure rotation: the translation (< eps) is applied along the heading
         assert np.hypot(*(pose[:2] - cur[:2])) <= 2e-3
@@ -453,8 +454,9 @@ def test_tentative_landmarks_are_confirmed_or_dropped():
 
 
 def test_per_increment_motion_noise_equals_a_filter_configured_with_it():
-    """Scan-matched increments bring their own (alphas, floor): the same as a dense filter whose config
-    holds those values, and different from the wheel-odometry defaults."""
+    """A fused increment brings its own covariance (in the frame of the pose it starts from): given
+    the α-model covariance of other alphas, the filter equals a dense filter whose config holds those
+    alphas — the rotation into the map frame included — and differs from the wheel-odometry defaults."""
     rng = np.random.default_rng(7)
     mu, P = random_state(rng, 20)
     alphas, floor = (0.0002, 0.0001, 0.0002, 0.0001), (0.01, 0.005)
@@ -468,7 +470,8 @@ def test_per_increment_motion_noise_equals_a_filter_configured_with_it():
         Ekf.from_state(EkfConfig(), mu, P),
     )
     a, b = np.array([0.3, -0.2, 0.1]), np.array([0.9, 0.1, 0.5])
-    ekf.predict(a, b, alphas, floor)
+    cov = increment_noise(relative(a, b), alphas, *floor)
+    ekf.predict(a, b, cov)
     ref.predict(a, b)
     wheel.predict(a, b)
     assert_same_state(ekf, ref)

@@ -84,8 +84,11 @@ def test_values_past_either_bound_are_refused_and_the_bounds_accepted(key, tp, r
             load_config(None, [f"{key}={v!r}"])
         assert f"config key '{key}' = " in str(e.value) and f"allowed: {r}" in str(e.value)
     for v in _inside(r, tp):
-        if key == "scan_match.retry_step" and v < 0.0035:
-            continue  # the retry count (retry_angle / retry_step) has its own bound, checked below
+        if (key, v > 100) == ("scan_match.adapt_min_samples", True) or (key, v < 5) == (
+            "scan_match.adapt_window",
+            True,
+        ):
+            continue  # adapt_min_samples ≤ adapt_window (defaults 5, 100): a bound across keys, checked below
         cfg = load_config(None, [f"{key}={v!r}"])
         section = cfg
         for part in key.split("."):
@@ -105,10 +108,31 @@ def test_a_range_refuses_nan_and_bools_also_when_the_section_is_built_directly()
         num(5.0, ge=0.0, le=1.0)  # a default outside its own range
 
 
-def test_too_many_retried_headings_are_refused():
-    with pytest.raises(ConfigError, match="at most 100"):
-        load_config(None, ["scan_match.retry_step=0.001", "scan_match.retry_angle=0.35"])
-    assert load_config(None, ["scan_match.retry_step=0.0035", "scan_match.retry_angle=0.35"])
+def test_more_samples_to_learn_from_than_the_window_holds_are_refused():
+    with pytest.raises(ConfigError, match="adapt_min_samples = 101 exceeds adapt_window = 100"):
+        load_config(None, ["scan_match.adapt_min_samples=101"])
+    assert load_config(None, ["scan_match.adapt_min_samples=100"])
+
+
+def test_keys_of_earlier_versions_are_ignored_with_a_warning():
+    import io
+    import logging
+
+    stream = io.StringIO()
+    handler = logging.StreamHandler(stream)  # on the module's logger: the CLI may stop propagation above it
+    logger = logging.getLogger("cornerslam.config")
+    logger.addHandler(handler)
+    level = logger.level
+    logger.setLevel(logging.WARNING)  # a CLI test's -q may have raised the level above it
+    try:
+        cfg = load_config(None, ["scan_match.retry_angle=0.2", "scan_match.alpha1=0.5"])
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+    assert cfg == load_config(None)
+    text = stream.getvalue()
+    assert "'scan_match.retry_angle' is no longer used" in text and "correlative search" in text
+    assert "'scan_match.alpha1' is no longer used" in text and "its own covariance" in text
 
 
 # ---------------------------------------------------------------------------- YAML
@@ -148,9 +172,11 @@ def test_an_alias_bomb_is_refused_fast_in_constant_memory(tmp_path):
 
 def test_aliases_below_the_bound_are_fine_and_a_merge_key_may_be_overridden(tmp_path):
     p = tmp_path / "c.yaml"
-    p.write_text("ekf: &e\n  alpha1: 0.02\n  alpha2: 0.03\nscan_match:\n  <<: *e\n  alpha1: 0.001\n")
-    cfg = load_config(p)
-    assert (cfg.ekf.alpha1, cfg.scan_match.alpha1, cfg.scan_match.alpha2) == (0.02, 0.001, 0.03)
+    p.write_text(
+        "ekf: &e\n  alpha1: 0.02\n  alpha2: 0.03\nscan_match:\n  <<: *e\n  alpha1: 0.001\n  window: 7\n"
+    )
+    cfg = load_config(p)  # scan_match.alpha1/alpha2 (keys of earlier versions) are ignored with a warning
+    assert (cfg.ekf.alpha1, cfg.ekf.alpha2, cfg.scan_match.window) == (0.02, 0.03, 7)
 
 
 def test_messages_quote_a_short_prefix_of_any_value(tmp_path):

@@ -106,7 +106,7 @@ def test_read_names_the_file_it_cannot_read(tmp_path):
 # summary.json's layout as INTERFACE.md and every earlier version wrote it: keys in this order
 SUMMARY_KEYS = [
     "cornerslam_version", "mode", "input", "assoc", "counts", "timing", "final_pose", "warnings",
-    "accuracy", "hashes", "config", "versions",
+    "accuracy", "hashes", "config", "versions", "odometry_model",  # odometry_model appended (issue 15)
 ]  # fmt: skip
 INPUT_KEYS = [
     "log",
@@ -123,7 +123,7 @@ COUNT_KEYS = [
     "scans_size_mismatch", "messages_failed", "scans_in", "scans_out", "before_first_odom",
     "after_last_odom", "odom_gap", "scan_time_backwards", "odom_time_backwards", "keyframes_skipped",
     "odom_jumps", "scans_skipped", "budget_hits", "scans_matched", "scans_match_retried",
-    "scans_match_fallback",
+    "scans_match_fallback", "scans_match_rejected",  # scans_match_rejected appended (issue 15)
 ]  # fmt: skip
 TIMING_KEYS = [
     "t_extract", "t_predict", "t_match", "t_update", "t_scan_match", "t_total", "t_match_max", "wall_time",
@@ -157,6 +157,10 @@ def test_summary_json_of_a_simulated_run_has_the_layout_and_values_it_always_had
     assert c["steps"] == len(traj["step"]) == c["scans_in"] == c["scans_matched"] + 1
     assert c["landmarks"] == len(lm["id"]) and c["matched_total"] == timing["n_matched"].sum()
     assert c["scans_skipped"] == c["keyframes_skipped"] == c["budget_hits"] == c["scans_match_fallback"] == 0
+    assert c["scans_match_rejected"] == 0
+    m = s["odometry_model"]
+    assert list(m) == ["odom_noise_scale", "match_noise_scale", "odom_scale_error", "heading_drift_per_m"]
+    assert 0 < m["odom_noise_scale"] <= 100 and 1 <= m["match_noise_scale"] <= 1e4
     assert c["beams_total"] == 541 * c["scans_in"] > c["beams_invalid"] > 0  # the fixture's 541 beams a scan
     assert c["messages_failed"] == c["scans_size_mismatch"] == c["scans_bad_geometry"] == 0
     t, rounding = s["timing"], 1e-9 * c["steps"]  # timing.csv has 9 decimals

@@ -1,4 +1,5 @@
-"""Scan matching (motion/icp.py) against known poses in ray-cast worlds."""
+"""Scan matching fused with odometry (motion/icp.py, correlative.py, fusion.py) against known poses in
+ray-cast worlds."""
 
 import math
 
@@ -7,8 +8,11 @@ import pytest
 
 from cornerslam_cli.config import load_config
 from cornerslam_cli.errors import ConfigError
-from cornerslam_cli.geometry import matrix_from_pose, pose_from_matrix, transform_points, wrap_angle
+from cornerslam_cli.evaluate import ate
+from cornerslam_cli.frontend import odometry_noise
+from cornerslam_cli.geometry import compose, relative, transform_points, wrap_angle
 from cornerslam_cli.motion import ScanMatchConfig, ScanMatcher
+from cornerslam_cli.motion.correlative import BLOCK, PULL, Window, angle_steps, search
 from cornerslam_cli.motion.icp import LocalMap, register, voxel_thin
 from cornerslam_cli.simworld import OFFICE_LOOP, make_world, office_world, path_poses, polyline, raycast
 
@@ -33,75 +37,169 @@ def office():
     return office_world()
 
 
+def matcher(cfg: ScanMatchConfig | None = None, overrides=()) -> ScanMatcher:
+    """A scan matcher with the default odometry noise model (``ekf.alpha*``)."""
+    full = load_config(None, list(overrides))
+    return ScanMatcher(cfg or full.scan_match, odometry_noise(full))
+
+
 def test_register_recovers_a_known_pose(office):
     rng = np.random.default_rng(1)
     ref_pose, true_pose = np.array([6.0, 5.0, 0.1]), np.array([6.6, 5.2, 0.45])
     local = LocalMap.build(transform_points(scan_points(office, ref_pose, rng, 0.01), ref_pose))
     points = scan_points(office, true_pose, rng, 0.01)
     guess = true_pose + [0.15, -0.1, math.radians(4.0)]
-    pose, fit = register(points, local, guess, ScanMatchConfig())
-    d, a = pose_error(pose, true_pose)
+    reg = register(points, local, guess, ScanMatchConfig())
+    d, a = pose_error(reg.pose, true_pose)
     assert d < 0.02 and a < math.radians(0.3)
-    assert fit > 0.8
+    assert reg.fit > 0.8
 
 
-def test_heading_retry_rescues_a_bad_odometry_turn(office):
-    """A 15° odometry heading error: plain ICP from the guess falls into a wrong minimum or a poor fit;
-    the retries around the guess find the true pose."""
+def test_search_then_icp_recovers_from_half_a_metre_and_20_degrees(office):
+    """From a guess 0.5 m and 20° off, the correlative search over a window that holds the truth finds
+    the basin and ICP refines it to the truth."""
     rng = np.random.default_rng(2)
+    ref_pose, true_pose = np.array([6.0, 5.0, 0.0]), np.array([6.8, 5.3, 0.5])
+    map_pts = transform_points(scan_points(office, ref_pose, rng, 0.01), ref_pose)
+    local = LocalMap.build(map_pts)
+    points = scan_points(office, true_pose, rng, 0.01)
+    guess = true_pose + [0.35, -0.35, math.radians(20.0)]
     cfg = ScanMatchConfig()
-    poses = [np.array([6.0, 5.0, 0.0]), np.array([6.5, 5.1, 0.4])]
-    m = ScanMatcher(cfg)
+    found = search(points, map_pts, guess, Window(0.6, 0.45), cfg.search_resolution, cfg.search_sigma)
+    reg = register(points, local, found.pose, cfg)
+    d, a = pose_error(reg.pose, true_pose)
+    assert d < 0.02 and a < math.radians(0.3)
+
+
+def test_branch_and_bound_equals_the_exhaustive_search(office):
+    rng = np.random.default_rng(3)
+    map_pts = transform_points(scan_points(office, np.array([6.0, 5.0, 0.0]), rng, 0.01), [6.0, 5.0, 0.0])
+    points = scan_points(office, np.array([6.4, 5.1, 0.2]), rng, 0.01)
+    guess, window, res, sigma = np.array([6.3, 5.2, 0.1]), Window(0.35, 0.2), 0.1, 0.1
+    got = search(points, map_pts, guess, window, res, sigma)
+    # brute force: every rotation and every cell offset of the window, scored by direct lookup
+    W = int(np.ceil(window.xy / res))
+    best = -1.0
+    for dth in angle_steps(points, window.theta, res):
+        th = guess[2] + dth
+        for i in range(-W, W + 1):
+            for j in range(-W, W + 1):
+                pose = np.array([guess[0] + i * res, guess[1] + j * res, th])
+                best = max(best, _score(points, map_pts, pose, guess, window, res, sigma))
+    assert got.score == pytest.approx(best, abs=1e-12)
+    assert got.evaluated < 0.2 * len(angle_steps(points, window.theta, res)) * (2 * W + 1) ** 2
+
+
+def _score(points, map_pts, pose, guess, window, res, sigma):
+    """Mean likelihood of ``points`` at ``pose`` on the field the search builds (cells anchored at the
+    same corner), by a kd-tree distance from each cell to the nearest occupied cell."""
+    from scipy.spatial import cKDTree
+
+    thetas = guess[2] + angle_steps(points, window.theta, res)
+    c, s = np.cos(thetas), np.sin(thetas)
+    rx = c[:, None] * points[None, :, 0] - s[:, None] * points[None, :, 1] + guess[0]
+    ry = s[:, None] * points[None, :, 0] + c[:, None] * points[None, :, 1] + guess[1]
+    margin = window.xy + 3.0 * sigma + 2.0 * res
+    lo = np.array([rx.min() - margin, ry.min() - margin])
+    shape = np.ceil((np.array([rx.max() + margin, ry.max() + margin]) - lo) / res) + BLOCK
+    occupied = np.unique(np.floor((map_pts - lo) / res).astype(np.int64), axis=0)
+    occupied = occupied[((occupied >= 0) & (occupied < shape.astype(np.int64))).all(axis=1)]
+    # the point's cell: its rotated position at the guess, shifted by whole cells (as the search does)
+    th_rot = np.array([[np.cos(pose[2]), -np.sin(pose[2])], [np.sin(pose[2]), np.cos(pose[2])]])
+    placed = points @ th_rot.T + guess[:2]
+    shift = np.rint((pose[:2] - guess[:2]) / res).astype(np.int64)
+    cells = np.floor((placed - lo) / res).astype(np.int64) + shift
+    d, _ = cKDTree(occupied).query(cells)
+    pull = PULL * (((pose[2] - guess[2]) / window.theta) ** 2 + np.sum((shift * res / window.xy) ** 2))
+    return float(np.mean(np.exp(-0.5 * (d * res / sigma) ** 2))) - pull
+
+
+def test_a_wide_turn_between_sparse_scans_is_found(office):
+    """0.8 rad between two 1° scans with the odometry 10° and 0.15 m off: the window from the odometry
+    model holds the truth, the matcher finds it and the gate accepts it."""
+    rng = np.random.default_rng(4)
+    poses = [np.array([6.0, 5.0, 0.0]), np.array([6.3, 5.2, 0.8])]
+    m = matcher()
     m.step(scan_points(office, poses[0], rng, 0.01), poses[0])
-    bad_odom = poses[1] + [0.0, 0.0, math.radians(15.0)]
+    bad_odom = poses[1] + [0.15, 0.0, math.radians(10.0)]
     res = m.step(scan_points(office, poses[1], rng, 0.01), bad_odom)
     d, a = pose_error(res.pose, poses[1])
-    assert res.matched and d < 0.03 and a < math.radians(0.5)
+    assert res.searched and res.matched and d < 0.03 and a < math.radians(0.5)
 
 
-def test_corridor_keeps_the_wheel_guess_along_its_axis():
-    """Two long parallel walls, nothing else in view: ICP cannot tell motion along the corridor, the
-    prior keeps the wheel estimate there while the cross-track offset and heading are corrected."""
+def test_corridor_stays_well_posed_along_its_axis():
+    """Two long parallel walls, nothing else in view: the scans cannot tell motion along the corridor.
+    The match's covariance says so (large along the axis), the cross-track offset and heading come from
+    the scans, and the fused increment's covariance stays large along the axis. (Noisy 5-point normals
+    give ICP a spurious grip along the axis: see the closing note of issue 15.)"""
     world = make_world([polyline([(-50, -1), (50, -1)]), polyline([(-50, 1), (50, 1)])], "corridor")
     rng = np.random.default_rng(3)
     ref_pose, true_pose = np.array([0.0, 0.0, 0.0]), np.array([0.5, 0.1, 0.03])
     local = LocalMap.build(scan_points(world, ref_pose, rng, 0.005))
     guess = true_pose + [0.07, 0.08, 0.03]  # 7 cm along the axis (unobservable), 8 cm across, 1.7°
-    pose, _ = register(scan_points(world, true_pose, rng, 0.005), local, guess, ScanMatchConfig())
-    assert abs(pose[0] - guess[0]) < 0.035  # along: stays near the guess, not pulled 7 cm to truth
-    assert abs(pose[1] - true_pose[1]) < 0.01 and abs(pose[2] - true_pose[2]) < math.radians(0.3)
+    reg = register(scan_points(world, true_pose, rng, 0.005), local, guess, ScanMatchConfig())
+    assert np.sqrt(reg.cov[0, 0]) > 10 * np.sqrt(reg.cov[1, 1])  # ill-posed along, well-posed across
+    m = matcher()
+    m.step(scan_points(world, ref_pose, rng, 0.005), ref_pose)
+    res = m.step(scan_points(world, true_pose, rng, 0.005), guess)
+    assert abs(res.pose[1] - true_pose[1]) < 0.01 and abs(res.pose[2] - true_pose[2]) < math.radians(0.3)
+    assert np.all(np.linalg.eigvalsh(res.cov) > 0)  # well-posed for the filter
+    assert res.cov[0, 0] > 10 * res.cov[1, 1]  # and it knows the axis is the uncertain direction
 
 
-def test_nothing_in_common_falls_back_to_the_wheel_increment(office):
-    cfg = ScanMatchConfig()
-    m = ScanMatcher(cfg)
+def test_nothing_in_common_falls_back_to_the_odometry_increment(office):
+    m = matcher()
     p0 = np.array([6.0, 5.0, 0.0])
     m.step(scan_points(office, p0), p0)
     far = np.random.default_rng(4).uniform(40.0, 60.0, (150, 2))  # points nowhere near the map
     odom = np.array([6.3, 5.0, 0.1])
     res = m.step(far, odom)
-    assert not res.matched and res.fit < cfg.min_fit
-    np.testing.assert_allclose(res.pose, odom, atol=1e-12)  # previous refined pose = odometry here
+    assert not res.matched and res.fit < m.cfg.min_fit
+    np.testing.assert_allclose(res.pose, odom, atol=1e-12)  # previous pose = odometry here
     assert m.n_fallback == 1
 
 
-def test_refined_chain_beats_drifting_odometry_on_a_loop(office):
-    """Once around the simulator's office loop (60 m) with 3 %-scale, heading-drifting wheel odometry:
-    the refined chain stays a fraction of the odometry's error from the truth."""
-    rng = np.random.default_rng(5)
-    truth = path_poses(OFFICE_LOOP, 0.6)
+def noisy_odometry(truth, rng, scale=1.03, drift=0.01, sigma=0.02):
     odom = [truth[0]]
     for k in range(1, len(truth)):
-        inc = pose_from_matrix(np.linalg.inv(matrix_from_pose(truth[k - 1])) @ matrix_from_pose(truth[k]))
-        inc = inc * [1.03, 1.03, 1.0] + [0.0, 0.0, 0.01 + rng.normal(0, 0.02)]
-        odom.append(pose_from_matrix(matrix_from_pose(odom[-1]) @ matrix_from_pose(inc)))
-    m = ScanMatcher(ScanMatchConfig())
-    refined = [m.step(scan_points(office, p, rng, 0.01), o).pose for p, o in zip(truth, odom, strict=True)]
+        inc = relative(truth[k - 1], truth[k])
+        inc = inc * [scale, scale, 1.0] + [0.0, 0.0, drift + rng.normal(0, sigma)]
+        odom.append(compose(odom[-1], inc))
+    return np.array(odom)
+
+
+def test_fused_chain_beats_drifting_odometry_on_a_loop(office):
+    """Once around the simulator's office loop (60 m) with 3 %-scale, heading-drifting wheel odometry:
+    the fused chain stays a fraction of the odometry's error from the truth, and the learnt odometer
+    scale error has the sign and size of the one put in."""
+    rng = np.random.default_rng(5)
+    truth = path_poses(OFFICE_LOOP, 0.6)
+    odom = noisy_odometry(truth, rng)
+    m = matcher()
+    fused = [m.step(scan_points(office, p, rng, 0.01), o).pose for p, o in zip(truth, odom, strict=True)]
     err_odom = max(pose_error(o, p)[0] for o, p in zip(odom, truth, strict=True))
-    err_icp = max(pose_error(r, p)[0] for r, p in zip(refined, truth, strict=True))
+    err_fused = max(pose_error(r, p)[0] for r, p in zip(fused, truth, strict=True))
     assert err_odom > 1.0
-    assert err_icp < 0.1 * err_odom
+    assert err_fused < 0.1 * err_odom
     assert m.n_matched == len(truth) - 1 and m.n_fallback == 0
+    assert m.fusion.c[0] == pytest.approx(0.03, abs=0.01)  # odometer reads 3 % long
+
+
+def test_exact_odometry_stays_exact(office):
+    """Odometry that is the truth, scans with 1 cm noise: the fused chain must stay on it (the learnt
+    odometry noise scale drops to its floor) — well under what the scans alone give. ATE (aligned): the
+    few keyframes before the scale is learnt leave a small rigid offset on the rest of the chain."""
+    rng = np.random.default_rng(8)
+    truth = path_poses(OFFICE_LOOP, 0.6)
+    m = matcher()
+    fused = np.array([m.step(scan_points(office, p, rng, 0.01), p).pose for p in truth])
+    alone = matcher(overrides=["scan_match.adapt_min=1.0", "scan_match.adapt_max=1.0", "ekf.alpha1=100",
+                               "ekf.alpha2=100", "ekf.alpha3=100", "ekf.alpha4=100"])  # fmt: skip
+    matched = np.array([alone.step(scan_points(office, p, rng, 0.01), p).pose for p in truth])
+    t = np.arange(len(truth), dtype=float)
+    err, err_alone = ate(t, fused, t, truth).rmse, ate(t, matched, t, truth).rmse
+    assert m.odom_scale < 1e-3
+    assert err < 0.01 and err < 0.2 * err_alone
 
 
 def test_voxel_thin_matches_a_brute_force_cell_count():
@@ -115,7 +213,7 @@ def test_voxel_thin_matches_a_brute_force_cell_count():
 
 @pytest.mark.parametrize(
     "key,value",
-    [("window", "0"), ("min_fit", "1.5"), ("robust_scale", "0"), ("alpha1", "-1"), ("voxl", "0.1")],
+    [("window", "0"), ("min_fit", "1.5"), ("robust_scale", "0"), ("gate", "-1"), ("voxl", "0.1")],
 )
 def test_bad_scan_match_keys_are_config_errors(key, value):
     with pytest.raises(ConfigError, match=f"scan_match.{key}"):

@@ -13,9 +13,7 @@ from cornerslam_cli.report.tables import MAP_COLUMNS, TIMING_COLUMNS, TRAJECTORY
 from cornerslam_cli.slam import Slam
 from cornerslam_cli.types import Segments
 
-CFG = load_config(
-    None, ["scan_match.alpha1=0.11", "input.odom_jump.sigma_xy=0.7", "input.odom_jump.sigma_theta=0.3"]
-)
+CFG = load_config(None, ["input.odom_jump.sigma_xy=0.7", "input.odom_jump.sigma_theta=0.3"])
 NO_SEGMENTS = Segments(*(np.zeros((0,) + s) for s in ((), (), (2, 2), (2,), (2,), (), (), ())))
 
 
@@ -31,15 +29,18 @@ def test_the_first_frame_has_nothing_to_predict_then_odometry_with_the_filter_no
     slam.step(frame([1.0, 2.0, 0.1]))
     m = slam.motion(frame([1.5, 2.0, 0.1]))
     assert m.prev == pytest.approx([1.0, 2.0, 0.1]) and m.cur == pytest.approx([1.5, 2.0, 0.1])
-    assert (m.alphas, m.floor, m.inflate) == (None, None, None)  # the filter's own ekf.alpha*
+    assert (m.cov, m.inflate) == (None, None)  # the filter's own ekf.alpha*
 
 
-def test_a_scan_matched_increment_brings_the_matcher_noise_and_no_inflation_across_a_jump():
+def test_a_fused_increment_brings_its_covariance_and_no_inflation_across_a_jump():
     slam = Slam.from_config(CFG, (0.0, 0.0, 0.0))
     slam.step(frame([0.0, 0.0, 0.0], motion=[0.0, 0.0, 0.0], scan_matched=True))
-    m = slam.motion(frame([9.0, 0.0, 0.0], motion=[0.2, 0.0, 0.0], scan_matched=True, odom_jump=True))
-    assert m.cur == pytest.approx([0.2, 0.0, 0.0])  # the scan-matched chain, not odometry
-    assert m.alphas == CFG.scan_match.alphas and m.alphas[0] == 0.11 and m.floor == CFG.scan_match.floor
+    cov = np.diag([1e-4, 4e-4, 1e-5])
+    m = slam.motion(
+        frame([9.0, 0.0, 0.0], motion=[0.2, 0.0, 0.0], motion_cov=cov, scan_matched=True, odom_jump=True)
+    )
+    assert m.cur == pytest.approx([0.2, 0.0, 0.0])  # the fused chain, not odometry
+    assert m.cov is cov
     assert m.inflate is None  # the scans told the motion across the jump
 
 
@@ -48,7 +49,7 @@ def test_an_odometry_jump_without_scan_matching_inflates_the_robot_covariance():
     slam.step(frame([0.0, 0.0, 0.0]))
     before = slam.ekf.P[:3, :3].copy()
     m = slam.motion(frame([0.0, 0.0, 0.0], odom_jump=True))
-    assert m.inflate == (0.7, 0.3) and m.alphas is None
+    assert m.inflate == (0.7, 0.3) and m.cov is None
     slam.step(frame([0.0, 0.0, 0.0], odom_jump=True))  # no motion: the prediction adds only its floor
     added = np.diag(slam.ekf.P[:3, :3] - before)
     assert added == pytest.approx([0.49, 0.49, 0.09], abs=0.01)

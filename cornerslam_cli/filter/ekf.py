@@ -119,20 +119,23 @@ class Ekf:
         self,
         odom_prev: np.ndarray,
         odom_cur: np.ndarray,
-        alphas: tuple[float, float, float, float] | None = None,
-        floor: tuple[float, float] | None = None,
+        cov: np.ndarray | None = None,
     ) -> np.ndarray:
         """Move the robot by the odometry between two keyframe poses (x, y, θ); O(N).
 
-        ``alphas``, ``floor`` = (σ_xy, σ_θ): the motion noise of this increment (default ``ekf.alpha1..4``
-        and ``ekf.min_sigma_xy/theta``; the scan-matched increments of motion/icp.py bring their own).
-        Returns the increment (rot1, trans, rot2) applied.
+        ``cov``: the covariance (3, 3) of this increment in the frame of ``odom_prev`` (the fused
+        increments of motion/ bring their own); None: the odometry noise model ``ekf.alpha1..4`` with
+        the floor ``ekf.min_sigma_xy/theta``. Returns the increment (rot1, trans, rot2) applied.
         """
         cfg = self.cfg
         u = odometry_increment(odom_prev, odom_cur, cfg.pure_rotation_eps, cfg.reverse_motion)
         pose_new, G, _ = motion_model(self._mu_buf[:3], u)
-        sigma_xy, sigma_theta = floor or (cfg.min_sigma_xy, cfg.min_sigma_theta)
-        R = motion_noise(u, self._mu_buf[2], alphas or cfg.alphas, sigma_xy, sigma_theta)
+        if cov is None:
+            R = motion_noise(u, self._mu_buf[2], cfg.alphas, cfg.min_sigma_xy, cfg.min_sigma_theta)
+        else:  # rotated from the robot's frame into the map's
+            c, s = np.cos(self._mu_buf[2]), np.sin(self._mu_buf[2])
+            Rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+            R = Rot @ cov @ Rot.T
         P, d = self._P_buf, self._dim
         P_rr = G @ P[:3, :3] @ G.T + R  # eq 22, robot block
         P[:3, :3] = 0.5 * (P_rr + P_rr.T)

@@ -96,6 +96,20 @@ def motion_noise(
     return 0.5 * (R + R.T)
 
 
+def increment_noise(
+    inc: np.ndarray,
+    alphas: tuple[float, float, float, float],
+    min_sigma_xy: float,
+    min_sigma_theta: float,
+    eps_trans: float = 1e-4,
+    reverse: bool = True,
+) -> np.ndarray:
+    """Covariance (3, 3) of an odometry increment ``inc`` = (dx, dy, dθ) given in the frame of the
+    pose it starts from: :func:`motion_noise` of its (rot1, trans, rot2) at heading 0."""
+    u = odometry_increment(np.zeros(3), inc, eps_trans, reverse)
+    return motion_noise(u, 0.0, alphas, min_sigma_xy, min_sigma_theta)
+
+
 def observe(pose: np.ndarray, landmarks: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Predicted measurements of landmarks (n, 3) from ``pose`` and their exact Jacobians (NOTES §4).
 

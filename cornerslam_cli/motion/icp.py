@@ -23,12 +23,15 @@ point per voxel. Per scan:
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..geometry import matrix_from_pose, pose_from_matrix, transform_points, wrap_angle
+from ..geometry import compose, matrix_from_pose, pose_from_matrix, relative, transform_points, wrap_angle
+from .correlative import Window, search
+from .fusion import OdometryFusion
 from .params import ScanMatchConfig
 
 NORMAL_NEIGHBOURS = 5
@@ -37,7 +40,10 @@ NORMAL_FLATNESS = 0.2  # smaller / larger eigenvalue of the neighbourhood scatte
 NORMAL_TIE = 1e-9  # relative: a neighbour this close to the 5th's distance is tied with it and joins
 NORMAL_TIED_EXTRA = 2  # neighbours queried beyond the 5th to find those tied with it
 SHRINK = 0.5
-CONVERGED = 1e-5  # largest step component (m or rad) that ends the iterations
+MAX_RHO = 0.98  # residual correlation used at most: an inflation of 99
+FIT_EVIDENCE = 0.1  # a match fitting this much better than the odometry's pose outvotes it past the gate
+FIT_MARGIN = 0.02  # a fit better by more than this replaces the match from the odometry's guess
+CONVERGED = 1e-4  # largest step component (m or rad) that ends the iterations
 
 
 def voxel_thin(points: np.ndarray, size: float) -> np.ndarray:
@@ -104,98 +110,224 @@ class LocalMap:
 
 
 @dataclass(frozen=True)
-class MatchResult:
+class Registration:
     pose: np.ndarray  # refined pose of the scan in the motion frame
-    fit: float  # share of scan points within inlier_distance of the map after the match
-    matched: bool  # False: the fit stayed below min_fit and the wheel guess was kept
+    fit: float  # share of scan points within inlier_distance of the map
+    cov: np.ndarray  # (3, 3) covariance of ``pose`` (motion frame; rotation about the robot)
 
 
 def register(
-    points: np.ndarray, local: LocalMap, guess: np.ndarray, cfg: ScanMatchConfig
-) -> tuple[np.ndarray, float]:
-    """ICP of ``points`` (base frame) against ``local`` from ``guess``; returns (pose, fit)."""
-    M = matrix_from_pose(guess)
+    points: np.ndarray,
+    local: LocalMap,
+    start: np.ndarray,
+    cfg: ScanMatchConfig,
+    prior: np.ndarray | None = None,
+) -> Registration:
+    """ICP of ``points`` (base frame) against ``local`` from ``start``, with a weak prior towards
+    ``prior`` (default ``start``): the odometry's guess, so an ill-posed direction stays with it."""
+    guess = start if prior is None else prior
+    M = matrix_from_pose(start)
     prior_info = np.array([cfg.prior_sigma_xy**-2, cfg.prior_sigma_xy**-2, cfg.prior_sigma_theta**-2])
-    prior_info *= cfg.robust_scale**2  # the data term below is in units of robust_scale²
+    prior_info_scaled = prior_info * cfg.robust_scale**2  # the data term below is in units of robust_scale²
     dmax = cfg.max_distance
     for _ in range(cfg.max_iterations):
-        q = points @ M[:2, :2].T + M[:2, 2]
-        _, idx = local.tree.query(q, distance_upper_bound=dmax)
-        n = local.padded_normals[idx]  # zero rows: no neighbour in range, or a neighbour with no normal
-        if np.count_nonzero(np.abs(n).sum(axis=1)) < 3:  # fewer than 3 usable correspondences
+        terms = _point_to_line(points, local, M, dmax, cfg.robust_scale)
+        if terms is None:  # fewer than 3 usable correspondences
             break
-        r = np.einsum("ij,ij->i", q - local.padded_points[idx], n)
-        w = 1.0 / (1.0 + (r / cfg.robust_scale) ** 2)  # Cauchy
-        # ∂r/∂(x, y, θ) of the pose itself (turning about the robot, not the map origin: far from the
-        # origin that keeps rotation and translation decoupled): (n_x, n_y, (q − t) × n)
-        rel = q - M[:2, 2]
-        J = np.column_stack((n[:, 0], n[:, 1], rel[:, 0] * n[:, 1] - rel[:, 1] * n[:, 0]))
+        J, w, r = terms
         off = pose_from_matrix(M) - guess
         off[2] = wrap_angle(off[2])
         Jw = J * w[:, None]
-        H = Jw.T @ J + np.diag(prior_info)
-        g = Jw.T @ r + prior_info * off
+        H = Jw.T @ J + np.diag(prior_info_scaled)
+        g = Jw.T @ r + prior_info_scaled * off
         step = -np.linalg.solve(H, g)
         M = matrix_from_pose(pose_from_matrix(M) + step)
         dmax = max(cfg.min_distance, dmax * SHRINK)
         if np.abs(step).max() < CONVERGED and dmax <= cfg.min_distance:
             break
-    pose = pose_from_matrix(M)
-    dist, _ = local.tree.query(transform_points(points, pose), distance_upper_bound=cfg.inlier_distance)
-    return pose, float(np.mean(dist < cfg.inlier_distance))
+    q = points @ M[:2, :2].T + M[:2, 2]
+    dist, idx = local.tree.query(q, distance_upper_bound=cfg.inlier_distance)
+    fit = float(np.mean(dist < cfg.inlier_distance))
+    terms = _line_terms(q, idx, local, M, cfg.robust_scale)
+    return Registration(pose_from_matrix(M), fit, _covariance(terms, prior_info, cfg))
+
+
+def _point_to_line(points: np.ndarray, local: LocalMap, M: np.ndarray, dmax: float, scale: float):
+    """Jacobian J (n, 3), Cauchy weights w and point-to-line residuals r of ``points`` placed by ``M``
+    against their nearest map point within ``dmax``; None with fewer than 3 usable correspondences."""
+    q = points @ M[:2, :2].T + M[:2, 2]
+    _, idx = local.tree.query(q, distance_upper_bound=dmax)
+    return _line_terms(q, idx, local, M, scale)
+
+
+def _line_terms(q: np.ndarray, idx: np.ndarray, local: LocalMap, M: np.ndarray, scale: float):
+    """:func:`_point_to_line` of points ``q`` already placed, given their nearest map points ``idx``."""
+    n = local.padded_normals[idx]  # zero rows: no neighbour in range, or a neighbour with no normal
+    if np.count_nonzero(np.abs(n).sum(axis=1)) < 3:
+        return None
+    r = np.einsum("ij,ij->i", q - local.padded_points[idx], n)
+    w = 1.0 / (1.0 + (r / scale) ** 2)  # Cauchy
+    # ∂r/∂(x, y, θ) of the pose itself (turning about the robot, not the map origin: far from the
+    # origin that keeps rotation and translation decoupled): (n_x, n_y, (q − t) × n)
+    rel = q - M[:2, 2]
+    J = np.column_stack((n[:, 0], n[:, 1], rel[:, 0] * n[:, 1] - rel[:, 1] * n[:, 0]))
+    return J, w, r
+
+
+def _covariance(terms, prior_info: np.ndarray, cfg) -> np.ndarray:
+    """Covariance of the registered pose: (JᵀWJ / (σ̂²·c) + prior)⁻¹ at the solution, from the
+    point-to-line ``terms`` (J, w, r) of the correspondences within ``inlier_distance``.
+
+    σ̂² is the weighted mean squared point-to-line residual (the scan's own noise, not a configured
+    one). c corrects for residuals that are not independent: neighbouring points of a scan are
+    measured against the same stretch of map wall, so their residuals move together; with ρ the lag-1
+    correlation of the residuals in beam order (an AR(1) model), n points carry the information of
+    n·(1 − ρ)/(1 + ρ) independent ones, so c = (1 + ρ)/(1 − ρ) (at least ``cov_inflation``).
+    """
+    if terms is None:  # fewer than 3 usable correspondences within inlier_distance
+        return np.diag(1.0 / prior_info)
+    J, w, r = terms
+    used = np.abs(J[:, :2]).sum(axis=1) > 0
+    dof = max(float(w[used].sum()) - 3.0, 1.0)
+    sigma2 = max(float(np.sum(w * r * r)) / dof, cfg.min_residual_sigma**2)
+    c = max(cfg.cov_inflation, _ar1_inflation(r[used] * np.sqrt(w[used])))
+    H = (J * w[:, None]).T @ J / (sigma2 * c) + np.diag(prior_info)
+    cov = np.linalg.inv(H)
+    return 0.5 * (cov + cov.T)
+
+
+def _ar1_inflation(r: np.ndarray) -> float:
+    """(1 + ρ)/(1 − ρ) for the lag-1 autocorrelation ρ ∈ [0, MAX_RHO] of the sequence ``r``."""
+    if len(r) < 4:
+        return 1.0
+    r = r - r.mean()
+    den = float(r @ r)
+    if den <= 0.0:
+        return 1.0
+    rho = min(max(float(r[1:] @ r[:-1]) / den, 0.0), MAX_RHO)
+    return (1.0 + rho) / (1.0 - rho)
+
+
+@dataclass(frozen=True)
+class MatchResult:
+    pose: np.ndarray  # fused pose of the scan in the motion frame (the filter's motion input)
+    fit: float  # share of scan points within inlier_distance of the map after the match
+    matched: bool  # the scan match was fused; False: the odometry increment alone (no map, low fit, gated)
+    cov: np.ndarray  # (3, 3) covariance of the increment into this scan, previous scan's frame
+    searched: bool = False  # the correlative search ran (the odometry window exceeded ICP's basin)
 
 
 class ScanMatcher:
-    """Refines a stream of (points, wheel odometry pose) into a motion-frame pose chain."""
+    """Fuses a stream of (points, wheel odometry pose) with scan matches into a motion-frame pose chain."""
 
-    def __init__(self, cfg: ScanMatchConfig):
+    def __init__(self, cfg: ScanMatchConfig, odometry_noise: Callable[[np.ndarray], np.ndarray]):
         self.cfg = cfg
+        self.odometry_noise = odometry_noise  # covariance of an odometry increment (the filter's model)
+        self.fusion = OdometryFusion(
+            cfg.gate, cfg.adapt_window, cfg.adapt_min_samples, cfg.adapt_min, cfg.adapt_max, cfg.adapt_every
+        )
         self.scans: deque[np.ndarray] = deque(maxlen=cfg.window)  # motion-frame points per map scan
         self.local: LocalMap | None = None
-        self.pose: np.ndarray | None = None  # refined pose of the previous scan
+        self.pose: np.ndarray | None = None  # fused pose of the previous scan
         self.odom: np.ndarray | None = None  # wheel pose of the previous scan
         self.last_map_pose: np.ndarray | None = None
         self.n_matched = 0
-        self.n_retried = 0
+        self.n_searched = 0
         self.n_fallback = 0
 
+    @property
+    def n_rejected(self) -> int:
+        return self.fusion.n_rejected
+
+    @property
+    def odom_scale(self) -> float:
+        """The learnt scale of the odometry's noise model (motion/fusion.py)."""
+        return self.fusion.k
+
+    def warm_up(self, scans: list[tuple[np.ndarray, np.ndarray]]) -> None:
+        """Learn the noise scales and bias (motion/fusion.py) on the first keyframes before matching
+        them for real: a throw-away pass over ``scans`` (points, odometry pose), whose learnt state
+        (and samples) this matcher starts from — so the first matches are judged like later ones."""
+        probe = ScanMatcher(self.cfg, self.odometry_noise)
+        for points, odom in scans:
+            probe.step(points, odom)
+        if len(probe.fusion.samples) >= self.cfg.adapt_min_samples:
+            self.fusion.k, self.fusion.s, self.fusion.c = probe.fusion.k, probe.fusion.s, probe.fusion.c
+            self.fusion.samples = probe.fusion.samples
+
     def step(self, points: np.ndarray, odom: np.ndarray) -> MatchResult:
-        """Refined pose of the scan whose base-frame ``points`` were taken at wheel pose ``odom``.
+        """Fused pose of the scan whose base-frame ``points`` were taken at wheel pose ``odom``.
 
         Across an odometry jump (already re-anchored by logs/sync.py) the wheel increment is only the
-        first guess and the local map is kept: ICP usually recovers the motion.
+        first guess and the local map is kept: the match usually recovers the motion.
         """
         odom = np.asarray(odom, dtype=float)
         if self.pose is None:
-            result = MatchResult(odom.copy(), 1.0, True)
+            result = MatchResult(odom.copy(), 1.0, True, np.zeros((3, 3)))
         else:
-            # the wheel increment applied to the previous refined pose: (pose ∘ odom_prev⁻¹) ∘ odom
-            wheel2motion = matrix_from_pose(self.pose) @ np.linalg.inv(matrix_from_pose(self.odom))
-            guess = pose_from_matrix(wheel2motion @ matrix_from_pose(odom))
-            result = self._match(points, guess)
+            result = self._match(points, relative(self.odom, odom))
         self.pose, self.odom = result.pose, odom
         self._grow_map(points, result.pose)
         return result
 
-    def _match(self, points: np.ndarray, guess: np.ndarray) -> MatchResult:
+    def _match(self, points: np.ndarray, o: np.ndarray) -> MatchResult:
+        """Match, fuse with the odometry increment ``o`` (previous scan's frame), or fall back to it."""
         cfg = self.cfg
+        cov_o = self.odometry_noise(o)
+        guess = compose(self.pose, o)
         points = points[voxel_thin(points, cfg.scan_voxel)]
         if self.local is None or len(points) < 3:
-            self.n_fallback += 1
-            return MatchResult(guess, 0.0, False)
-        pose, fit = register(points, self.local, guess, cfg)
-        if fit < cfg.retry_fit and cfg.retry_angle > 0:
-            self.n_retried += 1
-            k = int(np.floor(cfg.retry_angle / cfg.retry_step + 1e-9))
-            for off in cfg.retry_step * np.concatenate((-np.arange(1, k + 1), np.arange(1, k + 1))):
-                p2, f2 = register(points, self.local, guess + np.array([0.0, 0.0, off]), cfg)
-                if f2 > fit:
-                    pose, fit = p2, f2
-        if fit < cfg.min_fit:
-            self.n_fallback += 1
-            return MatchResult(guess, fit, False)
-        self.n_matched += 1
-        return MatchResult(pose, fit, True)
+            return self._fallback(o, cov_o, 0.0)
+        reg, searched = register(points, self.local, guess, cfg), False
+        window = self._window(cov_o)
+        near = points[np.einsum("ij,ij->i", points, points) <= cfg.search_range**2]
+        if (window.xy > cfg.search_min_xy or window.theta > cfg.search_min_theta) and len(near) >= 3:
+            # the odometry may be outside ICP's basin: ICP also from the best pose of the whole window,
+            # kept when it fits clearly better (near-equal fits: the one from the odometry, e.g. along
+            # a corridor where the search's cells are as good as each other)
+            found = search(near, self.local.points, guess, window, cfg.search_resolution, cfg.search_sigma)
+            other = register(points, self.local, found.pose, cfg, prior=guess)
+            if other.fit > reg.fit + FIT_MARGIN:
+                reg = other
+            searched = True
+            self.n_searched += 1
+        if reg.fit < cfg.min_fit:
+            return self._fallback(o, cov_o, reg.fit, searched)
+        m = relative(self.pose, reg.pose)
+        R = _rotation3(-self.pose[2])  # motion frame → previous scan's frame
+        fused = self.fusion.fuse(
+            o, cov_o, m, R @ reg.cov @ R.T, lambda: reg.fit >= self._fit_at(points, guess) + FIT_EVIDENCE
+        )
+        self.n_matched += fused.accepted
+        # the match's error its fit cannot see, passed on with the weight the match got (none when the
+        # odometry is exact and the fusion hardly weighs the match)
+        floor = np.diag([cfg.sigma_xy**2, cfg.sigma_xy**2, cfg.sigma_theta**2])
+        cov = fused.cov + fused.gain @ floor @ fused.gain.T
+        return MatchResult(compose(self.pose, fused.inc), reg.fit, fused.accepted, cov, searched)
+
+    def _fit_at(self, points: np.ndarray, pose: np.ndarray) -> float:
+        """Share of ``points`` within ``inlier_distance`` of the local map at ``pose``."""
+        dist, _ = self.local.tree.query(
+            transform_points(points, pose), distance_upper_bound=self.cfg.inlier_distance
+        )
+        return float(np.mean(dist < self.cfg.inlier_distance))
+
+    def _fallback(self, o: np.ndarray, cov_o: np.ndarray, fit: float, searched: bool = False) -> MatchResult:
+        self.n_fallback += 1
+        return MatchResult(
+            compose(self.pose, self.fusion.corrected(o)), fit, False, self.fusion.k * cov_o, searched
+        )
+
+    def _window(self, cov_o: np.ndarray) -> Window:
+        """Search half-widths: ``search_sigmas`` standard deviations of the odometry model (k = 1: the
+        window does not shrink with the learnt scale, so a slip on good odometry is still found),
+        capped at ``search_max_*``."""
+        cfg = self.cfg
+        sx = np.sqrt(max(cov_o[0, 0], cov_o[1, 1]))
+        st = np.sqrt(cov_o[2, 2])
+        return Window(
+            min(cfg.search_sigmas * sx, cfg.search_max_xy), min(cfg.search_sigmas * st, cfg.search_max_theta)
+        )
 
     def _grow_map(self, points: np.ndarray, pose: np.ndarray) -> None:
         """Add the scan to the local map if the robot moved enough since the last one that joined; the
@@ -214,3 +346,9 @@ class ScanMatcher:
         self.scans.append(placed[voxel_thin(placed, cfg.voxel)])  # thinned alone first: a smaller union
         pts = np.concatenate(self.scans)
         self.local = LocalMap.build(pts[voxel_thin(pts, cfg.voxel)])
+
+
+def _rotation3(theta: float) -> np.ndarray:
+    """blockdiag(R(θ), 1): moves a pose covariance (x, y, θ) into a frame turned by θ."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])

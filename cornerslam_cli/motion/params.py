@@ -4,20 +4,33 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 from ..ranges import check_ranges, num
-
-MAX_RETRIES = 100  # headings tried on each side of the wheel guess (retry_angle / retry_step)
 
 
 @dataclass(frozen=True)
 class ScanMatchConfig:
-    """Point-to-line ICP of each keyframe against a local map of the previous ones (motion/icp.py).
+    """Scan matching fused with the odometry (motion/icp.py, correlative.py, fusion.py).
 
-    The refined pose chain replaces the wheel odometry as the filter's motion input; its increments get
-    the motion noise ``alpha1..4`` below (same model as ``ekf.alpha*``, Thrun §5.4). A match whose fit
-    stays below ``min_fit`` falls back to the wheel increment with the ``ekf.alpha*`` noise.
+    Each keyframe is matched against a local map of the previous ones — a correlative search over a
+    window sized from the odometry's noise model (``ekf.alpha*``) when that window is wider than ICP's
+    basin, then point-to-line ICP — and the match is fused with the odometry increment by their
+    covariances; the fused pose chain is the filter's motion input. A match whose fit stays below
+    ``min_fit``, or which disagrees with the odometry beyond ``gate``, leaves the odometry increment alone.
     """
+
+    # keys of earlier versions, accepted with a warning and ignored (config.py)
+    RETIRED: ClassVar[dict[str, str]] = {
+        **dict.fromkeys(
+            ("retry_fit", "retry_angle", "retry_step"),
+            "the correlative search over the odometry's uncertainty window replaced the heading retries",
+        ),
+        **dict.fromkeys(
+            ("alpha1", "alpha2", "alpha3", "alpha4"),
+            "each match now brings its own covariance, fused with the odometry's (ekf.alpha*)",
+        ),
+    }
 
     enabled: bool = True
     window: int = num(10, ge=1, le=1000)  # scans kept in the local map
@@ -35,39 +48,57 @@ class ScanMatchConfig:
     robust_scale: float = num(0.05, ge=1e-6, le=1000.0)
     # m: a point within this of the map counts for the fit
     inlier_distance: float = num(0.1, gt=0.0, le=1000.0)
-    # fit below this: retry from headings ±retry_angle around the wheel guess
-    retry_fit: float = num(0.65, ge=0.0, le=1.0)
-    retry_angle: float = num(0.35, ge=0.0, le=math.pi)  # rad
-    retry_step: float = num(0.0873, gt=0.0, le=math.pi)  # rad between the retried headings
-    # fit below this after retries: use the wheel odometry increment
+    # fit below this: use the odometry increment alone
     min_fit: float = num(0.3, ge=0.0, le=1.0)
-    # m: weak pull towards the wheel guess (fixes corridor degeneracy)
+    # m: weak pull of ICP towards its start (keeps a featureless corridor well-posed along its axis)
     prior_sigma_xy: float = num(0.5, ge=1e-6, le=1000.0)
     prior_sigma_theta: float = num(0.5, ge=1e-6, le=2 * math.pi)  # rad
-    # motion noise of a matched increment: R = V diag(α-model) Vᵀ + diag(σ_xy², σ_xy², σ_θ²), fitted on
-    # Intel against the RBPF increments (least squares on the squared errors, which include the RBPF's
-    # own): heading var ≈ 2.8e-5·Δθ² + 1.2e-5·d² + 7.6e-5, position var per axis ≈ 2e-4·(d² + Δθ²) +
-    # 4e-4. Inflating the heading terms (α1 = 2e-4 was tried) lets close corners turn the filter away
-    # from the matcher's heading during spins in place (docs/tuning.md)
-    alpha1: float = num(0.00003, ge=0.0, le=100.0)  # rot → rot
-    alpha2: float = num(0.000012, ge=0.0, le=100.0)  # trans → rot
-    alpha3: float = num(0.0002, ge=0.0, le=100.0)  # trans → trans
-    alpha4: float = num(0.0001, ge=0.0, le=100.0)  # rot → trans
-    sigma_xy: float = num(0.01, gt=0.0, le=100.0)  # m per increment
-    sigma_theta: float = num(0.005, gt=0.0, le=math.pi)  # rad per increment
+    # --- match covariance: (JᵀWJ / (σ̂²·cov_inflation) + prior)⁻¹, σ̂ the residuals' own spread
+    # at least this inflation of the fit covariance: 5-point map normals have errors of their own that the
+    # residuals do not show (1.5: NEES consistent in the ray-cast office, tests/test_fusion.py; real logs
+    # learn their own scale on top, motion/fusion.py)
+    cov_inflation: float = num(1.5, ge=1.0, le=1e6)
+    min_residual_sigma: float = num(0.005, gt=0.0, le=10.0)  # m: floor of σ̂ (a perfect fit is not exact)
+    # --- correlative search (Olson 2009) over ±search_sigmas σ of the odometry model, when wider than
+    # ICP's basin (search_min_*), at most search_max_*
+    search_sigmas: float = num(3.0, gt=0.0, le=100.0)
+    search_min_xy: float = num(0.1, ge=0.0, le=100.0)  # m
+    search_min_theta: float = num(0.05, ge=0.0, le=math.pi)  # rad
+    search_max_xy: float = num(1.0, gt=0.0, le=100.0)  # m
+    search_max_theta: float = num(0.6, gt=0.0, le=math.pi)  # rad
+    search_resolution: float = num(0.1, ge=0.01, le=10.0)  # m: grid cell of the likelihood field
+    search_sigma: float = num(0.1, gt=0.0, le=10.0)  # m: its blur exp(−d²/2σ²)
+    # m: only scan points this close to the robot are searched with (the grid's area, so its cost, grows
+    # with the square of it); ICP then refines with all of them
+    search_range: float = num(20.0, gt=0.0, le=1000.0)
+    # --- fusion with the odometry (motion/fusion.py)
+    # χ²₃ of a match's disagreement with the odometry beyond which it is rejected: 30.7 = a 10⁻⁶ tail,
+    # "far beyond" — real odometry errors are heavy-tailed (17° in one 30° turn on Intel)
+    gate: float = num(30.7, gt=0.0, le=1e9)
+    adapt_window: int = num(
+        100, ge=1, le=100000
+    )  # keyframes whose disagreements set the noise scales and bias
+    # keyframes matched once to learn the scales before the run (0 = off: learnt as the run goes). Off by
+    # default: over the whole panel (docs/results/frontend_panel.md) it did not pay — the first matches
+    # judged with learnt scales changed which marginal ones were kept, for better or worse per log
+    warmup: int = num(0, ge=0, le=10000)
+    adapt_every: int = num(25, ge=1, le=100000)  # keyframes between two re-estimates
+    adapt_min_samples: int = num(5, ge=2, le=100000)  # ... the model itself (scale 1) until this many
+    # error of a match that its fit cannot see, added to the fused increment's covariance with the weight
+    # the match got (K·F·Kᵀ): the local map drifts with the chain it is matched against, so match errors
+    # are correlated from one keyframe to the next and the corners need room to correct them; an exact
+    # odometry, which the fusion hardly corrects, stays exact in the filter. Default 0: measured on the
+    # panel, no floor serves the exact-odometry logs best and the noisy ones no worse
+    # (docs/results/frontend_panel.md); 0.01 / 0.005 lets the corners correct the simulated lap more
+    sigma_xy: float = num(0.0, ge=0.0, le=100.0)  # m per match
+    sigma_theta: float = num(0.0, ge=0.0, le=math.pi)  # rad per match
+    adapt_min: float = num(1e-6, gt=0.0, le=1.0)  # bounds of the learnt odometry noise scale
+    adapt_max: float = num(100.0, ge=1.0, le=1e6)
 
     def __post_init__(self):
         check_ranges(self)
-        if self.retry_angle / self.retry_step > MAX_RETRIES:
+        if self.adapt_min_samples > self.adapt_window:
             raise ValueError(
-                f"retry_angle / retry_step = {self.retry_angle / self.retry_step:.3g} headings to retry on "
-                f"each side; at most {MAX_RETRIES} (raise retry_step or lower retry_angle)"
+                f"adapt_min_samples = {self.adapt_min_samples} exceeds adapt_window = {self.adapt_window} "
+                "(the window must hold the samples)"
             )
-
-    @property
-    def alphas(self) -> tuple[float, float, float, float]:
-        return (self.alpha1, self.alpha2, self.alpha3, self.alpha4)
-
-    @property
-    def floor(self) -> tuple[float, float]:
-        return (self.sigma_xy, self.sigma_theta)

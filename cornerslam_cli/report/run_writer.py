@@ -32,7 +32,7 @@ from ..errors import display_path
 from ..evaluate import ate, overlap_problem, read_relations, relation_error, rpe
 from ..geometry import compose
 from ..logs import check_regular
-from ..results import Accuracy, Counts, Hashes, RunInput, RunSummary, Timing
+from ..results import Accuracy, Counts, Hashes, OdometryModel, RunInput, RunSummary, Timing
 from .occupancy import ScanStore, build_grid, draw_grid, write_grid
 from .odom_frame import in_odom_frame, landmarks_in_odom_frame
 from .tables import (
@@ -215,6 +215,7 @@ def build_summary(
         counts=run_counts(src, totals, n_landmarks),
         timing=run_timing(totals, wall0, t_grid),
         final_pose=tuple(final_pose.tolist()),
+        odometry_model=odometry_model(src.matcher),
         warnings=tuple(src.reader.stats.warnings),
         accuracy=accuracy,
         hashes=Hashes(input=input_hash(src.path), config=config_hash(cfg), version=__version__),
@@ -239,8 +240,23 @@ def run_counts(src: Input, totals: Totals, n_landmarks: int) -> Counts:
         **src.stats.as_dict(),
         budget_hits=int(totals.budget_hits),
         scans_matched=None if matcher is None else matcher.n_matched,
-        scans_match_retried=None if matcher is None else matcher.n_retried,
+        # "retried": the correlative search over the odometry's window ran (it replaced the heading retries)
+        scans_match_retried=None if matcher is None else matcher.n_searched,
+        scans_match_rejected=None if matcher is None else matcher.n_rejected,
         scans_match_fallback=None if matcher is None else matcher.n_fallback,
+    )
+
+
+def odometry_model(matcher) -> OdometryModel | None:
+    """What the fusion learnt about the odometry and the matches (motion/fusion.py) by the run's end."""
+    if matcher is None:
+        return None
+    f = matcher.fusion
+    return OdometryModel(
+        odom_noise_scale=f.k,
+        match_noise_scale=f.s,
+        odom_scale_error=float(f.c[0]),
+        heading_drift_per_m=float(f.c[1]),
     )
 
 

@@ -1,0 +1,151 @@
+"""Correlative scan matching (Olson, ICRA 2009): the best pose of a scan over a whole search window.
+
+ICP (motion/icp.py) converges to the nearest minimum; from an odometry guess a few tenths of a radian
+off, on a sparse scan that overlaps the map by half, that is often a wrong one. The correlative
+matcher instead scores *every* pose of a window (rotations × translations on the grid's cells) and
+keeps the best, so it finds the right basin whenever the window holds it; ICP then refines from
+there. The window comes from the odometry's noise model (motion/fusion.py), so it is wide only when
+the odometry is uncertain.
+
+Score of a pose: the mean over the scan's points of a likelihood field L = exp(−d² / 2σ²), d the
+distance from the point's cell to the nearest map point (a Euclidean distance transform on a grid
+cropped to where the scan can land), minus a small pull towards the guess (``PULL``). Search as Olson's
+multi-resolution method: every rotation of the window is scored on a coarse grid whose cells hold the
+maximum of ``BLOCK`` × ``BLOCK`` fine cells — an upper bound of every fine translation inside — and
+coarse cells are expanded best first until no bound beats the best fine score found (branch and bound:
+the result equals the exhaustive fine search, which a test checks).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+BLOCK = 4  # fine cells per coarse cell side
+MAX_ANGLES = 121  # rotations scored per window at most (the step grows on wide windows)
+MIN_ANGLE_STEP = 0.002  # rad
+# score lost per (offset / window half-width)² on each axis: among poses that fit about equally (along a
+# corridor) the one nearest the odometry wins, as Karto's and Olson's searches weigh by the motion prior
+PULL = 0.01
+
+
+@dataclass(frozen=True)
+class Window:
+    """Half-widths of the search around the guess: ``xy`` metres on each axis, ``theta`` radians."""
+
+    xy: float
+    theta: float
+
+
+@dataclass(frozen=True)
+class SearchResult:
+    pose: np.ndarray  # best pose (x, y, θ) on the search grid
+    score: float  # its mean likelihood, in [0, 1], minus the pull towards the guess
+    evaluated: int  # fine poses scored (the exhaustive search scores angles × (2W + 1)²)
+
+
+def likelihood_field(
+    map_points: np.ndarray, lo: np.ndarray, shape: tuple[int, int], res: float, sigma: float
+):
+    """L (shape) over the cells whose lower-left corner is ``lo`` + res·(i, j): exp(−d²/2σ²), d the
+    distance (m) from the cell to the nearest cell holding a map point."""
+    cells = np.floor((map_points - lo) / res).astype(np.int64)
+    inside = (cells >= 0).all(axis=1) & (cells[:, 0] < shape[0]) & (cells[:, 1] < shape[1])
+    free = np.ones(shape, dtype=bool)
+    free[cells[inside, 0], cells[inside, 1]] = False
+    if free.all():
+        return np.zeros(shape)
+    d = ndimage.distance_transform_edt(free) * res
+    return np.exp(-0.5 * (d / sigma) ** 2)
+
+
+def block_max(L: np.ndarray, b: int) -> np.ndarray:
+    """U[i, j] = max of L[i : i + b, j : j + b] (cells beyond the edge count as 0)."""
+    P = np.zeros((L.shape[0] + b - 1, L.shape[1] + b - 1))
+    P[: L.shape[0], : L.shape[1]] = L
+    U = L.copy()
+    for di in range(b):
+        for dj in range(b):
+            if di or dj:
+                np.maximum(U, P[di : di + L.shape[0], dj : dj + L.shape[1]], out=U)
+    return U
+
+
+def angle_steps(points: np.ndarray, theta: float, res: float) -> np.ndarray:
+    """Rotations (offsets from the guess) of a window of half-width ``theta``: a step that moves the
+    90th-percentile-range point by one cell (Olson), coarser when that would exceed MAX_ANGLES."""
+    r = float(np.percentile(np.hypot(points[:, 0], points[:, 1]), 90)) if len(points) else 1.0
+    step = max(res / max(r, res), MIN_ANGLE_STEP, 2.0 * theta / (MAX_ANGLES - 1))
+    k = int(np.floor(theta / step + 1e-9))
+    return step * np.arange(-k, k + 1)
+
+
+def search(
+    points: np.ndarray,
+    map_points: np.ndarray,
+    guess: np.ndarray,
+    window: Window,
+    res: float,
+    sigma: float,
+) -> SearchResult:
+    """The pose in ``window`` around ``guess`` that maximises the mean likelihood of ``points`` (base
+    frame) on the field of ``map_points`` (motion frame) minus a small pull towards the guess."""
+    W = int(np.ceil(window.xy / res))
+    n_side = 2 * W + 1
+    dthetas = angle_steps(points, window.theta, res)
+    thetas = guess[2] + dthetas
+    c, s = np.cos(thetas), np.sin(thetas)
+    # (A, n, 2) scan points rotated by each candidate heading and placed at the guess's position
+    rx = c[:, None] * points[None, :, 0] - s[:, None] * points[None, :, 1] + guess[0]
+    ry = s[:, None] * points[None, :, 0] + c[:, None] * points[None, :, 1] + guess[1]
+    margin = window.xy + 3.0 * sigma + 2.0 * res
+    lo = np.array([rx.min() - margin, ry.min() - margin])
+    hi = np.array([rx.max() + margin, ry.max() + margin])
+    shape = tuple(int(v) for v in np.ceil((hi - lo) / res) + BLOCK)
+    L = likelihood_field(map_points, lo, shape, res, sigma)
+    # cell of each rotated point at the window's lowest translation offset (−W, −W)
+    px = np.floor((rx - lo[0]) / res).astype(np.int64) - W
+    py = np.floor((ry - lo[1]) / res).astype(np.int64) - W
+    n = points.shape[0]
+    nc = -(-n_side // BLOCK)  # coarse cells per side
+    U = block_max(L, BLOCK)
+    offs = BLOCK * np.arange(nc)
+    # bound[a, i, j] = Σ_points U[px + 4i, py + 4j] / n ≥ the score of every fine offset of coarse cell (i, j)
+    bound = U[
+        px[:, :, None, None] + offs[None, None, :, None], py[:, :, None, None] + offs[None, None, None, :]
+    ]
+    bound = bound.sum(axis=1) / n
+    # minus the smallest pull towards the guess inside each coarse cell: still a bound
+    near = np.clip(0, offs - W, offs + BLOCK - 1 - W)  # per axis, the cell offset closest to the guess
+    bound -= PULL * (
+        (dthetas / max(window.theta, 1e-9))[:, None, None] ** 2
+        + ((near * res / window.xy) ** 2)[None, :, None]
+        + ((near * res / window.xy) ** 2)[None, None, :]
+    )
+    order = np.argsort(-bound, axis=None, kind="stable")
+    best, best_pose, evaluated = -1.0, guess.copy(), 0
+    fine = np.arange(BLOCK)
+    for flat in order:
+        a, i, j = np.unravel_index(flat, bound.shape)
+        if bound[a, i, j] <= best:
+            break
+        ox = (BLOCK * i + fine)[BLOCK * i + fine < n_side]
+        oy = (BLOCK * j + fine)[BLOCK * j + fine < n_side]
+        sc = (
+            L[px[a][:, None, None] + ox[None, :, None], py[a][:, None, None] + oy[None, None, :]].sum(axis=0)
+            / n
+        )
+        sc = sc - PULL * (
+            (dthetas[a] / max(window.theta, 1e-9)) ** 2
+            + ((ox - W) * res / window.xy)[:, None] ** 2
+            + ((oy - W) * res / window.xy)[None, :] ** 2
+        )
+        evaluated += sc.size
+        k = int(np.argmax(sc))
+        if sc.flat[k] > best:
+            bi, bj = np.unravel_index(k, sc.shape)
+            best = float(sc.flat[k])
+            best_pose = np.array([guess[0] + (ox[bi] - W) * res, guess[1] + (oy[bj] - W) * res, thetas[a]])
+    return SearchResult(best_pose, best, evaluated)

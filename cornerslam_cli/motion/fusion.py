@@ -1,0 +1,195 @@
+"""Fusion of the odometry increment with the scan match: never worse than the odometry it is given.
+
+Each keyframe brings two estimates of the same increment (previous keyframe → this one, in the
+previous keyframe's frame): the odometry's ``o`` with the noise model of the filter (``ekf.alpha*``,
+Thrun §5.4) and the scan match's ``m`` with the covariance of its fit (motion/icp.py). The increment
+handed to the filter is their information-weighted combination (a Kalman update of the odometry by the
+match), with the combined covariance — in a featureless corridor the match is uncertain along the axis
+and the odometry keeps it; with exact odometry the match hardly moves it.
+
+**Both noise levels, and the odometry's bias, are learnt from the data.** A config cannot know whether
+this robot's odometry is a drifting wheel encoder or already-corrected poses, and a fit's residuals
+miss what makes real matches wrong (sparse beams, the map's own errors). The disagreements
+d = m − o of the last ``adapt_window`` keyframes tell them apart because the two sources scale
+differently: odometry noise grows with the motion (Σ_o from the α-model is large on long steps and
+turns), the match's does not. The model is
+
+    d ~ Student-t₄(−B(o)·c, k·Σ_o + s·Σ_m),  B(o)·c = (c_s·o_x, c_s·o_y, c_θ·|o_xy|)
+
+with k the odometry's noise scale, s ≥ 1 the match's, c_s an odometer scale error and c_θ a heading
+drift per metre (systematic errors that no noise scale absorbs: they add up along the path). k and s
+maximise the likelihood (Nelder–Mead on log k, log s; c solved by weighted least squares inside,
+re-weighted for the Student-t so that up to a few wrong matches do not move them); a drift term is
+kept only when it is at least ``BIAS_SIGMAS`` standard errors from zero; k and s are then scaled
+together so that the median normalised disagreement is χ²₃'s (a Student-t's scale is smaller than
+the covariance of the Gaussian core it is fitted to). Until ``adapt_min_samples``
+keyframes have been seen the model itself is used (k = s = 1, no bias); then they are re-estimated
+at every keyframe up to 2·``adapt_every`` samples, every ``adapt_every`` after that. Nothing here looks at a
+reference trajectory.
+
+**Gate.** Once the scales are learnt, a match whose disagreement with the corrected odometry exceeds the
+χ²₃ ``gate`` under max(k, 1)·Σ_o + s·Σ_m is not taken on trust: the odometry increment is used alone
+(counted as rejected) — unless the scans themselves clearly prefer the match (they fit the map better at
+its pose than at the odometry's): then the odometry is the outlier (a wheel slip) and the match is used
+alone. The gate keeps the configured model as a floor: real odometry errors are heavy-tailed (a wheel
+slipping in a turn), and a scale learnt on the bulk of the increments would reject the true match of
+such a turn.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import optimize
+
+from ..geometry import wrap_angle
+
+NU = 4.0  # degrees of freedom of the Student-t: heavy tails, so a few wrong matches do not set the scales
+IRLS = 4  # re-weighting passes
+CHI2_3_MEDIAN = 2.365974  # median of χ² with 3 degrees of freedom
+S_MAX = 1e4  # the match's covariance is inflated at most this much
+BIAS_SIGMAS = 3.0  # a drift term is kept when it is this many standard errors from zero
+
+
+@dataclass(frozen=True)
+class Fused:
+    inc: np.ndarray  # the increment handed to the filter (previous keyframe's frame)
+    cov: np.ndarray  # its covariance (3, 3)
+    accepted: bool  # False: the match failed the gate and the odometry increment was used alone
+    nis: float  # dᵀ(k·Σ_o + Σ_m)⁻¹d of the match against the odometry
+    gain: np.ndarray  # (3, 3) the weight the match got: inc = corrected odometry + gain·(m − it)
+
+
+def nis(d: np.ndarray, S: np.ndarray) -> np.ndarray:
+    """dᵢᵀ Sᵢ⁻¹ dᵢ for stacks d (n, 3), S (n, 3, 3)."""
+    return np.einsum("ni,ni->n", d, np.linalg.solve(S, d[..., None])[..., 0])
+
+
+class OdometryFusion:
+    """Combines odometry and scan-match increments; learns the noise scales k, s and the bias c."""
+
+    def __init__(self, gate: float, window: int, min_samples: int, k_min: float, k_max: float, every: int):
+        self.gate, self.min_samples, self.k_min, self.k_max, self.every = (
+            gate,
+            min_samples,
+            k_min,
+            k_max,
+            every,
+        )
+        self.k, self.s = 1.0, 1.0
+        self.c = np.zeros(2)
+        self.samples: deque[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = deque(maxlen=window)
+        self.n_rejected = 0
+        self.n_odometry_outliers = 0
+        self._since = 0
+
+    def corrected(self, o: np.ndarray) -> np.ndarray:
+        """The odometry increment with the learnt scale error and drift taken out."""
+        return o - bias_matrix(o) @ self.c
+
+    def fuse(
+        self,
+        o: np.ndarray,
+        cov_o: np.ndarray,
+        m: np.ndarray,
+        cov_m: np.ndarray,
+        scans_prefer_match: Callable[[], bool] | None = None,
+    ) -> Fused:
+        """The fused increment of odometry ``o`` (model covariance ``cov_o``) and match ``m``
+        (covariance ``cov_m`` from its fit), both in the previous keyframe's frame.
+
+        When the two disagree beyond the gate one of them is an outlier, and the scans decide which:
+        ``scans_prefer_match`` (the scan fits the map clearly better at the match than at the
+        odometry's pose) keeps the match alone — the odometry slipped —, otherwise the odometry is kept
+        alone and the match is counted as rejected. (A callable: asked only past the gate.)"""
+        d = m - o
+        d[2] = wrap_angle(d[2])
+        self.samples.append((d, cov_o, cov_m, bias_matrix(o)))
+        self._since += 1
+        if len(self.samples) >= self.min_samples and (
+            self._since >= self.every or len(self.samples) < 2 * self.every
+        ):
+            self._learn()
+            self._since = 0
+        oc = self.corrected(o)
+        dc = m - oc
+        dc[2] = wrap_angle(dc[2])
+        So, Sm = self.k * cov_o, self.s * cov_m
+        S = So + Sm
+        # the gate: the configured model (or the learnt scale, if larger) — a learnt k fits the bulk of
+        # the increments and would reject the true match of a rare large odometry error
+        score = float(dc @ np.linalg.solve(max(self.k, 1.0) * cov_o + Sm, dc))
+        learnt = len(self.samples) >= self.min_samples  # before that, no basis to judge a match on
+        if not np.isfinite(score) or (learnt and score > self.gate):
+            if np.isfinite(score) and scans_prefer_match is not None and scans_prefer_match():
+                self.n_odometry_outliers += 1  # the match alone: the odometry is the outlier
+                return Fused(oc + dc, 0.5 * (Sm + Sm.T), True, score, np.eye(3))
+            self.n_rejected += 1  # the odometry alone, as uncertain as the gate's model
+            return Fused(oc, self.fallback_cov(cov_o), False, score, np.zeros((3, 3)))
+        K = So @ np.linalg.inv(S)  # Kalman gain of the odometry prior updated by the match
+        inc = oc + K @ dc
+        inc[2] = wrap_angle(inc[2])
+        cov = (np.eye(3) - K) @ So
+        return Fused(inc, 0.5 * (cov + cov.T), True, score, K)
+
+    def fallback_cov(self, cov_o: np.ndarray) -> np.ndarray:
+        """Covariance of an odometry increment used without a match: the configured model at least."""
+        return max(self.k, 1.0) * cov_o
+
+    def _learn(self) -> None:
+        d = np.array([x[0] for x in self.samples])
+        So = np.array([x[1] for x in self.samples])
+        Sm = np.array([x[2] for x in self.samples])
+        B = np.array([x[3] for x in self.samples])
+        lo = np.array([np.log(self.k_min), 0.0])
+        hi = np.array([np.log(self.k_max), np.log(S_MAX)])
+
+        def cost(v: np.ndarray) -> float:
+            v = np.clip(v, lo, hi)
+            return student_fit(d, np.exp(v[0]) * So + np.exp(v[1]) * Sm, B)[0]
+
+        x0 = np.clip(np.log([self.k, self.s]), lo, hi)
+        res = optimize.minimize(
+            cost, x0, method="Nelder-Mead", options={"xatol": 0.05, "fatol": 1e-3, "maxiter": 80}
+        )
+        v = np.clip(res.x, lo, hi)
+        k, s = float(np.exp(v[0])), float(np.exp(v[1]))
+        _, c, se = student_fit(d, k * So + s * Sm, B)
+        self.c = np.where(np.abs(c) >= BIAS_SIGMAS * se, c, 0.0)
+        # a Student-t's scale is not the covariance of a Gaussian core: rescale both so the median
+        # normalised disagreement is χ²₃'s (robust to the tail the Student-t was there to ignore)
+        r = d + np.einsum("nij,j->ni", B, self.c)
+        q = nis(r, k * So + s * Sm)
+        g = float(np.median(q)) / CHI2_3_MEDIAN
+        self.k = float(np.clip(k * g, self.k_min, self.k_max))
+        self.s = float(np.clip(s * g, 1.0, S_MAX))
+
+
+def bias_matrix(o: np.ndarray) -> np.ndarray:
+    """B (3, 2) with B·(c_s, c_θ) the increment error of an odometer scale error c_s and a heading
+    drift c_θ per metre travelled."""
+    return np.array([[o[0], 0.0], [o[1], 0.0], [0.0, float(np.hypot(o[0], o[1]))]])
+
+
+def student_fit(d: np.ndarray, S: np.ndarray, B: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """Negative Student-t log likelihood of d (n, 3) with covariances S (n, 3, 3) and mean −B·c, c
+    (2,) by iteratively re-weighted least squares, and the standard errors of c."""
+    Sinv = np.linalg.inv(S)
+    w = np.ones(len(d))
+    BtS = np.einsum("nij,nik->njk", B, Sinv)  # Bᵀ S⁻¹ (n, 2, 3)
+    A0 = np.einsum("njk,nkl->njl", BtS, B)  # Bᵀ S⁻¹ B (n, 2, 2)
+    b0 = np.einsum("njk,nk->nj", BtS, d)
+    c = np.zeros(2)
+    for _ in range(IRLS):
+        A = np.einsum("n,njl->jl", w, A0) + 1e-12 * np.eye(2)
+        c = np.linalg.solve(A, -np.einsum("n,nj->j", w, b0))
+        r = d + np.einsum("nij,j->ni", B, c)
+        q = np.maximum(np.einsum("ni,nij,nj->n", r, Sinv, r), 0.0)
+        w = (NU + 3.0) / (NU + q)
+    _, logdet = np.linalg.slogdet(S)
+    nll = float(np.sum(0.5 * logdet + 0.5 * (NU + 3.0) * np.log1p(q / NU)))
+    se = np.sqrt(np.clip(np.diag(np.linalg.inv(A)), 0.0, None))
+    return nll, c, se

@@ -1,0 +1,129 @@
+"""Odometry–scan-match fusion (motion/fusion.py) and the match covariance (motion/icp.py) against
+Monte Carlo references: data drawn from known noise scales, bias and poses."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from cornerslam_cli.config import load_config
+from cornerslam_cli.frontend import odometry_noise
+from cornerslam_cli.geometry import compose, relative, transform_points
+from cornerslam_cli.motion import ScanMatchConfig
+from cornerslam_cli.motion.fusion import OdometryFusion, bias_matrix, student_fit
+from cornerslam_cli.motion.icp import LocalMap, register
+from cornerslam_cli.simworld import office_world, raycast
+
+ANGLES = np.radians(np.arange(-90.0, 90.5, 1.0))
+
+
+def fusion(**kw) -> OdometryFusion:
+    c = ScanMatchConfig(**kw)
+    return OdometryFusion(
+        c.gate, c.adapt_window, c.adapt_min_samples, c.adapt_min, c.adapt_max, c.adapt_every
+    )
+
+
+def draw(rng, k, s, c, n, noise):
+    """n increments with the α-model covariance, match covariances of a few mm, and matches drawn
+    from m = o − B(o)·c + e, e ~ N(0, k·Σ_o + s·Σ_m) (the model the fusion assumes)."""
+    for _ in range(n):
+        o = np.array([rng.uniform(0.2, 1.0), rng.normal(0, 0.05), rng.normal(0, 0.4)])
+        So = noise(o)
+        A = rng.normal(0, 1, (3, 3))
+        D = np.diag([3e-3, 3e-3, 1e-3])
+        Sm = D @ (A @ A.T + np.eye(3)) @ D
+        m = o - bias_matrix(o) @ c + rng.multivariate_normal(np.zeros(3), k * So + s * Sm)
+        yield o, So, m, Sm
+
+
+def test_learnt_noise_scales_and_bias_recover_the_ones_drawn():
+    rng = np.random.default_rng(11)
+    noise = odometry_noise(load_config(None))
+    k, s, c = 0.05, 6.0, np.array([0.02, 0.01])
+    f = fusion()
+    for o, So, m, Sm in draw(rng, k, s, c, 100, noise):
+        f.fuse(o, So, m, Sm)
+    assert f.k == pytest.approx(k, rel=0.5) and f.s == pytest.approx(s, rel=0.5)
+    d, So, Sm, B = (np.array([x[i] for x in f.samples]) for i in range(4))
+    _, _, se = student_fit(d, f.k * So + f.s * Sm, B)
+    assert np.all(np.abs(f.c - c) < 3 * se) and np.all(se < 0.01)
+
+
+def test_no_bias_is_invented_and_exact_odometry_is_learnt_as_exact():
+    rng = np.random.default_rng(12)
+    noise = odometry_noise(load_config(None))
+    f = fusion()
+    for o, So, m, Sm in draw(rng, 0.0, 4.0, np.zeros(2), 100, noise):
+        fused = f.fuse(o, So, m, Sm)
+    assert f.k < 1e-3 and f.s == pytest.approx(4.0, rel=0.5)
+    assert np.all(f.c == 0.0)  # not significant: not applied
+    assert np.abs(fused.inc - o).max() < 1e-3  # the fused increment stays on the odometry
+
+
+def test_the_fused_increment_is_the_information_weighted_mean():
+    """Before any learning (k = s = 1): the fused increment and its covariance equal the product of
+    the two Gaussians, computed in information form."""
+    f = fusion()
+    o, m = np.array([0.5, 0.02, 0.1]), np.array([0.47, 0.0, 0.12])
+    So, Sm = np.diag([4e-3, 1e-3, 2e-3]), np.diag([1e-3, 2e-3, 1e-4])
+    got = f.fuse(o, So, m, Sm)
+    info = np.linalg.inv(So) + np.linalg.inv(Sm)
+    want = np.linalg.solve(info, np.linalg.solve(So, o) + np.linalg.solve(Sm, m))
+    assert got.accepted
+    np.testing.assert_allclose(got.inc, want, atol=1e-12)
+    np.testing.assert_allclose(got.cov, np.linalg.inv(info), atol=1e-12)
+
+
+def test_a_match_far_beyond_both_covariances_is_rejected_once_the_scales_are_learnt():
+    rng = np.random.default_rng(14)
+    noise = odometry_noise(load_config(None))
+    f = fusion()
+    o = np.array([0.5, 0.0, 0.1])
+    wrong = o + [0.0, 0.0, 1.2]  # 69° off: a wrong basin
+    assert f.fuse(o, noise(o), wrong, np.diag([1e-4, 1e-4, 1e-5])).accepted  # nothing to judge it by yet
+    for oi, So, m, Sm in draw(rng, 0.05, 3.0, np.zeros(2), f.min_samples, noise):
+        assert f.fuse(oi, So, m, Sm).accepted
+    got = f.fuse(o, noise(o), wrong, np.diag([1e-4, 1e-4, 1e-5]))
+    assert not got.accepted and f.n_rejected == 1
+    np.testing.assert_array_equal(got.inc, o)
+
+
+def test_match_covariance_is_consistent_over_monte_carlo_runs():
+    """NEES of registered poses in a ray-cast office (independent range noise on both scans): its
+    mean over the runs lies in the 95 % band of χ²₃."""
+    world = office_world()
+    rng = np.random.default_rng(13)
+    cfg = ScanMatchConfig()
+    ref_pose, true_pose = np.array([6.0, 5.0, 0.1]), np.array([6.5, 5.2, 0.35])
+    runs, nees = 60, []
+    for _ in range(runs):
+        map_pts = transform_points(scan(world, ref_pose, rng), ref_pose)
+        reg = register(
+            scan(world, true_pose, rng), LocalMap.build(map_pts), true_pose + rng.normal(0, 0.03, 3), cfg
+        )
+        e = relative(true_pose, reg.pose)
+        R = np.array(
+            [
+                [np.cos(true_pose[2]), -np.sin(true_pose[2]), 0],
+                [np.sin(true_pose[2]), np.cos(true_pose[2]), 0],
+                [0, 0, 1],
+            ]
+        )
+        e = R @ e  # back into the map frame the covariance is in
+        nees.append(float(e @ np.linalg.solve(reg.cov, e)))
+    lo, hi = chi2.ppf([0.025, 0.975], 3 * runs) / runs
+    assert lo < np.mean(nees) < hi, (np.mean(nees), lo, hi)
+
+
+def scan(world, pose, rng, sigma=0.01):
+    r = raycast(world, pose, ANGLES, max_range=30.0)
+    ok = np.isfinite(r)
+    r = r[ok] + rng.normal(0.0, sigma, ok.sum())
+    return np.column_stack((r * np.cos(ANGLES[ok]), r * np.sin(ANGLES[ok])))
+
+
+def test_compose_and_relative_round_trip_used_by_the_matcher():
+    a, b = np.array([1.0, 2.0, 0.3]), np.array([-0.5, 0.7, -1.2])
+    np.testing.assert_allclose(compose(a, relative(a, b)), b, atol=1e-12)
