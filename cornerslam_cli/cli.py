@@ -107,18 +107,13 @@ class _Cli(click.Group):
         except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
             raise
         except KeyboardInterrupt as e:
-            word, code = ("terminated", 143) if isinstance(e, _Terminated) else ("interrupted", 130)
-            written = getattr(e, "output_written", None)  # the signal came after the commit
-            if written is not None:
-                text = f"after the output was complete ('{written}' is written)"
-            else:
-                text = "no output written (a previous complete output directory is kept)"
-            click.echo(f"{word}: {text}", err=True)
-            ctx.exit(code)
+            _interrupted(ctx, e)
         except BrokenPipeError:
             _stdout_gone()
             ctx.exit(141)
         except Exception as exc:
+            if (signal_exc := _interrupt_in_chain(exc)) is not None:
+                _interrupted(ctx, signal_exc)  # raised inside a compiled kernel, wrapped by numba
             if isinstance(exc, OSError) and _stdout_write_failed(exc):
                 _stdout_gone()
                 reason = os.strerror(exc.errno) if exc.errno else str(exc)
@@ -134,6 +129,30 @@ class _Cli(click.Group):
         finally:
             if main_thread and previous is not None:
                 signal.signal(signal.SIGTERM, previous)
+
+
+def _interrupted(ctx: click.Context, e: KeyboardInterrupt) -> None:
+    """Exit 130 (Ctrl-C) or 143 (SIGTERM) with one line saying whether the output was written."""
+    word, code = ("terminated", 143) if isinstance(e, _Terminated) else ("interrupted", 130)
+    written = getattr(e, "output_written", None)  # the signal came after the commit
+    if written is not None:
+        text = f"after the output was complete ('{written}' is written)"
+    else:
+        text = "no output written (a previous complete output directory is kept)"
+    click.echo(f"{word}: {text}", err=True)
+    ctx.exit(code)
+
+
+def _interrupt_in_chain(exc: BaseException) -> KeyboardInterrupt | None:
+    """The Ctrl-C / SIGTERM behind ``exc``, if any: a signal handler's exception raised while a Numba
+    kernel runs reaches us as a SystemError ("returned a result with an exception set") caused by it."""
+    seen: set[int] = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
 
 
 # ---------------------------------------------------------------------------- commands

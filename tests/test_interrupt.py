@@ -63,3 +63,32 @@ def test_interrupted_run_leaves_the_previous_output_or_none(long_log, tmp_path, 
         assert (out / "summary.json").read_text() == '{"previous": true}\n'
     else:
         assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("terminated", "code", "word"), [(True, 143, "terminated"), (False, 130, "interrupted")]
+)
+def test_a_signal_raised_inside_a_compiled_kernel_still_exits_as_the_signal(terminated, code, word):
+    """Numba hands a signal handler's exception back wrapped in SystemErrors ("returned a result with an
+    exception set"), as the CI saw once when SIGTERM came during the line fit: it must not read as a bug."""
+    import click
+    from click.testing import CliRunner
+
+    from cornerslam_cli.cli import _Cli, _Terminated
+
+    def kernel_interrupted():
+        try:
+            try:
+                raise _Terminated if terminated else KeyboardInterrupt
+            except KeyboardInterrupt as e:
+                raise SystemError("<function _numba_unpickle> returned a result with an exception set") from e
+        except SystemError as e:
+            raise SystemError(
+                "CPUDispatcher(<function second_pass>) returned a result with an exception set"
+            ) from e
+
+    group = _Cli()
+    group.add_command(click.Command("work", callback=kernel_interrupted))
+    res = CliRunner().invoke(group, ["work"])
+    assert res.exit_code == code and res.output.startswith(f"{word}: no output written"), res.output
+    assert "internal error" not in res.output
