@@ -25,6 +25,7 @@ from .report.outdir import StagedDir
 from .report.ownership import mark_output
 from .report.run_writer import load_reference
 from .results import RunSummary
+from .span import Span
 from .workers import exit_with_parent
 
 _SHARED: dict = {}  # what forked workers inherit: frames, input, reference
@@ -53,15 +54,16 @@ def compare(
     time_offset: float = 0.0,
     plots: bool = True,
     default_place: bool = False,
+    span: Span | None = None,
 ) -> list[RunSummary]:
     """Run each associator in ``assocs`` on ``log_path``; write OUT/ASSOC/, OUT/comparison.csv and
     (``plots``) the figures and OUT/report.html, committed together. The output place is checked
     before any work (``default_place``: OUT is named after the log: another log's output there is
-    refused, not replaced)."""
+    refused, not replaced); ``span``: the part of the log to process."""
     inputs = [p for p in (log_path, ground_truth, relations) if p]
     with StagedDir(out, "compare", inputs, log_path, own_log_only=default_place) as stage:
         ref = load_reference(Path(log_path), ground_truth, relations, time_offset)
-        src: Input = open_input(log_path, cfg)
+        src: Input = open_input(log_path, cfg, span)
         frame_list: list[Frame] = list(frames(src, cfg, progress))
         dirs = [stage.path / a for a in assocs]
         for d in dirs:
