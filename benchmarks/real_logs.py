@@ -50,12 +50,13 @@ REVISIT_BLOCK = 25  # keyframes: scans are grouped in blocks, neighbours come fr
 CELL = 0.05  # metres: grid of the map-sharpness count
 
 INTEL = Path("intel") / "intel-noisy-odom.log"
-LOGS = {  # paths relative to the data folder
-    "intel": (INTEL, []),
-    "exp1": (Path("mines") / "exp1.mcap", []),
-    "exp2": (Path("mines") / "exp2.mcap", []),
-    "exp3": (Path("mines") / "exp3.bag", ["input.laser.x=0.145"]),  # no tf in the bag
-    "exp4": (Path("mines") / "exp4.mcap", []),
+MINES = ROOT / "configs" / "mines.yaml"  # the rover's body (beams skipped), its laser mount (exp3: no tf)
+LOGS = {  # paths relative to the data folder, and the log's config (None: the built-in defaults)
+    "intel": (INTEL, None),
+    "exp1": (Path("mines") / "exp1.mcap", MINES),
+    "exp2": (Path("mines") / "exp2.mcap", MINES),
+    "exp3": (Path("mines") / "exp3.bag", MINES),
+    "exp4": (Path("mines") / "exp4.mcap", MINES),
 }
 PUBLISHED = (
     "Reference (Intel, relation metric): on these 910 scans the RBPF (gmapping) trajectory of "
@@ -79,10 +80,11 @@ def relation_args(data: Path) -> list[str]:
     return ["--relations", str(data / "intel" / "intel.relations"), "--time-offset", str(TIME_OFFSET)]
 
 
-def run_compare(name: str, log: Path, extra: list[str], sets: list[str], work: Path) -> Path:
+def run_compare(name: str, log: Path, config: Path | None, sets: list[str], work: Path) -> Path:
     out = work / name
     cmd = [*CLI, "compare", str(log), "--assoc", ",".join(ASSOCS), "--out", str(out), "--jobs", "2", "-q"]
-    for s in extra + sets:
+    cmd += ["--config", str(config)] if config else []
+    for s in sets:
         cmd += ["--set", s]
     print("+", " ".join(cmd), flush=True)
     subprocess.run(cmd, check=True, cwd=ROOT)
@@ -120,13 +122,13 @@ def relation_scores(r: dict, data: Path, keys=("pose", "odom")) -> tuple[dict, .
     return tuple(relation_error(r["stamp"], r[k], rel, TIME_OFFSET).to_json() for k in keys)
 
 
-def scan_points(log: Path, extra: list[str], stamps: np.ndarray) -> list[np.ndarray]:
+def scan_points(log: Path, config: Path | None, sets: list[str], stamps: np.ndarray) -> list[np.ndarray]:
     """Valid beam end points (sensor frame → base frame) of the keyframe scans, by stamp."""
     from cornerslam_cli.frontend import open_input, scans_prepared
     from cornerslam_cli.lasers import resolve_config
     from cornerslam_cli.types import Scan
 
-    cfg = resolve_config(log, None, extra)
+    cfg = resolve_config(log, config, sets)
     src = open_input(log, cfg)
     lx, ly, lyaw = src.laser2base
     want = {round(float(s), 6): i for i, s in enumerate(stamps)}
@@ -275,14 +277,14 @@ def main() -> int:
 
     rows, notes, envs = [], [], set()
     for name in names:
-        rel_path, extra = LOGS[name]
+        rel_path, config = LOGS[name]
         log = args.data / rel_path
         out = args.work / name
         if not (args.reuse and (out / "comparison.csv").exists()):
-            run_compare(name, log, extra, args.set, args.work)
+            run_compare(name, log, config, args.set, args.work)
         runs = {a: load_run(out / a) for a in ASSOCS}
         envs |= {fp_env(r["summary"]) for r in runs.values()}
-        pts = scan_points(log, extra + args.set, runs["pca"]["stamp"])
+        pts = scan_points(log, config, args.set, runs["pca"]["stamp"])
         cells_odom = occupied_cells(pts, runs["pca"]["odom"])
         scored = {}
         for a, r in runs.items():
