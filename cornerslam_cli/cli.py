@@ -267,7 +267,7 @@ def compare(
     span = parse_span(start, end, max_scans)
     cfg = command_config(config_path, overrides, None, scan_topic, odom_topic, log_path)
     out_dir = Path(out) if out else default_out_dir(Path(log_path), "compare")
-    progress = Progress(f"{display_path(Path(log_path).name)} (extract)", not quiet)
+    progress = Progress(f"{display_path(Path(log_path).name)} (compare)", not quiet)
     try:
         summaries = run_compare(
             log_path, cfg, names, out_dir, ground_truth, jobs, progress, relations, time_offset,

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import logging
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
@@ -30,6 +31,8 @@ from .motion import ScanMatcher
 from .ranges import short_text
 from .span import Span, SpanUsed, select
 from .types import Corners, Scan, Segments
+
+log = logging.getLogger("cornerslam.frontend")
 
 
 def corners_to_base(
@@ -125,8 +128,14 @@ def open_input(log_path: str | Path, cfg: Config, span: Span | None = None) -> I
     odom_on_tf = info.odom_source.startswith("tf") or reader.odom_on_tf
     span = span or Span()
     total = _scan_count(info)
+    log.info(
+        "log %s (%s): %d scans on %s, odometry from %s; laser mount x=%.3f y=%.3f yaw=%.3f (%s), preset %s",
+        Path(log_path).name, info.format, total, short_text(info.scan_topic), info.odom_source or "-",
+        *laser2base, source, cfg.input.laser_preset,
+    )  # fmt: skip
     if span.given:
         total = span.expected_scans(total, info.duration)
+        log.info("processing %s: about %d scans", span.describe(), total)
     return Input(
         Path(log_path), reader, info, laser2base, source, total, SyncStats(), matcher, odom_on_tf, span
     )

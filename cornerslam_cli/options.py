@@ -23,7 +23,12 @@ CONFIG_COPIES = "config_copies"  # ctx.meta: temporary copy of a piped --config 
 
 def verbosity_options(f):
     """``-v`` (repeatable) and ``-q``."""
-    f = click.option("-v", "--verbose", count=True, help="More log output (-v steps, -vv debug).")(f)
+    f = click.option(
+        "-v",
+        "--verbose",
+        count=True,
+        help="More log output: -v what is read and each stage's totals, -vv every filter step.",
+    )(f)
     f = click.option("-q", "--quiet", is_flag=True, help="Only errors; no progress bar.")(f)
     return f
 

@@ -8,6 +8,7 @@ written by the run writer (report/run_writer.py) into a staged output directory 
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -22,6 +23,8 @@ from .report.run_writer import Reference, RunWriter, find_ground_truth, load_ref
 from .results import RunSummary
 from .slam import Slam
 from .span import Span
+
+log = logging.getLogger("cornerslam.run")
 
 
 def default_out_dir(log_path: Path, assoc: str) -> Path:
@@ -99,14 +102,30 @@ def run_filter(
     ref: Reference,
     wall0: float,
     scans: ScanStore | None = None,
+    stepped: Callable[[int], None] | None = None,
 ) -> RunSummary:
     """The filter over the front end's frames, a run's files written into the (staging) directory
-    ``dest`` (the scans kept in ``scans`` when given); returns the summary."""
+    ``dest`` (the scans kept in ``scans`` when given); ``stepped(n)`` after each of its n steps;
+    returns the summary."""
     slam = Slam.from_config(cfg, src.laser2base)
     with RunWriter(dest, src.laser2base, cfg.grid, scans) as writer:
         for frame in frame_iter:
-            writer.step(slam.step(frame), frame.points)
+            record = slam.step(frame)
+            writer.step(record, frame.points)
+            log.debug(
+                "step %d (%s): %d corners, %d matched, %d new, %d landmarks, match %.1f ms",
+                record.step, cfg.association.method, record.n_corners, record.n_matched, record.n_new,
+                record.n_landmarks, 1e3 * record.t_match,
+            )  # fmt: skip
+            if stepped is not None:
+                stepped(slam.n_steps)
         writer.close_steps()
         check_processed(src, slam.n_steps, writer.totals.points)
         warn_default_mount(src, cfg)
-        return writer.finish(slam.landmark_table(), src, cfg, ref, wall0)
+        summary = writer.finish(slam.landmark_table(), src, cfg, ref, wall0)
+    c = summary.counts
+    log.info(
+        "filter %s: %d steps, %d landmarks, %d matches, %.1f s",
+        cfg.association.method, c.steps, c.landmarks, c.matched_total, time.perf_counter() - wall0,
+    )  # fmt: skip
+    return summary
