@@ -34,9 +34,11 @@ from .options import (  # noqa: E402
     command_config,
     config_options,
     parse_assocs,
+    parse_span,
     parse_sweeps,
     reference_options,
     setup_logging,
+    span_options,
     topic_options,
     verbosity_options,
 )
@@ -179,6 +181,7 @@ def cli() -> None:
 @reference_options
 @click.option("--plot", is_flag=True, help="Also draw the map, timing and corner plots and report.html.")
 @click.option("--mcap-out", type=click.Path(), help="Also write the results as MCAP for Foxglove.")
+@span_options
 @verbosity_options
 def run(
     log_path,
@@ -193,6 +196,9 @@ def run(
     time_offset,
     plot,
     mcap_out,
+    start,
+    end,
+    max_scans,
     verbose,
     quiet,
 ):
@@ -206,6 +212,7 @@ def run(
 
     setup_logging(verbose, quiet)
     names = parse_assocs(assoc, allow_many=False)
+    span = parse_span(start, end, max_scans)
     cfg = command_config(
         config_path, overrides, names[0] if names else None, scan_topic, odom_topic, log_path
     )
@@ -222,6 +229,7 @@ def run(
             plot=plot,
             mcap_out=mcap_out,
             config_path=config_path,
+            span=span,
         )
     finally:
         progress.close()
@@ -244,6 +252,7 @@ def run(
 @topic_options
 @reference_options
 @click.option("--jobs", default=1, show_default=True, type=click.IntRange(1, 64), help="Parallel processes.")
+@span_options
 @verbosity_options
 def compare(
     log_path,
@@ -257,6 +266,9 @@ def compare(
     relations,
     time_offset,
     jobs,
+    start,
+    end,
+    max_scans,
     verbose,
     quiet,
 ):
@@ -271,13 +283,14 @@ def compare(
 
     setup_logging(verbose, quiet)
     names = parse_assocs(assocs, allow_many=True)
+    span = parse_span(start, end, max_scans)
     cfg = command_config(config_path, overrides, None, scan_topic, odom_topic, log_path)
     out_dir = Path(out) if out else default_out_dir(Path(log_path), "compare")
-    progress = Progress(f"{display_path(Path(log_path).name)} (extract)", not quiet)
+    progress = Progress(f"{display_path(Path(log_path).name)} (compare)", not quiet)
     try:
         summaries = run_compare(
             log_path, cfg, names, out_dir, ground_truth, jobs, progress, relations, time_offset,
-            default_place=not out,
+            default_place=not out, span=span,
         )  # fmt: skip
     finally:
         progress.close()

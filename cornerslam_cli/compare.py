@@ -3,7 +3,8 @@
 Frames are extracted once (extraction does not depend on the associator) and kept in memory, then
 each associator runs the filter over them — in parallel worker processes with ``jobs`` > 1 (the
 frames reach the workers by fork, not by pickling). Each associator's run is a complete ``run``
-output directory under ``OUT/ASSOC``; ``comparison.csv`` has one row per associator; the figures and
+output directory under ``OUT/ASSOC``; progress is reported in scans while extracting, then in filter
+steps of all the associators; ``comparison.csv`` has one row per associator; the figures and
 report.html follow (report/comparison.py writes them). The whole of OUT is staged and committed once
 (report/outdir.py).
 """
@@ -11,10 +12,11 @@ report.html follow (report/comparison.py writes them). The whole of OUT is stage
 from __future__ import annotations
 
 import dataclasses
+import logging
 import multiprocessing
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 from .config import Config
@@ -25,8 +27,10 @@ from .report.outdir import StagedDir
 from .report.ownership import mark_output
 from .report.run_writer import load_reference
 from .results import RunSummary
+from .span import Span
 from .workers import exit_with_parent
 
+log = logging.getLogger("cornerslam.compare")
 _SHARED: dict = {}  # what forked workers inherit: frames, input, reference
 
 
@@ -34,11 +38,38 @@ def with_assoc(cfg: Config, assoc: str) -> Config:
     return dataclasses.replace(cfg, association=dataclasses.replace(cfg.association, method=assoc))
 
 
-def _run_one(assoc: str, out_dir: Path) -> RunSummary:
+def _run_one(assoc: str, out_dir: Path, stepped: Callable[[int], None] | None = None) -> RunSummary:
     sh = _SHARED
-    return run_filter(
-        sh["frames"], sh["src"], with_assoc(sh["cfg"], assoc), out_dir, sh["ref"], time.perf_counter()
-    )
+    cfg = with_assoc(sh["cfg"], assoc)
+    return run_filter(sh["frames"], sh["src"], cfg, out_dir, sh["ref"], time.perf_counter(), stepped=stepped)
+
+
+def _run_filters(
+    assocs: Sequence[str], dirs: list[Path], jobs: int, progress: Callable[..., None] | None
+) -> list[RunSummary]:
+    """Each associator's filter over the shared frames, reporting ``progress`` in filter steps of all
+    of them: after every step when they run one after another, as each finishes with ``jobs`` > 1
+    (worker processes)."""
+    n = len(_SHARED["frames"])
+    total = n * len(assocs)
+
+    def report(done: int) -> None:
+        if progress is not None:
+            progress(done, total, "filter steps")
+
+    if jobs > 1 and len(assocs) > 1:
+        ctx = multiprocessing.get_context("fork")
+        with ProcessPoolExecutor(
+            max_workers=min(jobs, len(assocs)), mp_context=ctx, initializer=exit_with_parent
+        ) as pool:
+            futures = [pool.submit(_run_one, a, d) for a, d in zip(assocs, dirs, strict=True)]
+            for k, _ in enumerate(as_completed(futures), 1):
+                report(k * n)
+            return [f.result() for f in futures]
+    summaries = []
+    for k, (a, d) in enumerate(zip(assocs, dirs, strict=True)):
+        summaries.append(_run_one(a, d, lambda i, k=k: report(k * n + i)))
+    return summaries
 
 
 def compare(
@@ -48,34 +79,32 @@ def compare(
     out: Path,
     ground_truth: str | Path | None = None,
     jobs: int = 1,
-    progress: Callable[[int, int], None] | None = None,
+    progress: Callable[..., None] | None = None,
     relations: str | Path | None = None,
     time_offset: float = 0.0,
     plots: bool = True,
     default_place: bool = False,
+    span: Span | None = None,
 ) -> list[RunSummary]:
     """Run each associator in ``assocs`` on ``log_path``; write OUT/ASSOC/, OUT/comparison.csv and
     (``plots``) the figures and OUT/report.html, committed together. The output place is checked
     before any work (``default_place``: OUT is named after the log: another log's output there is
-    refused, not replaced)."""
+    refused, not replaced); ``span``: the part of the log to process."""
     inputs = [p for p in (log_path, ground_truth, relations) if p]
     with StagedDir(out, "compare", inputs, log_path, own_log_only=default_place) as stage:
         ref = load_reference(Path(log_path), ground_truth, relations, time_offset)
-        src: Input = open_input(log_path, cfg)
+        t0 = time.perf_counter()
+        src: Input = open_input(log_path, cfg, span)
         frame_list: list[Frame] = list(frames(src, cfg, progress))
         dirs = [stage.path / a for a in assocs]
         for d in dirs:
             d.mkdir()
+        log.info(
+            "extracted %d keyframes of %s in %.1f s", len(frame_list), src.path.name, time.perf_counter() - t0
+        )
         _SHARED.update(frames=frame_list, src=src, cfg=cfg, ref=ref)
         try:
-            if jobs > 1 and len(assocs) > 1:
-                ctx = multiprocessing.get_context("fork")
-                with ProcessPoolExecutor(
-                    max_workers=min(jobs, len(assocs)), mp_context=ctx, initializer=exit_with_parent
-                ) as pool:
-                    summaries = list(pool.map(_run_one, assocs, dirs))
-            else:
-                summaries = [_run_one(a, d) for a, d in zip(assocs, dirs, strict=True)]
+            summaries = _run_filters(assocs, dirs, jobs, progress)
         finally:
             _SHARED.clear()
         write_comparison(stage.path, summaries, plots, ref.gt_path)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import logging
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
@@ -28,7 +29,10 @@ from .logs import ReadStats, open_log
 from .logs.sync import SyncStats, reanchor_odometry, select_keyframes, synchronise
 from .motion import ScanMatcher
 from .ranges import short_text
+from .span import Span, SpanUsed, select
 from .types import Corners, Scan, Segments
+
+log = logging.getLogger("cornerslam.frontend")
 
 
 def corners_to_base(
@@ -101,11 +105,13 @@ class Input:
     stats: SyncStats
     matcher: ScanMatcher | None = None  # scan matching of the motion input (scan_match.enabled)
     odom_on_tf: bool = False  # the log's tf carries odom→base (odometry from tf, or seen beside it)
+    span: Span = dataclasses.field(default_factory=Span)  # the part of the log to process (span.py)
+    span_used: SpanUsed = dataclasses.field(default_factory=SpanUsed)  # the scans it kept
 
 
-def open_input(log_path: str | Path, cfg: Config) -> Input:
+def open_input(log_path: str | Path, cfg: Config, span: Span | None = None) -> Input:
     """Open the log, check its topics (exit-2 errors before any work), find the laser mount and load the
-    extractor's compiled kernels (start-up work, not the first step's)."""
+    extractor's compiled kernels (start-up work, not the first step's); ``span``: the part to process."""
     inp = cfg.input
     reader = open_log(
         Path(log_path),
@@ -120,8 +126,18 @@ def open_input(log_path: str | Path, cfg: Config) -> Input:
     matcher = ScanMatcher(cfg.scan_match, odometry_noise(cfg)) if cfg.scan_match.enabled else None
     load_kernels(cfg.sensor, cfg.lines)
     odom_on_tf = info.odom_source.startswith("tf") or reader.odom_on_tf
+    span = span or Span()
+    total = _scan_count(info)
+    log.info(
+        "log %s (%s): %d scans on %s, odometry from %s; laser mount x=%.3f y=%.3f yaw=%.3f (%s), preset %s",
+        Path(log_path).name, info.format, total, short_text(info.scan_topic), info.odom_source or "-",
+        *laser2base, source, cfg.input.laser_preset,
+    )  # fmt: skip
+    if span.given:
+        total = span.expected_scans(total, info.duration)
+        log.info("processing %s: about %d scans", span.describe(), total)
     return Input(
-        Path(log_path), reader, info, laser2base, source, _scan_count(info), SyncStats(), matcher, odom_on_tf
+        Path(log_path), reader, info, laser2base, source, total, SyncStats(), matcher, odom_on_tf, span
     )
 
 
@@ -141,9 +157,10 @@ def odometry_noise(cfg: Config) -> Callable[[np.ndarray], np.ndarray]:
 
 def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None = None) -> Iterator[Frame]:
     """Synchronised keyframes of the log, features extracted, motion scan-matched (streaming)."""
-    msgs = reanchor_odometry(
-        scans_prepared(src.reader, cfg), cfg.input.odom_jump, src.stats, src.reader.stats.warn
-    )
+    msgs = scans_prepared(src.reader, cfg)
+    if src.span.given:
+        msgs = select(msgs, src.span, src.span_used, src.path.name)
+    msgs = reanchor_odometry(msgs, cfg.input.odom_jump, src.stats, src.reader.stats.warn)
     synced = synchronise(msgs, src.stats, src.reader.stats.warn)  # its warning lands in summary.json too
     pairs = select_keyframes(synced, cfg.keyframes, src.stats)
     if src.matcher is not None and cfg.scan_match.warmup > 0:

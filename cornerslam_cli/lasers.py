@@ -56,15 +56,14 @@ PRESETS: dict[str, LaserPreset] = {
         0.5,
         {"sensor": {"model": "linear", "a": 0.01, "b": 0.005, "sigma_theta": math.radians(0.25)}},
     ),
-    # Hokuyo URG-04LX, 240° at 0.352°, 5.6 m: ±10 mm to 1 m, ±1 % beyond (data sheet). On the Mines
-    # rover (shared/data/real/mines) the first and last 70 beams see the robot's body.
+    # Hokuyo URG-04LX, 240° at 0.352°, 5.6 m: ±10 mm to 1 m, ±1 % beyond (data sheet). The sensor
+    # only: a robot whose body the scan sees skips those beams in its own config (configs/mines.yaml).
     "hokuyo_urg04lx": LaserPreset(
         "Hokuyo URG-04LX 240° (e.g. the Mines ParisTech rover logs)",
         (681, 682, 683, 725, 726, 768, 769),
         360.0 / 1024.0,
         {
             "sensor": {"model": "piecewise", "sigma_r_near": 0.01, "near_range": 1.0, "sigma_r_rel": 0.01},
-            "input": {"skip_beams_start": 70, "skip_beams_end": 70},
         },
     ),
     # Hokuyo UTM-30LX class, 270° at 0.25°: the paper's sensor model (eq 33-34).

@@ -23,7 +23,12 @@ CONFIG_COPIES = "config_copies"  # ctx.meta: temporary copy of a piped --config 
 
 def verbosity_options(f):
     """``-v`` (repeatable) and ``-q``."""
-    f = click.option("-v", "--verbose", count=True, help="More log output (-v steps, -vv debug).")(f)
+    f = click.option(
+        "-v",
+        "--verbose",
+        count=True,
+        help="More log output: -v what is read and each stage's totals, -vv every filter step.",
+    )(f)
     f = click.option("-q", "--quiet", is_flag=True, help="Only errors; no progress bar.")(f)
     return f
 
@@ -113,6 +118,55 @@ def reference_options(f):
         "--ground-truth", type=click.Path(dir_okay=False), help="TUM ground truth (default: LOG.gt.tum)."
     )(f)
     return f
+
+
+class _SpanBound(click.ParamType):
+    """``--start`` / ``--end``: seconds from the log's first scan, or ``#INDEX`` (span.py)."""
+
+    name = "SECONDS|#INDEX"
+
+    def convert(self, value, param, ctx):
+        from .span import Bound, parse_bound
+
+        if isinstance(value, Bound):
+            return value
+        try:
+            return parse_bound(value)
+        except ValueError as e:
+            self.fail(str(e), param, ctx)
+
+
+def span_options(f):
+    """``--start``, ``--end`` and ``--max-scans``: process part of the log (read by :func:`parse_span`)."""
+    f = click.option(
+        "--max-scans",
+        type=click.IntRange(min=1),
+        default=None,
+        help="Process at most N scans from the start.",
+    )(f)
+    f = click.option(
+        "--end",
+        type=_SpanBound(),
+        default=None,
+        help="Stop before this point: seconds from the first scan or #INDEX.",
+    )(f)
+    f = click.option(
+        "--start",
+        type=_SpanBound(),
+        default=None,
+        help="Begin here: seconds from the log's first scan, or #INDEX (a scan index, 0 = first).",
+    )(f)
+    return f
+
+
+def parse_span(start, end, max_scans):
+    """The :class:`span.Span` of the options; ``--end`` not after ``--start`` is a usage error."""
+    from .span import Span
+
+    span = Span(start, end, max_scans)
+    if problem := span.order_problem():
+        raise click.BadParameter(problem, param_hint="--end")
+    return span
 
 
 def setup_logging(verbose: int, quiet: bool) -> None:

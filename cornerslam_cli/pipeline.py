@@ -8,6 +8,7 @@ written by the run writer (report/run_writer.py) into a staged output directory 
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -21,6 +22,9 @@ from .report.outdir import StagedDir
 from .report.run_writer import Reference, RunWriter, find_ground_truth, load_reference
 from .results import RunSummary
 from .slam import Slam
+from .span import Span
+
+log = logging.getLogger("cornerslam.run")
 
 
 def default_out_dir(log_path: Path, assoc: str) -> Path:
@@ -39,14 +43,15 @@ def run(
     plot: bool = False,
     mcap_out: str | Path | None = None,
     config_path: str | Path | None = None,
+    span: Span | None = None,
 ) -> RunSummary:
     """Run corner EKF-SLAM on one log and write the output directory atomically: the tables, with
     ``plot`` the figures and report.html, and ``mcap_out`` beside it, all committed at once.
 
     The output places are checked before any work (report/ownership.py); the run's inputs — the log,
     the ground truth (also LOG.gt.tum found beside the log), the relations, the config file
-    ``config_path`` — are never written over. Returns the summary (also written to summary.json)
-    with ``out_dir``, the committed directory.
+    ``config_path`` — are never written over; ``span``: the part of the log to process (span.py).
+    Returns the summary (also written to summary.json) with ``out_dir``, the committed directory.
     """
     wall0 = time.perf_counter()
     out_dir = Path(out) if out else default_out_dir(Path(log_path), cfg.association.method)
@@ -55,7 +60,7 @@ def run(
     with StagedDir(out_dir, "run", inputs, log_path, own_log_only=not out) as stage:
         mcap_path = stage.stage_file(mcap_out) if mcap_out else None
         ref = load_reference(Path(log_path), ground_truth, relations, time_offset)  # bad files fail first
-        src = open_input(log_path, cfg)
+        src = open_input(log_path, cfg, span)
         scans = ScanStore() if mcap_path else None  # kept for the results MCAP's scans
         summary = run_filter(frames(src, cfg, progress), src, cfg, stage.path, ref, wall0, scans)
         write_extras(stage, plot, mcap_out, mcap_path, ref.gt_path, scans)
@@ -97,14 +102,30 @@ def run_filter(
     ref: Reference,
     wall0: float,
     scans: ScanStore | None = None,
+    stepped: Callable[[int], None] | None = None,
 ) -> RunSummary:
     """The filter over the front end's frames, a run's files written into the (staging) directory
-    ``dest`` (the scans kept in ``scans`` when given); returns the summary."""
+    ``dest`` (the scans kept in ``scans`` when given); ``stepped(n)`` after each of its n steps;
+    returns the summary."""
     slam = Slam.from_config(cfg, src.laser2base)
     with RunWriter(dest, src.laser2base, cfg.grid, scans) as writer:
         for frame in frame_iter:
-            writer.step(slam.step(frame), frame.points)
+            record = slam.step(frame)
+            writer.step(record, frame.points)
+            log.debug(
+                "step %d (%s): %d corners, %d matched, %d new, %d landmarks, match %.1f ms",
+                record.step, cfg.association.method, record.n_corners, record.n_matched, record.n_new,
+                record.n_landmarks, 1e3 * record.t_match,
+            )  # fmt: skip
+            if stepped is not None:
+                stepped(slam.n_steps)
         writer.close_steps()
         check_processed(src, slam.n_steps, writer.totals.points)
         warn_default_mount(src, cfg)
-        return writer.finish(slam.landmark_table(), src, cfg, ref, wall0)
+        summary = writer.finish(slam.landmark_table(), src, cfg, ref, wall0)
+    c = summary.counts
+    log.info(
+        "filter %s: %d steps, %d landmarks, %d matches, %.1f s",
+        cfg.association.method, c.steps, c.landmarks, c.matched_total, time.perf_counter() - wall0,
+    )  # fmt: skip
+    return summary

@@ -98,6 +98,20 @@ class Accuracy(JsonResult):
 
 
 @dataclass(frozen=True, kw_only=True)
+class ScanSpan(JsonResult):
+    """The part of the log a run processed (``--start``/``--end``/``--max-scans``, span.py): the
+    options as given; the first and last scan kept, by index on the scan topic and in seconds from
+    the log's first scan; how many scans that is."""
+
+    options: str
+    first_index: int
+    last_index: int
+    first_time: float
+    last_time: float
+    scans: int
+
+
+@dataclass(frozen=True, kw_only=True)
 class RunInput(JsonResult):
     """What a run read: the log, its format and topics, the laser mount and where it came from."""
 
@@ -109,6 +123,7 @@ class RunInput(JsonResult):
     laser_to_base: tuple[float, float, float]
     laser_to_base_source: str  # tf, config, preset or default (lasers.mount_source)
     odom_on_tf: bool | None = optional()  # the log's tf carries odom → base (absent before issue 17)
+    span: ScanSpan | None = optional()  # absent when the whole log was processed
 
 
 @dataclass(frozen=True, kw_only=True)

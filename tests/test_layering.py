@@ -26,7 +26,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("", "blas", "errors", "fpenv", "geometry", "ranges", "types", "workers"),  # stdlib, numpy
     ("textfile", "association.params", "features.params", "filter.params", "motion.params", "logs.params"),
     ("report.tables", "results"),  # file formats (TUM, CSV, JSON); a run's results (summary.json's fields)
-    ("logs", "features", "association", "filter", "motion", "simworld"),  # the stages, independent
+    ("logs", "features", "association", "filter", "motion", "simworld", "span"),  # the stages, independent
     ("config",),  # the stages' sections assembled, loaded, validated
     ("lasers", "evaluate", "extract"),  # a run's config; scoring a trajectory; one scan's features
     ("frontend",),  # a run's front end: log → synchronised frames → features → scan-matched motion

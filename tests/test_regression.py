@@ -20,7 +20,8 @@ from click.testing import CliRunner
 
 from cornerslam_cli.cli import cli
 
-SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLES = ROOT / "sample_logs"
 REFERENCES = json.loads((SAMPLES / "expected.json").read_text())["runs"]
 
 EXACT_COUNTS = ("steps", "landmarks", "matched_total", "scans_matched")
@@ -46,7 +47,8 @@ def test_every_sample_log_has_a_reference_and_real_logs_one_without_scan_matchin
 
 
 @pytest.mark.parametrize("name", sorted(REFERENCES))
-def test_sample_log_matches_its_reference(name, tmp_path):
+def test_sample_log_matches_its_reference(name, tmp_path, monkeypatch):
+    monkeypatch.chdir(ROOT)  # the arguments name files relative to the repository (configs/mines.yaml)
     ref = REFERENCES[name]
     summary = run(ref["log"], ref["args"], tmp_path / "out")
     counts = summary["counts"]

@@ -5,21 +5,27 @@ from __future__ import annotations
 
 import sys
 import time
+from collections import deque
+
+SHOW_AFTER = 2.0  # seconds: shorter commands show no status line
+EVERY_TTY, EVERY_LOG = 0.1, 10.0  # seconds between redraws on a terminal, lines otherwise (CI logs)
+ETA_WINDOW = 30.0  # seconds of recent progress the ETA's rate is measured over
 
 
 class StatusLine:
     """One status line on stderr: redrawn in place on a terminal, a line every 10 s otherwise (CI
     logs). Silent when not enabled (-q)."""
 
-    def __init__(self, enabled: bool):
+    def __init__(self, enabled: bool, clock=time.monotonic):
         self.enabled = enabled
-        self.t0 = time.monotonic()
+        self.clock = clock
+        self.t0 = clock()
         self.last = 0.0
         self.tty = sys.stderr.isatty()
         self.drawn = False
 
     def _due(self, now: float) -> bool:
-        return now - self.last >= (0.1 if self.tty else 10.0)
+        return now - self.last >= (EVERY_TTY if self.tty else EVERY_LOG)
 
     def _write(self, text: str) -> None:
         try:
@@ -41,27 +47,50 @@ class StatusLine:
 
 
 class Progress(StatusLine):
-    """Scans done of a run's log, with a bar and an ETA, for runs longer than ~2 s."""
+    """Work done of a run's log (scans read, or with ``unit`` another stage's steps: ``compare``'s
+    filters), with a bar and an ETA, for commands longer than ``SHOW_AFTER``.
 
-    def __init__(self, label: str, enabled: bool):
-        super().__init__(enabled)
+    The ETA is the remaining work at the rate of the last ``ETA_WINDOW`` seconds, not the average
+    since the start: a step costs more as the map grows (a long real log's last steps cost ~3× its
+    first), so the whole-run average promised too early an end. A new ``unit`` starts a new rate.
+    """
+
+    def __init__(self, label: str, enabled: bool, clock=time.monotonic):
+        super().__init__(enabled, clock)
         self.label = label
+        self.unit = "scans"
+        self.recent: deque[tuple[float, int]] = deque()  # (time, done) over the last ETA_WINDOW s
 
-    def __call__(self, done: int, total: int) -> None:
+    def __call__(self, done: int, total: int, unit: str = "scans") -> None:
         if not self.enabled:
             return
-        now = time.monotonic()
+        now = self.clock()
+        self._sample(now, done, unit)
         el = now - self.t0
-        if el < 2.0 or not self._due(now):
+        if el < SHOW_AFTER or not self._due(now):
             return
         self.last = now
         if total > 0:
             frac = min(done / total, 1.0)
-            eta = el * (1 - frac) / max(frac, 1e-9)
             bar = "#" * int(30 * frac)
-            self._draw(f"{self.label} [{bar:<30}] {done}/{total} scans {el:5.0f}s eta {eta:4.0f}s")
+            self._draw(f"{self.label} [{bar:<30}] {done}/{total} {unit} {el:5.0f}s eta {self.eta(total):>5}")
         else:
-            self._draw(f"{self.label} {done} scans {el:5.0f}s")
+            self._draw(f"{self.label} {done} {unit} {el:5.0f}s")
+
+    def _sample(self, now: float, done: int, unit: str) -> None:
+        if unit != self.unit:
+            self.unit = unit
+            self.recent.clear()
+        self.recent.append((now, done))
+        while len(self.recent) > 2 and now - self.recent[1][0] >= ETA_WINDOW:
+            self.recent.popleft()
+
+    def eta(self, total: int) -> str:
+        """Seconds left at the recent rate, e.g. ``"  42s"``; ``"?"`` before a rate is known."""
+        (t_old, d_old), (t_new, d_new) = self.recent[0], self.recent[-1]
+        if d_new <= d_old or t_new <= t_old:
+            return "?"
+        return f"{(total - d_new) * (t_new - t_old) / (d_new - d_old):4.0f}s"
 
 
 class BatchProgress(StatusLine):
@@ -69,7 +98,7 @@ class BatchProgress(StatusLine):
     combinations run so far (skipped ones cost nothing)."""
 
     def __call__(self, s) -> None:
-        now = time.monotonic()
+        now = self.clock()
         if not self.enabled or (s.remaining and not self._due(now)):
             return
         self.last = now

@@ -210,6 +210,7 @@ def build_summary(
             laser_to_base=tuple(float(v) for v in src.laser2base),
             laser_to_base_source=src.laser_source,
             odom_on_tf=src.odom_on_tf,
+            span=src.span_used.record(src.span),
         ),
         assoc=cfg.association.method,
         counts=run_counts(src, totals, n_landmarks),

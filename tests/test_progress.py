@@ -1,0 +1,80 @@
+"""Progress and verbosity (issue 17 item 8): the ETA from recent steps, ``compare``'s progress after
+extraction, what ``-v`` and ``-vv`` add to the default output."""
+
+import re
+
+from click.testing import CliRunner
+
+from cornerslam_cli.cli import cli
+from cornerslam_cli.report import progress as progress_module
+from cornerslam_cli.report.progress import Progress
+
+
+class FakeClock:
+    def __init__(self):
+        self.t = 0.0
+
+    def __call__(self):
+        return self.t
+
+
+def test_eta_follows_the_recent_step_cost_not_the_average():
+    """Steps cost 1 s, then 3 s as the map grows: the ETA is what is left at 3 s a step (the
+    average since the start would promise less than half of it)."""
+    clock = FakeClock()
+    p = Progress("log", True, clock)
+    total = 300
+    for done in range(1, 151):
+        clock.t += 1.0 if done <= 100 else 3.0
+        p(done, total)
+    assert p.eta(total) == " 450s"  # 150 steps left × 3 s; the whole-run average says 250 s
+    for done in range(151, 231):  # faster again (40 s): the ETA follows once the window is past
+        clock.t += 0.5
+        p(done, total)
+    assert p.eta(total) == "  35s"  # 70 steps left × 0.5 s
+
+
+def test_eta_restarts_with_a_new_unit():
+    clock = FakeClock()
+    p = Progress("log", True, clock)
+    for done in range(1, 11):
+        clock.t += 1.0
+        p(done, 10)
+    p(0, 40, "filter steps")
+    assert p.eta(40) == "?"  # no rate for filter steps yet; extraction's is not theirs
+    clock.t += 2.0
+    p(10, 40, "filter steps")
+    assert p.eta(40) == "   6s"
+
+
+def test_compare_shows_progress_after_extraction(sim_log, tmp_path, monkeypatch):
+    monkeypatch.setattr(progress_module, "SHOW_AFTER", 0.0)
+    monkeypatch.setattr(progress_module, "EVERY_LOG", 0.0)
+    res = CliRunner().invoke(
+        cli,
+        ["compare", str(sim_log), "--assoc", "icnn,pca", "--out", str(tmp_path / "c"), "--max-scans", "20"],
+    )
+    assert res.exit_code == 0, res.output
+    lines = [line for line in res.stderr.splitlines() if "(compare)" in line]
+    assert any(" scans " in line for line in lines)  # extraction
+    filter_lines = [line for line in lines if "filter steps" in line]
+    n = re.search(r"(\d+)/(\d+) filter steps", filter_lines[-1]).groups()
+    assert n[0] == n[1] and int(n[1]) == 2 * 20  # both associators' steps, to the end
+    assert len(filter_lines) >= 20  # after every step when run one after another
+
+
+def test_verbose_prints_more_than_the_default(sim_log, tmp_path):
+    def stderr(*flags):
+        out = tmp_path / f"run{len(flags)}{''.join(flags)}"
+        res = CliRunner().invoke(cli, ["run", str(sim_log), "--out", str(out), "--max-scans", "12", *flags])
+        assert res.exit_code == 0, res.output
+        return res.stderr.splitlines()
+
+    default, v, vv = stderr(), stderr("-v"), stderr("-vv")
+    assert not [line for line in default if line.startswith(("INFO", "DEBUG"))]
+    info = [line for line in v if line.startswith("INFO:")]
+    assert any("laser mount" in line and "sim.mcap" in line for line in info)  # what is read
+    assert any(re.search(r"filter pca: \d+ steps, \d+ landmarks", line) for line in info)  # stage totals
+    assert not [line for line in v if line.startswith("DEBUG")]
+    steps = [line for line in vv if re.match(r"DEBUG: step \d+ \(pca\): \d+ corners", line)]
+    assert len(steps) == 12  # every filter step

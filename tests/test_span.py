@@ -1,0 +1,97 @@
+"""``--start``, ``--end`` and ``--max-scans`` on ``run`` and ``compare`` (span.py): the part of a log
+processed, recorded in summary.json; bad values exit 2 naming the option."""
+
+import json
+
+import pytest
+from click.testing import CliRunner
+
+from cornerslam_cli.cli import cli
+from cornerslam_cli.span import Bound, Span, parse_bound
+
+
+def invoke(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
+
+
+def summary(out):
+    return json.loads((out / "summary.json").read_text())
+
+
+def stamps(out):
+    return [float(line.split()[0]) for line in (out / "trajectory.tum").read_text().splitlines()]
+
+
+def test_parse_bound_seconds_and_index():
+    assert parse_bound("12.5") == Bound(12.5, False)
+    assert parse_bound(" #40 ") == Bound(40.0, True)
+    for bad in ("#", "#1.5", "#-3", "-1", "nan", "inf", "ten"):
+        with pytest.raises(ValueError):
+            parse_bound(bad)
+
+
+def test_expected_scans_for_the_progress_line():
+    assert Span(Bound(10, True), Bound(30, True)).expected_scans(100, 50.0) == 20
+    assert Span(Bound(5.0, False), None, 7).expected_scans(100, 50.0) == 7  # 2 scans/s
+    assert Span(Bound(40.0, False)).expected_scans(100, 50.0) == 20
+    assert Span(Bound(200, True)).expected_scans(100, 50.0) == 0
+
+
+def test_run_by_scan_index_and_count_records_the_span(sim_log, tmp_path):
+    full, part = tmp_path / "full", tmp_path / "part"
+    assert invoke("run", sim_log, "--out", full, "-q").exit_code == 0
+    res = invoke("run", sim_log, "--out", part, "-q", "--start", "#10", "--max-scans", "20")
+    assert res.exit_code == 0, res.output
+    assert "span" not in summary(full)["input"]  # a whole-log run's summary.json is unchanged
+    span = summary(part)["input"]["span"]
+    assert span["options"] == "--start #10 --max-scans 20"
+    assert (span["first_index"], span["last_index"], span["scans"]) == (10, 29, 20)
+    t_full, t_part = stamps(full), stamps(part)
+    t0 = t_full[0]  # the simulated log's first scan is its first keyframe
+    assert t_part[0] == pytest.approx(t0 + span["first_time"], abs=1e-6)
+    assert t_part[-1] <= t0 + span["last_time"] + 1e-6
+    assert summary(part)["counts"]["steps"] < summary(full)["counts"]["steps"]
+
+
+def test_run_by_seconds_keeps_scans_inside(sim_log, tmp_path):
+    out = tmp_path / "out"
+    res = invoke("run", sim_log, "--out", out, "-q", "--start", "5", "--end", "20")
+    assert res.exit_code == 0, res.output
+    span = summary(out)["input"]["span"]
+    assert 5.0 <= span["first_time"] < 5.6 and 19.4 < span["last_time"] < 20.0
+    assert span["scans"] == span["last_index"] - span["first_index"] + 1
+
+
+def test_compare_on_part_of_the_log(sim_log, tmp_path):
+    out = tmp_path / "cmp"
+    res = invoke("compare", sim_log, "--assoc", "icnn,pca", "--out", out, "-q", "--end", "#25")
+    assert res.exit_code == 0, res.output
+    for assoc in ("icnn", "pca"):
+        span = summary(out / assoc)["input"]["span"]
+        assert (span["first_index"], span["last_index"], span["options"]) == (0, 24, "--end #25")
+
+
+@pytest.mark.parametrize(
+    "args, option",
+    [
+        (("--start", "ten"), "--start"),
+        (("--end", "#x"), "--end"),
+        (("--start", "-2"), "--start"),
+        (("--max-scans", "0"), "--max-scans"),
+        (("--start", "#20", "--end", "#20"), "--end"),
+        (("--start", "8", "--end", "3"), "--end"),
+    ],
+)
+@pytest.mark.parametrize("command", ["run", "compare"])
+def test_bad_span_values_exit_2_naming_the_option(sim_log, tmp_path, command, args, option):
+    res = invoke(command, sim_log, "--out", tmp_path / "o", *args)
+    assert res.exit_code == 2 and option in res.stderr and "Traceback" not in res.output
+    assert not (tmp_path / "o").exists()
+
+
+def test_span_past_the_end_of_the_log_is_one_line_error(sim_log, tmp_path):
+    res = invoke("run", sim_log, "--out", tmp_path / "o", "--start", "#100000")
+    assert res.exit_code == 2, res.output
+    err = res.stderr.strip()
+    assert err.startswith("error: --start #100000 selects no scan of log 'sim.mcap'") and "\n" not in err
+    assert not (tmp_path / "o").exists()
