@@ -99,3 +99,9 @@ def test_a_simulated_run_reports_a_map_sharper_and_more_consistent_than_its_odom
     assert c["cells_vs_odom"] == pytest.approx(c["occupied_cells"] / c["odom_occupied_cells"])
     assert c["cells_vs_odom"] < 0.9  # the simulated odometry drifts: its map is smeared
     assert 0 < c["revisit_mean"] < c["odom_revisit_mean"] and c["revisit_share"] > c["odom_revisit_share"]
+
+
+def test_map_consistency_of_no_scans_is_empty_not_an_error():
+    m = map_consistency([], np.zeros((0, 3)), np.zeros((0, 3)))
+    assert (m.scans, m.points, m.occupied_cells, m.odom_occupied_cells) == (0, 0, 0, 0)
+    assert math.isnan(m.cells_vs_odom) and math.isnan(m.revisit_mean) and m.revisit_share == 0

@@ -17,6 +17,7 @@ from cornerslam_cli.report.plots import (
     COMPARE_FIGURES,
     MAX_STEPS_DRAWN,
     RUN_FIGURES,
+    STEP_BINS,
     binned,
     plot_compare,
     plot_run,
@@ -161,8 +162,8 @@ def test_binned_gives_each_bins_median_and_range():
     np.testing.assert_array_equal(med, [3, np.nan, 4, 9])  # an all-NaN bin stays a gap
     np.testing.assert_array_equal(lo, [1, np.nan, 2, 9])
     np.testing.assert_array_equal(hi, [5, np.nan, 8, 9])
-    assert step_bins(MAX_STEPS_DRAWN) == 1 and step_bins(MAX_STEPS_DRAWN + 1) == 3
-    assert math.ceil(4800 / step_bins(4800)) <= MAX_STEPS_DRAWN // 2
+    assert step_bins(MAX_STEPS_DRAWN) == 1 and step_bins(MAX_STEPS_DRAWN + 1) == 5
+    assert math.ceil(4800 / step_bins(4800)) <= STEP_BINS
 
 
 def long_run(outputs, tmp_path: Path, n: int = 4800) -> Path:
@@ -192,7 +193,7 @@ def test_long_runs_are_drawn_per_bin_not_as_a_solid_band(outputs, tmp_path):
     try:
         _plot_per_step(ax, t["step"], t["t_match"], "tab:orange", "matching")
         (line,) = ax.get_lines()
-        assert len(line.get_xdata()) <= MAX_STEPS_DRAWN // 2  # medians, not 4,800 zig-zags
+        assert len(line.get_xdata()) <= STEP_BINS  # medians, not 4,800 zig-zags
         band = [c for c in ax.collections if isinstance(c, PolyCollection)]
         assert len(band) == 1  # the range of each bin, drawn faintly
         size = step_bins(4800)

@@ -41,6 +41,7 @@ COLORS = {
 ASSOC_COLORS = {"icnn": "tab:orange", "jcbb": "tab:purple", "pca": "tab:blue"}
 
 MAX_STEPS_DRAWN = 600  # longer per-step series are drawn per bin of steps (median and range), not per step
+STEP_BINS = 150  # bins of a longer series
 MANY_LANDMARKS = 100  # more landmarks than this: their ellipses are drawn thinner and fainter
 RUN_FIGURES = ("map.png", "segments.png", "timing.png", "corners.png")
 COMPARE_FIGURES = ("compare_matching.png", "compare_maps.png", "compare_timing.png")
@@ -180,8 +181,8 @@ def _positive(v: np.ndarray) -> np.ndarray:
 
 def step_bins(n: int) -> int:
     """Steps per bin for a series of ``n`` steps: 1 up to MAX_STEPS_DRAWN, then enough for at most
-    MAX_STEPS_DRAWN / 2 bins."""
-    return 1 if n <= MAX_STEPS_DRAWN else math.ceil(2 * n / MAX_STEPS_DRAWN)
+    STEP_BINS bins."""
+    return 1 if n <= MAX_STEPS_DRAWN else math.ceil(n / STEP_BINS)
 
 
 def binned(step: np.ndarray, v: np.ndarray, size: int) -> tuple[np.ndarray, ...]:
