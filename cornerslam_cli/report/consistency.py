@@ -26,6 +26,7 @@ import numpy as np
 
 from ..motion.icp import voxel_thin
 from ..results import MapConsistency
+from .occupancy import ScanStore
 
 CELL = 0.05  # m: the grid of the occupied-cell count
 REVISIT_GAP = 100  # scans
@@ -112,3 +113,10 @@ def map_consistency(pts: list[np.ndarray], poses: np.ndarray, odoms: np.ndarray)
         odom_revisit_mean=odom_revisit,
         odom_revisit_share=odom_share,
     )
+
+
+def store_consistency(store: ScanStore, odoms: np.ndarray) -> MapConsistency:
+    """The map consistency of a run's kept scans (placed with the estimate) against the laser's
+    poses by the odometry ``odoms`` (n, 3), one per kept scan."""
+    laser_poses = np.column_stack((np.asarray(store.origins).reshape(-1, 2), store.headings))
+    return map_consistency(store.in_laser_frame(), laser_poses, odoms)

@@ -32,17 +32,8 @@ from ..errors import display_path
 from ..evaluate import ate, overlap_problem, read_relations, relation_error, rpe
 from ..geometry import compose
 from ..logs import check_regular
-from ..results import (
-    Accuracy,
-    Counts,
-    Hashes,
-    MapConsistency,
-    OdometryModel,
-    RunInput,
-    RunSummary,
-    Timing,
-)
-from .consistency import map_consistency
+from ..results import Accuracy, Counts, Hashes, OdometryModel, RunInput, RunSummary, Timing
+from .consistency import store_consistency
 from .occupancy import ScanStore, build_grid, draw_grid, write_grid
 from .odom_frame import in_odom_frame, landmarks_in_odom_frame
 from .tables import (
@@ -59,6 +50,7 @@ from .tables import (
 if TYPE_CHECKING:
     from ..config import Config, GridConfig
     from ..frontend import Input
+    from ..results import MapConsistency
     from ..slam import StepRecord
 
 
@@ -184,25 +176,12 @@ class RunWriter:
         t_grid = time.perf_counter()
         self.write_grid(poses, src.reader.stats.warn)
         t_grid = time.perf_counter() - t_grid
+        consistency = store_consistency(self.scans, np.frombuffer(self.scan_odoms).reshape(-1, 3))
         summary = build_summary(
-            src,
-            cfg,
-            self.totals,
-            len(landmarks["id"]),
-            poses[-1],
-            accuracy,
-            wall0,
-            t_grid,
-            self.consistency(),
+            src, cfg, self.totals, len(landmarks["id"]), poses[-1], accuracy, wall0, t_grid, consistency
         )
         write_json(self.dest / "summary.json", summary.to_json())
         return summary
-
-    def consistency(self) -> MapConsistency:
-        """The map consistency of the kept scans: placed with the estimate vs with the odometry."""
-        laser_poses = np.column_stack((np.asarray(self.scans.origins).reshape(-1, 2), self.scans.headings))
-        odoms = np.frombuffer(self.scan_odoms, dtype=float).reshape(-1, 3)
-        return map_consistency(self.scans.in_laser_frame(), laser_poses, odoms)
 
     def write_grid(self, poses: np.ndarray, warn) -> None:
         """map.pgm, map.yaml and map_grid.png from the kept scans (their warnings through ``warn``)."""
