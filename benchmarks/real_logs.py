@@ -16,7 +16,8 @@ Accuracy:
   time = log time + 976052857.334 s), mean ± std of the translational (m) and rotational (deg) errors, for
   the estimate and for the raw odometry of the same run; the RBPF (gmapping) trajectory of these 910 scans
   scores 0.126 ± 0.117 m, 4.1 ± 4.8° (README of the data).
-* Mines (no ground truth): **revisit misalignment** — every scan's points are placed in the map with the
+* Mines (no ground truth): **revisit misalignment** (computed by ``cornerslam_cli/report/consistency.py``,
+  as every run's summary.json does) — every scan's points are placed in the map with the
   trajectory under test; for each point, the distance to the nearest point of any scan at least
   ``REVISIT_GAP`` keyframes earlier or later (in blocks of ``REVISIT_BLOCK``), capped at ``REVISIT_CAP`` m;
   the figure is the mean over the points that have such a neighbour within the cap (the parts of the
@@ -42,12 +43,18 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 CLI = [str(Path(sys.executable).parent / "cornerslam")]
+
+from cornerslam_cli.report.consistency import (  # noqa: E402  (the package, from the clone)
+    CELL,
+    REVISIT_CAP,
+    REVISIT_GAP,
+    occupied_cells,
+    place,
+    revisit_misalignment,
+)
+
 TIME_OFFSET = 976052857.334
 ASSOCS = ("icnn", "jcbb", "pca")
-REVISIT_GAP = 100  # keyframes
-REVISIT_CAP = 0.3  # metres
-REVISIT_BLOCK = 25  # keyframes: scans are grouped in blocks, neighbours come from blocks >= GAP away
-CELL = 0.05  # metres: grid of the map-sharpness count
 
 INTEL = Path("intel") / "intel-noisy-odom.log"
 MINES = ROOT / "configs" / "mines.yaml"  # the rover's body (beams skipped), its laser mount (exp3: no tf)
@@ -142,27 +149,6 @@ def scan_points(log: Path, config: Path | None, sets: list[str], stamps: np.ndar
     return pts
 
 
-def revisit_misalignment(pts: list[np.ndarray], poses: np.ndarray) -> tuple[float, float]:
-    """(mean capped NN distance over revisited points, share of points revisited); see the docstring."""
-    from scipy.spatial import cKDTree
-
-    W = place(pts, poses)
-    block = np.repeat(np.arange(len(pts)), [len(p) for p in pts]) // REVISIT_BLOCK  # by keyframe
-    trees = {b: cKDTree(W[block == b]) for b in np.unique(block)}
-    gap = REVISIT_GAP // REVISIT_BLOCK
-    dists, total = [], 0
-    for b in trees:
-        q = W[block == b]
-        total += len(q)
-        best = np.full(len(q), np.inf)
-        for b2, tree in trees.items():
-            if abs(b2 - b) >= gap:
-                best = np.minimum(best, tree.query(q, distance_upper_bound=REVISIT_CAP)[0])
-        dists.append(best[np.isfinite(best)])
-    d = np.concatenate(dists) if dists else np.zeros(0)
-    return (float(d.mean()) if len(d) else float("nan")), len(d) / max(total, 1)
-
-
 def rbpf_poses(stamps: np.ndarray, data: Path) -> np.ndarray:
     """Poses of ``intel.gfs.log`` (gmapping's corrected FLASER poses) at the given scan stamps."""
     by_stamp = {}
@@ -172,23 +158,6 @@ def rbpf_poses(stamps: np.ndarray, data: Path) -> np.ndarray:
             n = int(f[1])
             by_stamp[round(float(f[n + 8]), 4)] = [float(v) for v in f[n + 2 : n + 5]]
     return np.array([by_stamp[round(float(t), 4)] for t in stamps])
-
-
-def place(pts: list[np.ndarray], poses: np.ndarray) -> np.ndarray:
-    """All scan points in the map frame, placed with ``poses``."""
-    out = []
-    for p, (x, y, th) in zip(pts, poses, strict=True):
-        c, s = math.cos(th), math.sin(th)
-        out.append(np.column_stack((x + c * p[:, 0] - s * p[:, 1], y + s * p[:, 0] + c * p[:, 1])))
-    return np.vstack(out)
-
-
-def occupied_cells(pts: list[np.ndarray], poses: np.ndarray, cell: float = CELL) -> int:
-    """Distinct ``cell``-sized grid cells hit by the scan points placed with ``poses``: the same walls
-    drawn twice (a doubled or fanned-out map) occupy more cells, so fewer = crisper."""
-    from cornerslam_cli.motion.icp import voxel_thin
-
-    return len(voxel_thin(place(pts, poses), cell))  # one index per occupied cell
 
 
 def points_figure(pts: list[np.ndarray], runs: dict[str, np.ndarray], title: str, dst: Path) -> None:

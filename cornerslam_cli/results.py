@@ -169,6 +169,25 @@ class OdometryModel(JsonResult):
 
 
 @dataclass(frozen=True, kw_only=True)
+class MapConsistency(JsonResult):
+    """How well the map agrees with itself, without ground truth (report/consistency.py): the scans'
+    points placed with the estimate and with the odometry — occupied ``cell``-sized cells (fewer is
+    crisper; ``cells_vs_odom`` their ratio) and the revisit misalignment [m] with the share of points
+    revisited (null and 0 when the run never comes back to a place)."""
+
+    cell: float
+    scans: int
+    points: int
+    occupied_cells: int
+    odom_occupied_cells: int
+    cells_vs_odom: float
+    revisit_mean: float
+    revisit_share: float
+    odom_revisit_mean: float
+    odom_revisit_share: float
+
+
+@dataclass(frozen=True, kw_only=True)
 class Timing(JsonResult):
     """Stage times summed over the steps [s], the slowest matching step, the wall time of the run."""
 
@@ -211,6 +230,7 @@ class RunSummary(JsonResult):
     config: dict
     versions: dict
     odometry_model: OdometryModel | None = optional()  # appended (issue 15): what the front end learnt
+    consistency: MapConsistency | None = optional()  # appended (issue 17): map consistency, no ground truth
     out_dir: str | None = field(default=None, metadata={"json": False})
 
     @classmethod

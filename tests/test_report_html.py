@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import base64
 import json
+import re
 import shutil
 from html.parser import HTMLParser
 from pathlib import Path
 
+import matplotlib
 import pytest
 from test_report_plots import ASSOCS, PNG_SIGNATURE, make_report_outputs
 
@@ -167,3 +169,84 @@ def test_report_escapes_text(tmp_path, reports):
 def test_write_report_returns_path_inside_dir(reports):
     for p in reports:
         assert isinstance(p, Path) and p.parent.is_dir() and p.stat().st_size > 50_000
+
+
+FONT = Path(matplotlib.get_data_path()) / "fonts" / "ttf"  # DejaVu Sans: what system-ui falls back to
+
+
+def min_table_width(rows: list[list[str]], font_px: float, pad_px: float) -> float:
+    """The narrowest a browser can lay out a table (px): per column its widest unbreakable piece (a
+    header breaks at spaces and after underscores, a cell at spaces), plus padding and borders;
+    header text is bold. Measured with DejaVu Sans, what system-ui falls back to on Linux."""
+    from PIL import ImageFont
+
+    bold = ImageFont.truetype(str(FONT / "DejaVuSans-Bold.ttf"), size=round(font_px))
+    regular = ImageFont.truetype(str(FONT / "DejaVuSans.ttf"), size=round(font_px))
+    widths = [0.0] * len(rows[0])
+    for i, row in enumerate(rows):
+        font = bold if i == 0 else regular
+        for j, text in enumerate(row):
+            pieces = re.split(r"(?<=_)|\s+", text) if i == 0 else text.split()
+            widths[j] = max([widths[j]] + [font.getlength(p) for p in pieces])
+    return sum(widths) + len(widths) * (2 * pad_px + 1) + 1
+
+
+def test_compare_table_fits_a_1400_px_page_with_the_widest_numbers(reports):
+    text = reports[1].read_text(encoding="utf-8")
+    assert '<table class="wide">' in text and "rel_<wbr>trans_<wbr>mean" in text
+    rows = [[c[0] for c in r] for r in table_with_header(Page(text), "assoc")]
+    body = 1200  # CSS max-width of the page body: a 1,400 px window shows it whole
+    font, pad = 16 * 0.75, 16 * 0.75 * 0.25  # table.wide: .75em, padding .25em
+    assert min_table_width(rows, font, pad) <= body
+    # every cell as wide as a time or an error of 4 significant digits in the millisecond range gets
+    widest = [rows[0]] + [[r[0]] + ["0.001234"] * (len(r) - 1) for r in rows[1:]]
+    assert min_table_width(widest, font, pad) <= body
+    assert min_table_width(widest, 16 * 0.92, 16 * 0.92 * 0.6) > body  # the table as it was did not fit
+
+
+def test_run_report_shows_the_relation_metric_without_ground_truth(tmp_path, reports):
+    """A run scored by --relations only (no ground truth, no ATE): the report shows the relation
+    metric stdout prints, and no accuracy table of dashes."""
+    run = tmp_path / "run"
+    shutil.copytree(reports[0].parent, run)
+    summary = json.loads((run / "summary.json").read_text())
+    rel = {
+        "n": 120,
+        "n_total": 130,
+        "trans_mean": 0.167,
+        "trans_std": 0.158,
+        "rot_mean_deg": 2.5,
+        "rot_std_deg": 3.0,
+    }
+    odom = {
+        "n": 120,
+        "n_total": 130,
+        "trans_mean": 5.9,
+        "trans_std": 9.0,
+        "rot_mean_deg": 20.0,
+        "rot_std_deg": 1,
+    }
+    summary["accuracy"] = {"relations_file": "intel.relations", "relations": rel, "odom_relations": odom}
+    (run / "summary.json").write_text(json.dumps(summary))
+    page = Page(write_report(run).read_text(encoding="utf-8"))
+    assert not [t for t in page.tables if t and t[0] and t[0][0][0] == "trajectory"]  # no ATE
+    rows = table_with_header(page, "trajectory (relations)")
+    assert [[c[0] for c in r] for r in rows[1:]] == [
+        ["corrected", "0.167", "0.158", "2.5", "3", "120 of 130"],
+        ["odometry", "5.9", "9", "20", "1", "120 of 130"],
+    ]
+
+
+def test_run_report_names_the_times_and_shows_the_map_consistency(reports):
+    page = Page(reports[0].read_text(encoding="utf-8"))
+    summary = json.loads((reports[0].parent / "summary.json").read_text())
+    facts = {r[0][0]: r[1][0] for t in page.tables for r in t if len(r) == 2}
+    assert facts["wall-clock time [s]"] == f"{summary['timing']['wall_time']:.4g}"
+    assert "matching time [s]" in facts and not any(
+        " time time" in k or "_" in k for k in facts if "[s]" in k
+    )
+    c = summary["consistency"]
+    rows = [[cell[0] for cell in r] for r in table_with_header(page, "trajectory (map)")[1:]]
+    assert rows[0][:3] == ["corrected", str(c["occupied_cells"]), f"{c['cells_vs_odom']:.4g}"]
+    assert rows[1][:3] == ["odometry", str(c["odom_occupied_cells"]), "1"]
+    assert float(rows[0][3]) == pytest.approx(100 * c["revisit_mean"], rel=1e-3)

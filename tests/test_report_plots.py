@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import shutil
 import struct
 from pathlib import Path
@@ -12,7 +13,16 @@ import pytest
 from cornerslam_cli.compare import compare
 from cornerslam_cli.config import load_config
 from cornerslam_cli.geometry import relative
-from cornerslam_cli.report.plots import COMPARE_FIGURES, RUN_FIGURES, plot_compare, plot_run
+from cornerslam_cli.report.plots import (
+    COMPARE_FIGURES,
+    MAX_STEPS_DRAWN,
+    RUN_FIGURES,
+    STEP_BINS,
+    binned,
+    plot_compare,
+    plot_run,
+    step_bins,
+)
 from cornerslam_cli.report.run_dir import ellipse_polygons, load_run, odom_in_map
 
 ASSOCS = ["icnn", "pca"]
@@ -142,3 +152,78 @@ def test_ellipse_polygons_lie_on_the_n_sigma_contour():
     # axis-aligned: semi-axes 3σ = 6 m along x, 3 m along y
     box = ellipse_polygons(np.zeros((1, 2)), np.diag([4.0, 1.0])[None], k=64)[0]
     np.testing.assert_allclose(np.abs(box).max(axis=0), [6.0, 3.0], rtol=1e-3)
+
+
+def test_binned_gives_each_bins_median_and_range():
+    step = np.arange(10)
+    v = np.array([1, 5, 3, np.nan, np.nan, np.nan, 2, 8, 4, 9], dtype=float)
+    mid, med, lo, hi = binned(step, v, 3)
+    np.testing.assert_array_equal(mid, [1, 4, 7, 9])
+    np.testing.assert_array_equal(med, [3, np.nan, 4, 9])  # an all-NaN bin stays a gap
+    np.testing.assert_array_equal(lo, [1, np.nan, 2, 9])
+    np.testing.assert_array_equal(hi, [5, np.nan, 8, 9])
+    assert step_bins(MAX_STEPS_DRAWN) == 1 and step_bins(MAX_STEPS_DRAWN + 1) == 5
+    assert math.ceil(4800 / step_bins(4800)) <= STEP_BINS
+
+
+def long_run(outputs, tmp_path: Path, n: int = 4800) -> Path:
+    """The sim run stretched to ``n`` steps: timing.csv's rows repeated with fresh step numbers."""
+    run = tmp_path / "long"
+    shutil.copytree(outputs[0], run, ignore=shutil.ignore_patterns("*.png", "report.html"))
+    lines = (run / "timing.csv").read_text().splitlines()
+    body = [row.split(",", 1)[1] for row in lines[1:]]
+    rows = [f"{i},{body[i % len(body)]}" for i in range(n)]
+    (run / "timing.csv").write_text("\n".join([lines[0], *rows]) + "\n")
+    return run
+
+
+def test_long_runs_are_drawn_per_bin_not_as_a_solid_band(outputs, tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import PolyCollection
+
+    from cornerslam_cli.report.plots import _plot_per_step
+
+    run = long_run(outputs, tmp_path)
+    t = load_run(run).timing
+    assert len(t["step"]) == 4800
+    fig, ax = plt.subplots()
+    try:
+        _plot_per_step(ax, t["step"], t["t_match"], "tab:orange", "matching")
+        (line,) = ax.get_lines()
+        assert len(line.get_xdata()) <= STEP_BINS  # medians, not 4,800 zig-zags
+        band = [c for c in ax.collections if isinstance(c, PolyCollection)]
+        assert len(band) == 1  # the range of each bin, drawn faintly
+        size = step_bins(4800)
+        np.testing.assert_allclose(line.get_ydata()[0], np.median(t["t_match"][:size]))
+    finally:
+        plt.close(fig)
+    for path in plot_run(run):
+        check_png(path)
+
+
+def test_many_landmarks_get_thin_ellipses_all_still_drawn():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import PolyCollection
+
+    from cornerslam_cli.report.plots import _draw_landmarks
+
+    rng = np.random.default_rng(1)
+    widths = []
+    for n in (50, 900):
+        lm = {"x": rng.uniform(0, 50, n), "y": rng.uniform(0, 50, n), "var_x": np.full(n, 0.04),
+              "var_y": np.full(n, 0.01), "cov_xy": np.zeros(n)}  # fmt: skip
+        fig, ax = plt.subplots()
+        try:
+            _draw_landmarks(ax, lm)
+            (polys,) = [c for c in ax.collections if isinstance(c, PolyCollection)]
+            assert len(polys.get_paths()) == n
+            widths.append(float(polys.get_linewidths()[0]))
+        finally:
+            plt.close(fig)
+    assert widths[0] == 0.7 and widths[1] <= 0.7 / 3

@@ -107,6 +107,7 @@ def test_read_names_the_file_it_cannot_read(tmp_path):
 SUMMARY_KEYS = [
     "cornerslam_version", "mode", "input", "assoc", "counts", "timing", "final_pose", "warnings",
     "accuracy", "hashes", "config", "versions", "odometry_model",  # odometry_model appended (issue 15)
+    "consistency",  # appended (issue 17): map consistency without ground truth
 ]  # fmt: skip
 INPUT_KEYS = [
     "log",

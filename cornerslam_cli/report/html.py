@@ -15,7 +15,7 @@ import math
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
-from ..results import Ate, RunSummary, to_json
+from ..results import Ate, MapConsistency, RelationError, RunSummary, to_json
 from .plots import COMPARE_FIGURES, RUN_FIGURES, compare_assocs, plot_compare, plot_run
 from .tables import COMPARISON_COLUMNS, read_csv
 
@@ -27,6 +27,8 @@ h2 { font-size: 1.25em; margin-top: 2em; border-bottom: 1px solid #ddd; }
 h3 { font-size: 1.05em; }
 table { border-collapse: collapse; margin: .5em 0 1em; font-size: .92em; }
 th, td { border: 1px solid #ccc; padding: .25em .6em; text-align: right; }
+table.wide { font-size: .75em; } table.wide th, table.wide td { padding: .2em .25em; }
+table.wide th { font-weight: 600; }
 th { background: #f2f2f2; } td.name, th.name { text-align: left; }
 td.best { background: #d9f2d9; font-weight: bold; }
 figure { margin: 1em 0; } figure img { max-width: 100%; border: 1px solid #ddd; }
@@ -59,6 +61,18 @@ BETTER: dict[str, Callable[[Iterable[float]], float]] = {
 }
 
 
+# summary.json's time totals as the report names them
+TIME_LABELS = {
+    "t_extract": "extraction time",
+    "t_scan_match": "scan matching time",
+    "t_predict": "prediction time",
+    "t_match": "matching time",
+    "t_update": "update time",
+    "t_total": "filter time (all stages)",
+    "wall_time": "wall-clock time",
+}
+
+
 def esc(value) -> str:
     return html.escape(str(value), quote=True)
 
@@ -86,14 +100,16 @@ def figure(path: Path, alt: str) -> str:
     )
 
 
-def table(header: list[str], rows: list[list], name_cols: int = 1, best: set | None = None) -> str:
-    """An HTML table; ``best`` holds (row, col) cells to highlight. Everything is escaped."""
+def table(
+    header: list[str], rows: list[list], name_cols: int = 1, best: set | None = None, wide: bool = False
+) -> str:
+    """An HTML table; ``best`` holds (row, col) cells to highlight. Everything is escaped. A ``wide``
+    table (many columns named like ``rel_trans_mean``) is set smaller and its headers may break
+    after each underscore, so it fits the page."""
     best = best or set()
-    out = ["<table><tr>"]
-    out += [
-        f'<th class="name">{esc(h)}</th>' if j < name_cols else f"<th>{esc(h)}</th>"
-        for j, h in enumerate(header)
-    ]
+    out = ['<table class="wide"><tr>' if wide else "<table><tr>"]
+    heads = [esc(h).replace("_", "_<wbr>") if wide else esc(h) for h in header]
+    out += [f'<th class="name">{h}</th>' if j < name_cols else f"<th>{h}</th>" for j, h in enumerate(heads)]
     out.append("</tr>")
     for i, row in enumerate(rows):
         cells = []
@@ -134,25 +150,15 @@ def _summary_section(summary: RunSummary) -> list[str]:
         ("landmarks", counts.landmarks),
         ("matched corners", counts.matched_total),
     ]
-    for key in ("t_extract", "t_scan_match", "t_predict", "t_match", "t_update", "t_total", "wall_time"):
+    for key, label in TIME_LABELS.items():
         if getattr(timing, key) is not None:  # no scan matching time in a summary from before it
-            pairs.append((f"{key.removeprefix('t_')} time [s]", float(getattr(timing, key))))
+            pairs.append((f"{label} [s]", float(getattr(timing, key))))
     pairs.append(("max matching time per step [ms]", 1e3 * timing.t_match_max))
     pairs.append(("scans per second", timing.scans_per_second))
     pairs.append(("final pose x, y [m], θ [rad]", ", ".join(f"{v:.3f}" for v in summary.final_pose)))
     out = ["<h2>Summary</h2>", _kv_table(pairs)]
-    acc = summary.accuracy
-    if acc is not None:
-        rows = [[name, *_ate_cells(a)] for name, a in (("corrected", acc.ate), ("odometry", acc.odom_ate))]
-        out += [
-            "<h3>Accuracy</h3>",
-            f'<p class="muted">against {esc(acc.ground_truth or "")} (SE(2)-aligned)</p>',
-            table(["trajectory", "ATE RMSE [m]", "mean [m]", "max [m]", "heading RMSE [rad]", "poses"], rows),
-        ]
-        extra = [(k, getattr(acc, k)) for k in ("rpe_step_rmse", "rpe_step_rot_rmse", "rpe_per_m")]
-        extra = [(k, v) for k, v in extra if v is not None and math.isfinite(v)]  # null in summary.json
-        if extra:
-            out.append(_kv_table(extra))
+    out += _accuracy_section(summary)
+    out += _consistency_section(summary.consistency)
     out.append("<h3>Warnings</h3>")
     if summary.warnings:
         out.append("<ul>" + "".join(f'<li class="warn">{esc(w)}</li>' for w in summary.warnings) + "</ul>")
@@ -161,6 +167,69 @@ def _summary_section(summary: RunSummary) -> list[str]:
     out.append("<details><summary>All counts</summary>")
     out.append(_kv_table(list(to_json(counts).items())) + "</details>")
     return out
+
+
+def _accuracy_section(summary: RunSummary) -> list[str]:
+    """ATE against the ground truth and the relation metric, each when the run measured it."""
+    acc = summary.accuracy
+    if acc is None:
+        return []
+    out = ["<h3>Accuracy</h3>"]
+    if acc.ate is not None or acc.odom_ate is not None:
+        rows = [[name, *_ate_cells(a)] for name, a in (("corrected", acc.ate), ("odometry", acc.odom_ate))]
+        out += [
+            f'<p class="muted">against {esc(acc.ground_truth or "")} (SE(2)-aligned)</p>',
+            table(["trajectory", "ATE RMSE [m]", "mean [m]", "max [m]", "heading RMSE [rad]", "poses"], rows),
+        ]
+    extra = [(k, getattr(acc, k)) for k in ("rpe_step_rmse", "rpe_step_rot_rmse", "rpe_per_m")]
+    extra = [(k, v) for k, v in extra if v is not None and math.isfinite(v)]  # null in summary.json
+    if extra:
+        out.append(_kv_table(extra))
+    if acc.relations is not None:
+        named = (("corrected", acc.relations), ("odometry", acc.odom_relations))
+        named += (("scan-matched odometry", acc.scan_odom_relations),) if acc.scan_odom_relations else ()
+        source = esc(acc.relations_file or "")
+        out += [
+            f'<p class="muted">relation metric (Kümmerle et al. 2009) against {source}</p>',
+            table(RELATION_HEADER, [[name, *_relation_cells(e)] for name, e in named]),
+        ]
+    return out
+
+
+RELATION_HEADER = [
+    "trajectory (relations)", "translation mean [m]", "std [m]", "rotation mean [°]", "std [°]", "used"
+]  # fmt: skip
+
+
+def _relation_cells(e: RelationError | None) -> list:
+    """Translation and rotation mean, std; 'n of total': NaN for what was not measured."""
+    if e is None:
+        return [math.nan] * 4 + [""]
+    values = (e.trans_mean, e.trans_std, e.rot_mean_deg, e.rot_std_deg)
+    return [math.nan if v is None else v for v in values] + [f"{e.n} of {e.n_total}"]
+
+
+def _consistency_section(c: MapConsistency | None) -> list[str]:
+    """The map-consistency figures (no ground truth needed): estimate vs odometry."""
+    if c is None:
+        return []
+    rows = [
+        ["corrected", c.occupied_cells, c.cells_vs_odom, 100 * c.revisit_mean, 100 * c.revisit_share],
+        ["odometry", c.odom_occupied_cells, 1.0, 100 * c.odom_revisit_mean, 100 * c.odom_revisit_share],
+    ]
+    return [
+        "<h3>Map consistency</h3>",
+        f'<p class="muted">{c.scans} scans, {c.points} points placed with each trajectory: occupied '
+        f"{100 * c.cell:g} cm cells (fewer is crisper) and the revisit misalignment (distance to the nearest "
+        "point of scans far apart in the sequence; share: the points that have one within 30 cm). "
+        "No ground truth needed.</p>",
+        table(CONSISTENCY_HEADER, rows),
+    ]
+
+
+CONSISTENCY_HEADER = [
+    "trajectory (map)", "occupied cells", "vs odometry", "revisit misalignment [cm]", "revisited points [%]"
+]  # fmt: skip
 
 
 def _ate_cells(a: Ate | None) -> list:
@@ -228,7 +297,7 @@ def _compare_report(out_dir: Path) -> str:
         "<nav>" + "".join(f'<a href="#assoc-{esc(a)}">{esc(a)}</a>' for a in assocs) + "</nav>",
         "<h2>Comparison</h2>",
         f'<p class="muted">log {esc(log)}; times in seconds; best value per column highlighted.</p>',
-        table(COMPARISON_COLUMNS, rows, best=best_cells(columns, n)),
+        table(COMPARISON_COLUMNS, rows, best=best_cells(columns, n), wide=True),
         "<h2>Figures</h2>",
         *[figure(out_dir / name, name) for name in COMPARE_FIGURES if (out_dir / name).is_file()],
     ]

@@ -47,6 +47,7 @@ class ScanStore:
         self.max_points = max_points
         self.stride = 1  # every stride-th beam of a scan is kept
         self.origins: list[np.ndarray] = []
+        self.headings: list[float] = []  # the laser's heading per scan (with origins: its pose)
         self.points: list[np.ndarray] = []
         self.n_points = 0
         self.n_seen = 0  # end points given, before thinning
@@ -59,12 +60,22 @@ class ScanStore:
         p = p[np.hypot(p[:, 0], p[:, 1]) <= MAX_BEAM]
         moved = np.column_stack((c * p[:, 0] - s * p[:, 1], s * p[:, 0] + c * p[:, 1])) + laser2odom[:2]
         self.origins.append(np.asarray(laser2odom[:2], dtype=np.float32))
+        self.headings.append(float(laser2odom[2]))
         self.points.append(moved.astype(np.float32))
         self.n_points += len(moved)
         while self.n_points > self.max_points:
             self.stride *= 2
             self.points = [q[::2] for q in self.points]
             self.n_points = sum(len(q) for q in self.points)
+
+    def in_laser_frame(self) -> list[np.ndarray]:
+        """The kept end points of each scan back in its laser's frame (float64)."""
+        out = []
+        for (x, y), th, q in zip(self.origins, self.headings, self.points, strict=True):
+            c, s = math.cos(th), math.sin(th)
+            d = q.astype(float) - (float(x), float(y))
+            out.append(np.column_stack((c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1])))
+        return out
 
     def rays(self) -> tuple[np.ndarray, np.ndarray]:
         """(n, 2) start and (n, 2) end of every kept beam, float64."""

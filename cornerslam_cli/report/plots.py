@@ -40,6 +40,9 @@ COLORS = {
 }
 ASSOC_COLORS = {"icnn": "tab:orange", "jcbb": "tab:purple", "pca": "tab:blue"}
 
+MAX_STEPS_DRAWN = 600  # longer per-step series are drawn per bin of steps (median and range), not per step
+STEP_BINS = 150  # bins of a longer series
+MANY_LANDMARKS = 100  # more landmarks than this: their ellipses are drawn thinner and fainter
 RUN_FIGURES = ("map.png", "segments.png", "timing.png", "corners.png")
 COMPARE_FIGURES = ("compare_matching.png", "compare_maps.png", "compare_timing.png")
 
@@ -84,12 +87,20 @@ def _draw_landmarks(ax, lm: dict[str, np.ndarray], ellipses: bool = True, label:
         cov[:, 0, 0], cov[:, 1, 1] = lm["var_x"], lm["var_y"]
         cov[:, 0, 1] = cov[:, 1, 0] = lm["cov_xy"]
         polys = ellipse_polygons(xy, np.nan_to_num(cov))
+        thin = min(1.0, math.sqrt(MANY_LANDMARKS / n))  # 1 up to MANY_LANDMARKS, then ~ 1/sqrt(n)
         ax.add_collection(
             PolyCollection(
-                polys, closed=True, facecolors="none", edgecolors=COLORS["landmark"], linewidths=0.7
+                polys,
+                closed=True,
+                facecolors="none",
+                edgecolors=COLORS["landmark"],
+                linewidths=0.7 * thin,
+                alpha=None if thin == 1.0 else max(0.35, thin),
+                zorder=2,
             )
         )
-    ax.scatter(xy[:, 0], xy[:, 1], s=9, marker="+", color=COLORS["landmark"], linewidths=0.9, label=label)
+    size = 9 if n <= MANY_LANDMARKS else 4
+    ax.scatter(xy[:, 0], xy[:, 1], s=size, marker="+", color=COLORS["landmark"], linewidths=0.9, label=label)
 
 
 def _draw_map(ax, run: RunData, segments_alpha: float = 0.18, legend: bool = True) -> None:
@@ -168,6 +179,48 @@ def _positive(v: np.ndarray) -> np.ndarray:
     return v
 
 
+def step_bins(n: int) -> int:
+    """Steps per bin for a series of ``n`` steps: 1 up to MAX_STEPS_DRAWN, then enough for at most
+    STEP_BINS bins."""
+    return 1 if n <= MAX_STEPS_DRAWN else math.ceil(n / STEP_BINS)
+
+
+def binned(step: np.ndarray, v: np.ndarray, size: int) -> tuple[np.ndarray, ...]:
+    """Per bin of ``size`` consecutive steps: the middle step, and the median, minimum and maximum of
+    ``v`` (NaN, a gap, where a bin has no value)."""
+    n = math.ceil(len(v) / size)
+    pad = np.full(n * size, np.nan)
+    pad[: len(v)] = v
+    bins = pad.reshape(n, size)
+    mid = np.asarray(step, dtype=float)[np.minimum(np.arange(n) * size + size // 2, len(v) - 1)]
+    empty = np.all(np.isnan(bins), axis=1)
+    bins[empty] = 0.0  # no all-NaN warnings; put back as NaN below
+    stats = [np.nanmedian(bins, axis=1), np.nanmin(bins, axis=1), np.nanmax(bins, axis=1)]
+    for a in stats:
+        a[empty] = np.nan
+    return mid, *stats
+
+
+def _plot_per_step(
+    ax, step: np.ndarray, v: np.ndarray, color: str, label: str, lw: float = 0.7, **kw
+) -> None:
+    """A per-step series: each step when short, else per bin its median (a line) and its range (a
+    light band), so a long run is not a solid band of lines."""
+    size = step_bins(len(v))
+    if size == 1:
+        ax.plot(step, v, lw=0.7, color=color, label=label, **kw)
+        return
+    mid, med, lo, hi = binned(step, v, size)
+    ax.fill_between(mid, lo, hi, color=color, alpha=0.18, lw=0)
+    ax.plot(mid, med, lw=1.1, color=color, label=label, **kw)
+
+
+def _binned_note(step: np.ndarray) -> str:
+    """The axis label's note for a binned series ('' when drawn per step)."""
+    size = step_bins(len(step))
+    return "" if size == 1 else f"\n(median and range per {size} steps)"
+
+
 def plot_timing(run: RunData, path: Path) -> Path:
     t = run.timing
     fig, (ax, ax2) = _figure(2, 1, figsize=(9, 6), sharex=True, height_ratios=(3, 1), layout="constrained")
@@ -179,9 +232,9 @@ def plot_timing(run: RunData, path: Path) -> Path:
     if np.any(t.get("t_scan_match", np.zeros(1)) > 0):  # our motion front end, not in the paper's figure
         series.append(("t_scan_match", "scan matching", "tab:purple"))
     for key, label, color in series:
-        ax.plot(t["step"], _positive(t[key] * 1e3), lw=0.7, color=color, label=label)
+        _plot_per_step(ax, t["step"], _positive(t[key] * 1e3), color=color, label=label)
     ax.set_yscale("log")
-    ax.set_ylabel("time per step [ms]")
+    ax.set_ylabel("time per step [ms]" + _binned_note(t["step"]))
     ax.legend(loc="upper left", fontsize=8, ncol=len(series))
     ax.grid(True, which="both", lw=0.3, alpha=0.5)
     ax.set_title(f"Per-step prediction, matching and update time (Fig 17) — {run.title}")
@@ -195,11 +248,13 @@ def plot_timing(run: RunData, path: Path) -> Path:
 def plot_corners(run: RunData, path: Path) -> Path:
     t = run.timing
     fig, (ax, ax2) = _figure(2, 1, figsize=(9, 6), sharex=True, height_ratios=(2, 1), layout="constrained")
-    ax.plot(t["step"], t["n_corners"], lw=0.8, color="tab:gray", label="detected corners")
-    ax.plot(t["step"], t["n_matched"], lw=0.8, color="tab:blue", label="matched corners")
-    ax.fill_between(t["step"], t["n_matched"], t["n_corners"], color="tab:red", alpha=0.3, lw=0,
+    size = step_bins(len(t["step"]))
+    step, detected, matched = (_bin_mean(t[k], size) for k in ("step", "n_corners", "n_matched"))
+    ax.plot(step, detected, lw=0.8, color="tab:gray", label="detected corners")
+    ax.plot(step, matched, lw=0.8, color="tab:blue", label="matched corners")
+    ax.fill_between(step, matched, detected, color="tab:red", alpha=0.3, lw=0,
                     step=None, label="unmatched")  # fmt: skip
-    ax.set_ylabel("corners per step")
+    ax.set_ylabel("corners per step" + ("" if size == 1 else f"\n(mean per {size} steps)"))
     ax.legend(loc="upper left", fontsize=8, ncol=3)
     ax.grid(True, lw=0.3, alpha=0.5)
     total_d, total_m = int(np.nansum(t["n_corners"])), int(np.nansum(t["n_matched"]))
@@ -208,11 +263,24 @@ def plot_corners(run: RunData, path: Path) -> Path:
         f"{total_m} of {total_d} detections matched ({100 * total_m / max(total_d, 1):.0f} %)",
         fontsize=10,
     )
-    ax2.bar(t["step"], t["n_new"], width=1.0, color=COLORS["landmark"], label="new landmarks")
-    ax2.set_ylabel("new landmarks")
+    new = _bin_sum(t["n_new"], size)
+    ax2.bar(step, new, width=size, color=COLORS["landmark"], label="new landmarks")
+    ax2.set_ylabel("new landmarks" + ("" if size == 1 else f"\nper {size} steps"))
     ax2.set_xlabel("step")
     ax2.grid(True, lw=0.3, alpha=0.5)
     return _save(fig, path)
+
+
+def _bin_sum(v: np.ndarray, size: int) -> np.ndarray:
+    """Sums of ``v`` over bins of ``size`` consecutive values (the last bin may be shorter)."""
+    v = np.asarray(v, dtype=float)
+    return v if size == 1 else np.add.reduceat(v, np.arange(0, len(v), size))
+
+
+def _bin_mean(v: np.ndarray, size: int) -> np.ndarray:
+    """Means of ``v`` over bins of ``size`` consecutive values (the last bin may be shorter)."""
+    counts = _bin_sum(np.ones(len(v)), size)
+    return _bin_sum(v, size) / counts
 
 
 def plot_run(out_dir: Path, ground_truth: str | Path | None = None) -> list[Path]:
@@ -294,11 +362,13 @@ def _plot_compare_timing(runs: list[RunData], log_name: str, path: Path) -> Path
     fig, ax = _figure(figsize=(10, 4.8), layout="constrained")
     for i, r in enumerate(runs):
         t = r.timing
-        ax.plot(t["step"], _positive(t["t_match"] * 1e3), color=_assoc_color(r.assoc, i), lw=0.7, alpha=0.85,
-                label=f"{r.assoc} (max {np.nanmax(t['t_match']) * 1e3:.1f} ms)")  # fmt: skip
+        label = f"{r.assoc} (max {np.nanmax(t['t_match']) * 1e3:.1f} ms)"
+        _plot_per_step(
+            ax, t["step"], _positive(t["t_match"] * 1e3), _assoc_color(r.assoc, i), label, alpha=0.85
+        )
     ax.set_yscale("log")
     ax.set_xlabel("step")
-    ax.set_ylabel("matching time per step [ms]")
+    ax.set_ylabel("matching time per step [ms]" + (_binned_note(runs[0].timing["step"]) if runs else ""))
     ax.grid(True, which="both", lw=0.3, alpha=0.5)
     ax.legend(loc="upper left", fontsize=9)
     ax.set_title(f"Per-step matching time per associator (Fig 17) — {log_name}")

@@ -33,6 +33,7 @@ from ..evaluate import ate, overlap_problem, read_relations, relation_error, rpe
 from ..geometry import compose
 from ..logs import check_regular
 from ..results import Accuracy, Counts, Hashes, OdometryModel, RunInput, RunSummary, Timing
+from .consistency import store_consistency
 from .occupancy import ScanStore, build_grid, draw_grid, write_grid
 from .odom_frame import in_odom_frame, landmarks_in_odom_frame
 from .tables import (
@@ -49,6 +50,7 @@ from .tables import (
 if TYPE_CHECKING:
     from ..config import Config, GridConfig
     from ..frontend import Input
+    from ..results import MapConsistency
     from ..slam import StepRecord
 
 
@@ -117,6 +119,7 @@ class RunWriter:
         self.track = array("d")  # stamp, pose, odom, motion per step: 80 bytes (a list of arrays: ~400)
         self.totals = Totals()
         self.map2odom: np.ndarray | None = None  # the filter's map frame in the odometry frame
+        self.scan_odoms = array("d")  # the laser's pose by the odometry, per scan kept (x, y, θ)
 
     def _open(self, name: str, columns: list[str]) -> CsvTable:
         return self._files.enter_context(CsvTable(self.dest / name, columns))
@@ -135,6 +138,7 @@ class RunWriter:
         r = in_odom_frame(r, self.map2odom)
         if points is not None:
             self.scans.add(compose(r.pose, self.laser2base), points)
+            self.scan_odoms.extend(compose(r.odom, self.laser2base))
         self.trajectory.write(trajectory_row(r))
         self.timing.write(timing_row(r))
         self.lines.rows(r.segments_map, lead=(r.step,))
@@ -172,8 +176,9 @@ class RunWriter:
         t_grid = time.perf_counter()
         self.write_grid(poses, src.reader.stats.warn)
         t_grid = time.perf_counter() - t_grid
+        consistency = store_consistency(self.scans, np.frombuffer(self.scan_odoms).reshape(-1, 3))
         summary = build_summary(
-            src, cfg, self.totals, len(landmarks["id"]), poses[-1], accuracy, wall0, t_grid
+            src, cfg, self.totals, len(landmarks["id"]), poses[-1], accuracy, wall0, t_grid, consistency
         )
         write_json(self.dest / "summary.json", summary.to_json())
         return summary
@@ -194,9 +199,10 @@ def build_summary(
     accuracy: Accuracy | None,
     wall0: float,
     t_grid: float | None = None,
+    consistency: MapConsistency | None = None,
 ) -> RunSummary:
     """The summary of a run (summary.json, INTERFACE.md): input, counts, timing totals (``t_grid``:
-    the occupancy grid's), accuracy, hashes, versions."""
+    the occupancy grid's), accuracy, hashes, versions, map ``consistency``."""
     info = src.info
     return RunSummary(
         cornerslam_version=__version__,
@@ -217,6 +223,7 @@ def build_summary(
         timing=run_timing(totals, wall0, t_grid),
         final_pose=tuple(final_pose.tolist()),
         odometry_model=odometry_model(src.matcher),
+        consistency=consistency,
         warnings=tuple(src.reader.stats.warnings),
         accuracy=accuracy,
         hashes=Hashes(input=input_hash(src.path), config=config_hash(cfg), version=__version__),

@@ -1,0 +1,107 @@
+"""Map consistency without ground truth (report/consistency.py): hand-made scans whose occupied cells
+and revisit misalignment are known, and the figures in a simulated run's summary.json."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from cornerslam_cli.cli import cli
+from cornerslam_cli.report.consistency import (
+    CELL,
+    dyadic_runs,
+    map_consistency,
+    occupied_cells,
+    place,
+    revisit_misalignment,
+)
+
+
+def wall_scan() -> np.ndarray:
+    """20 points 1 m ahead of the laser, along a wall, one at the centre of each 5 cm cell."""
+    return np.column_stack((np.full(20, 1.0 + CELL / 2), CELL * (np.arange(20) + 0.5)))
+
+
+def test_place_rotates_and_translates_each_scan_by_its_pose():
+    pts = [np.array([[1.0, 0.0]]), np.array([[1.0, 0.0], [0.0, 2.0]])]
+    poses = np.array([[0.0, 0.0, 0.0], [1.0, -1.0, math.pi / 2]])
+    np.testing.assert_allclose(place(pts, poses), [[1, 0], [1, 0], [-1, -1]], atol=1e-12)
+
+
+def test_occupied_cells_count_a_wall_once_when_the_scans_agree_and_twice_when_they_do_not():
+    pts = [wall_scan(), wall_scan()]
+    same = np.zeros((2, 3))
+    assert occupied_cells(pts, same) == 20
+    shifted = np.array([[0.0, 0.0, 0.0], [2 * CELL, 0.0, 0.0]])  # the second scan's wall 10 cm further
+    assert occupied_cells(pts, shifted) == 40
+    along = np.array([[0.0, 0.0, 0.0], [0.0, 10 * CELL, 0.0]])  # half the wall seen again, half new
+    assert occupied_cells(pts, along) == 30
+
+
+def revisit_case() -> tuple[list[np.ndarray], np.ndarray]:
+    """200 scans of one point each (8 blocks of 25; neighbours from blocks >= 4 away): scans 0–99
+    place it at (0, 0), 100–149 10 cm away, 150–199 1 m away (beyond the cap). Blocks 0, 1 meet
+    blocks 4, 5 at 0.1 m; blocks 2, 3 only reach 6, 7 (too far); 6, 7 only 2, 3."""
+    pts = [np.array([[1.0, 0.0]])] * 200
+    x = np.concatenate((np.zeros(100), np.full(50, 0.1), np.full(50, 1.0)))
+    poses = np.column_stack((x - 1.0, np.zeros(200), np.zeros(200)))
+    return pts, poses
+
+
+def test_revisit_misalignment_measures_only_scans_far_apart_in_the_sequence():
+    pts, poses = revisit_case()
+    mean, share = revisit_misalignment(pts, poses)
+    assert mean == pytest.approx(0.1) and share == 0.5
+    # every scan in one place: all revisited, no misalignment
+    assert revisit_misalignment(pts, np.column_stack((np.full(200, -1.0), np.zeros((200, 2))))) == (0.0, 1.0)
+    # a run that never comes back: 99 scans are fewer than the gap
+    mean, share = revisit_misalignment(pts[:99], poses[:99])
+    assert math.isnan(mean) and share == 0
+
+
+@pytest.mark.parametrize("lo", range(0, 13))
+def test_dyadic_runs_cover_a_range_exactly_with_aligned_power_of_two_runs(lo):
+    for hi in range(-1, 40):
+        runs = dyadic_runs(lo, hi)
+        covered = [i for a, z in runs for i in range(a, z)]
+        assert covered == list(range(lo, hi))
+        for a, z in runs:
+            size = z - a
+            assert size & (size - 1) == 0 and a % size == 0
+        assert len(runs) <= 2 * max(hi, 1).bit_length()
+
+
+def test_map_consistency_compares_the_estimate_with_the_odometry():
+    pts, poses = revisit_case()
+    odoms = poses.copy()
+    odoms[100:, 1] += 0.5  # the odometry drifted sideways: the second half's points land elsewhere
+    m = map_consistency(pts, poses, odoms)
+    assert (m.scans, m.points, m.cell) == (200, 200, CELL)
+    assert (m.occupied_cells, m.odom_occupied_cells) == (3, 3)
+    assert m.revisit_mean == pytest.approx(0.1) and m.revisit_share == 0.5
+    assert math.isnan(m.odom_revisit_mean) and m.odom_revisit_share == 0
+    walls = map_consistency([wall_scan()] * 2, np.zeros((2, 3)), np.array([[0, 0, 0], [0.1, 0, 0]]))
+    assert (walls.occupied_cells, walls.odom_occupied_cells, walls.cells_vs_odom) == (20, 40, 0.5)
+
+
+def test_a_simulated_run_reports_a_map_sharper_and_more_consistent_than_its_odometry(sim_log, tmp_path):
+    out = tmp_path / "run"
+    res = CliRunner().invoke(cli, ["run", str(sim_log), "--out", str(out), "-q"])
+    assert res.exit_code == 0, res.output
+    s = json.loads((out / "summary.json").read_text())
+    c = s["consistency"]
+    assert list(s)[-1] == "consistency"
+    assert c["scans"] == s["counts"]["steps"] and 0 < c["points"] <= s["counts"]["beams_total"]
+    assert c["cells_vs_odom"] == pytest.approx(c["occupied_cells"] / c["odom_occupied_cells"])
+    assert c["cells_vs_odom"] < 0.9  # the simulated odometry drifts: its map is smeared
+    assert 0 < c["revisit_mean"] < c["odom_revisit_mean"] and c["revisit_share"] > c["odom_revisit_share"]
+
+
+def test_map_consistency_of_no_scans_is_empty_not_an_error():
+    m = map_consistency([], np.zeros((0, 3)), np.zeros((0, 3)))
+    assert (m.scans, m.points, m.occupied_cells, m.odom_occupied_cells) == (0, 0, 0, 0)
+    assert math.isnan(m.cells_vs_odom) and math.isnan(m.revisit_mean) and m.revisit_share == 0
