@@ -162,9 +162,13 @@ def shoot(browser: Browser, page: Path, png: Path) -> dict:
     browser.send("Page.enable", session)
     browser.send("Page.navigate", session, url=page.resolve().as_uri())
     browser.wait_event("Page.loadEventFired")
-    facts = browser.send("Runtime.evaluate", session, expression=MEASURE, returnByValue=True)["result"]["value"]
-    clip = {"x": 0, "y": 0, "width": max(WIDTH, facts["scroll_width"]), "height": facts["page_height"], "scale": 1}
-    shot = browser.send("Page.captureScreenshot", session, format="png", captureBeyondViewport=True, clip=clip)
+    measured = browser.send("Runtime.evaluate", session, expression=MEASURE, returnByValue=True)
+    facts = measured["result"]["value"]
+    width, height = max(WIDTH, facts["scroll_width"]), facts["page_height"]
+    clip = {"x": 0, "y": 0, "width": width, "height": height, "scale": 1}
+    shot = browser.send(
+        "Page.captureScreenshot", session, format="png", captureBeyondViewport=True, clip=clip
+    )
     png.write_bytes(base64.b64decode(shot["data"]))
     browser.send("Target.closeTarget", targetId=target)
     return facts
@@ -172,7 +176,7 @@ def shoot(browser: Browser, page: Path, png: Path) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--data", type=Path, default=default_data(), help="the real-log folder (shared/data/real)")
+    ap.add_argument("--data", type=Path, default=default_data(), help="the real-log folder (real_logs.py)")
     ap.add_argument("--work", type=Path, default=Path(tempfile.gettempdir()) / "cornerslam_report_shots")
     ap.add_argument("--out", type=Path, default=ROOT / "docs" / "results" / "report_shots")
     ap.add_argument("--chromium", default=shutil.which("chromium") or shutil.which("chromium-browser"))
@@ -184,7 +188,7 @@ def main() -> None:
         "sim_office": ROOT / "sample_logs" / "sim_office.mcap",
         "infinite_corridor": args.data / "radish" / "infinite-corridor.log",
     }
-    for name, log in logs.items():
+    for log in logs.values():
         if not log.is_file():
             raise SystemExit(f"error: {log} not found (pass --data, the real-log folder)")
     reports = {name: run_report(name, log, args.work, args.reuse) for name, log in logs.items()}
@@ -196,7 +200,7 @@ def main() -> None:
             facts = shoot(browser, page, args.out / f"{name}.png")
             failures = verdict(facts)
             checks[name] = {
-                "log": str(logs[name].relative_to(ROOT) if logs[name].is_relative_to(ROOT) else logs[name].name),
+                "log": logs[name].name,
                 "scroll_width": facts["scroll_width"],
                 "page_height": facts["page_height"],
                 "images": len(facts["images"]),
