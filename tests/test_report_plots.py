@@ -227,3 +227,26 @@ def test_many_landmarks_get_thin_ellipses_all_still_drawn():
         finally:
             plt.close(fig)
     assert widths[0] == 0.7 and widths[1] <= 0.7 / 3
+
+
+def test_the_map_is_framed_on_the_estimate_not_on_drifting_odometry():
+    """Fig 16 of a long real log: odometry 300 m off must not shrink the map into a corner."""
+    from types import SimpleNamespace
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from cornerslam_cli.report.plots import _frame_the_map
+
+    t = np.linspace(0, 2 * np.pi, 50)
+    corrected = np.column_stack((10 * np.cos(t), 10 * np.sin(t), t))
+    run = SimpleNamespace(corrected=corrected, scan_odometry=None, ground_truth=None,
+                          landmarks={"x": np.array([12.0]), "y": np.array([0.0])})  # fmt: skip
+    fig, ax = plt.subplots()
+    ax.plot(corrected[:, 0] - 300, corrected[:, 1] - 300)  # the drifting odometry, drawn first
+    _frame_the_map(ax, run)
+    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+    plt.close(fig)
+    assert -12 < x0 < -10 and 12 < x1 < 14 and -12 < y0 < -10 and 10 < y1 < 12

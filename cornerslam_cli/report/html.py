@@ -41,7 +41,7 @@ nav a { margin-right: 1em; }
 CAPTIONS = {
     "map.png": "Fig 16 — odometry (dashed) and corrected (solid) trajectories, landmarks with 3σ ellipses.",
     "segments.png": "Fig 20 — segment map at the corrected poses with the landmark positions.",
-    "timing.png": "Fig 17 — per-step prediction, matching and update time.",
+    "timing.png": "Fig 17 — per-step prediction, matching, update and scan-matching time.",
     "corners.png": "Fig 18 — detected vs matched corners per step, and new landmarks.",
     "compare_matching.png": "Fig 19 — cumulative matching time and total landmarks per associator.",
     "compare_maps.png": "Fig 16 — each associator's map with odometry and ground truth.",

@@ -122,8 +122,28 @@ def _draw_map(ax, run: RunData, segments_alpha: float = 0.18, legend: bool = Tru
     if len(c):
         ax.plot(*c[0, :2], "o", color="k", ms=4, zorder=5, label="start")
     _map_axes(ax)
+    _frame_the_map(ax, run)
     if legend:
         ax.legend(loc="best", fontsize=8, framealpha=0.85)
+
+
+def _frame_the_map(ax, run: RunData, margin: float = 0.05) -> None:
+    """Axes limits from the map (corrected and scan-matched trajectories, ground truth, landmarks), not
+    the raw odometry: drifting 100 m off on a long real log it would shrink the map into a corner. The
+    odometry is drawn where it falls inside."""
+    parts = [run.corrected[:, :2]]
+    parts += [a[:, :2] for a in (run.scan_odometry, run.ground_truth) if a is not None]
+    lm = run.landmarks
+    if len(lm.get("x", ())):
+        parts.append(np.column_stack((lm["x"], lm["y"])))
+    pts = np.concatenate([p for p in parts if len(p)]) if any(len(p) for p in parts) else np.zeros((0, 2))
+    pts = pts[np.isfinite(pts).all(axis=1)]
+    if len(pts) == 0:
+        return
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    pad = margin * max(float(np.max(hi - lo)), 1.0)
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
 
 
 def _map_axes(ax) -> None:
@@ -237,7 +257,7 @@ def plot_timing(run: RunData, path: Path) -> Path:
     ax.set_ylabel("time per step [ms]" + _binned_note(t["step"]))
     ax.legend(loc="upper left", fontsize=8, ncol=len(series))
     ax.grid(True, which="both", lw=0.3, alpha=0.5)
-    ax.set_title(f"Per-step prediction, matching and update time (Fig 17) — {run.title}")
+    ax.set_title(f"Per-step time of the filter stages and scan matching (Fig 17) — {run.title}")
     ax2.plot(t["step"], t["n_landmarks"], color=COLORS["landmark"], lw=1.0)
     ax2.set_ylabel("landmarks")
     ax2.set_xlabel("step")
