@@ -50,6 +50,14 @@ def rotate_covariance(cov: np.ndarray, yaw: float) -> np.ndarray:
     return R @ np.asarray(cov, dtype=float) @ R.T
 
 
+def rotate_pose_covariance(cov: np.ndarray, yaw: float) -> np.ndarray:
+    """(3, 3) covariance of a pose (x, y, θ) moved into a frame turned by ``yaw``: J Σ Jᵀ with
+    J = blockdiag(R(yaw), 1) (θ itself does not change with the frame)."""
+    J = np.eye(3)
+    J[:2, :2] = matrix_from_pose((0.0, 0.0, yaw))[:2, :2]
+    return J @ np.asarray(cov, dtype=float) @ J.T
+
+
 def compose(a, b) -> np.ndarray:
     """a ∘ b: with a = ``base2map`` and b = ``laser2base``, ``laser2map``. Row-wise for (n, 3)."""
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)

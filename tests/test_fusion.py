@@ -19,10 +19,7 @@ ANGLES = np.radians(np.arange(-90.0, 90.5, 1.0))
 
 
 def fusion(**kw) -> OdometryFusion:
-    c = ScanMatchConfig(**kw)
-    return OdometryFusion(
-        c.gate, c.adapt_window, c.adapt_min_samples, c.adapt_min, c.adapt_max, c.adapt_every
-    )
+    return OdometryFusion(ScanMatchConfig(**kw))
 
 
 def draw(rng, k, s, c, n, noise):

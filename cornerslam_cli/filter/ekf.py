@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import NumericalError
-from ..geometry import wrap_angle
+from ..geometry import rotate_pose_covariance, wrap_angle
 from ..types import Prediction
 from .models import (
     inverse_observe,
@@ -133,9 +133,7 @@ class Ekf:
         if cov is None:
             R = motion_noise(u, self._mu_buf[2], cfg.alphas, cfg.min_sigma_xy, cfg.min_sigma_theta)
         else:  # rotated from the robot's frame into the map's
-            c, s = np.cos(self._mu_buf[2]), np.sin(self._mu_buf[2])
-            Rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-            R = Rot @ cov @ Rot.T
+            R = rotate_pose_covariance(cov, float(self._mu_buf[2]))
         P, d = self._P_buf, self._dim
         P_rr = G @ P[:3, :3] @ G.T + R  # eq 22, robot block
         P[:3, :3] = 0.5 * (P_rr + P_rr.T)

@@ -46,6 +46,7 @@ import numpy as np
 from scipy import optimize
 
 from ..geometry import wrap_angle
+from .params import ScanMatchConfig
 
 NU = 4.0  # degrees of freedom of the Student-t: heavy tails, so a few wrong matches do not set the scales
 IRLS = 4  # re-weighting passes
@@ -59,7 +60,6 @@ class Fused:
     inc: np.ndarray  # the increment handed to the filter (previous keyframe's frame)
     cov: np.ndarray  # its covariance (3, 3)
     accepted: bool  # False: the match failed the gate and the odometry increment was used alone
-    nis: float  # dᵀ(k·Σ_o + Σ_m)⁻¹d of the match against the odometry
     gain: np.ndarray  # (3, 3) the weight the match got: inc = corrected odometry + gain·(m − it)
 
 
@@ -71,19 +71,15 @@ def nis(d: np.ndarray, S: np.ndarray) -> np.ndarray:
 class OdometryFusion:
     """Combines odometry and scan-match increments; learns the noise scales k, s and the bias c."""
 
-    def __init__(self, gate: float, window: int, min_samples: int, k_min: float, k_max: float, every: int):
-        self.gate, self.min_samples, self.k_min, self.k_max, self.every = (
-            gate,
-            min_samples,
-            k_min,
-            k_max,
-            every,
-        )
+    def __init__(self, cfg: ScanMatchConfig):
+        self.gate, self.min_samples, self.every = cfg.gate, cfg.adapt_min_samples, cfg.adapt_every
+        self.k_min, self.k_max = cfg.adapt_min, cfg.adapt_max
         self.k, self.s = 1.0, 1.0
         self.c = np.zeros(2)
-        self.samples: deque[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = deque(maxlen=window)
+        self.samples: deque[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = deque(
+            maxlen=cfg.adapt_window
+        )
         self.n_rejected = 0
-        self.n_odometry_outliers = 0
         self._since = 0
 
     def corrected(self, o: np.ndarray) -> np.ndarray:
@@ -125,15 +121,14 @@ class OdometryFusion:
         learnt = len(self.samples) >= self.min_samples  # before that, no basis to judge a match on
         if not np.isfinite(score) or (learnt and score > self.gate):
             if np.isfinite(score) and scans_prefer_match is not None and scans_prefer_match():
-                self.n_odometry_outliers += 1  # the match alone: the odometry is the outlier
-                return Fused(oc + dc, 0.5 * (Sm + Sm.T), True, score, np.eye(3))
+                return Fused(oc + dc, 0.5 * (Sm + Sm.T), True, np.eye(3))  # the odometry is the outlier
             self.n_rejected += 1  # the odometry alone, as uncertain as the gate's model
-            return Fused(oc, self.fallback_cov(cov_o), False, score, np.zeros((3, 3)))
+            return Fused(oc, self.fallback_cov(cov_o), False, np.zeros((3, 3)))
         K = So @ np.linalg.inv(S)  # Kalman gain of the odometry prior updated by the match
         inc = oc + K @ dc
         inc[2] = wrap_angle(inc[2])
         cov = (np.eye(3) - K) @ So
-        return Fused(inc, 0.5 * (cov + cov.T), True, score, K)
+        return Fused(inc, 0.5 * (cov + cov.T), True, K)
 
     def fallback_cov(self, cov_o: np.ndarray) -> np.ndarray:
         """Covariance of an odometry increment used without a match: the configured model at least."""

@@ -29,7 +29,15 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..geometry import compose, matrix_from_pose, pose_from_matrix, relative, transform_points, wrap_angle
+from ..geometry import (
+    compose,
+    matrix_from_pose,
+    pose_from_matrix,
+    relative,
+    rotate_pose_covariance,
+    transform_points,
+    wrap_angle,
+)
 from .correlative import Window, search
 from .fusion import OdometryFusion
 from .params import ScanMatchConfig
@@ -223,9 +231,7 @@ class ScanMatcher:
     def __init__(self, cfg: ScanMatchConfig, odometry_noise: Callable[[np.ndarray], np.ndarray]):
         self.cfg = cfg
         self.odometry_noise = odometry_noise  # covariance of an odometry increment (the filter's model)
-        self.fusion = OdometryFusion(
-            cfg.gate, cfg.adapt_window, cfg.adapt_min_samples, cfg.adapt_min, cfg.adapt_max, cfg.adapt_every
-        )
+        self.fusion = OdometryFusion(cfg)
         self.scans: deque[np.ndarray] = deque(maxlen=cfg.window)  # motion-frame points per map scan
         self.local: LocalMap | None = None
         self.pose: np.ndarray | None = None  # fused pose of the previous scan
@@ -280,8 +286,9 @@ class ScanMatcher:
             return self._fallback(o, cov_o, 0.0)
         reg, searched = register(points, self.local, guess, cfg), False
         window = self._window(cov_o)
-        near = points[np.einsum("ij,ij->i", points, points) <= cfg.search_range**2]
-        if (window.xy > cfg.search_min_xy or window.theta > cfg.search_min_theta) and len(near) >= 3:
+        wide = window.xy > cfg.search_min_xy or window.theta > cfg.search_min_theta
+        near = points[np.einsum("ij,ij->i", points, points) <= cfg.search_range**2] if wide else points[:0]
+        if len(near) >= 3:
             # the odometry may be outside ICP's basin: ICP also from the best pose of the whole window,
             # kept when it fits clearly better (near-equal fits: the one from the odometry, e.g. along
             # a corridor where the search's cells are as good as each other)
@@ -294,9 +301,12 @@ class ScanMatcher:
         if reg.fit < cfg.min_fit:
             return self._fallback(o, cov_o, reg.fit, searched)
         m = relative(self.pose, reg.pose)
-        R = _rotation3(-self.pose[2])  # motion frame → previous scan's frame
         fused = self.fusion.fuse(
-            o, cov_o, m, R @ reg.cov @ R.T, lambda: reg.fit >= self._fit_at(points, guess) + FIT_EVIDENCE
+            o,
+            cov_o,
+            m,
+            rotate_pose_covariance(reg.cov, -self.pose[2]),
+            lambda: reg.fit >= self._fit_at(points, guess) + FIT_EVIDENCE,
         )
         self.n_matched += fused.accepted
         # the match's error its fit cannot see, passed on with the weight the match got (none when the
@@ -346,9 +356,3 @@ class ScanMatcher:
         self.scans.append(placed[voxel_thin(placed, cfg.voxel)])  # thinned alone first: a smaller union
         pts = np.concatenate(self.scans)
         self.local = LocalMap.build(pts[voxel_thin(pts, cfg.voxel)])
-
-
-def _rotation3(theta: float) -> np.ndarray:
-    """blockdiag(R(θ), 1): moves a pose covariance (x, y, θ) into a frame turned by θ."""
-    c, s = np.cos(theta), np.sin(theta)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
