@@ -31,6 +31,7 @@ from .association.params import AssociationConfig
 from .errors import ConfigError, did_you_mean
 from .features.params import CornersConfig, LinesConfig, SensorConfig
 from .filter.params import EkfConfig
+from .graph.params import GraphConfig, LoopConfig, SubmapConfig
 from .logs.params import KeyframeConfig, OdomJumpConfig
 from .motion.params import ScanMatchConfig
 from .ranges import RangeError, check_ranges, num, short_repr, short_text
@@ -103,6 +104,9 @@ class Config:
     association: AssociationConfig = field(default_factory=AssociationConfig)
     ekf: EkfConfig = field(default_factory=EkfConfig)
     grid: GridConfig = field(default_factory=GridConfig)
+    submaps: SubmapConfig = field(default_factory=SubmapConfig)
+    loops: LoopConfig = field(default_factory=LoopConfig)
+    graph: GraphConfig = field(default_factory=GraphConfig)
 
     def to_dict(self) -> dict:
         return _to_plain(dataclasses.asdict(self))

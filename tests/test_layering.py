@@ -24,13 +24,22 @@ PACKAGE = Path(cornerslam_cli.__file__).resolve().parent
 # lowest first; a name is a module or package under cornerslam_cli ("" = the package's __init__)
 LAYERS: list[tuple[str, ...]] = [
     ("", "blas", "errors", "fpenv", "geometry", "ranges", "types", "workers"),  # stdlib, numpy
-    ("textfile", "association.params", "features.params", "filter.params", "motion.params", "logs.params"),
+    (
+        "textfile",
+        "association.params",
+        "features.params",
+        "filter.params",
+        "motion.params",
+        "logs.params",
+        "graph.params",
+    ),
     ("report.tables", "results"),  # file formats (TUM, CSV, JSON); a run's results (summary.json's fields)
     ("logs", "features", "association", "filter", "motion", "simworld", "span"),  # the stages, independent
     ("config",),  # the stages' sections assembled, loaded, validated
-    ("lasers", "evaluate", "extract"),  # a run's config; scoring a trajectory; one scan's features
+    ("lasers", "evaluate", "extract", "graph"),  # a run's config; scoring; one scan's features; pose graph
     ("frontend",),  # a run's front end: log → synchronised frames → features → scan-matched motion
     ("slam",),  # the filter over the frames: steps, landmarks
+    ("hierarchy",),  # local EKF submaps (slam) joined by the pose graph (graph)
     ("report",),  # run writer, figures, MCAP out, output directories, printed text, progress display
     ("pipeline", "simulate", "sweep"),  # a run; the simulated log; a batch's plan
     ("compare", "batch"),

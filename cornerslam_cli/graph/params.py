@@ -1,0 +1,71 @@
+"""Config sections of the two-level SLAM (graph/, hierarchy.py): ``submaps``, ``loops``, ``graph``."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+from ..ranges import check_ranges, num
+
+
+@dataclass(frozen=True)
+class SubmapConfig:
+    """Local EKF submaps (Hierarchical SLAM, Estrada et al. 2005): the paper's filter runs on a bounded
+    local map in its own frame; a submap closes when any limit is reached and the next one starts at the
+    robot's pose with zero relative uncertainty. ``enabled: false`` is the paper's single-map filter."""
+
+    enabled: bool = False
+    max_distance: float = num(10.0, gt=0.0, le=1e6)  # m travelled in one submap
+    max_landmarks: int = num(60, ge=1, le=1000)  # landmarks in one submap
+    max_steps: int = num(300, ge=2, le=1_000_000)  # keyframes in one submap
+    # m: a submap's scan points (kept for loop closing and the occupancy grid) thinned to one per cell
+    voxel: float = num(0.05, gt=0.0, le=10.0)
+
+    def __post_init__(self) -> None:
+        check_ranges(self)
+
+
+@dataclass(frozen=True)
+class LoopConfig:
+    """Loop closing between submaps (graph/loops.py): candidates from the pose graph's estimate and
+    marginals; verification by corner-pair hypotheses, the configured associator and ICP on the scan
+    points; accepted only with ``min_corners`` corners matched and a point fitness ≥ ``min_fitness``."""
+
+    enabled: bool = True
+    min_corners: int = num(4, ge=2, le=1000)  # corners jointly matched for a closure
+    min_fitness: float = num(0.5, ge=0.0, le=1.0)  # share of overlapping points within inlier_distance
+    inlier_distance: float = num(0.1, gt=0.0, le=10.0)  # m
+    # corner pairs agree when their lengths differ by less than this (m) and their φ by less than pair_phi
+    pair_distance: float = num(0.15, gt=0.0, le=10.0)
+    pair_phi: float = num(0.15, gt=0.0, le=math.pi)
+    # σ given to a hypothesis' pose when the associator looks for the jointly compatible set under it
+    hypothesis_sigma_xy: float = num(0.3, gt=0.0, le=100.0)
+    hypothesis_sigma_theta: float = num(0.1, gt=0.0, le=math.pi)
+    max_hypotheses: int = num(200, ge=1, le=100_000)  # corner-pair hypotheses tried per submap pair
+    # a candidate: an earlier submap whose extent, grown by this many marginal σ, meets the new one's
+    candidate_sigmas: float = num(3.0, gt=0.0, le=100.0)
+    max_candidates: int = num(8, ge=1, le=1000)  # candidates verified per closed submap (nearest first)
+    min_gap: int = num(2, ge=1, le=1_000_000)  # submaps between a and b (neighbours share a factor)
+    # a closure must agree with the graph's prediction within this χ²₃ (Mahalanobis², marginal covariance)
+    gate: float = num(30.7, gt=0.0, le=1e9)
+
+    def __post_init__(self) -> None:
+        check_ranges(self)
+
+
+@dataclass(frozen=True)
+class GraphConfig:
+    """The global pose graph (graph/posegraph.py, GTSAM): submap origins joined by each submap's final
+    relative pose and covariance, and loop closures under a robust kernel."""
+
+    solver: Literal["isam2", "lm"] = "isam2"  # incremental (iSAM2) or batch Levenberg–Marquardt
+    kernel: Literal["cauchy", "dcs", "none"] = "cauchy"  # robust kernel of loop-closure factors
+    kernel_scale: float = num(1.0, gt=0.0, le=1e6)  # in units of the factor's σ (whitened residual)
+
+    def __post_init__(self) -> None:
+        check_ranges(self)
+        if self.solver not in ("isam2", "lm"):
+            raise ValueError(f"solver must be 'isam2' or 'lm', got {self.solver!r}")
+        if self.kernel not in ("cauchy", "dcs", "none"):
+            raise ValueError(f"kernel must be 'cauchy', 'dcs' or 'none', got {self.kernel!r}")
