@@ -101,12 +101,21 @@ def merge_sightings(z: np.ndarray, C: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return landmarks, P
 
 
-def empty_submap(index: int = 0) -> Submap:
-    """A submap with no landmarks and no points (a robot that saw nothing)."""
+def corners_submap(landmarks: np.ndarray, sigma_xy: float = 0.01, sigma_phi: float = 0.03) -> Submap:
+    """A submap of the given corners (n, 3) alone (no points), each with covariance
+    diag(σ_xy², σ_xy², σ_φ²); the joint P block-diagonal."""
+    landmarks = np.asarray(landmarks, dtype=float).reshape(-1, 3)
+    n = len(landmarks)
+    P = np.kron(np.eye(n), np.diag([sigma_xy**2, sigma_xy**2, sigma_phi**2]))
     return Submap(
-        index, 0, 0, np.zeros((0, 3)), np.zeros((0, 0)), np.zeros(0, dtype=np.int64), np.zeros((0, 2)),
-        np.zeros(3), np.zeros((3, 3)), np.zeros((1, 3)),
+        0, 0, 0, landmarks, P, np.arange(n, dtype=np.int64), np.zeros((0, 2)), np.zeros(3), np.zeros((3, 3)),
+        np.zeros((1, 3)),
     )  # fmt: skip
+
+
+def empty_submap() -> Submap:
+    """A submap with no landmarks and no points (a robot that saw nothing)."""
+    return corners_submap(np.zeros((0, 3)))
 
 
 def straight_path(start: Sequence[float], end: Sequence[float], step: float = 0.25) -> np.ndarray:
