@@ -119,6 +119,8 @@ class PoseGraph:
         self._n_loops_optimized = 0  # loop factors the last optimize() saw
         self._loops: list[tuple[int, gtsam.noiseModel.Gaussian]] = []  # (factor index, its noise)
         self._marginals = None  # LM: gtsam.Marginals of the last optimize(), built when first asked
+        self.iterations = 0  # the last optimize()'s iSAM2 updates or LM iterations
+        self.converged = True  # whether it stopped before its step limit
         self._isam = gtsam.ISAM2(self._isam2_params()) if cfg.solver == "isam2" else None
         prior = gtsam.noiseModel.Isotropic.Sigma(3, PRIOR_SIGMA)
         self._add_factor(gtsam.PriorFactorPose2(0, _pose2(origin), prior))
@@ -182,12 +184,11 @@ class PoseGraph:
 
     def optimize(self) -> None:
         """Solve the graph: iSAM2 adds the factors and nodes since the last call and updates until
-        no variable needs relinearising; LM solves the whole graph from the current estimate."""
+        no variable needs relinearising; LM solves the whole graph from the current estimate.
+        ``iterations`` and ``converged`` say how it went (not converged: stopped at the step limit,
+        the estimate is the last step's)."""
         if self._isam is not None:
-            self._isam.update(self._new_factors, self._new_values)
-            for _ in range(ISAM2_MAX_STEPS):  # relinearise where the new step moved a variable
-                if self._isam.update().getVariablesRelinearized() == 0:
-                    break
+            self.iterations, self.converged = self._isam2_steps()
             self._estimate = self._isam.calculateEstimate()
             self._new_values = gtsam.Values()
         else:
@@ -195,7 +196,9 @@ class PoseGraph:
             params.setRelativeErrorTol(LM_RELATIVE_TOL)
             params.setAbsoluteErrorTol(LM_ABSOLUTE_TOL)
             params.setMaxIterations(LM_MAX_ITERATIONS)
-            self._estimate = gtsam.LevenbergMarquardtOptimizer(self._graph, self._estimate, params).optimize()
+            lm = gtsam.LevenbergMarquardtOptimizer(self._graph, self._estimate, params)
+            self._estimate = lm.optimize()
+            self.iterations, self.converged = lm.iterations(), lm.iterations() < LM_MAX_ITERATIONS
             self._marginals = None
         self._new_factors = gtsam.NonlinearFactorGraph()
         self._n_optimized = len(self)
@@ -203,6 +206,15 @@ class PoseGraph:
         poses = gtsam.utilities.extractPose2(self._estimate)
         poses[:, 2] = wrap_angle(poses[:, 2])
         self._poses = list(poses)
+
+    def _isam2_steps(self) -> tuple[int, bool]:
+        """iSAM2 update with the new factors and nodes, then updates that relinearise where a step
+        moved a variable, until none does. Returns (updates, whether that point was reached)."""
+        self._isam.update(self._new_factors, self._new_values)
+        for k in range(ISAM2_MAX_STEPS):
+            if self._isam.update().getVariablesRelinearized() == 0:
+                return k + 2, True
+        return ISAM2_MAX_STEPS + 1, False
 
     # --- answers ----------------------------------------------------------------------------------
 
