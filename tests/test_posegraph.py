@@ -188,7 +188,7 @@ def test_marginal_and_relative_match_monte_carlo(solver):
     assert_cov_close(pose_samples_cov(samples[3], g.pose(3)), g.marginal(3))
     assert_cov_close(pose_samples_cov(samples[1], g.pose(1)), g.marginal(1))
     assert np.all(np.abs(g.marginal(0)) < 1e-10)  # the prior holds node 0
-    rel, cov = g.relative(1, 3)
+    rel, cov = g.relative(np.int64(1), np.int64(3))  # indices as numpy gives them
     np.testing.assert_allclose(rel, relative(g.pose(1), g.pose(3)), atol=1e-12)
     assert_cov_close(pose_samples_cov(relative(samples[1], samples[3]), rel), cov)
     # one factor's relative pose is that factor: its measurement and covariance

@@ -69,7 +69,7 @@ def _array(pose: gtsam.Pose2) -> np.ndarray:
 def _check_pose(rel, what: str) -> np.ndarray:
     rel = np.asarray(rel, dtype=float)
     if rel.shape != (3,) or not np.all(np.isfinite(rel)):
-        raise ValueError(f"{what}: a relative pose must be 3 finite numbers (x, y, θ), got {rel!r}")
+        raise ValueError(f"{what}: a pose must be 3 finite numbers (x, y, θ), got {rel!r}")
     return rel
 
 
@@ -148,8 +148,7 @@ class PoseGraph:
         ``cov`` its covariance (3, 3, in i's frame), under ``graph.kernel``. Returns the loop's index
         k (for :meth:`loop_inlier`), counting loops from 0."""
         what = f"loop factor {i}→{j}"
-        self._check_node(i, what)
-        self._check_node(j, what)
+        i, j = self._check_node(i, what), self._check_node(j, what)
         if i == j:
             raise ValueError(f"{what}: a loop must join two different nodes")
         rel = _check_pose(rel, what)
@@ -224,12 +223,11 @@ class PoseGraph:
 
     def pose(self, i: int) -> np.ndarray:
         """(3,) node i's x, y, θ."""
-        self._check_node(i, "pose")
-        return self._poses[i].copy()
+        return self._poses[self._check_node(i, "pose")].copy()
 
     def marginal(self, i: int) -> np.ndarray:
         """(3, 3) covariance of node i's (x, y, θ) in the global frame (after :meth:`optimize`)."""
-        self._check_solved(i, "marginal")
+        i = self._check_solved(i, "marginal")
         if self._isam is not None:
             cov = self._isam.marginalCovariance(i)
         else:
@@ -240,8 +238,7 @@ class PoseGraph:
         """The graph's prediction of j's origin in i's frame: (3,) pose and (3, 3) covariance in i's
         frame, from the joint marginal of i and j (so their correlation counts: two nodes far from
         node 0 but close in the graph are known well relative to each other)."""
-        self._check_solved(i, "relative")
-        self._check_solved(j, "relative")
+        i, j = self._check_solved(i, "relative"), self._check_solved(j, "relative")
         if i == j:
             raise ValueError(f"relative: i and j are the same node ({i})")
         solver = self._isam if self._isam is not None else self._lm_marginals()
@@ -275,14 +272,18 @@ class PoseGraph:
 
     # --- checks -----------------------------------------------------------------------------------
 
-    def _check_node(self, i, what: str) -> None:
+    def _check_node(self, i, what: str) -> int:
+        """``i`` as an int (a GTSAM key); ValueError naming ``what`` unless it is a node's index."""
         if not isinstance(i, (int, np.integer)) or not 0 <= i < len(self):
             raise ValueError(f"{what}: no node {i!r} (the graph has nodes 0..{len(self) - 1})")
+        return int(i)
 
-    def _check_solved(self, i, what: str) -> None:
-        self._check_node(i, what)
+    def _check_solved(self, i, what: str) -> int:
+        """:meth:`_check_node`, and the node must have been in the last :meth:`optimize`."""
+        i = self._check_node(i, what)
         if i >= self._n_optimized:
             raise ValueError(f"{what}: node {i} was added after the last optimize() (call it first)")
+        return i
 
     def _lm_marginals(self) -> gtsam.Marginals:
         if self._marginals is None:
