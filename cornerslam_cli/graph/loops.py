@@ -1,0 +1,295 @@
+"""Loop-closure verification between two closed submaps with no pose prior (Issue 16, item 3).
+
+    match = match_submaps(a, b, cfg.loops, make_associator(cfg.association), cfg.scan_match)
+
+The relative pose a→b is b's origin in a's frame (graph/submap.py). Four steps:
+
+1. **Hypotheses** (geometric constraints, as in Neira–Tardós relocation): a pair of b's corners (i, j)
+   agrees with a pair of a's (k, l) when their lengths differ by less than ``pair_distance`` and each
+   corner's φ (pose-invariant) by less than ``pair_phi`` from its partner's — in both orderings
+   (i↔k, j↔l) and (i↔l, j↔k). Each agreement fixes a rigid transform a→b. Agreements implying about the
+   same pose (a Hough cell of ``VOTE_XY`` × ``VOTE_THETA``) are one candidate pose with as many votes:
+   the true pose, implied by every pair of its matched corners, has the most even when most of b lies
+   outside a. The longest pair (it fixes the heading best) of every cell is tried first, cells by
+   votes, then every cell's second longest, and so on, at most ``max_hypotheses`` in all: different
+   poses (a symmetric room's) are all taken before any is taken twice. Their *support* — b's corners
+   that land within ``SUPPORT_DISTANCE`` of one of a's, φ within ``pair_phi``, at the hypothesis' pose
+   (RANSAC's consensus, all hypotheses at once) — orders them again. Only those supported by
+   ``min_corners`` corners or more, and by at least as many as the best set found so far less
+   ``SUPPORT_SLACK``, go to the associator (the first one always does): an associator call costs
+   ~1–10 ms, and its set is hardly ever larger than the support (on the office fixtures: never), so a
+   hypothesis with less support can neither beat the best set nor tie it (step 2's ambiguity).
+2. **Association** under each hypothesis: the configured associator (ICNN, JCBB or PCA) looks for the
+   largest jointly compatible set between b's corners — the observations, seen from b's origin, the
+   "robot" — and a's corners — the map, with a's joint covariance — with the robot's pose the
+   hypothesis, its covariance diag(σ_xy², σ_xy², σ_θ²) (``hypothesis_sigma_*``). A hypothesis not
+   clearly apart from a set of ``min_corners`` or more already found is skipped: it would find the
+   same solution again. The best
+   set has the most corners (distinct a corners: ICNN may give one to two), ties by the lower joint
+   D²; its pose is the least-squares rigid transform of the matched corners (:func:`fit_rigid`).
+3. **Refinement**: point-to-line ICP (motion/icp.py) of b's points onto a's from that pose. ICP moves
+   the pose (x, y, θ) additively in the map frame, here a's, so its covariance is already the
+   covariance of the three numbers of a→b in a's frame: the submap convention, no conversion.
+4. **Fitness**: the share of b's points *overlapping* a — within ``OVERLAP_DISTANCE`` of a point of a
+   after the refinement (b's points farther away lie where a saw nothing, e.g. beyond its range, and
+   say nothing for or against) — that lie within ``inlier_distance`` of a point of a. The overlap is
+   wide (1 m) on purpose: a wrong alignment shifts walls by decimetres, and those points must count
+   against it, not drop out. Fewer than ``MIN_OVERLAP_POINTS`` overlapping points give fitness 0.
+
+Accepted with ≥ ``min_corners`` corners and fitness ≥ ``min_fitness``. Rejected as ambiguous when
+another set of as many corners implies a clearly different pose (``AMBIGUOUS_XY`` / ``AMBIGUOUS_THETA``
+apart): a symmetric room. A wrong closure costs far more than a missed one. Telling two *identical*
+rooms apart is not possible here: the matcher returns the pose that aligns them; the graph's gate
+(its prediction and marginal covariance) rejects it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..association import Associator
+from ..filter import Ekf, EkfConfig
+from ..geometry import transform_points, wrap_angle
+from ..motion.icp import NORMAL_NEIGHBOURS, LocalMap, register
+from ..motion.params import ScanMatchConfig
+from .params import LoopConfig
+from .submap import LoopMatch, Submap
+
+VOTE_XY = 0.5  # m: Hough cell of a hypothesis' translation, for the votes that order them
+VOTE_THETA = 0.2  # rad: ... and of its heading
+AMBIGUOUS_XY = 0.5  # m: two corner sets this far apart in translation are different poses
+AMBIGUOUS_THETA = 0.2  # rad: ... or in heading
+OVERLAP_DISTANCE = 1.0  # m: a point of b this close to a point of a overlaps a (counts for the fitness)
+MIN_OVERLAP_POINTS = 20  # fewer overlapping points are no evidence: fitness 0
+SUPPORT_DISTANCE = 0.3  # m: a corner of b this close to one of a at a hypothesis' pose supports it
+SUPPORT_SLACK = 1  # a hypothesis is associated when its support ≥ the best set's corners − this
+
+# why a match was rejected (LoopMatch.reason)
+NO_HYPOTHESIS = "no hypothesis"  # no pair of b's corners agrees with a pair of a's
+FEW_CORNERS = "few corners"  # the best set has fewer than min_corners corners
+AMBIGUOUS = "ambiguous"  # another set of as many corners implies a different pose
+LOW_FITNESS = "low fitness"  # the refined pose puts too few of b's points on a's
+
+
+@dataclass(frozen=True)
+class Hypotheses:
+    """Corner-pair correspondences between submaps a and b, in the order they are tried.
+
+    pairs : (h, 4) int64 (i, j, k, l): b's corner i ↔ a's corner k and b's j ↔ a's l
+    poses : (h, 3) the rigid transform a→b each implies (b's origin in a's frame)
+    length : (h,) m, length of b's pair;  votes : (h,) agreements in the same Hough cell
+    support : (h,) b's corners near one of a's at the pose (:func:`support`)
+    """
+
+    pairs: np.ndarray
+    poses: np.ndarray
+    length: np.ndarray
+    votes: np.ndarray
+    support: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.pairs)
+
+
+@dataclass(frozen=True)
+class CornerSet:
+    """A jointly compatible set found under one hypothesis.
+
+    pairs : (c, 2) int64 (b's corner, a's corner);  pose : (3,) least-squares a→b of those corners
+    n : distinct a corners matched;  joint_d2 : the associator's joint D²;  hypothesis : index tried
+    """
+
+    pairs: np.ndarray
+    pose: np.ndarray
+    n: int
+    joint_d2: float
+    hypothesis: int
+
+    def key(self) -> tuple[int, float]:
+        """Sort key of "better": more corners, then lower joint D²."""
+        return (-self.n, self.joint_d2)
+
+
+def match_submaps(
+    a: Submap, b: Submap, cfg: LoopConfig, associate: Associator, icp: ScanMatchConfig
+) -> LoopMatch:
+    """Verify a loop closure between submaps a and b (module docstring); never raises on empty input."""
+    hyps = pair_hypotheses(a.landmarks, b.landmarks, cfg)
+    sets = corner_sets(a, b, hyps, cfg, associate)
+    if not sets:
+        return _rejected(np.full(3, np.nan), 0, NO_HYPOTHESIS)
+    best = min(sets, key=CornerSet.key)
+    if best.n < cfg.min_corners:
+        return _rejected(best.pose, best.n, FEW_CORNERS)
+    if any(s.n == best.n and _far_apart(s.pose, best.pose) for s in sets):
+        return _rejected(best.pose, best.n, AMBIGUOUS)
+    if len(a.points) < NORMAL_NEIGHBOURS or len(b.points) < 3:  # nothing to refine or measure with
+        return _rejected(best.pose, best.n, LOW_FITNESS)
+    local = LocalMap.build(a.points)
+    reg = register(b.points, local, best.pose, icp)
+    fitness = overlap_fitness(b.points, local, reg.pose, cfg.inlier_distance)
+    accepted = fitness >= cfg.min_fitness
+    return LoopMatch(reg.pose, reg.cov, best.n, fitness, accepted, "" if accepted else LOW_FITNESS, best.pairs)
+
+
+def _rejected(pose: np.ndarray, n: int, reason: str) -> LoopMatch:
+    """A rejection before ICP: the corners' pose (NaN when none), no covariance (NaN), fitness 0."""
+    return LoopMatch(np.asarray(pose, dtype=float), np.full((3, 3), np.nan), n, 0.0, False, reason)
+
+
+def _far_apart(p: np.ndarray, q: np.ndarray) -> bool:
+    """Two a→b poses are clearly different: ``AMBIGUOUS_XY`` or ``AMBIGUOUS_THETA`` apart."""
+    return bool(np.hypot(*(p[:2] - q[:2])) > AMBIGUOUS_XY or abs(wrap_angle(p[2] - q[2])) > AMBIGUOUS_THETA)
+
+
+# ---------------------------------------------------------------------------------------- 1. hypotheses
+
+
+def _corner_pairs(lm: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """All pairs i < j of corners (n, 3) and their lengths."""
+    i, j = np.triu_indices(len(lm), 1)
+    return i, j, np.hypot(lm[j, 0] - lm[i, 0], lm[j, 1] - lm[i, 1])
+
+
+def pair_hypotheses(a: np.ndarray, b: np.ndarray, cfg: LoopConfig) -> Hypotheses:
+    """Every agreement of a pair of b's corners (n_b, 3) with a pair of a's (n_a, 3) (module docstring),
+    at most ``cfg.max_hypotheses``, by support, then votes, then length."""
+    a, b = np.asarray(a, dtype=float).reshape(-1, 3), np.asarray(b, dtype=float).reshape(-1, 3)
+    ai, aj, ad = _corner_pairs(a)
+    order = np.argsort(ad, kind="stable")
+    ai, aj, ad = ai[order], aj[order], ad[order]
+    bi, bj, bd = _corner_pairs(b)
+    # a's pairs with |length − b's| < pair_distance: a window of the sorted lengths per b pair
+    lo = np.searchsorted(ad, bd - cfg.pair_distance, side="right")
+    count = np.searchsorted(ad, bd + cfg.pair_distance, side="left") - lo
+    rb = np.repeat(np.arange(len(bd)), count)
+    ra = lo[rb] + np.arange(len(rb)) - np.repeat(np.cumsum(count) - count, count)
+    # both orderings: (i↔k, j↔l) and (i↔l, j↔k)
+    I, J = np.tile(bi[rb], 2), np.tile(bj[rb], 2)
+    K, L = np.concatenate((ai[ra], aj[ra])), np.concatenate((aj[ra], ai[ra]))
+    ok = (np.abs(wrap_angle(b[I, 2] - a[K, 2])) < cfg.pair_phi) & (
+        np.abs(wrap_angle(b[J, 2] - a[L, 2])) < cfg.pair_phi
+    )
+    pairs = np.column_stack((I, J, K, L))[ok]
+    length = np.tile(bd[rb], 2)[ok]
+    poses = pair_transform(b[pairs[:, 0], :2], b[pairs[:, 1], :2], a[pairs[:, 2], :2], a[pairs[:, 3], :2])
+    votes, rank = _votes(poses, length)
+    order = np.lexsort((-length, -votes, rank))[: cfg.max_hypotheses]
+    n = support(poses[order], a, b, cfg.pair_phi)
+    order = order[np.argsort(-n, kind="stable")]
+    return Hypotheses(
+        pairs[order].astype(np.int64), poses[order], length[order], votes[order], np.sort(n)[::-1]
+    )
+
+
+def pair_transform(p1: np.ndarray, p2: np.ndarray, q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
+    """(h, 3) rigid transforms T with T(p1) ≈ q1 and T(p2) ≈ q2, points (h, 2): the heading turns
+    p2 − p1 onto q2 − q1, the translation puts the midpoints together."""
+    dp, dq = p2 - p1, q2 - q1
+    theta = wrap_angle(np.arctan2(dq[:, 1], dq[:, 0]) - np.arctan2(dp[:, 1], dp[:, 0]))
+    c, s = np.cos(theta), np.sin(theta)
+    mp, mq = 0.5 * (p1 + p2), 0.5 * (q1 + q2)
+    t = mq - np.column_stack((c * mp[:, 0] - s * mp[:, 1], s * mp[:, 0] + c * mp[:, 1]))
+    return np.column_stack((t, theta))
+
+
+def _votes(poses: np.ndarray, length: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(h,) how many of the poses fall in each one's Hough cell (``VOTE_XY`` × ``VOTE_XY`` × ``VOTE_THETA``)
+    and (h,) each one's rank in its cell by decreasing length (0 = the cell's longest pair)."""
+    cells = np.floor(poses / np.array([VOTE_XY, VOTE_XY, VOTE_THETA]))
+    cells = np.clip(cells, -(2**20), 2**20 - 1).astype(np.int64) + 2**20  # 21 bits each
+    key = (cells[:, 0] << 42) | (cells[:, 1] << 21) | cells[:, 2]  # one int64 per cell: 1-D unique is fast
+    _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
+    by_cell = np.lexsort((-length, key))
+    first = np.cumsum(counts) - counts  # where each cell starts in by_cell (cells in key order)
+    rank = np.empty(len(key), dtype=np.int64)
+    rank[by_cell] = np.arange(len(key)) - first[inverse[by_cell]]
+    return counts[inverse], rank
+
+
+def support(poses: np.ndarray, a: np.ndarray, b: np.ndarray, pair_phi: float) -> np.ndarray:
+    """(h,) for each pose (h, 3) a→b, how many of b's corners (n_b, 3) land within ``SUPPORT_DISTANCE``
+    of one of a's (n_a, 3) with φ within ``pair_phi``: O(h · n_b · n_a), vectorised."""
+    c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
+    x = poses[:, :1] + c * b[None, :, 0] - s * b[None, :, 1]  # (h, n_b) b's corners in a's frame
+    y = poses[:, 1:2] + s * b[None, :, 0] + c * b[None, :, 1]
+    d2 = (x[..., None] - a[None, None, :, 0]) ** 2 + (y[..., None] - a[None, None, :, 1]) ** 2
+    same_phi = np.abs(wrap_angle(b[:, None, 2] - a[None, :, 2])) < pair_phi  # (n_b, n_a)
+    near = (d2 < SUPPORT_DISTANCE**2) & same_phi[None]
+    return near.any(axis=2).sum(axis=1)
+
+
+# ---------------------------------------------------------------------------------------- 2. association
+
+
+def corner_sets(
+    a: Submap, b: Submap, hyps: Hypotheses, cfg: LoopConfig, associate: Associator
+) -> list[CornerSet]:
+    """The jointly compatible set the associator finds under each hypothesis supported well enough
+    (module docstring, steps 1–2; the first is always tried); a hypothesis not clearly apart
+    (:func:`_far_apart`) from a set of ``min_corners`` or more already found is skipped: it would
+    find that solution again."""
+    if len(hyps) == 0:
+        return []
+    z, C = b.landmarks, _diagonal_blocks(b.landmark_P)
+    n = len(a.landmarks)
+    P = np.zeros((3 + 3 * n, 3 + 3 * n))  # the state [hypothesis, a's corners]: blockdiag(Σ_hyp, a's P)
+    P[:3, :3] = np.diag([cfg.hypothesis_sigma_xy**2] * 2 + [cfg.hypothesis_sigma_theta**2])
+    P[3:, 3:] = a.landmark_P
+    ekf_cfg = EkfConfig()
+    found: list[CornerSet] = []
+    most = 0  # corners of the best set so far
+    for h in range(len(hyps)):
+        if h and hyps.support[h] < max(cfg.min_corners, most - SUPPORT_SLACK):
+            break  # sorted by support: the rest can neither beat nor tie the best set
+        if any(s.n >= cfg.min_corners and not _far_apart(s.pose, hyps.poses[h]) for s in found):
+            continue  # the same solution as a set already found
+        ekf = Ekf.from_state(ekf_cfg, np.concatenate((hyps.poses[h], a.landmarks.reshape(-1))), P)
+        result = associate(z, C, ekf.predict_observations())
+        matched = np.flatnonzero(result.pairs >= 0)
+        pairs = np.column_stack((matched, result.pairs[matched])).astype(np.int64)
+        pose = fit_rigid(b, a, pairs) if len(pairs) >= 2 else hyps.poses[h]
+        found.append(CornerSet(pairs, pose, len(np.unique(pairs[:, 1])), result.joint_d2, h))
+        most = max(most, found[-1].n)
+    return found
+
+
+def _diagonal_blocks(P: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) diagonal blocks of a (3n, 3n) joint covariance."""
+    n = len(P) // 3
+    idx = 3 * np.arange(n)[:, None] + np.arange(3)
+    return P[idx[:, :, None], idx[:, None, :]]
+
+
+def fit_rigid(b: Submap, a: Submap, pairs: np.ndarray) -> np.ndarray:
+    """Least-squares a→b (3,) putting b's matched corners on a's: weighted Procrustes on x, y.
+
+    pairs : (c, 2) (b's corner, a's corner), c ≥ 2. Weight of a pair 2 / tr(Σ_a + Σ_b) of the two
+    position covariances (the trace does not depend on the frame, so no rotation is needed); φ does not
+    change with the frame, so it only gated the pairs.
+    """
+    p, q = b.landmarks[pairs[:, 0], :2], a.landmarks[pairs[:, 1], :2]
+    Cb, Ca = _diagonal_blocks(b.landmark_P)[pairs[:, 0]], _diagonal_blocks(a.landmark_P)[pairs[:, 1]]
+    w = 2.0 / (np.trace(Cb[:, :2, :2], axis1=1, axis2=2) + np.trace(Ca[:, :2, :2], axis1=1, axis2=2))
+    w = w / w.sum()
+    mp, mq = w @ p, w @ q
+    H = (w[:, None] * (p - mp)).T @ (q - mq)  # Σ w (p − p̄)(q − q̄)ᵀ
+    theta = np.arctan2(H[0, 1] - H[1, 0], H[0, 0] + H[1, 1])
+    t = mq - transform_points(mp[None, :], (0.0, 0.0, theta))[0]
+    return np.array([t[0], t[1], wrap_angle(theta)])
+
+
+# ---------------------------------------------------------------------------------------- 4. fitness
+
+
+def overlap_fitness(points: np.ndarray, local: LocalMap, pose: np.ndarray, inlier_distance: float) -> float:
+    """Share of ``points`` (b's frame) placed by ``pose`` that overlap ``local`` (within
+    ``OVERLAP_DISTANCE`` of one of its points) and lie within ``inlier_distance`` of one; 0 when fewer
+    than ``MIN_OVERLAP_POINTS`` overlap."""
+    dist, _ = local.tree.query(transform_points(points, pose), distance_upper_bound=OVERLAP_DISTANCE)
+    overlap = int(np.count_nonzero(dist < OVERLAP_DISTANCE))
+    if overlap < MIN_OVERLAP_POINTS:
+        return 0.0
+    return float(np.count_nonzero(dist < inlier_distance)) / overlap

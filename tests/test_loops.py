@@ -1,0 +1,304 @@
+"""Loop-closure verification between two submaps (graph/loops.py) on simulated submaps
+(tests/submap_fixtures.py): known relative poses, a brute-force reference for the hypothesis step,
+perceptual aliasing, and every way a match is rejected."""
+
+from __future__ import annotations
+
+import functools
+import itertools
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from _association_helpers import observe
+from scipy.stats import chi2
+from submap_fixtures import (
+    build_submap,
+    corners_submap,
+    empty_submap,
+    identical_rooms_world,
+    room_origin,
+    spin,
+    straight_path,
+    symmetric_room_world,
+)
+
+from cornerslam_cli import simworld as sw
+from cornerslam_cli.association import ASSOCIATORS, AssociationConfig, make_associator
+from cornerslam_cli.geometry import relative, rotate_pose_covariance, transform_points, wrap_angle
+from cornerslam_cli.graph import loops
+from cornerslam_cli.graph.params import LoopConfig
+from cornerslam_cli.motion.params import ScanMatchConfig
+from cornerslam_cli.types import Prediction
+
+CFG = LoopConfig()
+ICP = ScanMatchConfig()
+PCA = make_associator(AssociationConfig(method="pca"))
+
+# the south corridor of the office driven east, then the same stretch driven back west 0.3 m to the side
+PATH_A = straight_path((5.0, 5.0), (15.0, 5.0))
+PATH_B = straight_path((16.0, 5.3), (6.0, 5.3))
+
+
+@functools.cache
+def office_pair():
+    """Submaps a, b of the same corridor from two paths, and the true a→b."""
+    world = sw.office_world()
+    a = build_submap(world, PATH_A, 0, seed=1)
+    b = build_submap(world, PATH_B, 5, seed=2, first_id=100)
+    return a, b, relative(PATH_A[0], PATH_B[0])
+
+
+@functools.cache
+def north_corridor():
+    """A submap of the office's north corridor, east end: nothing in common with ``office_pair``'s a."""
+    return build_submap(sw.office_world(), straight_path((18.0, 15.0), (25.0, 15.0)), 3, seed=3)
+
+
+@functools.cache
+def room_submap():
+    """A submap of a furnished room of ``identical_rooms_world``, turning on the spot."""
+    pose = np.r_[room_origin(0), 0.0] + (3.0, 2.5, 0.0)
+    return build_submap(identical_rooms_world(), spin(*pose[:2], np.linspace(0.0, 6.0, 8)), 1, seed=4)
+
+
+def pose_error(pose, truth) -> tuple[float, float]:
+    """(m, rad) distance between two poses."""
+    return float(np.hypot(*(pose[:2] - truth[:2]))), abs(float(wrap_angle(pose[2] - truth[2])))
+
+
+# ----------------------------------------------------------------------------------- a simulated loop
+
+
+@pytest.mark.parametrize("method", list(ASSOCIATORS))
+def test_simulated_loop_recovers_the_known_pose(method):
+    a, b, truth = office_pair()
+    match = loops.match_submaps(a, b, CFG, make_associator(AssociationConfig(method=method)), ICP)
+    assert match.accepted and match.reason == ""
+    assert match.n_corners >= CFG.min_corners
+    assert match.fitness >= CFG.min_fitness
+    d_xy, d_th = pose_error(match.pose, truth)
+    assert d_xy < 0.02 and d_th < math.radians(0.5)
+    # the covariance is sane: symmetric positive definite, the error within ~3σ (χ²₃ at 99.7 %)
+    assert np.allclose(match.cov, match.cov.T) and np.all(np.linalg.eigvalsh(match.cov) > 0)
+    e = match.pose - truth
+    e[2] = wrap_angle(e[2])
+    assert e @ np.linalg.solve(match.cov, e) < chi2.ppf(0.997, 3)
+
+
+def test_covariance_is_in_a_frame():
+    """Turning a's frame by α turns a→b and its covariance with it (the submap convention: the
+    covariance of b's origin in a's frame); b's frame alone would leave the covariance unchanged."""
+    a, b, _ = office_pair()
+    alpha = 0.7
+    turn = (0.0, 0.0, -alpha)  # coordinates in the frame turned by α
+    a2 = replace(
+        a,
+        landmarks=np.column_stack((transform_points(a.landmarks[:, :2], turn), a.landmarks[:, 2])),
+        landmark_P=_rotate_joint(a.landmark_P, -alpha),
+        points=transform_points(a.points, turn),
+    )
+    m1 = loops.match_submaps(a, b, CFG, PCA, ICP)
+    m2 = loops.match_submaps(a2, b, CFG, PCA, ICP)
+    assert m1.accepted and m2.accepted
+    expected = np.concatenate(
+        (transform_points(m1.pose[None, :2], turn)[0], [wrap_angle(m1.pose[2] - alpha)])
+    )
+    assert pose_error(m2.pose, expected)[0] < 1e-4 and pose_error(m2.pose, expected)[1] < 1e-5
+    assert np.allclose(m2.cov, rotate_pose_covariance(m1.cov, -alpha), rtol=0.02, atol=1e-12)
+    assert not np.allclose(m2.cov, m1.cov, rtol=0.02, atol=1e-12)  # the turn is visible at all
+
+
+def _rotate_joint(P: np.ndarray, yaw: float) -> np.ndarray:
+    """A joint corner covariance (3n, 3n) in a frame turned by ``yaw``: blockdiag(J, …) P blockdiag(J, …)ᵀ."""
+    n = len(P) // 3
+    J = np.kron(np.eye(n), _pose_rotation(yaw))
+    return J @ P @ J.T
+
+
+def _pose_rotation(yaw: float) -> np.ndarray:
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+# ----------------------------------------------------------------------------------- the hypothesis step
+
+
+def _reference_hypotheses(a: np.ndarray, b: np.ndarray, cfg: LoopConfig) -> dict[tuple, np.ndarray]:
+    """Every agreement, by hand: ordered pairs (i, j) of b's corners against ordered pairs (k, l) of a's,
+    keyed (i, j, k, l) with i < j, valued the pose a→b putting b's i, j on a's k, l (complex numbers)."""
+    out = {}
+    for i, j in itertools.permutations(range(len(b)), 2):
+        for k, l in itertools.permutations(range(len(a)), 2):
+            db = math.dist(b[i, :2], b[j, :2])
+            da = math.dist(a[k, :2], a[l, :2])
+            phi_ok = all(abs(wrap_angle(b[u, 2] - a[v, 2])) < cfg.pair_phi for u, v in ((i, k), (j, l)))
+            if abs(da - db) >= cfg.pair_distance or not phi_ok or i > j:
+                continue
+            p, q = complex(*b[i, :2]), complex(*b[j, :2])
+            r, t = complex(*a[k, :2]), complex(*a[l, :2])
+            turn = (t - r) / abs(t - r) / ((q - p) / abs(q - p))  # e^{iθ}
+            shift = (r + t) / 2 - turn * (p + q) / 2
+            out[(i, j, k, l)] = np.array([shift.real, shift.imag, math.atan2(turn.imag, turn.real)])
+    return out
+
+
+def _reference_best(a_sub, b_sub, hypotheses: dict, cfg: LoopConfig, associate):
+    """The associator under every hypothesis with a Prediction built independently of the filter; the
+    set with the most distinct a corners, ties by the lower joint D² (brute force, no screening)."""
+    n = len(a_sub.landmarks)
+    P = np.zeros((3 + 3 * n, 3 + 3 * n))
+    P[:3, :3] = np.diag([cfg.hypothesis_sigma_xy**2] * 2 + [cfg.hypothesis_sigma_theta**2])
+    P[3:, 3:] = a_sub.landmark_P
+    C = np.array(
+        [b_sub.landmark_P[3 * m : 3 * m + 3, 3 * m : 3 * m + 3] for m in range(len(b_sub.landmarks))]
+    )
+    best = None
+    for pose in hypotheses.values():
+        h, H_r, H_l = observe(pose, a_sub.landmarks)
+        result = associate(b_sub.landmarks, C, Prediction(h, H_r, H_l, P))
+        matched = np.flatnonzero(result.pairs >= 0)
+        key = (-len(set(result.pairs[matched].tolist())), result.joint_d2)
+        if best is None or key < best[0]:
+            best = (key, {(int(i), int(result.pairs[i])) for i in matched})
+    return best
+
+
+def test_hypotheses_and_best_set_match_brute_force():
+    rng = np.random.default_rng(7)
+    a = np.column_stack((rng.uniform(0, 8, 7), rng.uniform(0, 6, 7), rng.uniform(0.6, 2.6, 7)))
+    truth = np.array([2.0, 1.0, 0.8])  # b's origin in a's frame
+    seen = [0, 1, 2, 3, 5]
+    b = np.column_stack((transform_points(a[seen, :2], relative(truth, np.zeros(3))), a[seen, 2]))
+    b[:, :2] += rng.normal(0.0, 0.005, (len(seen), 2))
+    b = np.vstack((b, [1.0, -2.0, 1.4]))  # a corner a never saw
+    a_sub, b_sub = corners_submap(a), corners_submap(b)
+    cfg = replace(CFG, max_hypotheses=100_000)
+
+    reference = _reference_hypotheses(a, b, cfg)
+    hyps = loops.pair_hypotheses(a, b, cfg)
+    assert sorted(map(tuple, hyps.pairs.tolist())) == sorted(reference)
+    for pair, pose in zip(hyps.pairs.tolist(), hyps.poses, strict=True):
+        assert np.allclose(pose, reference[tuple(pair)], atol=1e-9)
+
+    for associate in (make_associator(AssociationConfig(method=m)) for m in ASSOCIATORS):
+        (n_ref, _), pairs_ref = _reference_best(a_sub, b_sub, reference, cfg, associate)
+        best = min(loops.corner_sets(a_sub, b_sub, hyps, cfg, associate), key=loops.CornerSet.key)
+        assert best.n == -n_ref == len(seen)
+        assert (
+            {tuple(p) for p in best.pairs.tolist()} == pairs_ref == {(m, seen[m]) for m in range(len(seen))}
+        )
+        assert pose_error(best.pose, truth)[0] < 0.02
+
+
+def test_fit_rigid_recovers_an_exact_transform():
+    rng = np.random.default_rng(3)
+    a = np.column_stack((rng.uniform(-5, 5, (6, 2)), np.full(6, 1.5)))
+    truth = np.array([-1.0, 3.0, -2.5])
+    b = np.column_stack((transform_points(a[:, :2], relative(truth, np.zeros(3))), a[:, 2]))
+    pairs = np.column_stack((np.arange(6), np.arange(6)))
+    assert np.allclose(loops.fit_rigid(corners_submap(b), corners_submap(a), pairs), truth, atol=1e-12)
+
+
+# ----------------------------------------------------------------------------------- perceptual aliasing
+
+
+def test_identical_rooms_align_locally():
+    """Room 1 against room 3 of the same shape: the matcher cannot tell them apart and returns the pose
+    that aligns the rooms — the local relative pose, 12 m from the true one. Rejecting it is the graph
+    gate's job (hierarchy.py: the graph's prediction and marginal covariance), not this module's."""
+    world = identical_rooms_world()
+    o1, o3 = np.r_[room_origin(0), 0.0], np.r_[room_origin(2), 0.0]
+    pa = spin(*(o1[:2] + (3.0, 2.5)), np.linspace(0.0, 2 * np.pi, 8, endpoint=False))
+    pb = spin(*(o3[:2] + (3.2, 2.3)), np.linspace(0.3, 0.3 + 2 * np.pi, 8, endpoint=False))
+    a, b = build_submap(world, pa, 0, seed=1), build_submap(world, pb, 2, seed=2)
+    match = loops.match_submaps(a, b, CFG, PCA, ICP)
+    local = relative(pa[0] - o1, pb[0] - o3)  # b's origin in a's frame were the rooms one room
+    d_xy, d_th = pose_error(match.pose, local)
+    assert match.accepted and d_xy < 0.02 and d_th < math.radians(0.5)
+    assert pose_error(match.pose, relative(pa[0], pb[0]))[0] > 10.0
+
+
+@pytest.mark.parametrize("method", list(ASSOCIATORS))
+def test_symmetric_room_is_ambiguous(method):
+    """A bare rectangle seen from its centre looks the same turned by π: two poses, as many corners."""
+    world = symmetric_room_world()
+    a = build_submap(world, spin(3.0, 2.0, np.linspace(0.0, 2 * np.pi, 4, endpoint=False)), 0, seed=1)
+    b = build_submap(world, spin(3.0, 2.0, np.linspace(0.4, 0.4 + 2 * np.pi, 4, endpoint=False)), 2, seed=2)
+    associate = make_associator(AssociationConfig(method=method))
+    match = loops.match_submaps(a, b, CFG, associate, ICP)
+    assert not match.accepted and match.reason == loops.AMBIGUOUS
+    assert match.n_corners == 4
+    sets = loops.corner_sets(a, b, loops.pair_hypotheses(a.landmarks, b.landmarks, CFG), CFG, associate)
+    turns = sorted(abs(float(wrap_angle(s.pose[2] - 0.4))) for s in sets if s.n == 4)  # b turned by 0.4
+    assert len(turns) == 2 and turns[0] < 0.01 and abs(turns[1] - math.pi) < 0.01
+
+
+# ----------------------------------------------------------------------------------- rejections
+
+
+@pytest.mark.parametrize("which", ["both", "a", "b"])
+def test_empty_submaps_are_rejected(which):
+    a, b, _ = office_pair()
+    a = empty_submap() if which in ("both", "a") else a
+    b = empty_submap() if which in ("both", "b") else b
+    match = loops.match_submaps(a, b, CFG, PCA, ICP)
+    assert not match.accepted and match.reason == loops.NO_HYPOTHESIS
+    assert match.n_corners == 0 and match.fitness == 0.0 and np.isnan(match.pose).all()
+
+
+def test_one_corner_each_is_no_hypothesis():
+    one = corners_submap([[1.0, 2.0, 1.57]])
+    match = loops.match_submaps(one, one, CFG, PCA, ICP)
+    assert not match.accepted and match.reason == loops.NO_HYPOTHESIS
+
+
+def test_too_few_shared_corners_are_rejected():
+    """b keeps three of its corners: they match a's exactly, but three is below min_corners."""
+    a, b, _ = office_pair()
+    sets = loops.corner_sets(a, b, loops.pair_hypotheses(a.landmarks, b.landmarks, CFG), CFG, PCA)
+    shared = min(sets, key=loops.CornerSet.key)
+    keep = np.sort(shared.pairs[:3, 0])
+    idx = (3 * keep[:, None] + np.arange(3)).ravel()
+    b3 = replace(b, landmarks=b.landmarks[keep], landmark_P=b.landmark_P[np.ix_(idx, idx)])
+    match = loops.match_submaps(a, b3, CFG, PCA, ICP)
+    assert not match.accepted and match.reason == loops.FEW_CORNERS
+    assert match.n_corners == 3
+
+
+@pytest.mark.parametrize(
+    ("method", "reason"),
+    [("jcbb", loops.FEW_CORNERS), ("pca", loops.FEW_CORNERS), ("icnn", loops.LOW_FITNESS)],
+)
+def test_no_overlap_is_rejected(method, reason):
+    """Two corridors with nothing in common: JCBB and PCA find no jointly compatible set of
+    min_corners; ICNN's nearest neighbours (not jointly compatible) make five, which the points refute."""
+    a, _, _ = office_pair()
+    match = loops.match_submaps(
+        a, north_corridor(), CFG, make_associator(AssociationConfig(method=method)), ICP
+    )
+    assert not match.accepted and match.reason == reason
+
+
+@pytest.mark.parametrize("points", ["none", "elsewhere"])
+def test_points_that_disagree_are_low_fitness(points):
+    """The corners agree but b's points do not lie on a's: none at all, or another place's."""
+    a, b, _ = office_pair()
+    b = replace(b, points=np.zeros((0, 2)) if points == "none" else room_submap().points)
+    match = loops.match_submaps(a, b, CFG, PCA, ICP)
+    assert not match.accepted and match.reason == loops.LOW_FITNESS
+    assert match.n_corners >= CFG.min_corners and match.fitness < CFG.min_fitness
+
+
+def test_fitness_counts_only_the_overlap():
+    """Points of b beyond a's reach neither help nor hurt; points near a's but off them count against."""
+    a, _, _ = office_pair()
+    local = loops.LocalMap.build(a.points)
+    on = a.points[::3]
+    far = on + (100.0, 0.0)  # nowhere near a
+    near = on + (0.0, 0.4)  # within the overlap, off a's walls
+    assert loops.overlap_fitness(np.vstack((on, far)), local, np.zeros(3), 0.1) == 1.0
+    assert loops.overlap_fitness(far, local, np.zeros(3), 0.1) == 0.0
+    mixed = loops.overlap_fitness(np.vstack((on, near)), local, np.zeros(3), 0.1)
+    assert 0.3 < mixed < 0.7
