@@ -41,6 +41,7 @@ if TYPE_CHECKING:
     from .frontend import Frame
 
 COV_FLOOR = np.diag([1e-8, 1e-8, 1e-10])  # added to a submap's end covariance: a still robot gives Σ = 0
+PATH_CELL = 0.5  # m: a submap's path kept for finding candidates, one position per cell
 AGREE_XY, AGREE_THETA = 0.5, 0.2  # m, rad: two closures of one submap agree on where it is
 
 
@@ -114,7 +115,7 @@ class HierarchicalSlam:
         self.graph = PoseGraph(cfg.graph)
         self.loop_associate = make_associator(cfg.association)
         self.closed: list[Submap] = []
-        self.extents: list[tuple[np.ndarray, float]] = []  # per closed submap: centre (own frame), radius
+        self.paths: list[np.ndarray] = []  # per closed submap: its robot positions thinned (own frame)
         self.tables: list[dict[str, np.ndarray]] = []  # per closed submap: its landmarks (own frame)
         self.loops: list[LoopRecord] = []
         self.step_submap = array("l")
@@ -194,7 +195,7 @@ class HierarchicalSlam:
         )
         self.closed.append(closed)
         self.tables.append({**table, "id": ids})
-        self.extents.append(extent(closed))
+        self.paths.append(closed.poses[voxel_thin(closed.poses[:, :2], PATH_CELL), :2])
         return closed
 
     def _close_loops(self, b: Submap, step: int) -> None:
@@ -205,8 +206,16 @@ class HierarchicalSlam:
             m = match_submaps(a, b, cfg, self.loop_associate, self.cfg.scan_match)
             reason = m.reason if not m.accepted else self._gate(a.index, b.index, m)
             found.append(LoopRecord(step, a.index, b.index, m, not reason, reason))
+        gated = [r for r in found if r.match.accepted and not r.accepted]
+        if len(gated) >= 2 and agree([self.placed(r) for r in gated]):
+            # two or more closures from different parts of the map agree on where b is, against the
+            # graph: the graph is what is wrong (an earlier false closure, or drift beyond its
+            # covariance); they enter it, and its robust kernel weighs them against what they contradict
+            why = f"{len(gated)} closures agree against the graph"
+            ids = {id(r) for r in gated}
+            found = [replace(r, accepted=True, reason=why) if id(r) in ids else r for r in found]
         accepted = [r for r in found if r.accepted]
-        if not agree([compose(self.graph.pose(r.submap_from), r.match.pose) for r in accepted]):
+        if not agree([self.placed(r) for r in accepted]):
             why = "closures of this submap disagree on where it is (aliasing)"
             found = [replace(r, accepted=False, reason=why) if r.accepted else r for r in found]
         for r in found:
@@ -216,6 +225,10 @@ class HierarchicalSlam:
             self.loops.append(r)
         if any(r.accepted for r in found):
             self.graph.optimize()
+
+    def placed(self, r: LoopRecord) -> np.ndarray:
+        """The global pose of submap b's origin that closure ``r`` implies (a's pose in the graph ∘ a→b)."""
+        return compose(self.graph.pose(r.submap_from), r.match.pose)
 
     def _gate(self, a: int, b: int, m: LoopMatch) -> str:
         """'' when the match agrees with the graph's predicted a→b pose within ``loops.gate`` (χ²₃ on
@@ -228,25 +241,30 @@ class HierarchicalSlam:
         return "" if d2 <= self.cfg.loops.gate else f"disagrees with the graph (chi2 {d2:.1f})"
 
     def candidates(self, b: Submap) -> list[Submap]:
-        """Earlier submaps (at least ``loops.min_gap`` before ``b``) whose extent meets b's, grown by
-        ``candidate_sigmas`` σ of b's global marginal (its position and its heading's lever arm over
-        b's radius); nearest first, at most ``max_candidates``."""
+        """Earlier submaps (at least ``loops.min_gap`` before ``b``) whose path came within
+        ``candidate_distance`` of b's, plus ``candidate_sigmas`` σ of b's global marginal (its position,
+        and its heading's lever arm over b's path), under the graph's estimate; nearest first, at most
+        ``max_candidates``. Paths, not extents: two robots a few metres apart see the same walls, while
+        a submap's points reach as far as its laser."""
         cfg = self.cfg.loops
         last = b.index - cfg.min_gap
         if last < 0:
             return []
         poses = self.graph.poses()
-        cb, rb = self.extents[b.index]
+        path_b = transform_points(self.paths[b.index], poses[b.index])
         Sb = self.graph.marginal(b.index)
-        sigma = math.sqrt(max(np.linalg.eigvalsh(Sb[:2, :2]).max(), 0.0)) + math.sqrt(max(Sb[2, 2], 0.0)) * rb
-        centre_b = transform_points(cb[None], poses[b.index])[0]
-        near = []
-        for a in range(last + 1):
-            ca, ra = self.extents[a]
-            d = float(np.hypot(*(transform_points(ca[None], poses[a])[0] - centre_b)))
-            if d <= ra + rb + cfg.candidate_sigmas * sigma:
-                near.append((d, a))
-        return [self.closed[a] for _, a in sorted(near)[: cfg.max_candidates]]
+        reach = float(np.hypot(*self.paths[b.index].T).max())
+        sigma = (
+            math.sqrt(max(np.linalg.eigvalsh(Sb[:2, :2]).max(), 0.0)) + math.sqrt(max(Sb[2, 2], 0.0)) * reach
+        )
+        owner = np.concatenate([np.full(len(self.paths[a]), a) for a in range(last + 1)])
+        path_a = np.concatenate([transform_points(self.paths[a], poses[a]) for a in range(last + 1)])
+        d = np.sqrt(((path_a[:, None, :] - path_b[None, :, :]) ** 2).sum(axis=2)).min(axis=1)
+        closest = np.full(last + 1, np.inf)
+        np.minimum.at(closest, owner, d)
+        near = np.flatnonzero(closest <= cfg.candidate_distance + cfg.candidate_sigmas * sigma)
+        near = near[np.argsort(closest[near], kind="stable")][: cfg.max_candidates]
+        return [self.closed[a] for a in near]
 
     def final_poses(self) -> np.ndarray:
         """(n, 3) every step's pose with the optimised submap origins (the smoothed trajectory)."""
@@ -276,14 +294,6 @@ class HierarchicalSlam:
     def loop_rows(self) -> list[dict]:
         """loops.csv's rows; ``inlier``: whether the graph kept an accepted closure inside its kernel."""
         return [r.row(self.graph.loop_inlier(r.factor) if r.factor >= 0 else None) for r in self.loops]
-
-
-def extent(sub: Submap) -> tuple[np.ndarray, float]:
-    """A submap's centre (its frame) and the radius of a circle about it holding its points and poses."""
-    pts = np.vstack((sub.points.reshape(-1, 2), sub.poses[:, :2]))
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
-    centre = 0.5 * (lo + hi)
-    return centre, float(np.sqrt(((pts - centre) ** 2).sum(axis=1).max()))
 
 
 def agree(poses: list[np.ndarray]) -> bool:
