@@ -16,6 +16,7 @@ from pathlib import Path
 from .config import Config
 from .errors import OutputError, display_path
 from .frontend import Frame, Input, check_processed, frames, open_input, warn_default_mount
+from .hierarchy import HierarchicalSlam
 from .report.occupancy import ScanStore
 from .report.oserrors import output_errors
 from .report.outdir import StagedDir
@@ -107,7 +108,12 @@ def run_filter(
     """The filter over the front end's frames, a run's files written into the (staging) directory
     ``dest`` (the scans kept in ``scans`` when given); ``stepped(n)`` after each of its n steps;
     returns the summary."""
-    slam = Slam.from_config(cfg, src.laser2base)
+    slam = (
+        HierarchicalSlam(cfg, src.laser2base)
+        if cfg.submaps.enabled
+        else Slam.from_config(cfg, src.laser2base)
+    )
+    graph = slam if isinstance(slam, HierarchicalSlam) else None
     with RunWriter(dest, src.laser2base, cfg.grid, scans) as writer:
         for frame in frame_iter:
             record = slam.step(frame)
@@ -122,7 +128,9 @@ def run_filter(
         writer.close_steps()
         check_processed(src, slam.n_steps, writer.totals.points)
         warn_default_mount(src, cfg)
-        summary = writer.finish(slam.landmark_table(), src, cfg, ref, wall0)
+        if graph is not None:
+            graph.finish()
+        summary = writer.finish(slam.landmark_table(), src, cfg, ref, wall0, graph)
     c = summary.counts
     log.info(
         "filter %s: %d steps, %d landmarks, %d matches, %.1f s",

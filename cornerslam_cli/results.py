@@ -95,6 +95,9 @@ class Accuracy(JsonResult):
     relations: RelationError | None = optional()
     odom_relations: RelationError | None = optional()
     scan_odom_relations: RelationError | None = optional()
+    online_ate: Ate | None = (
+        optional()
+    )  # appended (issue 16): the causal estimate, when the output was smoothed
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -155,6 +158,10 @@ class Counts(JsonResult):
     scans_match_retried: int | None = optional()
     scans_match_fallback: int | None = optional()
     scans_match_rejected: int | None = optional()  # appended (issue 15): matches the fusion's gate refused
+    # appended (issue 16), absent without submaps: submaps closed, loop closures accepted / refused
+    submaps: int | None = optional()
+    loops_accepted: int | None = optional()
+    loops_rejected: int | None = optional()
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -201,6 +208,7 @@ class Timing(JsonResult):
     wall_time: float
     scans_per_second: float
     t_grid: float | None = optional()  # ray tracing and writing the occupancy grid (absent before it)
+    t_loop: float | None = optional()  # loop closing and the pose graph (issue 16; absent without submaps)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -60,10 +60,14 @@ class StepRecord:
     t_scan_match: float = 0.0
     scan_fit: float = float("nan")
     cov_xy: float = 0.0  # the robot's x-y covariance (pose_var holds the diagonal)
+    t_loop: float = 0.0  # closing a submap: loop detection and the pose graph's optimisation (hierarchy.py)
+    submap: int = 0  # the local map the step was filtered in (0 without submaps)
 
     @property
     def t_total(self) -> float:
-        return self.t_extract + self.t_scan_match + self.t_predict + self.t_match + self.t_update
+        return (
+            self.t_extract + self.t_scan_match + self.t_predict + self.t_match + self.t_update + self.t_loop
+        )
 
 
 @dataclass(frozen=True)
@@ -102,6 +106,15 @@ class Slam:
     def from_config(cls, cfg: Config, laser2base: tuple[float, float, float]) -> Slam:
         """The filter with the sections of a run's config that it uses."""
         return cls(cfg.ekf, cfg.association, cfg.input.odom_jump, laser2base)
+
+    def new_map(self) -> None:
+        """Start a new local map (a submap, hierarchy.py): the filter restarts empty at the origin of
+        its frame — the robot's current pose — with zero uncertainty; the step count and the motion
+        input go on, so the next prediction is the motion since the last step."""
+        cfg = self.ekf.cfg
+        self.ekf = Ekf.from_state(cfg, np.zeros(3), np.zeros((3, 3)))
+        self.first_step = np.zeros(0, dtype=np.int64)
+        self.last_step = np.zeros(0, dtype=np.int64)
 
     def motion(self, frame: Frame) -> Motion:
         """The motion input into ``frame`` and its noise.
@@ -197,4 +210,6 @@ class Slam:
             "first_step": self.first_step[ids],
             "last_step": self.last_step[ids],
             "n_obs": self.ekf.n_obs[ids],
+            "submap": np.zeros(len(ids), dtype=np.int64),
+            "linked_to": np.full(len(ids), -1, dtype=np.int64),
         }

@@ -43,7 +43,9 @@ class LoopConfig:
     hypothesis_sigma_xy: float = num(0.3, gt=0.0, le=100.0)
     hypothesis_sigma_theta: float = num(0.1, gt=0.0, le=math.pi)
     max_hypotheses: int = num(200, ge=1, le=100_000)  # corner-pair hypotheses tried per submap pair
-    # a candidate: an earlier submap whose extent, grown by this many marginal σ, meets the new one's
+    # a candidate: an earlier submap whose path came within candidate_distance of the new one's, plus
+    # candidate_sigmas σ of the new one's marginal (hierarchy.py)
+    candidate_distance: float = num(3.0, ge=0.0, le=1e6)  # m
     candidate_sigmas: float = num(3.0, gt=0.0, le=100.0)
     max_candidates: int = num(8, ge=1, le=1000)  # candidates verified per closed submap (nearest first)
     min_gap: int = num(2, ge=1, le=1_000_000)  # submaps between a and b (neighbours share a factor)

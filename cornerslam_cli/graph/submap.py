@@ -40,3 +40,4 @@ class LoopMatch:
     fitness: float  # share of b's points overlapping a that lie within inlier_distance of a's points
     accepted: bool
     reason: str = ""  # why not accepted ("" when accepted)
+    pairs: np.ndarray | None = None  # (k, 2) matched corners: rows of b.landmarks, rows of a.landmarks

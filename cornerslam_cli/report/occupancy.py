@@ -68,6 +68,19 @@ class ScanStore:
             self.points = [q[::2] for q in self.points]
             self.n_points = sum(len(q) for q in self.points)
 
+    def move(self, index: np.ndarray, delta: np.ndarray) -> None:
+        """Move scan i by the pose ``delta[index[i]]`` (x, y, θ, applied on the left: the smoothed
+        pose of its step ∘ the pose it was kept at⁻¹); a zero delta leaves a scan untouched."""
+        for i, k in enumerate(np.asarray(index)):
+            dx, dy, dth = (float(v) for v in delta[k])
+            if dx == 0.0 and dy == 0.0 and dth == 0.0:
+                continue
+            c, s = math.cos(dth), math.sin(dth)
+            R = np.array([[c, -s], [s, c]])
+            self.origins[i] = (R @ self.origins[i].astype(float) + (dx, dy)).astype(np.float32)
+            self.headings[i] += dth
+            self.points[i] = (self.points[i].astype(float) @ R.T + (dx, dy)).astype(np.float32)
+
     def in_laser_frame(self) -> list[np.ndarray]:
         """The kept end points of each scan back in its laser's frame (float64)."""
         out = []

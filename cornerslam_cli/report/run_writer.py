@@ -21,7 +21,7 @@ import platform
 import time
 from array import array
 from contextlib import ExitStack
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -30,7 +30,7 @@ import numpy as np
 from .. import __version__, fpenv
 from ..errors import display_path
 from ..evaluate import ate, overlap_problem, read_relations, relation_error, rpe
-from ..geometry import compose
+from ..geometry import compose, compose_inverse, rotate_covariance, transform_points
 from ..logs import check_regular
 from ..results import Accuracy, Counts, Hashes, OdometryModel, RunInput, RunSummary, Timing
 from .consistency import store_consistency
@@ -38,6 +38,7 @@ from .occupancy import ScanStore, build_grid, draw_grid, write_grid
 from .odom_frame import in_odom_frame, landmarks_in_odom_frame
 from .tables import (
     LINES_COLUMNS,
+    LOOP_COLUMNS,
     MAP_COLUMNS,
     TIMING_COLUMNS,
     TRAJECTORY_COLUMNS,
@@ -50,23 +51,68 @@ from .tables import (
 if TYPE_CHECKING:
     from ..config import Config, GridConfig
     from ..frontend import Input
+    from ..hierarchy import HierarchicalSlam
     from ..results import MapConsistency
     from ..slam import StepRecord
 
 
-def trajectory_row(r: StepRecord) -> dict:
-    """One row of trajectory.csv: the filter's pose, odometry, the pose variances, the motion input."""
+def trajectory_row(r: StepRecord | TrackRow, online: np.ndarray | None = None) -> dict:
+    """One row of trajectory.csv: the pose, odometry, the pose variances, the motion input, the online
+    (causal) pose — ``online``, or the pose itself when the trajectory was not smoothed — and the submap."""
+    pose = r.pose.tolist()
     return {
         "step": r.step,
         "stamp": f"{r.stamp:.9f}",
         # Python floats (tolist): the same cells, formatted without numpy-scalar overhead
-        **dict(zip(("x", "y", "theta"), r.pose.tolist(), strict=True)),
+        **dict(zip(("x", "y", "theta"), pose, strict=True)),
         **dict(zip(("odom_x", "odom_y", "odom_theta"), np.asarray(r.odom).tolist(), strict=True)),
         **dict(zip(("var_x", "var_y", "var_theta"), r.pose_var.tolist(), strict=True)),
         **dict(
             zip(("scan_odom_x", "scan_odom_y", "scan_odom_theta"), np.asarray(r.motion).tolist(), strict=True)
         ),
+        **dict(
+            zip(
+                ("online_x", "online_y", "online_theta"),
+                pose if online is None else online.tolist(),
+                strict=True,
+            )
+        ),
+        "submap": r.submap,
     }
+
+
+@dataclass(frozen=True)
+class TrackRow:
+    """What trajectory.csv and lines.csv need of one step, as kept by :class:`RunWriter`."""
+
+    step: int
+    stamp: float
+    pose: np.ndarray
+    odom: np.ndarray
+    motion: np.ndarray
+    pose_var: np.ndarray
+    cov_xy: float
+    submap: int
+    segments_map: np.ndarray
+
+
+def track_record(t: np.ndarray, segments: np.ndarray, step: int) -> TrackRow:
+    """A kept step (``RunWriter.TRACK`` doubles) and its segments as a row."""
+    return TrackRow(step, float(t[0]), t[1:4], t[4:7], t[7:10], t[10:13], float(t[13]), int(t[14]), segments)
+
+
+def moved_record(r: TrackRow, delta: np.ndarray) -> TrackRow:
+    """The row moved by ``delta`` (online → smoothed): pose, segments and the position covariance."""
+    cov = rotate_covariance(
+        np.array([[[r.pose_var[0], r.cov_xy], [r.cov_xy, r.pose_var[1]]]]), float(delta[2])
+    )[0]
+    return replace(
+        r,
+        pose=compose(delta, r.pose),
+        pose_var=np.array([cov[0, 0], cov[1, 1], r.pose_var[2]]),
+        cov_xy=float(cov[0, 1]),
+        segments_map=transform_points(r.segments_map.reshape(-1, 2), delta).reshape(-1, 4),
+    )
 
 
 def timing_row(r: StepRecord) -> dict:
@@ -79,7 +125,9 @@ class Totals:
     """What summary.json sums over the steps."""
 
     steps: int = 0
-    times: np.ndarray = field(default_factory=lambda: np.zeros(5))  # extract, predict, match, update, ICP
+    times: np.ndarray = field(
+        default_factory=lambda: np.zeros(6)
+    )  # extract, predict, match, update, ICP, loop
     t_match_max: float = 0.0
     budget_hits: int = 0  # steps where the associator ran out of its search budget
     matched: int = 0  # corners matched to a landmark
@@ -87,7 +135,7 @@ class Totals:
 
     def add(self, r: StepRecord) -> None:
         self.steps += 1
-        self.times += (r.t_extract, r.t_predict, r.t_match, r.t_update, r.t_scan_match)
+        self.times += (r.t_extract, r.t_predict, r.t_match, r.t_update, r.t_scan_match, r.t_loop)
         self.t_match_max = max(self.t_match_max, r.t_match)
         self.budget_hits += r.budget_hit
         self.matched += r.n_matched
@@ -95,11 +143,15 @@ class Totals:
 
 
 class RunWriter:
-    """A run's files in the (staging) directory ``dest``: :meth:`step` writes one step's rows,
-    :meth:`close_steps` completes the per-step tables, :meth:`finish` the map, trajectory.tum and
-    summary.json. A context manager: on an error the open files are closed without a second error.
+    """A run's files in the (staging) directory ``dest``: :meth:`step` takes one step (its timing row
+    is written at once; its trajectory and lines rows are kept, since a smoothed trajectory is only
+    known at the end), :meth:`close_steps` completes timing.csv, :meth:`finish` writes the rest —
+    trajectory.csv, lines.csv, map.csv, the TUM files, with submaps loops.csv, the grid, summary.json.
+    A context manager: on an error the open files are closed without a second error.
     The scans given to :meth:`step` (the laser at ``laser2base`` on the robot) make the occupancy
     grid (``grid``: its resolution and size cap); they are kept in ``scans`` (a new store if None)."""
+
+    TRACK = 15  # doubles kept per step: stamp, pose, odom, motion, pose variances, cov_xy, submap
 
     def __init__(
         self,
@@ -113,10 +165,10 @@ class RunWriter:
         self.grid = grid
         self.scans = ScanStore() if scans is None else scans
         self._files = ExitStack()
-        self.trajectory = self._open("trajectory.csv", TRAJECTORY_COLUMNS)
         self.timing = self._open("timing.csv", TIMING_COLUMNS)
-        self.lines = self._open("lines.csv", LINES_COLUMNS)
-        self.track = array("d")  # stamp, pose, odom, motion per step: 80 bytes (a list of arrays: ~400)
+        self.track = array("d")  # TRACK doubles per step (a list of arrays would take ~5× the memory)
+        self.segments: list[np.ndarray] = []  # per step its segments (k, 4), odometry frame
+        self.scan_steps = array("l")  # the steps whose scans the store kept
         self.totals = Totals()
         self.map2odom: np.ndarray | None = None  # the filter's map frame in the odometry frame
         self.scan_odoms = array("d")  # the laser's pose by the odometry, per scan kept (x, y, θ)
@@ -131,46 +183,58 @@ class RunWriter:
         self._files.__exit__(*exc)
 
     def step(self, r: StepRecord, points: np.ndarray | None = None) -> None:
-        """Write one step's rows, in the odometry frame (the first step's odometry pose places it);
-        keep its scan's ``points`` (k, 2, laser frame) for the occupancy grid."""
+        """Take one step, in the odometry frame (the first step's odometry pose places it); keep its
+        scan's ``points`` (k, 2, laser frame) for the occupancy grid."""
         if self.map2odom is None:
             self.map2odom = np.array(r.odom, dtype=float)
         r = in_odom_frame(r, self.map2odom)
         if points is not None:
             self.scans.add(compose(r.pose, self.laser2base), points)
             self.scan_odoms.extend(compose(r.odom, self.laser2base))
-        self.trajectory.write(trajectory_row(r))
+            self.scan_steps.append(len(self.segments))
         self.timing.write(timing_row(r))
-        self.lines.rows(r.segments_map, lead=(r.step,))
+        self.segments.append(r.segments_map)
         self.track.append(r.stamp)
-        self.track.extend(r.pose)
-        self.track.extend(r.odom)
-        self.track.extend(r.motion)
+        for v in (r.pose, r.odom, r.motion, r.pose_var):
+            self.track.extend(v)
+        self.track.extend((r.cov_xy, r.submap))
         self.totals.add(r)
 
     def close_steps(self) -> None:
-        for table in (self.trajectory, self.timing, self.lines):
-            table.close()
+        self.timing.close()
 
     def finish(
-        self, landmarks: dict[str, np.ndarray], src: Input, cfg: Config, ref: Reference, wall0: float
+        self,
+        landmarks: dict[str, np.ndarray],
+        src: Input,
+        cfg: Config,
+        ref: Reference,
+        wall0: float,
+        graph: HierarchicalSlam | None = None,
     ) -> RunSummary:
-        """map.csv from the filter's ``landmarks`` (columns by name), trajectory.tum, odometry.tum and
-        (with scan matching) scan_matched.tum, the occupancy grid, the accuracy against ``ref`` and
-        summary.json; returns the summary."""
+        """trajectory.csv and lines.csv (at the smoothed poses of ``graph``, the two-level SLAM, when
+        given), map.csv from ``landmarks`` (columns by name), loops.csv with a graph, trajectory.tum,
+        odometry.tum and (with scan matching) scan_matched.tum, the occupancy grid, the accuracy
+        against ``ref`` and summary.json; returns the summary."""
         if self.map2odom is not None:
             landmarks = landmarks_in_odom_frame(landmarks, self.map2odom)
+        track = np.frombuffer(self.track, dtype=float).reshape(-1, self.TRACK)
+        stamps, online, odoms = track[:, 0], track[:, 1:4], track[:, 4:7]
+        poses = online if graph is None else self._placed(graph.final_poses())
+        self.write_steps(track, poses)
         with self._open("map.csv", MAP_COLUMNS) as mp:
             for i in range(len(landmarks["id"])):
                 mp.write({name: landmarks[name][i] for name in MAP_COLUMNS})
-        track = np.frombuffer(self.track, dtype=float).reshape(-1, 10)
-        stamps, poses, odoms = track[:, 0], track[:, 1:4], track[:, 4:7]
+        if graph is not None:
+            with self._open("loops.csv", LOOP_COLUMNS) as lp:
+                for row in graph.loop_rows():
+                    lp.write(row)
         motions = track[:, 7:10] if src.matcher is not None else None
         write_tum(self.dest / "trajectory.tum", stamps, poses)
         write_tum(self.dest / "odometry.tum", stamps, odoms)
         if motions is not None:
             write_tum(self.dest / "scan_matched.tum", stamps, motions)
-        accuracy, notes = accuracy_of(stamps, poses, odoms, ref, motions)
+        accuracy, notes = accuracy_of(stamps, poses, odoms, ref, motions, None if graph is None else online)
         for text in notes:
             src.reader.stats.warn(text)
         t_grid = time.perf_counter()
@@ -178,10 +242,44 @@ class RunWriter:
         t_grid = time.perf_counter() - t_grid
         consistency = store_consistency(self.scans, np.frombuffer(self.scan_odoms).reshape(-1, 3))
         summary = build_summary(
-            src, cfg, self.totals, len(landmarks["id"]), poses[-1], accuracy, wall0, t_grid, consistency
+            src,
+            cfg,
+            self.totals,
+            len(landmarks["id"]),
+            poses[-1],
+            accuracy,
+            wall0,
+            t_grid,
+            consistency,
+            graph,
         )
         write_json(self.dest / "summary.json", summary.to_json())
         return summary
+
+    def _placed(self, poses: np.ndarray) -> np.ndarray:
+        """Map-frame poses in the odometry frame (as :func:`in_odom_frame` places each step)."""
+        return poses if self.map2odom is None or not np.any(self.map2odom) else compose(self.map2odom, poses)
+
+    def write_steps(self, track: np.ndarray, poses: np.ndarray) -> None:
+        """trajectory.csv and lines.csv at ``poses``; a step moved from its online pose has its
+        segments, position covariance and kept scan moved with it."""
+        online = track[:, 1:4]
+        moved = np.flatnonzero(np.any(poses != online, axis=1))
+        delta = compose_inverse(poses, online)  # online → smoothed, per step
+        if len(moved) and len(self.scan_steps):
+            self.scans.move(np.frombuffer(self.scan_steps, dtype=np.int64), delta)
+        with (
+            self._open("trajectory.csv", TRAJECTORY_COLUMNS) as tr,
+            self._open("lines.csv", LINES_COLUMNS) as ln,
+        ):
+            is_moved = np.zeros(len(track), dtype=bool)
+            is_moved[moved] = True
+            for k, t in enumerate(track):
+                r = track_record(t, self.segments[k], k)
+                if is_moved[k]:
+                    r = moved_record(r, delta[k])
+                tr.write(trajectory_row(r, t[1:4] if is_moved[k] else None))
+                ln.rows(r.segments_map, lead=(r.step,))
 
     def write_grid(self, poses: np.ndarray, warn) -> None:
         """map.pgm, map.yaml and map_grid.png from the kept scans (their warnings through ``warn``)."""
@@ -200,9 +298,11 @@ def build_summary(
     wall0: float,
     t_grid: float | None = None,
     consistency: MapConsistency | None = None,
+    graph: HierarchicalSlam | None = None,
 ) -> RunSummary:
     """The summary of a run (summary.json, INTERFACE.md): input, counts, timing totals (``t_grid``:
-    the occupancy grid's), accuracy, hashes, versions, map ``consistency``."""
+    the occupancy grid's), accuracy, hashes, versions, map ``consistency``; with the two-level SLAM
+    ``graph`` its submaps and loop closures counted and its loop-closing time."""
     info = src.info
     return RunSummary(
         cornerslam_version=__version__,
@@ -219,8 +319,8 @@ def build_summary(
             span=src.span_used.record(src.span),
         ),
         assoc=cfg.association.method,
-        counts=run_counts(src, totals, n_landmarks),
-        timing=run_timing(totals, wall0, t_grid),
+        counts=run_counts(src, totals, n_landmarks, graph),
+        timing=run_timing(totals, wall0, t_grid, graph),
         final_pose=tuple(final_pose.tolist()),
         odometry_model=odometry_model(src.matcher),
         consistency=consistency,
@@ -232,9 +332,11 @@ def build_summary(
     )
 
 
-def run_counts(src: Input, totals: Totals, n_landmarks: int) -> Counts:
+def run_counts(src: Input, totals: Totals, n_landmarks: int, graph: HierarchicalSlam | None = None) -> Counts:
     """What the run counted: the filter's steps and matches, the reader's beams and scans, the
-    synchroniser's scans and odometry, the associator's budget hits, the scan matcher's outcomes."""
+    synchroniser's scans and odometry, the associator's budget hits, the scan matcher's outcomes,
+    the submaps and loop closures of the two-level SLAM ``graph``."""
+    loops = [] if graph is None else graph.loops
     stats, matcher = src.reader.stats, src.matcher
     return Counts(
         steps=totals.steps,
@@ -252,6 +354,9 @@ def run_counts(src: Input, totals: Totals, n_landmarks: int) -> Counts:
         scans_match_retried=None if matcher is None else matcher.n_searched,
         scans_match_rejected=None if matcher is None else matcher.n_rejected,
         scans_match_fallback=None if matcher is None else matcher.n_fallback,
+        submaps=None if graph is None else len(graph.closed),
+        loops_accepted=None if graph is None else sum(r.accepted for r in loops),
+        loops_rejected=None if graph is None else sum(not r.accepted for r in loops),
     )
 
 
@@ -268,10 +373,14 @@ def odometry_model(matcher) -> OdometryModel | None:
     )
 
 
-def run_timing(totals: Totals, wall0: float, t_grid: float | None = None) -> Timing:
+def run_timing(
+    totals: Totals, wall0: float, t_grid: float | None = None, graph: HierarchicalSlam | None = None
+) -> Timing:
     """The stage times summed over the steps, the slowest matching step, the wall time since ``wall0``
-    and the occupancy grid's time ``t_grid``."""
+    and the occupancy grid's time ``t_grid``; with the two-level SLAM ``graph``, the loop closing and
+    graph optimisation (over the steps and at the end, closing the last submap)."""
     times = totals.times
+    t_loop = None if graph is None else float(times[5] + graph.t_loop)
     return Timing(
         t_extract=float(times[0]),
         t_predict=float(times[1]),
@@ -283,6 +392,7 @@ def run_timing(totals: Totals, wall0: float, t_grid: float | None = None) -> Tim
         wall_time=time.perf_counter() - wall0,
         scans_per_second=totals.steps / max(float(times.sum()), 1e-12),
         t_grid=t_grid,
+        t_loop=t_loop,
     )
 
 
@@ -331,11 +441,13 @@ def accuracy_of(
     odoms: np.ndarray,
     ref: Reference,
     scan_odoms: np.ndarray | None = None,
+    online: np.ndarray | None = None,
 ) -> tuple[Accuracy | None, list[str]]:
     """ATE/RPE against the ground truth and the relation metric, for the estimate and for odometry (and
     for the scan-matched odometry when there is one: what the corners add on top of it), and the
     warnings about them: a ground truth read out of time order, a ground truth that does not overlap
-    the run in time (then there is no ATE/RPE, rather than NaN), no relation inside the run."""
+    the run in time (then there is no ATE/RPE, rather than NaN), no relation inside the run. ``online``:
+    the causal estimate when ``poses`` were smoothed (two-level SLAM), scored beside them."""
     acc: dict = {}  # Accuracy's fields
     notes = list(ref.notes)
     problem = ref.gt is not None and overlap_problem(stamps, ref.gt[0], f"ground truth '{ref.gt_path}'")
@@ -348,6 +460,7 @@ def accuracy_of(
             odom_ate=ate(stamps, odoms, *ref.gt),
             **vars(rpe(stamps, poses, *ref.gt)),
             scan_odom_ate=None if scan_odoms is None else ate(stamps, scan_odoms, *ref.gt),
+            online_ate=None if online is None else ate(stamps, online, *ref.gt),
         )
     if ref.relations is not None:
         rel, offset = ref.relations, ref.time_offset

@@ -22,14 +22,19 @@ log = logging.getLogger("cornerslam.report")
 
 # INTERFACE.md's columns, then (an extension) the scan-matched odometry the filter used as motion input
 # (= odom_* when scan matching is off)
+# (appended, issue 16) the causal online estimate — x, y, theta are the smoothed trajectory with submaps
+# — and the submap of the step
 TRAJECTORY_COLUMNS = (
-    "step,stamp,x,y,theta,odom_x,odom_y,odom_theta,var_x,var_y,var_theta,scan_odom_x,scan_odom_y,scan_odom_theta"
+    "step,stamp,x,y,theta,odom_x,odom_y,odom_theta,var_x,var_y,var_theta,scan_odom_x,scan_odom_y,scan_odom_theta,"
+    "online_x,online_y,online_theta,submap"
 ).split(",")
-MAP_COLUMNS = "id,x,y,phi,var_x,var_y,cov_xy,var_phi,first_step,last_step,n_obs".split(",")
+# (appended, issue 16) the landmark's submap and the id of the corner it was matched to across a loop closure
+MAP_COLUMNS = "id,x,y,phi,var_x,var_y,cov_xy,var_phi,first_step,last_step,n_obs,submap,linked_to".split(",")
+LOOP_COLUMNS = "step,submap_from,submap_to,x,y,theta,corners,fitness,accepted,inlier,reason".split(",")
 LINES_COLUMNS = ["step", "x1", "y1", "x2", "y2"]
 TIMING_COLUMNS = (
     "step,stamp,n_points,n_lines,n_corners,n_candidates,n_matched,n_new,n_landmarks,"
-    "t_extract,t_predict,t_match,t_update,t_total,t_scan_match,scan_fit"
+    "t_extract,t_predict,t_match,t_update,t_total,t_scan_match,scan_fit,t_loop"
 ).split(",")
 COMPARISON_COLUMNS = (
     "assoc,steps,landmarks,matched_total,t_match_total,t_match_max,t_total,ate_rmse,"

@@ -1,0 +1,344 @@
+"""Two-level SLAM (Hierarchical SLAM, Estrada, Neira, Tardós, T-RO 2005): the paper's corner EKF
+(slam.py) on bounded local submaps, joined by a pose graph over the submap origins (graph/posegraph.py,
+GTSAM) with loop closures verified by the configured associator (graph/loops.py).
+
+- **Local level.** The filter runs in the open submap's frame (its origin = the robot's pose at the
+  submap's first step, zero relative uncertainty). A submap closes when it reaches ``submaps.max_steps``
+  steps, ``max_distance`` metres travelled or ``max_landmarks`` landmarks; its final pose and robot
+  covariance become the sequential factor to the next origin, so per-step cost is bounded by the submap.
+- **Global level.** After each closed submap: candidates are earlier submaps whose extent, grown by
+  ``loops.candidate_sigmas`` σ of the closed submap's global marginal, meets its extent under the graph's
+  estimate (nearest first, at most ``max_candidates``); each is verified without a pose prior
+  (graph/loops.py), then gated against the graph's predicted relative pose and its joint marginal
+  (``loops.gate``, χ²₃); closures that disagree with each other about where the submap is are all
+  refused (perceptual aliasing). Accepted closures enter the graph under a robust kernel.
+- **Outputs.** Each step's causal (online) estimate is its submap origin's pose in the graph *at that
+  step* ∘ the filter's local pose; :meth:`HierarchicalSlam.final_poses` is the same with the optimised
+  origins — the smoothed trajectory written to trajectory.csv. Landmarks stay one per submap in the
+  global frame; a corner matched across an accepted closure is *linked* (map.csv ``linked_to``), not merged.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from array import array
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .association import make_associator
+from .geometry import compose, rotate_covariance, rotate_pose_covariance, transform_points, wrap_angle
+from .graph.loops import match_submaps
+from .graph.posegraph import PoseGraph
+from .graph.submap import LoopMatch, Submap
+from .motion.icp import voxel_thin
+from .slam import Slam, StepRecord
+
+if TYPE_CHECKING:
+    from .config import Config
+    from .frontend import Frame
+
+COV_FLOOR = np.diag([1e-8, 1e-8, 1e-10])  # added to a submap's end covariance: a still robot gives Σ = 0
+PATH_CELL = 0.5  # m: a submap's path kept for finding candidates, one position per cell
+AGREE_XY, AGREE_THETA = 0.5, 0.2  # m, rad: two closures of one submap agree on where it is
+
+
+@dataclass(frozen=True)
+class LoopRecord:
+    """One verified candidate pair: a row of loops.csv."""
+
+    step: int  # the step at which the submap closed
+    submap_from: int  # the earlier submap a
+    submap_to: int  # the closed submap b
+    match: LoopMatch
+    accepted: bool  # verified, inside the gate and consistent with the other closures of b
+    reason: str
+    factor: int = -1  # the graph's loop factor index when accepted
+
+    def row(self, inlier: bool | None) -> dict:
+        """loops.csv's row (report/tables.py ``LOOP_COLUMNS``)."""
+        x, y, th = self.match.pose.tolist()
+        return {
+            "step": self.step,
+            "submap_from": self.submap_from,
+            "submap_to": self.submap_to,
+            "x": x,
+            "y": y,
+            "theta": th,
+            "corners": self.match.n_corners,
+            "fitness": self.match.fitness,
+            "accepted": self.accepted,
+            "inlier": "" if inlier is None else inlier,
+            "reason": self.reason,
+        }
+
+
+class _OpenSubmap:
+    """The submap being built: its steps' local poses, its scans' points, how far the robot went."""
+
+    def __init__(self, index: int, first_step: int):
+        self.index = index
+        self.first_step = first_step
+        self.poses: list[np.ndarray] = []
+        self.points: list[np.ndarray] = []
+        self.n_points = 0
+        self.travelled = 0.0
+
+    def add(self, pose: np.ndarray, points: np.ndarray | None, voxel: float) -> None:
+        if self.poses:
+            self.travelled += math.hypot(*(pose[:2] - self.poses[-1][:2]))
+        self.poses.append(pose)
+        if points is not None and len(points):
+            self.points.append(points)
+            self.n_points += len(points)
+            if self.n_points > 200_000:  # thin as it grows: bounded memory on a long submap
+                self.points = [self.thinned(voxel)]
+                self.n_points = len(self.points[0])
+
+    def thinned(self, voxel: float) -> np.ndarray:
+        if not self.points:
+            return np.zeros((0, 2))
+        p = np.concatenate(self.points)
+        return p[voxel_thin(p, voxel)]
+
+
+class HierarchicalSlam:
+    """Local EKF submaps (slam.py) joined by a pose graph with loop closures; :meth:`step` per frame
+    like :class:`~cornerslam_cli.slam.Slam`, then :meth:`finish` closes the last submap."""
+
+    def __init__(self, cfg: Config, laser2base: tuple[float, float, float]):
+        self.cfg = cfg
+        self.laser2base = laser2base
+        self.slam = Slam.from_config(cfg, laser2base)
+        self.graph = PoseGraph(cfg.graph)
+        self.loop_associate = make_associator(cfg.association)
+        self.closed: list[Submap] = []
+        self.paths: list[np.ndarray] = []  # per closed submap: its robot positions thinned (own frame)
+        self.tables: list[dict[str, np.ndarray]] = []  # per closed submap: its landmarks (own frame)
+        self.loops: list[LoopRecord] = []
+        self.step_submap = array("l")
+        self.local_poses = array("d")
+        self._open = _OpenSubmap(0, 0)
+        self._origin_cov = np.zeros((3, 3))  # the open submap origin's marginal in the graph
+        self.t_loop = 0.0
+        self.n_ids = 0
+
+    @property
+    def n_steps(self) -> int:
+        return self.slam.n_steps
+
+    def step(self, frame: Frame) -> StepRecord:
+        """One step of the local filter; closes the submap when it is full (loop closing and the
+        graph's optimisation timed as the step's ``t_loop``). Returns the step in the global frame."""
+        r = self.slam.step(frame)
+        sub = self._open
+        sensor = compose(r.pose, self.laser2base)
+        pts = None if frame.points is None else transform_points(frame.points.astype(float), sensor)
+        sub.add(r.pose, pts, self.cfg.submaps.voxel)
+        self.step_submap.append(sub.index)
+        self.local_poses.extend(r.pose)
+        origin, origin_cov = self.graph.pose(sub.index), self._origin_cov
+        t_loop = 0.0
+        if self._full():
+            t0 = time.perf_counter()
+            self._close(r.step)
+            t_loop = time.perf_counter() - t0
+        return globalise(r, origin, origin_cov, sub.index, t_loop)
+
+    def _full(self) -> bool:
+        lim, sub = self.cfg.submaps, self._open
+        return (
+            len(sub.poses) >= lim.max_steps
+            or sub.travelled >= lim.max_distance
+            or self.slam.ekf.n_landmarks >= lim.max_landmarks
+        )
+
+    def finish(self) -> None:
+        """Close the last submap (its loops too) when it has steps."""
+        if self._open.poses:
+            t0 = time.perf_counter()
+            self._close(self.n_steps - 1, last=True)
+            self.t_loop += time.perf_counter() - t0
+
+    def _close(self, step: int, last: bool = False) -> None:
+        """Close the open submap at ``step``: a node for the next origin, its loops, the graph optimised."""
+        sub = self._close_submap()
+        self.graph.add_sequential(sub.end_pose, sub.end_cov + COV_FLOOR)
+        self.graph.optimize()
+        if self.cfg.loops.enabled:
+            self._close_loops(sub, step)
+        if not last:
+            self.slam.new_map()
+            self._open = _OpenSubmap(sub.index + 1, step + 1)
+            self._origin_cov = self.graph.marginal(sub.index + 1)
+
+    def _close_submap(self) -> Submap:
+        ekf, sub = self.slam.ekf, self._open
+        table = self.slam.landmark_table()
+        n = len(table["id"])
+        state = (3 + 3 * table["id"][:, None] + np.arange(3)).reshape(-1)
+        ids = self.n_ids + np.arange(n)
+        self.n_ids += n
+        closed = Submap(
+            index=sub.index,
+            first_step=sub.first_step,
+            last_step=sub.first_step + len(sub.poses) - 1,
+            landmarks=np.column_stack((table["x"], table["y"], table["phi"])),
+            landmark_P=ekf.P[np.ix_(state, state)].copy(),
+            landmark_ids=ids,
+            points=sub.thinned(self.cfg.submaps.voxel),
+            end_pose=ekf.pose,
+            end_cov=ekf.P[:3, :3].copy(),
+            poses=np.array(sub.poses).reshape(-1, 3),
+        )
+        self.closed.append(closed)
+        self.tables.append({**table, "id": ids})
+        self.paths.append(closed.poses[voxel_thin(closed.poses[:, :2], PATH_CELL), :2])
+        return closed
+
+    def _close_loops(self, b: Submap, step: int) -> None:
+        """Verify the candidates for submap ``b``, gate them, add the accepted ones to the graph."""
+        cfg = self.cfg.loops
+        found = []
+        for a in self.candidates(b):
+            m = match_submaps(a, b, cfg, self.loop_associate, self.cfg.scan_match)
+            reason = m.reason if not m.accepted else self._gate(a.index, b.index, m)
+            found.append(LoopRecord(step, a.index, b.index, m, not reason, reason))
+        gated = [r for r in found if r.match.accepted and not r.accepted]
+        if len(gated) >= 2 and agree([self.placed(r) for r in gated]):
+            # two or more closures from different parts of the map agree on where b is, against the
+            # graph: the graph is what is wrong (an earlier false closure, or drift beyond its
+            # covariance); they enter it, and its robust kernel weighs them against what they contradict
+            why = f"{len(gated)} closures agree against the graph"
+            ids = {id(r) for r in gated}
+            found = [replace(r, accepted=True, reason=why) if id(r) in ids else r for r in found]
+        accepted = [r for r in found if r.accepted]
+        if not agree([self.placed(r) for r in accepted]):
+            why = "closures of this submap disagree on where it is (aliasing)"
+            found = [replace(r, accepted=False, reason=why) if r.accepted else r for r in found]
+        for r in found:
+            if r.accepted:
+                k = self.graph.add_loop(r.submap_from, r.submap_to, r.match.pose, r.match.cov)
+                r = replace(r, factor=k)
+            self.loops.append(r)
+        if any(r.accepted for r in found):
+            self.graph.optimize()
+
+    def placed(self, r: LoopRecord) -> np.ndarray:
+        """The global pose of submap b's origin that closure ``r`` implies (a's pose in the graph ∘ a→b)."""
+        return compose(self.graph.pose(r.submap_from), r.match.pose)
+
+    def _gate(self, a: int, b: int, m: LoopMatch) -> str:
+        """'' when the match agrees with the graph's predicted a→b pose within ``loops.gate`` (χ²₃ on
+        the sum of the prediction's joint-marginal covariance and the match's), else why not."""
+        pred, cov = self.graph.relative(a, b)  # both covariances are of (x, y, θ) in a's frame
+        e = np.asarray(m.pose, dtype=float) - pred
+        e[2] = wrap_angle(e[2])
+        S = cov + m.cov
+        d2 = float(e @ np.linalg.solve(S, e))
+        return "" if d2 <= self.cfg.loops.gate else f"disagrees with the graph (chi2 {d2:.1f})"
+
+    def candidates(self, b: Submap) -> list[Submap]:
+        """Earlier submaps (at least ``loops.min_gap`` before ``b``) whose path came within
+        ``candidate_distance`` of b's, plus ``candidate_sigmas`` σ of b's global marginal (its position,
+        and its heading's lever arm over b's path), under the graph's estimate; nearest first, at most
+        ``max_candidates``. Paths, not extents: two robots a few metres apart see the same walls, while
+        a submap's points reach as far as its laser."""
+        cfg = self.cfg.loops
+        last = b.index - cfg.min_gap
+        if last < 0:
+            return []
+        poses = self.graph.poses()
+        path_b = transform_points(self.paths[b.index], poses[b.index])
+        Sb = self.graph.marginal(b.index)
+        reach = float(np.hypot(*self.paths[b.index].T).max())
+        sigma = (
+            math.sqrt(max(np.linalg.eigvalsh(Sb[:2, :2]).max(), 0.0)) + math.sqrt(max(Sb[2, 2], 0.0)) * reach
+        )
+        owner = np.concatenate([np.full(len(self.paths[a]), a) for a in range(last + 1)])
+        path_a = np.concatenate([transform_points(self.paths[a], poses[a]) for a in range(last + 1)])
+        d = np.sqrt(((path_a[:, None, :] - path_b[None, :, :]) ** 2).sum(axis=2)).min(axis=1)
+        closest = np.full(last + 1, np.inf)
+        np.minimum.at(closest, owner, d)
+        near = np.flatnonzero(closest <= cfg.candidate_distance + cfg.candidate_sigmas * sigma)
+        near = near[np.argsort(closest[near], kind="stable")][: cfg.max_candidates]
+        return [self.closed[a] for a in near]
+
+    def final_poses(self) -> np.ndarray:
+        """(n, 3) every step's pose with the optimised submap origins (the smoothed trajectory)."""
+        origins = self.graph.poses()[np.frombuffer(self.step_submap, dtype=np.int64)]
+        return compose(origins, np.frombuffer(self.local_poses).reshape(-1, 3))
+
+    def landmark_table(self) -> dict[str, np.ndarray]:
+        """map.csv's columns: every submap's landmarks at its optimised origin (global frame), their
+        covariances turned with it (the origin's own uncertainty not added), with ``submap`` and
+        ``linked_to`` (the id of the corner it was matched to across an accepted closure, or -1)."""
+        poses = self.graph.poses()
+        parts = [place_table(t, poses[i], i) for i, t in enumerate(self.tables)]
+        if not parts:
+            return self.slam.landmark_table() | {"submap": np.zeros(0, int), "linked_to": np.zeros(0, int)}
+        table = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+        table["linked_to"] = self._links(len(table["id"]))
+        return table
+
+    def _links(self, n: int) -> np.ndarray:
+        linked = np.full(n, -1, dtype=np.int64)
+        for r in self.loops:
+            if r.accepted and r.match.pairs is not None and len(r.match.pairs):
+                a, b = self.closed[r.submap_from], self.closed[r.submap_to]
+                linked[b.landmark_ids[r.match.pairs[:, 0]]] = a.landmark_ids[r.match.pairs[:, 1]]
+        return linked
+
+    def loop_rows(self) -> list[dict]:
+        """loops.csv's rows; ``inlier``: whether the graph kept an accepted closure inside its kernel."""
+        return [r.row(self.graph.loop_inlier(r.factor) if r.factor >= 0 else None) for r in self.loops]
+
+
+def agree(poses: list[np.ndarray]) -> bool:
+    """Whether the global poses one submap's closures imply are all within AGREE_XY / AGREE_THETA."""
+    if len(poses) < 2:
+        return True
+    P = np.array(poses)
+    d = np.hypot(*(P[:, None, :2] - P[None, :, :2]).transpose(2, 0, 1))
+    dth = np.abs(wrap_angle(P[:, None, 2] - P[None, :, 2]))
+    return bool(d.max() <= AGREE_XY and dth.max() <= AGREE_THETA)
+
+
+def place_table(table: dict[str, np.ndarray], origin: np.ndarray, index: int) -> dict[str, np.ndarray]:
+    """A submap's landmark columns moved into the global frame by its ``origin``."""
+    n = len(table["id"])
+    xy = transform_points(np.column_stack((table["x"], table["y"])), origin)
+    cov = np.stack((table["var_x"], table["cov_xy"], table["cov_xy"], table["var_y"]), axis=-1)
+    cov = rotate_covariance(cov.reshape(-1, 2, 2), float(origin[2]))
+    return {
+        **table,
+        "x": xy[:, 0],
+        "y": xy[:, 1],
+        "var_x": cov[:, 0, 0],
+        "var_y": cov[:, 1, 1],
+        "cov_xy": cov[:, 0, 1],
+        "submap": np.full(n, index, dtype=np.int64),
+    }
+
+
+def globalise(
+    r: StepRecord, origin: np.ndarray, origin_cov: np.ndarray, index: int, t_loop: float
+) -> StepRecord:
+    """A local step record in the global frame: its submap's ``origin`` ∘ the local pose; the pose's
+    covariance the local one turned by the origin plus the origin's marginal ``origin_cov`` (the
+    lever arm of the origin's heading error ignored); segments moved with it."""
+    cov = np.array(
+        [[r.pose_var[0], r.cov_xy, 0.0], [r.cov_xy, r.pose_var[1], 0.0], [0.0, 0.0, r.pose_var[2]]]
+    )
+    cov = rotate_pose_covariance(cov, float(origin[2])) + origin_cov
+    return replace(
+        r,
+        pose=compose(origin, r.pose),
+        pose_var=np.diag(cov).copy(),
+        cov_xy=float(cov[0, 1]),
+        segments_map=transform_points(r.segments_map.reshape(-1, 2), origin).reshape(-1, 4),
+        t_loop=t_loop,
+        submap=index,
+    )

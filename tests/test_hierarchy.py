@@ -1,0 +1,147 @@
+"""The two-level SLAM (hierarchy.py): submaps close on their limits, the run's files with submaps, the
+loop gate and the refusal of closures that disagree (perceptual aliasing), the paper mode untouched.
+
+Loop verification itself (graph/loops.py) and the pose graph (graph/posegraph.py) have their own tests;
+here the verifier is replaced where a test needs a closure of a known kind (right, wrong, aliased).
+"""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import cornerslam_cli.hierarchy as hierarchy
+from cornerslam_cli.cli import cli
+from cornerslam_cli.config import config_from
+from cornerslam_cli.frontend import frames, open_input
+from cornerslam_cli.geometry import compose
+from cornerslam_cli.graph.submap import LoopMatch
+from cornerslam_cli.hierarchy import HierarchicalSlam, agree
+from cornerslam_cli.report.tables import LOOP_COLUMNS, MAP_COLUMNS, TRAJECTORY_COLUMNS, read_csv
+
+
+def run_cli(log: Path, out: Path, *sets: str) -> dict:
+    args = ["run", str(log), "--out", str(out), "-q"]
+    for s in sets:
+        args += ["--set", s]
+    res = CliRunner().invoke(cli, args)
+    assert res.exit_code == 0, res.output
+    return json.loads((out / "summary.json").read_text())
+
+
+def hierarchical(sim_log: Path, *sets: str) -> HierarchicalSlam:
+    cfg = config_from({}, ["submaps.enabled=true", *sets])
+    src = open_input(sim_log, cfg)
+    hs = HierarchicalSlam(cfg, src.laser2base)
+    for frame in frames(src, cfg):
+        hs.step(frame)
+    hs.finish()
+    return hs
+
+
+@pytest.mark.parametrize(
+    "limit, check",
+    [
+        ("submaps.max_steps=6", lambda steps, travelled, landmarks: steps <= 6),
+        ("submaps.max_distance=2.0", lambda steps, travelled, landmarks: travelled < 2.0 + 0.6),
+        ("submaps.max_landmarks=5", lambda steps, travelled, landmarks: landmarks < 5 + 12),
+    ],
+)
+def test_a_submap_closes_when_it_reaches_a_limit(sim_log, limit, check):
+    hs = hierarchical(sim_log, limit, "loops.enabled=false")
+    assert len(hs.closed) > 2
+    for sub in hs.closed[:-1]:  # the last one closes at the end of the log
+        steps = sub.last_step - sub.first_step + 1
+        travelled = float(np.hypot(*np.diff(sub.poses[:, :2], axis=0).T).sum())
+        assert check(steps, travelled, len(sub.landmarks)), (limit, steps, travelled, len(sub.landmarks))
+    # the submaps tile the steps, and each one starts at its origin with zero uncertainty
+    assert [s.first_step for s in hs.closed[1:]] == [s.last_step + 1 for s in hs.closed[:-1]]
+    assert hs.closed[-1].last_step == hs.n_steps - 1
+    for sub in hs.closed:
+        assert np.linalg.norm(sub.poses[0]) < 0.5  # one step from the origin
+
+
+def test_submaps_write_the_smoothed_trajectory_loops_and_linked_map(sim_log, tmp_path):
+    s = run_cli(sim_log, tmp_path / "out", "submaps.enabled=true", "submaps.max_steps=8")
+    out = tmp_path / "out"
+    traj, mp, loops = read_csv(out / "trajectory.csv"), read_csv(out / "map.csv"), read_csv(out / "loops.csv")
+    assert list(traj) == TRAJECTORY_COLUMNS and list(mp) == MAP_COLUMNS and list(loops) == LOOP_COLUMNS
+    c = s["counts"]
+    assert c["submaps"] == len(set(traj["submap"])) == len(set(mp["submap"]))
+    assert c["loops_accepted"] + c["loops_rejected"] == len(loops["step"])
+    assert s["timing"]["t_loop"] > 0 and "online_ate" in s["accuracy"]
+    steps = Counter(np.asarray(traj["submap"]).astype(int).tolist())
+    assert max(steps.values()) <= 8
+
+
+def test_submaps_off_keeps_the_single_map_and_says_nothing_of_submaps(sim_log, tmp_path):
+    s = run_cli(sim_log, tmp_path / "out")
+    traj = read_csv(tmp_path / "out" / "trajectory.csv")
+    for a in ("x", "y", "theta"):
+        assert np.array_equal(traj[a], traj[f"online_{a}"])
+    assert set(np.asarray(traj["submap"]).astype(int).tolist()) == {0}
+    assert not (tmp_path / "out" / "loops.csv").exists()
+    assert "submaps" not in s["counts"] and "t_loop" not in s["timing"]
+
+
+class FakeVerifier:
+    """Stands in for graph/loops.py: answers every candidate pair with the graph's own prediction
+    moved by ``offset`` (per earlier submap a, or for all), accepted, so the gate alone decides."""
+
+    def __init__(self, offsets):
+        self.offsets = offsets
+        self.hs: HierarchicalSlam | None = None
+        self.calls = 0
+
+    def __call__(self, a, b, cfg, associate, icp):
+        self.calls += 1
+        pred, _ = self.hs.graph.relative(a.index, b.index)
+        off = self.offsets(a.index) if callable(self.offsets) else self.offsets
+        pose = compose(pred, off)
+        return LoopMatch(pose, np.diag([1e-4, 1e-4, 1e-5]), 6, 0.9, True, "")
+
+
+def run_with_verifier(sim_log, monkeypatch, verifier, *sets):
+    monkeypatch.setattr(hierarchy, "match_submaps", verifier)
+    cfg = config_from({}, ["submaps.enabled=true", "submaps.max_steps=6", "loops.min_gap=2", *sets])
+    src = open_input(sim_log, cfg)
+    hs = HierarchicalSlam(cfg, src.laser2base)
+    verifier.hs = hs
+    for frame in frames(src, cfg):
+        hs.step(frame)
+    hs.finish()
+    return hs
+
+
+def test_a_closure_that_agrees_with_the_graph_is_accepted_and_one_far_off_is_gated(sim_log, monkeypatch):
+    good = run_with_verifier(sim_log, monkeypatch, FakeVerifier(np.array([0.01, 0.0, 0.001])))
+    assert good.loops and all(r.accepted for r in good.loops)
+    bad = run_with_verifier(sim_log, monkeypatch, FakeVerifier(np.array([4.0, 0.0, 0.5])))
+    assert bad.loops and not any(r.accepted for r in bad.loops)
+    assert all(r.reason.startswith("disagrees with the graph") for r in bad.loops)
+    rows = bad.loop_rows()
+    assert all(row["inlier"] == "" and row["accepted"] is False for row in rows)
+
+
+def test_closures_of_one_submap_that_disagree_are_all_refused(sim_log, monkeypatch):
+    # every candidate passes the gate (a loose gate), but the even ones place the submap 2 m away
+    # from where the odd ones do: an aliased place; none may enter the graph
+    verifier = FakeVerifier(lambda a: np.array([2.0 * (a % 2), 0.0, 0.0]))
+    hs = run_with_verifier(sim_log, monkeypatch, verifier, "loops.gate=1e9")
+    several = Counter(r.submap_to for r in hs.loops)
+    mixed = [b for b, n in several.items() if n > 1]
+    assert mixed, "the fixture should give some submap two candidates"
+    for r in hs.loops:
+        if r.submap_to in mixed:
+            assert not r.accepted and "disagree" in r.reason
+
+
+def test_agree_is_about_position_and_heading():
+    p = np.zeros(3)
+    assert agree([p]) and agree([p, p + [0.3, 0.0, 0.1]])
+    assert not agree([p, p + [0.6, 0.0, 0.0]]) and not agree([p, p + [0.0, 0.0, 0.3]])
