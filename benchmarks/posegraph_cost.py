@@ -3,6 +3,8 @@
     .venv/bin/python benchmarks/posegraph_cost.py                          # 100 and 1,000 submaps
     .venv/bin/python benchmarks/posegraph_cost.py --sizes 100 --kernel-scale 1.0 --out /tmp/pg.md
 
+Results: docs/results/posegraph_cost.md.
+
 The use the hierarchy makes of it, one closed submap at a time: add the submap's sequential factor, its
 loop closures (here: to the submap one lap back and its neighbour, as a robot circling a building
 finds them), optimize(), then the candidate search's questions (marginal of the new node, relative
