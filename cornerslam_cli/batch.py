@@ -97,7 +97,8 @@ def run_batch(
     or the Dask cluster at ``scheduler``. Rows come in the order of ``combos``.
     """
     from .config import Config, from_dict
-    from .report.run_writer import config_hash, find_ground_truth, input_hash
+    from .report.run_writer import find_ground_truth
+    from .report.summary import config_hash, input_hash
 
     out = Path(out_dir)
     claim_dir(out, "batch")  # refuses a directory that is not a batch's, before any work

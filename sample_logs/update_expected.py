@@ -28,12 +28,16 @@ EXPECTED = HERE / "expected.json"
 # reference name -> (log, extra command-line arguments: what a user of that robot would pass)
 ROOT = HERE.parent  # the runs start here: arguments name files relative to the repository
 MINES = ["--config", "configs/mines.yaml"]  # the rover's body (70 beams at each end), its laser mount
-NO_SCAN_MATCH = ["--set", "scan_match.enabled=false"]  # the paper's filter: wheel odometry only
+SINGLE_MAP = ["--set", "submaps.enabled=false"]  # the paper's single EKF map (no submaps, no pose graph)
+NO_SCAN_MATCH = ["--set", "scan_match.enabled=false"] + SINGLE_MAP  # the paper's filter: wheel odometry only
 RUNS = {
     "sim_office.mcap": ("sim_office.mcap", []),
+    "sim_office.mcap single map": ("sim_office.mcap", SINGLE_MAP),
     "intel_cut.clf": ("intel_cut.clf", []),
+    "intel_cut.clf single map": ("intel_cut.clf", SINGLE_MAP),
     "intel_cut.clf scan_match off": ("intel_cut.clf", NO_SCAN_MATCH),
     "mines_exp3_cut.bag": ("mines_exp3_cut.bag", MINES),
+    "mines_exp3_cut.bag single map": ("mines_exp3_cut.bag", MINES + SINGLE_MAP),
     "mines_exp3_cut.bag scan_match off": ("mines_exp3_cut.bag", MINES + NO_SCAN_MATCH),
 }
 

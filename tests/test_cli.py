@@ -47,6 +47,7 @@ def test_run_writes_every_table_with_the_interface_columns(sim_log, tmp_path):
     assert res.exit_code == 0, res.output
     files = ["trajectory.tum", "trajectory.csv", "map.csv", "lines.csv", "timing.csv", "summary.json"]
     files += ["odometry.tum", "scan_matched.tum", "map.pgm", "map.yaml", "map_grid.png"]  # issue 17
+    files += ["loops.csv"]  # issue 16: submaps are on by default
     assert sorted(p.name for p in out.iterdir()) == sorted([*files, MARKER])
     assert json.loads((out / MARKER).read_text())["files"] == sorted(files)  # what it replaces next time
     traj = read_csv(out / "trajectory.csv")

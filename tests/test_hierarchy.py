@@ -80,7 +80,7 @@ def test_submaps_write_the_smoothed_trajectory_loops_and_linked_map(sim_log, tmp
 
 
 def test_submaps_off_keeps_the_single_map_and_says_nothing_of_submaps(sim_log, tmp_path):
-    s = run_cli(sim_log, tmp_path / "out")
+    s = run_cli(sim_log, tmp_path / "out", "submaps.enabled=false")
     traj = read_csv(tmp_path / "out" / "trajectory.csv")
     for a in ("x", "y", "theta"):
         assert np.array_equal(traj[a], traj[f"online_{a}"])
@@ -121,11 +121,25 @@ def run_with_verifier(sim_log, monkeypatch, verifier, *sets):
 def test_a_closure_that_agrees_with_the_graph_is_accepted_and_one_far_off_is_gated(sim_log, monkeypatch):
     good = run_with_verifier(sim_log, monkeypatch, FakeVerifier(np.array([0.01, 0.0, 0.001])))
     assert good.loops and all(r.accepted for r in good.loops)
-    bad = run_with_verifier(sim_log, monkeypatch, FakeVerifier(np.array([4.0, 0.0, 0.5])))
+    # wrong by a different amount for each earlier submap: no two of them agree on where b is
+    bad = run_with_verifier(sim_log, monkeypatch, FakeVerifier(lambda a: np.array([4.0 + 3.0 * a, 0.0, 0.5])))
     assert bad.loops and not any(r.accepted for r in bad.loops)
     assert all(r.reason.startswith("disagrees with the graph") for r in bad.loops)
     rows = bad.loop_rows()
     assert all(row["inlier"] == "" and row["accepted"] is False for row in rows)
+
+
+def test_closures_that_agree_with_each_other_against_the_graph_enter_it(sim_log, monkeypatch):
+    # every candidate places b 1 m from where the graph has it, all at the same place: the graph is
+    # what is wrong (as after an earlier false closure); two or more such closures are accepted
+    hs = run_with_verifier(sim_log, monkeypatch, FakeVerifier(np.array([1.0, 0.0, 0.0])), "loops.gate=1")
+    several = Counter(r.submap_to for r in hs.loops)
+    for r in hs.loops:
+        if several[r.submap_to] >= 2:
+            assert r.accepted and "agree against the graph" in r.reason, r
+        else:
+            assert not r.accepted and r.reason.startswith("disagrees with the graph"), r
+    assert any(n >= 2 for n in several.values()) and any(n == 1 for n in several.values())
 
 
 def test_closures_of_one_submap_that_disagree_are_all_refused(sim_log, monkeypatch):

@@ -125,13 +125,16 @@ COUNT_KEYS = [
     "after_last_odom", "odom_gap", "scan_time_backwards", "odom_time_backwards", "keyframes_skipped",
     "odom_jumps", "scans_skipped", "budget_hits", "scans_matched", "scans_match_retried",
     "scans_match_fallback", "scans_match_rejected",  # scans_match_rejected appended (issue 15)
+    "submaps", "loops_accepted", "loops_rejected",  # appended (issue 16): the two-level SLAM's
 ]  # fmt: skip
 TIMING_KEYS = [
     "t_extract", "t_predict", "t_match", "t_update", "t_scan_match", "t_total", "t_match_max", "wall_time",
     "scans_per_second", "t_grid",  # t_grid appended (issue 17): the occupancy grid
+    "t_loop",  # appended (issue 16): loop closing and the pose graph
 ]  # fmt: skip
 ACCURACY_KEYS = [
     "ground_truth", "ate", "odom_ate", "rpe_step_rmse", "rpe_step_rot_rmse", "rpe_per_m", "scan_odom_ate",
+    "online_ate",  # appended (issue 16): the causal estimate beside the smoothed one
 ]  # fmt: skip
 ATE_KEYS = ["n", "rmse", "mean", "max", "rot_rmse"]
 
@@ -167,7 +170,10 @@ def test_summary_json_of_a_simulated_run_has_the_layout_and_values_it_always_had
     t, rounding = s["timing"], 1e-9 * c["steps"]  # timing.csv has 9 decimals
     for name in ("t_extract", "t_predict", "t_match", "t_update", "t_scan_match"):
         assert t[name] == pytest.approx(timing[name].sum(), abs=rounding)
-    assert t["t_total"] == pytest.approx(sum(t[n] for n in TIMING_KEYS[:5]), rel=1e-12)
+    # the steps' loop closing is in t_total; t_loop also holds the last submap's, closed after the last step
+    steps_loop = timing["t_loop"].sum()
+    assert t["t_total"] == pytest.approx(sum(t[n] for n in TIMING_KEYS[:5]) + steps_loop, rel=1e-6)
+    assert t["t_loop"] >= steps_loop - rounding
     assert (
         t["t_match_max"] == pytest.approx(timing["t_match"].max(), abs=1e-9) and t["wall_time"] > t["t_total"]
     )

@@ -131,7 +131,8 @@ def match_submaps(
     reg = register(b.points, local, best.pose, icp)
     fitness = overlap_fitness(b.points, local, reg.pose, cfg.inlier_distance)
     accepted = fitness >= cfg.min_fitness
-    return LoopMatch(reg.pose, reg.cov, best.n, fitness, accepted, "" if accepted else LOW_FITNESS, best.pairs)
+    reason = "" if accepted else LOW_FITNESS
+    return LoopMatch(reg.pose, reg.cov, best.n, fitness, accepted, reason, best.pairs)
 
 
 def _rejected(pose: np.ndarray, n: int, reason: str) -> LoopMatch:

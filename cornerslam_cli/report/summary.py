@@ -1,0 +1,191 @@
+"""summary.json of a run: what it counted, how long each stage took, what the fusion learnt, the
+hashes batch resumes by and the versions (results.py's :class:`RunSummary`), built once by the run
+writer (run_writer.py)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import platform
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .. import __version__, fpenv
+from ..errors import display_path
+from ..logs import check_regular
+from ..results import Accuracy, Counts, Hashes, OdometryModel, RunInput, RunSummary, Timing
+
+if TYPE_CHECKING:
+    from ..config import Config
+    from ..frontend import Input
+    from ..hierarchy import HierarchicalSlam
+    from ..results import MapConsistency
+    from ..slam import StepRecord
+
+
+@dataclass
+class Totals:
+    """What summary.json sums over the steps."""
+
+    steps: int = 0
+    times: np.ndarray = field(
+        default_factory=lambda: np.zeros(6)
+    )  # extract, predict, match, update, ICP, loop
+    t_match_max: float = 0.0
+    budget_hits: int = 0  # steps where the associator ran out of its search budget
+    matched: int = 0  # corners matched to a landmark
+    points: int = 0  # valid beams
+
+    def add(self, r: StepRecord) -> None:
+        self.steps += 1
+        self.times += (r.t_extract, r.t_predict, r.t_match, r.t_update, r.t_scan_match, r.t_loop)
+        self.t_match_max = max(self.t_match_max, r.t_match)
+        self.budget_hits += r.budget_hit
+        self.matched += r.n_matched
+        self.points += r.n_points
+
+
+def build_summary(
+    src: Input,
+    cfg: Config,
+    totals: Totals,
+    n_landmarks: int,
+    final_pose: np.ndarray,
+    accuracy: Accuracy | None,
+    wall0: float,
+    t_grid: float | None = None,
+    consistency: MapConsistency | None = None,
+    graph: HierarchicalSlam | None = None,
+) -> RunSummary:
+    """The summary of a run (summary.json, INTERFACE.md): input, counts, timing totals (``t_grid``:
+    the occupancy grid's), accuracy, hashes, versions, map ``consistency``; with the two-level SLAM
+    ``graph`` its submaps and loop closures counted and its loop-closing time."""
+    info = src.info
+    return RunSummary(
+        cornerslam_version=__version__,
+        mode="slam",
+        input=RunInput(
+            log=display_path(src.path),
+            format=info.format,
+            scan_topic=info.scan_topic,
+            odom_topic=info.odom_topic,
+            odom_source=info.odom_source,
+            laser_to_base=tuple(float(v) for v in src.laser2base),
+            laser_to_base_source=src.laser_source,
+            odom_on_tf=src.odom_on_tf,
+            span=src.span_used.record(src.span),
+        ),
+        assoc=cfg.association.method,
+        counts=run_counts(src, totals, n_landmarks, graph),
+        timing=run_timing(totals, wall0, t_grid, graph),
+        final_pose=tuple(final_pose.tolist()),
+        odometry_model=odometry_model(src.matcher),
+        consistency=consistency,
+        warnings=tuple(src.reader.stats.warnings),
+        accuracy=accuracy,
+        hashes=Hashes(input=input_hash(src.path), config=config_hash(cfg), version=__version__),
+        config=cfg.to_dict(),
+        versions=_versions(),
+    )
+
+
+def run_counts(src: Input, totals: Totals, n_landmarks: int, graph: HierarchicalSlam | None = None) -> Counts:
+    """What the run counted: the filter's steps and matches, the reader's beams and scans, the
+    synchroniser's scans and odometry, the associator's budget hits, the scan matcher's outcomes,
+    the submaps and loop closures of the two-level SLAM ``graph``."""
+    loops = [] if graph is None else graph.loops
+    stats, matcher = src.reader.stats, src.matcher
+    return Counts(
+        steps=totals.steps,
+        landmarks=n_landmarks,
+        matched_total=totals.matched,
+        beams_total=stats.beams,
+        beams_invalid=stats.beams_dropped,
+        scans_bad_geometry=stats.scans_skipped,
+        scans_size_mismatch=stats.size_mismatch,
+        messages_failed=stats.decode_failed,
+        **src.stats.as_dict(),
+        budget_hits=int(totals.budget_hits),
+        scans_matched=None if matcher is None else matcher.n_matched,
+        # "retried": the correlative search over the odometry's window ran (it replaced the heading retries)
+        scans_match_retried=None if matcher is None else matcher.n_searched,
+        scans_match_rejected=None if matcher is None else matcher.n_rejected,
+        scans_match_fallback=None if matcher is None else matcher.n_fallback,
+        submaps=None if graph is None else len(graph.closed),
+        loops_accepted=None if graph is None else sum(r.accepted for r in loops),
+        loops_rejected=None if graph is None else sum(not r.accepted for r in loops),
+    )
+
+
+def odometry_model(matcher) -> OdometryModel | None:
+    """What the fusion learnt about the odometry and the matches (motion/fusion.py) by the run's end."""
+    if matcher is None:
+        return None
+    f = matcher.fusion
+    return OdometryModel(
+        odom_noise_scale=f.k,
+        match_noise_scale=f.s,
+        odom_scale_error=float(f.c[0]),
+        heading_drift_per_m=float(f.c[1]),
+    )
+
+
+def run_timing(
+    totals: Totals, wall0: float, t_grid: float | None = None, graph: HierarchicalSlam | None = None
+) -> Timing:
+    """The stage times summed over the steps, the slowest matching step, the wall time since ``wall0``
+    and the occupancy grid's time ``t_grid``; with the two-level SLAM ``graph``, the loop closing and
+    graph optimisation (over the steps and at the end, closing the last submap)."""
+    times = totals.times
+    t_loop = None if graph is None else float(times[5] + graph.t_loop)
+    return Timing(
+        t_extract=float(times[0]),
+        t_predict=float(times[1]),
+        t_match=float(times[2]),
+        t_update=float(times[3]),
+        t_scan_match=float(times[4]),
+        t_total=float(times.sum()),
+        t_match_max=totals.t_match_max,
+        wall_time=time.perf_counter() - wall0,
+        scans_per_second=totals.steps / max(float(times.sum()), 1e-12),
+        t_grid=t_grid,
+        t_loop=t_loop,
+    )
+
+
+def config_hash(cfg: Config) -> str:
+    """sha256 of the resolved config (canonical JSON): equal configs, equal hashes."""
+    text = json.dumps(cfg.to_dict(), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def input_hash(path: Path) -> str:
+    """sha256 of the log's bytes (every file, in name order, for a ROS 2 bag directory); a LogError
+    for a pipe or a device (reading it would consume or hang on it)."""
+    check_regular(path)
+    h = hashlib.sha256()
+    files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+    for f in files:
+        h.update(os.fsencode(f.relative_to(path) if path.is_dir() else f.name))
+        with open(f, "rb") as fh:
+            while chunk := fh.read(1 << 20):
+                h.update(chunk)
+    return h.hexdigest()
+
+
+def _versions() -> dict:
+    import importlib.metadata as md
+
+    out = {"python": platform.python_version()}
+    for name in ("numpy", "scipy", "mcap", "rosbags", "click", "pyyaml"):
+        try:
+            out[name] = md.version(name)
+        except md.PackageNotFoundError:
+            pass
+    out.update(fpenv.describe())  # the BLAS kernels and numpy SIMD level: the last digits depend on them
+    return out
