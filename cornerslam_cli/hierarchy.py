@@ -220,8 +220,12 @@ class HierarchicalSlam:
             found = [replace(r, accepted=False, reason=why) if r.accepted else r for r in found]
         for r in found:
             if r.accepted:
-                k = self.graph.add_loop(r.submap_from, r.submap_to, r.match.pose, r.match.cov)
-                r = replace(r, factor=k)
+                try:
+                    r = replace(
+                        r, factor=self.graph.add_loop(r.submap_from, r.submap_to, r.match.pose, r.match.cov)
+                    )
+                except ValueError:  # a degenerate ICP fit (a featureless corridor): no usable covariance
+                    r = replace(r, accepted=False, reason="match covariance not positive definite")
             self.loops.append(r)
         if any(r.accepted for r in found):
             self.graph.optimize()
