@@ -55,6 +55,7 @@ class LoopRecord:
     match: LoopMatch
     accepted: bool  # verified, inside the gate and consistent with the other closures of b
     reason: str
+    chi2: float = float("nan")  # the match against the graph's prediction (Mahalanobis², 3 dof)
     factor: int = -1  # the graph's loop factor index when accepted
 
     def row(self, inlier: bool | None) -> dict:
@@ -71,6 +72,7 @@ class LoopRecord:
             "fitness": self.match.fitness,
             "accepted": self.accepted,
             "inlier": "" if inlier is None else inlier,
+            "chi2": self.chi2,
             "reason": self.reason,
         }
 
@@ -204,13 +206,15 @@ class HierarchicalSlam:
         found = []
         for a in self.candidates(b):
             m = match_submaps(a, b, cfg, self.loop_associate, self.cfg.scan_match)
-            reason = m.reason if not m.accepted else self._gate(a.index, b.index, m)
-            found.append(LoopRecord(step, a.index, b.index, m, not reason, reason))
-        gated = [r for r in found if r.match.accepted and not r.accepted]
+            d2 = self._chi2(a.index, b.index, m) if m.accepted else float("nan")
+            reason = m.reason or ("" if d2 <= cfg.gate else f"disagrees with the graph (chi2 {d2:.1f})")
+            found.append(LoopRecord(step, a.index, b.index, m, not reason, reason, d2))
+        gated = [r for r in found if r.match.accepted and not r.accepted and r.chi2 <= cfg.group_gate]
         if len(gated) >= 2 and agree([self.placed(r) for r in gated]):
             # two or more closures from different parts of the map agree on where b is, against the
-            # graph: the graph is what is wrong (an earlier false closure, or drift beyond its
-            # covariance); they enter it, and its robust kernel weighs them against what they contradict
+            # graph but not wildly (group_gate): the graph is what is wrong (an earlier false closure,
+            # or drift beyond its covariance); they enter it, and its robust kernel weighs them against
+            # what they contradict. Far beyond that it is a symmetric place seen from elsewhere.
             why = f"{len(gated)} closures agree against the graph"
             ids = {id(r) for r in gated}
             found = [replace(r, accepted=True, reason=why) if id(r) in ids else r for r in found]
@@ -220,8 +224,12 @@ class HierarchicalSlam:
             found = [replace(r, accepted=False, reason=why) if r.accepted else r for r in found]
         for r in found:
             if r.accepted:
-                k = self.graph.add_loop(r.submap_from, r.submap_to, r.match.pose, r.match.cov)
-                r = replace(r, factor=k)
+                try:
+                    r = replace(
+                        r, factor=self.graph.add_loop(r.submap_from, r.submap_to, r.match.pose, r.match.cov)
+                    )
+                except ValueError:  # a degenerate ICP fit (a featureless corridor): no usable covariance
+                    r = replace(r, accepted=False, reason="match covariance not positive definite")
             self.loops.append(r)
         if any(r.accepted for r in found):
             self.graph.optimize()
@@ -230,15 +238,13 @@ class HierarchicalSlam:
         """The global pose of submap b's origin that closure ``r`` implies (a's pose in the graph ∘ a→b)."""
         return compose(self.graph.pose(r.submap_from), r.match.pose)
 
-    def _gate(self, a: int, b: int, m: LoopMatch) -> str:
-        """'' when the match agrees with the graph's predicted a→b pose within ``loops.gate`` (χ²₃ on
-        the sum of the prediction's joint-marginal covariance and the match's), else why not."""
-        pred, cov = self.graph.relative(a, b)  # both covariances are of (x, y, θ) in a's frame
+    def _chi2(self, a: int, b: int, m: LoopMatch) -> float:
+        """Mahalanobis² of the match against the graph's predicted a→b pose, on the sum of the
+        prediction's joint-marginal covariance and the match's (both of (x, y, θ) in a's frame)."""
+        pred, cov = self.graph.relative(a, b)
         e = np.asarray(m.pose, dtype=float) - pred
         e[2] = wrap_angle(e[2])
-        S = cov + m.cov
-        d2 = float(e @ np.linalg.solve(S, e))
-        return "" if d2 <= self.cfg.loops.gate else f"disagrees with the graph (chi2 {d2:.1f})"
+        return float(e @ np.linalg.solve(cov + m.cov, e))
 
     def candidates(self, b: Submap) -> list[Submap]:
         """Earlier submaps (at least ``loops.min_gap`` before ``b``) whose path came within

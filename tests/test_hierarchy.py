@@ -132,7 +132,9 @@ def test_a_closure_that_agrees_with_the_graph_is_accepted_and_one_far_off_is_gat
 def test_closures_that_agree_with_each_other_against_the_graph_enter_it(sim_log, monkeypatch):
     # every candidate places b 1 m from where the graph has it, all at the same place: the graph is
     # what is wrong (as after an earlier false closure); two or more such closures are accepted
-    hs = run_with_verifier(sim_log, monkeypatch, FakeVerifier(np.array([1.0, 0.0, 0.0])), "loops.gate=1")
+    hs = run_with_verifier(
+        sim_log, monkeypatch, FakeVerifier(np.array([1.0, 0.0, 0.0])), "loops.gate=1", "loops.group_gate=1e9"
+    )
     several = Counter(r.submap_to for r in hs.loops)
     for r in hs.loops:
         if several[r.submap_to] >= 2:
@@ -140,6 +142,14 @@ def test_closures_that_agree_with_each_other_against_the_graph_enter_it(sim_log,
         else:
             assert not r.accepted and r.reason.startswith("disagrees with the graph"), r
     assert any(n >= 2 for n in several.values()) and any(n == 1 for n in several.values())
+
+
+def test_closures_that_agree_with_each_other_far_beyond_the_graph_are_refused(sim_log, monkeypatch):
+    # a symmetric place seen from elsewhere: every candidate agrees on a pose turned by π and 20 m off
+    # (aces did this); far beyond group_gate, so the agreement does not let them in
+    hs = run_with_verifier(sim_log, monkeypatch, FakeVerifier(np.array([20.0, 0.0, np.pi])))
+    assert hs.loops and not any(r.accepted for r in hs.loops)
+    assert all(r.chi2 > hs.cfg.loops.group_gate for r in hs.loops)
 
 
 def test_closures_of_one_submap_that_disagree_are_all_refused(sim_log, monkeypatch):

@@ -52,6 +52,9 @@ class LoopConfig:
     min_gap: int = num(2, ge=1, le=1_000_000)  # submaps between a and b (neighbours share a factor)
     # a closure must agree with the graph's prediction within this χ²₃ (Mahalanobis², marginal covariance)
     gate: float = num(30.7, gt=0.0, le=1e9)
+    # ... unless two or more closures of the new submap agree with each other and each is within this
+    # (10 × gate: the graph's σ too small by up to ~3×, as after a false closure); beyond it, refused
+    group_gate: float = num(307.0, gt=0.0, le=1e12)
 
     def __post_init__(self) -> None:
         check_ranges(self)
