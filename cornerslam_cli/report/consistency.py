@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from ..motion.icp import voxel_thin
+from ..motion.icp import cell_keys
 from ..results import MapConsistency
 from .occupancy import ScanStore
 
@@ -32,6 +32,7 @@ CELL = 0.05  # m: the grid of the occupied-cell count
 REVISIT_GAP = 100  # scans
 REVISIT_CAP = 0.3  # m
 REVISIT_BLOCK = 25  # scans: neighbours come from blocks at least REVISIT_GAP // REVISIT_BLOCK away
+OCCUPIED_SCANS = 500  # scans whose occupied cells are found at once
 
 
 def place(pts: list[np.ndarray], poses: np.ndarray) -> np.ndarray:
@@ -52,8 +53,14 @@ def scan_offsets(pts: list[np.ndarray]) -> np.ndarray:
 
 
 def occupied_cells(pts: list[np.ndarray], poses: np.ndarray, cell: float = CELL) -> int:
-    """Distinct ``cell``-sized grid cells hit by the scan points placed with ``poses``."""
-    return len(voxel_thin(place(pts, poses), cell))  # one index per occupied cell
+    """Distinct ``cell``-sized grid cells hit by the scan points placed with ``poses``: the cells of
+    ``OCCUPIED_SCANS`` scans at a time (a long log's temporaries stay small), then their union."""
+    cells = [np.zeros(0, dtype=np.int64)]
+    for i in range(0, len(pts), OCCUPIED_SCANS):
+        cells.append(
+            np.unique(cell_keys(place(pts[i : i + OCCUPIED_SCANS], poses[i : i + OCCUPIED_SCANS]), cell))
+        )
+    return len(np.unique(np.concatenate(cells)))
 
 
 def revisit_misalignment(pts: list[np.ndarray], poses: np.ndarray) -> tuple[float, float]:
