@@ -20,18 +20,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from submap_fixtures import identical_rooms_world, room_door
 
 from cornerslam_cli.cli import cli
+from cornerslam_cli.errors import ConfigError
 from cornerslam_cli.geometry import relative, wrap_angle
 from cornerslam_cli.report.tables import read_csv, read_tum
 from cornerslam_cli.simulate import simulate_log
-from cornerslam_cli.simworld import raycast
-from submap_fixtures import identical_rooms_world, room_door
+from cornerslam_cli.simworld import OFFICE_LOOP, office_world, raycast
 
 SIM = {"rate": 2.0, "beams": 541}  # as conftest.py's sim_log: a few seconds a run
 N_ROOMS = 4
 WRONG_XY, WRONG_THETA = 0.3, np.radians(5.0)  # a closure this far from the truth is a wrong one
-# what an accepted closure on the office log reaches (module docstring of test_closure_accuracy)
+# what an accepted closure on the office log reaches (the docstring of test_closure_accuracy_on_two_laps_of_the_office)
 CLOSURE_XY, CLOSURE_THETA = 0.05, np.radians(0.5)
 SINGLE_MAP_MARGIN = 0.01  # m: the smoothed trajectory's ATE may exceed the single map's by this
 
@@ -47,6 +48,12 @@ def rooms_tour(n: int) -> np.ndarray:
     wp.append(room_door(n - 1) + corridor + (2.9, 0.0))
     wp.append(room_door(0) + corridor)
     return np.array(wp)
+
+
+def raycast_free(world, p: np.ndarray, heading: float) -> float:
+    """Free distance from ``p`` along ``heading`` for a robot 0.4 m wide (three parallel rays)."""
+    side = np.array([-np.sin(heading), np.cos(heading)]) * 0.2
+    return min(float(raycast(world, (*(p + k * side), heading), np.zeros(1))[0]) for k in (-1, 0, 1))
 
 
 def run_cli(log: Path, out: Path, *sets: str) -> dict:
@@ -113,12 +120,6 @@ def test_rooms_tour_stays_in_free_space():
         assert free > np.hypot(*(q - p)) + 0.3, (p, q, free)
 
 
-def raycast_free(world, p: np.ndarray, heading: float) -> float:
-    """Free distance from ``p`` along ``heading`` for a robot 0.4 m wide (three parallel rays)."""
-    side = np.array([-np.sin(heading), np.cos(heading)]) * 0.2
-    return min(float(raycast(world, (*(p + k * side), heading), np.zeros(1))[0]) for k in (-1, 0, 1))
-
-
 def test_identical_rooms_give_no_wrong_closure(rooms_log, tmp_path):
     run_cli(rooms_log, tmp_path / "out")
     rows = closure_errors(rooms_log, tmp_path / "out")
@@ -159,3 +160,19 @@ def test_smoothed_trajectory_beats_the_online_one_and_the_single_map(office_two_
     single = run_cli(log, tmp_path / "single", "submaps.enabled=false")["accuracy"]["ate"]["rmse"]
     assert ate < online, (ate, online)
     assert ate <= single + SINGLE_MAP_MARGIN, (ate, single)
+
+
+def test_simulate_world_and_waypoints_default_to_the_office(tmp_path):
+    small = {"rate": 0.5, "beams": 91}
+    simulate_log(tmp_path / "default.mcap", seed=2, **small)
+    simulate_log(tmp_path / "given.mcap", seed=2, world=office_world(), waypoints=OFFICE_LOOP, **small)
+    for suffix in (".mcap", ".gt.tum", ".corners.csv"):
+        given = (tmp_path / "given.mcap").with_suffix(suffix).read_bytes()
+        default = (tmp_path / "default.mcap").with_suffix(suffix).read_bytes()
+        assert given == default, suffix
+
+
+def test_simulate_refuses_fewer_than_two_waypoints(tmp_path):
+    with pytest.raises(ConfigError, match="at least 2 waypoints"):
+        simulate_log(tmp_path / "one.mcap", waypoints=[(0.0, 0.0)])
+    assert not (tmp_path / "one.mcap").exists()
