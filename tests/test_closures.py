@@ -32,7 +32,7 @@ from cornerslam_cli.simworld import OFFICE_LOOP, office_world, raycast
 SIM = {"rate": 2.0, "beams": 541}  # as conftest.py's sim_log: a few seconds a run
 N_ROOMS = 4
 WRONG_XY, WRONG_THETA = 0.3, np.radians(5.0)  # a closure this far from the truth is a wrong one
-# what an accepted closure on the office log reaches (the docstring of test_closure_accuracy_on_two_laps_of_the_office)
+# what an accepted closure on the 2-lap office log reaches (test_closure_accuracy_on_two_laps_of_the_office)
 CLOSURE_XY, CLOSURE_THETA = 0.05, np.radians(0.5)
 SINGLE_MAP_MARGIN = 0.01  # m: the smoothed trajectory's ATE may exceed the single map's by this
 
