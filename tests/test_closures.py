@@ -130,12 +130,6 @@ def test_identical_rooms_give_no_wrong_closure(rooms_log, tmp_path):
     assert aliased and min(r["err_xy"] for r in aliased) > 6.0  # a room's width and more
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="hierarchy.py _close_loops: two aliased closures from neighbouring submaps agree with each "
-    "other (the same room period off) and enter the graph 'against the graph'; the kernel then "
-    "marks them outliers",
-)
 def test_identical_rooms_give_no_wrong_closure_with_odometry_alone(rooms_log, tmp_path):
     run_cli(rooms_log, tmp_path / "out", "scan_match.enabled=false")
     rows = closure_errors(rooms_log, tmp_path / "out")
