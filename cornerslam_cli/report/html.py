@@ -12,6 +12,8 @@ import base64
 import html
 import json
 import math
+import re
+from collections import Counter
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
@@ -58,6 +60,7 @@ BETTER: dict[str, Callable[[Iterable[float]], float]] = {
     "rpe_trans_per_m": min,
     "wall_time": min,
     "budget_hits": min,
+    "online_ate_rmse": min,
 }
 
 
@@ -138,7 +141,7 @@ def _kv_table(pairs: list[tuple[str, object]]) -> str:
     return f"<table>{rows}</table>"
 
 
-def _summary_section(summary: RunSummary) -> list[str]:
+def _summary_section(summary: RunSummary, run_dir: Path) -> list[str]:
     inp, counts, timing = summary.input, summary.counts, summary.timing
     pairs: list[tuple[str, object]] = [
         ("log", inp.log),
@@ -159,6 +162,7 @@ def _summary_section(summary: RunSummary) -> list[str]:
     out = ["<h2>Summary</h2>", _kv_table(pairs)]
     out += _accuracy_section(summary)
     out += _consistency_section(summary.consistency)
+    out += _loops_section(run_dir, summary)
     out.append("<h3>Warnings</h3>")
     if summary.warnings:
         out.append("<ul>" + "".join(f'<li class="warn">{esc(w)}</li>' for w in summary.warnings) + "</ul>")
@@ -232,6 +236,48 @@ CONSISTENCY_HEADER = [
 ]  # fmt: skip
 
 
+def _loops_section(run_dir: Path, summary: RunSummary) -> list[str]:
+    """With submaps: how many, the loop closures accepted and refused, the loop time, and loops.csv's
+    candidates counted by outcome and reason."""
+    c, t = summary.counts, summary.timing
+    if c.submaps is None:
+        return []
+    pairs = [
+        ("submaps", c.submaps),
+        ("loop closures accepted", c.loops_accepted),
+        ("loop closures refused", c.loops_rejected),
+        ("loop closing and graph time [s]", float(t.t_loop or 0.0)),
+    ]
+    path = run_dir / "loops.csv"
+    rows = loop_reason_rows(read_csv(path)) if path.is_file() else []
+    return [
+        "<h3>Loop closures</h3>",
+        _kv_table(pairs),
+        table(LOOPS_HEADER, rows, name_cols=2) if rows else '<p class="muted">no loop-closure candidate</p>',
+    ]
+
+
+LOOPS_HEADER = ["outcome", "reason", "candidates"]
+ACCEPTED_REASON = "verified, inside the gate"  # loops.csv's empty reason of an accepted closure
+
+
+def loop_reason_rows(loops: dict) -> list[list]:
+    """loops.csv's candidates counted by outcome (accepted first) and reason, most frequent first; a
+    reason's figures (the χ² of a gated closure, how many closures agreed) left out so that like
+    reasons count together."""
+    counts: Counter[tuple[bool, str]] = Counter()
+    for accepted, reason in zip(loops["accepted"], loops["reason"], strict=True):
+        kind = _reason_kind(str(reason)) or (ACCEPTED_REASON if accepted else "")
+        counts[(not accepted, kind)] += 1
+    order = sorted(counts.items(), key=lambda kv: (kv[0][0], -kv[1], kv[0][1]))
+    return [["refused" if refused else "accepted", reason, n] for (refused, reason), n in order]
+
+
+def _reason_kind(reason: str) -> str:
+    """A loops.csv reason without its figures: '(chi2 12.3)' and a leading count dropped."""
+    return re.sub(r"^\d+ ", "", re.sub(r"\s*\([^)]*\d[^)]*\)", "", reason))
+
+
 def _ate_cells(a: Ate | None) -> list:
     """ATE RMSE, mean, max, heading RMSE, poses: NaN (and no count) for what was not measured."""
     if a is None:
@@ -260,7 +306,7 @@ def _run_report(out_dir: Path) -> str:
     summary = RunSummary.read(out_dir)
     title = f"cornerslam run — {Path(summary.input.log).name} ({summary.assoc})"
     body = [f"<h1>{esc(title)}</h1>"]
-    body += _summary_section(summary)
+    body += _summary_section(summary, out_dir)
     body += ["<h2>Figures</h2>", *_figures(out_dir, summary.assoc)]
     body += ["<h2>Configuration</h2>", *_config_section(summary)]
     return _page(title, body)
@@ -304,7 +350,9 @@ def _compare_report(out_dir: Path) -> str:
     for a in assocs:
         s = summaries[a]
         body.append(f'<h2 id="assoc-{esc(a)}">{esc(a)}</h2>')
-        body += [h.replace("<h2>", "<h3>").replace("</h2>", "</h3>") for h in _summary_section(s)]
+        body += [
+            h.replace("<h2>", "<h3>").replace("</h2>", "</h3>") for h in _summary_section(s, out_dir / a)
+        ]
         body += _figures(out_dir / a, a)
         body += _config_section(s)
     return _page(title, body)
