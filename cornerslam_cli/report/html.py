@@ -250,11 +250,13 @@ def _loops_section(run_dir: Path, summary: RunSummary) -> list[str]:
     ]
     path = run_dir / "loops.csv"
     rows = loop_reason_rows(read_csv(path)) if path.is_file() else []
-    return [
-        "<h3>Loop closures</h3>",
-        _kv_table(pairs),
-        table(LOOPS_HEADER, rows, name_cols=2) if rows else '<p class="muted">no loop-closure candidate</p>',
-    ]
+    if rows:
+        candidates = table(LOOPS_HEADER, rows, name_cols=2)
+    else:
+        candidates = (
+            f'<p class="muted">{"no loop-closure candidate" if path.is_file() else "no loops.csv"}</p>'
+        )
+    return ["<h3>Loop closures</h3>", _kv_table(pairs), candidates]
 
 
 LOOPS_HEADER = ["outcome", "reason", "candidates"]
