@@ -340,3 +340,20 @@ def test_a_run_without_loop_candidates_says_so(tmp_path, sim_log):
     html = (out / "report.html").read_text(encoding="utf-8")
     assert "Loop closures" in html and "no loop-closure candidate" in html
     assert load_run(out).loop_closures().shape == (0, 2, 2)
+
+
+def test_report_compares_the_associators_on_loop_closing_in_a_table_of_its_own(compared, single_map):
+    out, _ = compared
+    page = Page((out / "report.html").read_text(encoding="utf-8"))
+    main, loops = [t for t in page.tables if t and t[0] and t[0][0][0] == "assoc"]
+    assert [c[0] for c in main[0]] == BEFORE and [c[0] for c in loops[0]] == ["assoc", *LOOPS]
+    cells = raw_rows(out / "comparison.csv")
+    for row, r in zip(loops[1:], cells, strict=True):
+        assert [c[0] for c in row[:4]] == [r["assoc"], r["submaps"], r["loops_accepted"], r["loops_rejected"]]
+        assert float(row[4][0]) == pytest.approx(float(r["online_ate_rmse"]), rel=1e-3)
+    online = [float(r["online_ate_rmse"]) for r in cells]
+    marked = [i for i, row in enumerate(loops[1:]) if "best" in row[4][1]]
+    assert marked == ([] if len(set(online)) < 2 else [online.index(min(online))])
+    page = Page((single_map[0] / "report.html").read_text(encoding="utf-8"))
+    (main,) = [t for t in page.tables if t and t[0] and t[0][0][0] == "assoc"]  # no loop-closing table
+    assert [c[0] for c in main[0]] == BEFORE

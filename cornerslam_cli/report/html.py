@@ -19,7 +19,7 @@ from pathlib import Path
 
 from ..results import Ate, MapConsistency, RelationError, RunSummary, to_json
 from .plots import COMPARE_FIGURES, RUN_FIGURES, compare_assocs, plot_compare, plot_run
-from .tables import COMPARISON_COLUMNS, read_csv
+from .tables import COMPARISON_COLUMNS, COMPARISON_LOOP_COLUMNS, read_csv
 
 CSS = """
 body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 2em auto; max-width: 1200px;
@@ -314,10 +314,11 @@ def _run_report(out_dir: Path) -> str:
     return _page(title, body)
 
 
-def best_cells(columns: dict, n_rows: int) -> set[tuple[int, int]]:
-    """(row, col) of the best value in each BETTER column, when the values differ."""
+def best_cells(columns: dict, n_rows: int, names: list[str] = COMPARISON_COLUMNS) -> set[tuple[int, int]]:
+    """(row, col) of the best value in each BETTER column of ``names`` (the table's columns, in
+    order), when the values differ."""
     best = set()
-    for j, name in enumerate(COMPARISON_COLUMNS):
+    for j, name in enumerate(names):
         pick = BETTER.get(name)
         col = columns.get(name)
         if pick is None or col is None or col.dtype == object:
@@ -331,11 +332,28 @@ def best_cells(columns: dict, n_rows: int) -> set[tuple[int, int]]:
     return best
 
 
+MAIN_COLUMNS = [c for c in COMPARISON_COLUMNS if c not in COMPARISON_LOOP_COLUMNS]
+
+
+def _comparison_table(columns: dict, n: int, names: list[str], wide: bool = False) -> str:
+    """comparison.csv's ``names`` columns as a table of its ``n`` rows, the best values highlighted."""
+    rows = [[columns[c][i] for c in names] for i in range(n)]
+    return table(names, rows, best=best_cells(columns, n, names), wide=wide)
+
+
+def _loop_comparison(columns: dict, n: int) -> list[str]:
+    """The associators on loop closing (comparison.csv's appended columns) as a table of their own —
+    the main one is as wide as a page — when the runs had submaps."""
+    loops = [columns.get(c) for c in COMPARISON_LOOP_COLUMNS]
+    if any(col is None or col.dtype == object for col in loops):  # no submaps (empty cells), or older
+        return []
+    return ["<h3>Loop closing</h3>", _comparison_table(columns, n, ["assoc", *COMPARISON_LOOP_COLUMNS])]
+
+
 def _compare_report(out_dir: Path) -> str:
     columns = read_csv(out_dir / "comparison.csv")
     assocs = compare_assocs(out_dir)
     n = len(assocs)
-    rows = [[columns[c][i] for c in COMPARISON_COLUMNS] for i in range(n)]
     summaries = {a: RunSummary.read(out_dir / a) for a in assocs}
     log = summaries[assocs[0]].input.log if assocs else ""
     log_name = Path(log).name if assocs else out_dir.name
@@ -345,7 +363,8 @@ def _compare_report(out_dir: Path) -> str:
         "<nav>" + "".join(f'<a href="#assoc-{esc(a)}">{esc(a)}</a>' for a in assocs) + "</nav>",
         "<h2>Comparison</h2>",
         f'<p class="muted">log {esc(log)}; times in seconds; best value per column highlighted.</p>',
-        table(COMPARISON_COLUMNS, rows, best=best_cells(columns, n), wide=True),
+        _comparison_table(columns, n, MAIN_COLUMNS, wide=True),
+        *_loop_comparison(columns, n),
         "<h2>Figures</h2>",
         *[figure(out_dir / name, name) for name in COMPARE_FIGURES if (out_dir / name).is_file()],
     ]
