@@ -89,7 +89,8 @@ def main() -> None:
         f"but right*: a refused candidate whose pose was right; *near pairs*: submaps whose true origins are "
         f"within {NEAR} m (at least one submap apart), and how many of them were candidates.",
         "",
-        "| log | submaps | verified | accepted | accepted and wrong | refused but right | near pairs | of them candidates |",
+        "| log | submaps | verified | accepted | accepted and wrong | refused but right | near pairs "
+        "| of them candidates |",
         "|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     total = {"accepted": 0, "wrong": 0}

@@ -2,12 +2,14 @@
 
     python benchmarks/submap_scaling.py [--data DIR] [--scans 20000] [--short 2000]
 
-For each log and mode (``submaps.enabled`` true / false), one ``cornerslam run`` (a subprocess, its
-peak RSS from the kernel): the per-step time (timing.csv ``t_total``, which holds loop closing and the
-graph's optimisation on the steps that close a submap) over the last 10 % of steps against the first
-10 %, the whole-run throughput, the peak memory. Logs: the real infinite-corridor (1,941 keyframes)
-and simulated multi-lap office logs of ``--short`` and ``--scans`` scans (10 Hz, 1,081 beams), so
-memory is compared between a short and a 10× longer run of the same world. Writes
+For each log and mode (``submaps.enabled`` true / false), one ``cornerslam run`` (a subprocess; its
+peak RSS is the kernel's ``ru_maxrss`` of that process, from ``wait4``): the per-step time (timing.csv
+``t_total``, which holds loop closing and the graph's optimisation on the steps that close a submap)
+over the last 10 % of steps against the first 10 %, the throughput of the filter (steps / Σ t_total)
+and of the whole run (steps / wall time: reading, the front end, the filter, every output), the peak
+memory. Logs: the real infinite-corridor (1,941 keyframes) and the first ``--short`` and ``--scans``
+scans (``--max-scans``) of one simulated multi-lap office log (10 Hz, 1,081 beams, every scan a
+keyframe), so memory is compared between a short and a 10× longer run of the same world. Writes
 ``docs/results/submap_scaling.md``. Every figure in it is from one run of this script on one machine:
 the ratios are the claim; absolute times vary with the machine and its load (say so when quoting).
 """
@@ -17,6 +19,8 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import math
+import os
 import subprocess
 import sys
 import tempfile
@@ -27,51 +31,52 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from real_logs import CLI, ROOT, default_data  # noqa: E402
 
-SIM_SCANS_PER_LAP = 501  # the simulated office lap at 10 Hz, 0.5 m/s (cornerslam simulate)
+from cornerslam_cli.simulate import SimParams  # noqa: E402
+from cornerslam_cli.simworld import OFFICE_LOOP  # noqa: E402
+
 MODES = {"submaps": ["--set", "submaps.enabled=true"], "single map": ["--set", "submaps.enabled=false"]}
 
 
 def run(log: Path, out: Path, extra: list[str]) -> dict:
     """One run and its figures: per-step time first / last 10 %, throughput, peak memory."""
     cmd = [*CLI, "run", str(log), "--out", str(out), "-q", *extra]
-    # a fresh interpreter per measured run so RUSAGE_CHILDREN's maximum is this run's own
-    wrapper = [sys.executable, "-c", RSS_CHILD, *cmd]
-    res = subprocess.run(wrapper, capture_output=True, text=True)
-    if res.returncode != 0:
-        raise SystemExit(f"{' '.join(cmd)} failed: {res.stderr.strip()[-400:]}")
-    rss = float(res.stdout.strip().splitlines()[-1])
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    err = proc.stderr.read()
+    _, status, usage = os.wait4(proc.pid, 0)  # this process's own rusage (Linux ru_maxrss: KB)
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    if proc.returncode != 0:
+        raise SystemExit(f"{' '.join(cmd)} failed: {err.strip()[-400:]}")
     s = json.loads((out / "summary.json").read_text())
     with open(out / "timing.csv") as f:
-        t = np.array([float(r["t_total"]) for r in csv.DictReader(f)])
+        rows = list(csv.DictReader(f))
+    t = np.array([float(r["t_total"]) for r in rows])
+    loop = np.array([float(r["t_loop"] or 0.0) for r in rows])
     tenth = max(1, len(t) // 10)
     first, last = t[:tenth].mean(), t[-tenth:].mean()
     ate = (s.get("accuracy") or {}).get("ate") or {}
+    timing = s["timing"]
     return {
         "steps": len(t),
         "first_ms": 1e3 * first,
         "last_ms": 1e3 * last,
         "ratio": last / first,
-        "scans_per_s": s["timing"]["scans_per_second"],
-        "wall": s["timing"]["wall_time"],
-        "rss_mb": rss,
+        "last_loop_ms": 1e3 * loop[-tenth:].mean(),
+        "scans_per_s": timing["scans_per_second"],
+        "run_scans_per_s": len(t) / timing["wall_time"],
+        "wall": timing["wall_time"],
+        "rss_mb": usage.ru_maxrss / 1024.0,
         "ate": ate.get("rmse"),
         "submaps": s["counts"].get("submaps"),
         "loops": s["counts"].get("loops_accepted"),
     }
 
 
-# runs argv[1:] as a child and prints its peak RSS in MB (Linux ru_maxrss is in KB)
-RSS_CHILD = (
-    "import resource, subprocess, sys\n"
-    "r = subprocess.run(sys.argv[1:])\n"
-    "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0)\n"
-    "sys.exit(r.returncode)\n"
-)
-
-
 def simulated(tmp: Path, scans: int) -> Path:
-    """A simulated multi-lap office log of about ``scans`` scans (whole laps)."""
-    laps = max(1, round(scans / SIM_SCANS_PER_LAP))
+    """A simulated multi-lap office log of at least ``scans`` scans (whole laps)."""
+    p = SimParams()
+    loop = np.vstack((OFFICE_LOOP, OFFICE_LOOP[:1]))
+    per_lap = float(np.hypot(*np.diff(loop, axis=0).T).sum()) / p.speed * p.rate  # turns add a few
+    laps = max(1, math.ceil(scans / per_lap))
     out = tmp / f"sim_{laps}laps.mcap"
     cmd = [*CLI, "simulate", str(out), "--laps", str(laps), "--seed", "1", "-q"]
     res = subprocess.run(cmd, capture_output=True, text=True)
@@ -82,17 +87,31 @@ def simulated(tmp: Path, scans: int) -> Path:
 
 def table(rows: list[tuple[str, str, dict]]) -> list[str]:
     lines = [
-        "| log | mode | steps | submaps | loops | ATE m | per-step first 10 % ms | last 10 % ms | last/first "
-        "| scans/s | peak RSS MB |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| log | mode | steps | submaps | loops | ATE m | per-step first 10 % ms | last 10 % ms "
+        "| of which loops ms | last/first | filter scans/s | whole run scans/s | peak RSS MB |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for log, mode, r in rows:
         ate = "" if r["ate"] is None else f"{r['ate']:.3f}"
         loops = "" if r["loops"] is None else r["loops"]
         lines.append(
             f"| {log} | {mode} | {r['steps']:,} | {r['submaps'] or ''} | {loops} "
-            f"| {ate} | {r['first_ms']:.1f} | {r['last_ms']:.1f} | {r['ratio']:.2f} | {r['scans_per_s']:.0f} "
+            f"| {ate} | {r['first_ms']:.1f} | {r['last_ms']:.1f} | {r['last_loop_ms']:.1f} "
+            f"| {r['ratio']:.2f} | {r['scans_per_s']:.0f} | {r['run_scans_per_s']:.0f} "
             f"| {r['rss_mb']:.0f} |"
+        )
+    return lines
+
+
+def memory_lines(rows: list[tuple[str, str, dict]]) -> list[str]:
+    """Peak memory of the long simulated run against the short one, per mode."""
+    sim = [(mode, r) for log, mode, r in rows if log.startswith("simulated")]
+    lines = []
+    for mode in MODES:
+        short, long = [r for m, r in sim if m == mode]
+        lines.append(
+            f"Peak memory, {mode}, {long['steps']:,} vs {short['steps']:,} simulated scans: "
+            f"{long['rss_mb'] / short['rss_mb']:.2f}× ({long['rss_mb']:.0f} vs {short['rss_mb']:.0f} MB)."
         )
     return lines
 
@@ -108,30 +127,30 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
         corridor = args.data / "radish" / "infinite-corridor.log"
-        logs = [("infinite-corridor", corridor)] if corridor.is_file() else []
-        logs += [(f"simulated, {n:,} scans", simulated(tmp, n)) for n in (args.short, args.scans)]
-        for name, log in logs:
+        if not corridor.is_file():
+            raise SystemExit(f"no {corridor} (give --data, the folder of the real logs)")
+        logs = [("infinite-corridor", corridor, [])]
+        sim = simulated(tmp, max(args.short, args.scans))
+        logs += [(f"simulated, {n:,} scans", sim, ["--max-scans", str(n)]) for n in (args.short, args.scans)]
+        for name, log, limit in logs:
             for mode, extra in MODES.items():
-                r = run(log, tmp / f"{len(rows)}", extra)
+                r = run(log, tmp / f"{len(rows)}", [*limit, *extra])
                 rows.append((name, mode, r))
                 print(name, mode, json.dumps({k: v for k, v in r.items()}), flush=True)
-    by = {(log, mode): r for log, mode, r in rows}
-    sub = [r for (log, mode), r in by.items() if mode == "submaps" and log.startswith("simulated")]
     text = [
         "# Cost against log length: submaps + pose graph vs the single map",
         "",
         "From `python benchmarks/submap_scaling.py` (one run, this 2-core machine). Per-step time is",
         "timing.csv's `t_total` (loop closing and the graph's optimisation included on the steps that",
-        "close a submap), averaged over the first and the last 10 % of the steps.",
+        "close a submap), averaged over the first and the last 10 % of the steps; 'of which loops': the",
+        "last 10 %'s `t_loop` (loop closing and optimisation) per step. Filter scans/s: steps /",
+        "Σ t_total; whole run: steps / wall time (reading, front end, filter and every output file).",
+        "Peak RSS: the run process's maximum resident set (its own rusage).",
         "",
         *table(rows),
         "",
+        *memory_lines(rows),
     ]
-    if len(sub) == 2:
-        text.append(
-            f"Peak memory, submaps, {sub[1]['steps']:,} vs {sub[0]['steps']:,} simulated scans: "
-            f"{sub[1]['rss_mb'] / sub[0]['rss_mb']:.2f}×."
-        )
     args.out.write_text("\n".join(text) + "\n")
     print(f"wrote {args.out}")
 

@@ -13,6 +13,9 @@ from click.testing import CliRunner
 from cornerslam_cli.cli import cli
 from cornerslam_cli.report.consistency import (
     CELL,
+    REVISIT_BLOCK,
+    REVISIT_CAP,
+    REVISIT_GAP,
     dyadic_runs,
     map_consistency,
     occupied_cells,
@@ -61,6 +64,33 @@ def test_revisit_misalignment_measures_only_scans_far_apart_in_the_sequence():
     # a run that never comes back: 99 scans are fewer than the gap
     mean, share = revisit_misalignment(pts[:99], poses[:99])
     assert math.isnan(mean) and share == 0
+
+
+def brute_force_revisit(pts: list[np.ndarray], poses: np.ndarray) -> tuple[float, float]:
+    """The revisit figures by their definition: every point against every point of the scans in
+    blocks at least REVISIT_GAP // REVISIT_BLOCK away, capped, no kd-tree."""
+    placed = place(pts, poses)
+    block = np.repeat(np.arange(len(pts)), [len(p) for p in pts]) // REVISIT_BLOCK
+    far = np.abs(block[:, None] - block[None, :]) >= REVISIT_GAP // REVISIT_BLOCK
+    d = np.hypot(*(placed[:, None, :] - placed[None, :, :]).transpose(2, 0, 1))
+    best = np.where(far, d, np.inf).min(axis=1, initial=np.inf)
+    revisited = best[best <= REVISIT_CAP]
+    return (float(revisited.mean()) if len(revisited) else math.nan), len(revisited) / max(len(placed), 1)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_revisit_misalignment_equals_the_brute_force_definition(seed):
+    """Scans of 0–6 points (some empty, empty ones last too), jittered about a few places, over
+    enough blocks that every level of the dyadic runs is asked, and each run's tree serves many
+    blocks: the trees built one at a time give the figures of the definition."""
+    rng = np.random.default_rng(seed)
+    n = 23 * REVISIT_BLOCK + 7
+    pts = [rng.normal(0.0, 0.5, (rng.integers(0, 7), 2)) for _ in range(n)] + [np.zeros((0, 2))] * 30
+    poses = np.column_stack((rng.normal(0.0, 0.2, (n + 30, 2)), rng.normal(0.0, 0.2, n + 30)))
+    mean, share = revisit_misalignment(pts, poses)
+    want_mean, want_share = brute_force_revisit(pts, poses)
+    assert share == want_share and 0 < share < 1
+    assert mean == pytest.approx(want_mean, rel=1e-12)
 
 
 @pytest.mark.parametrize("lo", range(0, 13))

@@ -26,6 +26,7 @@ from test_report_mcap import validate
 
 from cornerslam_cli.cli import cli
 from cornerslam_cli.logs.writers import RawScan, write_mcap
+from cornerslam_cli.report import occupancy
 from cornerslam_cli.report.occupancy import FREE, OCCUPIED, UNKNOWN, ScanStore, classify, count, line_cells
 from cornerslam_cli.report.odom_frame import in_odom_frame, landmarks_in_odom_frame
 from cornerslam_cli.report.ownership import MARKER
@@ -284,6 +285,27 @@ def test_ray_cells_against_dense_sampling():
         assert set(mine.tolist()) <= touched
         assert len(mine) == max(1, math.ceil(np.abs(end[k] - start[k]).max() / res - 1e-9))
         assert ends[k] == int(np.floor(end[k, 1] / res)) * cols + int(np.floor(end[k, 0] / res))
+
+
+def test_grid_traced_in_parts_equals_the_grid_traced_at_once(monkeypatch):
+    """A store's scans ray traced a few at a time (CHUNK points per part) give the grid of one pass
+    (CHUNK beyond every beam): the same cells, origin and resolution, with a cell whose counts
+    saturate (uint16) across parts and scans without points among them."""
+    rng = np.random.default_rng(4)
+    store = ScanStore()
+    for i in range(300):
+        pose = np.array([*rng.normal(0.0, 0.3, 2), rng.uniform(-math.pi, math.pi)])
+        store.add(pose, rng.normal(0.0, 3.0, (rng.integers(0, 40) * (i % 7 != 3), 2)))
+    for _ in range(700):  # 70,000 beams ending in one cell: more than a uint16 counts
+        store.add(np.zeros(3), np.tile([[1.0, 0.0]], (100, 1)))
+    grids = []
+    for chunk in (10**9, 333):
+        monkeypatch.setattr(occupancy, "CHUNK", chunk)
+        assert (len(store.parts(chunk)) == 1) == (chunk > store.n_points)
+        grids.append(occupancy.build_grid(store, 0.05, 10**7, print))
+    whole, parts = grids
+    assert np.array_equal(whole.cells, parts.cells) and (OCCUPIED == whole.cells).any()
+    assert whole.origin == parts.origin and whole.resolution == parts.resolution
 
 
 def test_scan_store_thins_beyond_its_cap():

@@ -58,10 +58,15 @@ def voxel_thin(points: np.ndarray, size: float) -> np.ndarray:
     """Indices of one point per ``size`` × ``size`` cell (the first in input order); all when size is 0."""
     if size <= 0 or len(points) == 0:
         return np.arange(len(points))
-    cells = np.floor(np.clip(points / size, -(2**31), 2**31 - 1)).astype(np.int64)  # no int overflow
-    key = (cells[:, 0] << 32) + (cells[:, 1] & 0xFFFFFFFF)  # one int64 per cell: 1-D unique is fast
-    _, first = np.unique(key, return_index=True)
+    _, first = np.unique(cell_keys(points, size), return_index=True)
     return np.sort(first)
+
+
+def cell_keys(points: np.ndarray, size: float) -> np.ndarray:
+    """(n,) int64 key of the ``size`` × ``size`` cell of each point (one int64 per cell: 1-D unique
+    is fast)."""
+    cells = np.floor(np.clip(points / size, -(2**31), 2**31 - 1)).astype(np.int64)  # no int overflow
+    return (cells[:, 0] << 32) + (cells[:, 1] & 0xFFFFFFFF)
 
 
 def line_normals(points: np.ndarray, tree: cKDTree) -> tuple[np.ndarray, np.ndarray]:

@@ -14,17 +14,17 @@ the result with the same scans placed with the wheel odometry:
 
 The nearest earlier or later neighbour is found in kd-trees over power-of-two runs of blocks (a range
 of blocks is at most two such runs per level), so a long log costs O(n log n), not one tree query per
-pair of blocks.
+pair of blocks. The trees are built one at a time, each asked by every block that needs it, so memory
+holds one tree, not one per run (together some ten copies of a long log's points).
 """
 
 from __future__ import annotations
 
 import math
-from functools import cache
 
 import numpy as np
 
-from ..motion.icp import voxel_thin
+from ..motion.icp import cell_keys
 from ..results import MapConsistency
 from .occupancy import ScanStore
 
@@ -32,53 +32,69 @@ CELL = 0.05  # m: the grid of the occupied-cell count
 REVISIT_GAP = 100  # scans
 REVISIT_CAP = 0.3  # m
 REVISIT_BLOCK = 25  # scans: neighbours come from blocks at least REVISIT_GAP // REVISIT_BLOCK away
+OCCUPIED_SCANS = 500  # scans whose occupied cells are found at once
 
 
 def place(pts: list[np.ndarray], poses: np.ndarray) -> np.ndarray:
     """All scan points (each scan's (k, 2) points in its own frame) in the map frame, placed with
     ``poses`` (n, 3): one pose per scan."""
-    out = [np.zeros((0, 2))]
-    for p, (x, y, th) in zip(pts, poses, strict=True):
+    offsets = scan_offsets(pts)
+    out = np.empty((offsets[-1], 2))  # filled in place: no second copy of a long log's points
+    for i, (p, (x, y, th)) in enumerate(zip(pts, poses, strict=True)):
         c, s = math.cos(th), math.sin(th)
-        out.append(np.column_stack((x + c * p[:, 0] - s * p[:, 1], y + s * p[:, 0] + c * p[:, 1])))
-    return np.vstack(out)
+        out[offsets[i] : offsets[i + 1], 0] = x + c * p[:, 0] - s * p[:, 1]
+        out[offsets[i] : offsets[i + 1], 1] = y + s * p[:, 0] + c * p[:, 1]
+    return out
+
+
+def scan_offsets(pts: list[np.ndarray]) -> np.ndarray:
+    """(n + 1,) where each scan's points start in :func:`place`'s array, and their total last."""
+    return np.concatenate(([0], np.cumsum([len(p) for p in pts], dtype=np.int64)))
 
 
 def occupied_cells(pts: list[np.ndarray], poses: np.ndarray, cell: float = CELL) -> int:
-    """Distinct ``cell``-sized grid cells hit by the scan points placed with ``poses``."""
-    return len(voxel_thin(place(pts, poses), cell))  # one index per occupied cell
+    """Distinct ``cell``-sized grid cells hit by the scan points placed with ``poses``: the cells of
+    ``OCCUPIED_SCANS`` scans at a time (a long log's temporaries stay small), then their union."""
+    cells = [np.zeros(0, dtype=np.int64)]
+    for i in range(0, len(pts), OCCUPIED_SCANS):
+        cells.append(
+            np.unique(cell_keys(place(pts[i : i + OCCUPIED_SCANS], poses[i : i + OCCUPIED_SCANS]), cell))
+        )
+    return len(np.unique(np.concatenate(cells)))
 
 
 def revisit_misalignment(pts: list[np.ndarray], poses: np.ndarray) -> tuple[float, float]:
     """(mean capped nearest-neighbour distance over the revisited points, share of points revisited)
     of the scan points placed with ``poses``; NaN and 0 when no point is revisited."""
+    from scipy.spatial import cKDTree
+
     placed = place(pts, poses)
-    block = np.repeat(np.arange(len(pts)), [len(p) for p in pts]) // REVISIT_BLOCK
-    n_blocks = int(block[-1]) + 1 if len(block) else 0
-    starts = np.searchsorted(block, np.arange(n_blocks + 1))
-    gap = REVISIT_GAP // REVISIT_BLOCK
-    trees = _block_trees(placed, starts)
-    dists = []
-    for b in range(n_blocks):
-        q = placed[starts[b] : starts[b + 1]]
-        best = np.full(len(q), np.inf)
-        for lo, hi in ((0, b - gap + 1), (b + gap, n_blocks)):
-            for tree in (trees(a, z) for a, z in dyadic_runs(lo, hi)):
-                best = np.minimum(best, tree.query(q, distance_upper_bound=REVISIT_CAP)[0])
-        dists.append(best[np.isfinite(best)])
-    d = np.concatenate(dists) if dists else np.zeros(0)
+    offsets = scan_offsets(pts)
+    seen = np.flatnonzero(np.diff(offsets))  # the scans with points
+    n_blocks = int(seen[-1]) // REVISIT_BLOCK + 1 if len(seen) else 0
+    starts = offsets[np.minimum(REVISIT_BLOCK * np.arange(n_blocks + 1), len(pts))]  # block b's first point
+    best = np.full(len(placed), np.inf)
+    for (a, z), blocks in _runs_asked(n_blocks).items():
+        tree = cKDTree(placed[starts[a] : starts[z]])  # one tree at a time: memory of one, not of all
+        for b in blocks:
+            q = slice(starts[b], starts[b + 1])
+            best[q] = np.minimum(best[q], tree.query(placed[q], distance_upper_bound=REVISIT_CAP)[0])
+        del tree
+    d = best[np.isfinite(best)]
     return (float(d.mean()) if len(d) else float("nan")), len(d) / max(len(placed), 1)
 
 
-def _block_trees(placed: np.ndarray, starts: np.ndarray):
-    """A cached function: the kd-tree of the points of blocks [a, z)."""
-    from scipy.spatial import cKDTree
-
-    @cache
-    def tree(a: int, z: int) -> cKDTree:
-        return cKDTree(placed[starts[a] : starts[z]])
-
-    return tree
+def _runs_asked(n_blocks: int) -> dict[tuple[int, int], list[int]]:
+    """Per run of blocks [a, z) (:func:`dyadic_runs`), the blocks whose points look for a neighbour in
+    it: every block b asks the runs covering the blocks at least ``REVISIT_GAP // REVISIT_BLOCK``
+    before and after it."""
+    gap = REVISIT_GAP // REVISIT_BLOCK
+    asked: dict[tuple[int, int], list[int]] = {}
+    for b in range(n_blocks):
+        for lo, hi in ((0, b - gap + 1), (b + gap, n_blocks)):
+            for run in dyadic_runs(lo, hi):
+                asked.setdefault(run, []).append(b)
+    return asked
 
 
 def dyadic_runs(lo: int, hi: int) -> list[tuple[int, int]]:

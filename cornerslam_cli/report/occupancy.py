@@ -90,13 +90,23 @@ class ScanStore:
             out.append(np.column_stack((c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1])))
         return out
 
-    def rays(self) -> tuple[np.ndarray, np.ndarray]:
-        """(n, 2) start and (n, 2) end of every kept beam, float64."""
-        if not self.points:
+    def rays(self, scans: slice = slice(None)) -> tuple[np.ndarray, np.ndarray]:
+        """(n, 2) start and (n, 2) end of every kept beam of ``scans`` (all by default), float64."""
+        points = self.points[scans]
+        if not points:
             return np.empty((0, 2)), np.empty((0, 2))
-        counts = [len(q) for q in self.points]
-        start = np.repeat(np.asarray(self.origins, dtype=float), counts, axis=0)
-        return start, np.concatenate(self.points).astype(float)
+        counts = [len(q) for q in points]
+        start = np.repeat(np.asarray(self.origins[scans], dtype=float), counts, axis=0)
+        return start, np.concatenate(points).astype(float)
+
+    def parts(self, size: int) -> list[slice]:
+        """Consecutive runs of scans of about ``size`` kept end points each (a larger scan alone)."""
+        ends = np.cumsum([len(q) for q in self.points])
+        if not len(ends):
+            return []
+        cuts = np.searchsorted(ends, np.arange(size, ends[-1], size), side="right")
+        edges = np.unique(np.concatenate(([0], cuts, [len(ends)])))
+        return [slice(i, j) for i, j in zip(edges[:-1].tolist(), edges[1:].tolist(), strict=True)]
 
 
 @dataclass(frozen=True)
@@ -172,15 +182,16 @@ def count(counts: np.ndarray, idx: np.ndarray) -> None:
 def build_grid(store: ScanStore, resolution: float, max_cells: int, warn: Callable[[str], None]) -> Grid:
     """Ray trace the stored scans into a :class:`Grid` at ``resolution`` (coarser when the map would
     exceed ``max_cells`` cells; a store thinned past ``MAX_POINTS``: both warned through ``warn``)."""
-    start, end = store.rays()
+    parts = store.parts(CHUNK)  # rays made a part at a time: never all of a long log's at once
     if store.stride > 1:
         warn(
             f"occupancy grid: {store.n_seen} beams are more than {store.max_points}: "
             f"every {store.stride}th beam of each scan traced"
         )
-    if len(start) == 0:
+    box = extent(store, parts)
+    if box is None:
         return Grid(np.full((1, 1), UNKNOWN, dtype=np.uint8), resolution, (0.0, 0.0))
-    lo, hi = np.minimum(start.min(0), end.min(0)), np.maximum(start.max(0), end.max(0))
+    lo, hi = box
     fit = fitting_resolution(lo, hi, resolution, max_cells)
     if fit != resolution:
         rows, cols = grid_shape(lo, hi, resolution)
@@ -192,11 +203,26 @@ def build_grid(store: ScanStore, resolution: float, max_cells: int, warn: Callab
     lo = lo - fit / 2  # half a cell of margin on each side
     hits = np.zeros(rows * cols, dtype=np.uint16)
     passes = np.zeros(rows * cols, dtype=np.uint16)
-    for part in _chunks(start, end, fit):
-        beam, cells, ends = line_cells(start[part], end[part], lo, fit, cols)
-        count(hits, ends)
-        count(passes, cells[cells != ends[beam]])
+    for scans in parts:
+        start, end = store.rays(scans)
+        if not len(start):
+            continue
+        for part in _chunks(start, end, fit):
+            beam, cells, ends = line_cells(start[part], end[part], lo, fit, cols)
+            count(hits, ends)  # saturating counts: the same whatever the parts
+            count(passes, cells[cells != ends[beam]])
     return Grid(classify(hits, passes).reshape(rows, cols), fit, (float(lo[0]), float(lo[1])))
+
+
+def extent(store: ScanStore, parts: list[slice]) -> tuple[np.ndarray, np.ndarray] | None:
+    """(lo, hi) corners of the box holding every kept beam's start and end; None when there is none."""
+    lo = hi = None
+    for scans in parts:
+        start, end = store.rays(scans)
+        if len(start):
+            a, b = np.minimum(start.min(0), end.min(0)), np.maximum(start.max(0), end.max(0))
+            lo, hi = (a, b) if lo is None else (np.minimum(lo, a), np.maximum(hi, b))
+    return None if lo is None else (lo, hi)
 
 
 def classify(hits: np.ndarray, passes: np.ndarray) -> np.ndarray:
