@@ -14,15 +14,13 @@ at the last step of submap k − 1 (trajectory.csv's ``submap`` column).
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
+from _run_helpers import run_cli
 from submap_fixtures import identical_rooms_world, room_door
 
-from cornerslam_cli.cli import cli
 from cornerslam_cli.errors import ConfigError
 from cornerslam_cli.geometry import relative, wrap_angle
 from cornerslam_cli.report.tables import read_csv, read_tum
@@ -54,15 +52,6 @@ def raycast_free(world, p: np.ndarray, heading: float) -> float:
     """Free distance from ``p`` along ``heading`` for a robot 0.4 m wide (three parallel rays)."""
     side = np.array([-np.sin(heading), np.cos(heading)]) * 0.2
     return min(float(raycast(world, (*(p + k * side), heading), np.zeros(1))[0]) for k in (-1, 0, 1))
-
-
-def run_cli(log: Path, out: Path, *sets: str) -> dict:
-    args = ["run", str(log), "--out", str(out), "-q"]
-    for s in sets:
-        args += ["--set", s]
-    res = CliRunner().invoke(cli, args)
-    assert res.exit_code == 0, res.output
-    return json.loads((out / "summary.json").read_text())
 
 
 def closure_errors(log: Path, out: Path) -> list[dict]:
