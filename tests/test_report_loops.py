@@ -233,7 +233,7 @@ def test_closures_naming_an_unknown_submap_are_left_out_with_a_warning(compared,
     shutil.copytree(compared[0] / "pca", run_dir)
     want = expected_closures(run_dir)
     text = (run_dir / "loops.csv").read_text().splitlines()
-    text.append("999,5,400,0,0,0,5,0.9,1,1,")  # an edited row: submap 400 does not exist
+    text.append("999,5,400,0,0,0,5,0.9,1,1,0.5,")  # an edited row: submap 400 does not exist
     (run_dir / "loops.csv").write_text("\n".join(text) + "\n")
     with caplog.at_level(logging.WARNING, logger="cornerslam_cli.report.run_dir"):
         got = load_run(run_dir).loop_closures()
