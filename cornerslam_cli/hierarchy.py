@@ -28,9 +28,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .association import make_associator
 from .geometry import compose, rotate_covariance, rotate_pose_covariance, transform_points, wrap_angle
-from .graph.loops import match_submaps
+from .graph.loops import loop_associator, match_submaps
 from .graph.posegraph import PoseGraph
 from .graph.submap import LoopMatch, Submap
 from .motion.icp import voxel_thin
@@ -115,7 +114,7 @@ class HierarchicalSlam:
         self.laser2base = laser2base
         self.slam = Slam.from_config(cfg, laser2base)
         self.graph = PoseGraph(cfg.graph)
-        self.loop_associate = make_associator(cfg.association)
+        self.loop_associate = loop_associator(cfg.association, cfg.loops)
         self.closed: list[Submap] = []
         self.paths: list[np.ndarray] = []  # per closed submap: its robot positions thinned (own frame)
         self.tables: list[dict[str, np.ndarray]] = []  # per closed submap: its landmarks (own frame)

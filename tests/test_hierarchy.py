@@ -68,6 +68,16 @@ def test_submaps_write_the_smoothed_trajectory_loops_and_linked_map(sim_log, tmp
     assert max(steps.values()) <= 8
 
 
+def test_loop_searches_cut_by_the_node_budget_are_rejected_and_counted(sim_log, tmp_path):
+    """loops.max_nodes=1 through the CLI: the verified pairs whose corner search it cut are in
+    loops.csv as rejected, reason 'search budget', and counted with the rejected closures."""
+    s = run_cli(sim_log, tmp_path / "out", "submaps.max_steps=8", "loops.max_nodes=1")
+    loops = read_csv(tmp_path / "out" / "loops.csv")
+    cut = np.asarray(loops["reason"]) == "search budget"
+    assert cut.any() and not np.asarray(loops["accepted"])[cut].astype(bool).any()
+    assert s["counts"]["loops_rejected"] >= int(cut.sum())
+
+
 def test_submaps_off_keeps_the_single_map_and_says_nothing_of_submaps(sim_log, tmp_path):
     s = run_cli(sim_log, tmp_path / "out", "submaps.enabled=false")
     traj = read_csv(tmp_path / "out" / "trajectory.csv")

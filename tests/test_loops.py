@@ -26,6 +26,7 @@ from submap_fixtures import (
 
 from cornerslam_cli import simworld as sw
 from cornerslam_cli.association import ASSOCIATORS, AssociationConfig, make_associator
+from cornerslam_cli.association.params import JcbbConfig, PcaConfig
 from cornerslam_cli.geometry import relative, rotate_pose_covariance, transform_points, wrap_angle
 from cornerslam_cli.graph import loops
 from cornerslam_cli.graph.params import LoopConfig
@@ -85,6 +86,36 @@ def test_simulated_loop_recovers_the_known_pose(method):
     e = match.pose - truth
     e[2] = wrap_angle(e[2])
     assert e @ np.linalg.solve(match.cov, e) < chi2.ppf(0.997, 3)
+
+
+def test_a_search_cut_short_by_the_node_budget_rejects_the_match():
+    """The loop the known-pose test accepts: with a budget of one search node the associator stops
+    under the first hypothesis, and the match is rejected as 'search budget' (not trusted on the
+    partial set it found); the default budget lets it through."""
+    a, b, _ = office_pair()
+    tight = replace(CFG, max_nodes=1)
+    match = loops.match_submaps(
+        a, b, tight, loops.loop_associator(AssociationConfig(method="pca"), tight), ICP
+    )
+    assert not match.accepted and match.reason == loops.BUDGET
+    sets = loops.corner_sets(
+        a, b, loops.pair_hypotheses(a.landmarks, b.landmarks, tight), tight,
+        loops.loop_associator(AssociationConfig(method="jcbb"), tight),
+    )  # fmt: skip
+    assert len(sets) == 1 and sets[0].budget_hit  # no hypothesis tried after the cut
+    match = loops.match_submaps(a, b, CFG, loops.loop_associator(AssociationConfig(method="pca"), CFG), ICP)
+    assert match.accepted
+
+
+@pytest.mark.parametrize(
+    "own, loop_budget, want",
+    [(0, 30_000, 30_000), (500, 30_000, 500), (50_000, 30_000, 30_000), (0, 0, 0), (700, 0, 700)],
+)
+def test_loop_associator_bounds_jcbb_and_pca_by_the_tighter_budget(own, loop_budget, want):
+    assoc = AssociationConfig(method="pca", jcbb=JcbbConfig(max_nodes=own), pca=PcaConfig(max_nodes=own))
+    bounded = loops.loop_associator(assoc, replace(CFG, max_nodes=loop_budget))
+    assert bounded.cfg.jcbb.max_nodes == bounded.cfg.pca.max_nodes == want
+    assert bounded.cfg.method == "pca" and bounded.cfg.alpha == assoc.alpha
 
 
 def test_covariance_is_in_a_frame():

@@ -1,6 +1,6 @@
 """Loop-closure verification between two closed submaps with no pose prior (Issue 16, item 3).
 
-    match = match_submaps(a, b, cfg.loops, make_associator(cfg.association), cfg.scan_match)
+    match = match_submaps(a, b, cfg.loops, loop_associator(cfg.association, cfg.loops), cfg.scan_match)
 
 The relative pose a→b is b's origin in a's frame (graph/submap.py). Four steps:
 
@@ -36,6 +36,10 @@ The relative pose a→b is b's origin in a's frame (graph/submap.py). Four steps
    wide (1 m) on purpose: a wrong alignment shifts walls by decimetres, and those points must count
    against it, not drop out. Fewer than ``MIN_OVERLAP_POINTS`` overlapping points give fitness 0.
 
+The associator's search under one hypothesis is bounded by ``max_nodes`` (:func:`loop_associator`); a
+search cut short leaves the best set unknown, so the match is rejected ("search budget") — a missed
+closure, never a wrong one.
+
 Accepted with ≥ ``min_corners`` corners and fitness ≥ ``min_fitness``. Rejected as ambiguous when
 another set of as many corners implies a clearly different pose (``AMBIGUOUS_XY`` / ``AMBIGUOUS_THETA``
 apart): a symmetric room. A wrong closure costs far more than a missed one. Telling two *identical*
@@ -45,11 +49,11 @@ rooms apart is not possible here: the matcher returns the pose that aligns them;
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..association import Associator
+from ..association import AssociationConfig, Associator, make_associator
 from ..filter import Ekf, EkfConfig
 from ..geometry import transform_points, wrap_angle
 from ..motion.icp import NORMAL_NEIGHBOURS, LocalMap, register
@@ -71,6 +75,7 @@ NO_HYPOTHESIS = "no hypothesis"  # no pair of b's corners agrees with a pair of 
 FEW_CORNERS = "few corners"  # the best set has fewer than min_corners corners
 AMBIGUOUS = "ambiguous"  # another set of as many corners implies a different pose
 LOW_FITNESS = "low fitness"  # the refined pose puts too few of b's points on a's
+BUDGET = "search budget"  # the associator's search under a hypothesis reached loops.max_nodes
 
 
 @dataclass(frozen=True)
@@ -99,6 +104,7 @@ class CornerSet:
 
     pairs : (c, 2) int64 (b's corner, a's corner);  pose : (3,) least-squares a→b of those corners
     n : distinct a corners matched;  joint_d2 : the associator's joint D²;  hypothesis : index tried
+    budget_hit : the associator's search stopped at its node budget (the set may not be the best)
     """
 
     pairs: np.ndarray
@@ -106,6 +112,7 @@ class CornerSet:
     n: int
     joint_d2: float
     hypothesis: int
+    budget_hit: bool = False
 
     def key(self) -> tuple[int, float]:
         """Sort key of "better": more corners, then lower joint D²."""
@@ -120,6 +127,8 @@ def match_submaps(
     sets = corner_sets(a, b, hyps, cfg, associate)
     if not sets:
         return _rejected(np.full(3, np.nan), 0, NO_HYPOTHESIS)
+    if sets[-1].budget_hit:
+        return _rejected(sets[-1].pose, sets[-1].n, BUDGET)
     best = min(sets, key=CornerSet.key)
     if best.n < cfg.min_corners:
         return _rejected(best.pose, best.n, FEW_CORNERS)
@@ -133,6 +142,23 @@ def match_submaps(
     accepted = fitness >= cfg.min_fitness
     reason = "" if accepted else LOW_FITNESS
     return LoopMatch(reg.pose, reg.cov, best.n, fitness, accepted, reason, best.pairs)
+
+
+def loop_associator(assoc: AssociationConfig, cfg: LoopConfig) -> Associator:
+    """The configured associator for loop verification: JCBB's and PCA's search bounded by
+    ``loops.max_nodes`` nodes per hypothesis (or by the association section's own budget when tighter)."""
+
+    def bound(nodes: int) -> int:
+        return min((n for n in (nodes, cfg.max_nodes) if n > 0), default=0)
+
+    jcbb, pca = assoc.jcbb, assoc.pca
+    return make_associator(
+        replace(
+            assoc,
+            jcbb=replace(jcbb, max_nodes=bound(jcbb.max_nodes)),
+            pca=replace(pca, max_nodes=bound(pca.max_nodes)),
+        )
+    )
 
 
 def _rejected(pose: np.ndarray, n: int, reason: str) -> LoopMatch:
@@ -252,7 +278,10 @@ def corner_sets(
         matched = np.flatnonzero(result.pairs >= 0)
         pairs = np.column_stack((matched, result.pairs[matched])).astype(np.int64)
         pose = fit_rigid(b, a, pairs) if len(pairs) >= 2 else hyps.poses[h]
-        found.append(CornerSet(pairs, pose, len(np.unique(pairs[:, 1])), result.joint_d2, h))
+        n_a = len(np.unique(pairs[:, 1]))
+        found.append(CornerSet(pairs, pose, n_a, result.joint_d2, h, result.budget_hit))
+        if result.budget_hit:
+            break  # the best set under this hypothesis is unknown: the match is rejected
         most = max(most, found[-1].n)
     return found
 

@@ -44,6 +44,9 @@ class LoopConfig:
     hypothesis_sigma_xy: float = num(0.3, gt=0.0, le=100.0)
     hypothesis_sigma_theta: float = num(0.1, gt=0.0, le=math.pi)
     max_hypotheses: int = num(200, ge=1, le=100_000)  # corner-pair hypotheses tried per submap pair
+    # search nodes of the associator under one hypothesis (0 = no bound); a search cut short rejects
+    # the match ("search budget"): a few pairs of many-corner submaps otherwise took 10–40 s each
+    max_nodes: int = num(30_000, ge=0, le=10**12)
     # a candidate: an earlier submap whose path came within candidate_distance of the new one's, plus
     # candidate_sigmas σ of the new one's marginal (hierarchy.py)
     candidate_distance: float = num(3.0, ge=0.0, le=1e6)  # m
