@@ -1,7 +1,8 @@
 """``cornerslam simulate``: a synthetic indoor log with ground truth.
 
 A differential-drive robot follows a closed loop of waypoints through :func:`simworld.office_world`
-(rooms, a corridor loop, clutter boxes), ``laps`` times. It records
+(rooms, a corridor loop, clutter boxes), ``laps`` times (library callers may give another world and
+loop: :func:`simulate_log`'s ``world`` and ``waypoints``). It records
 
 * ``/scan`` sensor_msgs/LaserScan from a 270° laser 0.10 m ahead of the base (published on
   ``/tf_static``), ranges ray-cast in the world with Gaussian noise σ = a + b·ρ, random dropouts
@@ -26,7 +27,7 @@ from .geometry import compose, relative, wrap_angle
 from .logs.writers import RawScan, write_mcap
 from .report.ownership import refuse_special_file
 from .report.tables import write_tum
-from .simworld import OFFICE_LOOP, office_world, raycast, true_corners
+from .simworld import OFFICE_LOOP, World, office_world, raycast, true_corners
 from .types import OdomSample
 
 EPOCH = 1_700_000_000.0  # an arbitrary fixed start time, seconds
@@ -98,15 +99,15 @@ MAX_RANGES = 50_000_000  # scans × beams: ~200 MB of float32 ranges held before
 MAX_SECONDS = 20_000.0  # 10^6 odometry samples
 
 
-def check_options(seed: int, laps: int, p: SimParams) -> None:
+def check_options(seed: int, laps: int, p: SimParams, waypoints: np.ndarray = OFFICE_LOOP) -> None:
     """ConfigError naming the option when a simulate option is out of range (NaN included) or the
-    log would be too large to build in memory."""
+    log would be too large to build in memory (``laps`` times round the closed ``waypoints``)."""
     if not seed >= 0:
         raise ConfigError(f"--seed must be >= 0, got {seed}", "give a non-negative integer")
     for (name, lo, hi), value in zip(RANGES, (laps, p.rate, p.beams, p.speed), strict=True):
         if not lo <= value <= hi:
             raise ConfigError(f"{name} must be in [{lo}, {hi}], got {value}")
-    loop = np.vstack((OFFICE_LOOP, OFFICE_LOOP[:1]))
+    loop = np.vstack((waypoints, waypoints[:1]))
     seconds = laps * float(np.hypot(*np.diff(loop, axis=0).T).sum()) / p.speed
     if seconds > MAX_SECONDS or seconds * p.rate * p.beams > MAX_RANGES:
         raise ConfigError(
@@ -117,19 +118,35 @@ def check_options(seed: int, laps: int, p: SimParams) -> None:
 
 
 def simulate_log(
-    out: Path, seed: int = 0, laps: int = 1, rate: float = 10.0, beams: int = 1081, speed: float = 0.5
+    out: Path,
+    seed: int = 0,
+    laps: int = 1,
+    rate: float = 10.0,
+    beams: int = 1081,
+    speed: float = 0.5,
+    world: World | None = None,
+    waypoints: np.ndarray | None = None,
 ) -> dict:
-    """Write the synthetic log ``out`` (.mcap), ``out.gt.tum`` and ``out.corners.csv``."""
+    """Write the synthetic log ``out`` (.mcap), ``out.gt.tum`` and ``out.corners.csv``.
+
+    ``world`` and ``waypoints`` (library use, not CLI options): another world (simworld.py) and the
+    closed loop (k, 2) the robot drives through it, starting at its first waypoint; both default to
+    the office and its corridor loop (``OFFICE_LOOP``). The waypoints must be joined by free space:
+    the robot drives straight between them and does not avoid walls.
+    """
     if out.suffix != ".mcap":
         raise ConfigError(f"simulate writes MCAP: '{out}' must end in .mcap")
+    world = office_world() if world is None else world
+    waypoints = OFFICE_LOOP if waypoints is None else np.asarray(waypoints, dtype=float).reshape(-1, 2)
+    if len(waypoints) < 2:
+        raise ConfigError(f"simulate needs at least 2 waypoints, got {len(waypoints)}")
     p = SimParams(rate=rate, beams=beams, speed=speed)
-    check_options(seed, laps, p)
+    check_options(seed, laps, p, waypoints)
     for path in (out, out.with_suffix(".gt.tum"), out.with_suffix(".corners.csv")):
         refuse_special_file(path, path)
     rng = np.random.default_rng(seed)
-    world = office_world()
     dt = 1.0 / p.odom_rate
-    truth = drive(OFFICE_LOOP, laps, p, dt)  # at the odometry rate
+    truth = drive(waypoints, laps, p, dt)  # at the odometry rate
     t = EPOCH + dt * np.arange(len(truth))
     odom = corrupt_odometry(truth, p, rng)
     # scans between odometry samples (offset by a third of a period), true pose interpolated

@@ -137,13 +137,20 @@ def identical_rooms_world(n: int = 4) -> sw.World:
         walls.append(sw.room(x0, 0.0, x0 + ROOM_W, ROOM_H, doors={"N": [(ROOM_W / 2, 1.0)]}))
         walls += [sw.rectangle(x0 + cx, cy, w, h, ang) for cx, cy, w, h, ang in ROOM_FURNITURE]
     length = n * (ROOM_W + ROOM_GAP)
-    walls.append(sw.room(-1.0, ROOM_H, length + 1.0, ROOM_H + CORRIDOR))
+    # the corridor's south wall (the rooms' north walls) with the same door gaps, measured from x = -1
+    doors = [(room_door(r)[0] + 1.0, 1.0) for r in range(n)]
+    walls.append(sw.room(-1.0, ROOM_H, length + 1.0, ROOM_H + CORRIDOR, doors={"S": doors}))
     return sw.make_world(walls, "identical_rooms")
 
 
 def room_origin(r: int) -> np.ndarray:
     """(x, y) of room ``r``'s south-west corner in ``identical_rooms_world``."""
     return np.array([r * (ROOM_W + ROOM_GAP), 0.0])
+
+
+def room_door(r: int) -> np.ndarray:
+    """(x, y) of the middle of room ``r``'s door into the corridor in ``identical_rooms_world``."""
+    return room_origin(r) + (ROOM_W / 2, ROOM_H)
 
 
 def symmetric_room_world() -> sw.World:

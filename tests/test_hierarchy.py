@@ -7,31 +7,20 @@ here the verifier is replaced where a test needs a closure of a known kind (righ
 
 from __future__ import annotations
 
-import json
 from collections import Counter
 from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
+from _run_helpers import run_cli
 
 import cornerslam_cli.hierarchy as hierarchy
-from cornerslam_cli.cli import cli
 from cornerslam_cli.config import config_from
 from cornerslam_cli.frontend import frames, open_input
 from cornerslam_cli.geometry import compose
 from cornerslam_cli.graph.submap import LoopMatch
 from cornerslam_cli.hierarchy import HierarchicalSlam, agree
 from cornerslam_cli.report.tables import LOOP_COLUMNS, MAP_COLUMNS, TRAJECTORY_COLUMNS, read_csv
-
-
-def run_cli(log: Path, out: Path, *sets: str) -> dict:
-    args = ["run", str(log), "--out", str(out), "-q"]
-    for s in sets:
-        args += ["--set", s]
-    res = CliRunner().invoke(cli, args)
-    assert res.exit_code == 0, res.output
-    return json.loads((out / "summary.json").read_text())
 
 
 def hierarchical(sim_log: Path, *sets: str) -> HierarchicalSlam:

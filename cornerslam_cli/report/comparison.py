@@ -12,7 +12,8 @@ NAN = float("nan")
 
 
 def comparison_row(s: RunSummary) -> list:
-    """One row of comparison.csv (``COMPARISON_COLUMNS``); NaN for what the run did not measure."""
+    """One row of comparison.csv (``COMPARISON_COLUMNS``); NaN for what the run did not measure, empty
+    loop-closing cells without submaps."""
     c, t, acc = s.counts, s.timing, s.accuracy or Accuracy()
     return [
         s.assoc,
@@ -33,7 +34,17 @@ def comparison_row(s: RunSummary) -> list:
         _or_nan(acc.odom_relations, "trans_mean"),
         _or_nan(acc.scan_odom_ate, "rmse"),  # the motion input, the same for every associator
         _or_nan(acc.scan_odom_relations, "trans_mean"),
+        *loop_cells(s),
     ]
+
+
+def loop_cells(s: RunSummary) -> list:
+    """comparison.csv's loop-closing cells: submaps, closures accepted and refused, the online
+    (causal) estimate's ATE RMSE (NaN without ground truth); empty cells when the run had no submaps."""
+    c, acc = s.counts, s.accuracy or Accuracy()
+    if c.submaps is None:
+        return [""] * 4
+    return [c.submaps, c.loops_accepted, c.loops_rejected, _or_nan(acc.online_ate, "rmse")]
 
 
 def _or_nan(result: Ate | RelationError | None, name: str) -> float:

@@ -12,12 +12,14 @@ import base64
 import html
 import json
 import math
+import re
+from collections import Counter
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from ..results import Ate, MapConsistency, RelationError, RunSummary, to_json
 from .plots import COMPARE_FIGURES, RUN_FIGURES, compare_assocs, plot_compare, plot_run
-from .tables import COMPARISON_COLUMNS, read_csv
+from .tables import COMPARISON_COLUMNS, COMPARISON_LOOP_COLUMNS, read_csv
 
 CSS = """
 body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 2em auto; max-width: 1200px;
@@ -58,6 +60,7 @@ BETTER: dict[str, Callable[[Iterable[float]], float]] = {
     "rpe_trans_per_m": min,
     "wall_time": min,
     "budget_hits": min,
+    "online_ate_rmse": min,
 }
 
 
@@ -138,7 +141,7 @@ def _kv_table(pairs: list[tuple[str, object]]) -> str:
     return f"<table>{rows}</table>"
 
 
-def _summary_section(summary: RunSummary) -> list[str]:
+def _summary_section(summary: RunSummary, run_dir: Path) -> list[str]:
     inp, counts, timing = summary.input, summary.counts, summary.timing
     pairs: list[tuple[str, object]] = [
         ("log", inp.log),
@@ -159,6 +162,7 @@ def _summary_section(summary: RunSummary) -> list[str]:
     out = ["<h2>Summary</h2>", _kv_table(pairs)]
     out += _accuracy_section(summary)
     out += _consistency_section(summary.consistency)
+    out += _loops_section(run_dir, summary)
     out.append("<h3>Warnings</h3>")
     if summary.warnings:
         out.append("<ul>" + "".join(f'<li class="warn">{esc(w)}</li>' for w in summary.warnings) + "</ul>")
@@ -232,6 +236,50 @@ CONSISTENCY_HEADER = [
 ]  # fmt: skip
 
 
+def _loops_section(run_dir: Path, summary: RunSummary) -> list[str]:
+    """With submaps: how many, the loop closures accepted and refused, the loop time, and loops.csv's
+    candidates counted by outcome and reason."""
+    c, t = summary.counts, summary.timing
+    if c.submaps is None:
+        return []
+    pairs = [
+        ("submaps", c.submaps),
+        ("loop closures accepted", c.loops_accepted),
+        ("loop closures refused", c.loops_rejected),
+        ("loop closing and graph time [s]", float(t.t_loop or 0.0)),
+    ]
+    path = run_dir / "loops.csv"
+    rows = loop_reason_rows(read_csv(path)) if path.is_file() else []
+    if rows:
+        candidates = table(LOOPS_HEADER, rows, name_cols=2)
+    else:
+        candidates = (
+            f'<p class="muted">{"no loop-closure candidate" if path.is_file() else "no loops.csv"}</p>'
+        )
+    return ["<h3>Loop closures</h3>", _kv_table(pairs), candidates]
+
+
+LOOPS_HEADER = ["outcome", "reason", "candidates"]
+ACCEPTED_REASON = "verified, inside the gate"  # loops.csv's empty reason of an accepted closure
+
+
+def loop_reason_rows(loops: dict) -> list[list]:
+    """loops.csv's candidates counted by outcome (accepted first) and reason, most frequent first; a
+    reason's figures (the χ² of a gated closure, how many closures agreed) left out so that like
+    reasons count together."""
+    counts: Counter[tuple[bool, str]] = Counter()
+    for accepted, reason in zip(loops["accepted"], loops["reason"], strict=True):
+        kind = _reason_kind(str(reason)) or (ACCEPTED_REASON if accepted else "")
+        counts[(not accepted, kind)] += 1
+    order = sorted(counts.items(), key=lambda kv: (kv[0][0], -kv[1], kv[0][1]))
+    return [["refused" if refused else "accepted", reason, n] for (refused, reason), n in order]
+
+
+def _reason_kind(reason: str) -> str:
+    """A loops.csv reason without its figures: '(chi2 12.3)' and a leading count dropped."""
+    return re.sub(r"^\d+ ", "", re.sub(r"\s*\([^)]*\d[^)]*\)", "", reason))
+
+
 def _ate_cells(a: Ate | None) -> list:
     """ATE RMSE, mean, max, heading RMSE, poses: NaN (and no count) for what was not measured."""
     if a is None:
@@ -260,16 +308,17 @@ def _run_report(out_dir: Path) -> str:
     summary = RunSummary.read(out_dir)
     title = f"cornerslam run — {Path(summary.input.log).name} ({summary.assoc})"
     body = [f"<h1>{esc(title)}</h1>"]
-    body += _summary_section(summary)
+    body += _summary_section(summary, out_dir)
     body += ["<h2>Figures</h2>", *_figures(out_dir, summary.assoc)]
     body += ["<h2>Configuration</h2>", *_config_section(summary)]
     return _page(title, body)
 
 
-def best_cells(columns: dict, n_rows: int) -> set[tuple[int, int]]:
-    """(row, col) of the best value in each BETTER column, when the values differ."""
+def best_cells(columns: dict, n_rows: int, names: list[str] = COMPARISON_COLUMNS) -> set[tuple[int, int]]:
+    """(row, col) of the best value in each BETTER column of ``names`` (the table's columns, in
+    order), when the values differ."""
     best = set()
-    for j, name in enumerate(COMPARISON_COLUMNS):
+    for j, name in enumerate(names):
         pick = BETTER.get(name)
         col = columns.get(name)
         if pick is None or col is None or col.dtype == object:
@@ -283,11 +332,28 @@ def best_cells(columns: dict, n_rows: int) -> set[tuple[int, int]]:
     return best
 
 
+MAIN_COLUMNS = [c for c in COMPARISON_COLUMNS if c not in COMPARISON_LOOP_COLUMNS]
+
+
+def _comparison_table(columns: dict, n: int, names: list[str], wide: bool = False) -> str:
+    """comparison.csv's ``names`` columns as a table of its ``n`` rows, the best values highlighted."""
+    rows = [[columns[c][i] for c in names] for i in range(n)]
+    return table(names, rows, best=best_cells(columns, n, names), wide=wide)
+
+
+def _loop_comparison(columns: dict, n: int) -> list[str]:
+    """The associators on loop closing (comparison.csv's appended columns) as a table of their own —
+    the main one is as wide as a page — when the runs had submaps."""
+    loops = [columns.get(c) for c in COMPARISON_LOOP_COLUMNS]
+    if any(col is None or col.dtype == object for col in loops):  # no submaps (empty cells), or older
+        return []
+    return ["<h3>Loop closing</h3>", _comparison_table(columns, n, ["assoc", *COMPARISON_LOOP_COLUMNS])]
+
+
 def _compare_report(out_dir: Path) -> str:
     columns = read_csv(out_dir / "comparison.csv")
     assocs = compare_assocs(out_dir)
     n = len(assocs)
-    rows = [[columns[c][i] for c in COMPARISON_COLUMNS] for i in range(n)]
     summaries = {a: RunSummary.read(out_dir / a) for a in assocs}
     log = summaries[assocs[0]].input.log if assocs else ""
     log_name = Path(log).name if assocs else out_dir.name
@@ -297,14 +363,17 @@ def _compare_report(out_dir: Path) -> str:
         "<nav>" + "".join(f'<a href="#assoc-{esc(a)}">{esc(a)}</a>' for a in assocs) + "</nav>",
         "<h2>Comparison</h2>",
         f'<p class="muted">log {esc(log)}; times in seconds; best value per column highlighted.</p>',
-        table(COMPARISON_COLUMNS, rows, best=best_cells(columns, n), wide=True),
+        _comparison_table(columns, n, MAIN_COLUMNS, wide=True),
+        *_loop_comparison(columns, n),
         "<h2>Figures</h2>",
         *[figure(out_dir / name, name) for name in COMPARE_FIGURES if (out_dir / name).is_file()],
     ]
     for a in assocs:
         s = summaries[a]
         body.append(f'<h2 id="assoc-{esc(a)}">{esc(a)}</h2>')
-        body += [h.replace("<h2>", "<h3>").replace("</h2>", "</h3>") for h in _summary_section(s)]
+        body += [
+            h.replace("<h2>", "<h3>").replace("</h2>", "</h3>") for h in _summary_section(s, out_dir / a)
+        ]
         body += _figures(out_dir / a, a)
         body += _config_section(s)
     return _page(title, body)

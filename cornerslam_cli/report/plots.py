@@ -3,20 +3,26 @@
 ``plot_run(DIR)`` reads a ``cornerslam run`` output directory and writes
 
 - ``map.png`` (Fig 16): odometry and corrected trajectories, ground truth when the summary names one,
-  landmarks with 3σ covariance ellipses, the segment map drawn faintly;
+  landmarks with 3σ covariance ellipses, the segment map drawn faintly; with submaps, the accepted
+  loop closures as lines between the two submap origins;
 - ``segments.png`` (Fig 20a): the segment map at the corrected poses with the landmark positions;
 - ``timing.png`` (Fig 17): per-step prediction / matching / update time (and scan matching when on);
 - ``corners.png`` (Fig 18): detected vs matched corners per step, and new landmarks.
 
 ``plot_compare(DIR)`` reads a ``cornerslam compare`` output directory and writes
 ``compare_matching.png`` (Fig 19: cumulative matching time and landmark count per associator),
-``compare_maps.png`` (each associator's map side by side) and ``compare_timing.png`` (per-step
-matching time per associator), then calls ``plot_run`` on each associator's directory.
+``compare_maps.png`` (each associator's map side by side, its accepted loop closures counted in its
+title) and ``compare_timing.png`` (per-step matching time per associator), then calls ``plot_run`` on
+each associator's directory.
 
 The directories are read back by report/run_dir.py (the trajectories in the map frame, the
 landmarks' covariance ellipses).
 
 matplotlib is imported inside the functions (Agg backend), so importing this module stays cheap.
+
+Over 400 lines because the run's figures and the comparison's are drawn by the same helpers (Fig 16's
+map on one axes with its loop closures, the binned per-step series, the accuracy note): split in two,
+each half would import the other's private drawing functions.
 """
 
 from __future__ import annotations
@@ -37,12 +43,14 @@ COLORS = {
     "scan_odometry": "tab:orange",
     "ground_truth": "black",
     "landmark": "tab:green",
+    "loop": "tab:purple",
 }
 ASSOC_COLORS = {"icnn": "tab:orange", "jcbb": "tab:purple", "pca": "tab:blue"}
 
 MAX_STEPS_DRAWN = 600  # longer per-step series are drawn per bin of steps (median and range), not per step
 STEP_BINS = 150  # bins of a longer series
 MANY_LANDMARKS = 100  # more landmarks than this: their ellipses are drawn thinner and fainter
+MANY_LOOPS = 30  # more loop closures than this: their lines are drawn thinner and fainter
 RUN_FIGURES = ("map.png", "segments.png", "timing.png", "corners.png")
 COMPARE_FIGURES = ("compare_matching.png", "compare_maps.png", "compare_timing.png")
 
@@ -119,12 +127,25 @@ def _draw_map(ax, run: RunData, segments_alpha: float = 0.18, legend: bool = Tru
         )
     ax.plot(c[:, 0], c[:, 1], color=COLORS["corrected"], lw=1.2, label="corrected (EKF)")
     _draw_landmarks(ax, run.landmarks, label=f"landmarks ({len(run.landmarks.get('x', ()))}, 3σ)")
+    _draw_loop_closures(ax, run.loop_closures())
     if len(c):
         ax.plot(*c[0, :2], "o", color="k", ms=4, zorder=5, label="start")
     _map_axes(ax)
     _frame_the_map(ax, run)
     if legend:
         ax.legend(loc="best", fontsize=8, framealpha=0.85)
+
+
+def _draw_loop_closures(ax, seg: np.ndarray) -> None:
+    """The accepted loop closures ``seg`` (k, 2, 2): a line between the two submap origins, dots at
+    the origins; one artist however many, thinner and fainter past MANY_LOOPS."""
+    k = len(seg)
+    if k == 0:
+        return
+    xy = np.concatenate((seg, np.full((k, 1, 2), np.nan)), axis=1).reshape(-1, 2)  # NaN: a break
+    thin = min(1.0, math.sqrt(MANY_LOOPS / k))
+    ax.plot(xy[:, 0], xy[:, 1], "-o", color=COLORS["loop"], lw=1.2 * thin, ms=3 * max(thin, 0.5),
+            alpha=max(0.4, thin), zorder=3, label=f"loop closures ({k} accepted)")  # fmt: skip
 
 
 def _frame_the_map(ax, run: RunData, margin: float = 0.05) -> None:
@@ -369,13 +390,25 @@ def _plot_compare_maps(runs: list[RunData], log_name: str, path: Path) -> Path:
         _draw_map(ax, r, legend=False)
         note = _accuracy_note(r.summary)
         n_lm = len(r.landmarks.get("x", ()))
-        ax.set_title(f"{r.assoc}: {n_lm} landmarks" + (f"\n{note}" if note else ""), fontsize=10)
+        loops = r.summary.counts.loops_accepted
+        closures = "" if loops is None else f", {loops} loop closures"
+        ax.set_title(f"{r.assoc}: {n_lm} landmarks{closures}" + (f"\n{note}" if note else ""), fontsize=10)
     if runs:
-        handles, labels = axes[0][0].get_legend_handles_labels()
-        labels = [lb.split(" (")[0] if lb.startswith("landmarks") else lb for lb in labels]
-        fig.legend(handles, labels, loc="outside lower center", ncol=len(labels), fontsize=9)
+        _shared_legend(fig, axes[0][: len(runs)])
     fig.suptitle(f"Maps per associator (Fig 16) — {log_name}")
     return _save(fig, path)
+
+
+def _shared_legend(fig, axes) -> None:
+    """One legend below the panels: every label any panel has, once, without its panel's count (the
+    landmarks and loop closures of one associator)."""
+    seen: dict[str, object] = {}
+    for ax in axes:
+        for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
+            if label.startswith(("landmarks", "loop closures")):
+                label = label.split(" (")[0]
+            seen.setdefault(label, handle)
+    fig.legend(list(seen.values()), list(seen), loc="outside lower center", ncol=len(seen), fontsize=9)
 
 
 def _plot_compare_timing(runs: list[RunData], log_name: str, path: Path) -> Path:

@@ -31,6 +31,8 @@ class RunData:
     scan_odometry : (n, 3) the scan-matched odometry (map frame), or None when scan matching was off.
     ground_truth : (g, 3) SE(2)-aligned onto ``corrected``, or None.
     landmarks : map.csv columns; lines : lines.csv columns; timing : timing.csv columns.
+    submap : (n,) int the submap of each step (all 0 for a single map), or None in a run written
+    before submaps; loops : loops.csv columns, or None when the run had no submaps.
     """
 
     out_dir: Path
@@ -45,10 +47,28 @@ class RunData:
     landmarks: dict[str, np.ndarray]
     lines: dict[str, np.ndarray]
     timing: dict[str, np.ndarray]
+    submap: np.ndarray | None = None
+    loops: dict[str, np.ndarray] | None = None
 
     @property
     def title(self) -> str:
         return f"{self.log_name} — {self.assoc}"
+
+    def loop_closures(self) -> np.ndarray:
+        """(k, 2, 2) the accepted loop closures as segments from submap a's origin to submap b's
+        (map frame, on the corrected trajectory: :func:`submap_origins`); (0, 2, 2) without any."""
+        if self.loops is None or self.submap is None or len(self.corrected) == 0:
+            return np.zeros((0, 2, 2))
+        origins = submap_origins(self.submap, self.corrected)
+        accepted = self.loops["accepted"] == 1
+        ab = np.column_stack((self.loops["submap_from"], self.loops["submap_to"]))[accepted]
+        known = np.all((ab >= 0) & (ab < len(origins)), axis=1)
+        if not known.all():  # an edited or mismatched directory: draw what can be placed
+            log.warning(
+                "%s: %d accepted loop closure(s) name a submap that trajectory.csv does not have "
+                "(%d submaps): not drawn", self.out_dir / "loops.csv", int((~known).sum()), len(origins)
+            )  # fmt: skip
+        return origins[ab[known].astype(np.int64)]
 
 
 def load_run(out_dir: str | Path, ground_truth: str | Path | None = None) -> RunData:
@@ -76,7 +96,20 @@ def load_run(out_dir: str | Path, ground_truth: str | Path | None = None) -> Run
         landmarks=read_csv(out_dir / "map.csv"),
         lines=read_csv(out_dir / "lines.csv"),
         timing=read_csv(out_dir / "timing.csv"),
+        submap=traj["submap"].astype(np.int64) if "submap" in traj else None,
+        loops=read_csv(out_dir / "loops.csv") if (out_dir / "loops.csv").is_file() else None,
     )
+
+
+def submap_origins(submap: np.ndarray, corrected: np.ndarray) -> np.ndarray:
+    """(s, 2) the position of each submap's origin on the trajectory, from each step's ``submap``
+    (non-decreasing from 0): the pose at the last step of submap s − 1 (whose end pose the next
+    submap starts from, hierarchy.py), step 0's for submap 0."""
+    n_sub = int(submap.max()) + 1 if len(submap) else 0
+    if n_sub == 0:
+        return np.zeros((0, 2))
+    last = np.searchsorted(submap, np.arange(n_sub - 1), side="right") - 1  # of submaps 0 … s − 2
+    return corrected[np.concatenate(([0], np.maximum(last, 0))), :2]
 
 
 def odom_in_map(odom: np.ndarray, corrected: np.ndarray) -> np.ndarray:

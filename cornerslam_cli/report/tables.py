@@ -36,11 +36,13 @@ TIMING_COLUMNS = (
     "step,stamp,n_points,n_lines,n_corners,n_candidates,n_matched,n_new,n_landmarks,"
     "t_extract,t_predict,t_match,t_update,t_total,t_scan_match,scan_fit,t_loop"
 ).split(",")
+# (appended, issue 16) the associators on loop closing: empty cells when the runs had no submaps
+COMPARISON_LOOP_COLUMNS = ["submaps", "loops_accepted", "loops_rejected", "online_ate_rmse"]
 COMPARISON_COLUMNS = (
     "assoc,steps,landmarks,matched_total,t_match_total,t_match_max,t_total,ate_rmse,"
     "odom_ate_rmse,rpe_trans_per_m,wall_time,budget_hits,rel_trans_mean,rel_trans_std,rel_rot_mean_deg,"
     "odom_rel_trans_mean,scan_odom_ate_rmse,scan_odom_rel_trans_mean"
-).split(",")
+).split(",") + COMPARISON_LOOP_COLUMNS
 
 
 def csv_value(v) -> str:

@@ -46,6 +46,11 @@ def summary_lines(s: RunSummary) -> list[str]:
         f"predict {t.t_predict:.2f}s match {t.t_match:.2f}s "
         f"update {t.t_update:.2f}s ({t.scans_per_second:.0f} steps/s), wall {t.wall_time:.1f}s",
     ]
+    if c.submaps is not None:
+        lines.append(
+            f"submaps: {c.submaps}, loop closures {c.loops_accepted} accepted, {c.loops_rejected} refused, "
+            f"loop time {t.t_loop or 0.0:.2f}s"
+        )
     acc = s.accuracy
     if acc is not None and acc.ate is not None:
         lines.append(
@@ -79,7 +84,8 @@ def mount_line(inp: RunInput) -> str:
 
 def comparison_lines(summaries: list[RunSummary]) -> list[str]:
     """``cornerslam compare``: one row per associator (accuracy columns when any run has a
-    reference), then the scan-matched odometry's accuracy, the same for every associator."""
+    reference, loop-closing columns when any run had submaps), then the scan-matched odometry's
+    accuracy, the same for every associator."""
     head = (
         f"{'assoc':<6} {'steps':>6} {'landmarks':>9} {'matched':>8} "
         f"{'t_match s':>10} {'max ms':>8} {'t_total s':>10}"
@@ -90,6 +96,11 @@ def comparison_lines(summaries: list[RunSummary]) -> list[str]:
         head += f" {'ATE m':>8} {'odom ATE m':>10}"
     if has_rel:
         head += f" {'relations m':>16} {'odom relations m':>18}"
+    has_loops = any(s.counts.submaps is not None for s in summaries)
+    if has_loops:
+        head += f" {'submaps':>7} {'loops ok':>8} {'refused':>7}" + (
+            f" {'online ATE m':>12}" if has_gt else ""
+        )
     lines = [head]
     for s in summaries:
         c, t = s.counts, s.timing
@@ -102,6 +113,8 @@ def comparison_lines(summaries: list[RunSummary]) -> list[str]:
             line += f" {a.ate.rmse:>8.3f} {a.odom_ate.rmse:>10.3f}"
         if has_rel:
             line += f" {mean_std(a.relations):>16} {mean_std(a.odom_relations):>18}"
+        if has_loops:
+            line += _loop_columns(s, has_gt)
         lines.append(line)
     a = summaries[0].accuracy if summaries else None
     if a is not None and (a.scan_odom_ate or a.scan_odom_relations):  # the motion input: one for all
@@ -112,6 +125,18 @@ def comparison_lines(summaries: list[RunSummary]) -> list[str]:
             parts.append(f"relations {mean_std(a.scan_odom_relations)} m")
         lines.append("scan-matched odometry (the filter's motion input): " + ", ".join(parts))
     return lines
+
+
+def _loop_columns(s: RunSummary, has_gt: bool) -> str:
+    """A comparison row's loop-closing cells: submaps, closures accepted and refused, and with a
+    reference the online (causal) estimate's ATE; '-' where the run had no submaps."""
+    c, a = s.counts, s.accuracy
+    online = "-" if a is None or a.online_ate is None else f"{a.online_ate.rmse:.3f}"
+    if c.submaps is None:
+        cells = f" {'-':>7} {'-':>8} {'-':>7}"
+    else:
+        cells = f" {c.submaps:>7} {c.loops_accepted:>8} {c.loops_rejected:>7}"
+    return cells + (f" {online:>12}" if has_gt else "")
 
 
 def batch_lines(rows: list[dict], keys: list[str]) -> list[str]:
