@@ -18,7 +18,7 @@ from __future__ import annotations
 import time
 from array import array
 from contextlib import ExitStack
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -26,7 +26,7 @@ import numpy as np
 
 from ..errors import display_path
 from ..evaluate import ate, overlap_problem, read_relations, relation_error, rpe
-from ..geometry import compose, compose_inverse, rotate_covariance, transform_points
+from ..geometry import compose, compose_inverse
 from ..results import Accuracy, RunSummary
 from .consistency import store_consistency
 from .occupancy import ScanStore, build_grid, draw_grid, write_grid
@@ -94,20 +94,6 @@ class TrackRow:
 def track_record(t: np.ndarray, segments: np.ndarray, step: int) -> TrackRow:
     """A kept step (``RunWriter.TRACK`` doubles) and its segments as a row."""
     return TrackRow(step, float(t[0]), t[1:4], t[4:7], t[7:10], t[10:13], float(t[13]), int(t[14]), segments)
-
-
-def moved_record(r: TrackRow, delta: np.ndarray) -> TrackRow:
-    """The row moved by ``delta`` (online → smoothed): pose, segments and the position covariance."""
-    cov = rotate_covariance(
-        np.array([[[r.pose_var[0], r.cov_xy], [r.cov_xy, r.pose_var[1]]]]), float(delta[2])
-    )[0]
-    return replace(
-        r,
-        pose=compose(delta, r.pose),
-        pose_var=np.array([cov[0, 0], cov[1, 1], r.pose_var[2]]),
-        cov_xy=float(cov[0, 1]),
-        segments_map=transform_points(r.segments_map.reshape(-1, 2), delta).reshape(-1, 4),
-    )
 
 
 def timing_row(r: StepRecord) -> dict:
@@ -250,7 +236,7 @@ class RunWriter:
             for k, t in enumerate(track):
                 r = track_record(t, self.segments[k], k)
                 if is_moved[k]:
-                    r = moved_record(r, delta[k])
+                    r = in_odom_frame(r, delta[k])  # moved by a pose: the same change of frame
                 tr.write(trajectory_row(r, t[1:4] if is_moved[k] else None))
                 ln.rows(r.segments_map, lead=(r.step,))
 
