@@ -78,6 +78,9 @@ class Frame:
     scan_matched: bool = False  # a scan match was fused into the increment into this frame
     scan_fit: float = float("nan")  # share of the scan's points on the local map after matching
     t_scan_match: float = 0.0
+    # how much too small the scan matcher has found its fits' covariances (motion/fusion.py's learnt s,
+    # 1 without scan matching): a fit's covariance misses what makes real matches wrong
+    match_scale: float = 1.0
     points: np.ndarray | None = None  # (k, 2) float32 valid beam end points, sensor frame (occupancy grid)
 
 
@@ -220,6 +223,7 @@ def _scan_matched(
         motion_cov=m.cov,
         scan_matched=m.matched,
         scan_fit=m.fit,
+        match_scale=matcher.fusion.s,
         t_scan_match=time.perf_counter() - t0,
     )
 

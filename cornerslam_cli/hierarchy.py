@@ -125,6 +125,7 @@ class HierarchicalSlam:
         self._origin_cov = np.zeros((3, 3))  # the open submap origin's marginal in the graph
         self.t_loop = 0.0
         self.n_ids = 0
+        self._match_scale = 1.0  # the front end's learnt scale of fit covariances (Frame.match_scale)
 
     @property
     def n_steps(self) -> int:
@@ -134,6 +135,7 @@ class HierarchicalSlam:
         """One step of the local filter; closes the submap when it is full (loop closing and the
         graph's optimisation timed as the step's ``t_loop``). Returns the step in the global frame."""
         r = self.slam.step(frame)
+        self._match_scale = frame.match_scale
         sub = self._open
         sensor = compose(r.pose, self.laser2base)
         pts = None if frame.points is None else transform_points(frame.points.astype(float), sensor)
@@ -205,6 +207,7 @@ class HierarchicalSlam:
         found = []
         for a in self.candidates(b):
             m = match_submaps(a, b, cfg, self.loop_associate, self.cfg.scan_match)
+            m = replace(m, cov=m.cov * self._match_scale)
             d2 = self._chi2(a.index, b.index, m) if m.accepted else float("nan")
             reason = m.reason or ("" if d2 <= cfg.gate else f"disagrees with the graph (chi2 {d2:.1f})")
             found.append(LoopRecord(step, a.index, b.index, m, not reason, reason, d2))

@@ -168,3 +168,24 @@ def test_agree_is_about_position_and_heading():
     p = np.zeros(3)
     assert agree([p]) and agree([p, p + [0.3, 0.0, 0.1]])
     assert not agree([p, p + [0.6, 0.0, 0.0]]) and not agree([p, p + [0.0, 0.0, 0.3]])
+
+
+def test_closures_carry_the_front_ends_learnt_scale_of_fit_covariances(sim_log, monkeypatch):
+    # an ICP fit's covariance misses what makes real matches wrong; the front end learns by how much
+    # (motion/fusion.py's s) and a closure, an ICP fit between two submaps, is weighed with the same scale
+    verifier = FakeVerifier(np.array([0.01, 0.0, 0.001]))
+    monkeypatch.setattr(hierarchy, "match_submaps", verifier)
+    cfg = config_from({}, ["submaps.enabled=true", "submaps.max_steps=6", "loops.min_gap=2"])
+    src = open_input(sim_log, cfg)
+    hs = HierarchicalSlam(cfg, src.laser2base)
+    verifier.hs = hs
+    scale = []
+    for frame in frames(src, cfg):
+        hs.step(frame)
+        scale.append(frame.match_scale)
+    hs.finish()
+    assert hs.loops and max(scale) > 2.0  # learnt: this log's fits are too confident
+    for r in hs.loops:
+        np.testing.assert_allclose(r.match.cov, np.diag([1e-4, 1e-4, 1e-5]) * scale[r.step])
+    off = run_with_verifier(sim_log, monkeypatch, FakeVerifier(np.zeros(3)), "scan_match.enabled=false")
+    assert off.loops and all(np.allclose(r.match.cov, np.diag([1e-4, 1e-4, 1e-5])) for r in off.loops)
