@@ -88,7 +88,7 @@ def test_values_past_either_bound_are_refused_and_the_bounds_accepted(key, tp, r
             "scan_match.adapt_window",
             True,
         ):
-            continue  # adapt_min_samples ≤ adapt_window (defaults 5, 100): a bound across keys, checked below
+            continue  # adapt_min_samples ≤ adapt_window (defaults 5, 400): a bound across keys, checked below
         cfg = load_config(None, [f"{key}={v!r}"])
         section = cfg
         for part in key.split("."):
@@ -109,9 +109,9 @@ def test_a_range_refuses_nan_and_bools_also_when_the_section_is_built_directly()
 
 
 def test_more_samples_to_learn_from_than_the_window_holds_are_refused():
-    with pytest.raises(ConfigError, match="adapt_min_samples = 101 exceeds adapt_window = 100"):
-        load_config(None, ["scan_match.adapt_min_samples=101"])
-    assert load_config(None, ["scan_match.adapt_min_samples=100"])
+    with pytest.raises(ConfigError, match="adapt_min_samples = 401 exceeds adapt_window = 400"):
+        load_config(None, ["scan_match.adapt_min_samples=401"])
+    assert load_config(None, ["scan_match.adapt_min_samples=400"])
 
 
 def test_keys_of_earlier_versions_are_ignored_with_a_warning():

@@ -75,9 +75,10 @@ class ScanMatchConfig:
     # χ²₃ of a match's disagreement with the odometry beyond which it is rejected: 30.7 = a 10⁻⁶ tail,
     # "far beyond" — real odometry errors are heavy-tailed (17° in one 30° turn on Intel)
     gate: float = num(30.7, gt=0.0, le=1e9)
-    adapt_window: int = num(
-        100, ge=1, le=100000
-    )  # keyframes whose disagreements set the noise scales and bias
+    # keyframes whose disagreements set the noise scales and bias: one robot's odometry noise is
+    # stationary, so a long window (400 = 100 until then); at 100 a stretch of poor matches (little
+    # overlap in turns) raised the learnt odometry noise of an exact odometry for its length
+    adapt_window: int = num(400, ge=1, le=100000)
     # keyframes matched once to learn the scales before the run (0 = off: learnt as the run goes). Off by
     # default: over the whole panel (docs/results/frontend_panel.md) it did not pay — the first matches
     # judged with learnt scales changed which marginal ones were kept, for better or worse per log
