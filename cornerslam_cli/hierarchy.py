@@ -6,10 +6,12 @@ GTSAM) with loop closures verified by the configured associator (graph/loops.py)
   submap's first step, zero relative uncertainty). A submap closes when it reaches ``submaps.max_steps``
   steps, ``max_distance`` metres travelled or ``max_landmarks`` landmarks; its final pose and robot
   covariance become the sequential factor to the next origin, so per-step cost is bounded by the submap.
-- **Global level.** After each closed submap: candidates are earlier submaps whose extent, grown by
-  ``loops.candidate_sigmas`` σ of the closed submap's global marginal, meets its extent under the graph's
-  estimate (nearest first, at most ``max_candidates``); each is verified without a pose prior
-  (graph/loops.py), then gated against the graph's predicted relative pose and its joint marginal
+- **Global level.** After each closed submap: candidates are earlier submaps whose robot path came
+  within ``loops.candidate_distance`` + ``candidate_sigmas`` σ of the closed submap's (its global
+  marginal) under the graph's estimate (nearest first, at most ``max_candidates``); each is verified
+  without a pose prior (graph/loops.py) — or, with too few corners in common, on its points around the
+  graph's prediction (``loops.point_search``) —, its covariance scaled by the front end's learnt scale
+  of ICP covariances, then gated against the graph's predicted relative pose and its joint marginal
   (``loops.gate``, χ²₃); closures that disagree with each other about where the submap is are all
   refused (perceptual aliasing). Accepted closures enter the graph under a robust kernel.
 - **Outputs.** Each step's causal (online) estimate is its submap origin's pose in the graph *at that
@@ -29,7 +31,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .geometry import compose, rotate_covariance, rotate_pose_covariance, transform_points, wrap_angle
-from .graph.loops import loop_associator, match_submaps
+from .graph.loops import FEW_CORNERS, NO_HYPOTHESIS, POINTS, loop_associator, match_points, match_submaps
 from .graph.posegraph import PoseGraph
 from .graph.submap import LoopMatch, Submap
 from .motion.icp import voxel_thin
@@ -207,10 +209,19 @@ class HierarchicalSlam:
         found = []
         for a in self.candidates(b):
             m = match_submaps(a, b, cfg, self.loop_associate, self.cfg.scan_match)
+            on_points = cfg.point_search and m.reason in (FEW_CORNERS, NO_HYPOTHESIS)
+            if on_points:
+                m = replace(
+                    match_points(a, b, *self.graph.relative(a.index, b.index), cfg, self.cfg.scan_match),
+                    n_corners=m.n_corners,
+                )
             m = replace(m, cov=m.cov * self._match_scale)
             d2 = self._chi2(a.index, b.index, m) if m.accepted else float("nan")
             reason = m.reason or ("" if d2 <= cfg.gate else f"disagrees with the graph (chi2 {d2:.1f})")
-            found.append(LoopRecord(step, a.index, b.index, m, not reason, reason, d2))
+            ok = not reason
+            if ok and on_points:
+                reason = POINTS
+            found.append(LoopRecord(step, a.index, b.index, m, ok, reason, d2))
         gated = [r for r in found if r.match.accepted and not r.accepted and r.chi2 <= cfg.group_gate]
         if len(gated) >= 2 and agree([self.placed(r) for r in gated]):
             # two or more closures from different parts of the map agree on where b is, against the

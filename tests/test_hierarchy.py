@@ -189,3 +189,42 @@ def test_closures_carry_the_front_ends_learnt_scale_of_fit_covariances(sim_log, 
         np.testing.assert_allclose(r.match.cov, np.diag([1e-4, 1e-4, 1e-5]) * scale[r.step])
     off = run_with_verifier(sim_log, monkeypatch, FakeVerifier(np.zeros(3)), "scan_match.enabled=false")
     assert off.loops and all(np.allclose(r.match.cov, np.diag([1e-4, 1e-4, 1e-5])) for r in off.loops)
+
+
+@pytest.mark.parametrize(
+    "corner_reason, on_points",
+    [("few corners", True), ("no hypothesis", True), ("ambiguous", False), ("low fitness", False)],
+)
+def test_pairs_the_corners_cannot_verify_are_verified_on_points(
+    sim_log, monkeypatch, corner_reason, on_points
+):
+    # too few corners seen from both (a corridor driven the other way) is no evidence either way: the
+    # points decide, around the graph's prediction; an ambiguous or ill-fitting corner match stays refused
+    def corners(a, b, cfg, associate, icp):
+        return LoopMatch(np.full(3, np.nan), np.full((3, 3), np.nan), 2, 0.0, False, corner_reason)
+
+    priors = []
+
+    def points(a, b, prior, prior_cov, cfg, icp):
+        priors.append((a.index, b.index, prior, prior_cov))
+        return LoopMatch(compose(prior, (0.01, 0.0, 0.0)), np.diag([1e-4, 1e-4, 1e-5]), 0, 0.9, True, "")
+
+    monkeypatch.setattr(hierarchy, "match_submaps", corners)
+    monkeypatch.setattr(hierarchy, "match_points", points)
+    for enabled in (True, False):
+        priors.clear()
+        cfg = config_from(
+            {}, ["submaps.enabled=true", "submaps.max_steps=6", f"loops.point_search={str(enabled).lower()}"]
+        )
+        src = open_input(sim_log, cfg)
+        hs = HierarchicalSlam(cfg, src.laser2base)
+        for frame in frames(src, cfg):
+            hs.step(frame)
+        hs.finish()
+        assert hs.loops
+        if enabled and on_points:
+            assert priors and all(r.accepted and r.reason == "verified on points" for r in hs.loops)
+            assert all(r.match.n_corners == 2 for r in hs.loops)  # the corners' count is kept for loops.csv
+        else:
+            assert not priors and not any(r.accepted for r in hs.loops)
+            assert all(r.reason == corner_reason for r in hs.loops)

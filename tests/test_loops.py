@@ -27,7 +27,7 @@ from submap_fixtures import (
 from cornerslam_cli import simworld as sw
 from cornerslam_cli.association import ASSOCIATORS, AssociationConfig, make_associator
 from cornerslam_cli.association.params import JcbbConfig, PcaConfig
-from cornerslam_cli.geometry import relative, rotate_pose_covariance, transform_points, wrap_angle
+from cornerslam_cli.geometry import compose, relative, rotate_pose_covariance, transform_points, wrap_angle
 from cornerslam_cli.graph import loops
 from cornerslam_cli.graph.params import LoopConfig
 from cornerslam_cli.motion.params import ScanMatchConfig
@@ -333,3 +333,65 @@ def test_fitness_counts_only_the_overlap():
     assert loops.overlap_fitness(far, local, np.zeros(3), 0.1) == 0.0
     mixed = loops.overlap_fitness(np.vstack((on, near)), local, np.zeros(3), 0.1)
     assert 0.3 < mixed < 0.7
+
+
+# ------------------------------------------------------------------ verification on points (with a prior)
+PRIOR_COV = np.diag([0.3**2, 0.3**2, 0.08**2])
+PRIOR_OFF = np.array([0.4, -0.3, 0.08])  # the graph's prediction this far off the truth (1.3 σ)
+
+
+@functools.cache
+def corridor_pair():
+    """Submaps of a featureless corridor driven east, then back west 0.3 m to the side, and the true a→b."""
+    world = sw.corridor_world(40.0, 2.0)
+    path_a, path_b = straight_path((5.0, 0.0), (15.0, 0.0)), straight_path((16.0, 0.3), (6.0, 0.3))
+    a, b = build_submap(world, path_a, 0, seed=1), build_submap(world, path_b, 5, seed=2)
+    return a, b, relative(path_a[0], path_b[0])
+
+
+@functools.cache
+def room_pair():
+    """Two submaps of one furnished room, turning on the spot at two places 1.2 m apart, and the true a→b."""
+    room = np.r_[room_origin(0), 0.0]
+    path_a = spin(*(room[:2] + (3.0, 2.5)), np.linspace(0.0, 6.0, 8))
+    path_b = spin(*(room[:2] + (2.0, 3.2)), np.linspace(1.0, 7.0, 8))
+    world = identical_rooms_world()
+    return (
+        build_submap(world, path_a, 0, seed=4),
+        build_submap(world, path_b, 4, seed=9),
+        relative(path_a[0], path_b[0]),
+    )
+
+
+@pytest.mark.parametrize("pair", [office_pair, room_pair])
+def test_points_recover_the_known_pose_from_the_graphs_prediction(pair):
+    a, b, truth = pair()
+    m = loops.match_points(a, b, compose(truth, PRIOR_OFF), PRIOR_COV, CFG, ICP)
+    assert m.accepted and m.reason == "" and m.fitness > 0.8
+    d, dth = pose_error(m.pose, truth)
+    assert d < 0.02 and dth < math.radians(0.5)
+    assert np.isfinite(m.cov).all() and np.all(np.linalg.eigvalsh(m.cov) > 0)
+
+
+def test_a_featureless_corridor_is_not_distinct_on_points():
+    # every shift along the corridor fits as well: the prior, not the points, would fix the pose along it
+    a, b, truth = corridor_pair()
+    m = loops.match_points(a, b, compose(truth, PRIOR_OFF), PRIOR_COV, CFG, ICP)
+    assert not m.accepted and m.reason == loops.NOT_DISTINCT
+    assert m.fitness > CFG.min_fitness  # the walls do fit: refused for the ambiguity alone
+
+
+def test_points_search_only_inside_the_predictions_window():
+    # the graph places b 4 m across the corridor from where it is, and is sure of it: the truth is outside
+    # the window, no pose inside it puts b's walls on a's
+    a, b, truth = office_pair()
+    m = loops.match_points(
+        a, b, compose(truth, (0.0, 4.0, 0.0)), np.diag([0.05**2, 0.05**2, 0.01**2]), CFG, ICP
+    )
+    assert not m.accepted and m.reason == loops.LOW_FITNESS
+
+
+def test_a_degenerate_fit_is_not_distinct():
+    a, b, truth = office_pair()
+    local = loops.LocalMap.build(a.points)
+    assert not loops.distinct(b.points, local, truth, np.full((3, 3), np.nan), 0.9, CFG)

@@ -45,10 +45,15 @@ another set of as many corners implies a clearly different pose (``AMBIGUOUS_XY`
 apart): a symmetric room. A wrong closure costs far more than a missed one. Telling two *identical*
 rooms apart is not possible here: the matcher returns the pose that aligns them; the graph's gate
 (its prediction and marginal covariance) rejects it.
+
+A pair the corners cannot verify (``few corners``, ``no hypothesis``: a corridor driven the other way
+round shows few corners from both sides) can be verified on the points alone, around the graph's
+prediction: :func:`match_points` (hierarchy.py decides when, ``loops.point_search``).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -56,7 +61,8 @@ import numpy as np
 from ..association import AssociationConfig, Associator, make_associator
 from ..filter import Ekf, EkfConfig
 from ..geometry import transform_points, wrap_angle
-from ..motion.icp import NORMAL_NEIGHBOURS, LocalMap, register
+from ..motion.correlative import Window, search
+from ..motion.icp import NORMAL_NEIGHBOURS, LocalMap, register, voxel_thin
 from ..motion.params import ScanMatchConfig
 from .params import LoopConfig
 from .submap import LoopMatch, Submap
@@ -75,6 +81,11 @@ NO_HYPOTHESIS = "no hypothesis"  # no pair of b's corners agrees with a pair of 
 FEW_CORNERS = "few corners"  # the best set has fewer than min_corners corners
 AMBIGUOUS = "ambiguous"  # another set of as many corners implies a different pose
 LOW_FITNESS = "low fitness"  # the refined pose puts too few of b's points on a's
+NOT_DISTINCT = "not distinct on points"  # the points fit as well moved along the fit's weak direction
+POINTS = "verified on points"  # accepted on the scan points alone (too few corners)
+POINT_VOXEL = 0.2  # m: b's points thinned for the correlative search (its cost grows with their number)
+POINT_MAX = 500  # ... and at most this many of them (every k-th)
+MIN_WINDOW_XY, MIN_WINDOW_THETA = 0.3, 0.05  # m, rad: the search window is at least ICP's basin
 BUDGET = "search budget"  # the associator's search under a hypothesis reached loops.max_nodes
 
 
@@ -142,6 +153,58 @@ def match_submaps(
     accepted = fitness >= cfg.min_fitness
     reason = "" if accepted else LOW_FITNESS
     return LoopMatch(reg.pose, reg.cov, best.n, fitness, accepted, reason, best.pairs)
+
+
+def match_points(
+    a: Submap, b: Submap, prior: np.ndarray, prior_cov: np.ndarray, cfg: LoopConfig, icp: ScanMatchConfig
+) -> LoopMatch:
+    """Verify a→b on the two submaps' scan points alone, for a pair whose corners cannot (too few seen
+    from both: a corridor driven the other way round). Unlike :func:`match_submaps` this needs a prior:
+    the graph's predicted a→b ``prior`` and its covariance ``prior_cov`` (a's frame).
+
+    The correlative search (motion/correlative.py) finds the best pose of b's points (thinned) on a's
+    within ±3σ of the prior (at least ICP's basin, at most ``point_max_xy`` / ``point_max_theta``); ICP
+    refines it on all points; accepted when the fitness is ≥ ``min_fitness`` and *distinct*: moved
+    ``point_shift`` either way along the refined fit's weakest direction, the fitness falls below
+    ``point_distinct`` × its own. Along a featureless corridor it does not (every shift fits), and such
+    a match is refused — the prior, not the points, would be fixing the pose along it."""
+    if len(a.points) < NORMAL_NEIGHBOURS or len(b.points) < MIN_OVERLAP_POINTS:
+        return _rejected(prior, 0, LOW_FITNESS)
+    sx = math.sqrt(max(float(np.linalg.eigvalsh(prior_cov[:2, :2]).max()), 0.0))
+    st = math.sqrt(max(float(prior_cov[2, 2]), 0.0))
+    window = Window(
+        min(max(3.0 * sx, MIN_WINDOW_XY), cfg.point_max_xy),
+        min(max(3.0 * st, MIN_WINDOW_THETA), cfg.point_max_theta),
+    )
+    pts = b.points[voxel_thin(b.points, POINT_VOXEL)]
+    pts = pts[:: -(-len(pts) // POINT_MAX)]
+    found = search(
+        pts, a.points, np.asarray(prior, dtype=float), window, icp.search_resolution, icp.search_sigma
+    )
+    local = LocalMap.build(a.points)
+    reg = register(b.points, local, found.pose, icp)
+    fitness = overlap_fitness(b.points, local, reg.pose, cfg.inlier_distance)
+    if fitness < cfg.min_fitness:
+        return LoopMatch(reg.pose, reg.cov, 0, fitness, False, LOW_FITNESS)
+    if not distinct(b.points, local, reg.pose, reg.cov, fitness, cfg):
+        return LoopMatch(reg.pose, reg.cov, 0, fitness, False, NOT_DISTINCT)
+    return LoopMatch(reg.pose, reg.cov, 0, fitness, True, "")
+
+
+def distinct(
+    points: np.ndarray, local: LocalMap, pose: np.ndarray, cov: np.ndarray, fitness: float, cfg: LoopConfig
+) -> bool:
+    """Whether ``points`` fit ``local`` at ``pose`` clearly better than at ``pose`` moved ``point_shift``
+    either way along the weakest direction of the fit's covariance ``cov`` (its largest xy eigenvector)."""
+    if not np.isfinite(cov).all():
+        return False
+    weak = np.linalg.eigh(cov[:2, :2])[1][:, 1]
+    for sign in (1.0, -1.0):
+        moved = np.asarray(pose, dtype=float).copy()
+        moved[:2] += sign * cfg.point_shift * weak
+        if overlap_fitness(points, local, moved, cfg.inlier_distance) >= cfg.point_distinct * fitness:
+            return False
+    return True
 
 
 def loop_associator(assoc: AssociationConfig, cfg: LoopConfig) -> Associator:

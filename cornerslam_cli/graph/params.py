@@ -52,6 +52,15 @@ class LoopConfig:
     candidate_distance: float = num(3.0, ge=0.0, le=1e6)  # m
     candidate_sigmas: float = num(3.0, gt=0.0, le=100.0)
     max_candidates: int = num(8, ge=1, le=1000)  # candidates verified per closed submap (nearest first)
+    # a pair the corners cannot verify (few corners, no hypothesis: a corridor seen the other way round)
+    # is searched on its scan points inside the graph's prediction ± 3σ, at most point_max_xy /
+    # point_max_theta (graph/loops.py match_points); accepted when the fit is distinct: moved point_shift
+    # along the fit's weakest direction the fitness falls below point_distinct × its own (not a corridor)
+    point_search: bool = True
+    point_max_xy: float = num(2.0, gt=0.0, le=100.0)  # m
+    point_max_theta: float = num(0.5, gt=0.0, le=math.pi)  # rad
+    point_shift: float = num(0.5, gt=0.0, le=100.0)  # m
+    point_distinct: float = num(0.7, gt=0.0, le=1.0)
     min_gap: int = num(2, ge=1, le=1_000_000)  # submaps between a and b (neighbours share a factor)
     # a closure must agree with the graph's prediction within this χ²₃ (Mahalanobis², marginal covariance)
     gate: float = num(30.7, gt=0.0, le=1e9)
