@@ -126,6 +126,15 @@ class LocalMap:
         return LocalMap(points, tree, grid, normals, has_normal, padded_points, padded_normals)
 
 
+def load_kernels() -> None:
+    """Load (on a machine's first run: compile) the scan matcher's Numba kernels (motion/nearest.py,
+    motion/kernels.py) now, so that the first timed match of a run does not pay it: one
+    :func:`register` of a corner against itself."""
+    s = np.linspace(0.0, 1.0, 21)
+    corner = np.concatenate((np.column_stack((s, 0.0 * s)), np.column_stack((0.0 * s, s))))
+    register(corner, LocalMap.build(corner), np.zeros(3), ScanMatchConfig())
+
+
 @dataclass(frozen=True)
 class Registration:
     pose: np.ndarray  # refined pose of the scan in the motion frame
