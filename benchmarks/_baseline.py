@@ -5,12 +5,17 @@
 
 ``build_env(ROOT)`` runs this checkout. The other build is imported from ``PYTHONPATH``, which Python
 searches before the editable install's finder, with this environment's packages (numpy, scipy, …).
+``python -m`` and ``-c`` would put the working directory before ``PYTHONPATH`` — run from this
+repository's root, *both* builds imported this checkout (a side-by-side run once reported two builds
+with different outputs as byte-identical) — so the environment sets ``PYTHONSAFEPATH`` (Python ≥ 3.11),
+and ``build_env`` checks where ``cornerslam_cli`` is imported from before handing it out.
 """
 
 from __future__ import annotations
 
 import os
 import subprocess
+import sys
 import tarfile
 import tempfile
 from collections.abc import Iterator
@@ -35,6 +40,13 @@ def build_env(src: Path) -> dict[str, str]:
     """The environment that makes ``python -m cornerslam_cli`` import the package under ``src``."""
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(src), *filter(None, [env.get("PYTHONPATH")])])
+    env["PYTHONSAFEPATH"] = "1"  # not the working directory first (it may be another build's root)
+    where = subprocess.run(
+        [sys.executable, "-c", "import cornerslam_cli; print(cornerslam_cli.__file__)"],
+        env=env, capture_output=True, text=True, check=True,
+    ).stdout.strip()  # fmt: skip
+    if Path(where).resolve().parent.parent != Path(src).resolve():
+        raise RuntimeError(f"the build under {src} imports cornerslam_cli from {where} instead")
     return env
 
 

@@ -4,12 +4,13 @@
     python benchmarks/bench_run.py [--laps 1] [--baseline main] [--repeat 2]   # writes docs/results/run.md
 
 Both builds run the same log in one benchmark run, interleaved (baseline, this, baseline, this, ...) so
-that the shared machine's load falls on both alike; of the ``--repeat`` runs of a build and case the one
-with the least processing time is reported. "scans/s" counts the scans read from the log per second of
-processing (extract + scan match + predict + match + update, as timing.csv records them); "wall scans/s"
-divides by the whole command's wall time (start-up, reading, synchronisation, writing the tables
-included). Per-stage figures are medians per step from timing.csv. "same output" compares
-trajectory.csv, map.csv and lines.csv of the two builds byte for byte.
+that the shared machine's load falls on both alike, after one untimed short run of each (a fresh
+source tree compiles its Numba kernels: tens of seconds of wall time); of the ``--repeat`` runs of a
+build and case the one with the least processing time is reported. "scans/s" counts the scans read
+from the log per second of processing (extract + scan match + predict + match + update, as timing.csv
+records them); "wall scans/s" divides by the whole command's wall time (start-up, reading,
+synchronisation, writing the tables included). Per-stage figures are medians per step from timing.csv.
+"same output" compares trajectory.csv, map.csv and lines.csv of the two builds byte for byte.
 """
 
 from __future__ import annotations
@@ -131,6 +132,8 @@ def main() -> int:
             {f"{args.baseline} ({revision(args.baseline)})": build_env(base_src)} if args.baseline else {}
         )
         builds[this] = cur_env
+        for i, env in enumerate(builds.values()):  # untimed: a fresh source tree compiles its kernels
+            run_once(env, log, tmp / f"warm-{i}", "pca", ["--max-scans", "20"])
         rows = side_by_side(builds, log, tmp, args.repeat)
         assoc_rows = []
         for assoc in ("icnn", "jcbb"):

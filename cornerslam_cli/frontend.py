@@ -21,13 +21,14 @@ import numpy as np
 
 from .config import Config
 from .errors import ConfigError, LogError
-from .features import extract, load_kernels
+from .features import extract, load_kernels, signals_deferred
 from .filter.models import increment_noise
 from .geometry import matrix_from_pose, transform_points
 from .lasers import mount_source
 from .logs import ReadStats, open_log
 from .logs.sync import SyncStats, reanchor_odometry, select_keyframes, synchronise
 from .motion import ScanMatcher
+from .motion.icp import load_kernels as load_motion_kernels
 from .ranges import short_text
 from .span import Span, SpanUsed, select
 from .types import Corners, Scan, Segments
@@ -114,7 +115,8 @@ class Input:
 
 def open_input(log_path: str | Path, cfg: Config, span: Span | None = None) -> Input:
     """Open the log, check its topics (exit-2 errors before any work), find the laser mount and load the
-    extractor's compiled kernels (start-up work, not the first step's); ``span``: the part to process."""
+    extractor's and the scan matcher's compiled kernels (start-up work, not the first step's); ``span``:
+    the part to process."""
     inp = cfg.input
     reader = open_log(
         Path(log_path),
@@ -128,6 +130,9 @@ def open_input(log_path: str | Path, cfg: Config, span: Span | None = None) -> I
     laser2base, source = _laser_mount(reader, cfg)
     matcher = ScanMatcher(cfg.scan_match, odometry_noise(cfg)) if cfg.scan_match.enabled else None
     load_kernels(cfg.sensor, cfg.lines)
+    if matcher is not None:
+        with signals_deferred():
+            load_motion_kernels()
     odom_on_tf = info.odom_source.startswith("tf") or reader.odom_on_tf
     span = span or Span()
     total = _scan_count(info)

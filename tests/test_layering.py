@@ -23,7 +23,8 @@ PACKAGE = Path(cornerslam_cli.__file__).resolve().parent
 
 # lowest first; a name is a module or package under cornerslam_cli ("" = the package's __init__)
 LAYERS: list[tuple[str, ...]] = [
-    ("", "blas", "errors", "fpenv", "geometry", "ranges", "types", "workers"),  # stdlib, numpy
+    # stdlib, numpy; features.jit: numba's njit with its cache (extraction's and scan matching's kernels)
+    ("", "blas", "errors", "fpenv", "geometry", "ranges", "types", "workers", "features.jit"),
     (
         "textfile",
         "association.params",

@@ -40,6 +40,8 @@ from ..geometry import (
 )
 from .correlative import Window, search
 from .fusion import OdometryFusion
+from .kernels import line_terms, neighbour_scatter
+from .nearest import BucketGrid
 from .params import ScanMatchConfig
 
 NORMAL_NEIGHBOURS = 5
@@ -83,12 +85,11 @@ def line_normals(points: np.ndarray, tree: cKDTree) -> tuple[np.ndarray, np.ndar
     q = min(NORMAL_NEIGHBOURS + NORMAL_TIED_EXTRA, n)
     dist, idx = tree.query(points, q)
     dist, idx = dist.reshape(n, q), idx.reshape(n, q)
-    w = dist <= dist[:, k - 1 : k] * (1.0 + NORMAL_TIE)  # the k nearest and any tied with the k-th
-    mean = (points[idx] * w[..., None]).sum(axis=1, keepdims=True) / w.sum(axis=1)[:, None, None]
-    nb = (points[idx] - mean) * w[..., None]
-    # 2×2 scatter [[a, b], [b, c]] in closed form (batched eigh is slower): major axis at angle ψ with
-    # tan 2ψ = 2b / (a − c), eigenvalues (a + c)/2 ± h
-    a, b, c = (nb[..., 0] ** 2).sum(1), (nb[..., 0] * nb[..., 1]).sum(1), (nb[..., 1] ** 2).sum(1)
+    # the k nearest and any tied with the k-th; their 2×2 scatter [[a, b], [b, c]] about their mean
+    a, b, c = scatter = np.empty((3, n))  # rows: contiguous, as numpy's SIMD loops below had them
+    neighbour_scatter(points, dist, idx, k, NORMAL_TIE, scatter)
+    # in closed form (batched eigh is slower): major axis at angle ψ with tan 2ψ = 2b / (a − c),
+    # eigenvalues (a + c)/2 ± h
     psi = 0.5 * np.arctan2(2.0 * b, a - c)
     h = np.hypot(0.5 * (a - c), b)
     small, large = 0.5 * (a + c) - h, 0.5 * (a + c) + h
@@ -99,7 +100,8 @@ def line_normals(points: np.ndarray, tree: cKDTree) -> tuple[np.ndarray, np.ndar
 
 @dataclass
 class LocalMap:
-    """Map points (k, 2), their kd-tree, unit normals (k, 2) and which points have a usable normal.
+    """Map points (k, 2), their kd-tree (for the normals), their bucket grid (the nearest-point queries of
+    ICP: motion/nearest.py), unit normals (k, 2) and which points have a usable normal.
 
     ``padded_points``/``padded_normals`` have one extra row (a zero normal) at index k, where the
     kd-tree sends queries with no neighbour in range: residual and Jacobian rows of such points, and of
@@ -108,6 +110,7 @@ class LocalMap:
 
     points: np.ndarray
     tree: cKDTree
+    grid: BucketGrid
     normals: np.ndarray
     has_normal: np.ndarray
     padded_points: np.ndarray
@@ -119,7 +122,17 @@ class LocalMap:
         normals, has_normal = line_normals(points, tree)
         padded_points = np.vstack((points, np.zeros((1, 2))))
         padded_normals = np.vstack((np.where(has_normal[:, None], normals, 0.0), np.zeros((1, 2))))
-        return LocalMap(points, tree, normals, has_normal, padded_points, padded_normals)
+        grid = BucketGrid.build(points)
+        return LocalMap(points, tree, grid, normals, has_normal, padded_points, padded_normals)
+
+
+def load_kernels() -> None:
+    """Load (on a machine's first run: compile) the scan matcher's Numba kernels (motion/nearest.py,
+    motion/kernels.py) now, so that the first timed match of a run does not pay it: one
+    :func:`register` of a corner against itself."""
+    s = np.linspace(0.0, 1.0, 21)
+    corner = np.concatenate((np.column_stack((s, 0.0 * s)), np.column_stack((0.0 * s, s))))
+    register(corner, LocalMap.build(corner), np.zeros(3), ScanMatchConfig())
 
 
 @dataclass(frozen=True)
@@ -159,7 +172,7 @@ def register(
         if np.abs(step).max() < CONVERGED and dmax <= cfg.min_distance:
             break
     q = points @ M[:2, :2].T + M[:2, 2]
-    dist, idx = local.tree.query(q, distance_upper_bound=cfg.inlier_distance)
+    dist, idx = local.grid.query(q, cfg.inlier_distance)
     fit = float(np.mean(dist < cfg.inlier_distance))
     terms = _line_terms(q, idx, local, M, cfg.robust_scale)
     return Registration(pose_from_matrix(M), fit, _covariance(terms, prior_info, cfg))
@@ -169,22 +182,18 @@ def _point_to_line(points: np.ndarray, local: LocalMap, M: np.ndarray, dmax: flo
     """Jacobian J (n, 3), Cauchy weights w and point-to-line residuals r of ``points`` placed by ``M``
     against their nearest map point within ``dmax``; None with fewer than 3 usable correspondences."""
     q = points @ M[:2, :2].T + M[:2, 2]
-    _, idx = local.tree.query(q, distance_upper_bound=dmax)
+    _, idx = local.grid.query(q, dmax)
     return _line_terms(q, idx, local, M, scale)
 
 
 def _line_terms(q: np.ndarray, idx: np.ndarray, local: LocalMap, M: np.ndarray, scale: float):
     """:func:`_point_to_line` of points ``q`` already placed, given their nearest map points ``idx``."""
-    n = local.padded_normals[idx]  # zero rows: no neighbour in range, or a neighbour with no normal
-    if np.count_nonzero(np.abs(n).sum(axis=1)) < 3:
-        return None
-    r = np.einsum("ij,ij->i", q - local.padded_points[idx], n)
-    w = 1.0 / (1.0 + (r / scale) ** 2)  # Cauchy
+    J, w, r = np.empty((len(q), 3)), np.empty(len(q)), np.empty(len(q))
     # ∂r/∂(x, y, θ) of the pose itself (turning about the robot, not the map origin: far from the
-    # origin that keeps rotation and translation decoupled): (n_x, n_y, (q − t) × n)
-    rel = q - M[:2, 2]
-    J = np.column_stack((n[:, 0], n[:, 1], rel[:, 0] * n[:, 1] - rel[:, 1] * n[:, 0]))
-    return J, w, r
+    # origin that keeps rotation and translation decoupled): (n_x, n_y, (q − t) × n); zero rows: no
+    # neighbour in range, or a neighbour with no normal
+    used = line_terms(q, idx, local.padded_points, local.padded_normals, M[:2, 2], scale, J, w, r)
+    return None if used < 3 else (J, w, r)
 
 
 def _covariance(terms, prior_info: np.ndarray, cfg) -> np.ndarray:
@@ -322,9 +331,7 @@ class ScanMatcher:
 
     def _fit_at(self, points: np.ndarray, pose: np.ndarray) -> float:
         """Share of ``points`` within ``inlier_distance`` of the local map at ``pose``."""
-        dist, _ = self.local.tree.query(
-            transform_points(points, pose), distance_upper_bound=self.cfg.inlier_distance
-        )
+        dist, _ = self.local.grid.query(transform_points(points, pose), self.cfg.inlier_distance)
         return float(np.mean(dist < self.cfg.inlier_distance))
 
     def _fallback(self, o: np.ndarray, cov_o: np.ndarray, fit: float, searched: bool = False) -> MatchResult:

@@ -1,0 +1,74 @@
+"""The scan matcher's compiled parts (motion/nearest.py, motion/kernels.py) give exactly what the
+kd-tree and the numpy expressions they replace give."""
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from cornerslam_cli.motion.icp import NORMAL_TIE
+from cornerslam_cli.motion.kernels import line_terms, neighbour_scatter
+from cornerslam_cli.motion.nearest import BucketGrid
+
+
+def point_sets(rng):
+    """Random clouds, an ellipse of 'walls' and coordinates quantised to 1 cm (exact ties)."""
+    for m in (1, 7, 300, 3000):
+        yield rng.normal(0.0, rng.uniform(0.1, 30.0), (m, 2))
+        yield np.round(rng.uniform(-20.0, 20.0, (m, 2)), 2)
+        t = rng.uniform(0.0, 2 * np.pi, m)
+        yield np.column_stack((5 * np.cos(t) + rng.normal(0, 0.01, m), 3 * np.sin(t)))
+
+
+@pytest.mark.parametrize("bound", [0.05, 0.1, 1.0, 50.0])
+def test_bucket_grid_answers_as_the_kd_tree(bound):
+    rng = np.random.default_rng(3)
+    for pts in point_sets(rng):
+        near = pts[:50] + rng.normal(0.0, 0.05, (min(50, len(pts)), 2))
+        q = np.vstack((near, rng.uniform(-60.0, 60.0, (400, 2)), pts[:20]))  # far, and on map points
+        d_tree, i_tree = cKDTree(pts).query(q, distance_upper_bound=bound)
+        d_grid, i_grid = BucketGrid.build(pts).query(q, bound)
+        assert np.array_equal(d_grid, d_tree)
+        ties = i_grid != i_tree  # only an exact tie may be broken otherwise (quantised points)
+        assert np.array_equal(np.linalg.norm(pts[i_grid[ties]] - q[ties], axis=1), d_tree[ties])
+
+
+def test_bucket_grid_none_in_range_is_k_and_inf():
+    pts = np.array([[0.0, 0.0], [1.0, 0.0]])
+    d, i = BucketGrid.build(pts).query(np.array([[0.5, 3.0], [0.1, 0.0]]), 1.0)
+    assert i.tolist() == [2, 0] and d[0] == np.inf and d[1] == pytest.approx(0.1)
+
+
+def test_line_terms_kernel_is_the_numpy_expression_bit_for_bit():
+    rng = np.random.default_rng(4)
+    pts = np.vstack((rng.normal(0, 5, (500, 2)), np.zeros((1, 2))))
+    normals = rng.normal(0, 1, (501, 2))
+    normals[rng.random(501) < 0.2] = 0.0  # points without a normal
+    normals[-1] = 0.0
+    q = rng.normal(0, 5, (400, 2))
+    idx = rng.integers(0, 501, 400)
+    t, scale = np.array([1.3, -0.7]), 0.05
+    J, w, r = np.empty((400, 3)), np.empty(400), np.empty(400)
+    used = line_terms(q, idx, pts, normals, t, scale, J, w, r)
+    n = normals[idx]  # the numpy expressions the kernel replaced (icp._line_terms)
+    r_np = np.einsum("ij,ij->i", q - pts[idx], n)
+    rel = q - t
+    J_np = np.column_stack((n[:, 0], n[:, 1], rel[:, 0] * n[:, 1] - rel[:, 1] * n[:, 0]))
+    assert used == np.count_nonzero(np.abs(n).sum(axis=1))
+    assert np.array_equal(r, r_np) and np.array_equal(J, J_np)
+    assert np.array_equal(w, 1.0 / (1.0 + (r_np / scale) ** 2))
+
+
+@pytest.mark.parametrize("quantised", [False, True])
+def test_neighbour_scatter_kernel_is_the_numpy_expression_bit_for_bit(quantised):
+    rng = np.random.default_rng(5)
+    pts = rng.normal(0, 3, (2000, 2))
+    pts = np.round(pts, 2) if quantised else pts  # quantised: neighbours tied with the 5th
+    k, q = 5, 7
+    dist, idx = cKDTree(pts).query(pts, q)
+    out = np.empty((3, len(pts)))
+    neighbour_scatter(pts, dist, idx, k, NORMAL_TIE, out)
+    w = dist <= dist[:, k - 1 : k] * (1.0 + NORMAL_TIE)  # the numpy expressions it replaced
+    mean = (pts[idx] * w[..., None]).sum(axis=1, keepdims=True) / w.sum(axis=1)[:, None, None]
+    nb = (pts[idx] - mean) * w[..., None]
+    expected = [(nb[..., 0] ** 2).sum(1), (nb[..., 0] * nb[..., 1]).sum(1), (nb[..., 1] ** 2).sum(1)]
+    assert np.array_equal(out, np.array(expected))
