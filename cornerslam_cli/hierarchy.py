@@ -222,6 +222,8 @@ class HierarchicalSlam:
             if ok and on_points:
                 reason = POINTS
             found.append(LoopRecord(step, a.index, b.index, m, ok, reason, d2))
+            if sum(r.accepted for r in found) >= cfg.max_closures:
+                break
         gated = [r for r in found if r.match.accepted and not r.accepted and r.chi2 <= cfg.group_gate]
         if len(gated) >= 2 and agree([self.placed(r) for r in gated]):
             # two or more closures from different parts of the map agree on where b is, against the

@@ -228,3 +228,16 @@ def test_pairs_the_corners_cannot_verify_are_verified_on_points(
         else:
             assert not priors and not any(r.accepted for r in hs.loops)
             assert all(r.reason == corner_reason for r in hs.loops)
+
+
+def test_verification_stops_once_max_closures_are_accepted(sim_log, monkeypatch):
+    # on ground revisited many times every close has max_candidates candidates; once max_closures of
+    # them (nearest first) passed the gate, the rest are not verified
+    many = run_with_verifier(sim_log, monkeypatch, FakeVerifier(np.zeros(3)), "loops.max_closures=1000")
+    per_submap = Counter(r.submap_to for r in many.loops)
+    assert max(per_submap.values()) >= 3, "the fixture should give some submap three closures or more"
+    verifier = FakeVerifier(np.zeros(3))
+    capped = run_with_verifier(sim_log, monkeypatch, verifier, "loops.max_closures=2")
+    per_submap = Counter(r.submap_to for r in capped.loops)
+    assert max(per_submap.values()) == 2 and all(r.accepted for r in capped.loops)
+    assert verifier.calls == len(capped.loops) < len(many.loops)
