@@ -210,13 +210,11 @@ class HierarchicalSlam:
         for a in self.candidates(b):
             m = match_submaps(a, b, cfg, self.loop_associate, self.cfg.scan_match)
             on_points = cfg.point_search and m.reason in (FEW_CORNERS, NO_HYPOTHESIS)
+            pred = self.graph.relative(a.index, b.index) if on_points or m.accepted else None
             if on_points:
-                m = replace(
-                    match_points(a, b, *self.graph.relative(a.index, b.index), cfg, self.cfg.scan_match),
-                    n_corners=m.n_corners,
-                )
+                m = replace(match_points(a, b, *pred, cfg, self.cfg.scan_match), n_corners=m.n_corners)
             m = replace(m, cov=m.cov * self._match_scale)
-            d2 = self._chi2(a.index, b.index, m) if m.accepted else float("nan")
+            d2 = chi2(*pred, m) if m.accepted else float("nan")
             reason = m.reason or ("" if d2 <= cfg.gate else f"disagrees with the graph (chi2 {d2:.1f})")
             ok = not reason
             if ok and on_points:
@@ -224,7 +222,16 @@ class HierarchicalSlam:
             found.append(LoopRecord(step, a.index, b.index, m, ok, reason, d2))
             if sum(r.accepted for r in found) >= cfg.max_closures:
                 break
-        gated = [r for r in found if r.match.accepted and not r.accepted and r.chi2 <= cfg.group_gate]
+        # (corner-verified ones only: a match found on points around the graph's own prediction is no
+        # evidence against it)
+        gated = [
+            r
+            for r in found
+            if r.match.accepted
+            and not r.accepted
+            and r.chi2 <= cfg.group_gate
+            and r.match.n_corners >= cfg.min_corners
+        ]
         if len(gated) >= 2 and agree([self.placed(r) for r in gated]):
             # two or more closures from different parts of the map agree on where b is, against the
             # graph but not wildly (group_gate): the graph is what is wrong (an earlier false closure,
@@ -252,14 +259,6 @@ class HierarchicalSlam:
     def placed(self, r: LoopRecord) -> np.ndarray:
         """The global pose of submap b's origin that closure ``r`` implies (a's pose in the graph ∘ a→b)."""
         return compose(self.graph.pose(r.submap_from), r.match.pose)
-
-    def _chi2(self, a: int, b: int, m: LoopMatch) -> float:
-        """Mahalanobis² of the match against the graph's predicted a→b pose, on the sum of the
-        prediction's joint-marginal covariance and the match's (both of (x, y, θ) in a's frame)."""
-        pred, cov = self.graph.relative(a, b)
-        e = np.asarray(m.pose, dtype=float) - pred
-        e[2] = wrap_angle(e[2])
-        return float(e @ np.linalg.solve(cov + m.cov, e))
 
     def candidates(self, b: Submap) -> list[Submap]:
         """Earlier submaps (at least ``loops.min_gap`` before ``b``) whose path came within
@@ -315,6 +314,14 @@ class HierarchicalSlam:
     def loop_rows(self) -> list[dict]:
         """loops.csv's rows; ``inlier``: whether the graph kept an accepted closure inside its kernel."""
         return [r.row(self.graph.loop_inlier(r.factor) if r.factor >= 0 else None) for r in self.loops]
+
+
+def chi2(pred: np.ndarray, pred_cov: np.ndarray, m: LoopMatch) -> float:
+    """Mahalanobis² of the match against the graph's predicted a→b pose ``pred``, on the sum of the
+    prediction's joint-marginal covariance and the match's (both of (x, y, θ) in a's frame)."""
+    e = np.asarray(m.pose, dtype=float) - pred
+    e[2] = wrap_angle(e[2])
+    return float(e @ np.linalg.solve(pred_cov + m.cov, e))
 
 
 def agree(poses: list[np.ndarray]) -> bool:

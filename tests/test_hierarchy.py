@@ -203,10 +203,14 @@ def test_pairs_the_corners_cannot_verify_are_verified_on_points(
     def corners(a, b, cfg, associate, icp):
         return LoopMatch(np.full(3, np.nan), np.full((3, 3), np.nan), 2, 0.0, False, corner_reason)
 
-    priors = []
+    priors, current = [], []
 
     def points(a, b, prior, prior_cov, cfg, icp):
-        priors.append((a.index, b.index, prior, prior_cov))
+        # the prior is the graph's own prediction of b's origin in a's frame, with its covariance
+        want, want_cov = current[0].graph.relative(a.index, b.index)
+        np.testing.assert_allclose(prior, want)
+        np.testing.assert_allclose(prior_cov, want_cov)
+        priors.append((a.index, b.index))
         return LoopMatch(compose(prior, (0.01, 0.0, 0.0)), np.diag([1e-4, 1e-4, 1e-5]), 0, 0.9, True, "")
 
     monkeypatch.setattr(hierarchy, "match_submaps", corners)
@@ -218,6 +222,7 @@ def test_pairs_the_corners_cannot_verify_are_verified_on_points(
         )
         src = open_input(sim_log, cfg)
         hs = HierarchicalSlam(cfg, src.laser2base)
+        current[:] = [hs]
         for frame in frames(src, cfg):
             hs.step(frame)
         hs.finish()

@@ -382,13 +382,51 @@ def test_a_featureless_corridor_is_not_distinct_on_points():
 
 
 def test_points_search_only_inside_the_predictions_window():
-    # the graph places b 4 m across the corridor from where it is, and is sure of it: the truth is outside
-    # the window, no pose inside it puts b's walls on a's
+    # the graph places b 1.2 m across the corridor from where it is: sure of it (σ 5 cm), the truth is
+    # outside the window and no pose inside puts b's walls on a's; unsure (σ 0.5 m), it is found
     a, b, truth = office_pair()
-    m = loops.match_points(
-        a, b, compose(truth, (0.0, 4.0, 0.0)), np.diag([0.05**2, 0.05**2, 0.01**2]), CFG, ICP
+    prior = compose(truth, (0.0, 1.2, 0.0))
+    sure = loops.match_points(a, b, prior, np.diag([0.05**2, 0.05**2, 0.01**2]), CFG, ICP)
+    assert not sure.accepted and sure.reason == loops.LOW_FITNESS
+    unsure = loops.match_points(a, b, prior, np.diag([0.5**2, 0.5**2, 0.01**2]), CFG, ICP)
+    assert unsure.accepted
+    d, dth = pose_error(unsure.pose, truth)
+    assert d < 0.02 and dth < math.radians(0.5)
+
+
+def test_a_prior_without_a_usable_covariance_searches_the_whole_capped_window():
+    a, b, truth = office_pair()
+    m = loops.match_points(a, b, compose(truth, PRIOR_OFF), np.full((3, 3), np.nan), CFG, ICP)
+    assert m.accepted and pose_error(m.pose, truth)[0] < 0.02
+    window = loops.points_window(
+        np.diag([100.0, 100.0, 10.0]), replace(CFG, point_max_xy=100.0), ICP.search_resolution
     )
-    assert not m.accepted and m.reason == loops.LOW_FITNESS
+    assert window.xy == loops.POINT_MAX_CELLS * ICP.search_resolution  # the search's memory stays bounded
+    assert window.theta == CFG.point_max_theta
+
+
+@functools.cache
+def pillared_corridor_pair():
+    """A corridor with a pillar every 1.2 m on one wall, driven east then back west: alignments 1.2 m
+    apart along it fit almost as well (the pillars repeat, the ends are out of view)."""
+    walls = [sw.polyline([(-30.0, -1.0), (60.0, -1.0)]), sw.polyline([(-30.0, 1.0), (60.0, 1.0)])]
+    pillars = [sw.rectangle(x, 0.85, 0.3, 0.3) for x in np.arange(-30.0, 60.0, 1.2)]
+    world = sw.make_world(walls + pillars, "pillared corridor")
+    path_a, path_b = straight_path((5.0, 0.0), (15.0, 0.0)), straight_path((16.0, 0.2), (6.0, 0.2))
+    a, b = build_submap(world, path_a, 0, seed=1), build_submap(world, path_b, 5, seed=2)
+    return a, b, relative(path_a[0], path_b[0])
+
+
+def test_a_repeated_structure_inside_the_window_is_ambiguous_on_points(monkeypatch):
+    # the slide test alone (distinct) is bypassed: the runner-up of the window, 1.2 m along, must refuse it
+    monkeypatch.setattr(loops, "distinct", lambda *args: True)
+    a, b, truth = pillared_corridor_pair()
+    m = loops.match_points(a, b, compose(truth, PRIOR_OFF), PRIOR_COV * 9.0, CFG, ICP)
+    assert not m.accepted and m.reason == loops.AMBIGUOUS
+    room_a, room_b, room_truth = room_pair()  # a distinct place is not refused by the same rule
+    assert loops.match_points(
+        room_a, room_b, compose(room_truth, PRIOR_OFF), PRIOR_COV * 9.0, CFG, ICP
+    ).accepted
 
 
 def test_a_degenerate_fit_is_not_distinct():

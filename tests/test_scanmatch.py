@@ -12,7 +12,7 @@ from cornerslam_cli.evaluate import ate
 from cornerslam_cli.frontend import odometry_noise
 from cornerslam_cli.geometry import compose, relative, transform_points, wrap_angle
 from cornerslam_cli.motion import ScanMatchConfig, ScanMatcher
-from cornerslam_cli.motion.correlative import BLOCK, PULL, Window, angle_steps, search
+from cornerslam_cli.motion.correlative import BLOCK, PULL, Exclusion, Window, angle_steps, search
 from cornerslam_cli.motion.icp import LocalMap, register, voxel_thin
 from cornerslam_cli.simworld import OFFICE_LOOP, make_world, office_world, path_poses, polyline, raycast
 
@@ -71,23 +71,55 @@ def test_search_then_icp_recovers_from_half_a_metre_and_20_degrees(office):
     assert d < 0.02 and a < math.radians(0.3)
 
 
-def test_branch_and_bound_equals_the_exhaustive_search(office):
+def _search_case(office):
+    """A scan 0.1 m / 0.1 rad from the guess, the map of a scan nearby, and the search's settings."""
     rng = np.random.default_rng(3)
     map_pts = transform_points(scan_points(office, np.array([6.0, 5.0, 0.0]), rng, 0.01), [6.0, 5.0, 0.0])
     points = scan_points(office, np.array([6.4, 5.1, 0.2]), rng, 0.01)
-    guess, window, res, sigma = np.array([6.3, 5.2, 0.1]), Window(0.35, 0.2), 0.1, 0.1
-    got = search(points, map_pts, guess, window, res, sigma)
-    # brute force: every rotation and every cell offset of the window, scored by direct lookup
+    return points, map_pts, np.array([6.3, 5.2, 0.1]), Window(0.35, 0.2), 0.1, 0.1
+
+
+def _exhaustive_best(points, map_pts, guess, window, res, sigma, skip=lambda pose: False) -> float:
+    """Brute force: every rotation and every cell offset of the window (but those ``skip`` says),
+    scored by direct lookup."""
     W = int(np.ceil(window.xy / res))
-    best = -1.0
+    best = -np.inf
     for dth in angle_steps(points, window.theta, res):
-        th = guess[2] + dth
         for i in range(-W, W + 1):
             for j in range(-W, W + 1):
-                pose = np.array([guess[0] + i * res, guess[1] + j * res, th])
-                best = max(best, _score(points, map_pts, pose, guess, window, res, sigma))
-    assert got.score == pytest.approx(best, abs=1e-12)
+                pose = np.array([guess[0] + i * res, guess[1] + j * res, guess[2] + dth])
+                if not skip(pose):
+                    best = max(best, _score(points, map_pts, pose, guess, window, res, sigma))
+    return best
+
+
+def test_branch_and_bound_equals_the_exhaustive_search(office):
+    case = _search_case(office)
+    points, _, _, window, res, _ = case
+    got = search(*case)
+    assert got.score == pytest.approx(_exhaustive_best(*case), abs=1e-12)
+    W = int(np.ceil(window.xy / res))
     assert got.evaluated < 0.2 * len(angle_steps(points, window.theta, res)) * (2 * W + 1) ** 2
+
+
+def test_an_excluded_neighbourhood_gives_the_best_pose_outside_it(office):
+    # the runner-up of loop verification on points (graph/loops.py): the best of the window's poses
+    # that are not within xy / theta of the one found first, by brute force
+    case = _search_case(office)
+    first = search(*case)
+    away = Exclusion(first.pose, 0.25, 0.05)
+
+    def near(pose):
+        return (
+            np.hypot(*(pose[:2] - first.pose[:2])) <= 0.25
+            and abs(wrap_angle(pose[2] - first.pose[2])) <= 0.05
+        )
+
+    got = search(*case, exclude=away)
+    assert (
+        got.score == pytest.approx(_exhaustive_best(*case, skip=near), abs=1e-12) and got.score < first.score
+    )
+    assert not near(got.pose)
 
 
 def _score(points, map_pts, pose, guess, window, res, sigma):

@@ -61,7 +61,7 @@ import numpy as np
 from ..association import AssociationConfig, Associator, make_associator
 from ..filter import Ekf, EkfConfig
 from ..geometry import transform_points, wrap_angle
-from ..motion.correlative import Window, search
+from ..motion.correlative import Exclusion, Window, search
 from ..motion.icp import NORMAL_NEIGHBOURS, LocalMap, register, voxel_thin
 from ..motion.params import ScanMatchConfig
 from .params import LoopConfig
@@ -86,6 +86,7 @@ POINTS = "verified on points"  # accepted on the scan points alone (too few corn
 POINT_VOXEL = 0.2  # m: b's points thinned for the correlative search (its cost grows with their number)
 POINT_MAX = 500  # ... and at most this many of them (every k-th)
 MIN_WINDOW_XY, MIN_WINDOW_THETA = 0.3, 0.05  # m, rad: the search window is at least ICP's basin
+POINT_MAX_CELLS = 25  # the window's half-width in grid cells at most (memory: angles × points × cells²)
 BUDGET = "search budget"  # the associator's search under a hypothesis reached loops.max_nodes
 
 
@@ -163,24 +164,21 @@ def match_points(
     the graph's predicted a→b ``prior`` and its covariance ``prior_cov`` (a's frame).
 
     The correlative search (motion/correlative.py) finds the best pose of b's points (thinned) on a's
-    within ±3σ of the prior (at least ICP's basin, at most ``point_max_xy`` / ``point_max_theta``); ICP
-    refines it on all points; accepted when the fitness is ≥ ``min_fitness`` and *distinct*: moved
-    ``point_shift`` either way along the refined fit's weakest direction, the fitness falls below
-    ``point_distinct`` × its own. Along a featureless corridor it does not (every shift fits), and such
-    a match is refused — the prior, not the points, would be fixing the pose along it."""
+    within ±3σ of the prior (at least ICP's basin, at most ``point_max_xy`` / ``point_max_theta`` and
+    ``POINT_MAX_CELLS`` cells of ``scan_match.search_resolution``: the search's memory grows with the
+    square of it); ICP refines it on all points. Accepted when the fitness is ≥ ``min_fitness`` and the
+    fit is distinct: (1) moved ``point_shift`` either way along the refined fit's weakest direction, the
+    fitness falls below ``point_distinct`` × its own — along a featureless corridor it does not, and the
+    prior, not the points, would be fixing the pose along it; (2) the best pose of the window away from
+    it (``AMBIGUOUS_XY`` / ``AMBIGUOUS_THETA``) scores below ``point_distinct`` × its score — a parallel
+    corridor, a repeated door, is refused (``ambiguous``) as a symmetric place is on corners."""
     if len(a.points) < NORMAL_NEIGHBOURS or len(b.points) < MIN_OVERLAP_POINTS:
-        return _rejected(prior, 0, LOW_FITNESS)
-    sx = math.sqrt(max(float(np.linalg.eigvalsh(prior_cov[:2, :2]).max()), 0.0))
-    st = math.sqrt(max(float(prior_cov[2, 2]), 0.0))
-    window = Window(
-        min(max(3.0 * sx, MIN_WINDOW_XY), cfg.point_max_xy),
-        min(max(3.0 * st, MIN_WINDOW_THETA), cfg.point_max_theta),
-    )
+        return _rejected(np.full(3, np.nan), 0, LOW_FITNESS)
+    prior = np.asarray(prior, dtype=float)
+    window = points_window(prior_cov, cfg, icp.search_resolution)
     pts = b.points[voxel_thin(b.points, POINT_VOXEL)]
     pts = pts[:: -(-len(pts) // POINT_MAX)]
-    found = search(
-        pts, a.points, np.asarray(prior, dtype=float), window, icp.search_resolution, icp.search_sigma
-    )
+    found = search(pts, a.points, prior, window, icp.search_resolution, icp.search_sigma)
     local = LocalMap.build(a.points)
     reg = register(b.points, local, found.pose, icp)
     fitness = overlap_fitness(b.points, local, reg.pose, cfg.inlier_distance)
@@ -188,7 +186,22 @@ def match_points(
         return LoopMatch(reg.pose, reg.cov, 0, fitness, False, LOW_FITNESS)
     if not distinct(b.points, local, reg.pose, reg.cov, fitness, cfg):
         return LoopMatch(reg.pose, reg.cov, 0, fitness, False, NOT_DISTINCT)
+    away = Exclusion(found.pose, AMBIGUOUS_XY, AMBIGUOUS_THETA)
+    other = search(pts, a.points, prior, window, icp.search_resolution, icp.search_sigma, exclude=away)
+    if np.isfinite(other.score) and other.score >= cfg.point_distinct * found.score:
+        return LoopMatch(reg.pose, reg.cov, 0, fitness, False, AMBIGUOUS)
     return LoopMatch(reg.pose, reg.cov, 0, fitness, True, "")
+
+
+def points_window(prior_cov: np.ndarray, cfg: LoopConfig, res: float) -> Window:
+    """The search window of :func:`match_points`: ±3σ of the prior, at least ICP's basin, at most the
+    caps (``point_max_*``, ``POINT_MAX_CELLS`` cells); the caps when the prior has no usable covariance."""
+    cap_xy, cap_theta = min(cfg.point_max_xy, POINT_MAX_CELLS * res), cfg.point_max_theta
+    if not np.isfinite(prior_cov).all():
+        return Window(cap_xy, cap_theta)
+    sx = math.sqrt(max(float(np.linalg.eigvalsh(prior_cov[:2, :2]).max()), 0.0))
+    st = math.sqrt(max(float(prior_cov[2, 2]), 0.0))
+    return Window(min(max(3.0 * sx, MIN_WINDOW_XY), cap_xy), min(max(3.0 * st, MIN_WINDOW_THETA), cap_theta))
 
 
 def distinct(

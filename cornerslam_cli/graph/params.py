@@ -58,9 +58,12 @@ class LoopConfig:
     # a pair the corners cannot verify (few corners, no hypothesis: a corridor seen the other way round)
     # is searched on its scan points inside the graph's prediction ± 3σ, at most point_max_xy /
     # point_max_theta (graph/loops.py match_points); accepted when the fit is distinct: moved point_shift
-    # along the fit's weakest direction the fitness falls below point_distinct × its own (not a corridor)
+    # along the fit's weakest direction the fitness falls below point_distinct × its own (not a corridor),
+    # and no pose of the window away from it scores point_distinct × as well (not a repeated structure)
     point_search: bool = True
-    point_max_xy: float = num(2.0, gt=0.0, le=100.0)  # m
+    point_max_xy: float = num(
+        2.0, gt=0.0, le=100.0
+    )  # m (and at most 25 cells of scan_match.search_resolution)
     point_max_theta: float = num(0.5, gt=0.0, le=math.pi)  # rad
     point_shift: float = num(0.5, gt=0.0, le=100.0)  # m
     point_distinct: float = num(0.7, gt=0.0, le=1.0)

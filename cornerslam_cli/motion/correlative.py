@@ -18,6 +18,7 @@ the result equals the exhaustive fine search, which a test checks).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,6 +38,25 @@ class Window:
 
     xy: float
     theta: float
+
+
+@dataclass(frozen=True)
+class Exclusion:
+    """Poses within ``xy`` metres and ``theta`` radians of ``pose``: left out of a search."""
+
+    pose: np.ndarray
+    xy: float
+    theta: float
+
+    def covers(
+        self, guess: np.ndarray, ox: np.ndarray, oy: np.ndarray, res: float, theta: float
+    ) -> np.ndarray:
+        """(len(ox), len(oy)) whether the poses guess + (ox, oy)·res at heading ``theta`` are excluded."""
+        dx = guess[0] + ox * res - self.pose[0]
+        dy = guess[1] + oy * res - self.pose[1]
+        near = dx[:, None] ** 2 + dy[None, :] ** 2 <= self.xy**2
+        turned = abs(math.remainder(theta - float(self.pose[2]), math.tau)) <= self.theta
+        return near & turned
 
 
 @dataclass(frozen=True)
@@ -89,9 +109,11 @@ def search(
     window: Window,
     res: float,
     sigma: float,
+    exclude: Exclusion | None = None,
 ) -> SearchResult:
     """The pose in ``window`` around ``guess`` that maximises the mean likelihood of ``points`` (base
-    frame) on the field of ``map_points`` (motion frame) minus a small pull towards the guess."""
+    frame) on the field of ``map_points`` (motion frame) minus a small pull towards the guess;
+    ``exclude``: poses near one already found are not candidates (the runner-up of an ambiguity test)."""
     W = int(np.ceil(window.xy / res))
     n_side = 2 * W + 1
     dthetas = angle_steps(points, window.theta, res)
@@ -142,6 +164,8 @@ def search(
             + ((ox - W) * res / window.xy)[:, None] ** 2
             + ((oy - W) * res / window.xy)[None, :] ** 2
         )
+        if exclude is not None:
+            sc = np.where(exclude.covers(guess, ox - W, oy - W, res, thetas[a]), -np.inf, sc)
         evaluated += sc.size
         k = int(np.argmax(sc))
         if sc.flat[k] > best:
