@@ -206,10 +206,15 @@ class HierarchicalSlam:
     def _close_loops(self, b: Submap, step: int) -> None:
         """Verify the candidates for submap ``b``, gate them, add the accepted ones to the graph."""
         cfg = self.cfg.loops
-        found = []
+        found, searched = [], 0
         for a in self.candidates(b):
             m = match_submaps(a, b, cfg, self.loop_associate, self.cfg.scan_match)
-            on_points = cfg.point_search and m.reason in (FEW_CORNERS, NO_HYPOTHESIS)
+            on_points = (
+                cfg.point_search
+                and searched < cfg.point_searches
+                and m.reason in (FEW_CORNERS, NO_HYPOTHESIS)
+            )
+            searched += on_points
             pred = self.graph.relative(a.index, b.index) if on_points or m.accepted else None
             if on_points:
                 m = replace(match_points(a, b, *pred, cfg, self.cfg.scan_match), n_corners=m.n_corners)

@@ -218,7 +218,13 @@ def test_pairs_the_corners_cannot_verify_are_verified_on_points(
     for enabled in (True, False):
         priors.clear()
         cfg = config_from(
-            {}, ["submaps.enabled=true", "submaps.max_steps=6", f"loops.point_search={str(enabled).lower()}"]
+            {},
+            [
+                "submaps.enabled=true",
+                "submaps.max_steps=6",
+                f"loops.point_search={str(enabled).lower()}",
+                "loops.point_searches=1000",
+            ],
         )
         src = open_input(sim_log, cfg)
         hs = HierarchicalSlam(cfg, src.laser2base)
@@ -246,3 +252,29 @@ def test_verification_stops_once_max_closures_are_accepted(sim_log, monkeypatch)
     per_submap = Counter(r.submap_to for r in capped.loops)
     assert max(per_submap.values()) == 2 and all(r.accepted for r in capped.loops)
     assert verifier.calls == len(capped.loops) < len(many.loops)
+
+
+def test_points_are_searched_for_the_nearest_candidates_only(sim_log, monkeypatch):
+    # each search costs a correlative search or two: at most loops.point_searches per closed submap
+    def corners(a, b, cfg, associate, icp):
+        return LoopMatch(np.full(3, np.nan), np.full((3, 3), np.nan), 2, 0.0, False, "few corners")
+
+    def points(a, b, prior, prior_cov, cfg, icp):
+        return LoopMatch(
+            compose(prior, (0.5, 0.0, 0.0)), np.diag([1e-4, 1e-4, 1e-5]), 0, 0.9, False, "ambiguous"
+        )
+
+    monkeypatch.setattr(hierarchy, "match_submaps", corners)
+    monkeypatch.setattr(hierarchy, "match_points", points)
+    cfg = config_from({}, ["submaps.enabled=true", "submaps.max_steps=6", "loops.point_searches=1"])
+    src = open_input(sim_log, cfg)
+    hs = HierarchicalSlam(cfg, src.laser2base)
+    for frame in frames(src, cfg):
+        hs.step(frame)
+    hs.finish()
+    searched = Counter(r.submap_to for r in hs.loops if r.reason == "ambiguous")
+    per_submap = Counter(r.submap_to for r in hs.loops)
+    assert any(n >= 2 for n in per_submap.values()), "the fixture should give some submap two candidates"
+    assert all(searched[b] == 1 for b in per_submap)
+    for b in per_submap:  # the nearest (first) candidate was the one searched
+        assert next(r for r in hs.loops if r.submap_to == b).reason == "ambiguous"

@@ -87,6 +87,10 @@ POINT_VOXEL = 0.2  # m: b's points thinned for the correlative search (its cost 
 POINT_MAX = 500  # ... and at most this many of them (every k-th)
 MIN_WINDOW_XY, MIN_WINDOW_THETA = 0.3, 0.05  # m, rad: the search window is at least ICP's basin
 POINT_MAX_CELLS = 25  # the window's half-width in grid cells at most (memory: angles × points × cells²)
+# the search's grid: this many times the front end's (scan_match.search_resolution): it only has to find
+# ICP's basin, and a submap's points reach far (the angular step shrinks with their range), so at the
+# front end's 0.1 m a search cost ~25 ms and loop closing dominated infinite-corridor's last 10 %
+POINT_RES = 2.0
 BUDGET = "search budget"  # the associator's search under a hypothesis reached loops.max_nodes
 
 
@@ -164,21 +168,23 @@ def match_points(
     the graph's predicted a→b ``prior`` and its covariance ``prior_cov`` (a's frame).
 
     The correlative search (motion/correlative.py) finds the best pose of b's points (thinned) on a's
-    within ±3σ of the prior (at least ICP's basin, at most ``point_max_xy`` / ``point_max_theta`` and
-    ``POINT_MAX_CELLS`` cells of ``scan_match.search_resolution``: the search's memory grows with the
-    square of it); ICP refines it on all points. Accepted when the fitness is ≥ ``min_fitness`` and the
-    fit is distinct: (1) moved ``point_shift`` either way along the refined fit's weakest direction, the
-    fitness falls below ``point_distinct`` × its own — along a featureless corridor it does not, and the
-    prior, not the points, would be fixing the pose along it; (2) the best pose of the window away from
-    it (``AMBIGUOUS_XY`` / ``AMBIGUOUS_THETA``) scores below ``point_distinct`` × its score — a parallel
-    corridor, a repeated door, is refused (``ambiguous``) as a symmetric place is on corners."""
+    within ±3σ of the prior (at least ICP's basin; at most ``point_max_xy`` / ``point_max_theta`` and
+    ``POINT_MAX_CELLS`` cells of its grid, ``POINT_RES`` × ``scan_match.search_resolution``: the search's
+    memory grows with the square of it); ICP refines it on all points. Accepted when the fitness is
+    ≥ ``min_fitness`` and the fit is distinct: (1) moved ``point_shift`` either way along the refined
+    fit's weakest direction, the fitness falls below ``point_distinct`` × its own — along a featureless
+    corridor it does not, and the prior, not the points, would be fixing the pose along it; (2) the best
+    pose of the window away from it (``AMBIGUOUS_XY`` / ``AMBIGUOUS_THETA``) scores below
+    ``point_distinct`` × its score — a parallel corridor, a repeated door, is refused (``ambiguous``) as a
+    symmetric place is on corners."""
     if len(a.points) < NORMAL_NEIGHBOURS or len(b.points) < MIN_OVERLAP_POINTS:
         return _rejected(np.full(3, np.nan), 0, LOW_FITNESS)
     prior = np.asarray(prior, dtype=float)
-    window = points_window(prior_cov, cfg, icp.search_resolution)
+    res = POINT_RES * icp.search_resolution
+    window = points_window(prior_cov, cfg, res)
     pts = b.points[voxel_thin(b.points, POINT_VOXEL)]
     pts = pts[:: -(-len(pts) // POINT_MAX)]
-    found = search(pts, a.points, prior, window, icp.search_resolution, icp.search_sigma)
+    found = search(pts, a.points, prior, window, res, icp.search_sigma)
     local = LocalMap.build(a.points)
     reg = register(b.points, local, found.pose, icp)
     fitness = overlap_fitness(b.points, local, reg.pose, cfg.inlier_distance)
@@ -187,7 +193,7 @@ def match_points(
     if not distinct(b.points, local, reg.pose, reg.cov, fitness, cfg):
         return LoopMatch(reg.pose, reg.cov, 0, fitness, False, NOT_DISTINCT)
     away = Exclusion(found.pose, AMBIGUOUS_XY, AMBIGUOUS_THETA)
-    other = search(pts, a.points, prior, window, icp.search_resolution, icp.search_sigma, exclude=away)
+    other = search(pts, a.points, prior, window, res, icp.search_sigma, exclude=away)
     if np.isfinite(other.score) and other.score >= cfg.point_distinct * found.score:
         return LoopMatch(reg.pose, reg.cov, 0, fitness, False, AMBIGUOUS)
     return LoopMatch(reg.pose, reg.cov, 0, fitness, True, "")
