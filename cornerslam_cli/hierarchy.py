@@ -10,9 +10,9 @@ GTSAM) with loop closures verified by the configured associator (graph/loops.py)
   within ``loops.candidate_distance`` + ``candidate_sigmas`` σ of the closed submap's (its global
   marginal) under the graph's estimate (nearest first, at most ``max_candidates``); each is verified
   without a pose prior (graph/loops.py) — or, with too few corners in common, on its points around the
-  graph's prediction (``loops.point_search``) —, its covariance scaled by the front end's learnt scale
-  of ICP covariances, then gated against the graph's predicted relative pose and its joint marginal
-  (``loops.gate``, χ²₃); closures that disagree with each other about where the submap is are all
+  graph's prediction (graph/points.py, ``loops.point_search``) —, its covariance scaled by the front
+  end's learnt scale of ICP covariances, then gated against the graph's predicted relative pose and its
+  joint marginal (``loops.gate``, χ²₃); closures that disagree with each other about where the submap is are all
   refused (perceptual aliasing). Accepted closures enter the graph under a robust kernel.
 - **Outputs.** Each step's causal (online) estimate is its submap origin's pose in the graph *at that
   step* ∘ the filter's local pose; :meth:`HierarchicalSlam.final_poses` is the same with the optimised
@@ -31,7 +31,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .geometry import compose, rotate_covariance, rotate_pose_covariance, transform_points, wrap_angle
-from .graph.loops import FEW_CORNERS, NO_HYPOTHESIS, POINTS, loop_associator, match_points, match_submaps
+from .graph.loops import FEW_CORNERS, NO_HYPOTHESIS, loop_associator, match_submaps
+from .graph.points import POINTS, match_points
 from .graph.posegraph import PoseGraph
 from .graph.submap import LoopMatch, Submap
 from .motion.icp import voxel_thin

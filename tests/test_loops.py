@@ -28,7 +28,7 @@ from cornerslam_cli import simworld as sw
 from cornerslam_cli.association import ASSOCIATORS, AssociationConfig, make_associator
 from cornerslam_cli.association.params import JcbbConfig, PcaConfig
 from cornerslam_cli.geometry import compose, relative, rotate_pose_covariance, transform_points, wrap_angle
-from cornerslam_cli.graph import loops
+from cornerslam_cli.graph import loops, points
 from cornerslam_cli.graph.params import LoopConfig
 from cornerslam_cli.motion.params import ScanMatchConfig
 from cornerslam_cli.types import Prediction
@@ -325,7 +325,7 @@ def test_points_that_disagree_are_low_fitness(points):
 def test_fitness_counts_only_the_overlap():
     """Points of b beyond a's reach neither help nor hurt; points near a's but off them count against."""
     a, _, _ = office_pair()
-    local = loops.LocalMap.build(a.points)
+    local = points.LocalMap.build(a.points)
     on = a.points[::3]
     far = on + (100.0, 0.0)  # nowhere near a
     near = on + (0.0, 0.4)  # within the overlap, off a's walls
@@ -366,7 +366,7 @@ def room_pair():
 @pytest.mark.parametrize("pair", [office_pair, room_pair])
 def test_points_recover_the_known_pose_from_the_graphs_prediction(pair):
     a, b, truth = pair()
-    m = loops.match_points(a, b, compose(truth, PRIOR_OFF), PRIOR_COV, CFG, ICP)
+    m = points.match_points(a, b, compose(truth, PRIOR_OFF), PRIOR_COV, CFG, ICP)
     assert m.accepted and m.reason == "" and m.fitness > 0.8
     d, dth = pose_error(m.pose, truth)
     assert d < 0.02 and dth < math.radians(0.5)
@@ -376,8 +376,8 @@ def test_points_recover_the_known_pose_from_the_graphs_prediction(pair):
 def test_a_featureless_corridor_is_not_distinct_on_points():
     # every shift along the corridor fits as well: the prior, not the points, would fix the pose along it
     a, b, truth = corridor_pair()
-    m = loops.match_points(a, b, compose(truth, PRIOR_OFF), PRIOR_COV, CFG, ICP)
-    assert not m.accepted and m.reason == loops.NOT_DISTINCT
+    m = points.match_points(a, b, compose(truth, PRIOR_OFF), PRIOR_COV, CFG, ICP)
+    assert not m.accepted and m.reason == points.NOT_DISTINCT
     assert m.fitness > CFG.min_fitness  # the walls do fit: refused for the ambiguity alone
 
 
@@ -386,9 +386,9 @@ def test_points_search_only_inside_the_predictions_window():
     # outside the window and no pose inside puts b's walls on a's; unsure (σ 0.5 m), it is found
     a, b, truth = office_pair()
     prior = compose(truth, (0.0, 1.2, 0.0))
-    sure = loops.match_points(a, b, prior, np.diag([0.05**2, 0.05**2, 0.01**2]), CFG, ICP)
+    sure = points.match_points(a, b, prior, np.diag([0.05**2, 0.05**2, 0.01**2]), CFG, ICP)
     assert not sure.accepted and sure.reason == loops.LOW_FITNESS
-    unsure = loops.match_points(a, b, prior, np.diag([0.5**2, 0.5**2, 0.01**2]), CFG, ICP)
+    unsure = points.match_points(a, b, prior, np.diag([0.5**2, 0.5**2, 0.01**2]), CFG, ICP)
     assert unsure.accepted
     d, dth = pose_error(unsure.pose, truth)
     assert d < 0.02 and dth < math.radians(0.5)
@@ -396,12 +396,12 @@ def test_points_search_only_inside_the_predictions_window():
 
 def test_a_prior_without_a_usable_covariance_searches_the_whole_capped_window():
     a, b, truth = office_pair()
-    m = loops.match_points(a, b, compose(truth, PRIOR_OFF), np.full((3, 3), np.nan), CFG, ICP)
+    m = points.match_points(a, b, compose(truth, PRIOR_OFF), np.full((3, 3), np.nan), CFG, ICP)
     assert m.accepted and pose_error(m.pose, truth)[0] < 0.02
-    window = loops.points_window(
+    window = points.points_window(
         np.diag([100.0, 100.0, 10.0]), replace(CFG, point_max_xy=100.0), ICP.search_resolution
     )
-    assert window.xy == loops.POINT_MAX_CELLS * ICP.search_resolution  # the search's memory stays bounded
+    assert window.xy == points.POINT_MAX_CELLS * ICP.search_resolution  # the search's memory stays bounded
     assert window.theta == CFG.point_max_theta
 
 
@@ -419,17 +419,17 @@ def pillared_corridor_pair():
 
 def test_a_repeated_structure_inside_the_window_is_ambiguous_on_points(monkeypatch):
     # the slide test alone (distinct) is bypassed: the runner-up of the window, 1.2 m along, must refuse it
-    monkeypatch.setattr(loops, "distinct", lambda *args: True)
+    monkeypatch.setattr(points, "distinct", lambda *args: True)
     a, b, truth = pillared_corridor_pair()
-    m = loops.match_points(a, b, compose(truth, PRIOR_OFF), PRIOR_COV * 9.0, CFG, ICP)
+    m = points.match_points(a, b, compose(truth, PRIOR_OFF), PRIOR_COV * 9.0, CFG, ICP)
     assert not m.accepted and m.reason == loops.AMBIGUOUS
     room_a, room_b, room_truth = room_pair()  # a distinct place is not refused by the same rule
-    assert loops.match_points(
+    assert points.match_points(
         room_a, room_b, compose(room_truth, PRIOR_OFF), PRIOR_COV * 9.0, CFG, ICP
     ).accepted
 
 
 def test_a_degenerate_fit_is_not_distinct():
     a, b, truth = office_pair()
-    local = loops.LocalMap.build(a.points)
-    assert not loops.distinct(b.points, local, truth, np.full((3, 3), np.nan), 0.9, CFG)
+    local = points.LocalMap.build(a.points)
+    assert not points.distinct(b.points, local, truth, np.full((3, 3), np.nan), 0.9, CFG)

@@ -103,7 +103,7 @@ def test_branch_and_bound_equals_the_exhaustive_search(office):
 
 
 def test_an_excluded_neighbourhood_gives_the_best_pose_outside_it(office):
-    # the runner-up of loop verification on points (graph/loops.py): the best of the window's poses
+    # the runner-up of loop verification on points (graph/points.py): the best of the window's poses
     # that are not within xy / theta of the one found first, by brute force
     case = _search_case(office)
     first = search(*case)

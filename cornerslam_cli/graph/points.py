@@ -1,0 +1,100 @@
+"""Loop-closure verification on scan points alone, around the pose graph's prediction (issue 16).
+
+    match = match_points(a, b, *graph.relative(a.index, b.index), cfg.loops, cfg.scan_match)
+
+For a pair of submaps whose corners give no verdict (graph/loops.py: ``few corners``, ``no hypothesis``
+— a corridor driven the other way round shows few corners from both sides). Unlike the corner search
+this needs a prior, the graph's predicted a→b and its covariance; hierarchy.py decides when to ask
+(``loops.point_search``, ``point_searches``). Same conventions as graph/loops.py: a→b is b's origin in
+a's frame, the match's covariance in a's frame.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..motion.correlative import Exclusion, Window, search
+from ..motion.icp import NORMAL_NEIGHBOURS, LocalMap, register, voxel_thin
+from ..motion.params import ScanMatchConfig
+from .loops import AMBIGUOUS, AMBIGUOUS_THETA, AMBIGUOUS_XY, LOW_FITNESS, MIN_OVERLAP_POINTS, overlap_fitness
+from .params import LoopConfig
+from .submap import LoopMatch, Submap
+
+NOT_DISTINCT = "not distinct on points"  # the points fit as well moved along the fit's weak direction
+POINTS = "verified on points"  # accepted on the scan points alone (too few corners)
+POINT_VOXEL = 0.2  # m: b's points thinned for the correlative search (its cost grows with their number)
+POINT_MAX = 500  # ... and at most this many of them (every k-th)
+MIN_WINDOW_XY, MIN_WINDOW_THETA = 0.3, 0.05  # m, rad: the search window is at least ICP's basin
+POINT_MAX_CELLS = 25  # the window's half-width in grid cells at most (memory: angles × points × cells²)
+# the search's grid: this many times the front end's (scan_match.search_resolution): it only has to find
+# ICP's basin, and a submap's points reach far (the angular step shrinks with their range), so at the
+# front end's 0.1 m a search cost ~25 ms and loop closing dominated infinite-corridor's last 10 %
+POINT_RES = 2.0
+
+
+def match_points(
+    a: Submap, b: Submap, prior: np.ndarray, prior_cov: np.ndarray, cfg: LoopConfig, icp: ScanMatchConfig
+) -> LoopMatch:
+    """Verify a→b on the two submaps' scan points alone, for a pair whose corners cannot (too few seen
+    from both: a corridor driven the other way round). Unlike :func:`match_submaps` this needs a prior:
+    the graph's predicted a→b ``prior`` and its covariance ``prior_cov`` (a's frame).
+
+    The correlative search (motion/correlative.py) finds the best pose of b's points (thinned) on a's
+    within ±3σ of the prior (at least ICP's basin; at most ``point_max_xy`` / ``point_max_theta`` and
+    ``POINT_MAX_CELLS`` cells of its grid, ``POINT_RES`` × ``scan_match.search_resolution``: the search's
+    memory grows with the square of it); ICP refines it on all points. Accepted when the fitness is
+    ≥ ``min_fitness`` and the fit is distinct: (1) moved ``point_shift`` either way along the refined
+    fit's weakest direction, the fitness falls below ``point_distinct`` × its own — along a featureless
+    corridor it does not, and the prior, not the points, would be fixing the pose along it; (2) the best
+    pose of the window away from it (``AMBIGUOUS_XY`` / ``AMBIGUOUS_THETA``) scores below
+    ``point_distinct`` × its score — a parallel corridor, a repeated door, is refused (``ambiguous``) as a
+    symmetric place is on corners."""
+    if len(a.points) < NORMAL_NEIGHBOURS or len(b.points) < MIN_OVERLAP_POINTS:
+        return LoopMatch(np.full(3, np.nan), np.full((3, 3), np.nan), 0, 0.0, False, LOW_FITNESS)
+    prior = np.asarray(prior, dtype=float)
+    res = POINT_RES * icp.search_resolution
+    window = points_window(prior_cov, cfg, res)
+    pts = b.points[voxel_thin(b.points, POINT_VOXEL)]
+    pts = pts[:: -(-len(pts) // POINT_MAX)]
+    found = search(pts, a.points, prior, window, res, icp.search_sigma)
+    local = LocalMap.build(a.points)
+    reg = register(b.points, local, found.pose, icp)
+    fitness = overlap_fitness(b.points, local, reg.pose, cfg.inlier_distance)
+    if fitness < cfg.min_fitness:
+        return LoopMatch(reg.pose, reg.cov, 0, fitness, False, LOW_FITNESS)
+    if not distinct(b.points, local, reg.pose, reg.cov, fitness, cfg):
+        return LoopMatch(reg.pose, reg.cov, 0, fitness, False, NOT_DISTINCT)
+    away = Exclusion(found.pose, AMBIGUOUS_XY, AMBIGUOUS_THETA)
+    other = search(pts, a.points, prior, window, res, icp.search_sigma, exclude=away)
+    if np.isfinite(other.score) and other.score >= cfg.point_distinct * found.score:
+        return LoopMatch(reg.pose, reg.cov, 0, fitness, False, AMBIGUOUS)
+    return LoopMatch(reg.pose, reg.cov, 0, fitness, True, "")
+
+
+def points_window(prior_cov: np.ndarray, cfg: LoopConfig, res: float) -> Window:
+    """The search window of :func:`match_points`: ±3σ of the prior, at least ICP's basin, at most the
+    caps (``point_max_*``, ``POINT_MAX_CELLS`` cells); the caps when the prior has no usable covariance."""
+    cap_xy, cap_theta = min(cfg.point_max_xy, POINT_MAX_CELLS * res), cfg.point_max_theta
+    if not np.isfinite(prior_cov).all():
+        return Window(cap_xy, cap_theta)
+    sx = math.sqrt(max(float(np.linalg.eigvalsh(prior_cov[:2, :2]).max()), 0.0))
+    st = math.sqrt(max(float(prior_cov[2, 2]), 0.0))
+    return Window(min(max(3.0 * sx, MIN_WINDOW_XY), cap_xy), min(max(3.0 * st, MIN_WINDOW_THETA), cap_theta))
+
+
+def distinct(
+    points: np.ndarray, local: LocalMap, pose: np.ndarray, cov: np.ndarray, fitness: float, cfg: LoopConfig
+) -> bool:
+    """Whether ``points`` fit ``local`` at ``pose`` clearly better than at ``pose`` moved ``point_shift``
+    either way along the weakest direction of the fit's covariance ``cov`` (its largest xy eigenvector)."""
+    if not np.isfinite(cov).all():
+        return False
+    weak = np.linalg.eigh(cov[:2, :2])[1][:, 1]
+    for sign in (1.0, -1.0):
+        moved = np.asarray(pose, dtype=float).copy()
+        moved[:2] += sign * cfg.point_shift * weak
+        if overlap_fitness(points, local, moved, cfg.inlier_distance) >= cfg.point_distinct * fitness:
+            return False
+    return True
