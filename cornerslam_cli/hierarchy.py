@@ -12,8 +12,8 @@ GTSAM) with loop closures verified by the configured associator (graph/loops.py)
   without a pose prior (graph/loops.py) — or, with too few corners in common, on its points around the
   graph's prediction (graph/points.py, ``loops.point_search``) —, its covariance scaled by the front
   end's learnt scale of ICP covariances, then gated against the graph's predicted relative pose and its
-  joint marginal (``loops.gate``, χ²₃); closures that disagree with each other about where the submap is are all
-  refused (perceptual aliasing). Accepted closures enter the graph under a robust kernel.
+  joint marginal (``loops.gate``, χ²₃); closures that disagree with each other about where the submap
+  is are all refused (perceptual aliasing). Accepted closures enter the graph under a robust kernel.
 - **Outputs.** Each step's causal (online) estimate is its submap origin's pose in the graph *at that
   step* ∘ the filter's local pose; :meth:`HierarchicalSlam.final_poses` is the same with the optimised
   origins — the smoothed trajectory written to trajectory.csv. Landmarks stay one per submap in the
