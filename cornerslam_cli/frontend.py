@@ -130,7 +130,7 @@ def open_input(log_path: str | Path, cfg: Config, span: Span | None = None) -> I
     laser2base, source = _laser_mount(reader, cfg)
     matcher = ScanMatcher(cfg.scan_match, odometry_noise(cfg)) if cfg.scan_match.enabled else None
     load_kernels(cfg.sensor, cfg.lines)
-    if matcher is not None:
+    if matcher is not None or (cfg.submaps.enabled and cfg.loops.enabled):  # loop closing runs ICP too
         with signals_deferred():
             load_motion_kernels()
     odom_on_tf = info.odom_source.startswith("tf") or reader.odom_on_tf

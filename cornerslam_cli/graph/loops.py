@@ -130,16 +130,16 @@ def match_submaps(
     hyps = pair_hypotheses(a.landmarks, b.landmarks, cfg)
     sets = corner_sets(a, b, hyps, cfg, associate)
     if not sets:
-        return _rejected(np.full(3, np.nan), 0, NO_HYPOTHESIS)
+        return rejected(np.full(3, np.nan), 0, NO_HYPOTHESIS)
     if sets[-1].budget_hit:
-        return _rejected(sets[-1].pose, sets[-1].n, BUDGET)
+        return rejected(sets[-1].pose, sets[-1].n, BUDGET)
     best = min(sets, key=CornerSet.key)
     if best.n < cfg.min_corners:
-        return _rejected(best.pose, best.n, FEW_CORNERS)
+        return rejected(best.pose, best.n, FEW_CORNERS)
     if any(s.n == best.n and _far_apart(s.pose, best.pose) for s in sets):
-        return _rejected(best.pose, best.n, AMBIGUOUS)
+        return rejected(best.pose, best.n, AMBIGUOUS)
     if len(a.points) < NORMAL_NEIGHBOURS or len(b.points) < 3:  # nothing to refine or measure with
-        return _rejected(best.pose, best.n, LOW_FITNESS)
+        return rejected(best.pose, best.n, LOW_FITNESS)
     local = LocalMap.build(a.points)
     reg = register(b.points, local, best.pose, icp)
     fitness = overlap_fitness(b.points, local, reg.pose, cfg.inlier_distance)
@@ -165,7 +165,7 @@ def loop_associator(assoc: AssociationConfig, cfg: LoopConfig) -> Associator:
     )
 
 
-def _rejected(pose: np.ndarray, n: int, reason: str) -> LoopMatch:
+def rejected(pose: np.ndarray, n: int, reason: str) -> LoopMatch:
     """A rejection before ICP: the corners' pose (NaN when none), no covariance (NaN), fitness 0."""
     return LoopMatch(np.asarray(pose, dtype=float), np.full((3, 3), np.nan), n, 0.0, False, reason)
 

@@ -18,7 +18,15 @@ import numpy as np
 from ..motion.correlative import Exclusion, Window, search
 from ..motion.icp import NORMAL_NEIGHBOURS, LocalMap, register, voxel_thin
 from ..motion.params import ScanMatchConfig
-from .loops import AMBIGUOUS, AMBIGUOUS_THETA, AMBIGUOUS_XY, LOW_FITNESS, MIN_OVERLAP_POINTS, overlap_fitness
+from .loops import (
+    AMBIGUOUS,
+    AMBIGUOUS_THETA,
+    AMBIGUOUS_XY,
+    LOW_FITNESS,
+    MIN_OVERLAP_POINTS,
+    overlap_fitness,
+    rejected,
+)
 from .params import LoopConfig
 from .submap import LoopMatch, Submap
 
@@ -52,7 +60,7 @@ def match_points(
     ``point_distinct`` × its score — a parallel corridor, a repeated door, is refused (``ambiguous``) as a
     symmetric place is on corners."""
     if len(a.points) < NORMAL_NEIGHBOURS or len(b.points) < MIN_OVERLAP_POINTS:
-        return LoopMatch(np.full(3, np.nan), np.full((3, 3), np.nan), 0, 0.0, False, LOW_FITNESS)
+        return rejected(np.full(3, np.nan), 0, LOW_FITNESS)
     prior = np.asarray(prior, dtype=float)
     res = POINT_RES * icp.search_resolution
     window = points_window(prior_cov, cfg, res)
