@@ -116,3 +116,32 @@ def test_tab_separated_lines_read_as_space_separated(tmp_path, gz):
         assert type(m) is type(n)
         if hasattr(m, "ranges"):
             np.testing.assert_array_equal(m.ranges, n.ranges)
+
+
+def _odom_line(t, x):
+    return f"ODOM {x} 0 0 0 0 0 {t} host {t}\n"
+
+
+@pytest.mark.parametrize(
+    ("odom_times", "laser_moves", "want", "reason"),
+    [
+        ((1.0, 2.0, 3.0), True, "ODOM", False),  # a clean ODOM series: kept
+        ((1.0, 3.0, 2.0), True, "FLASER", True),  # out of order: the scans' own poses
+        ((1.0, 3.0, 2.0), False, "ODOM", False),  # ... unless they never move (nothing better there)
+    ],
+)
+def test_odometry_from_laser_poses_when_odom_lines_go_back_in_time(
+    tmp_path, odom_times, laser_moves, want, reason
+):
+    lines = [_odom_line(t, 10 * t) for t in odom_times]
+    lines += [flaser(181, t + 0.5, pose=(t if laser_moves else 0, 0, 0)) for t in (1.0, 2.0, 3.0)]
+    p = tmp_path / "o.log"
+    p.write_text("".join(lines))
+    log = open_log(p)
+    info = log.info()
+    assert info.odom_topic == want
+    assert ("go back in time (1 of 3)" in info.odom_source) == reason
+    _, odoms = split(log.messages())
+    xs = [o.x for o in odoms]
+    assert xs == ([1.0, 2.0, 3.0] if want == "FLASER" else [10 * t for t in odom_times])
+    assert open_log(p, odom_topic="ODOM").info().odom_topic == "ODOM"  # the user's choice is kept

@@ -21,7 +21,11 @@ Conventions (as CARMEN's own ``carmen_string_to_laser_laser_message_orig``):
 * Stamps: the message timestamp field (sensor time), not the logger timestamp. Lines are yielded in
   file order.
 * Odometry: ODOM lines when the log has any; otherwise the odometry pose fields of the laser lines
-  (FLASER odom_x/y/theta, ROBOTLASER1 robot_x/y/theta), yielded just before their scan.
+  (FLASER odom_x/y/theta, ROBOTLASER1 robot_x/y/theta), yielded just before their scan. Also those
+  fields when ODOM lines go back in time (a merged or re-stamped log: intel.gfs.log's 1,498 of 14,541)
+  and the laser lines' own fields move: they are the pose the logger stamped with each scan, while
+  odometry interpolated between out-of-order ODOM lines is wrong at the scans' times. ``odom_topic``
+  ``ODOM`` keeps the ODOM lines.
 * The laser offset is not in FLASER lines: ``laser_to_base()`` returns the mean laser-minus-robot
   offset of ROBOTLASER1 lines, None for FLASER logs (configure it).
 
@@ -83,6 +87,14 @@ def _lines(path: Path, stats: ReadStats | None) -> Iterator[str]:
             stats.warn("%s ends early after %d lines (damaged or cut gzip: %s)", path.name, n, exc)
 
 
+def _odometry_fields(tag: str, rest: str) -> tuple[str, ...]:
+    """The robot pose fields of a laser line (its tokens after the tag), unparsed: FLASER/RLASER
+    ``odom_x odom_y odom_theta`` 6th–4th from the end, ROBOTLASERx ``robot_x robot_y robot_theta``
+    11th–9th."""
+    tok = rest.rsplit(None, 11)
+    return tuple(tok[-6:-3]) if tag in ("FLASER", "RLASER") else tuple(tok[-11:-8])
+
+
 class _Laser:
     """Parsed fields of one laser line."""
 
@@ -130,6 +142,8 @@ class CarmenReader:
         self._params: dict[str, str] = {}
         self._start: float | None = None
         self._end: float | None = None
+        self._odom_back = 0  # ODOM lines stamped before the ODOM line above them
+        self._moving: set[str] = set()  # laser tags whose odometry fields are not all the same pose
         self._prescan()
         self._want_scan, self._want_odom = scan_topic, odom_topic
         self.scan_topic, self.odom_topic, self._problems = self._select()
@@ -137,6 +151,7 @@ class CarmenReader:
     def _prescan(self) -> None:
         """Count line tags, read PARAMs and the time span (cheap: no number parsing of readings)."""
         name = self.path.name
+        last_odom, first_pose = -math.inf, {}
         try:
             for line in _lines(self.path, self.stats):
                 tag, rest = (line.split(None, 1) + ["", ""])[:2]
@@ -156,6 +171,13 @@ class CarmenReader:
                     if math.isfinite(t):
                         self._start = t if self._start is None else min(self._start, t)
                         self._end = t if self._end is None else max(self._end, t)
+                    if tag == ODOM_TAG:
+                        self._odom_back += t < last_odom
+                        last_odom = t
+                    elif tag not in self._moving:
+                        pose = _odometry_fields(tag, rest)
+                        if first_pose.setdefault(tag, pose) != pose:
+                            self._moving.add(tag)
         except OSError as exc:
             raise LogError(
                 f"cannot read CARMEN log '{name}': {exc}", "check the file (gzip damaged?)"
@@ -199,7 +221,7 @@ class CarmenReader:
                         f"choose --odom-topic ODOM or a laser tag ({', '.join(lasers) or 'none'})",
                     )
                 )
-        elif self._counts.get(ODOM_TAG):
+        elif self._counts.get(ODOM_TAG) and not (self._odom_back and scan in self._moving):
             odom = ODOM_TAG
         elif scan:
             odom = scan
@@ -222,6 +244,8 @@ class CarmenReader:
             src = "ODOM lines"
         elif self.odom_topic:
             src = f"{self.odom_topic} odometry fields"
+            if not self._want_odom and self._counts.get(ODOM_TAG):
+                src += f"; ODOM lines go back in time ({self._odom_back} of {self._counts[ODOM_TAG]})"
         return LogInfo(
             format=self.format,
             path=str(self.path),
