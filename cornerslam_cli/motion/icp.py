@@ -247,7 +247,6 @@ class ScanMatcher:
         self.odometry_noise = odometry_noise  # covariance of an odometry increment (the filter's model)
         self.fusion = OdometryFusion(cfg)
         self.scans: deque[np.ndarray] = deque(maxlen=cfg.window)  # motion-frame points per map scan
-        self.scan_xy: deque[np.ndarray] = deque(maxlen=cfg.window)  # where each was taken
         self.local: LocalMap | None = None
         self.pose: np.ndarray | None = None  # fused pose of the previous scan
         self.odom: np.ndarray | None = None  # wheel pose of the previous scan
@@ -367,9 +366,5 @@ class ScanMatcher:
         self.last_map_pose = pose.copy()
         placed = transform_points(points, pose)
         self.scans.append(placed[voxel_thin(placed, cfg.voxel)])  # thinned alone first: a smaller union
-        self.scan_xy.append(pose[:2].copy())
-        while cfg.map_radius and np.hypot(*(self.scan_xy[0] - pose[:2])) > cfg.map_radius:
-            self.scans.popleft()
-            self.scan_xy.popleft()
         pts = np.concatenate(self.scans)
         self.local = LocalMap.build(pts[voxel_thin(pts, cfg.voxel)])

@@ -33,10 +33,7 @@ class ScanMatchConfig:
     }
 
     enabled: bool = True
-    window: int = num(10, ge=1, le=1000)  # scans kept in the local map, at most
-    # m: a scan leaves the local map once the robot is this far from where it was taken (0: only
-    # ``window`` counts)
-    map_radius: float = num(0.0, ge=0.0, le=1000.0)
+    window: int = num(10, ge=1, le=1000)  # scans kept in the local map
     # m: a scan joins the local map when the robot moved this far ...
     map_update_distance: float = num(0.1, ge=0.0, le=1000.0)
     # rad: ... or turned this much since the last scan that joined
