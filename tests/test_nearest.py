@@ -32,6 +32,31 @@ def test_bucket_grid_answers_as_the_kd_tree(bound):
         assert np.array_equal(np.linalg.norm(pts[i_grid[ties]] - q[ties], axis=1), d_tree[ties])
 
 
+@pytest.mark.parametrize("k", [1, 5, 7])
+def test_bucket_grid_neighbours_are_the_kd_trees(k):
+    """Each map point's k nearest map points (the normals' neighbourhoods), as the kd-tree orders them;
+    an exact tie (quantised points) may be ordered otherwise, at the same distance."""
+    rng = np.random.default_rng(6)
+    for pts in point_sets(rng):
+        kk = min(k, len(pts))
+        d_tree, i_tree = cKDTree(pts).query(pts, kk)
+        d_grid, i_grid = BucketGrid.build(pts).neighbours(kk)
+        d_tree, i_tree = d_tree.reshape(len(pts), kk), i_tree.reshape(len(pts), kk)
+        assert np.array_equal(d_grid, d_tree)
+        ties = i_grid != i_tree
+        assert np.array_equal(
+            np.linalg.norm(pts[i_grid[ties]] - pts[np.nonzero(ties)[0]], axis=1), d_tree[ties]
+        )
+        if kk > 1:  # itself first (or a duplicate of it)
+            assert np.all((i_grid[:, 0] == np.arange(len(pts))) | (d_grid[:, 1] == 0.0))
+
+
+def test_bucket_grid_far_or_nan_queries_find_nothing():
+    pts = np.array([[0.0, 0.0], [1.0, 0.0]])
+    d, i = BucketGrid.build(pts).query(np.array([[np.nan, 0.0], [1e300, -1e300], [0.0, np.inf]]), 1.0)
+    assert i.tolist() == [2, 2, 2] and np.all(d == np.inf)
+
+
 def test_bucket_grid_none_in_range_is_k_and_inf():
     pts = np.array([[0.0, 0.0], [1.0, 0.0]])
     d, i = BucketGrid.build(pts).query(np.array([[0.5, 3.0], [0.1, 0.0]]), 1.0)

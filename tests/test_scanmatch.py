@@ -256,14 +256,14 @@ def test_closed_form_normals_match_eigh():
     from scipy.spatial import cKDTree
 
     from cornerslam_cli.motion.icp import line_normals
+    from cornerslam_cli.motion.nearest import BucketGrid
 
     rng = np.random.default_rng(7)
     t = rng.uniform(0, 3, 200)
     pts = np.column_stack((t, 0.4 * t + rng.normal(0, 0.002, t.size)))  # a noisy line
     pts = np.vstack((pts, rng.uniform(5, 9, (60, 2))))  # and clutter
-    tree = cKDTree(pts)
-    normals, ok = line_normals(pts, tree)
-    _, idx = tree.query(pts, 5)
+    normals, ok = line_normals(pts, BucketGrid.build(pts))
+    _, idx = cKDTree(pts).query(pts, 5)
     nb = pts[idx] - pts[idx].mean(axis=1, keepdims=True)
     w, v = np.linalg.eigh(np.einsum("nki,nkj->nij", nb, nb))
     np.testing.assert_allclose(np.abs(np.einsum("ij,ij->i", normals, v[:, :, 0])), 1.0, atol=1e-6)
@@ -291,9 +291,8 @@ def test_normals_do_not_depend_on_which_tied_neighbour_is_fifth():
     quantised ranges): one would make the neighbourhood a line, the other not. A last-bit nudge of either,
     or another point order, must not change the normal or whether there is one (it did: the Intel
     figures then depended on the CPU's BLAS kernels, docs/results/intel_spread.md)."""
-    from scipy.spatial import cKDTree
-
     from cornerslam_cli.motion.icp import line_normals
+    from cornerslam_cli.motion.nearest import BucketGrid
 
     centre, on_line = [0.0, 0.0], [[0.05, 0.0], [-0.05, 0.0], [0.1, 0.0]]
     a, b = np.array([-0.15, 0.0]), np.array([0.0, 0.15])  # both exactly 0.15 m from the centre
@@ -304,7 +303,7 @@ def test_normals_do_not_depend_on_which_tied_neighbour_is_fifth():
         pb[1] = np.nextafter(pb[1], pb[1] + nudge_b) if nudge_b else pb[1]
         for order in ([0, 1, 2, 3, 4, 5], [5, 4, 3, 2, 1, 0], [0, 5, 1, 4, 2, 3]):
             pts = np.array([centre, *on_line, pa, pb])[order]
-            normals, ok = line_normals(pts, cKDTree(pts))
+            normals, ok = line_normals(pts, BucketGrid.build(pts))
             i = order.index(0)
             seen.add((bool(ok[i]), *np.round(np.abs(normals[i]), 12)))
     assert len(seen) == 1, seen
