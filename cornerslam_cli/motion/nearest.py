@@ -30,7 +30,6 @@ CELLS_PER_POINT = 8  # the grid has at most this many cells per map point (its m
 MIN_CELL = 0.1  # m: ... and cells no smaller than this
 FIRST_SQUARE = 0.5  # cells: half-width of a query's first square
 SLACK = 1e-9  # relative (and metres): a square is widened by this (rounding of the cells' edges)
-FAR = 1e12  # m: a query point farther out than this from the origin has no map point near it
 
 
 @dataclass(frozen=True)
@@ -93,7 +92,7 @@ def _query(q, bound, xy, index, start, ox, oy, cell, nx, ny, dist, idx):
         while True:  # squares of doubling half-width: the first that holds a point within it has the nearest
             best_d2[0], best_i[0] = half * half, -1
             _collect(px, py, half, xy, index, start, ox, oy, cell, nx, ny, best_d2, best_i)
-            if best_i[0] >= 0 or half >= bound:
+            if best_i[0] >= 0 or not half < bound:  # (not <: also a NaN bound ends it)
                 break
             half = min(2.0 * half, bound)
         if best_i[0] < 0:
@@ -113,7 +112,7 @@ def _neighbours(points, xy, index, start, ox, oy, cell, nx, ny, dist, idx):
         while True:  # the k nearest within a square are the k nearest once the k-th is within its half-width
             d2[:], found[:] = np.inf, -1
             _collect(px, py, half, xy, index, start, ox, oy, cell, nx, ny, d2, found)
-            if d2[k - 1] < half * half or _covers(px, py, half, ox, oy, cell, nx, ny):
+            if d2[k - 1] < half * half or _covers(px, py, half, ox, oy, cell, nx, ny) or half == np.inf:
                 break
             half *= 2.0
         for j in range(k):
@@ -146,13 +145,14 @@ def _square(px, py, half, ox, oy, cell, nx, ny):
     """Cell ranges (i0, i1, j0, j1), inclusive and inside the grid, of the square of half-width ``half``
     (widened by SLACK) around (px, py)."""
     h = half * (1.0 + SLACK) + SLACK
-    if not (abs(px) < FAR and abs(py) < FAR):  # NaN or absurd: no cell (and no integer overflow)
+    if math.isnan(px) or math.isnan(py):
         return 0, -1, 0, -1
-    i0 = max(math.floor((px - h - ox) / cell), 0.0)
-    i1 = min(math.floor((px + h - ox) / cell), nx - 1.0)
-    j0 = max(math.floor((py - h - oy) / cell), 0.0)
-    j1 = min(math.floor((py + h - oy) / cell), ny - 1.0)
-    return int(min(i0, nx)), int(max(i1, -1.0)), int(min(j0, ny)), int(max(j1, -1.0))
+    # clamped as floats: a point far outside the grid gives an empty range, not an integer overflow
+    i0 = min(max(math.floor((px - h - ox) / cell), 0.0), float(nx))
+    i1 = max(min(math.floor((px + h - ox) / cell), nx - 1.0), -1.0)
+    j0 = min(max(math.floor((py - h - oy) / cell), 0.0), float(ny))
+    j1 = max(min(math.floor((py + h - oy) / cell), ny - 1.0), -1.0)
+    return int(i0), int(i1), int(j0), int(j1)
 
 
 @kernel
