@@ -465,6 +465,7 @@ def _config_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
         ("sigma_1e300", "sensor.sigma_r_near=1e300", ("'sensor.sigma_r_near' = 1e+300 is out of range",)),
         ("group_size", "association.pca.group_size=1000000", ("'association.pca.group_size'", "[1, 1000]")),
         ("adapt_samples", "scan_match.adapt_min_samples=1000", ("adapt_min_samples = 1000 exceeds",)),
+        ("search_window", "scan_match.search_max_xy=100", ("'scan_match.search_max_xy' = 100", "(0, 5]")),
         ("on_as_string", "input.odom_frame=on", ("'input.odom_frame' must be a string, got True", "quote")),
         ("no_equals", "ekf.alpha1", ("is not key=value",)),
         ("empty_key", "=0.1", ("has an empty key",)),

@@ -32,6 +32,45 @@ def test_bucket_grid_answers_as_the_kd_tree(bound):
         assert np.array_equal(np.linalg.norm(pts[i_grid[ties]] - q[ties], axis=1), d_tree[ties])
 
 
+@pytest.mark.parametrize("k", [1, 5, 7])
+def test_bucket_grid_neighbours_are_the_kd_trees(k):
+    """Each map point's k nearest map points (the normals' neighbourhoods), as the kd-tree orders them;
+    an exact tie (quantised points) may be ordered otherwise, at the same distance."""
+    rng = np.random.default_rng(6)
+    for pts in point_sets(rng):
+        kk = min(k, len(pts))
+        d_tree, i_tree = cKDTree(pts).query(pts, kk)
+        d_grid, i_grid = BucketGrid.build(pts).neighbours(kk)
+        d_tree, i_tree = d_tree.reshape(len(pts), kk), i_tree.reshape(len(pts), kk)
+        assert np.array_equal(d_grid, d_tree)
+        ties = i_grid != i_tree
+        assert np.array_equal(
+            np.linalg.norm(pts[i_grid[ties]] - pts[np.nonzero(ties)[0]], axis=1), d_tree[ties]
+        )
+        if kk > 1:  # itself first (or a duplicate of it)
+            assert np.all((i_grid[:, 0] == np.arange(len(pts))) | (d_grid[:, 1] == 0.0))
+
+
+def test_bucket_grid_far_or_nan_queries_find_nothing():
+    pts = np.array([[0.0, 0.0], [1.0, 0.0]])
+    d, i = BucketGrid.build(pts).query(np.array([[np.nan, 0.0], [1e300, -1e300], [0.0, np.inf]]), 1.0)
+    assert i.tolist() == [2, 2, 2] and np.all(d == np.inf)
+
+
+def test_bucket_grid_of_points_1e30_apart_answers_as_the_kd_tree():
+    """Beams at 1e30 m (a laser with range_max = inf, tests/fault_corpus.py) in the map: the
+    neighbourhoods end (they once doubled their square for ever) and are the tree's."""
+    pts = np.array([[0.0, 0.0], [0.05, 0.0], [1e30, 1e30], [-1e30, 5.0], [0.11, 0.0], [0.1, 0.2]])
+    d_grid, i_grid = BucketGrid.build(pts).neighbours(3)
+    d_tree, i_tree = cKDTree(pts).query(pts, 3)
+    assert np.array_equal(d_grid, d_tree)
+    ties = i_grid != i_tree  # from 1e30 m, the points 5 cm apart are exactly as far
+    assert ties[:2].sum() == 0 and ties[4:].sum() == 0
+    assert np.array_equal(np.linalg.norm(pts[i_grid[ties]] - pts[np.nonzero(ties)[0]], axis=1), d_tree[ties])
+    d, i = BucketGrid.build(pts).query(pts + 0.01, 1.0)
+    assert np.array_equal(i, cKDTree(pts).query(pts + 0.01, distance_upper_bound=1.0)[1])
+
+
 def test_bucket_grid_none_in_range_is_k_and_inf():
     pts = np.array([[0.0, 0.0], [1.0, 0.0]])
     d, i = BucketGrid.build(pts).query(np.array([[0.5, 3.0], [0.1, 0.0]]), 1.0)

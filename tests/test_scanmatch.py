@@ -102,6 +102,43 @@ def test_branch_and_bound_equals_the_exhaustive_search(office):
     assert got.evaluated < 0.2 * len(angle_steps(points, window.theta, res)) * (2 * W + 1) ** 2
 
 
+@pytest.mark.parametrize("nc", [1, 2, 6, 26])
+def test_coarse_bounds_summed_in_blocks_are_the_whole_gathers_bit_for_bit(monkeypatch, nc):
+    """The search's coarse bounds, gathered a block of angles and points at a time (bounded memory), are
+    the sums numpy gives for the whole gather at once — also when one angle's terms exceed the cap."""
+    from cornerslam_cli.motion import correlative
+
+    rng = np.random.default_rng(8)
+    U = rng.random((4 * nc + 40, 4 * nc + 40))
+    px, py = rng.integers(0, 40, (2, 31, 300))
+    offs = BLOCK * np.arange(nc)
+    whole = U[
+        px[:, :, None, None] + offs[None, None, :, None], py[:, :, None, None] + offs[None, None, None, :]
+    ]
+    for cap in (1 << 21, 7 * 300 * nc * nc, 45 * nc * nc, 1):  # all at once, 7 angles, 45 points, one
+        monkeypatch.setattr(correlative, "BOUND_TERMS", cap)
+        assert np.array_equal(correlative.coarse_sums(U, px, py, offs), whole.sum(axis=1))
+
+
+def test_a_wide_search_window_stays_within_bounded_memory(office):
+    """A 5 m window (the largest search_max_xy) gathered its coarse bounds all at once (here 109 MB, with
+    a real scan's points 293 MB); in blocks the search's peak stays below 60 MB (38 MB, most of it the
+    likelihood field), and the truth is still found."""
+    import tracemalloc
+
+    rng = np.random.default_rng(9)
+    ref_pose, true_pose = np.array([6.0, 5.0, 0.0]), np.array([6.8, 5.3, 0.3])
+    map_pts = transform_points(scan_points(office, ref_pose, rng, 0.01), ref_pose)
+    points = scan_points(office, true_pose, rng, 0.01)
+    tracemalloc.start()
+    found = search(points, map_pts, true_pose + [0.5, -0.4, 0.1], Window(5.0, 0.6), 0.1, 0.1)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    d, a = pose_error(found.pose, true_pose)
+    assert d < 0.15 and a < 0.03
+    assert peak < 60e6, f"{peak / 1e6:.0f} MB"
+
+
 def test_an_excluded_neighbourhood_gives_the_best_pose_outside_it(office):
     # the runner-up of loop verification on points (graph/points.py): the best of the window's poses
     # that are not within xy / theta of the one found first, by brute force
@@ -245,7 +282,14 @@ def test_voxel_thin_matches_a_brute_force_cell_count():
 
 @pytest.mark.parametrize(
     "key,value",
-    [("window", "0"), ("min_fit", "1.5"), ("robust_scale", "0"), ("gate", "-1"), ("voxl", "0.1")],
+    [
+        ("window", "0"),
+        ("min_fit", "1.5"),
+        ("robust_scale", "0"),
+        ("gate", "-1"),
+        ("voxl", "0.1"),
+        ("search_max_xy", "100"),
+    ],
 )
 def test_bad_scan_match_keys_are_config_errors(key, value):
     with pytest.raises(ConfigError, match=f"scan_match.{key}"):
@@ -256,14 +300,14 @@ def test_closed_form_normals_match_eigh():
     from scipy.spatial import cKDTree
 
     from cornerslam_cli.motion.icp import line_normals
+    from cornerslam_cli.motion.nearest import BucketGrid
 
     rng = np.random.default_rng(7)
     t = rng.uniform(0, 3, 200)
     pts = np.column_stack((t, 0.4 * t + rng.normal(0, 0.002, t.size)))  # a noisy line
     pts = np.vstack((pts, rng.uniform(5, 9, (60, 2))))  # and clutter
-    tree = cKDTree(pts)
-    normals, ok = line_normals(pts, tree)
-    _, idx = tree.query(pts, 5)
+    normals, ok = line_normals(pts, BucketGrid.build(pts))
+    _, idx = cKDTree(pts).query(pts, 5)
     nb = pts[idx] - pts[idx].mean(axis=1, keepdims=True)
     w, v = np.linalg.eigh(np.einsum("nki,nkj->nij", nb, nb))
     np.testing.assert_allclose(np.abs(np.einsum("ij,ij->i", normals, v[:, :, 0])), 1.0, atol=1e-6)
@@ -291,9 +335,8 @@ def test_normals_do_not_depend_on_which_tied_neighbour_is_fifth():
     quantised ranges): one would make the neighbourhood a line, the other not. A last-bit nudge of either,
     or another point order, must not change the normal or whether there is one (it did: the Intel
     figures then depended on the CPU's BLAS kernels, docs/results/intel_spread.md)."""
-    from scipy.spatial import cKDTree
-
     from cornerslam_cli.motion.icp import line_normals
+    from cornerslam_cli.motion.nearest import BucketGrid
 
     centre, on_line = [0.0, 0.0], [[0.05, 0.0], [-0.05, 0.0], [0.1, 0.0]]
     a, b = np.array([-0.15, 0.0]), np.array([0.0, 0.15])  # both exactly 0.15 m from the centre
@@ -304,7 +347,7 @@ def test_normals_do_not_depend_on_which_tied_neighbour_is_fifth():
         pb[1] = np.nextafter(pb[1], pb[1] + nudge_b) if nudge_b else pb[1]
         for order in ([0, 1, 2, 3, 4, 5], [5, 4, 3, 2, 1, 0], [0, 5, 1, 4, 2, 3]):
             pts = np.array([centre, *on_line, pa, pb])[order]
-            normals, ok = line_normals(pts, cKDTree(pts))
+            normals, ok = line_normals(pts, BucketGrid.build(pts))
             i = order.index(0)
             seen.add((bool(ok[i]), *np.round(np.abs(normals[i]), 12)))
     assert len(seen) == 1, seen

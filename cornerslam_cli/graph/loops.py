@@ -322,7 +322,7 @@ def overlap_fitness(points: np.ndarray, local: LocalMap, pose: np.ndarray, inlie
     """Share of ``points`` (b's frame) placed by ``pose`` that overlap ``local`` (within
     ``OVERLAP_DISTANCE`` of one of its points) and lie within ``inlier_distance`` of one; 0 when fewer
     than ``MIN_OVERLAP_POINTS`` overlap."""
-    dist, _ = local.tree.query(transform_points(points, pose), distance_upper_bound=OVERLAP_DISTANCE)
+    dist, _ = local.grid.query(transform_points(points, pose), OVERLAP_DISTANCE)
     overlap = int(np.count_nonzero(dist < OVERLAP_DISTANCE))
     if overlap < MIN_OVERLAP_POINTS:
         return 0.0

@@ -25,6 +25,9 @@ import numpy as np
 from scipy import ndimage
 
 BLOCK = 4  # fine cells per coarse cell side
+# the coarse bounds are summed over at most this many (angle, point, coarse cell) terms at a time: their
+# memory (8 bytes each) stays bounded whatever the window (a 5 m window gathered all at once took 293 MB)
+BOUND_TERMS = 1 << 21
 MAX_ANGLES = 121  # rotations scored per window at most (the step grows on wide windows)
 MIN_ANGLE_STEP = 0.002  # rad
 # score lost per (offset / window half-width)² on each axis: among poses that fit about equally (along a
@@ -93,6 +96,27 @@ def block_max(L: np.ndarray, b: int) -> np.ndarray:
     return U
 
 
+def coarse_sums(U: np.ndarray, px: np.ndarray, py: np.ndarray, offs: np.ndarray) -> np.ndarray:
+    """S (A, nc, nc) with S[a, i, j] = Σ_p U[px[a, p] + offs[i], py[a, p] + offs[j]], gathered a block of
+    angles and points at a time (at most ``BOUND_TERMS`` terms): the sums of the whole gather, bit for
+    bit — numpy sums a middle axis in order, so a block's sum continues from the previous one's."""
+    A, n = px.shape
+    per_point = len(offs) ** 2
+    # one coarse cell: numpy sums the points pairwise (a contiguous axis), so they are not split
+    points_step = n if per_point == 1 else max(1, min(n, BOUND_TERMS // per_point))
+    angles_step = max(1, BOUND_TERMS // (points_step * per_point))
+    out = np.empty((A, len(offs), len(offs)))
+    for a in range(0, A, angles_step):
+        rows = slice(a, a + angles_step)
+        acc = None
+        for p in range(0, n, points_step):  # more than one block only when one angle's terms exceed the cap
+            cols = slice(p, p + points_step)
+            terms = U[px[rows, cols, None, None] + offs[:, None], py[rows, cols, None, None] + offs]
+            acc = (terms if acc is None else np.concatenate((acc[:, None], terms), axis=1)).sum(axis=1)
+        out[rows] = acc
+    return out
+
+
 def angle_steps(points: np.ndarray, theta: float, res: float) -> np.ndarray:
     """Rotations (offsets from the guess) of a window of half-width ``theta``: a step that moves the
     90th-percentile-range point by one cell (Olson), coarser when that would exceed MAX_ANGLES."""
@@ -135,10 +159,7 @@ def search(
     U = block_max(L, BLOCK)
     offs = BLOCK * np.arange(nc)
     # bound[a, i, j] = Σ_points U[px + 4i, py + 4j] / n ≥ the score of every fine offset of coarse cell (i, j)
-    bound = U[
-        px[:, :, None, None] + offs[None, None, :, None], py[:, :, None, None] + offs[None, None, None, :]
-    ]
-    bound = bound.sum(axis=1) / n
+    bound = coarse_sums(U, px, py, offs) / n
     # minus the smallest pull towards the guess inside each coarse cell: still a bound
     near = np.clip(0, offs - W, offs + BLOCK - 1 - W)  # per axis, the cell offset closest to the guess
     bound -= PULL * (

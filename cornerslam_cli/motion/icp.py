@@ -27,7 +27,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..geometry import (
     compose,
@@ -71,20 +70,20 @@ def cell_keys(points: np.ndarray, size: float) -> np.ndarray:
     return (cells[:, 0] << 32) + (cells[:, 1] & 0xFFFFFFFF)
 
 
-def line_normals(points: np.ndarray, tree: cKDTree) -> tuple[np.ndarray, np.ndarray]:
+def line_normals(points: np.ndarray, grid: BucketGrid) -> tuple[np.ndarray, np.ndarray]:
     """Unit normals (k, 2) of the line each point lies on (PCA of its 5 nearest neighbours) and which
     points have one (neighbours close and on a line; a point in clutter gets none).
 
     Neighbours as far as the 5th (to ``NORMAL_TIE``) join it: on a laser scan with ranges quantised to
     1 cm, the two beams either side of a point are often exactly equidistant from it, and which one the
     kd-tree calls 5th would otherwise be decided by the last bit of the coordinates — so by the CPU's
-    floating-point kernels (docs/results/intel_spread.md).
+    floating-point kernels (docs/results/intel_spread.md). ``grid`` is the bucket grid of ``points``
+    (motion/nearest.py: the kd-tree's neighbours, faster).
     """
     n = len(points)
     k = min(NORMAL_NEIGHBOURS, n)
     q = min(NORMAL_NEIGHBOURS + NORMAL_TIED_EXTRA, n)
-    dist, idx = tree.query(points, q)
-    dist, idx = dist.reshape(n, q), idx.reshape(n, q)
+    dist, idx = grid.neighbours(q)
     # the k nearest and any tied with the k-th; their 2×2 scatter [[a, b], [b, c]] about their mean
     a, b, c = scatter = np.empty((3, n))  # rows: contiguous, as numpy's SIMD loops below had them
     neighbour_scatter(points, dist, idx, k, NORMAL_TIE, scatter)
@@ -100,16 +99,15 @@ def line_normals(points: np.ndarray, tree: cKDTree) -> tuple[np.ndarray, np.ndar
 
 @dataclass
 class LocalMap:
-    """Map points (k, 2), their kd-tree (for the normals), their bucket grid (the nearest-point queries of
-    ICP: motion/nearest.py), unit normals (k, 2) and which points have a usable normal.
+    """Map points (k, 2), their bucket grid (the nearest-point queries of ICP and the normals'
+    neighbourhoods: motion/nearest.py), unit normals (k, 2) and which points have a usable normal.
 
     ``padded_points``/``padded_normals`` have one extra row (a zero normal) at index k, where the
-    kd-tree sends queries with no neighbour in range: residual and Jacobian rows of such points, and of
+    grid sends queries with no neighbour in range: residual and Jacobian rows of such points, and of
     points without a normal, are then zero without any masking.
     """
 
     points: np.ndarray
-    tree: cKDTree
     grid: BucketGrid
     normals: np.ndarray
     has_normal: np.ndarray
@@ -118,12 +116,11 @@ class LocalMap:
 
     @staticmethod
     def build(points: np.ndarray) -> LocalMap:
-        tree = cKDTree(points)
-        normals, has_normal = line_normals(points, tree)
+        grid = BucketGrid.build(points)
+        normals, has_normal = line_normals(points, grid)
         padded_points = np.vstack((points, np.zeros((1, 2))))
         padded_normals = np.vstack((np.where(has_normal[:, None], normals, 0.0), np.zeros((1, 2))))
-        grid = BucketGrid.build(points)
-        return LocalMap(points, tree, grid, normals, has_normal, padded_points, padded_normals)
+        return LocalMap(points, grid, normals, has_normal, padded_points, padded_normals)
 
 
 def load_kernels() -> None:

@@ -1,15 +1,19 @@
-"""Nearest map point within a distance, on a bucket grid (Numba): the queries of every ICP iteration.
+"""Nearest map points on a bucket grid (Numba): the queries of every ICP iteration and the neighbourhoods
+of the local map's normals.
 
 ICP (motion/icp.py) asks for the nearest local-map point of each of ~400–600 scan points, ~8 times per
-scan, with a distance bound; through scipy's cKDTree that was about half of the scan-matching time, most
-of it per-call overhead and tree descent on a map of ~1,000 points. Here the map points are bucketed in
-square cells (a counting sort) and a query looks at the cells in rings around its own, nearest cells
-first, skipping a cell whose box is already farther than the best point found or the bound.
+scan, with a distance bound, and each local-map rebuild for the 7 nearest map points of every map point;
+through scipy's cKDTree that was most of the scan-matching time, mostly per-call overhead and tree
+descent on a map of ~1,000 points. Here the map points are bucketed in square cells (a counting sort),
+and a query looks at the cells that overlap a square around its point, of half-width half a cell first,
+doubled until the square holds the answer (every point nearer than the square's half-width lies in it)
+or reaches the bound: most queries look at one to four cells.
 
 The answer is the cKDTree's: squared distances are computed as it computes them (dx² + dy², no fused
 multiply-add), a point counts when that is strictly below bound², and the distance returned is its
-square root. Only an exact tie between two map points (equal squared distances to the last bit) may be
-broken differently — which of the two the tree returns depends on its build. tests/test_nearest.py
+square root. The answer is the least (squared distance, index), whatever order the cells are visited
+in; only an exact tie between two map points (equal squared distances to the last bit) may be broken
+differently from the tree — which of the two it returns depends on its build. tests/test_nearest.py
 compares the two on random and quantised point sets.
 """
 
@@ -24,7 +28,8 @@ from ..features.jit import kernel
 
 CELLS_PER_POINT = 8  # the grid has at most this many cells per map point (its memory and build time) ...
 MIN_CELL = 0.1  # m: ... and cells no smaller than this
-SLACK = 1e-9  # relative: a cell's box distance is compared with this margin (rounding of its corners)
+FIRST_SQUARE = 0.5  # cells: half-width of a query's first square
+SLACK = 1e-9  # relative (and metres): a square is widened by this (rounding of the cells' edges)
 
 
 @dataclass(frozen=True)
@@ -64,67 +69,94 @@ class BucketGrid:
         _query(q, bound, self.xy, self.index, self.start, ox, oy, self.cell, self.nx, self.ny, dist, idx)
         return dist, idx
 
+    def neighbours(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """(distances, indices), each (n, k), of the ``k`` ≤ n nearest map points of every map point
+        (itself first), nearest first — as cKDTree.query(points, k)."""
+        n = len(self.xy)
+        dist, idx = np.empty((n, k)), np.empty((n, k), dtype=np.int64)
+        points = np.empty_like(self.xy)
+        points[self.index] = self.xy
+        ox, oy = float(self.origin[0]), float(self.origin[1])
+        _neighbours(points, self.xy, self.index, self.start, ox, oy, self.cell, self.nx, self.ny, dist, idx)
+        return dist, idx
+
 
 @kernel
 def _query(q, bound, xy, index, start, ox, oy, cell, nx, ny, dist, idx):
     """Fill ``dist``/``idx`` (see :meth:`BucketGrid.query`)."""
     k = len(xy)
-    rings = int(bound / cell) + 2  # every cell a point closer than ``bound`` can lie in
+    best_d2, best_i = np.empty(1), np.empty(1, dtype=np.int64)
     for n in range(len(q)):
         px, py = q[n, 0], q[n, 1]
-        cx, cy = int(math.floor((px - ox) / cell)), int(math.floor((py - oy) / cell))
-        best, found = bound * bound, -1
-        for r in range(rings):
-            near = (r - 1) * cell  # no point of ring r (cells r away from q's) is nearer than this
-            if near > 0.0 and near * near * (1.0 - SLACK) >= best:
+        half = min(bound, FIRST_SQUARE * cell)
+        while True:  # squares of doubling half-width: the first that holds a point within it has the nearest
+            best_d2[0], best_i[0] = half * half, -1
+            _collect(px, py, half, xy, index, start, ox, oy, cell, nx, ny, best_d2, best_i)
+            if best_i[0] >= 0 or not half < bound:  # (not <: also a NaN bound ends it)
                 break
-            for i in range(max(cx - r, 0), min(cx + r, nx - 1) + 1):
-                if i == cx - r or i == cx + r:  # a full column of the ring
-                    j0, j1, step = max(cy - r, 0), min(cy + r, ny - 1), 1
-                else:  # its two ends
-                    j0, j1, step = cy - r, cy + r, max(2 * r, 1)
-                for j in range(j0, j1 + 1, step):
-                    if 0 <= j < ny:
-                        best, found = _scan_cell(
-                            px,
-                            py,
-                            xy,
-                            index,
-                            start,
-                            i * ny + j,
-                            ox + i * cell,
-                            oy + j * cell,
-                            cell,
-                            best,
-                            found,
-                        )
-            if cx - r <= 0 and cx + r >= nx - 1 and cy - r <= 0 and cy + r >= ny - 1:
-                break  # the ring covered the whole grid
-        if found < 0:
+            half = min(2.0 * half, bound)
+        if best_i[0] < 0:
             dist[n], idx[n] = np.inf, k
         else:
-            dist[n], idx[n] = math.sqrt(best), found
+            dist[n], idx[n] = math.sqrt(best_d2[0]), best_i[0]
 
 
 @kernel
-def _scan_cell(px, py, xy, index, start, c, x0, y0, cell, best, found):
-    """(best squared distance, its point) after the points of cell ``c`` (lower-left corner x0, y0),
-    unless the whole cell is farther than ``best``. A point counts when strictly nearer (as cKDTree);
-    an exact tie goes to the lower index."""
-    if start[c] == start[c + 1] or _box2(px, py, x0, y0, cell) > best * (1.0 + SLACK):
-        return best, found
-    for m in range(start[c], start[c + 1]):
-        dx = xy[m, 0] - px
-        dy = xy[m, 1] - py
-        d2 = dx * dx + dy * dy
-        if d2 < best or (d2 == best and 0 <= index[m] < found):
-            best, found = d2, index[m]
-    return best, found
+def _neighbours(points, xy, index, start, ox, oy, cell, nx, ny, dist, idx):
+    """Fill ``dist``/``idx`` (n, k) (see :meth:`BucketGrid.neighbours`)."""
+    n, k = idx.shape
+    d2, found = np.empty(k), np.empty(k, dtype=np.int64)
+    for p in range(n):
+        px, py = points[p, 0], points[p, 1]
+        half = FIRST_SQUARE * cell
+        while True:  # the k nearest within a square are the k nearest once the k-th is within its half-width
+            d2[:], found[:] = np.inf, -1
+            _collect(px, py, half, xy, index, start, ox, oy, cell, nx, ny, d2, found)
+            if d2[k - 1] < half * half or _covers(px, py, half, ox, oy, cell, nx, ny) or half == np.inf:
+                break
+            half *= 2.0
+        for j in range(k):
+            dist[p, j], idx[p, j] = math.sqrt(d2[j]), found[j]
 
 
 @kernel
-def _box2(px, py, x0, y0, cell):
-    """Squared distance from (px, py) to the box [x0, x0 + cell] × [y0, y0 + cell]."""
-    dx = max(x0 - px, 0.0, px - x0 - cell)
-    dy = max(y0 - py, 0.0, py - y0 - cell)
-    return dx * dx + dy * dy
+def _collect(px, py, half, xy, index, start, ox, oy, cell, nx, ny, d2, found):
+    """Merge the points of the cells overlapping the square of half-width ``half`` around (px, py) into
+    the sorted lists ``d2``/``found`` of the len(d2) least (squared distance, index) so far; a point
+    counts when strictly below the last entry's squared distance (an exact tie: the lower index first)."""
+    i0, i1, j0, j1 = _square(px, py, half, ox, oy, cell, nx, ny)
+    last = len(d2) - 1
+    for i in range(i0, i1 + 1):
+        for c in range(i * ny + j0, i * ny + j1 + 1):
+            for m in range(start[c], start[c + 1]):
+                dx = xy[m, 0] - px
+                dy = xy[m, 1] - py
+                e = dx * dx + dy * dy
+                if e < d2[last] or (e == d2[last] and 0 <= index[m] < found[last]):
+                    s = last  # insertion: shift the farther entries down
+                    while s > 0 and (e < d2[s - 1] or (e == d2[s - 1] and index[m] < found[s - 1])):
+                        d2[s], found[s] = d2[s - 1], found[s - 1]
+                        s -= 1
+                    d2[s], found[s] = e, index[m]
+
+
+@kernel
+def _square(px, py, half, ox, oy, cell, nx, ny):
+    """Cell ranges (i0, i1, j0, j1), inclusive and inside the grid, of the square of half-width ``half``
+    (widened by SLACK) around (px, py)."""
+    h = half * (1.0 + SLACK) + SLACK
+    if math.isnan(px) or math.isnan(py):
+        return 0, -1, 0, -1
+    # clamped as floats: a point far outside the grid gives an empty range, not an integer overflow
+    i0 = min(max(math.floor((px - h - ox) / cell), 0.0), float(nx))
+    i1 = max(min(math.floor((px + h - ox) / cell), nx - 1.0), -1.0)
+    j0 = min(max(math.floor((py - h - oy) / cell), 0.0), float(ny))
+    j1 = max(min(math.floor((py + h - oy) / cell), ny - 1.0), -1.0)
+    return int(i0), int(i1), int(j0), int(j1)
+
+
+@kernel
+def _covers(px, py, half, ox, oy, cell, nx, ny):
+    """Whether the square of half-width ``half`` around (px, py) covers the whole grid."""
+    i0, i1, j0, j1 = _square(px, py, half, ox, oy, cell, nx, ny)
+    return i0 == 0 and j0 == 0 and i1 == nx - 1 and j1 == ny - 1

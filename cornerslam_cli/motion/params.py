@@ -64,7 +64,8 @@ class ScanMatchConfig:
     search_sigmas: float = num(3.0, gt=0.0, le=100.0)
     search_min_xy: float = num(0.1, ge=0.0, le=100.0)  # m
     search_min_theta: float = num(0.05, ge=0.0, le=math.pi)  # rad
-    search_max_xy: float = num(1.0, gt=0.0, le=100.0)  # m
+    # m: at most 5 (the search's memory and time grow with the window's area in grid cells)
+    search_max_xy: float = num(1.0, gt=0.0, le=5.0)
     search_max_theta: float = num(0.6, gt=0.0, le=math.pi)  # rad
     search_resolution: float = num(0.1, ge=0.01, le=10.0)  # m: grid cell of the likelihood field
     search_sigma: float = num(0.1, gt=0.0, le=10.0)  # m: its blur exp(−d²/2σ²)
