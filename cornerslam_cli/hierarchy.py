@@ -10,12 +10,11 @@ GTSAM) with loop closures verified by the configured associator (graph/loops.py)
   within ``loops.candidate_distance`` + ``candidate_sigmas`` σ of the closed submap's (its global
   marginal) under the graph's estimate (nearest first, at most ``max_candidates``); each is verified
   without a pose prior (graph/loops.py) — or, with too few corners in common or a corner pose the
-  points refute, on its points around the graph's prediction (graph/points.py, ``loops.point_search``)
-  —, its covariance scaled by the front end's learnt scale of ICP covariances, then gated against the
-  graph's predicted relative pose and its joint marginal (``loops.gate``, χ²₃); closures that disagree
-  with each other about where the submap is, beyond the graph's own uncertainty between the submaps
-  they come from, are all refused (perceptual aliasing). Accepted closures enter the graph under a
-  robust kernel.
+  points refute, on its points around the graph's prediction (graph/points.py) —, its covariance scaled
+  by the front end's learnt scale of ICP covariances, then gated against the graph's prediction and its
+  joint marginal (``loops.gate``, χ²₃); closures that disagree about where the submap is, beyond the
+  graph's uncertainty between the submaps they come from, are all refused (perceptual aliasing).
+  Accepted closures enter the graph under a robust kernel.
 - **Outputs.** Each step's causal (online) estimate is its submap origin's pose in the graph *at that
   step* ∘ the filter's local pose; :meth:`HierarchicalSlam.final_poses` is the same with the optimised
   origins — the smoothed trajectory written to trajectory.csv. Landmarks stay one per submap in the
@@ -32,11 +31,18 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .geometry import compose, rotate_covariance, rotate_pose_covariance, transform_points, wrap_angle
+from .geometry import (
+    compose,
+    compose_inverse_cov,
+    rotate_covariance,
+    rotate_pose_covariance,
+    transform_points,
+    wrap_angle,
+)
 from .graph.loops import FEW_CORNERS, LOW_FITNESS, NO_HYPOTHESIS, loop_associator, match_submaps
-from .graph.points import POINTS, match_points
+from .graph.points import POINTS, match_points, searchable
 from .graph.posegraph import PoseGraph
-from .graph.submap import LoopMatch, Submap, between
+from .graph.submap import LoopMatch, Submap
 from .motion.icp import voxel_thin
 from .slam import Slam, StepRecord
 
@@ -50,7 +56,6 @@ AGREE_XY, AGREE_THETA = 0.5, 0.2  # m, rad: two closures of one submap agree on 
 # the corners gave no verdict (too few in common, no hypothesis) or a pose the points refute (low fitness:
 # usually a corner constellation repeated elsewhere): the points decide, around the graph's prediction
 TO_POINTS = (FEW_CORNERS, NO_HYPOTHESIS, LOW_FITNESS)
-PAIR_GATE = 30.7  # χ²₃ 10⁻⁶ tail: two closures of one submap compatible under the graph (``consistent``)
 
 
 @dataclass(frozen=True)
@@ -218,14 +223,14 @@ class HierarchicalSlam:
         for a in self.candidates(b):
             m = match_submaps(a, b, cfg, self.loop_associate, self.cfg.scan_match)
             on_points = cfg.point_search and searched < cfg.point_searches and m.reason in TO_POINTS
+            on_points = on_points and searchable(a, b)  # (one that cannot run spends no search)
             searched += on_points
             pred = self.graph.relative(a.index, b.index) if on_points or m.accepted else None
             if on_points:
-                # (the corners' count kept unless the points refuted their pose)
-                kept = 0 if m.reason == LOW_FITNESS else m.n_corners
+                kept = 0 if m.reason == LOW_FITNESS else m.n_corners  # (0: the points refuted their pose)
                 m = replace(match_points(a, b, *pred, cfg, self.cfg.scan_match), n_corners=kept)
             m = replace(m, cov=m.cov * self._match_scale)
-            d2 = chi2(*pred, m) if m.accepted else float("nan")
+            d2 = chi2(*pred, m.pose, m.cov) if m.accepted else float("nan")
             reason = m.reason or ("" if d2 <= cfg.gate else f"disagrees with the graph (chi2 {d2:.1f})")
             ok = not reason
             if ok and on_points:
@@ -265,17 +270,17 @@ class HierarchicalSlam:
             self.graph.optimize()
 
     def consistent(self, closures: list[LoopRecord]) -> bool:
-        """Whether one submap's closures agree on where it is: placed within AGREE_XY / AGREE_THETA of
-        each other, or — two at a time — the pose a1→a2 they imply (m1 ∘ m2⁻¹) inside ``PAIR_GATE`` of
-        the graph's (on the sum of both covariances): right closures from two parts of the map the
+        """Whether one submap's closures agree on where it is, two at a time: placed within AGREE_XY /
+        AGREE_THETA of each other, or the pose a1→a2 they imply (m1 ∘ m2⁻¹) inside ``loops.pair_gate``
+        of the graph's (on the sum of the covariances) — right closures from two parts of the map the
         graph has not yet joined place b apart by as much as the graph's own error between them."""
-        if agree([self.placed(r) for r in closures]):
-            return True
         for i, r1 in enumerate(closures):
             for r2 in closures[i + 1 :]:
-                pose, cov = between(r1.match, r2.match)
+                if agree([self.placed(r1), self.placed(r2)]):
+                    continue
+                pose, cov = compose_inverse_cov(r1.match.pose, r1.match.cov, r2.match.pose, r2.match.cov)
                 pred, pred_cov = self.graph.relative(r1.submap_from, r2.submap_from)
-                if chi2(pred, pred_cov, replace(r1.match, pose=pose, cov=cov)) > PAIR_GATE:
+                if chi2(pred, pred_cov, pose, cov) > self.cfg.loops.pair_gate:
                     return False
         return True
 
@@ -339,12 +344,12 @@ class HierarchicalSlam:
         return [r.row(self.graph.loop_inlier(r.factor) if r.factor >= 0 else None) for r in self.loops]
 
 
-def chi2(pred: np.ndarray, pred_cov: np.ndarray, m: LoopMatch) -> float:
-    """Mahalanobis² of the match against the graph's predicted a→b pose ``pred``, on the sum of the
-    prediction's joint-marginal covariance and the match's (both of (x, y, θ) in a's frame)."""
-    e = np.asarray(m.pose, dtype=float) - pred
+def chi2(pred: np.ndarray, pred_cov: np.ndarray, pose: np.ndarray, cov: np.ndarray) -> float:
+    """Mahalanobis² of a measured a→b ``pose`` against the graph's prediction ``pred``, on the sum of the
+    prediction's joint-marginal covariance and the measurement's (both of (x, y, θ) in a's frame)."""
+    e = np.asarray(pose, dtype=float) - pred
     e[2] = wrap_angle(e[2])
-    return float(e @ np.linalg.solve(pred_cov + m.cov, e))
+    return float(e @ np.linalg.solve(pred_cov + cov, e))
 
 
 def agree(poses: list[np.ndarray]) -> bool:

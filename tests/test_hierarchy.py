@@ -17,8 +17,8 @@ from _run_helpers import run_cli
 import cornerslam_cli.hierarchy as hierarchy
 from cornerslam_cli.config import config_from
 from cornerslam_cli.frontend import frames, open_input
-from cornerslam_cli.geometry import compose, inverse, wrap_angle
-from cornerslam_cli.graph.submap import LoopMatch, between
+from cornerslam_cli.geometry import compose, compose_inverse_cov, inverse, relative, wrap_angle
+from cornerslam_cli.graph.submap import LoopMatch
 from cornerslam_cli.hierarchy import HierarchicalSlam, LoopRecord, agree
 from cornerslam_cli.report.tables import LOOP_COLUMNS, MAP_COLUMNS, TRAJECTORY_COLUMNS, read_csv
 
@@ -170,15 +170,15 @@ def test_agree_is_about_position_and_heading():
     assert not agree([p, p + [0.6, 0.0, 0.0]]) and not agree([p, p + [0.0, 0.0, 0.3]])
 
 
-def test_between_two_closures_against_monte_carlo():
-    # the a1→a2 pose two closures of one submap imply, m1 ∘ m2⁻¹, and its first-order covariance
+def test_the_pose_two_closures_imply_against_monte_carlo():
+    # a1→a2 = m1 ∘ m2⁻¹ of two closures of one submap (m1: a1→b, m2: a2→b), its first-order covariance
     rng = np.random.default_rng(4)
-    m1 = LoopMatch(np.array([3.0, -1.0, 0.4]), np.diag([4e-4, 1e-4, 2e-4]), 5, 0.9, True, "")
-    m2 = LoopMatch(np.array([-2.0, 2.5, -1.1]), np.diag([1e-4, 3e-4, 1e-4]), 5, 0.9, True, "")
-    pose, cov = between(m1, m2)
-    np.testing.assert_allclose(pose, compose(m1.pose, inverse(m2.pose)), atol=1e-12)
-    d1 = rng.multivariate_normal(m1.pose, m1.cov, 20000)
-    d2 = rng.multivariate_normal(m2.pose, m2.cov, 20000)
+    m1, c1 = np.array([3.0, -1.0, 0.4]), np.diag([4e-4, 1e-4, 2e-4])
+    m2, c2 = np.array([-2.0, 2.5, -1.1]), np.diag([1e-4, 3e-4, 1e-4])
+    pose, cov = compose_inverse_cov(m1, c1, m2, c2)
+    np.testing.assert_allclose(pose, compose(m1, inverse(m2)), atol=1e-12)
+    d1 = rng.multivariate_normal(m1, c1, 20000)
+    d2 = rng.multivariate_normal(m2, c2, 20000)
     z = np.array([compose(p, inverse(q)) for p, q in zip(d1, d2, strict=True)])
     z[:, 2] = wrap_angle(z[:, 2] - pose[2])
     z[:, :2] -= pose[:2]
@@ -186,34 +186,41 @@ def test_between_two_closures_against_monte_carlo():
 
 
 class _Graph:
-    """A pose graph stand-in: a1 at the origin, a2 10 m ahead, a1→a2 known to ``sigma`` m."""
+    """A pose graph stand-in: a1 at the origin, a2 10 m ahead turned 90°; a1→a2 known to ``sigma`` m
+    across and along, 0.01 rad."""
 
     def __init__(self, sigma):
         self.sigma = sigma
 
     def pose(self, i):
-        return np.array([10.0 * i, 0.0, 0.0])
+        return np.array([10.0 * i, 0.0, i * np.pi / 2])
 
     def relative(self, i, j):
-        return self.pose(j) - self.pose(i), np.diag([self.sigma**2, self.sigma**2, 1e-4])
+        return relative(self.pose(i), self.pose(j)), np.diag([self.sigma**2, self.sigma**2, 1e-4])
 
 
-@pytest.mark.parametrize(("sigma", "consistent"), [(1.0, True), (0.05, False)])
-def test_closures_placing_a_submap_apart_agree_when_the_graph_is_unsure_between_their_submaps(
-    sigma, consistent
+@pytest.mark.parametrize(
+    ("sigma", "closure_sigma", "consistent"),
+    [(1.0, 0.01, True), (0.05, 0.01, False), (0.05, 1.0, True)],
+)
+def test_closures_placing_a_submap_apart_agree_within_the_uncertainty_between_their_submaps(
+    sigma, closure_sigma, consistent
 ):
-    # b is truly 5 m past a1 and 4.2 m short of a2 (which the graph puts 0.8 m too far from a1): the two
-    # right closures place b 0.8 m apart. Consistent while the graph does not know a1→a2 better than
-    # that; aliasing when it does
-    cov = np.diag([1e-4, 1e-4, 1e-5])
+    # b is truly 5 m past a1 and (the graph puts a2 0.8 m too far along a1's x) the two right closures
+    # place b 0.8 m apart. Consistent while the graph does not know a1→a2 better than that (or the
+    # closures themselves are that uncertain); aliasing when both are sure
+    true_a2 = np.array([9.2, 0.0, np.pi / 2])
+    b = np.array([5.0, 1.0, 0.3])
+    cov = np.diag([closure_sigma**2, closure_sigma**2, 1e-5])
     rows = [
-        LoopRecord(9, a, 5, LoopMatch(np.array([x, 0.0, 0.0]), cov, 6, 0.9, True, ""), True, "")
-        for a, x in ((0, 5.0), (1, -4.2))
+        LoopRecord(9, a, 5, LoopMatch(relative(origin, b), cov, 6, 0.9, True, ""), True, "")
+        for a, origin in ((0, np.zeros(3)), (1, true_a2))
     ]
     hs = HierarchicalSlam.__new__(HierarchicalSlam)
-    hs.graph = _Graph(sigma)
+    hs.graph, hs.cfg = _Graph(sigma), config_from({}, [])
     assert not agree([hs.placed(r) for r in rows])
     assert hs.consistent(rows) == consistent
+    assert hs.consistent(rows + rows[:1]) == consistent  # a third closure agreeing with the first
 
 
 def test_closures_carry_the_front_ends_learnt_scale_of_fit_covariances(sim_log, monkeypatch):

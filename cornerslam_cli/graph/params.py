@@ -78,6 +78,10 @@ class LoopConfig:
     # ... unless two or more closures of the new submap agree with each other and each is within this
     # (10 × gate: the graph's σ too small by up to ~3×, as after a false closure); beyond it, refused
     group_gate: float = num(307.0, gt=0.0, le=1e12)
+    # two closures of one submap placing it apart (> 0.5 m / 0.2 rad) agree when the a1→a2 pose they
+    # imply fits the graph's within this χ²₃ (their covariances carry the front end's learnt scale, so
+    # this guards against aliasing only as far as the graph knows a1→a2)
+    pair_gate: float = num(30.7, gt=0.0, le=1e12)
 
     def __post_init__(self) -> None:
         check_ranges(self)

@@ -41,21 +41,3 @@ class LoopMatch:
     accepted: bool
     reason: str = ""  # why not accepted ("" when accepted)
     pairs: np.ndarray | None = None  # (k, 2) matched corners: rows of b.landmarks, rows of a.landmarks
-
-
-def between(m1: LoopMatch, m2: LoopMatch) -> tuple[np.ndarray, np.ndarray]:
-    """The relative pose a1→a2 that two closures of one submap b imply (m1: a1→b, m2: a2→b), m1 ∘ m2⁻¹,
-    with its covariance in a1's frame to first order (the two matches independent)."""
-    t1, t2 = np.asarray(m1.pose[:2], float), np.asarray(m2.pose[:2], float)
-    phi = float(m1.pose[2] - m2.pose[2])
-    c, s = np.cos(phi), np.sin(phi)
-    R = np.array([[c, -s], [s, c]])
-    Rt2 = R @ t2
-    pose = np.array([*(t1 - Rt2), np.arctan2(np.sin(phi), np.cos(phi))])
-    lever = np.array([-Rt2[1], Rt2[0]])  # d(R(φ) t2)/dφ
-    J1 = np.eye(3)
-    J1[:2, 2] = -lever
-    J2 = -np.eye(3)
-    J2[:2, :2] = -R
-    J2[:2, 2] = lever
-    return pose, J1 @ m1.cov @ J1.T + J2 @ m2.cov @ J2.T
