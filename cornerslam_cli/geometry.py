@@ -95,6 +95,23 @@ def compose_inverse(a, b) -> np.ndarray:
     return np.stack((a[..., 0] - (c * bx - s * by), a[..., 1] - (s * bx + c * by), th), axis=-1)
 
 
+def compose_inverse_cov(a, cov_a: np.ndarray, b, cov_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """a ∘ b⁻¹ (θ wrapped) of two independent uncertain poses, with its covariance to first order; the
+    poses' covariances of (x, y, θ) in their parent frame, the result's in a's (two loop closures of one
+    submap b, a1→b and a2→b: the a1→a2 pose they imply)."""
+    pose = compose_inverse(a, b)
+    pose[2] = wrap_angle(pose[2])
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    rb = np.array([c * b[0] - s * b[1], s * b[0] + c * b[1]])  # R(θₐ − θ_b) t_b
+    lever = np.array([-rb[1], rb[0]])  # its derivative by θₐ − θ_b
+    Ja = np.eye(3)
+    Ja[:2, 2] = -lever
+    Jb = -np.eye(3)
+    Jb[:2, :2] = -np.array([[c, -s], [s, c]])
+    Jb[:2, 2] = lever
+    return pose, Ja @ cov_a @ Ja.T + Jb @ cov_b @ Jb.T
+
+
 def interpolate(stamps: np.ndarray, poses: np.ndarray, t):
     """Poses at time(s) ``t`` between the poses (n, 3) at increasing ``stamps`` (n,): linear in x, y,
     along the shorter arc in θ (the SE(2) geodesic differs by O(Δθ·Δd), negligible between samples

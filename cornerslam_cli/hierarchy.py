@@ -9,11 +9,12 @@ GTSAM) with loop closures verified by the configured associator (graph/loops.py)
 - **Global level.** After each closed submap: candidates are earlier submaps whose robot path came
   within ``loops.candidate_distance`` + ``candidate_sigmas`` σ of the closed submap's (its global
   marginal) under the graph's estimate (nearest first, at most ``max_candidates``); each is verified
-  without a pose prior (graph/loops.py) — or, with too few corners in common, on its points around the
-  graph's prediction (graph/points.py, ``loops.point_search``) —, its covariance scaled by the front
-  end's learnt scale of ICP covariances, then gated against the graph's predicted relative pose and its
-  joint marginal (``loops.gate``, χ²₃); closures that disagree with each other about where the submap
-  is are all refused (perceptual aliasing). Accepted closures enter the graph under a robust kernel.
+  without a pose prior (graph/loops.py) — or, with too few corners in common or a corner pose the
+  points refute, on its points around the graph's prediction (graph/points.py) —, its covariance scaled
+  by the front end's learnt scale of ICP covariances, then gated against the graph's prediction and its
+  joint marginal (``loops.gate``, χ²₃); closures that disagree about where the submap is, beyond the
+  graph's uncertainty between the submaps they come from, are all refused (perceptual aliasing).
+  Accepted closures enter the graph under a robust kernel.
 - **Outputs.** Each step's causal (online) estimate is its submap origin's pose in the graph *at that
   step* ∘ the filter's local pose; :meth:`HierarchicalSlam.final_poses` is the same with the optimised
   origins — the smoothed trajectory written to trajectory.csv. Landmarks stay one per submap in the
@@ -30,9 +31,16 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .geometry import compose, rotate_covariance, rotate_pose_covariance, transform_points, wrap_angle
-from .graph.loops import FEW_CORNERS, NO_HYPOTHESIS, loop_associator, match_submaps
-from .graph.points import POINTS, match_points
+from .geometry import (
+    compose,
+    compose_inverse_cov,
+    rotate_covariance,
+    rotate_pose_covariance,
+    transform_points,
+    wrap_angle,
+)
+from .graph.loops import FEW_CORNERS, LOW_FITNESS, NO_HYPOTHESIS, loop_associator, match_submaps
+from .graph.points import POINTS, match_points, searchable
 from .graph.posegraph import PoseGraph
 from .graph.submap import LoopMatch, Submap
 from .motion.icp import voxel_thin
@@ -45,6 +53,9 @@ if TYPE_CHECKING:
 COV_FLOOR = np.diag([1e-8, 1e-8, 1e-10])  # added to a submap's end covariance: a still robot gives Σ = 0
 PATH_CELL = 0.5  # m: a submap's path kept for finding candidates, one position per cell
 AGREE_XY, AGREE_THETA = 0.5, 0.2  # m, rad: two closures of one submap agree on where it is
+# the corners gave no verdict (too few in common, no hypothesis) or a pose the points refute (low fitness:
+# usually a corner constellation repeated elsewhere): the points decide, around the graph's prediction
+TO_POINTS = (FEW_CORNERS, NO_HYPOTHESIS, LOW_FITNESS)
 
 
 @dataclass(frozen=True)
@@ -59,6 +70,7 @@ class LoopRecord:
     reason: str
     chi2: float = float("nan")  # the match against the graph's prediction (Mahalanobis², 3 dof)
     factor: int = -1  # the graph's loop factor index when accepted
+    on_points: bool = False  # searched on points around the graph's prediction (graph/points.py)
 
     def row(self, inlier: bool | None) -> dict:
         """loops.csv's row (report/tables.py ``LOOP_COLUMNS``)."""
@@ -210,22 +222,20 @@ class HierarchicalSlam:
         found, searched = [], 0
         for a in self.candidates(b):
             m = match_submaps(a, b, cfg, self.loop_associate, self.cfg.scan_match)
-            on_points = (
-                cfg.point_search
-                and searched < cfg.point_searches
-                and m.reason in (FEW_CORNERS, NO_HYPOTHESIS)
-            )
+            on_points = cfg.point_search and searched < cfg.point_searches and m.reason in TO_POINTS
+            on_points = on_points and searchable(a, b)  # (one that cannot run spends no search)
             searched += on_points
             pred = self.graph.relative(a.index, b.index) if on_points or m.accepted else None
             if on_points:
-                m = replace(match_points(a, b, *pred, cfg, self.cfg.scan_match), n_corners=m.n_corners)
+                kept = 0 if m.reason == LOW_FITNESS else m.n_corners  # (0: the points refuted their pose)
+                m = replace(match_points(a, b, *pred, cfg, self.cfg.scan_match), n_corners=kept)
             m = replace(m, cov=m.cov * self._match_scale)
-            d2 = chi2(*pred, m) if m.accepted else float("nan")
+            d2 = chi2(*pred, m.pose, m.cov) if m.accepted else float("nan")
             reason = m.reason or ("" if d2 <= cfg.gate else f"disagrees with the graph (chi2 {d2:.1f})")
             ok = not reason
             if ok and on_points:
                 reason = POINTS
-            found.append(LoopRecord(step, a.index, b.index, m, ok, reason, d2))
+            found.append(LoopRecord(step, a.index, b.index, m, ok, reason, d2, on_points=on_points))
             if sum(r.accepted for r in found) >= cfg.max_closures:
                 break
         # (corner-verified ones only: a match found on points around the graph's own prediction is no
@@ -233,10 +243,7 @@ class HierarchicalSlam:
         gated = [
             r
             for r in found
-            if r.match.accepted
-            and not r.accepted
-            and r.chi2 <= cfg.group_gate
-            and r.match.n_corners >= cfg.min_corners
+            if r.match.accepted and not r.accepted and r.chi2 <= cfg.group_gate and not r.on_points
         ]
         if len(gated) >= 2 and agree([self.placed(r) for r in gated]):
             # two or more closures from different parts of the map agree on where b is, against the
@@ -247,7 +254,7 @@ class HierarchicalSlam:
             ids = {id(r) for r in gated}
             found = [replace(r, accepted=True, reason=why) if id(r) in ids else r for r in found]
         accepted = [r for r in found if r.accepted]
-        if not agree([self.placed(r) for r in accepted]):
+        if not self.consistent(accepted):
             why = "closures of this submap disagree on where it is (aliasing)"
             found = [replace(r, accepted=False, reason=why) if r.accepted else r for r in found]
         for r in found:
@@ -261,6 +268,21 @@ class HierarchicalSlam:
             self.loops.append(r)
         if any(r.accepted for r in found):
             self.graph.optimize()
+
+    def consistent(self, closures: list[LoopRecord]) -> bool:
+        """Whether one submap's closures agree on where it is, two at a time: placed within AGREE_XY /
+        AGREE_THETA of each other, or the pose a1→a2 they imply (m1 ∘ m2⁻¹) inside ``loops.pair_gate``
+        of the graph's (on the sum of the covariances) — right closures from two parts of the map the
+        graph has not yet joined place b apart by as much as the graph's own error between them."""
+        for i, r1 in enumerate(closures):
+            for r2 in closures[i + 1 :]:
+                if agree([self.placed(r1), self.placed(r2)]):
+                    continue
+                pose, cov = compose_inverse_cov(r1.match.pose, r1.match.cov, r2.match.pose, r2.match.cov)
+                pred, pred_cov = self.graph.relative(r1.submap_from, r2.submap_from)
+                if chi2(pred, pred_cov, pose, cov) > self.cfg.loops.pair_gate:
+                    return False
+        return True
 
     def placed(self, r: LoopRecord) -> np.ndarray:
         """The global pose of submap b's origin that closure ``r`` implies (a's pose in the graph ∘ a→b)."""
@@ -322,12 +344,12 @@ class HierarchicalSlam:
         return [r.row(self.graph.loop_inlier(r.factor) if r.factor >= 0 else None) for r in self.loops]
 
 
-def chi2(pred: np.ndarray, pred_cov: np.ndarray, m: LoopMatch) -> float:
-    """Mahalanobis² of the match against the graph's predicted a→b pose ``pred``, on the sum of the
-    prediction's joint-marginal covariance and the match's (both of (x, y, θ) in a's frame)."""
-    e = np.asarray(m.pose, dtype=float) - pred
+def chi2(pred: np.ndarray, pred_cov: np.ndarray, pose: np.ndarray, cov: np.ndarray) -> float:
+    """Mahalanobis² of a measured a→b ``pose`` against the graph's prediction ``pred``, on the sum of the
+    prediction's joint-marginal covariance and the measurement's (both of (x, y, θ) in a's frame)."""
+    e = np.asarray(pose, dtype=float) - pred
     e[2] = wrap_angle(e[2])
-    return float(e @ np.linalg.solve(pred_cov + m.cov, e))
+    return float(e @ np.linalg.solve(pred_cov + cov, e))
 
 
 def agree(poses: list[np.ndarray]) -> bool:

@@ -116,3 +116,64 @@ def test_tab_separated_lines_read_as_space_separated(tmp_path, gz):
         assert type(m) is type(n)
         if hasattr(m, "ranges"):
             np.testing.assert_array_equal(m.ranges, n.ranges)
+
+
+def _odom_line(t, x):
+    return f"ODOM {x} 0 0 0 0 0 {t} host {t}\n"
+
+
+def _flaser_odom(t, laser_x, odom_x):
+    """A FLASER line whose laser pose and odometry pose fields differ (the reader must take the latter)."""
+    return f"FLASER 3 1 1 1 {laser_x} 0 0 {odom_x} 0 0 {t} host {t}\n"
+
+
+def _robotlaser(t, laser_x, robot_x):
+    poses = f"{laser_x} 0 0 {robot_x} 0 0"
+    return f"ROBOTLASER1 0 -0.5 1.0 0.25 9.9 0.01 0 3 1 1 1 0 {poses} 0 0 0 0 0 {t} h {t}\n"
+
+
+@pytest.mark.parametrize(
+    ("odom_times", "laser_times", "odom_moves", "want"),
+    [
+        ((1.0, 2.0, 3.0), (1.0, 2.0, 3.0), True, "ODOM"),  # a clean ODOM series: kept
+        ((1.0, 3.0, 2.0), (1.0, 2.0, 3.0), True, "FLASER"),  # out of order: the scans' own poses
+        ((1.0, 3.0, 2.0), (1.0, 2.0, 3.0), False, "ODOM"),  # ... unless those never move
+        ((1.0, 3.0, 2.0), (1.0, 3.0, 2.0), True, "ODOM"),  # ... or the scans go back as often
+    ],
+)
+def test_odometry_from_laser_poses_when_odom_lines_go_back_in_time(
+    tmp_path, odom_times, laser_times, odom_moves, want
+):
+    # the laser pose fields move in every case, the odometry fields only when odom_moves: the reader
+    # must look at the odometry fields (odom_x …), not the laser's
+    lines = [_odom_line(t, 10 * t) for t in odom_times]
+    lines += [_flaser_odom(t + 0.5, laser_x=t, odom_x=t if odom_moves else 0) for t in laser_times]
+    p = tmp_path / "o.log"
+    p.write_text("".join(lines))
+    log = open_log(p)
+    info = log.info()
+    assert info.odom_topic == want
+    assert ("go back in time: 1 of 3" in info.odom_source) == (want == "FLASER")
+    _, odoms = split(log.messages())
+    want_x = [float(t) for t in laser_times] if want == "FLASER" else [10 * t for t in odom_times]
+    assert [o.x for o in odoms] == want_x
+    assert open_log(p, odom_topic="ODOM").info().odom_topic == "ODOM"  # the user's choice is kept
+
+
+@pytest.mark.parametrize("robot_moves", [True, False])
+def test_robotlaser_robot_pose_decides_the_switch(tmp_path, robot_moves):
+    # ROBOTLASER1: the robot pose fields (not the laser's) must move for the reader to prefer them
+    lines = [_odom_line(t, 10 * t) for t in (1.0, 3.0, 2.0)]
+    lines += [_robotlaser(t + 0.5, laser_x=t, robot_x=t if robot_moves else 0) for t in (1.0, 2.0, 3.0)]
+    p = tmp_path / "r.log"
+    p.write_text("".join(lines))
+    assert open_log(p).info().odom_topic == ("ROBOTLASER1" if robot_moves else "ODOM")
+
+
+def test_malformed_laser_lines_do_not_count_as_moving(tmp_path):
+    # "-0.0" and "0" are the same pose; a truncated line is skipped, not taken for a moving robot
+    lines = [_odom_line(t, 10 * t) for t in (1.0, 3.0, 2.0)]
+    lines += [_flaser_odom(1.5, 1, "0"), _flaser_odom(2.5, 2, "-0.0"), "FLASER 3 1 1\n"]
+    p = tmp_path / "m.log"
+    p.write_text("".join(lines))
+    assert open_log(p).info().odom_topic == "ODOM"

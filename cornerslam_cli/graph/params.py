@@ -55,10 +55,11 @@ class LoopConfig:
     # ... stopping once this many were accepted by the gate: on ground revisited many times every close
     # had 8 candidates to verify, and a third or fourth agreeing closure of one submap adds little
     max_closures: int = num(3, ge=1, le=1000)
-    # a pair the corners cannot verify (few corners, no hypothesis: a corridor seen the other way round)
-    # is searched on its scan points inside the graph's prediction ± 3σ, at most point_max_xy /
-    # point_max_theta (graph/points.py); accepted when the fit is distinct: moved point_shift
-    # along the fit's weakest direction the fitness falls below point_distinct × its own (not a corridor),
+    # a pair the corners cannot verify (few corners, no hypothesis: a corridor seen the other way round;
+    # low fitness: a corner pose the points refute) is searched on its scan points inside the graph's
+    # prediction ± 3σ, at most point_max_xy / point_max_theta (graph/points.py); accepted when the fit
+    # is distinct: moved point_shift along the fit's weakest direction the fitness falls below
+    # point_distinct × its own (not a corridor),
     # and no pose of the window away from it scores point_distinct × as well (not a repeated structure)
     point_search: bool = True
     # ... for at most this many candidates per closed submap (nearest first): each costs a correlative
@@ -77,6 +78,10 @@ class LoopConfig:
     # ... unless two or more closures of the new submap agree with each other and each is within this
     # (10 × gate: the graph's σ too small by up to ~3×, as after a false closure); beyond it, refused
     group_gate: float = num(307.0, gt=0.0, le=1e12)
+    # two closures of one submap placing it apart (> 0.5 m / 0.2 rad) agree when the a1→a2 pose they
+    # imply fits the graph's within this χ²₃ (their covariances carry the front end's learnt scale, so
+    # this guards against aliasing only as far as the graph knows a1→a2)
+    pair_gate: float = num(30.7, gt=0.0, le=1e12)
 
     def __post_init__(self) -> None:
         check_ranges(self)

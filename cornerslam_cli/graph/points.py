@@ -46,8 +46,9 @@ def match_points(
     a: Submap, b: Submap, prior: np.ndarray, prior_cov: np.ndarray, cfg: LoopConfig, icp: ScanMatchConfig
 ) -> LoopMatch:
     """Verify a→b on the two submaps' scan points alone, for a pair whose corners cannot (too few seen
-    from both: a corridor driven the other way round). Unlike :func:`match_submaps` this needs a prior:
-    the graph's predicted a→b ``prior`` and its covariance ``prior_cov`` (a's frame).
+    from both: a corridor driven the other way round; or a corner pose the points refute). Unlike
+    :func:`match_submaps` this needs a prior: the graph's predicted a→b ``prior`` and its covariance
+    ``prior_cov`` (a's frame).
 
     The correlative search (motion/correlative.py) finds the best pose of b's points (thinned) on a's
     within ±3σ of the prior (at least ICP's basin; at most ``point_max_xy`` / ``point_max_theta`` and
@@ -59,7 +60,7 @@ def match_points(
     pose of the window away from it (``AMBIGUOUS_XY`` / ``AMBIGUOUS_THETA``) scores below
     ``point_distinct`` × its score — a parallel corridor, a repeated door, is refused (``ambiguous``) as a
     symmetric place is on corners."""
-    if len(a.points) < NORMAL_NEIGHBOURS or len(b.points) < MIN_OVERLAP_POINTS:
+    if not searchable(a, b):
         return rejected(np.full(3, np.nan), 0, LOW_FITNESS)
     prior = np.asarray(prior, dtype=float)
     res = POINT_RES * icp.search_resolution
@@ -79,6 +80,11 @@ def match_points(
     if np.isfinite(other.score) and other.score >= cfg.point_distinct * found.score:
         return LoopMatch(reg.pose, reg.cov, 0, fitness, False, AMBIGUOUS)
     return LoopMatch(reg.pose, reg.cov, 0, fitness, True, "")
+
+
+def searchable(a: Submap, b: Submap) -> bool:
+    """Whether the two submaps hold enough points for :func:`match_points` to search at all."""
+    return len(a.points) >= NORMAL_NEIGHBOURS and len(b.points) >= MIN_OVERLAP_POINTS
 
 
 def points_window(prior_cov: np.ndarray, cfg: LoopConfig, res: float) -> Window:

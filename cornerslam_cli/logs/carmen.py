@@ -20,8 +20,12 @@ Conventions (as CARMEN's own ``carmen_string_to_laser_laser_message_orig``):
   classic Radish logs). Readings >= max range are no-return and dropped.
 * Stamps: the message timestamp field (sensor time), not the logger timestamp. Lines are yielded in
   file order.
-* Odometry: ODOM lines when the log has any; otherwise the odometry pose fields of the laser lines
-  (FLASER odom_x/y/theta, ROBOTLASER1 robot_x/y/theta), yielded just before their scan.
+* Odometry: ODOM lines when the log has any; otherwise the odometry pose fields of the laser lines (FLASER
+  odom_x/y/theta, ROBOTLASER1 robot_x/y/theta), yielded just before their scan. Also those fields when ODOM
+  lines go back in time more often than the laser lines do (a merged or re-stamped log: intel.gfs.log's 1,498
+  of 14,541 ODOM lines, 4 of 910 laser lines) and those fields move: they are the pose the logger stamped with
+  each scan, while odometry interpolated between out-of-order ODOM lines is wrong at the scans' times.
+  ``odom_topic`` ``ODOM`` keeps the ODOM lines.
 * The laser offset is not in FLASER lines: ``laser_to_base()`` returns the mean laser-minus-robot
   offset of ROBOTLASER1 lines, None for FLASER logs (configure it).
 
@@ -83,6 +87,19 @@ def _lines(path: Path, stats: ReadStats | None) -> Iterator[str]:
             stats.warn("%s ends early after %d lines (damaged or cut gzip: %s)", path.name, n, exc)
 
 
+def _odometry_fields(tag: str, rest: str) -> tuple[float, ...] | None:
+    """The robot pose of a laser line (its text after the tag): FLASER/RLASER ``odom_x odom_y
+    odom_theta`` 6th–4th field from the end, ROBOTLASERx ``robot_x robot_y robot_theta`` 11th–9th; None
+    when the line is too short or they are not numbers."""
+    tok = rest.rsplit(None, 11)
+    fields = tok[-6:-3] if tag in ("FLASER", "RLASER") else tok[-11:-8]
+    try:
+        pose = tuple(float(v) for v in fields)
+    except ValueError:
+        return None
+    return pose if len(pose) == 3 else None
+
+
 class _Laser:
     """Parsed fields of one laser line."""
 
@@ -130,6 +147,8 @@ class CarmenReader:
         self._params: dict[str, str] = {}
         self._start: float | None = None
         self._end: float | None = None
+        self._back: dict[str, int] = {}  # per tag: lines stamped before the line of that tag above them
+        self._moving: set[str] = set()  # laser tags whose odometry fields are not all the same pose
         self._prescan()
         self._want_scan, self._want_odom = scan_topic, odom_topic
         self.scan_topic, self.odom_topic, self._problems = self._select()
@@ -137,6 +156,8 @@ class CarmenReader:
     def _prescan(self) -> None:
         """Count line tags, read PARAMs and the time span (cheap: no number parsing of readings)."""
         name = self.path.name
+        last: dict[str, float] = {}
+        first_pose: dict[str, tuple[float, ...]] = {}
         try:
             for line in _lines(self.path, self.stats):
                 tag, rest = (line.split(None, 1) + ["", ""])[:2]
@@ -156,6 +177,12 @@ class CarmenReader:
                     if math.isfinite(t):
                         self._start = t if self._start is None else min(self._start, t)
                         self._end = t if self._end is None else max(self._end, t)
+                        self._back[tag] = self._back.get(tag, 0) + (t < last.get(tag, -math.inf))
+                        last[tag] = t
+                    if tag != ODOM_TAG and tag not in self._moving:
+                        pose = _odometry_fields(tag, rest)
+                        if pose is not None and first_pose.setdefault(tag, pose) != pose:
+                            self._moving.add(tag)
         except OSError as exc:
             raise LogError(
                 f"cannot read CARMEN log '{name}': {exc}", "check the file (gzip damaged?)"
@@ -199,13 +226,18 @@ class CarmenReader:
                         f"choose --odom-topic ODOM or a laser tag ({', '.join(lasers) or 'none'})",
                     )
                 )
-        elif self._counts.get(ODOM_TAG):
+        elif self._counts.get(ODOM_TAG) and not self._odom_lines_worse(scan):
             odom = ODOM_TAG
         elif scan:
             odom = scan
         else:
             problems.append((f"CARMEN log '{name}' has no odometry", "select one with --odom-topic"))
         return scan, odom, problems
+
+    def _odom_lines_worse(self, scan: str) -> bool:
+        """Whether the ODOM lines go back in time more often than the ``scan`` lines, whose own robot
+        poses move (a log whose lines are merely out of order together keeps its ODOM lines)."""
+        return scan in self._moving and self._back.get(ODOM_TAG, 0) > self._back.get(scan, 0)
 
     def check(self) -> None:
         if self._problems:
@@ -222,6 +254,8 @@ class CarmenReader:
             src = "ODOM lines"
         elif self.odom_topic:
             src = f"{self.odom_topic} odometry fields"
+            if not self._want_odom and self._counts.get(ODOM_TAG):
+                src += f"; ODOM lines go back in time: {self._back[ODOM_TAG]} of {self._counts[ODOM_TAG]}"
         return LogInfo(
             format=self.format,
             path=str(self.path),
