@@ -15,14 +15,16 @@ the result with the same scans placed with the wheel odometry:
 Bounded memory: the placed points are never all held at once. The map is cut into **tiles**, rectangles
 of ``BIN``-cell squares split at their weighted median until a tile holds at most ``TILE_POINTS``
 points (one square may hold more: a robot parked for a long time); a tile's points are placed again
-from the scans, ``SCANS`` scans at a time, with those of a ``MARGIN`` around it (every neighbour within
+from the scans, ``CHUNK`` points at a time, with those of a ``MARGIN`` around it (every neighbour within
 the cap of a point inside). Each cell lies in one tile, so the occupied cells are the sum of the
 tiles' counts. Inside a tile, the nearest earlier or later neighbour is found in kd-trees over
 power-of-two runs of the blocks seen there (a range of blocks is at most two such runs per level),
 built one at a time, each asked by every block that needs it: O(n log n), not one tree query per pair
-of blocks. The figures are those of the definition over all points at
-once: the same cells and shares, and with one tile the same mean bit for bit; with several, the mean
-is the sum of the tiles' sums, which may differ from one sum in the last bit (a relative 1e-15).
+of blocks. The figures are those of the definition over all points at once: the same cells and
+shares, and with one tile (up to a million kept beams: every sample log and the real logs of the
+panel) the same mean bit for bit; with several, the mean is the sum of the tiles' sums, which may
+differ from one sum in its last bits (relative 1e-15). Memory: one tile (~50 bytes a point) and one
+chunk (~150 bytes a point) at a time, where all of a long log's points once took ~50 bytes each.
 """
 
 from __future__ import annotations
@@ -39,27 +41,26 @@ CELL = 0.05  # m: the grid of the occupied-cell count
 REVISIT_GAP = 100  # scans
 REVISIT_CAP = 0.3  # m
 REVISIT_BLOCK = 25  # scans: neighbours come from blocks at least REVISIT_GAP // REVISIT_BLOCK away
-SCANS = 500  # scans placed at once
+CHUNK = 50_000  # points placed at once (with their cells and blocks: ~4 MB)
 BIN = 32  # cells (1.6 m): the squares tiles are made of
-TILE_POINTS = 400_000  # points of a tile at most (unless one BIN square has more): ~30 MB of temporaries
+TILE_POINTS = 1_000_000  # points of a tile at most (unless one BIN square has more): ~50 MB of temporaries
 MARGIN = math.ceil(REVISIT_CAP / CELL) + 1  # cells around a tile whose points it needs as neighbours
 
 
 def place(pts: Sequence[np.ndarray], poses: np.ndarray) -> np.ndarray:
     """All scan points (each scan's (k, 2) points in its own frame) in the map frame, placed with
     ``poses`` (n, 3): one pose per scan."""
-    offsets = scan_offsets(pts)
-    out = np.empty((offsets[-1], 2))  # filled in place: no second copy of the points
-    for i, (p, (x, y, th)) in enumerate(zip(pts, poses, strict=True)):
-        c, s = math.cos(th), math.sin(th)
-        out[offsets[i] : offsets[i + 1], 0] = x + c * p[:, 0] - s * p[:, 1]
-        out[offsets[i] : offsets[i + 1], 1] = y + s * p[:, 0] + c * p[:, 1]
+    if not len(pts):
+        return np.empty((0, 2))
+    p = np.concatenate(pts)
+    n = [len(q) for q in pts]
+    x, y, th = np.asarray(poses, dtype=float).reshape(-1, 3).T
+    c = np.repeat([math.cos(t) for t in th.tolist()], n)  # math's cos and sin, as one scan at a time
+    s = np.repeat([math.sin(t) for t in th.tolist()], n)
+    out = np.empty((len(p), 2))
+    out[:, 0] = np.repeat(x, n) + c * p[:, 0] - s * p[:, 1]
+    out[:, 1] = np.repeat(y, n) + s * p[:, 0] + c * p[:, 1]
     return out
-
-
-def scan_offsets(pts: Sequence[np.ndarray]) -> np.ndarray:
-    """(n + 1,) where each scan's points start in :func:`place`'s array, and their total last."""
-    return np.concatenate(([0], np.cumsum([len(p) for p in pts], dtype=np.int64)))
 
 
 def cell_index(xy: np.ndarray) -> np.ndarray:
@@ -73,11 +74,15 @@ def _cell_keys(cells: np.ndarray) -> np.ndarray:
 
 
 def placed_chunks(pts: Sequence[np.ndarray], poses: np.ndarray) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-    """The points placed with ``poses``, ``SCANS`` scans at a time: (placed (k, 2), block of each)."""
-    for i in range(0, len(pts), SCANS):
-        part = pts[i : i + SCANS]
+    """The points placed with ``poses``, about ``CHUNK`` at a time (as many scans as the last ones
+    suggest, at most twice as many as before): (placed (k, 2), block of each)."""
+    i, n = 0, 1
+    while i < len(pts):
+        part = pts[i : i + n]
         scan = np.repeat(np.arange(i, i + len(part)), [len(p) for p in part])
-        yield place(part, poses[i : i + SCANS]), scan // REVISIT_BLOCK
+        yield place(part, poses[i : i + len(part)]), scan // REVISIT_BLOCK
+        i += len(part)
+        n = max(1, min(2 * n, CHUNK * len(part) // max(len(scan), 1)))
 
 
 def tiles(pts: Sequence[np.ndarray], poses: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -119,7 +124,8 @@ def split(bins: np.ndarray, counts: np.ndarray, lo: np.ndarray, hi: np.ndarray) 
 
 def inside(cells: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Which of the cells (n, 2) lie in [lo, hi)."""
-    return np.all((cells >= lo) & (cells < hi), axis=1)
+    x, y = cells[:, 0], cells[:, 1]
+    return (x >= lo[0]) & (x < hi[0]) & (y >= lo[1]) & (y < hi[1])
 
 
 def tile_points(
@@ -154,7 +160,9 @@ def nearest_far(xy: np.ndarray, blocks: np.ndarray, query: np.ndarray) -> np.nda
     return best[query]
 
 
-def _runs_asked(present: np.ndarray, query: np.ndarray, starts: np.ndarray) -> dict[tuple[int, int], list[int]]:
+def _runs_asked(
+    present: np.ndarray, query: np.ndarray, starts: np.ndarray
+) -> dict[tuple[int, int], list[int]]:
     """Per run [a, z) of the ``present`` blocks (:func:`dyadic_runs` over their positions), the
     positions j of the blocks with ``query`` points that look for a neighbour in it: every such block
     asks the runs covering the blocks at least ``REVISIT_GAP // REVISIT_BLOCK`` before and after it."""
@@ -217,7 +225,7 @@ def revisit_misalignment(pts: Sequence[np.ndarray], poses: np.ndarray) -> tuple[
 def map_consistency(pts: Sequence[np.ndarray], poses: np.ndarray, odoms: np.ndarray) -> MapConsistency:
     """The consistency figures of the scans ``pts`` placed with the estimate ``poses`` and with the
     odometry ``odoms`` (each (n, 3), one per scan, the scan's laser pose). ``pts`` is a sequence of
-    (k, 2) arrays, sliced ``SCANS`` at a time (a :class:`ScanStore`'s ``laser_frame()`` view makes
+    (k, 2) arrays, sliced a few scans at a time (a :class:`ScanStore`'s ``laser_frame()`` view makes
     them on demand)."""
     points, cells, revisit, share = figures(pts, poses)
     _, odom_cells, odom_revisit, odom_share = figures(pts, odoms)

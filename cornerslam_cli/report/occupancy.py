@@ -95,14 +95,18 @@ class ScanStore:
 
     def in_laser_frame(self, scans: slice = slice(None)) -> list[np.ndarray]:
         """The kept end points of each scan of ``scans`` (all by default) back in its laser's frame
-        (float64)."""
-        out = []
-        poses = self.poses()[scans]
-        for (x, y, th), q in zip(poses.tolist(), self.points[scans], strict=True):
-            c, s = math.cos(th), math.sin(th)
-            d = q.astype(float) - (x, y)
-            out.append(np.column_stack((c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1])))
-        return out
+        (float64), the scans' arrays views of one."""
+        points = self.points[scans]
+        if not points:
+            return []
+        n = [len(q) for q in points]
+        xy = np.repeat(self.xy()[scans].astype(float), n, axis=0)
+        th = np.frombuffer(self.headings)[scans].tolist()
+        c = np.repeat([math.cos(t) for t in th], n)  # math's cos and sin, as one scan at a time
+        s = np.repeat([math.sin(t) for t in th], n)
+        d = np.concatenate(points).astype(float) - xy
+        out = np.column_stack((c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]))
+        return np.split(out, np.cumsum(n)[:-1])
 
     def laser_frame(self) -> LaserFrame:
         """The kept scans in their lasers' frames as a sequence made on demand, a slice at a time."""
