@@ -35,7 +35,7 @@ from collections.abc import Iterator, Sequence
 import numpy as np
 
 from ..results import MapConsistency
-from .occupancy import ScanStore
+from .occupancy import ScanStore, per_point_rotations
 
 CELL = 0.05  # m: the grid of the occupied-cell count
 REVISIT_GAP = 100  # scans
@@ -55,8 +55,7 @@ def place(pts: Sequence[np.ndarray], poses: np.ndarray) -> np.ndarray:
     p = np.concatenate(pts)
     n = [len(q) for q in pts]
     x, y, th = np.asarray(poses, dtype=float).reshape(-1, 3).T
-    c = np.repeat([math.cos(t) for t in th.tolist()], n)  # math's cos and sin, as one scan at a time
-    s = np.repeat([math.sin(t) for t in th.tolist()], n)
+    c, s = per_point_rotations(th, n)
     out = np.empty((len(p), 2))
     out[:, 0] = np.repeat(x, n) + c * p[:, 0] - s * p[:, 1]
     out[:, 1] = np.repeat(y, n) + s * p[:, 0] + c * p[:, 1]

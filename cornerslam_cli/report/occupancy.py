@@ -101,9 +101,7 @@ class ScanStore:
             return []
         n = [len(q) for q in points]
         xy = np.repeat(self.xy()[scans].astype(float), n, axis=0)
-        th = np.frombuffer(self.headings)[scans].tolist()
-        c = np.repeat([math.cos(t) for t in th], n)  # math's cos and sin, as one scan at a time
-        s = np.repeat([math.sin(t) for t in th], n)
+        c, s = per_point_rotations(np.frombuffer(self.headings)[scans], n)
         d = np.concatenate(points).astype(float) - xy
         out = np.column_stack((c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]))
         return np.split(out, np.cumsum(n)[:-1])
@@ -129,6 +127,13 @@ class ScanStore:
         cuts = np.searchsorted(ends, np.arange(size, ends[-1], size), side="right")
         edges = np.unique(np.concatenate(([0], cuts, [len(ends)])))
         return [slice(i, j) for i, j in zip(edges[:-1].tolist(), edges[1:].tolist(), strict=True)]
+
+
+def per_point_rotations(headings: np.ndarray, counts: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """cos and sin of each scan's heading repeated for its ``counts`` points: math's, as the scans
+    were once turned one at a time (numpy's may differ in the last bit)."""
+    th = np.asarray(headings, dtype=float).tolist()
+    return np.repeat([math.cos(t) for t in th], counts), np.repeat([math.sin(t) for t in th], counts)
 
 
 class LaserFrame:
