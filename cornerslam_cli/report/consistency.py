@@ -44,6 +44,7 @@ REVISIT_BLOCK = 25  # scans: neighbours come from blocks at least REVISIT_GAP //
 CHUNK = 50_000  # points placed at once (with their cells and blocks: ~4 MB)
 BIN = 32  # cells (1.6 m): the squares tiles are made of
 TILE_POINTS = 1_000_000  # points of a tile at most (unless one BIN square has more): ~50 MB of temporaries
+QUERIES = 100_000  # points asked of a tree at once (~50 bytes each while asked)
 MARGIN = math.ceil(REVISIT_CAP / CELL) + 1  # cells around a tile whose points it needs as neighbours
 
 
@@ -139,7 +140,15 @@ def tile_points(
         xy.append(p[near])
         blocks.append(b[near])
         own.append(inside(cells[near], lo, hi))
-    return np.concatenate(xy), np.concatenate(blocks), np.concatenate(own)
+    return _joined(xy), _joined(blocks), _joined(own)
+
+
+def _joined(parts: list[np.ndarray]) -> np.ndarray:
+    """The arrays of ``parts`` concatenated, the list emptied (its arrays freed before the next
+    list is joined: one copy of a tile's points at a time, not two)."""
+    joined = np.concatenate(parts)
+    parts.clear()
+    return joined
 
 
 def nearest_far(xy: np.ndarray, blocks: np.ndarray, query: np.ndarray) -> np.ndarray:
@@ -154,7 +163,9 @@ def nearest_far(xy: np.ndarray, blocks: np.ndarray, query: np.ndarray) -> np.nda
     for (a, z), asking in _runs_asked(present, query, starts).items():
         q = np.concatenate([starts[j] + np.flatnonzero(query[starts[j] : starts[j + 1]]) for j in asking])
         tree = cKDTree(xy[starts[a] : starts[z]])  # one tree at a time
-        best[q] = np.minimum(best[q], tree.query(xy[q], distance_upper_bound=REVISIT_CAP)[0])
+        for i in range(0, len(q), QUERIES):  # QUERIES points asked at once
+            part = q[i : i + QUERIES]
+            best[part] = np.minimum(best[part], tree.query(xy[part], distance_upper_bound=REVISIT_CAP)[0])
         del tree
     return best[query]
 
