@@ -130,17 +130,20 @@ def inside(cells: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 def tile_points(
     pts: Sequence[np.ndarray], poses: np.ndarray, lo: np.ndarray, hi: np.ndarray, margin: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """The placed points of the tile [lo, hi) and of ``margin`` cells around it, in scan order:
-    (xy (k, 2), block of each, which are inside the tile itself)."""
+    (xy (k, 2), block of each, which are inside the tile itself, the tile's occupied cells)."""
     xy, blocks, own = [np.zeros((0, 2))], [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=bool)]
+    keys = [np.zeros(0, dtype=np.int64)]
     for p, b in placed_chunks(pts, poses):
         cells = cell_index(p)
         near = inside(cells, lo - margin, hi + margin)
+        mine = inside(cells[near], lo, hi)
         xy.append(p[near])
         blocks.append(b[near])
-        own.append(inside(cells[near], lo, hi))
-    return _joined(xy), _joined(blocks), _joined(own)
+        own.append(mine)
+        keys.append(np.unique(_cell_keys(cells[near][mine])))
+    return _joined(xy), _joined(blocks), _joined(own), len(np.unique(_joined(keys)))
 
 
 def _joined(parts: list[np.ndarray]) -> np.ndarray:
@@ -209,8 +212,8 @@ def figures(
     a tile at a time; without ``revisit`` the revisit figures are NaN and 0."""
     cells, total, d_sum, d_count = 0, 0, 0.0, 0
     for lo, hi in tiles(pts, poses):
-        xy, blocks, own = tile_points(pts, poses, lo, hi, MARGIN if revisit else 0)
-        cells += len(np.unique(_cell_keys(cell_index(xy[own]))))
+        xy, blocks, own, n_cells = tile_points(pts, poses, lo, hi, MARGIN if revisit else 0)
+        cells += n_cells
         total += int(own.sum())
         if revisit:
             d = nearest_far(xy, blocks, own)
