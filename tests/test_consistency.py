@@ -3,14 +3,18 @@ and revisit misalignment are known, and the figures in a simulated run's summary
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
+import tracemalloc
 
 import numpy as np
 import pytest
+import scipy.spatial  # noqa: F401  (imported before tracemalloc starts: not the figures' memory)
 from click.testing import CliRunner
 
 from cornerslam_cli.cli import cli
+from cornerslam_cli.report import consistency
 from cornerslam_cli.report.consistency import (
     CELL,
     REVISIT_BLOCK,
@@ -22,6 +26,8 @@ from cornerslam_cli.report.consistency import (
     place,
     revisit_misalignment,
 )
+from cornerslam_cli.report.occupancy import ScanStore
+from cornerslam_cli.results import MapConsistency
 
 
 def wall_scan() -> np.ndarray:
@@ -135,3 +141,84 @@ def test_map_consistency_of_no_scans_is_empty_not_an_error():
     m = map_consistency([], np.zeros((0, 3)), np.zeros((0, 3)))
     assert (m.scans, m.points, m.occupied_cells, m.odom_occupied_cells) == (0, 0, 0, 0)
     assert math.isnan(m.cells_vs_odom) and math.isnan(m.revisit_mean) and m.revisit_share == 0
+
+
+def multi_place_case(seed: int) -> tuple[list[np.ndarray], np.ndarray]:
+    """Scans of 0–30 points jittered about four places 5 m apart, visited in turn (each place comes
+    back every 4 × 30 scans): a map whose tiles each hold a part of the revisits."""
+    rng = np.random.default_rng(seed)
+    n = 16 * REVISIT_BLOCK + 9
+    centre = np.array([[0.0, 0.0], [5.0, 0.0], [5.0, 5.0], [0.0, 5.0]])[(np.arange(n) // 30) % 4]
+    pts = [rng.normal(0.0, 0.6, (rng.integers(0, 31), 2)) for _ in range(n)]
+    poses = np.column_stack((centre + rng.normal(0.0, 0.05, (n, 2)), rng.normal(0.0, 0.05, n)))
+    return pts, poses
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_figures_by_tiles_are_those_of_all_points_at_once(seed, monkeypatch):
+    """Tiles of at most 300 points (squares of 4 cells, so points near a tile's edge find their
+    neighbours in its margin): the occupied cells and revisit share of one tile exactly, the mean to
+    the last bits, both equal to the brute-force definition."""
+    pts, poses = multi_place_case(seed)
+    whole = consistency.figures(pts, poses)
+    assert len(consistency.tiles(pts, poses)) == 1
+    monkeypatch.setattr(consistency, "TILE_POINTS", 300)
+    monkeypatch.setattr(consistency, "BIN", 4)
+    cut = consistency.tiles(pts, poses)
+    assert len(cut) > 10
+    tiled = consistency.figures(pts, poses)
+    assert tiled[:2] == whole[:2] and tiled[3] == whole[3] and 0 < whole[3] < 1
+    assert tiled[2] == pytest.approx(whole[2], rel=1e-14)
+    assert whole[1] == len(np.unique(np.floor(place(pts, poses) / CELL), axis=0))
+    assert (whole[2], whole[3]) == pytest.approx(brute_force_revisit(pts, poses), rel=1e-12)
+
+
+def test_tiles_cover_every_placed_point_once(monkeypatch):
+    monkeypatch.setattr(consistency, "TILE_POINTS", 300)
+    pts, poses = multi_place_case(3)
+    cells = consistency.cell_index(place(pts, poses))
+    owners = sum(consistency.inside(cells, lo, hi).astype(int) for lo, hi in consistency.tiles(pts, poses))
+    assert np.all(owners == 1)
+
+
+def circling_store(laps: int) -> ScanStore:
+    """A laser circling a room ``laps`` times, 50 scans of 500 random ranges a lap (25,000 end
+    points a lap, over the same area whatever the laps)."""
+    rng = np.random.default_rng(5)
+    store = ScanStore()
+    angles = np.linspace(-1.5, 1.5, 500)
+    for i in range(50 * laps):
+        a = 2 * math.pi * i / 50
+        r = rng.uniform(2.0, 8.0, 500)
+        store.add(
+            np.array([10 * math.cos(a), 10 * math.sin(a), a + math.pi / 2]),
+            np.column_stack((r * np.cos(angles), r * np.sin(angles))),
+        )
+    return store
+
+
+def traced_consistency(store: ScanStore) -> tuple[MapConsistency, int]:
+    """The store's consistency (odometry 1 cm and 1 mrad off) and the peak of its allocations."""
+    tracemalloc.start()
+    try:
+        got = consistency.store_consistency(store, store.poses() + [0.01, 0.0, 0.001])
+        return got, tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+def test_store_consistency_memory_is_flat_in_the_log_length(monkeypatch):
+    """Placed 2,500 points at a time in tiles of 2,500: four times the laps over the same room (4×
+    the points) peak within 1.3× the allocations of one lap, and below half of one float64
+    copy of the points (the figures once took some 50 bytes a point); a store's figures are those
+    of its scans given as a list."""
+    monkeypatch.setattr(consistency, "TILE_POINTS", 2_500)
+    monkeypatch.setattr(consistency, "CHUNK", 2_500)
+    one, four = circling_store(1), circling_store(4)
+    got_one, peak_one = traced_consistency(one)
+    got_four, peak_four = traced_consistency(four)
+    assert got_four.points == four.n_points == 100_000 and got_four.revisit_share > 0.5
+    assert peak_four < 1.3 * peak_one and peak_four < 16 * four.n_points / 2, (peak_one, peak_four)
+    odoms = one.poses() + [0.01, 0.0, 0.001]
+    listed = map_consistency(one.in_laser_frame(), one.poses(), odoms)
+    np.testing.assert_equal(dataclasses.asdict(got_one), dataclasses.asdict(listed))  # NaN == NaN

@@ -317,6 +317,9 @@ def test_scan_store_thins_beyond_its_cap():
     # a quarter turn: the laser frame's x is the world's y
     np.testing.assert_allclose(end[0], [0.0, 1.0], atol=1e-6)
     np.testing.assert_allclose(start[-1], [9.0, 0.0])
+    # a thinned scan is a copy: a view would keep every beam of the scan in memory
+    assert all(q.base is None for q in store.points)
+    assert sum(q.nbytes for q in store.points) == 8 * store.n_points
 
 
 # ----------------------------------------------------------------------------- 3: the results MCAP

@@ -22,6 +22,7 @@ The files follow ROS map_saver: ``mode: trinary``, pixels 0 (occupied), 254 (fre
 from __future__ import annotations
 
 import math
+from array import array
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,13 +42,14 @@ PNG_COLOURS = {OCCUPIED: (0, 0, 0), FREE: (255, 255, 255), UNKNOWN: (190, 190, 1
 
 class ScanStore:
     """The scans of a run as rays: per scan the laser's position and its beams' end points, in the
-    odometry frame (float32), thinned to at most ``max_points`` end points."""
+    odometry frame (float32), thinned to at most ``max_points`` end points. The poses are kept
+    packed (16 bytes a scan), and a thinned scan is a copy: a view would keep all of its beams."""
 
     def __init__(self, max_points: int = MAX_POINTS):
         self.max_points = max_points
         self.stride = 1  # every stride-th beam of a scan is kept
-        self.origins: list[np.ndarray] = []
-        self.headings: list[float] = []  # the laser's heading per scan (with origins: its pose)
+        self.origins = array("f")  # the laser's position per scan (x, y)
+        self.headings = array("d")  # the laser's heading per scan (with origins: its pose)
         self.points: list[np.ndarray] = []
         self.n_points = 0
         self.n_seen = 0  # end points given, before thinning
@@ -59,36 +61,54 @@ class ScanStore:
         p = np.asarray(points, dtype=float)[:: self.stride]
         p = p[np.hypot(p[:, 0], p[:, 1]) <= MAX_BEAM]
         moved = np.column_stack((c * p[:, 0] - s * p[:, 1], s * p[:, 0] + c * p[:, 1])) + laser2odom[:2]
-        self.origins.append(np.asarray(laser2odom[:2], dtype=np.float32))
+        self.origins.extend(np.asarray(laser2odom[:2], dtype=np.float32).tolist())
         self.headings.append(float(laser2odom[2]))
         self.points.append(moved.astype(np.float32))
         self.n_points += len(moved)
         while self.n_points > self.max_points:
             self.stride *= 2
-            self.points = [q[::2] for q in self.points]
+            for i, q in enumerate(self.points):
+                self.points[i] = q[::2].copy()
             self.n_points = sum(len(q) for q in self.points)
+
+    def xy(self) -> np.ndarray:
+        """(n, 2) float32 the laser's position per scan: a view of the store's, written through."""
+        return np.frombuffer(self.origins, dtype=np.float32).reshape(-1, 2)
+
+    def poses(self) -> np.ndarray:
+        """(n, 3) the laser's pose per scan (x, y, θ), float64."""
+        return np.column_stack((self.xy(), self.headings))
 
     def move(self, index: np.ndarray, delta: np.ndarray) -> None:
         """Move scan i by the pose ``delta[index[i]]`` (x, y, θ, applied on the left: the smoothed
         pose of its step ∘ the pose it was kept at⁻¹); a zero delta leaves a scan untouched."""
+        origins = self.xy()
         for i, k in enumerate(np.asarray(index)):
             dx, dy, dth = (float(v) for v in delta[k])
             if dx == 0.0 and dy == 0.0 and dth == 0.0:
                 continue
             c, s = math.cos(dth), math.sin(dth)
             R = np.array([[c, -s], [s, c]])
-            self.origins[i] = (R @ self.origins[i].astype(float) + (dx, dy)).astype(np.float32)
+            origins[i] = (R @ origins[i].astype(float) + (dx, dy)).astype(np.float32)
             self.headings[i] += dth
             self.points[i] = (self.points[i].astype(float) @ R.T + (dx, dy)).astype(np.float32)
 
-    def in_laser_frame(self) -> list[np.ndarray]:
-        """The kept end points of each scan back in its laser's frame (float64)."""
-        out = []
-        for (x, y), th, q in zip(self.origins, self.headings, self.points, strict=True):
-            c, s = math.cos(th), math.sin(th)
-            d = q.astype(float) - (float(x), float(y))
-            out.append(np.column_stack((c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1])))
-        return out
+    def in_laser_frame(self, scans: slice = slice(None)) -> list[np.ndarray]:
+        """The kept end points of each scan of ``scans`` (all by default) back in its laser's frame
+        (float64), the scans' arrays views of one."""
+        points = self.points[scans]
+        if not points:
+            return []
+        n = [len(q) for q in points]
+        xy = np.repeat(self.xy()[scans].astype(float), n, axis=0)
+        c, s = per_point_rotations(np.frombuffer(self.headings)[scans], n)
+        d = np.concatenate(points).astype(float) - xy
+        out = np.column_stack((c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]))
+        return np.split(out, np.cumsum(n)[:-1])
+
+    def laser_frame(self) -> LaserFrame:
+        """The kept scans in their lasers' frames as a sequence made on demand, a slice at a time."""
+        return LaserFrame(self)
 
     def rays(self, scans: slice = slice(None)) -> tuple[np.ndarray, np.ndarray]:
         """(n, 2) start and (n, 2) end of every kept beam of ``scans`` (all by default), float64."""
@@ -96,7 +116,7 @@ class ScanStore:
         if not points:
             return np.empty((0, 2)), np.empty((0, 2))
         counts = [len(q) for q in points]
-        start = np.repeat(np.asarray(self.origins[scans], dtype=float), counts, axis=0)
+        start = np.repeat(self.xy()[scans].astype(float), counts, axis=0)
         return start, np.concatenate(points).astype(float)
 
     def parts(self, size: int) -> list[slice]:
@@ -107,6 +127,27 @@ class ScanStore:
         cuts = np.searchsorted(ends, np.arange(size, ends[-1], size), side="right")
         edges = np.unique(np.concatenate(([0], cuts, [len(ends)])))
         return [slice(i, j) for i, j in zip(edges[:-1].tolist(), edges[1:].tolist(), strict=True)]
+
+
+def per_point_rotations(headings: np.ndarray, counts: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """cos and sin of each scan's heading repeated for its ``counts`` points: math's, as the scans
+    were once turned one at a time (numpy's may differ in the last bit)."""
+    th = np.asarray(headings, dtype=float).tolist()
+    return np.repeat([math.cos(t) for t in th], counts), np.repeat([math.sin(t) for t in th], counts)
+
+
+class LaserFrame:
+    """A :class:`ScanStore`'s scans back in their lasers' frames (float64 (k, 2) each), made when
+    sliced: a long log's points are never all converted at once (report/consistency.py)."""
+
+    def __init__(self, store: ScanStore):
+        self.store = store
+
+    def __len__(self) -> int:
+        return len(self.store.points)
+
+    def __getitem__(self, scans: slice) -> list[np.ndarray]:
+        return self.store.in_laser_frame(scans)
 
 
 @dataclass(frozen=True)
