@@ -143,6 +143,25 @@ def test_closures_that_agree_with_each_other_against_the_graph_enter_it(sim_log,
     assert any(n >= 2 for n in several.values()) and any(n == 1 for n in several.values())
 
 
+def test_closures_found_on_points_are_no_evidence_against_the_graph(sim_log, monkeypatch):
+    # the same agreeing closures 1 m off, but found on points around the graph's own prediction: they
+    # may not outvote the graph (the group rule is for corner-verified closures only)
+    def corners(a, b, cfg, associate, icp):
+        return LoopMatch(np.full(3, np.nan), np.full((3, 3), np.nan), 1, 0.0, False, "few corners")
+
+    def points(a, b, prior, prior_cov, cfg, icp):
+        return LoopMatch(compose(prior, (1.0, 0.0, 0.0)), np.diag([1e-4, 1e-4, 1e-5]), 0, 0.9, True, "")
+
+    monkeypatch.setattr(hierarchy, "match_points", points)
+    hs = run_with_verifier(
+        sim_log, monkeypatch, corners, "loops.gate=1", "loops.group_gate=1e9", "loops.point_searches=1000"
+    )
+    several = Counter(r.submap_to for r in hs.loops)
+    assert any(n >= 2 for n in several.values()), "the fixture should give some submap two candidates"
+    assert hs.loops and all(r.on_points and not r.accepted for r in hs.loops)
+    assert all(r.reason.startswith("disagrees with the graph") for r in hs.loops)
+
+
 def test_closures_that_agree_with_each_other_far_beyond_the_graph_are_refused(sim_log, monkeypatch):
     # a symmetric place seen from elsewhere: every candidate agrees on a pose turned by π and 20 m off
     # (aces did this); far beyond group_gate, so the agreement does not let them in
