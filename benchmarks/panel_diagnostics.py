@@ -1,0 +1,171 @@
+"""Where the radish panel's error is, and why candidate closures were refused.
+
+    python benchmarks/radish_panel.py            # first: the runs (cornerslam_out/radish_panel/NAME)
+    python benchmarks/panel_diagnostics.py [--work cornerslam_out/radish_panel] [--data DIR]
+
+Per run of the panel: the ATE of the smoothed and of the online (causal) trajectory; the ATE left when
+every submap is aligned to the reference on its own (the error *inside* submaps: the rest is between
+them); the RMS error of the relative pose of consecutive submap origins (the drift a submap adds). For
+the exact-odometry logs also the ATE over the keyframes before the last one whose reference its own
+scans refute by more than ``REFUTE_TURN`` (benchmarks/reference_check.py): a front end that follows its
+scans cannot follow the reference past it. Over the noisy runs: refused candidates by reason and how
+many were right (benchmarks/loop_closures.py's rule), and for those refused for low fitness, how many
+right and wrong ones a lower ``loops.min_fitness`` would have let through. Diagnostics only: nothing here
+feeds back into a default. Writes docs/results/panel_diagnostics.md; deterministic.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import sys
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from loop_closures import RIGHT_THETA, RIGHT_XY, origins_truth  # noqa: E402
+from radish_panel import BUILDINGS  # noqa: E402
+from real_logs import ROOT, default_data  # noqa: E402
+from reference_check import check  # noqa: E402
+
+from cornerslam_cli.evaluate import align_se2, interpolate_inside  # noqa: E402
+from cornerslam_cli.geometry import relative, wrap_angle  # noqa: E402
+from cornerslam_cli.report.tables import read_tum  # noqa: E402
+
+REFUTE_TURN = 5.0  # degrees
+FITNESS_STEPS = (0.3, 0.4, 0.45)
+
+
+def aligned_rmse(est: np.ndarray, ref: np.ndarray) -> float:
+    """ATE RMSE of ``est`` (n, 3) against ``ref`` after the best SE(2) alignment of the positions."""
+    if len(est) < 3:
+        return 0.0
+    th, t = align_se2(est[:, :2], ref[:, :2])
+    c, s = np.cos(th), np.sin(th)
+    moved = est[:, :2] @ np.array([[c, s], [-s, c]]) + t
+    return float(np.sqrt(np.mean(np.sum((moved - ref[:, :2]) ** 2, axis=1))))
+
+
+def trajectory(run: Path, gt: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The run's smoothed poses, submap per step and the reference (NaN rows outside it), per step."""
+    stamps, est = read_tum(run / "trajectory.tum")
+    with open(run / "trajectory.csv") as f:
+        sub = np.array([int(r["submap"]) for r in csv.DictReader(f)])
+    inside, g = interpolate_inside(*read_tum(gt), stamps)
+    ref = np.full((len(stamps), 3), np.nan)
+    ref[inside] = g
+    return est, sub, ref
+
+
+def errors(run: Path, gt: Path, last_good: int | None = None) -> dict:
+    est, sub, ref = trajectory(run, gt)
+    ok = ~np.isnan(ref[:, 0])
+    within = np.zeros(len(est))
+    for s in np.unique(sub):
+        m = ok & (sub == s)
+        within[m] = 0.0 if m.sum() < 3 else aligned_rmse(est[m], ref[m])
+    first = [int(np.argmax(sub == s)) for s in np.unique(sub)]
+    pairs = [(i, j) for i, j in zip(first[:-1], first[1:], strict=True) if ok[i] and ok[j]]
+    d = np.array([relative(est[i], est[j]) - relative(ref[i], ref[j]) for i, j in pairs]).reshape(-1, 3)
+    d[:, 2] = wrap_angle(d[:, 2])
+    summary = json.loads((run / "summary.json").read_text())["accuracy"]
+    row = {
+        "ate": aligned_rmse(est[ok], ref[ok]),
+        "online": summary["online_ate"]["rmse"],
+        "within": float(np.sqrt(np.mean(within[ok] ** 2))),
+        "origin_xy": float(np.sqrt(np.mean(np.sum(d[:, :2] ** 2, axis=1)))) if len(d) else float("nan"),
+        "origin_deg": float(np.degrees(np.sqrt(np.mean(d[:, 2] ** 2)))) if len(d) else float("nan"),
+    }
+    if last_good is not None:
+        keep = ok & (np.arange(len(est)) < last_good)
+        row["before_refuted"] = aligned_rmse(est[keep], ref[keep])
+    return row
+
+
+def refusals(run: Path, gt: Path, out: Counter, right: Counter, low: list) -> None:
+    """Count ``run``'s refused candidates by reason and the right ones; low fitness: (fitness, right)."""
+    origin, _ = origins_truth(run, gt)
+    with open(run / "loops.csv") as f:
+        for r in csv.DictReader(f):
+            if r["accepted"] == "1":
+                continue
+            a, b = int(r["submap_from"]), int(r["submap_to"])
+            true = relative(origin[a], origin[b])
+            got = np.array([float(r[k]) for k in ("x", "y", "theta")])
+            ok = bool(
+                np.hypot(*(true[:2] - got[:2])) < RIGHT_XY and abs(wrap_angle(true[2] - got[2])) < RIGHT_THETA
+            )
+            reason = r["reason"].split("(")[0].strip()
+            out[reason] += 1
+            right[reason] += ok
+            if reason == "low fitness":
+                low.append((float(r["fitness"]), ok))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--data", type=Path, default=default_data())
+    ap.add_argument("--work", type=Path, default=ROOT / "cornerslam_out" / "radish_panel")
+    ap.add_argument("--out", type=Path, default=ROOT / "docs" / "results" / "panel_diagnostics.md")
+    args = ap.parse_args()
+    radish = args.data / "radish"
+    lines = [
+        "# Where the panel's error is, and why closures were refused",
+        "",
+        "`python benchmarks/panel_diagnostics.py` over the runs of `benchmarks/radish_panel.py` (see its "
+        "docstring). *Inside submaps*: ATE RMSE with every submap aligned to the reference on its own. "
+        "*Origins*: RMS error of consecutive submap origins' relative pose. *Before refuted*: exact "
+        f"odometry, ATE over the keyframes before the last one whose reference its scans refute by more "
+        f"than {REFUTE_TURN:.0f}° (reference_check.py).",
+        "",
+        "| log | ATE (m) | online ATE (m) | inside submaps (m) | origins (cm, °) | before refuted (m) |",
+        "|---|---:|---:|---:|---|---:|",
+    ]
+    for variant in ("", "-exact"):
+        for b in BUILDINGS:
+            name = f"{b}{variant}"
+            last_good = None
+            if variant:
+                turns = [
+                    k
+                    for k, _, _, deg in check((radish / f"{name}.log", []))["refuted"]
+                    if abs(deg) > REFUTE_TURN
+                ]
+                last_good = max(turns) if turns else None
+            r = errors(args.work / name, radish / f"{name}.gt.tum", last_good)
+            before = f"{r['before_refuted']:.3f} (< {last_good})" if "before_refuted" in r else ""
+            lines.append(
+                f"| {name} | {r['ate']:.3f} | {r['online']:.3f} | {r['within']:.3f} "
+                f"| {100 * r['origin_xy']:.1f}, {r['origin_deg']:.2f} | {before} |"
+            )
+    out, right, low = Counter(), Counter(), []
+    for b in BUILDINGS:
+        refusals(args.work / b, radish / f"{b}.gt.tum", out, right, low)
+    lines += [
+        "",
+        f"Refused candidates over the noisy runs, and how many were right (within {RIGHT_XY} m / "
+        f"{RIGHT_THETA} rad of the reference):",
+        "",
+        "| reason | refused | right |",
+        "|---|---:|---:|",
+        *(f"| {k} | {out[k]} | {right[k]} |" for k in sorted(out, key=lambda k: -out[k])),
+        "",
+        "Refused for low fitness, that a lower `loops.min_fitness` would take:",
+        "",
+        "| min_fitness | right | wrong |",
+        "|---:|---:|---:|",
+        *(
+            f"| {f} | {sum(x >= f and ok for x, ok in low)} | {sum(x >= f and not ok for x, ok in low)} |"
+            for f in FITNESS_STEPS
+        ),
+    ]
+    text = "\n".join(lines) + "\n"
+    args.out.write_text(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
