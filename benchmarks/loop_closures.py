@@ -44,6 +44,16 @@ def origins_truth(run: Path, gt: Path) -> tuple[dict[int, np.ndarray], int]:
     return {s: truth[max(k - 1, 0)] for s, k in first.items()}, len(first)
 
 
+def is_right(origin: dict[int, np.ndarray], row: dict) -> bool:
+    """Whether a loops.csv ``row``'s pose is within RIGHT_XY / RIGHT_THETA of the true relative pose of
+    its two submap origins (``origin``: :func:`origins_truth`)."""
+    true = relative(origin[int(row["submap_from"])], origin[int(row["submap_to"])])
+    got = np.array([float(row[k]) for k in ("x", "y", "theta")])
+    return bool(
+        np.hypot(*(true[:2] - got[:2])) < RIGHT_XY and abs(wrap_angle(true[2] - got[2])) < RIGHT_THETA
+    )
+
+
 def score(run: Path, gt: Path) -> dict:
     origin, n_sub = origins_truth(run, gt)
     with open(run / "loops.csv") as f:
@@ -53,11 +63,7 @@ def score(run: Path, gt: Path) -> dict:
     for r in loops:
         a, b = int(r["submap_from"]), int(r["submap_to"])
         tried.add((a, b))
-        true = relative(origin[a], origin[b])
-        got = np.array([float(r[k]) for k in ("x", "y", "theta")])
-        right = bool(
-            np.hypot(*(true[:2] - got[:2])) < RIGHT_XY and abs(wrap_angle(true[2] - got[2])) < RIGHT_THETA
-        )
+        right = is_right(origin, r)
         if r["accepted"] == "1":
             out["accepted"] += 1
             out["wrong"] += not right

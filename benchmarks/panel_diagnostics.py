@@ -26,12 +26,12 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from loop_closures import RIGHT_THETA, RIGHT_XY, origins_truth  # noqa: E402
+from loop_closures import RIGHT_THETA, RIGHT_XY, is_right, origins_truth  # noqa: E402
 from radish_panel import BUILDINGS  # noqa: E402
 from real_logs import ROOT, default_data  # noqa: E402
 from reference_check import check  # noqa: E402
 
-from cornerslam_cli.evaluate import align_se2, interpolate_inside  # noqa: E402
+from cornerslam_cli.evaluate import align_se2, apply_se2, interpolate_inside  # noqa: E402
 from cornerslam_cli.geometry import relative, wrap_angle  # noqa: E402
 from cornerslam_cli.report.tables import read_tum  # noqa: E402
 
@@ -43,9 +43,7 @@ def aligned_rmse(est: np.ndarray, ref: np.ndarray) -> float:
     """ATE RMSE of ``est`` (n, 3) against ``ref`` after the best SE(2) alignment of the positions."""
     if len(est) < 3:
         return 0.0
-    th, t = align_se2(est[:, :2], ref[:, :2])
-    c, s = np.cos(th), np.sin(th)
-    moved = est[:, :2] @ np.array([[c, s], [-s, c]]) + t
+    moved = apply_se2(*align_se2(est[:, :2], ref[:, :2]), est)[:, :2]
     return float(np.sqrt(np.mean(np.sum((moved - ref[:, :2]) ** 2, axis=1))))
 
 
@@ -92,12 +90,7 @@ def refusals(run: Path, gt: Path, out: Counter, right: Counter, low: list) -> No
         for r in csv.DictReader(f):
             if r["accepted"] == "1":
                 continue
-            a, b = int(r["submap_from"]), int(r["submap_to"])
-            true = relative(origin[a], origin[b])
-            got = np.array([float(r[k]) for k in ("x", "y", "theta")])
-            ok = bool(
-                np.hypot(*(true[:2] - got[:2])) < RIGHT_XY and abs(wrap_angle(true[2] - got[2])) < RIGHT_THETA
-            )
+            ok = is_right(origin, r)
             reason = r["reason"].split("(")[0].strip()
             out[reason] += 1
             right[reason] += ok

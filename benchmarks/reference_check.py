@@ -4,14 +4,14 @@
 
 The exact-odometry logs (radish/NAME-exact.log) carry the reference poses as odometry, so a front end
 that follows its scans cannot score 0 against them where the reference itself is wrong. For every
-keyframe k (the run's own keyframe selection, default config): the scans of the ``WINDOW`` keyframes
-before it placed at their reference poses make a local map (motion/icp.py's LocalMap, as the front end
-builds it); scan k is scored at its reference pose (share of its points within ``inlier_distance`` of
-the map: the front end's fit) and at the best pose of a correlative search of ± ``SEARCH_XY`` m /
-± ``SEARCH_THETA`` rad around it, refined by ICP (motion/). A keyframe *refutes* the reference when the
-best pose fits at least ``REFUTE_FIT`` better and lies more than ``REFUTE_XY`` m or ``REFUTE_THETA``
-rad from it. Nothing here is fed back into a default: it says how far the panel's exact-odometry
-figures can be trusted. Writes ``docs/results/reference_check.md``; deterministic.
+keyframe k (the run's own keyframe selection, default config): the scans of the ``scan_match.window``
+keyframes before it placed at their reference poses make a local map (motion/icp.py's LocalMap, as the
+front end builds it); scan k is scored at its reference pose (share of its points within
+``inlier_distance`` of the map: the front end's fit) and at the best pose of a correlative search of ±
+``SEARCH_XY`` m / ± ``SEARCH_THETA`` rad around it, refined by ICP (motion/). A keyframe *refutes* the
+reference when the best pose fits at least ``REFUTE_FIT`` better and lies more than ``REFUTE_XY`` m or
+``REFUTE_THETA`` rad from it. Nothing here is fed back into a default: it says how far the panel's
+exact-odometry figures can be trusted. Writes ``docs/results/reference_check.md``; deterministic.
 """
 
 from __future__ import annotations
@@ -31,8 +31,9 @@ from real_logs import ROOT, default_data  # noqa: E402
 from cornerslam_cli.geometry import relative, transform_points, wrap_angle  # noqa: E402
 from cornerslam_cli.motion.correlative import Window, search  # noqa: E402
 from cornerslam_cli.motion.icp import LocalMap, register, voxel_thin  # noqa: E402
+from cornerslam_cli.motion.params import ScanMatchConfig  # noqa: E402
 
-WINDOW = 10  # keyframes in the local map (the front end's scan_match.window)
+WINDOW = ScanMatchConfig().window  # keyframes in the local map by default (the run's scan_match.window)
 SEARCH_XY, SEARCH_THETA = 0.3, 0.3  # m, rad: the search around the reference pose
 REFUTE_FIT = 0.2  # the best pose fits this much better (share of points) ...
 REFUTE_XY, REFUTE_THETA = 0.1, np.radians(3.0)  # ... and lies this far away: the reference is refuted
@@ -45,8 +46,8 @@ def check(args: tuple[Path, list[str]]) -> dict:
     ref = np.array([p.odom for p in pairs])  # -exact logs: the reference poses are the odometry
     pts = [transform_points(p.scan.points(), src.laser2base) for p in pairs]  # base frame
     refuted = []
-    for k in range(WINDOW, len(pairs)):
-        m = np.concatenate([transform_points(pts[i], ref[i]) for i in range(k - WINDOW, k)])
+    for k in range(cfg.window, len(pairs)):
+        m = np.concatenate([transform_points(pts[i], ref[i]) for i in range(k - cfg.window, k)])
         local = LocalMap.build(m[voxel_thin(m, cfg.voxel)])
         q = pts[k][voxel_thin(pts[k], cfg.scan_voxel)]
         if len(q) < 10:
@@ -55,17 +56,13 @@ def check(args: tuple[Path, list[str]]) -> dict:
             q, local.points, ref[k], Window(SEARCH_XY, SEARCH_THETA), cfg.search_resolution, cfg.search_sigma
         )
         best = register(q, local, found.pose, cfg).pose
-        gain = fit(local, q, best, cfg.inlier_distance) - fit(local, q, ref[k], cfg.inlier_distance)
+        gain = local.fit(transform_points(q, best), cfg.inlier_distance) - local.fit(
+            transform_points(q, ref[k]), cfg.inlier_distance
+        )
         d = relative(ref[k], best)
         if gain >= REFUTE_FIT and (np.hypot(d[0], d[1]) > REFUTE_XY or abs(wrap_angle(d[2])) > REFUTE_THETA):
             refuted.append((k, gain, float(np.hypot(d[0], d[1])), float(np.degrees(wrap_angle(d[2])))))
     return {"log": log.name.removesuffix(".log"), "keyframes": len(pairs), "refuted": refuted}
-
-
-def fit(local: LocalMap, points: np.ndarray, pose: np.ndarray, inlier: float) -> float:
-    """Share of ``points`` placed at ``pose`` within ``inlier`` of the local map (the front end's fit)."""
-    dist, _ = local.grid.query(transform_points(points, pose), inlier)
-    return float(np.mean(dist < inlier))
 
 
 def main() -> None:

@@ -47,7 +47,8 @@ rooms apart is not possible here: the matcher returns the pose that aligns them;
 (its prediction and marginal covariance) rejects it.
 
 A pair the corners cannot verify (``few corners``, ``no hypothesis``: a corridor driven the other way
-round shows few corners from both sides) can be verified on the points alone, around the graph's
+round shows few corners from both sides; ``low fitness``: a corner pose its points refute) can be
+verified on the points alone, around the graph's
 prediction: graph/points.py (hierarchy.py decides when, ``loops.point_search``).
 """
 

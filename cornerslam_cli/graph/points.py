@@ -3,7 +3,8 @@
     match = match_points(a, b, *graph.relative(a.index, b.index), cfg.loops, cfg.scan_match)
 
 For a pair of submaps whose corners give no verdict (graph/loops.py: ``few corners``, ``no hypothesis``
-— a corridor driven the other way round shows few corners from both sides). Unlike the corner search
+— a corridor driven the other way round shows few corners from both sides) or a pose its points refute
+(``low fitness``). Unlike the corner search
 this needs a prior, the graph's predicted a→b and its covariance; hierarchy.py decides when to ask
 (``loops.point_search``, ``point_searches``). Same conventions as graph/loops.py: a→b is b's origin in
 a's frame, the match's covariance in a's frame.
@@ -31,7 +32,7 @@ from .params import LoopConfig
 from .submap import LoopMatch, Submap
 
 NOT_DISTINCT = "not distinct on points"  # the points fit as well moved along the fit's weak direction
-POINTS = "verified on points"  # accepted on the scan points alone (too few corners)
+POINTS = "verified on points"  # accepted on the scan points alone (the corners could not verify it)
 POINT_VOXEL = 0.2  # m: b's points thinned for the correlative search (its cost grows with their number)
 POINT_MAX = 500  # ... and at most this many of them (every k-th)
 MIN_WINDOW_XY, MIN_WINDOW_THETA = 0.3, 0.05  # m, rad: the search window is at least ICP's basin

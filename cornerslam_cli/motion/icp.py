@@ -122,6 +122,11 @@ class LocalMap:
         padded_normals = np.vstack((np.where(has_normal[:, None], normals, 0.0), np.zeros((1, 2))))
         return LocalMap(points, grid, normals, has_normal, padded_points, padded_normals)
 
+    def fit(self, placed: np.ndarray, inlier_distance: float) -> float:
+        """Share of the ``placed`` points (motion frame) within ``inlier_distance`` of the map."""
+        dist, _ = self.grid.query(placed, inlier_distance)
+        return float(np.mean(dist < inlier_distance))
+
 
 def load_kernels() -> None:
     """Load (on a machine's first run: compile) the scan matcher's Numba kernels (motion/nearest.py,
@@ -328,8 +333,7 @@ class ScanMatcher:
 
     def _fit_at(self, points: np.ndarray, pose: np.ndarray) -> float:
         """Share of ``points`` within ``inlier_distance`` of the local map at ``pose``."""
-        dist, _ = self.local.grid.query(transform_points(points, pose), self.cfg.inlier_distance)
-        return float(np.mean(dist < self.cfg.inlier_distance))
+        return self.local.fit(transform_points(points, pose), self.cfg.inlier_distance)
 
     def _fallback(self, o: np.ndarray, cov_o: np.ndarray, fit: float, searched: bool = False) -> MatchResult:
         self.n_fallback += 1
