@@ -34,6 +34,7 @@ import numpy as np
 from .geometry import (
     compose,
     compose_inverse_cov,
+    reanchor,
     rotate_covariance,
     rotate_pose_covariance,
     transform_points,
@@ -42,7 +43,7 @@ from .geometry import (
 from .graph.loops import FEW_CORNERS, LOW_FITNESS, NO_HYPOTHESIS, loop_associator, match_submaps
 from .graph.points import POINTS, match_points, searchable
 from .graph.posegraph import PoseGraph
-from .graph.submap import LoopMatch, Submap
+from .graph.submap import LoopMatch, Submap, keyframe_factors, overlap_steps
 from .motion.icp import voxel_thin
 from .slam import Slam, StepRecord
 
@@ -98,14 +99,16 @@ class _OpenSubmap:
         self.index = index
         self.first_step = first_step
         self.poses: list[np.ndarray] = []
+        self.covs: list[np.ndarray] = []  # each step's motion noise (Slam.step_noise)
         self.points: list[np.ndarray] = []
         self.n_points = 0
         self.travelled = 0.0
 
-    def add(self, pose: np.ndarray, points: np.ndarray | None, voxel: float) -> None:
+    def add(self, pose: np.ndarray, cov: np.ndarray, points: np.ndarray | None, voxel: float) -> None:
         if self.poses:
             self.travelled += math.hypot(*(pose[:2] - self.poses[-1][:2]))
         self.poses.append(pose)
+        self.covs.append(cov)
         if points is not None and len(points):
             self.points.append(points)
             self.n_points += len(points)
@@ -154,10 +157,10 @@ class HierarchicalSlam:
         sub = self._open
         sensor = compose(r.pose, self.laser2base)
         pts = None if frame.points is None else transform_points(frame.points.astype(float), sensor)
-        sub.add(r.pose, pts, self.cfg.submaps.voxel)
+        sub.add(r.pose, self.slam.step_cov, pts, self.cfg.submaps.voxel)
         self.step_submap.append(sub.index)
         self.local_poses.extend(r.pose)
-        origin, origin_cov = self.graph.pose(sub.index), self._origin_cov
+        origin, origin_cov = self.graph.pose(sub.first_step), self._origin_cov
         t_loop = 0.0
         if self._full():
             t0 = time.perf_counter()
@@ -183,14 +186,15 @@ class HierarchicalSlam:
     def _close(self, step: int, last: bool = False) -> None:
         """Close the open submap at ``step``: a node for the next origin, its loops, the graph optimised."""
         sub = self._close_submap()
-        self.graph.add_sequential(sub.end_pose, sub.end_cov + COV_FLOOR)
+        for rel, cov in zip(*keyframe_factors(sub.poses, self._open.covs, sub.end_cov), strict=True):
+            self.graph.add_sequential(rel, cov + COV_FLOOR)  # node k + 1 = step k
         self.graph.optimize()
         if self.cfg.loops.enabled:
             self._close_loops(sub, step)
         if not last:
             self.slam.new_map()
             self._open = _OpenSubmap(sub.index + 1, step + 1)
-            self._origin_cov = self.graph.marginal(sub.index + 1)
+            self._origin_cov = self.graph.marginal(step + 1)
 
     def _close_submap(self) -> Submap:
         ekf, sub = self.slam.ekf, self._open
@@ -225,7 +229,7 @@ class HierarchicalSlam:
             on_points = cfg.point_search and searched < cfg.point_searches and m.reason in TO_POINTS
             on_points = on_points and searchable(a, b)  # (one that cannot run spends no search)
             searched += on_points
-            pred = self.graph.relative(a.index, b.index) if on_points or m.accepted else None
+            pred = self.graph.relative(a.first_step, b.first_step) if on_points or m.accepted else None
             if on_points:
                 kept = 0 if m.reason == LOW_FITNESS else m.n_corners  # (0: the points refuted their pose)
                 m = replace(match_points(a, b, *pred, cfg, self.cfg.scan_match), n_corners=kept)
@@ -260,9 +264,7 @@ class HierarchicalSlam:
         for r in found:
             if r.accepted:
                 try:
-                    r = replace(
-                        r, factor=self.graph.add_loop(r.submap_from, r.submap_to, r.match.pose, r.match.cov)
-                    )
+                    r = replace(r, factor=self._add_loop(self.closed[r.submap_from], b, r.match))
                 except ValueError:  # a degenerate ICP fit (a featureless corridor): no usable covariance
                     r = replace(r, accepted=False, reason="match covariance not positive definite")
             self.loops.append(r)
@@ -279,14 +281,24 @@ class HierarchicalSlam:
                 if agree([self.placed(r1), self.placed(r2)]):
                     continue
                 pose, cov = compose_inverse_cov(r1.match.pose, r1.match.cov, r2.match.pose, r2.match.cov)
-                pred, pred_cov = self.graph.relative(r1.submap_from, r2.submap_from)
+                pred, pred_cov = self.graph.relative(
+                    *(self.closed[r.submap_from].first_step for r in (r1, r2))
+                )
                 if chi2(pred, pred_cov, pose, cov) > self.cfg.loops.pair_gate:
                     return False
         return True
 
     def placed(self, r: LoopRecord) -> np.ndarray:
         """The global pose of submap b's origin that closure ``r`` implies (a's pose in the graph ∘ a→b)."""
-        return compose(self.graph.pose(r.submap_from), r.match.pose)
+        return compose(self.graph.pose(self.closed[r.submap_from].first_step), r.match.pose)
+
+    def _add_loop(self, a: Submap, b: Submap, m: LoopMatch) -> int:
+        """A closure a→b into the graph between the keyframes where the two submaps overlap (their
+        closest robot positions under it), not their origins: what the match measured is where the
+        scans there lie, so the submaps' own drift from their origins stays with the keyframe factors."""
+        i, j = overlap_steps(a, b, m.pose)
+        rel, cov = reanchor(m.pose, m.cov, a.poses[i], b.poses[j])
+        return self.graph.add_loop(a.first_step + i + 1, b.first_step + j + 1, rel, cov)
 
     def candidates(self, b: Submap) -> list[Submap]:
         """Earlier submaps (at least ``loops.min_gap`` before ``b``) whose path came within
@@ -298,9 +310,9 @@ class HierarchicalSlam:
         last = b.index - cfg.min_gap
         if last < 0:
             return []
-        poses = self.graph.poses()
+        poses = self.graph.poses()[[s.first_step for s in self.closed]]  # the origins
         path_b = transform_points(self.paths[b.index], poses[b.index])
-        Sb = self.graph.marginal(b.index)
+        Sb = self.graph.marginal(b.first_step)
         reach = float(np.hypot(*self.paths[b.index].T).max())
         sigma = (
             math.sqrt(max(np.linalg.eigvalsh(Sb[:2, :2]).max(), 0.0)) + math.sqrt(max(Sb[2, 2], 0.0)) * reach
@@ -316,15 +328,16 @@ class HierarchicalSlam:
 
     def final_poses(self) -> np.ndarray:
         """(n, 3) every step's pose with the optimised submap origins (the smoothed trajectory)."""
-        origins = self.graph.poses()[np.frombuffer(self.step_submap, dtype=np.int64)]
-        return compose(origins, np.frombuffer(self.local_poses).reshape(-1, 3))
+        nodes = self.graph.poses()[1:]  # step k's node is k + 1 (node 0: the first origin)
+        open_steps = np.frombuffer(self.local_poses).reshape(-1, 3)[len(nodes) :]  # not yet in the graph
+        return np.vstack((nodes, compose(self.graph.pose(self._open.first_step), open_steps).reshape(-1, 3)))
 
     def landmark_table(self) -> dict[str, np.ndarray]:
         """map.csv's columns: every submap's landmarks at its optimised origin (global frame), their
         covariances turned with it (the origin's own uncertainty not added), with ``submap`` and
         ``linked_to`` (the id of the corner it was matched to across an accepted closure, or -1)."""
         poses = self.graph.poses()
-        parts = [place_table(t, poses[i], i) for i, t in enumerate(self.tables)]
+        parts = [place_table(t, poses[self.closed[i].first_step], i) for i, t in enumerate(self.tables)]
         if not parts:
             return self.slam.landmark_table() | {"submap": np.zeros(0, int), "linked_to": np.zeros(0, int)}
         table = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
