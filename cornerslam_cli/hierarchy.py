@@ -35,6 +35,7 @@ from .geometry import (
     compose,
     compose_inverse_cov,
     reanchor,
+    relative,
     rotate_covariance,
     rotate_pose_covariance,
     transform_points,
@@ -43,7 +44,7 @@ from .geometry import (
 from .graph.loops import FEW_CORNERS, LOW_FITNESS, NO_HYPOTHESIS, loop_associator, match_submaps
 from .graph.points import POINTS, match_points, searchable
 from .graph.posegraph import PoseGraph
-from .graph.submap import LoopMatch, Submap, keyframe_factors, overlap_steps
+from .graph.submap import LoopMatch, Submap, keyframe_factors, keyframe_nodes, overlap_steps
 from .motion.icp import voxel_thin
 from .slam import Slam, StepRecord
 
@@ -95,9 +96,10 @@ class LoopRecord:
 class _OpenSubmap:
     """The submap being built: its steps' local poses, its scans' points, how far the robot went."""
 
-    def __init__(self, index: int, first_step: int):
+    def __init__(self, index: int, first_step: int, node: int):
         self.index = index
         self.first_step = first_step
+        self.node = node  # its origin's node in the pose graph
         self.poses: list[np.ndarray] = []
         self.covs: list[np.ndarray] = []  # each step's motion noise (Slam.step_noise)
         self.points: list[np.ndarray] = []
@@ -139,7 +141,9 @@ class HierarchicalSlam:
         self.loops: list[LoopRecord] = []
         self.step_submap = array("l")
         self.local_poses = array("d")
-        self._open = _OpenSubmap(0, 0)
+        self.step_node = array("l")  # per step of a closed submap: the graph node it hangs from …
+        self.step_offset = array("d")  # … and its pose relative to that node (the filter's)
+        self._open = _OpenSubmap(0, 0, 0)
         self._origin_cov = np.zeros((3, 3))  # the open submap origin's marginal in the graph
         self.t_loop = 0.0
         self.n_ids = 0
@@ -160,7 +164,7 @@ class HierarchicalSlam:
         sub.add(r.pose, self.slam.step_cov, pts, self.cfg.submaps.voxel)
         self.step_submap.append(sub.index)
         self.local_poses.extend(r.pose)
-        origin, origin_cov = self.graph.pose(sub.first_step), self._origin_cov
+        origin, origin_cov = self.graph.pose(sub.node), self._origin_cov
         t_loop = 0.0
         if self._full():
             t0 = time.perf_counter()
@@ -185,19 +189,28 @@ class HierarchicalSlam:
 
     def _close(self, step: int, last: bool = False) -> None:
         """Close the open submap at ``step``: a node for the next origin, its loops, the graph optimised."""
-        sub = self._close_submap()
-        for rel, cov in zip(*keyframe_factors(sub.poses, self._open.covs, sub.end_cov), strict=True):
-            self.graph.add_sequential(rel, cov + COV_FLOOR)  # node k + 1 = step k
+        sub, factors = self._close_submap()
+        for rel, cov in zip(*factors, strict=True):
+            self.graph.add_sequential(rel, cov + COV_FLOOR)
         self.graph.optimize()
         if self.cfg.loops.enabled:
             self._close_loops(sub, step)
         if not last:
             self.slam.new_map()
-            self._open = _OpenSubmap(sub.index + 1, step + 1)
-            self._origin_cov = self.graph.marginal(step + 1)
+            self._open = _OpenSubmap(sub.index + 1, step + 1, len(self.graph) - 1)
+            self._origin_cov = self.graph.marginal(self._open.node)
 
-    def _close_submap(self) -> Submap:
-        ekf, sub = self.slam.ekf, self._open
+    def _close_submap(self) -> tuple[Submap, tuple[np.ndarray, np.ndarray]]:
+        """The open submap closed, and its factors for the graph (keyframe nodes: graph/submap.py)."""
+        ekf, sub, g = self.slam.ekf, self._open, self.cfg.graph
+        poses = np.array(sub.poses).reshape(-1, 3)
+        nodes = keyframe_nodes(poses, g.node_spacing, g.node_angle)
+        factors = keyframe_factors(poses, np.array(sub.covs), ekf.P[:3, :3], nodes)
+        before = np.searchsorted(nodes, np.arange(len(poses)), side="right") - 1  # last node at or before
+        step_nodes = np.where(before >= 0, len(self.graph) + before, sub.node)
+        anchor_poses = np.where((before >= 0)[:, None], poses[nodes[before.clip(0)]], 0.0)
+        self.step_node.extend(step_nodes)
+        self.step_offset.extend(relative(anchor_poses, poses).ravel())
         table = self.slam.landmark_table()
         n = len(table["id"])
         state = (3 + 3 * table["id"][:, None] + np.arange(3)).reshape(-1)
@@ -213,12 +226,15 @@ class HierarchicalSlam:
             points=sub.thinned(self.cfg.submaps.voxel),
             end_pose=ekf.pose,
             end_cov=ekf.P[:3, :3].copy(),
-            poses=np.array(sub.poses).reshape(-1, 3),
+            poses=poses,
+            node=sub.node,
+            step_nodes=step_nodes,
+            anchor_poses=anchor_poses,
         )
         self.closed.append(closed)
         self.tables.append({**table, "id": ids})
         self.paths.append(closed.poses[voxel_thin(closed.poses[:, :2], PATH_CELL), :2])
-        return closed
+        return closed, factors
 
     def _close_loops(self, b: Submap, step: int) -> None:
         """Verify the candidates for submap ``b``, gate them, add the accepted ones to the graph."""
@@ -229,7 +245,7 @@ class HierarchicalSlam:
             on_points = cfg.point_search and searched < cfg.point_searches and m.reason in TO_POINTS
             on_points = on_points and searchable(a, b)  # (one that cannot run spends no search)
             searched += on_points
-            pred = self.graph.relative(a.first_step, b.first_step) if on_points or m.accepted else None
+            pred = self.graph.relative(a.node, b.node) if on_points or m.accepted else None
             if on_points:
                 kept = 0 if m.reason == LOW_FITNESS else m.n_corners  # (0: the points refuted their pose)
                 m = replace(match_points(a, b, *pred, cfg, self.cfg.scan_match), n_corners=kept)
@@ -281,24 +297,24 @@ class HierarchicalSlam:
                 if agree([self.placed(r1), self.placed(r2)]):
                     continue
                 pose, cov = compose_inverse_cov(r1.match.pose, r1.match.cov, r2.match.pose, r2.match.cov)
-                pred, pred_cov = self.graph.relative(
-                    *(self.closed[r.submap_from].first_step for r in (r1, r2))
-                )
+                pred, pred_cov = self.graph.relative(*(self.closed[r.submap_from].node for r in (r1, r2)))
                 if chi2(pred, pred_cov, pose, cov) > self.cfg.loops.pair_gate:
                     return False
         return True
 
     def placed(self, r: LoopRecord) -> np.ndarray:
         """The global pose of submap b's origin that closure ``r`` implies (a's pose in the graph ∘ a→b)."""
-        return compose(self.graph.pose(self.closed[r.submap_from].first_step), r.match.pose)
+        return compose(self.graph.pose(self.closed[r.submap_from].node), r.match.pose)
 
     def _add_loop(self, a: Submap, b: Submap, m: LoopMatch) -> int:
         """A closure a→b into the graph between the keyframes where the two submaps overlap (their
         closest robot positions under it), not their origins: what the match measured is where the
         scans there lie, so the submaps' own drift from their origins stays with the keyframe factors."""
         i, j = overlap_steps(a, b, m.pose)
-        rel, cov = reanchor(m.pose, m.cov, a.poses[i], b.poses[j])
-        return self.graph.add_loop(a.first_step + i + 1, b.first_step + j + 1, rel, cov)
+        if a.step_nodes[i] == b.step_nodes[j]:  # (b right after a, both at a's last node: the origins)
+            return self.graph.add_loop(a.node, b.node, m.pose, m.cov)
+        rel, cov = reanchor(m.pose, m.cov, a.anchor_poses[i], b.anchor_poses[j])
+        return self.graph.add_loop(a.step_nodes[i], b.step_nodes[j], rel, cov)
 
     def candidates(self, b: Submap) -> list[Submap]:
         """Earlier submaps (at least ``loops.min_gap`` before ``b``) whose path came within
@@ -310,9 +326,9 @@ class HierarchicalSlam:
         last = b.index - cfg.min_gap
         if last < 0:
             return []
-        poses = self.graph.poses()[[s.first_step for s in self.closed]]  # the origins
+        poses = self.graph.poses()[[s.node for s in self.closed]]  # the origins
         path_b = transform_points(self.paths[b.index], poses[b.index])
-        Sb = self.graph.marginal(b.first_step)
+        Sb = self.graph.marginal(b.node)
         reach = float(np.hypot(*self.paths[b.index].T).max())
         sigma = (
             math.sqrt(max(np.linalg.eigvalsh(Sb[:2, :2]).max(), 0.0)) + math.sqrt(max(Sb[2, 2], 0.0)) * reach
@@ -328,16 +344,19 @@ class HierarchicalSlam:
 
     def final_poses(self) -> np.ndarray:
         """(n, 3) every step's pose with the optimised submap origins (the smoothed trajectory)."""
-        nodes = self.graph.poses()[1:]  # step k's node is k + 1 (node 0: the first origin)
-        open_steps = np.frombuffer(self.local_poses).reshape(-1, 3)[len(nodes) :]  # not yet in the graph
-        return np.vstack((nodes, compose(self.graph.pose(self._open.first_step), open_steps).reshape(-1, 3)))
+        closed = compose(self.graph.poses()[np.frombuffer(self.step_node, dtype=np.int64)], self.offsets())
+        open_steps = np.frombuffer(self.local_poses).reshape(-1, 3)[len(closed) :]  # not yet in the graph
+        return np.vstack((closed, compose(self.graph.pose(self._open.node), open_steps).reshape(-1, 3)))
+
+    def offsets(self) -> np.ndarray:
+        return np.frombuffer(self.step_offset).reshape(-1, 3)
 
     def landmark_table(self) -> dict[str, np.ndarray]:
         """map.csv's columns: every submap's landmarks at its optimised origin (global frame), their
         covariances turned with it (the origin's own uncertainty not added), with ``submap`` and
         ``linked_to`` (the id of the corner it was matched to across an accepted closure, or -1)."""
         poses = self.graph.poses()
-        parts = [place_table(t, poses[self.closed[i].first_step], i) for i, t in enumerate(self.tables)]
+        parts = [place_table(t, poses[self.closed[i].node], i) for i, t in enumerate(self.tables)]
         if not parts:
             return self.slam.landmark_table() | {"submap": np.zeros(0, int), "linked_to": np.zeros(0, int)}
         table = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}

@@ -100,7 +100,7 @@ class FakeVerifier:
 
     def __call__(self, a, b, cfg, associate, icp):
         self.calls += 1
-        pred, _ = self.hs.graph.relative(a.first_step, b.first_step)
+        pred, _ = self.hs.graph.relative(a.node, b.node)
         off = self.offsets(a.index) if callable(self.offsets) else self.offsets
         pose = compose(pred, off)
         return LoopMatch(pose, np.diag([1e-4, 1e-4, 1e-5]), 6, 0.9, True, "")
@@ -238,7 +238,7 @@ def test_closures_placing_a_submap_apart_agree_within_the_uncertainty_between_th
     ]
     hs = HierarchicalSlam.__new__(HierarchicalSlam)
     hs.graph, hs.cfg = _Graph(sigma), config_from({}, [])
-    hs.closed = [SimpleNamespace(first_step=k) for k in range(2)]  # (a1's and a2's origins: nodes 0, 1)
+    hs.closed = [SimpleNamespace(node=k) for k in range(2)]  # (a1's and a2's origins: nodes 0, 1)
     assert not agree([hs.placed(r) for r in rows])
     assert hs.consistent(rows) == consistent
     assert hs.consistent(rows + rows[:1]) == consistent  # a third closure agreeing with the first
@@ -282,7 +282,7 @@ def test_pairs_the_corners_cannot_verify_are_verified_on_points(
 
     def points(a, b, prior, prior_cov, cfg, icp):
         # the prior is the graph's own prediction of b's origin in a's frame, with its covariance
-        want, want_cov = current[0].graph.relative(a.first_step, b.first_step)
+        want, want_cov = current[0].graph.relative(a.node, b.node)
         np.testing.assert_allclose(prior, want)
         np.testing.assert_allclose(prior_cov, want_cov)
         priors.append((a.index, b.index))

@@ -9,11 +9,12 @@ GTSAM's tangent space).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import relative, rotate_pose_covariance, transform_points
+from ..geometry import relative, rotate_pose_covariance, transform_points, wrap_angle
 
 
 @dataclass(frozen=True)
@@ -30,6 +31,9 @@ class Submap:
     end_pose: np.ndarray  # (3,) the robot at the last step: the next submap's origin
     end_cov: np.ndarray  # (3, 3) its covariance: the sequential factor of the graph
     poses: np.ndarray  # (s, 3) the robot at each of its steps (filtered, causal)
+    node: int = 0  # its origin's node in the pose graph
+    step_nodes: np.ndarray | None = None  # (s,) the graph node each step hangs from (its anchor) …
+    anchor_poses: np.ndarray | None = None  # (s, 3) … and that node's pose in this submap's frame
 
 
 @dataclass(frozen=True)
@@ -54,20 +58,46 @@ def overlap_steps(a: Submap, b: Submap, pose: np.ndarray) -> tuple[int, int]:
     return int(i), int(j)
 
 
+def keyframe_nodes(poses: np.ndarray, spacing: float, angle: float) -> np.ndarray:
+    """The steps of a closed submap (its local ``poses``) that become pose-graph nodes: one once the
+    robot has moved ``spacing`` m or turned ``angle`` rad since the last node (the origin first), and
+    always the last step (the next submap's origin). Indices into ``poses``."""
+    nodes, ref = [], np.zeros(3)
+    for k, p in enumerate(poses[:-1]):
+        if math.hypot(p[0] - ref[0], p[1] - ref[1]) >= spacing or abs(wrap_angle(p[2] - ref[2])) >= angle:
+            nodes.append(k)
+            ref = p
+    nodes.append(len(poses) - 1)
+    return np.array(nodes)
+
+
 def keyframe_factors(
-    poses: np.ndarray, covs: np.ndarray, end_cov: np.ndarray
+    poses: np.ndarray, covs: np.ndarray, end_cov: np.ndarray, nodes: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """A closed submap as the pose graph's chain of keyframe factors: each step's pose relative to the
-    one before (the first relative to the origin) and its motion noise ``covs`` (s, 3, 3), scaled so the
-    chain is as sure of the last pose as the filter was (``end_cov``: its corners narrowed what the
-    motion noise alone would say; the volumes, det^(1/3), matched). Returns (rel (s, 3), cov (s, 3, 3))."""
+    """A closed submap as a chain of pose-graph factors between its ``nodes`` (keyframe_nodes): each
+    node's pose relative to the one before (the first's to the origin), with the steps' motion noise
+    ``covs`` (s, 3, 3) propagated between them — all scaled so the chain is as sure of the last pose as
+    the filter was (``end_cov``: its corners narrowed what the motion noise alone would say; the volumes,
+    det^(1/3), matched). Returns (rel (m, 3), cov (m, 3, 3))."""
     prev = np.vstack((np.zeros(3), poses[:-1]))
-    acc = np.zeros((3, 3))
-    for p0, p1, c in zip(prev, poses, covs, strict=True):
-        G = np.eye(3)
-        G[:2, 2] = (p0[1] - p1[1], p1[0] - p0[0])  # ∂(p0 ∘ rel)/∂p0
-        acc = G @ acc @ G.T + rotate_pose_covariance(c, p0[2])
+    total, part, ref, parts = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros(3), []
+    is_node = np.zeros(len(poses), dtype=bool)
+    is_node[nodes] = True
+    for k, (p0, p1, c) in enumerate(zip(prev, poses, covs, strict=True)):
+        total = _propagate(total, p0, p1, c)
+        part = _propagate(part, relative(ref, p0), relative(ref, p1), c)
+        if is_node[k]:
+            parts.append(part)
+            part, ref = np.zeros((3, 3)), p1
     scale = 1.0
-    if np.linalg.det(acc) > 0 and np.linalg.det(end_cov) > 0:
-        scale = float(np.cbrt(np.linalg.det(end_cov) / np.linalg.det(acc)))
-    return relative(prev, poses), np.asarray(covs) * scale
+    if np.linalg.det(total) > 0 and np.linalg.det(end_cov) > 0:
+        scale = float(np.cbrt(np.linalg.det(end_cov) / np.linalg.det(total)))
+    anchors = np.vstack((np.zeros(3), poses[nodes[:-1]]))
+    return relative(anchors, poses[nodes]), np.array(parts) * scale
+
+
+def _propagate(acc: np.ndarray, p0: np.ndarray, p1: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """Covariance of pose p1 = p0 ∘ δ (both in one frame) from p0's ``acc`` and δ's ``cov`` (p0's frame)."""
+    G = np.eye(3)
+    G[:2, 2] = (p0[1] - p1[1], p1[0] - p0[0])  # ∂(p0 ∘ δ)/∂p0
+    return G @ acc @ G.T + rotate_pose_covariance(cov, p0[2])
