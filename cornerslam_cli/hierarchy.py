@@ -36,15 +36,13 @@ from .geometry import (
     compose_inverse_cov,
     reanchor,
     relative,
-    rotate_covariance,
     rotate_pose_covariance,
     transform_points,
-    wrap_angle,
 )
-from .graph.loops import FEW_CORNERS, LOW_FITNESS, NO_HYPOTHESIS, loop_associator, match_submaps
+from .graph.loops import FEW_CORNERS, LOW_FITNESS, NO_HYPOTHESIS, agree, chi2, loop_associator, match_submaps
 from .graph.points import POINTS, match_points, searchable
 from .graph.posegraph import PoseGraph
-from .graph.submap import LoopMatch, Submap, keyframe_factors, keyframe_nodes, overlap_steps
+from .graph.submap import LoopMatch, Submap, keyframe_factors, keyframe_nodes, overlap_steps, place_table
 from .motion.icp import voxel_thin
 from .slam import Slam, StepRecord
 
@@ -54,7 +52,6 @@ if TYPE_CHECKING:
 
 COV_FLOOR = np.diag([1e-8, 1e-8, 1e-10])  # added to a submap's end covariance: a still robot gives Σ = 0
 PATH_CELL = 0.5  # m: a submap's path kept for finding candidates, one position per cell
-AGREE_XY, AGREE_THETA = 0.5, 0.2  # m, rad: two closures of one submap agree on where it is
 # the corners gave no verdict (too few in common, no hypothesis) or a pose the points refute (low fitness:
 # usually a corner constellation repeated elsewhere): the points decide, around the graph's prediction
 TO_POINTS = (FEW_CORNERS, NO_HYPOTHESIS, LOW_FITNESS)
@@ -374,41 +371,6 @@ class HierarchicalSlam:
     def loop_rows(self) -> list[dict]:
         """loops.csv's rows; ``inlier``: whether the graph kept an accepted closure inside its kernel."""
         return [r.row(self.graph.loop_inlier(r.factor) if r.factor >= 0 else None) for r in self.loops]
-
-
-def chi2(pred: np.ndarray, pred_cov: np.ndarray, pose: np.ndarray, cov: np.ndarray) -> float:
-    """Mahalanobis² of a measured a→b ``pose`` against the graph's prediction ``pred``, on the sum of the
-    prediction's joint-marginal covariance and the measurement's (both of (x, y, θ) in a's frame)."""
-    e = np.asarray(pose, dtype=float) - pred
-    e[2] = wrap_angle(e[2])
-    return float(e @ np.linalg.solve(pred_cov + cov, e))
-
-
-def agree(poses: list[np.ndarray]) -> bool:
-    """Whether the global poses one submap's closures imply are all within AGREE_XY / AGREE_THETA."""
-    if len(poses) < 2:
-        return True
-    P = np.array(poses)
-    d = np.hypot(*(P[:, None, :2] - P[None, :, :2]).transpose(2, 0, 1))
-    dth = np.abs(wrap_angle(P[:, None, 2] - P[None, :, 2]))
-    return bool(d.max() <= AGREE_XY and dth.max() <= AGREE_THETA)
-
-
-def place_table(table: dict[str, np.ndarray], origin: np.ndarray, index: int) -> dict[str, np.ndarray]:
-    """A submap's landmark columns moved into the global frame by its ``origin``."""
-    n = len(table["id"])
-    xy = transform_points(np.column_stack((table["x"], table["y"])), origin)
-    cov = np.stack((table["var_x"], table["cov_xy"], table["cov_xy"], table["var_y"]), axis=-1)
-    cov = rotate_covariance(cov.reshape(-1, 2, 2), float(origin[2]))
-    return {
-        **table,
-        "x": xy[:, 0],
-        "y": xy[:, 1],
-        "var_x": cov[:, 0, 0],
-        "var_y": cov[:, 1, 1],
-        "cov_xy": cov[:, 0, 1],
-        "submap": np.full(n, index, dtype=np.int64),
-    }
 
 
 def globalise(

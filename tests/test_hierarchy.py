@@ -19,8 +19,9 @@ import cornerslam_cli.hierarchy as hierarchy
 from cornerslam_cli.config import config_from
 from cornerslam_cli.frontend import frames, open_input
 from cornerslam_cli.geometry import compose, compose_inverse_cov, inverse, relative, wrap_angle
+from cornerslam_cli.graph.loops import agree
 from cornerslam_cli.graph.submap import LoopMatch
-from cornerslam_cli.hierarchy import HierarchicalSlam, LoopRecord, agree
+from cornerslam_cli.hierarchy import HierarchicalSlam, LoopRecord
 from cornerslam_cli.report.tables import LOOP_COLUMNS, MAP_COLUMNS, TRAJECTORY_COLUMNS, read_csv
 
 

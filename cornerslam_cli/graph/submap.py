@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import relative, rotate_pose_covariance, transform_points, wrap_angle
+from ..geometry import relative, rotate_covariance, rotate_pose_covariance, transform_points, wrap_angle
 
 
 @dataclass(frozen=True)
@@ -101,3 +101,20 @@ def _propagate(acc: np.ndarray, p0: np.ndarray, p1: np.ndarray, cov: np.ndarray)
     G = np.eye(3)
     G[:2, 2] = (p0[1] - p1[1], p1[0] - p0[0])  # ∂(p0 ∘ δ)/∂p0
     return G @ acc @ G.T + rotate_pose_covariance(cov, p0[2])
+
+
+def place_table(table: dict[str, np.ndarray], origin: np.ndarray, index: int) -> dict[str, np.ndarray]:
+    """A submap's landmark columns moved into the global frame by its ``origin``."""
+    n = len(table["id"])
+    xy = transform_points(np.column_stack((table["x"], table["y"])), origin)
+    cov = np.stack((table["var_x"], table["cov_xy"], table["cov_xy"], table["var_y"]), axis=-1)
+    cov = rotate_covariance(cov.reshape(-1, 2, 2), float(origin[2]))
+    return {
+        **table,
+        "x": xy[:, 0],
+        "y": xy[:, 1],
+        "var_x": cov[:, 0, 0],
+        "var_y": cov[:, 1, 1],
+        "cov_xy": cov[:, 0, 1],
+        "submap": np.full(n, index, dtype=np.int64),
+    }
