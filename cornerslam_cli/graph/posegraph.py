@@ -1,8 +1,8 @@
-"""The global pose graph over submap origins, on GTSAM (issue 16, the global level).
+"""The global pose graph, on GTSAM (issue 16, the global level).
 
-Node 0 is the first submap's origin, held by a tight prior; node j > 0 joins node j−1 by the closed
-submap's final relative pose and covariance (a *sequential* factor) and any earlier node by loop
-closures (*loop* factors, under ``graph.kernel``). ``graph.solver`` picks iSAM2 (incremental: each
+Node 0 is the first submap's origin, held by a tight prior; node j > 0 joins node j−1 by a relative pose
+and covariance (a *sequential* factor: hierarchy.py chains each closed submap's keyframe nodes so) and
+any earlier node by loop closures (*loop* factors, under ``graph.kernel``). ``graph.solver`` picks iSAM2 (incremental: each
 :meth:`PoseGraph.optimize` adds what came since the last one) or batch Levenberg–Marquardt.
 
 Covariance conventions (the crux; tests/test_posegraph.py checks them by Monte Carlo):
