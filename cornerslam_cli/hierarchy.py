@@ -16,9 +16,9 @@ GTSAM) with loop closures verified by the configured associator (graph/loops.py)
   graph's uncertainty between the submaps they come from, are all refused (perceptual aliasing).
   Accepted closures enter the graph under a robust kernel.
 - **Outputs.** Each step's causal (online) estimate is its submap origin's pose in the graph *at that
-  step* ∘ the filter's local pose; :meth:`HierarchicalSlam.final_poses` is the same with the optimised
-  origins — the smoothed trajectory written to trajectory.csv. Landmarks stay one per submap in the
-  global frame; a corner matched across an accepted closure is *linked* (map.csv ``linked_to``), not merged.
+  step* ∘ the filter's local pose. :meth:`finish` solves a keyframe graph (graph/smooth.py: closures
+  act where the submaps overlap); :meth:`final_poses` hang from its nodes — the smoothed trajectory.
+  Landmarks stay one per submap, linked across closures (map.csv ``linked_to``), not merged.
 """
 
 from __future__ import annotations
@@ -34,7 +34,6 @@ import numpy as np
 from .geometry import (
     compose,
     compose_inverse_cov,
-    reanchor,
     relative,
     rotate_pose_covariance,
     transform_points,
@@ -42,7 +41,8 @@ from .geometry import (
 from .graph.loops import FEW_CORNERS, LOW_FITNESS, NO_HYPOTHESIS, agree, chi2, loop_associator, match_submaps
 from .graph.points import POINTS, match_points, searchable
 from .graph.posegraph import PoseGraph
-from .graph.submap import LoopMatch, Submap, keyframe_factors, keyframe_nodes, overlap_steps, place_table
+from .graph.smooth import smooth
+from .graph.submap import LoopMatch, OpenSubmap, Submap, keyframe_factors, keyframe_nodes, place_table
 from .motion.icp import voxel_thin
 from .slam import Slam, StepRecord
 
@@ -90,38 +90,6 @@ class LoopRecord:
         }
 
 
-class _OpenSubmap:
-    """The submap being built: its steps' local poses, its scans' points, how far the robot went."""
-
-    def __init__(self, index: int, first_step: int, node: int):
-        self.index = index
-        self.first_step = first_step
-        self.node = node  # its origin's node in the pose graph
-        self.poses: list[np.ndarray] = []
-        self.covs: list[np.ndarray] = []  # each step's motion noise (Slam.step_noise)
-        self.points: list[np.ndarray] = []
-        self.n_points = 0
-        self.travelled = 0.0
-
-    def add(self, pose: np.ndarray, cov: np.ndarray, points: np.ndarray | None, voxel: float) -> None:
-        if self.poses:
-            self.travelled += math.hypot(*(pose[:2] - self.poses[-1][:2]))
-        self.poses.append(pose)
-        self.covs.append(cov)
-        if points is not None and len(points):
-            self.points.append(points)
-            self.n_points += len(points)
-            if self.n_points > 200_000:  # thin as it grows: bounded memory on a long submap
-                self.points = [self.thinned(voxel)]
-                self.n_points = len(self.points[0])
-
-    def thinned(self, voxel: float) -> np.ndarray:
-        if not self.points:
-            return np.zeros((0, 2))
-        p = np.concatenate(self.points)
-        return p[voxel_thin(p, voxel)]
-
-
 class HierarchicalSlam:
     """Local EKF submaps (slam.py) joined by a pose graph with loop closures; :meth:`step` per frame
     like :class:`~cornerslam_cli.slam.Slam`, then :meth:`finish` closes the last submap."""
@@ -138,9 +106,12 @@ class HierarchicalSlam:
         self.loops: list[LoopRecord] = []
         self.step_submap = array("l")
         self.local_poses = array("d")
-        self.step_node = array("l")  # per step of a closed submap: the graph node it hangs from …
+        self.step_node = array("l")  # per step of a closed submap: the keyframe node it hangs from …
         self.step_offset = array("d")  # … and its pose relative to that node (the filter's)
-        self._open = _OpenSubmap(0, 0, 0)
+        self.chains: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # per closed submap (smooth)
+        self.n_nodes = 1  # keyframe nodes so far (node 0: the first origin)
+        self.smoothed: PoseGraph | None = None  # the keyframe graph, solved by finish()
+        self._open = OpenSubmap(0, 0, 0)
         self._origin_cov = np.zeros((3, 3))  # the open submap origin's marginal in the graph
         self.t_loop = 0.0
         self.n_ids = 0
@@ -161,7 +132,7 @@ class HierarchicalSlam:
         sub.add(r.pose, self.slam.step_cov, pts, self.cfg.submaps.voxel)
         self.step_submap.append(sub.index)
         self.local_poses.extend(r.pose)
-        origin, origin_cov = self.graph.pose(sub.node), self._origin_cov
+        origin, origin_cov = self.graph.pose(sub.index), self._origin_cov
         t_loop = 0.0
         if self._full():
             t0 = time.perf_counter()
@@ -178,33 +149,40 @@ class HierarchicalSlam:
         )
 
     def finish(self) -> None:
-        """Close the last submap (its loops too) when it has steps."""
+        """Close the last submap (its loops too) when it has steps; solve the keyframe graph."""
+        t0 = time.perf_counter()
         if self._open.poses:
-            t0 = time.perf_counter()
             self._close(self.n_steps - 1, last=True)
-            self.t_loop += time.perf_counter() - t0
+        if self.closed:
+            loops = [
+                (self.closed[r.submap_from], self.closed[r.submap_to], r.match)
+                for r in self.loops
+                if r.factor >= 0
+            ]
+            self.smoothed = smooth(self.cfg.graph, self.chains, self.graph.poses()[: len(self.closed)], loops)
+        self.t_loop += time.perf_counter() - t0
 
     def _close(self, step: int, last: bool = False) -> None:
         """Close the open submap at ``step``: a node for the next origin, its loops, the graph optimised."""
-        sub, factors = self._close_submap()
-        for rel, cov in zip(*factors, strict=True):
-            self.graph.add_sequential(rel, cov + COV_FLOOR)
+        sub = self._close_submap()
+        self.graph.add_sequential(sub.end_pose, sub.end_cov + COV_FLOOR)
         self.graph.optimize()
         if self.cfg.loops.enabled:
             self._close_loops(sub, step)
         if not last:
             self.slam.new_map()
-            self._open = _OpenSubmap(sub.index + 1, step + 1, len(self.graph) - 1)
-            self._origin_cov = self.graph.marginal(self._open.node)
+            self._open = OpenSubmap(sub.index + 1, step + 1, self.n_nodes - 1)
+            self._origin_cov = self.graph.marginal(sub.index + 1)
 
-    def _close_submap(self) -> tuple[Submap, tuple[np.ndarray, np.ndarray]]:
-        """The open submap closed, and its factors for the graph (keyframe nodes: graph/submap.py)."""
+    def _close_submap(self) -> Submap:
         ekf, sub, g = self.slam.ekf, self._open, self.cfg.graph
         poses = np.array(sub.poses).reshape(-1, 3)
         nodes = keyframe_nodes(poses, g.node_spacing, g.node_angle)
-        factors = keyframe_factors(poses, np.array(sub.covs), ekf.P[:3, :3], nodes)
+        rel, cov = keyframe_factors(poses, np.array(sub.covs), ekf.P[:3, :3], nodes)
+        self.chains.append((rel, cov + COV_FLOOR, poses[nodes]))
         before = np.searchsorted(nodes, np.arange(len(poses)), side="right") - 1  # last node at or before
-        step_nodes = np.where(before >= 0, len(self.graph) + before, sub.node)
+        step_nodes = np.where(before >= 0, self.n_nodes + before, sub.node)
+        self.n_nodes += len(nodes)
         anchor_poses = np.where((before >= 0)[:, None], poses[nodes[before.clip(0)]], 0.0)
         self.step_node.extend(step_nodes)
         self.step_offset.extend(relative(anchor_poses, poses).ravel())
@@ -231,7 +209,7 @@ class HierarchicalSlam:
         self.closed.append(closed)
         self.tables.append({**table, "id": ids})
         self.paths.append(closed.poses[voxel_thin(closed.poses[:, :2], PATH_CELL), :2])
-        return closed, factors
+        return closed
 
     def _close_loops(self, b: Submap, step: int) -> None:
         """Verify the candidates for submap ``b``, gate them, add the accepted ones to the graph."""
@@ -242,7 +220,7 @@ class HierarchicalSlam:
             on_points = cfg.point_search and searched < cfg.point_searches and m.reason in TO_POINTS
             on_points = on_points and searchable(a, b)  # (one that cannot run spends no search)
             searched += on_points
-            pred = self.graph.relative(a.node, b.node) if on_points or m.accepted else None
+            pred = self.graph.relative(a.index, b.index) if on_points or m.accepted else None
             if on_points:
                 kept = 0 if m.reason == LOW_FITNESS else m.n_corners  # (0: the points refuted their pose)
                 m = replace(match_points(a, b, *pred, cfg, self.cfg.scan_match), n_corners=kept)
@@ -277,7 +255,9 @@ class HierarchicalSlam:
         for r in found:
             if r.accepted:
                 try:
-                    r = replace(r, factor=self._add_loop(self.closed[r.submap_from], b, r.match))
+                    r = replace(
+                        r, factor=self.graph.add_loop(r.submap_from, r.submap_to, r.match.pose, r.match.cov)
+                    )
                 except ValueError:  # a degenerate ICP fit (a featureless corridor): no usable covariance
                     r = replace(r, accepted=False, reason="match covariance not positive definite")
             self.loops.append(r)
@@ -294,24 +274,14 @@ class HierarchicalSlam:
                 if agree([self.placed(r1), self.placed(r2)]):
                     continue
                 pose, cov = compose_inverse_cov(r1.match.pose, r1.match.cov, r2.match.pose, r2.match.cov)
-                pred, pred_cov = self.graph.relative(*(self.closed[r.submap_from].node for r in (r1, r2)))
+                pred, pred_cov = self.graph.relative(r1.submap_from, r2.submap_from)
                 if chi2(pred, pred_cov, pose, cov) > self.cfg.loops.pair_gate:
                     return False
         return True
 
     def placed(self, r: LoopRecord) -> np.ndarray:
         """The global pose of submap b's origin that closure ``r`` implies (a's pose in the graph ∘ a→b)."""
-        return compose(self.graph.pose(self.closed[r.submap_from].node), r.match.pose)
-
-    def _add_loop(self, a: Submap, b: Submap, m: LoopMatch) -> int:
-        """A closure a→b into the graph between the keyframes where the two submaps overlap (their
-        closest robot positions under it), not their origins: what the match measured is where the
-        scans there lie, so the submaps' own drift from their origins stays with the keyframe factors."""
-        i, j = overlap_steps(a, b, m.pose)
-        if a.step_nodes[i] == b.step_nodes[j]:  # (b right after a, both at a's last node: the origins)
-            return self.graph.add_loop(a.node, b.node, m.pose, m.cov)
-        rel, cov = reanchor(m.pose, m.cov, a.anchor_poses[i], b.anchor_poses[j])
-        return self.graph.add_loop(a.step_nodes[i], b.step_nodes[j], rel, cov)
+        return compose(self.graph.pose(r.submap_from), r.match.pose)
 
     def candidates(self, b: Submap) -> list[Submap]:
         """Earlier submaps (at least ``loops.min_gap`` before ``b``) whose path came within
@@ -323,9 +293,9 @@ class HierarchicalSlam:
         last = b.index - cfg.min_gap
         if last < 0:
             return []
-        poses = self.graph.poses()[[s.node for s in self.closed]]  # the origins
+        poses = self.graph.poses()
         path_b = transform_points(self.paths[b.index], poses[b.index])
-        Sb = self.graph.marginal(b.node)
+        Sb = self.graph.marginal(b.index)
         reach = float(np.hypot(*self.paths[b.index].T).max())
         sigma = (
             math.sqrt(max(np.linalg.eigvalsh(Sb[:2, :2]).max(), 0.0)) + math.sqrt(max(Sb[2, 2], 0.0)) * reach
@@ -340,25 +310,33 @@ class HierarchicalSlam:
         return [self.closed[a] for a in near]
 
     def final_poses(self) -> np.ndarray:
-        """(n, 3) every step's pose with the optimised submap origins (the smoothed trajectory)."""
-        closed = compose(self.graph.poses()[np.frombuffer(self.step_node, dtype=np.int64)], self.offsets())
-        open_steps = np.frombuffer(self.local_poses).reshape(-1, 3)[len(closed) :]  # not yet in the graph
-        return np.vstack((closed, compose(self.graph.pose(self._open.node), open_steps).reshape(-1, 3)))
-
-    def offsets(self) -> np.ndarray:
-        return np.frombuffer(self.step_offset).reshape(-1, 3)
+        """(n, 3) every step's pose in the solved keyframe graph (the smoothed trajectory); before
+        :meth:`finish`, with the online graph's submap origins."""
+        if self.smoothed is None:
+            local = np.frombuffer(self.local_poses).reshape(-1, 3)
+            return compose(self.graph.poses()[np.frombuffer(self.step_submap, dtype=np.int64)], local)
+        nodes = self.smoothed.poses()[np.frombuffer(self.step_node, dtype=np.int64)]
+        return compose(nodes, np.frombuffer(self.step_offset).reshape(-1, 3))
 
     def landmark_table(self) -> dict[str, np.ndarray]:
         """map.csv's columns: every submap's landmarks at its optimised origin (global frame), their
         covariances turned with it (the origin's own uncertainty not added), with ``submap`` and
         ``linked_to`` (the id of the corner it was matched to across an accepted closure, or -1)."""
-        poses = self.graph.poses()
-        parts = [place_table(t, poses[self.closed[i].node], i) for i, t in enumerate(self.tables)]
+        poses = self._origins()
+        parts = [place_table(t, poses[i], i) for i, t in enumerate(self.tables)]
         if not parts:
             return self.slam.landmark_table() | {"submap": np.zeros(0, int), "linked_to": np.zeros(0, int)}
         table = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
         table["linked_to"] = self._links(len(table["id"]))
         return table
+
+    def _origins(self) -> np.ndarray:
+        """(submaps, 3) each closed submap's origin, smoothed when solved."""
+        return (
+            self.graph.poses()
+            if self.smoothed is None
+            else self.smoothed.poses()[[s.node for s in self.closed]]
+        )
 
     def _links(self, n: int) -> np.ndarray:
         linked = np.full(n, -1, dtype=np.int64)
@@ -370,7 +348,8 @@ class HierarchicalSlam:
 
     def loop_rows(self) -> list[dict]:
         """loops.csv's rows; ``inlier``: whether the graph kept an accepted closure inside its kernel."""
-        return [r.row(self.graph.loop_inlier(r.factor) if r.factor >= 0 else None) for r in self.loops]
+        g = self.smoothed or self.graph
+        return [r.row(g.loop_inlier(r.factor) if r.factor >= 0 else None) for r in self.loops]
 
 
 def globalise(

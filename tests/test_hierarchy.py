@@ -101,7 +101,7 @@ class FakeVerifier:
 
     def __call__(self, a, b, cfg, associate, icp):
         self.calls += 1
-        pred, _ = self.hs.graph.relative(a.node, b.node)
+        pred, _ = self.hs.graph.relative(a.index, b.index)
         off = self.offsets(a.index) if callable(self.offsets) else self.offsets
         pose = compose(pred, off)
         return LoopMatch(pose, np.diag([1e-4, 1e-4, 1e-5]), 6, 0.9, True, "")
@@ -283,7 +283,7 @@ def test_pairs_the_corners_cannot_verify_are_verified_on_points(
 
     def points(a, b, prior, prior_cov, cfg, icp):
         # the prior is the graph's own prediction of b's origin in a's frame, with its covariance
-        want, want_cov = current[0].graph.relative(a.node, b.node)
+        want, want_cov = current[0].graph.relative(a.index, b.index)
         np.testing.assert_allclose(prior, want)
         np.testing.assert_allclose(prior_cov, want_cov)
         priors.append((a.index, b.index))

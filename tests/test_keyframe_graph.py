@@ -73,8 +73,8 @@ def last_errors(mc: np.ndarray, poses: np.ndarray) -> np.ndarray:
 
 @pytest.mark.parametrize("spacing", [0.0, 1.0])
 def test_a_runs_smoothed_poses_hang_from_the_nodes(sim_log, spacing):
-    """Without loop closing the graph is a chain: its smoothed trajectory is the filter's own (each
-    submap's steps at its origin), whatever the node spacing; each step's node is at or before it."""
+    """Without loop closing the keyframe graph is a chain: its smoothed trajectory is the filter's own
+    (each submap's steps at its origin), whatever the node spacing; each step's node is at or before it."""
     cfg = config_from({}, ["submaps.max_steps=6", "loops.enabled=false", f"graph.node_spacing={spacing}"])
     src = open_input(sim_log, cfg)
     hs = HierarchicalSlam(cfg, src.laser2base)
@@ -82,6 +82,6 @@ def test_a_runs_smoothed_poses_hang_from_the_nodes(sim_log, spacing):
     hs.finish()
     np.testing.assert_allclose(hs.final_poses(), online, atol=1e-6)
     nodes = np.frombuffer(hs.step_node, dtype=np.int64)
-    assert np.all(np.diff(nodes) >= 0) and nodes[-1] == len(hs.graph) - 1
+    assert np.all(np.diff(nodes) >= 0) and nodes[-1] == len(hs.smoothed) - 1
     if spacing == 0.0:
-        assert len(hs.graph) == hs.n_steps + 1  # a node per keyframe and the first origin
+        assert len(hs.smoothed) == hs.n_steps + 1  # a node per keyframe and the first origin

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry import relative, rotate_covariance, rotate_pose_covariance, transform_points, wrap_angle
+from ..motion.icp import voxel_thin
 
 
 @dataclass(frozen=True)
@@ -47,6 +48,38 @@ class LoopMatch:
     accepted: bool
     reason: str = ""  # why not accepted ("" when accepted)
     pairs: np.ndarray | None = None  # (k, 2) matched corners: rows of b.landmarks, rows of a.landmarks
+
+
+class OpenSubmap:
+    """The submap being built: its steps' local poses, its scans' points, how far the robot went."""
+
+    def __init__(self, index: int, first_step: int, node: int):
+        self.index = index
+        self.first_step = first_step
+        self.node = node  # its origin's node in the keyframe graph (graph/smooth.py)
+        self.poses: list[np.ndarray] = []
+        self.covs: list[np.ndarray] = []  # each step's motion noise (Slam.step_noise)
+        self.points: list[np.ndarray] = []
+        self.n_points = 0
+        self.travelled = 0.0
+
+    def add(self, pose: np.ndarray, cov: np.ndarray, points: np.ndarray | None, voxel: float) -> None:
+        if self.poses:
+            self.travelled += math.hypot(*(pose[:2] - self.poses[-1][:2]))
+        self.poses.append(pose)
+        self.covs.append(cov)
+        if points is not None and len(points):
+            self.points.append(points)
+            self.n_points += len(points)
+            if self.n_points > 200_000:  # thin as it grows: bounded memory on a long submap
+                self.points = [self.thinned(voxel)]
+                self.n_points = len(self.points[0])
+
+    def thinned(self, voxel: float) -> np.ndarray:
+        if not self.points:
+            return np.zeros((0, 2))
+        p = np.concatenate(self.points)
+        return p[voxel_thin(p, voxel)]
 
 
 def overlap_steps(a: Submap, b: Submap, pose: np.ndarray) -> tuple[int, int]:
