@@ -184,7 +184,7 @@ def student_fit(d: np.ndarray, S: np.ndarray, B: np.ndarray) -> tuple[float, np.
 def _student_fit(d, S, B, c, se):
     """:func:`student_fit` in loops (Numba; it runs ~35 times a re-estimate, on up to ``adapt_window``
     samples): fill c and se, return the negative log likelihood. Each S is inverted by its cofactors
-    (3 × 3, symmetric positive definite); a singular one gives an infinite likelihood cost."""
+    (3 × 3, symmetric positive definite); a singular one gives an infinite likelihood cost (and c = 0)."""
     n = len(d)
     Sinv = np.empty((n, 3, 3))
     A0 = np.zeros((n, 2, 2))  # Bᵀ S⁻¹ B
@@ -193,6 +193,7 @@ def _student_fit(d, S, B, c, se):
     for t in range(n):
         det = _inverse3(S[t], Sinv[t])
         if not det > 0.0:
+            c[:], se[:] = 0.0, np.inf  # no bias to learn from it
             return np.inf
         logdet += math.log(det)
         for j in range(2):
