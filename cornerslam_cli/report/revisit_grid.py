@@ -32,8 +32,8 @@ SLACK = 1e-9  # m: a searched square is taken this much smaller (rounding of the
 
 def nearest_far(xy: np.ndarray, blocks: np.ndarray, query: np.ndarray, gap: int, cap: float) -> np.ndarray:
     """Per point of ``query`` (a mask of xy (n, 2)), the distance to the nearest point of ``xy`` whose
-    block (``blocks``, one int per point) is at least ``gap`` away from its own, inf when none is
-    nearer than ``cap``."""
+    block (``blocks``, one int per point, ascending) is at least ``gap`` away from its own, inf when
+    none is nearer than ``cap``."""
     asked = np.flatnonzero(query)
     best = np.full(len(asked), np.inf)
     if not len(asked):
@@ -45,7 +45,7 @@ def nearest_far(xy: np.ndarray, blocks: np.ndarray, query: np.ndarray, gap: int,
     nx, ny = int(extent[0] / cell) + 1, int(extent[1] / cell) + 1
     ij = np.minimum(((xy - lo) / cell).astype(np.int64), (nx - 1, ny - 1))
     key = ij[:, 0] * ny + ij[:, 1]
-    order = np.lexsort((blocks, key))  # by cell, then by block
+    order = np.argsort(key, kind="stable")  # by cell, then by block (ascending in xy already)
     start = np.zeros(nx * ny + 1, dtype=np.int64)
     np.cumsum(np.bincount(key, minlength=nx * ny), out=start[1:])
     grid = (np.ascontiguousarray(xy[order]), np.ascontiguousarray(blocks[order]), start)
