@@ -504,6 +504,22 @@ def test_compiled_ray_tracing_counts_the_cells_of_line_cells_and_saturates():
     assert hits[ends[0]] == COUNT_MAX  # not wrapped round
 
 
+def test_grid_extent_is_the_box_of_every_ray_start_and_end():
+    """The extent, read from the stored float32 points a part at a time, is the box of the rays'
+    starts and ends in float64 — a scan without points adds no start (its laser is far away here)."""
+    rng = np.random.default_rng(6)
+    store = ScanStore()
+    for i in range(40):
+        pose = np.array([*rng.normal(0.0, 2.0, 2), rng.uniform(-math.pi, math.pi)])
+        store.add(
+            pose if i % 9 else np.array([50.0, -50.0, 0.0]), rng.normal(0.0, 3.0, ((i % 9 > 0) * 30, 2))
+        )
+    start, end = store.rays()
+    lo, hi = occupancy.extent(store, store.parts(100))
+    assert np.array_equal(lo, np.minimum(start.min(0), end.min(0))) and lo.dtype == np.float64
+    assert np.array_equal(hi, np.maximum(start.max(0), end.max(0))) and hi.max() < 20.0
+
+
 def test_classify_by_hand():
     hits = np.array([0, 0, 1, 1, 2, 7_000], dtype=np.uint16)
     passes = np.array([0, 5, 3, 4, 6, 21_000], dtype=np.uint16)

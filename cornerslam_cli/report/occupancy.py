@@ -256,12 +256,14 @@ def build_grid(store: ScanStore, resolution: float, max_cells: int, warn: Callab
 def extent(store: ScanStore, parts: list[slice]) -> tuple[np.ndarray, np.ndarray] | None:
     """(lo, hi) corners of the box holding every kept beam's start and end; None when there is none."""
     lo = hi = None
-    for scans in parts:
-        start, end = store.rays(scans)
-        if len(start):
+    for scans in parts:  # float32 as stored (float64 only at the end: the same bounds)
+        points = store.points[scans]
+        seen = np.array([len(q) > 0 for q in points], dtype=bool)
+        if seen.any():
+            start, end = store.xy()[scans][seen], np.concatenate(points)
             a, b = np.minimum(start.min(0), end.min(0)), np.maximum(start.max(0), end.max(0))
             lo, hi = (a, b) if lo is None else (np.minimum(lo, a), np.maximum(hi, b))
-    return None if lo is None else (lo, hi)
+    return None if lo is None else (lo.astype(float), hi.astype(float))
 
 
 def classify(hits: np.ndarray, passes: np.ndarray) -> np.ndarray:
