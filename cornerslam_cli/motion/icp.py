@@ -38,7 +38,7 @@ from ..geometry import (
     wrap_angle,
 )
 from .correlative import Window, search
-from .fusion import OdometryFusion
+from .fusion import OdometryFusion, student_fit
 from .kernels import line_terms, neighbour_scatter
 from .nearest import BucketGrid
 from .params import ScanMatchConfig
@@ -130,11 +130,12 @@ class LocalMap:
 
 def load_kernels() -> None:
     """Load (on a machine's first run: compile) the scan matcher's Numba kernels (motion/nearest.py,
-    motion/kernels.py) now, so that the first timed match of a run does not pay it: one
-    :func:`register` of a corner against itself."""
+    motion/kernels.py, the fusion's Student-t fit) now, so that the first timed match of a run does
+    not pay it: one :func:`register` of a corner against itself, one fit of a single sample."""
     s = np.linspace(0.0, 1.0, 21)
     corner = np.concatenate((np.column_stack((s, 0.0 * s)), np.column_stack((0.0 * s, s))))
     register(corner, LocalMap.build(corner), np.zeros(3), ScanMatchConfig())
+    student_fit(np.zeros((1, 3)), np.eye(3)[None], np.zeros((1, 3, 2)))
 
 
 @dataclass(frozen=True)
