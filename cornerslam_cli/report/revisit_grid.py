@@ -42,26 +42,51 @@ def nearest_far(xy: np.ndarray, blocks: np.ndarray, query: np.ndarray, gap: int,
     extent = xy.max(axis=0) - lo
     area = float(extent[0] + cap) * float(extent[1] + cap)
     cell = max(cap / CELLS_PER_CAP, math.sqrt(area / (CELLS_PER_POINT * len(xy))))
-    nx, ny = int(extent[0] / cell) + 1, int(extent[1] / cell) + 1
-    ij = np.minimum(((xy - lo) / cell).astype(np.int64), (nx - 1, ny - 1))
-    key = ij[:, 0] * ny + ij[:, 1]
-    order = np.argsort(key, kind="stable")  # by cell, then by block (ascending in xy already)
-    start = np.zeros(nx * ny + 1, dtype=np.int64)
-    np.cumsum(np.bincount(key, minlength=nx * ny), out=start[1:])
-    grid = (np.ascontiguousarray(xy[order]), np.ascontiguousarray(blocks[order]), start)
-    _search(xy[asked], blocks[asked], ij[asked], *grid, ny, float(lo[0]), float(lo[1]), cell, gap, cap, best)
+    grid = (float(lo[0]), float(lo[1]), cell, int(extent[0] / cell) + 1, int(extent[1] / cell) + 1)
+    key = np.empty(len(xy), dtype=np.int64)
+    _cell_keys(xy, *grid, key)
+    start = np.zeros(grid[3] * grid[4] + 1, dtype=np.int64)
+    np.cumsum(np.bincount(key, minlength=grid[3] * grid[4]), out=start[1:])
+    by_cell = np.empty_like(xy), np.empty_like(blocks)
+    _bucket(xy, blocks, key, start, *by_cell)
+    del key
+    _search(xy, blocks, asked, *by_cell, start, *grid, gap, cap, best)
     return best
 
 
 @kernel
-def _search(q, q_block, q_ij, xy, block, start, ny, ox, oy, cell, gap, cap, best):
-    """Fill ``best`` (see :func:`nearest_far`): rings of cells around each query's own, nearest first."""
-    nx = (len(start) - 1) // ny
+def _cell_of(x, y, ox, oy, cell, nx, ny):
+    """(i, j) of the cell holding the point (x, y) on the grid of corner (ox, oy)."""
+    return min(int((x - ox) / cell), nx - 1), min(int((y - oy) / cell), ny - 1)
+
+
+@kernel
+def _cell_keys(xy, ox, oy, cell, nx, ny, key):
+    """Fill ``key`` with the flat cell (i·ny + j) of each point."""
+    for m in range(len(xy)):
+        i, j = _cell_of(xy[m, 0], xy[m, 1], ox, oy, cell, nx, ny)
+        key[m] = i * ny + j
+
+
+@kernel
+def _bucket(xy, blocks, key, start, by_cell_xy, by_cell_blocks):
+    """Counting sort of the points by cell (stable: each cell's points keep their block order)."""
+    fill = start[:-1].copy()
+    for m in range(len(xy)):
+        k = fill[key[m]]
+        by_cell_xy[k, 0], by_cell_xy[k, 1], by_cell_blocks[k] = xy[m, 0], xy[m, 1], blocks[m]
+        fill[key[m]] += 1
+
+
+@kernel
+def _search(points, blocks, asked, xy, block, start, ox, oy, cell, nx, ny, gap, cap, best):
+    """Fill ``best`` (see :func:`nearest_far`): rings of cells around each query's own, nearest first;
+    ``xy``/``block`` are the points by cell."""
     cap2 = cap * cap
-    for n in range(len(q)):
-        qx, qy, b = q[n, 0], q[n, 1], q_block[n]
+    for n in range(len(asked)):
+        qx, qy, b = points[asked[n], 0], points[asked[n], 1], blocks[asked[n]]
         px, py = qx - ox, qy - oy  # from the grid's corner
-        ci, cj = q_ij[n, 0], q_ij[n, 1]
+        ci, cj = _cell_of(qx, qy, ox, oy, cell, nx, ny)
         d2 = cap2
         r = 0
         while True:
