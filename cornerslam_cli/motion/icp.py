@@ -39,7 +39,7 @@ from ..geometry import (
 )
 from .correlative import Window, search
 from .fusion import OdometryFusion, student_fit
-from .kernels import line_terms, neighbour_scatter
+from .kernels import gauss_newton_step, line_terms, neighbour_scatter
 from .nearest import BucketGrid
 from .params import ScanMatchConfig
 
@@ -159,17 +159,14 @@ def register(
     prior_info = np.array([cfg.prior_sigma_xy**-2, cfg.prior_sigma_xy**-2, cfg.prior_sigma_theta**-2])
     prior_info_scaled = prior_info * cfg.robust_scale**2  # the data term below is in units of robust_scale²
     dmax = cfg.max_distance
+    step = np.empty(3)
     for _ in range(cfg.max_iterations):
         terms = _point_to_line(points, local, M, dmax, cfg.robust_scale)
         if terms is None:  # fewer than 3 usable correspondences
             break
-        J, w, r = terms
         off = pose_from_matrix(M) - guess
         off[2] = wrap_angle(off[2])
-        Jw = J * w[:, None]
-        H = Jw.T @ J + np.diag(prior_info_scaled)
-        g = Jw.T @ r + prior_info_scaled * off
-        step = -np.linalg.solve(H, g)
+        gauss_newton_step(*terms, prior_info_scaled, off, step)  # −(JᵀWJ + prior)⁻¹ (JᵀWr + prior·off)
         M = matrix_from_pose(pose_from_matrix(M) + step)
         dmax = max(cfg.min_distance, dmax * SHRINK)
         if np.abs(step).max() < CONVERGED and dmax <= cfg.min_distance:
