@@ -20,13 +20,13 @@ from cornerslam_cli.report.consistency import (
     REVISIT_BLOCK,
     REVISIT_CAP,
     REVISIT_GAP,
-    dyadic_runs,
     map_consistency,
     occupied_cells,
     place,
     revisit_misalignment,
 )
 from cornerslam_cli.report.occupancy import ScanStore
+from cornerslam_cli.report.revisit_grid import nearest_far
 from cornerslam_cli.results import MapConsistency
 
 
@@ -87,8 +87,7 @@ def brute_force_revisit(pts: list[np.ndarray], poses: np.ndarray) -> tuple[float
 @pytest.mark.parametrize("seed", range(3))
 def test_revisit_misalignment_equals_the_brute_force_definition(seed):
     """Scans of 0–6 points (some empty, empty ones last too), jittered about a few places, over
-    enough blocks that every level of the dyadic runs is asked, and each run's tree serves many
-    blocks: the trees built one at a time give the figures of the definition."""
+    23 blocks: the grid search gives the figures of the definition."""
     rng = np.random.default_rng(seed)
     n = 23 * REVISIT_BLOCK + 7
     pts = [rng.normal(0.0, 0.5, (rng.integers(0, 7), 2)) for _ in range(n)] + [np.zeros((0, 2))] * 30
@@ -99,16 +98,31 @@ def test_revisit_misalignment_equals_the_brute_force_definition(seed):
     assert mean == pytest.approx(want_mean, rel=1e-12)
 
 
-@pytest.mark.parametrize("lo", range(0, 13))
-def test_dyadic_runs_cover_a_range_exactly_with_aligned_power_of_two_runs(lo):
-    for hi in range(-1, 40):
-        runs = dyadic_runs(lo, hi)
-        covered = [i for a, z in runs for i in range(a, z)]
-        assert covered == list(range(lo, hi))
-        for a, z in runs:
-            size = z - a
-            assert size & (size - 1) == 0 and a % size == 0
-        assert len(runs) <= 2 * max(hi, 1).bit_length()
+def brute_nearest_far(xy: np.ndarray, blocks: np.ndarray, query: np.ndarray, gap: int, cap: float):
+    """nearest_far by its definition, every pair: dx² + dy² (numpy: no fused multiply-add), strictly
+    below cap², the square root of the least."""
+    q = np.flatnonzero(query)
+    d2 = (xy[q, None, 0] - xy[None, :, 0]) ** 2 + (xy[q, None, 1] - xy[None, :, 1]) ** 2
+    d2 = np.where(np.abs(blocks[q, None] - blocks[None, :]) >= gap, d2, np.inf).min(axis=1, initial=np.inf)
+    return np.where(d2 < cap * cap, np.sqrt(d2), np.inf)
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("grain", [0.0, 0.1, 0.05])
+def test_the_grid_search_finds_the_definitions_distances_bit_for_bit(seed, grain):
+    """Points over a few metres (continuous, or on a 10 cm / 5 cm lattice: exact ties and distances of
+    exactly the cap), with far-flung ones beside them, blocks in scan order: every query's distance is the
+    brute-force one to the last bit, inf beyond the cap alike."""
+    rng = np.random.default_rng(seed)
+    n = 1500
+    xy = rng.uniform(-1.5, 1.5, (n, 2)) * rng.choice([0.2, 1.0, 4.0], (n, 1))
+    if grain:
+        xy = np.round(xy / grain) * grain
+    blocks = np.sort(rng.integers(0, 12, n))
+    query = rng.random(n) < 0.7
+    got = nearest_far(xy, blocks, query, 4, REVISIT_CAP)
+    want = brute_nearest_far(xy, blocks, query, 4, REVISIT_CAP)
+    assert np.array_equal(got, want) and np.isfinite(got).sum() > 100 and np.isinf(got).sum() > 10
 
 
 def test_map_consistency_compares_the_estimate_with_the_odometry():

@@ -124,3 +124,43 @@ def scan(world, pose, rng, sigma=0.01):
 def test_compose_and_relative_round_trip_used_by_the_matcher():
     a, b = np.array([1.0, 2.0, 0.3]), np.array([-0.5, 0.7, -1.2])
     np.testing.assert_allclose(compose(a, relative(a, b)), b, atol=1e-12)
+
+
+def numpy_student_fit(d, S, B):
+    """The Student-t fit in numpy (LAPACK inverses, einsums): the reference for the compiled one."""
+    from cornerslam_cli.motion.fusion import IRLS, NU
+
+    Sinv = np.linalg.inv(S)
+    w = np.ones(len(d))
+    BtS = np.einsum("nij,nik->njk", B, Sinv)
+    A0, b0 = np.einsum("njk,nkl->njl", BtS, B), np.einsum("njk,nk->nj", BtS, d)
+    for _ in range(IRLS):
+        A = np.einsum("n,njl->jl", w, A0) + 1e-12 * np.eye(2)
+        c = np.linalg.solve(A, -np.einsum("n,nj->j", w, b0))
+        r = d + np.einsum("nij,j->ni", B, c)
+        q = np.maximum(np.einsum("ni,nij,nj->n", r, Sinv, r), 0.0)
+        w = (NU + 3.0) / (NU + q)
+    nll = float(np.sum(0.5 * np.linalg.slogdet(S)[1] + 0.5 * (NU + 3.0) * np.log1p(q / NU)))
+    return nll, c, np.sqrt(np.diag(np.linalg.inv(A)))
+
+
+@pytest.mark.parametrize("scales", [(1.0, 1.0), (0.01, 6.0), (1e-4, 100.0)])
+def test_the_compiled_student_fit_is_the_numpy_one(scales):
+    """Likelihood, bias and standard errors as numpy computes them (to rounding), over samples with a
+    bias and a few wrong matches; a singular covariance gives an infinite cost, not an exception."""
+    rng = np.random.default_rng(15)
+    noise = odometry_noise(load_config(None))
+    samples = list(draw(rng, 0.05, 6.0, np.array([0.02, 0.01]), 300, noise))
+    d = np.array([m - o for o, _, m, _ in samples])
+    d[::50] += 0.3  # wrong matches
+    So, Sm = np.array([x[1] for x in samples]), np.array([x[3] for x in samples])
+    B = np.array([bias_matrix(x[0]) for x in samples])
+    S = scales[0] * So + scales[1] * Sm
+    nll, c, se = student_fit(d, S, B)
+    want_nll, want_c, want_se = numpy_student_fit(d, S, B)
+    assert nll == pytest.approx(want_nll, rel=1e-12)
+    np.testing.assert_allclose(c, want_c, rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(se, want_se, rtol=1e-9)
+    S[7] = 0.0
+    nll, c, se = student_fit(d, S, B)
+    assert nll == np.inf and np.all(c == 0.0) and np.all(se == np.inf)

@@ -27,7 +27,17 @@ from test_report_mcap import validate
 from cornerslam_cli.cli import cli
 from cornerslam_cli.logs.writers import RawScan, write_mcap
 from cornerslam_cli.report import occupancy
-from cornerslam_cli.report.occupancy import FREE, OCCUPIED, UNKNOWN, ScanStore, classify, count, line_cells
+from cornerslam_cli.report.occupancy import (
+    COUNT_MAX,
+    FREE,
+    OCCUPIED,
+    UNKNOWN,
+    ScanStore,
+    cell_units,
+    classify,
+    line_cells,
+    trace,
+)
 from cornerslam_cli.report.odom_frame import in_odom_frame, landmarks_in_odom_frame
 from cornerslam_cli.report.ownership import MARKER
 from cornerslam_cli.report.tables import read_csv, read_tum, write_tum
@@ -466,16 +476,48 @@ def test_an_output_without_the_log_in_its_marker_is_judged_by_its_summary(far_lo
     assert runner.invoke(cli, ["run", str(far_log["log"]), "-q"]).exit_code == 0
 
 
-@pytest.mark.parametrize("span", [1_000, 10_000_000])  # bincount over the span; a sort (span ≫ len)
-def test_count_equals_add_at_and_saturates(span):
-    idx = np.random.default_rng(2).integers(0, span, 5_000)
-    got, want = np.zeros(span, np.uint16), np.zeros(span, np.int64)
-    count(got, idx)
-    np.add.at(want, idx, 1)
-    assert np.array_equal(got, want)
-    got[idx[0]] = 65_530
-    count(got, np.full(10, idx[0]))
-    assert got[idx[0]] == 65_535  # not wrapped round to 4
+def test_compiled_ray_tracing_counts_the_cells_of_line_cells_and_saturates():
+    """trace() counts, per cell, the ends (hits) and the other sampled cells (passes) of line_cells'
+    numpy sampling exactly — rays in every direction, short and long, some ending in their own start
+    cell — and a count stops at COUNT_MAX instead of wrapping round."""
+    rng = np.random.default_rng(2)
+    start = rng.uniform(0.0, 4.0, (3_000, 2))
+    end = start + rng.normal(0.0, 1.0, (3_000, 2)) * rng.choice([0.01, 1.0], (3_000, 1))
+    end = np.clip(end, 0.0, 4.0)
+    lo, res, cols = np.zeros(2), 0.05, 82
+    beam, cells, ends = line_cells(start, end, lo, res, cols)
+    want_hits, want_passes = np.zeros(82 * 82, np.int64), np.zeros(82 * 82, np.int64)
+    np.add.at(want_hits, ends, 1)
+    np.add.at(want_passes, cells[cells != ends[beam]], 1)
+    hits, passes = np.zeros(82 * 82, np.uint16), np.zeros(82 * 82, np.uint16)
+    trace(cell_units(start, lo, res), cell_units(end, lo, res), cols, hits, passes)
+    assert np.array_equal(hits, want_hits) and np.array_equal(passes, want_passes)
+    assert want_passes.sum() > 5 * len(start) and (want_hits > 1).any()
+    hits[ends[0]] = COUNT_MAX - 3
+    trace(
+        cell_units(start[:1], lo, res).repeat(10, 0),
+        cell_units(end[:1], lo, res).repeat(10, 0),
+        cols,
+        hits,
+        passes,
+    )
+    assert hits[ends[0]] == COUNT_MAX  # not wrapped round
+
+
+def test_grid_extent_is_the_box_of_every_ray_start_and_end():
+    """The extent, read from the stored float32 points a part at a time, is the box of the rays'
+    starts and ends in float64 — a scan without points adds no start (its laser is far away here)."""
+    rng = np.random.default_rng(6)
+    store = ScanStore()
+    for i in range(40):
+        pose = np.array([*rng.normal(0.0, 2.0, 2), rng.uniform(-math.pi, math.pi)])
+        store.add(
+            pose if i % 9 else np.array([50.0, -50.0, 0.0]), rng.normal(0.0, 3.0, ((i % 9 > 0) * 30, 2))
+        )
+    start, end = store.rays()
+    lo, hi = occupancy.extent(store, store.parts(100))
+    assert np.array_equal(lo, np.minimum(start.min(0), end.min(0))) and lo.dtype == np.float64
+    assert np.array_equal(hi, np.maximum(start.max(0), end.max(0))) and hi.max() < 20.0
 
 
 def test_classify_by_hand():

@@ -351,3 +351,26 @@ def test_normals_do_not_depend_on_which_tied_neighbour_is_fifth():
             i = order.index(0)
             seen.add((bool(ok[i]), *np.round(np.abs(normals[i]), 12)))
     assert len(seen) == 1, seen
+
+
+def test_the_compiled_gauss_newton_step_solves_icps_normal_equations():
+    """gauss_newton_step against numpy's normal equations and LAPACK solve (register's before it):
+    the same step to rounding, on point-to-line terms of a few hundred points, with and without
+    zero rows (points with no neighbour or normal) and a prior that dominates a corridor's axis."""
+    from cornerslam_cli.motion.kernels import gauss_newton_step
+
+    rng = np.random.default_rng(8)
+    for n, corridor in ((400, False), (300, True), (3, False)):
+        normals = rng.normal(0.0, 1.0, (n, 2))
+        if corridor:
+            normals[:, 0] = 1e-3 * normals[:, 0]  # every wall along x: x is nearly unconstrained
+        normals /= np.hypot(*normals.T)[:, None]
+        J = np.column_stack((normals, rng.normal(0.0, 2.0, n)))
+        J[::7] = 0.0
+        w, r = rng.uniform(0.1, 1.0, n), rng.normal(0.0, 0.02, n)
+        prior, off = np.array([4.0, 4.0, 30.0]), rng.normal(0.0, 0.05, 3)
+        Jw = J * w[:, None]
+        want = -np.linalg.solve(Jw.T @ J + np.diag(prior), Jw.T @ r + prior * off)
+        got = np.empty(3)
+        gauss_newton_step(J, w, r, prior, off, got)
+        np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-14)

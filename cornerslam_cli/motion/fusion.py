@@ -38,6 +38,7 @@ such a turn.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -45,6 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import optimize
 
+from ..features.jit import kernel
 from ..geometry import wrap_angle
 from .params import ScanMatchConfig
 
@@ -172,19 +174,85 @@ def bias_matrix(o: np.ndarray) -> np.ndarray:
 def student_fit(d: np.ndarray, S: np.ndarray, B: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
     """Negative Student-t log likelihood of d (n, 3) with covariances S (n, 3, 3) and mean −B·c, c
     (2,) by iteratively re-weighted least squares, and the standard errors of c."""
-    Sinv = np.linalg.inv(S)
-    w = np.ones(len(d))
-    BtS = np.einsum("nij,nik->njk", B, Sinv)  # Bᵀ S⁻¹ (n, 2, 3)
-    A0 = np.einsum("njk,nkl->njl", BtS, B)  # Bᵀ S⁻¹ B (n, 2, 2)
-    b0 = np.einsum("njk,nk->nj", BtS, d)
-    c = np.zeros(2)
-    for _ in range(IRLS):
-        A = np.einsum("n,njl->jl", w, A0) + 1e-12 * np.eye(2)
-        c = np.linalg.solve(A, -np.einsum("n,nj->j", w, b0))
-        r = d + np.einsum("nij,j->ni", B, c)
-        q = np.maximum(np.einsum("ni,nij,nj->n", r, Sinv, r), 0.0)
-        w = (NU + 3.0) / (NU + q)
-    _, logdet = np.linalg.slogdet(S)
-    nll = float(np.sum(0.5 * logdet + 0.5 * (NU + 3.0) * np.log1p(q / NU)))
-    se = np.sqrt(np.clip(np.diag(np.linalg.inv(A)), 0.0, None))
+    c, se = np.empty(2), np.empty(2)
+    nll = _student_fit(np.ascontiguousarray(d, dtype=float), np.ascontiguousarray(S, dtype=float),
+                       np.ascontiguousarray(B, dtype=float), c, se)  # fmt: skip
     return nll, c, se
+
+
+@kernel
+def _student_fit(d, S, B, c, se):
+    """:func:`student_fit` in loops (Numba; it runs ~35 times a re-estimate, on up to ``adapt_window``
+    samples): fill c and se, return the negative log likelihood. Each S is inverted by its cofactors
+    (3 × 3, symmetric positive definite); a singular one gives an infinite likelihood cost (and c = 0)."""
+    n = len(d)
+    Sinv = np.empty((n, 3, 3))
+    A0 = np.zeros((n, 2, 2))  # Bᵀ S⁻¹ B
+    b0 = np.zeros((n, 2))  # Bᵀ S⁻¹ d
+    logdet = 0.0
+    for t in range(n):
+        det = _inverse3(S[t], Sinv[t])
+        if not det > 0.0:
+            c[:], se[:] = 0.0, np.inf  # no bias to learn from it
+            return np.inf
+        logdet += math.log(det)
+        for j in range(2):
+            for a in range(3):
+                BtS = B[t, 0, j] * Sinv[t, 0, a] + B[t, 1, j] * Sinv[t, 1, a] + B[t, 2, j] * Sinv[t, 2, a]
+                b0[t, j] += BtS * d[t, a]
+                for l in range(2):
+                    A0[t, j, l] += BtS * B[t, a, l]
+    w = np.ones(n)
+    q = np.zeros(n)
+    A = np.zeros((2, 2))
+    for _ in range(IRLS):
+        A[:] = 0.0
+        rhs0 = rhs1 = 0.0
+        for t in range(n):
+            A += w[t] * A0[t]
+            rhs0 -= w[t] * b0[t, 0]
+            rhs1 -= w[t] * b0[t, 1]
+        A[0, 0] += 1e-12
+        A[1, 1] += 1e-12
+        det = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
+        c[0] = (A[1, 1] * rhs0 - A[0, 1] * rhs1) / det
+        c[1] = (A[0, 0] * rhs1 - A[1, 0] * rhs0) / det
+        for t in range(n):
+            q[t] = max(_residual_nis(d[t], B[t], c, Sinv[t]), 0.0)
+            w[t] = (NU + 3.0) / (NU + q[t])
+    se[0] = math.sqrt(max(A[1, 1] / det, 0.0))
+    se[1] = math.sqrt(max(A[0, 0] / det, 0.0))
+    return 0.5 * logdet + 0.5 * (NU + 3.0) * np.sum(np.log1p(q / NU))
+
+
+@kernel
+def _residual_nis(d, B, c, Sinv):
+    """rᵀ S⁻¹ r of the residual r = d + B·c of one sample."""
+    r0 = d[0] + B[0, 0] * c[0] + B[0, 1] * c[1]
+    r1 = d[1] + B[1, 0] * c[0] + B[1, 1] * c[1]
+    r2 = d[2] + B[2, 0] * c[0] + B[2, 1] * c[1]
+    return (
+        r0 * (Sinv[0, 0] * r0 + Sinv[0, 1] * r1 + Sinv[0, 2] * r2)
+        + r1 * (Sinv[1, 0] * r0 + Sinv[1, 1] * r1 + Sinv[1, 2] * r2)
+        + r2 * (Sinv[2, 0] * r0 + Sinv[2, 1] * r1 + Sinv[2, 2] * r2)
+    )
+
+
+@kernel
+def _inverse3(M, out):
+    """Fill ``out`` with the inverse of the 3 × 3 ``M`` (adjugate / determinant); return the determinant
+    (``out`` untouched when it is not positive)."""
+    c00 = M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1]
+    c01 = M[1, 2] * M[2, 0] - M[1, 0] * M[2, 2]
+    c02 = M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0]
+    det = M[0, 0] * c00 + M[0, 1] * c01 + M[0, 2] * c02
+    if not det > 0.0:
+        return det
+    out[0, 0], out[1, 0], out[2, 0] = c00 / det, c01 / det, c02 / det
+    out[0, 1] = (M[0, 2] * M[2, 1] - M[0, 1] * M[2, 2]) / det
+    out[1, 1] = (M[0, 0] * M[2, 2] - M[0, 2] * M[2, 0]) / det
+    out[2, 1] = (M[0, 1] * M[2, 0] - M[0, 0] * M[2, 1]) / det
+    out[0, 2] = (M[0, 1] * M[1, 2] - M[0, 2] * M[1, 1]) / det
+    out[1, 2] = (M[0, 2] * M[1, 0] - M[0, 0] * M[1, 2]) / det
+    out[2, 2] = (M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]) / det
+    return det

@@ -38,8 +38,8 @@ from ..geometry import (
     wrap_angle,
 )
 from .correlative import Window, search
-from .fusion import OdometryFusion
-from .kernels import line_terms, neighbour_scatter
+from .fusion import OdometryFusion, student_fit
+from .kernels import gauss_newton_step, line_terms, neighbour_scatter
 from .nearest import BucketGrid
 from .params import ScanMatchConfig
 
@@ -130,11 +130,12 @@ class LocalMap:
 
 def load_kernels() -> None:
     """Load (on a machine's first run: compile) the scan matcher's Numba kernels (motion/nearest.py,
-    motion/kernels.py) now, so that the first timed match of a run does not pay it: one
-    :func:`register` of a corner against itself."""
+    motion/kernels.py, the fusion's Student-t fit) now, so that the first timed match of a run does
+    not pay it: one :func:`register` of a corner against itself, one fit of a single sample."""
     s = np.linspace(0.0, 1.0, 21)
     corner = np.concatenate((np.column_stack((s, 0.0 * s)), np.column_stack((0.0 * s, s))))
     register(corner, LocalMap.build(corner), np.zeros(3), ScanMatchConfig())
+    student_fit(np.zeros((1, 3)), np.eye(3)[None], np.zeros((1, 3, 2)))
 
 
 @dataclass(frozen=True)
@@ -158,17 +159,14 @@ def register(
     prior_info = np.array([cfg.prior_sigma_xy**-2, cfg.prior_sigma_xy**-2, cfg.prior_sigma_theta**-2])
     prior_info_scaled = prior_info * cfg.robust_scale**2  # the data term below is in units of robust_scale²
     dmax = cfg.max_distance
+    step = np.empty(3)
     for _ in range(cfg.max_iterations):
         terms = _point_to_line(points, local, M, dmax, cfg.robust_scale)
         if terms is None:  # fewer than 3 usable correspondences
             break
-        J, w, r = terms
         off = pose_from_matrix(M) - guess
         off[2] = wrap_angle(off[2])
-        Jw = J * w[:, None]
-        H = Jw.T @ J + np.diag(prior_info_scaled)
-        g = Jw.T @ r + prior_info_scaled * off
-        step = -np.linalg.solve(H, g)
+        gauss_newton_step(*terms, prior_info_scaled, off, step)  # −(JᵀWJ + prior)⁻¹ (JᵀWr + prior·off)
         M = matrix_from_pose(pose_from_matrix(M) + step)
         dmax = max(cfg.min_distance, dmax * SHRINK)
         if np.abs(step).max() < CONVERGED and dmax <= cfg.min_distance:

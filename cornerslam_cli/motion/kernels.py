@@ -6,10 +6,14 @@ for operation, in loops: elementwise + − × ÷ round as numpy's float64 loops 
 accumulates from +0 as numpy's does, and a sum over a row of ≤ 7 numbers is sequential from −0.0, as
 numpy's pairwise sum is below 8 elements. What numpy computes with other kernels — the (n, 2) @ (2, 2)
 placement (BLAS, fused multiply-adds), arctan2, hypot, sin and cos (SIMD versions) — stays in numpy.
-tests/test_scanmatch.py checks the kernels against the numpy expressions exactly.
+tests/test_scanmatch.py checks the kernels against the numpy expressions exactly. One exception,
+:func:`gauss_newton_step`: the normal equations and their 3 × 3 solve, which numpy computed with BLAS
+and LAPACK (sums in another order, fused multiply-adds), equal to rounding only.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -63,3 +67,43 @@ def neighbour_scatter(points, dist, idx, k, tie, out):
             b += dx * dy
             c += dy * dy
         out[0, i], out[1, i], out[2, i] = a, b, c
+
+
+@kernel
+def gauss_newton_step(J, w, r, prior, off, step):
+    """Fill ``step`` (3,) with ICP's Gauss–Newton step −H⁻¹g, H = JᵀWJ + diag(prior), g = JᵀWr +
+    prior·off (icp.register), H by its Cholesky factor in closed form. Not bit for bit numpy's (BLAS
+    sums, LAPACK's solve): the same to rounding (tests/test_scanmatch.py)."""
+    h00 = h01 = h02 = h11 = h12 = h22 = g0 = g1 = g2 = 0.0
+    for i in range(len(w)):
+        a, b, c, wi = J[i, 0], J[i, 1], J[i, 2], w[i]
+        wa, wb, wc = wi * a, wi * b, wi * c
+        h00 += wa * a
+        h01 += wa * b
+        h02 += wa * c
+        h11 += wb * b
+        h12 += wb * c
+        h22 += wc * c
+        g0 += wa * r[i]
+        g1 += wb * r[i]
+        g2 += wc * r[i]
+    h00 += prior[0]
+    h11 += prior[1]
+    h22 += prior[2]
+    g0 += prior[0] * off[0]
+    g1 += prior[1] * off[1]
+    g2 += prior[2] * off[2]
+    # H = L Lᵀ; forward then back substitution
+    l00 = math.sqrt(h00)
+    l10 = h01 / l00
+    l20 = h02 / l00
+    l11 = math.sqrt(h11 - l10 * l10)
+    l21 = (h12 - l20 * l10) / l11
+    l22 = math.sqrt(h22 - l20 * l20 - l21 * l21)
+    y0 = g0 / l00
+    y1 = (g1 - l10 * y0) / l11
+    y2 = (g2 - l20 * y0 - l21 * y1) / l22
+    x2 = y2 / l22
+    x1 = (y1 - l21 * x2) / l11
+    x0 = (y0 - l10 * x1 - l20 * x2) / l00
+    step[0], step[1], step[2] = -x0, -x1, -x2

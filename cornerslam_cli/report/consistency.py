@@ -13,18 +13,18 @@ the result with the same scans placed with the wheel odometry:
   figure is a map that agrees with itself across the loop.
 
 Bounded memory: the placed points are never all held at once. The map is cut into **tiles**, rectangles
-of ``BIN``-cell squares split at their weighted median until a tile holds at most ``TILE_POINTS``
-points (one square may hold more: a robot parked for a long time); a tile's points are placed again
-from the scans, ``CHUNK`` points at a time, with those of a ``MARGIN`` around it (every neighbour within
-the cap of a point inside). Each cell lies in one tile, so the occupied cells are the sum of the
-tiles' counts. Inside a tile, the nearest earlier or later neighbour is found in kd-trees over
-power-of-two runs of the blocks seen there (a range of blocks is at most two such runs per level),
-built one at a time, each asked by every block that needs it: O(n log n), not one tree query per pair
-of blocks. The figures are those of the definition over all points at once: the same cells and
-shares, and with one tile (up to a million kept beams: every sample log and the real logs of the
-panel) the same mean bit for bit; with several, the mean is the sum of the tiles' sums, which may
-differ from one sum in its last bits (relative 1e-15). Memory: one tile (~50 bytes a point) and one
-chunk (~150 bytes a point) at a time, where all of a long log's points once took ~50 bytes each.
+of ``BIN``-cell squares split at their weighted median until a tile holds at most ``TILE_POINTS`` points
+(one square may hold more: a robot parked for a long time); a tile's points are placed again from the
+scans, ``CHUNK`` points at a time, with those of a ``MARGIN`` around it (every neighbour within the cap
+of a point inside). Each cell lies in one tile, so the occupied cells are the sum of the tiles' counts.
+Inside a tile, the nearest earlier or later neighbour is found on a bucket grid whose cells hold their
+points in block order (report/revisit_grid.py). The figures are those of the definition over all points
+at once: the same cells and shares, and with one tile (up to a million kept beams: every sample log and
+the real logs of the panel) the same mean bit for bit; with several, the mean is the sum of the tiles'
+sums, which may differ from one sum in its last bits (relative 1e-15). Memory: one tile (~50 bytes a
+point, its search ~50 more: the points sorted by cell, the answers) and one chunk (~150 bytes a point)
+at a time, where all of a long log's points once took ~50 bytes each (peak traced on the 1,252-scan
+simulated lap, 1.3 M points in four tiles: 55 MB; 50 MB with the kd-trees).
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ import numpy as np
 
 from ..results import MapConsistency
 from .occupancy import ScanStore, per_point_rotations
+from .revisit_grid import nearest_far
 
 CELL = 0.05  # m: the grid of the occupied-cell count
 REVISIT_GAP = 100  # scans
@@ -44,7 +45,6 @@ REVISIT_BLOCK = 25  # scans: neighbours come from blocks at least REVISIT_GAP //
 CHUNK = 50_000  # points placed at once (with their cells and blocks: ~4 MB)
 BIN = 32  # cells (1.6 m): the squares tiles are made of
 TILE_POINTS = 1_000_000  # points of a tile at most (unless one BIN square has more): ~50 MB of temporaries
-QUERIES = 100_000  # points asked of a tree at once (~50 bytes each while asked)
 MARGIN = math.ceil(REVISIT_CAP / CELL) + 1  # cells around a tile whose points it needs as neighbours
 
 
@@ -154,57 +154,6 @@ def _joined(parts: list[np.ndarray]) -> np.ndarray:
     return joined
 
 
-def nearest_far(xy: np.ndarray, blocks: np.ndarray, query: np.ndarray) -> np.ndarray:
-    """Per point of ``query`` (a mask of xy), the distance to the nearest point of ``xy`` at least
-    ``REVISIT_GAP // REVISIT_BLOCK`` blocks away (``blocks`` ascending), inf beyond ``REVISIT_CAP``:
-    kd-trees over power-of-two runs of the blocks present, each asked by every block that needs it."""
-    from scipy.spatial import cKDTree
-
-    present, first = np.unique(blocks, return_index=True)
-    starts = np.append(first, len(blocks))  # block present[j]'s points: starts[j]:starts[j + 1]
-    best = np.full(len(xy), np.inf)
-    for (a, z), asking in _runs_asked(present, query, starts).items():
-        q = np.concatenate([starts[j] + np.flatnonzero(query[starts[j] : starts[j + 1]]) for j in asking])
-        tree = cKDTree(xy[starts[a] : starts[z]])  # one tree at a time
-        for i in range(0, len(q), QUERIES):  # QUERIES points asked at once
-            part = q[i : i + QUERIES]
-            best[part] = np.minimum(best[part], tree.query(xy[part], distance_upper_bound=REVISIT_CAP)[0])
-        del tree
-    return best[query]
-
-
-def _runs_asked(
-    present: np.ndarray, query: np.ndarray, starts: np.ndarray
-) -> dict[tuple[int, int], list[int]]:
-    """Per run [a, z) of the ``present`` blocks (:func:`dyadic_runs` over their positions), the
-    positions j of the blocks with ``query`` points that look for a neighbour in it: every such block
-    asks the runs covering the blocks at least ``REVISIT_GAP // REVISIT_BLOCK`` before and after it."""
-    gap = REVISIT_GAP // REVISIT_BLOCK
-    asked: dict[tuple[int, int], list[int]] = {}
-    for j, b in enumerate(present.tolist()):
-        if not query[starts[j] : starts[j + 1]].any():
-            continue
-        before = int(np.searchsorted(present, b - gap, side="right"))
-        after = int(np.searchsorted(present, b + gap, side="left"))
-        for run in (*dyadic_runs(0, before), *dyadic_runs(after, len(present))):
-            asked.setdefault(run, []).append(j)
-    return asked
-
-
-def dyadic_runs(lo: int, hi: int) -> list[tuple[int, int]]:
-    """[lo, hi) as aligned power-of-two runs [a, a + 2^k) (a divisible by 2^k), fewest first-to-last;
-    empty when lo >= hi."""
-    runs = []
-    lo = max(lo, 0)
-    while lo < hi:
-        size = lo & -lo if lo else 1 << (hi - 1).bit_length()
-        while lo + size > hi:
-            size //= 2
-        runs.append((lo, lo + size))
-        lo += size
-    return runs
-
-
 def figures(
     pts: Sequence[np.ndarray], poses: np.ndarray, revisit: bool = True
 ) -> tuple[int, int, float, float]:
@@ -216,7 +165,7 @@ def figures(
         cells += n_cells
         total += int(own.sum())
         if revisit:
-            d = nearest_far(xy, blocks, own)
+            d = nearest_far(xy, blocks, own, REVISIT_GAP // REVISIT_BLOCK, REVISIT_CAP)
             d = d[np.isfinite(d)]
             d_sum += float(d.sum())  # one tile: the mean of all points, bit for bit
             d_count += len(d)

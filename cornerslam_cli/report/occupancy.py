@@ -11,8 +11,8 @@ The scans are kept (float32, the odometry frame) until the run ends, when the ma
 past ``MAX_POINTS`` end points the store keeps every second beam (and so on), and a grid of more than
 ``grid.max_cells`` cells is written at a coarser resolution: both with a warning. A cell costs five
 bytes (two uint16 counts, saturating at 65,535 beams, and its value) plus the PNG's one or two. Ray tracing is
-vectorised: each beam is sampled once per cell along its major axis (a DDA line), in chunks of at
-most ``CHUNK`` samples.
+compiled (Numba): each beam is sampled once per cell along its major axis (a DDA line), in float32 cell
+units; :func:`line_cells` is the same sampling in numpy (the trajectory in ``map_grid.png``).
 
 The files follow ROS map_saver: ``mode: trinary``, pixels 0 (occupied), 254 (free), 205 (unknown),
 ``occupied_thresh: 0.65``, ``free_thresh: 0.196``, ``negate: 0``; the image's first row is the top
@@ -29,12 +29,14 @@ from pathlib import Path
 
 import numpy as np
 
+from ..features.jit import kernel
+
 OCCUPIED, FREE, UNKNOWN = 0, 254, 205  # map_saver's trinary pixel values
 OCCUPIED_THRESH, FREE_THRESH = 0.65, 0.196  # map_saver's thresholds: 0 → occupied, 254 → free, 205 → unknown
 HIT_SHARE = 4  # a cell is occupied when at least 1 in HIT_SHARE of the beams reaching it end in it
 MAX_POINTS = 8_000_000  # end points kept (64 MB as float32) before the store is thinned
 MAX_BEAM = 1000.0  # m: longer beams (a range of 1e30 m in a log with range_max = inf) are not traced
-CHUNK = 500_000  # ray samples traced (or cells classified) at once: ~40 MB of temporaries
+CHUNK = 500_000  # beams traced (or cells classified) at once: ~40 MB of temporaries
 COUNT_MAX = np.iinfo(np.uint16).max  # beams ending in / passing a cell are counted up to this
 PATH = 1  # the trajectory's pixels in map_grid.png (a palette image: one byte per cell)
 PNG_COLOURS = {OCCUPIED: (0, 0, 0), FREE: (255, 255, 255), UNKNOWN: (190, 190, 190), PATH: (31, 119, 180)}
@@ -182,8 +184,7 @@ def line_cells(start: np.ndarray, end: np.ndarray, lo: np.ndarray, resolution: f
     """Flat cell indices along the segments ``start`` → ``end`` (n, 2), one sample per cell along each
     segment's major axis, the end itself excluded; and the end's own flat cell per segment. Returns
     (beam of each sample, flat cell of each sample, flat cell of each end)."""
-    a = ((start - lo) / resolution).astype(np.float32)  # cell units: float32 is exact to 1/1000 cell
-    b = ((end - lo) / resolution).astype(np.float32)
+    a, b = cell_units(start, lo, resolution), cell_units(end, lo, resolution)
     d = b - a
     n = np.maximum(np.ceil(np.abs(d).max(axis=1)), 1.0).astype(np.int64)  # samples per segment
     beam = np.repeat(np.arange(len(n)), n)
@@ -193,31 +194,33 @@ def line_cells(start: np.ndarray, end: np.ndarray, lo: np.ndarray, resolution: f
     return beam, cells, _flat(b[:, 0], b[:, 1], cols)
 
 
+def cell_units(xy: np.ndarray, lo: np.ndarray, resolution: float) -> np.ndarray:
+    """The points ``xy`` (n, 2) in cell units from ``lo``, float32 (exact to 1/1000 cell)."""
+    return ((xy - lo) / resolution).astype(np.float32)
+
+
 def _flat(u: np.ndarray, v: np.ndarray, cols: int) -> np.ndarray:
     """Flat index (row · cols + col) of the cells holding the points (u, v), in cell units."""
     return np.floor(v).astype(np.int64) * cols + np.floor(u).astype(np.int64)
 
 
-def _chunks(start: np.ndarray, end: np.ndarray, resolution: float) -> list[slice]:
-    """Consecutive slices of the rays of about ``CHUNK`` samples each (a longer ray alone)."""
-    samples = np.cumsum(np.abs(end - start).max(axis=1) / resolution + 1.0)
-    cuts = np.searchsorted(samples, np.arange(CHUNK, samples[-1], CHUNK))
-    edges = np.unique(np.concatenate(([0], cuts, [len(start)])))
-    return [slice(i, j) for i, j in zip(edges[:-1], edges[1:], strict=True)]
-
-
-def count(counts: np.ndarray, idx: np.ndarray) -> None:
-    """``counts[i] += (number of times i occurs in idx)``, saturating at COUNT_MAX (uint16 counts):
-    ``np.add.at``, ten times faster, by a bincount over the span of ``idx`` (by sorting when that span
-    is much wider than ``idx`` is long)."""
-    if len(idx) == 0:
-        return
-    lo, hi = int(idx.min()), int(idx.max())
-    if hi - lo < 2 * len(idx):  # temporaries of ~20 bytes per cell of the span: ~40 per index
-        cells, n = slice(lo, hi + 1), np.bincount(idx - lo, minlength=hi - lo + 1)
-    else:
-        cells, n = np.unique(idx, return_counts=True)
-    counts[cells] = np.minimum(counts[cells] + n.astype(np.int32), COUNT_MAX)
+@kernel
+def trace(a, b, cols, hits, passes):
+    """Count the rays ``a`` → ``b`` (n, 2, float32 cell units) into ``hits`` (the end's cell) and
+    ``passes`` (the other cells of :func:`line_cells`' samples, by the same float32 arithmetic),
+    saturating at COUNT_MAX: what line_cells' cells would count, without its temporaries."""
+    for k in range(len(a)):
+        d0, d1 = b[k, 0] - a[k, 0], b[k, 1] - a[k, 1]
+        n = max(math.ceil(max(abs(d0), abs(d1))), 1)
+        end = math.floor(b[k, 1]) * cols + math.floor(b[k, 0])
+        if hits[end] < COUNT_MAX:
+            hits[end] += 1
+        nf = np.float32(n)
+        for i in range(n):
+            t = np.float32(i) / nf
+            cell = math.floor(a[k, 1] + t * d1) * cols + math.floor(a[k, 0] + t * d0)
+            if cell != end and passes[cell] < COUNT_MAX:
+                passes[cell] += 1
 
 
 def build_grid(store: ScanStore, resolution: float, max_cells: int, warn: Callable[[str], None]) -> Grid:
@@ -246,24 +249,21 @@ def build_grid(store: ScanStore, resolution: float, max_cells: int, warn: Callab
     passes = np.zeros(rows * cols, dtype=np.uint16)
     for scans in parts:
         start, end = store.rays(scans)
-        if not len(start):
-            continue
-        for part in _chunks(start, end, fit):
-            beam, cells, ends = line_cells(start[part], end[part], lo, fit, cols)
-            count(hits, ends)  # saturating counts: the same whatever the parts
-            count(passes, cells[cells != ends[beam]])
+        trace(cell_units(start, lo, fit), cell_units(end, lo, fit), cols, hits, passes)
     return Grid(classify(hits, passes).reshape(rows, cols), fit, (float(lo[0]), float(lo[1])))
 
 
 def extent(store: ScanStore, parts: list[slice]) -> tuple[np.ndarray, np.ndarray] | None:
     """(lo, hi) corners of the box holding every kept beam's start and end; None when there is none."""
     lo = hi = None
-    for scans in parts:
-        start, end = store.rays(scans)
-        if len(start):
+    for scans in parts:  # float32 as stored (float64 only at the end: the same bounds)
+        points = store.points[scans]
+        seen = np.array([len(q) > 0 for q in points], dtype=bool)
+        if seen.any():
+            start, end = store.xy()[scans][seen], np.concatenate(points)
             a, b = np.minimum(start.min(0), end.min(0)), np.maximum(start.max(0), end.max(0))
             lo, hi = (a, b) if lo is None else (np.minimum(lo, a), np.maximum(hi, b))
-    return None if lo is None else (lo, hi)
+    return None if lo is None else (lo.astype(float), hi.astype(float))
 
 
 def classify(hits: np.ndarray, passes: np.ndarray) -> np.ndarray:
