@@ -123,10 +123,19 @@ def keyframe_factors(
             parts.append(part)
             part, ref = np.zeros((3, 3)), p1
     scale = 1.0
-    if np.linalg.det(total) > 0 and np.linalg.det(end_cov) > 0:
-        scale = float(np.cbrt(np.linalg.det(end_cov) / np.linalg.det(total)))
+    if det3(total) > 0 and det3(end_cov) > 0:
+        scale = float(np.cbrt(det3(end_cov) / det3(total)))
     anchors = np.vstack((np.zeros(3), poses[nodes[:-1]]))
     return relative(anchors, poses[nodes]), np.array(parts) * scale
+
+
+def det3(m: np.ndarray) -> float:
+    """A 3 × 3 determinant by cofactors (not LAPACK's: the same bits under every BLAS kernel set)."""
+    return float(
+        m[0, 0] * (m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1])
+        - m[0, 1] * (m[1, 0] * m[2, 2] - m[1, 2] * m[2, 0])
+        + m[0, 2] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0])
+    )
 
 
 def _propagate(acc: np.ndarray, p0: np.ndarray, p1: np.ndarray, cov: np.ndarray) -> np.ndarray:
