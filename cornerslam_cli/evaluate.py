@@ -152,24 +152,30 @@ def evaluate_files(
     return Accuracy(**out)
 
 
-def relation_error(
+def relation_errors(
     est_t: np.ndarray, est: np.ndarray, relations: np.ndarray, time_offset: float = 0.0
-) -> RelationError:
-    """Kümmerle et al. 2009 metric: for each relation (t1, t2, δ), the error of the estimated relative
-    pose est(t1)⁻¹ ∘ est(t2) against δ. Relation times are shifted by ``-time_offset`` to log time;
-    poses between processed scans are interpolated. Returns mean ± std of the translational (m) and
-    absolute rotational (deg) errors, and how many relations could be evaluated."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per relation (t1, t2, δ) inside the trajectory's span: the error of est(t1)⁻¹ ∘ est(t2) against δ.
+    Relation times are shifted by ``-time_offset`` to log time; poses between processed scans are
+    interpolated. Returns (which relations were inside, their translational (m) and absolute rotational
+    (deg) errors)."""
     t1 = relations[:, 0] - time_offset
     t2 = relations[:, 1] - time_offset
     both = inside_span(est_t, t1) & inside_span(est_t, t2)
     a, b = interpolate(est_t, est, t1[both]), interpolate(est_t, est, t2[both])
-    gt = relations[both][:, 2:5]
+    err = relative(relations[both][:, 2:5], relative(a, b))
+    return both, np.linalg.norm(err[:, :2], axis=1), np.degrees(np.abs(err[:, 2]))
+
+
+def relation_error(
+    est_t: np.ndarray, est: np.ndarray, relations: np.ndarray, time_offset: float = 0.0
+) -> RelationError:
+    """Kümmerle et al. 2009 metric (:func:`relation_errors`): mean ± std of the translational (m) and
+    absolute rotational (deg) errors, and how many relations could be evaluated."""
+    both, trans, rot = relation_errors(est_t, est, relations, time_offset)
     n = int(np.count_nonzero(both))
     if n == 0:
         return RelationError(n=0, n_total=int(len(relations)))
-    err = relative(gt, relative(a, b))
-    trans = np.linalg.norm(err[:, :2], axis=1)
-    rot = np.degrees(np.abs(err[:, 2]))
     return RelationError(
         n=n,
         n_total=int(len(relations)),

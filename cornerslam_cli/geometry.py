@@ -112,6 +112,22 @@ def compose_inverse_cov(a, cov_a: np.ndarray, b, cov_b: np.ndarray) -> tuple[np.
     return pose, Ja @ cov_a @ Ja.T + Jb @ cov_b @ Jb.T
 
 
+def reanchor(pose, cov: np.ndarray, a, b) -> tuple[np.ndarray, np.ndarray]:
+    """A relative pose a→b (``pose``: frame b's origin in frame a, covariance ``cov`` of its (x, y, θ) in
+    a) re-expressed between two poses known exactly in those frames, ``a`` in frame a and ``b`` in frame
+    b: a⁻¹ ∘ pose ∘ b, with its covariance (in a's frame at ``a``) to first order. A loop closure
+    between two submaps' origins, moved onto the keyframes where the submaps overlap."""
+    pose = np.asarray(pose, dtype=float)
+    z = relative(a, compose(pose, b))
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    rb = np.array([c * b[0] - s * b[1], s * b[0] + c * b[1]])  # R(θ) t_b: its lever arm on θ
+    J = np.eye(3)
+    J[:2, 2] = (-rb[1], rb[0])
+    ca, sa = np.cos(a[2]), np.sin(a[2])
+    J[:2, :] = np.array([[ca, sa], [-sa, ca]]) @ J[:2, :]
+    return z, J @ cov @ J.T
+
+
 def interpolate(stamps: np.ndarray, poses: np.ndarray, t):
     """Poses at time(s) ``t`` between the poses (n, 3) at increasing ``stamps`` (n,): linear in x, y,
     along the shorter arc in θ (the SE(2) geodesic differs by O(Δθ·Δd), negligible between samples

@@ -16,9 +16,9 @@ GTSAM) with loop closures verified by the configured associator (graph/loops.py)
   graph's uncertainty between the submaps they come from, are all refused (perceptual aliasing).
   Accepted closures enter the graph under a robust kernel.
 - **Outputs.** Each step's causal (online) estimate is its submap origin's pose in the graph *at that
-  step* ∘ the filter's local pose; :meth:`HierarchicalSlam.final_poses` is the same with the optimised
-  origins — the smoothed trajectory written to trajectory.csv. Landmarks stay one per submap in the
-  global frame; a corner matched across an accepted closure is *linked* (map.csv ``linked_to``), not merged.
+  step* ∘ the filter's local pose. :meth:`finish` solves a keyframe graph (graph/smooth.py: closures
+  act where the submaps overlap); :meth:`final_poses` hang from its nodes — the smoothed trajectory.
+  Landmarks stay one per submap, linked across closures (map.csv ``linked_to``), not merged.
 """
 
 from __future__ import annotations
@@ -34,15 +34,15 @@ import numpy as np
 from .geometry import (
     compose,
     compose_inverse_cov,
-    rotate_covariance,
+    relative,
     rotate_pose_covariance,
     transform_points,
-    wrap_angle,
 )
-from .graph.loops import FEW_CORNERS, LOW_FITNESS, NO_HYPOTHESIS, loop_associator, match_submaps
+from .graph.loops import FEW_CORNERS, LOW_FITNESS, NO_HYPOTHESIS, agree, chi2, loop_associator, match_submaps
 from .graph.points import POINTS, match_points, searchable
 from .graph.posegraph import PoseGraph
-from .graph.submap import LoopMatch, Submap
+from .graph.smooth import smooth
+from .graph.submap import LoopMatch, OpenSubmap, Submap, keyframe_factors, keyframe_nodes, place_table
 from .motion.icp import voxel_thin
 from .slam import Slam, StepRecord
 
@@ -52,7 +52,6 @@ if TYPE_CHECKING:
 
 COV_FLOOR = np.diag([1e-8, 1e-8, 1e-10])  # added to a submap's end covariance: a still robot gives Σ = 0
 PATH_CELL = 0.5  # m: a submap's path kept for finding candidates, one position per cell
-AGREE_XY, AGREE_THETA = 0.5, 0.2  # m, rad: two closures of one submap agree on where it is
 # the corners gave no verdict (too few in common, no hypothesis) or a pose the points refute (low fitness:
 # usually a corner constellation repeated elsewhere): the points decide, around the graph's prediction
 TO_POINTS = (FEW_CORNERS, NO_HYPOTHESIS, LOW_FITNESS)
@@ -91,35 +90,6 @@ class LoopRecord:
         }
 
 
-class _OpenSubmap:
-    """The submap being built: its steps' local poses, its scans' points, how far the robot went."""
-
-    def __init__(self, index: int, first_step: int):
-        self.index = index
-        self.first_step = first_step
-        self.poses: list[np.ndarray] = []
-        self.points: list[np.ndarray] = []
-        self.n_points = 0
-        self.travelled = 0.0
-
-    def add(self, pose: np.ndarray, points: np.ndarray | None, voxel: float) -> None:
-        if self.poses:
-            self.travelled += math.hypot(*(pose[:2] - self.poses[-1][:2]))
-        self.poses.append(pose)
-        if points is not None and len(points):
-            self.points.append(points)
-            self.n_points += len(points)
-            if self.n_points > 200_000:  # thin as it grows: bounded memory on a long submap
-                self.points = [self.thinned(voxel)]
-                self.n_points = len(self.points[0])
-
-    def thinned(self, voxel: float) -> np.ndarray:
-        if not self.points:
-            return np.zeros((0, 2))
-        p = np.concatenate(self.points)
-        return p[voxel_thin(p, voxel)]
-
-
 class HierarchicalSlam:
     """Local EKF submaps (slam.py) joined by a pose graph with loop closures; :meth:`step` per frame
     like :class:`~cornerslam_cli.slam.Slam`, then :meth:`finish` closes the last submap."""
@@ -136,7 +106,12 @@ class HierarchicalSlam:
         self.loops: list[LoopRecord] = []
         self.step_submap = array("l")
         self.local_poses = array("d")
-        self._open = _OpenSubmap(0, 0)
+        self.step_node = array("l")  # per step of a closed submap: the keyframe node it hangs from …
+        self.step_offset = array("d")  # … and its pose relative to that node (the filter's)
+        self.chains: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # per closed submap (smooth)
+        self.n_nodes = 1  # keyframe nodes so far (node 0: the first origin)
+        self.smoothed: PoseGraph | None = None  # the keyframe graph, solved by finish()
+        self._open = OpenSubmap(0, 0, 0)
         self._origin_cov = np.zeros((3, 3))  # the open submap origin's marginal in the graph
         self.t_loop = 0.0
         self.n_ids = 0
@@ -154,7 +129,7 @@ class HierarchicalSlam:
         sub = self._open
         sensor = compose(r.pose, self.laser2base)
         pts = None if frame.points is None else transform_points(frame.points.astype(float), sensor)
-        sub.add(r.pose, pts, self.cfg.submaps.voxel)
+        sub.add(r.pose, self.slam.step_cov, pts, self.cfg.submaps.voxel)
         self.step_submap.append(sub.index)
         self.local_poses.extend(r.pose)
         origin, origin_cov = self.graph.pose(sub.index), self._origin_cov
@@ -174,11 +149,18 @@ class HierarchicalSlam:
         )
 
     def finish(self) -> None:
-        """Close the last submap (its loops too) when it has steps."""
+        """Close the last submap (its loops too) when it has steps; solve the keyframe graph."""
+        t0 = time.perf_counter()
         if self._open.poses:
-            t0 = time.perf_counter()
             self._close(self.n_steps - 1, last=True)
-            self.t_loop += time.perf_counter() - t0
+        if self.closed:
+            loops = [
+                (self.closed[r.submap_from], self.closed[r.submap_to], r.match)
+                for r in self.loops
+                if r.factor >= 0
+            ]
+            self.smoothed = smooth(self.cfg.graph, self.chains, self.graph.poses()[: len(self.closed)], loops)
+        self.t_loop += time.perf_counter() - t0
 
     def _close(self, step: int, last: bool = False) -> None:
         """Close the open submap at ``step``: a node for the next origin, its loops, the graph optimised."""
@@ -189,11 +171,21 @@ class HierarchicalSlam:
             self._close_loops(sub, step)
         if not last:
             self.slam.new_map()
-            self._open = _OpenSubmap(sub.index + 1, step + 1)
+            self._open = OpenSubmap(sub.index + 1, step + 1, self.n_nodes - 1)
             self._origin_cov = self.graph.marginal(sub.index + 1)
 
     def _close_submap(self) -> Submap:
-        ekf, sub = self.slam.ekf, self._open
+        ekf, sub, g = self.slam.ekf, self._open, self.cfg.graph
+        poses = np.array(sub.poses).reshape(-1, 3)
+        nodes = keyframe_nodes(poses, g.node_spacing, g.node_angle)
+        rel, cov = keyframe_factors(poses, np.array(sub.covs), ekf.P[:3, :3], nodes)
+        self.chains.append((rel, cov + COV_FLOOR, poses[nodes]))
+        before = np.searchsorted(nodes, np.arange(len(poses)), side="right") - 1  # last node at or before
+        step_nodes = np.where(before >= 0, self.n_nodes + before, sub.node)
+        self.n_nodes += len(nodes)
+        anchor_poses = np.where((before >= 0)[:, None], poses[nodes[before.clip(0)]], 0.0)
+        self.step_node.extend(step_nodes)
+        self.step_offset.extend(relative(anchor_poses, poses).ravel())
         table = self.slam.landmark_table()
         n = len(table["id"])
         state = (3 + 3 * table["id"][:, None] + np.arange(3)).reshape(-1)
@@ -209,7 +201,10 @@ class HierarchicalSlam:
             points=sub.thinned(self.cfg.submaps.voxel),
             end_pose=ekf.pose,
             end_cov=ekf.P[:3, :3].copy(),
-            poses=np.array(sub.poses).reshape(-1, 3),
+            poses=poses,
+            node=sub.node,
+            step_nodes=step_nodes,
+            anchor_poses=anchor_poses,
         )
         self.closed.append(closed)
         self.tables.append({**table, "id": ids})
@@ -315,21 +310,33 @@ class HierarchicalSlam:
         return [self.closed[a] for a in near]
 
     def final_poses(self) -> np.ndarray:
-        """(n, 3) every step's pose with the optimised submap origins (the smoothed trajectory)."""
-        origins = self.graph.poses()[np.frombuffer(self.step_submap, dtype=np.int64)]
-        return compose(origins, np.frombuffer(self.local_poses).reshape(-1, 3))
+        """(n, 3) every step's pose in the solved keyframe graph (the smoothed trajectory); before
+        :meth:`finish`, with the online graph's submap origins."""
+        if self.smoothed is None:
+            local = np.frombuffer(self.local_poses).reshape(-1, 3)
+            return compose(self.graph.poses()[np.frombuffer(self.step_submap, dtype=np.int64)], local)
+        nodes = self.smoothed.poses()[np.frombuffer(self.step_node, dtype=np.int64)]
+        return compose(nodes, np.frombuffer(self.step_offset).reshape(-1, 3))
 
     def landmark_table(self) -> dict[str, np.ndarray]:
         """map.csv's columns: every submap's landmarks at its optimised origin (global frame), their
         covariances turned with it (the origin's own uncertainty not added), with ``submap`` and
         ``linked_to`` (the id of the corner it was matched to across an accepted closure, or -1)."""
-        poses = self.graph.poses()
+        poses = self._origins()
         parts = [place_table(t, poses[i], i) for i, t in enumerate(self.tables)]
         if not parts:
             return self.slam.landmark_table() | {"submap": np.zeros(0, int), "linked_to": np.zeros(0, int)}
         table = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
         table["linked_to"] = self._links(len(table["id"]))
         return table
+
+    def _origins(self) -> np.ndarray:
+        """(submaps, 3) each closed submap's origin, smoothed when solved."""
+        return (
+            self.graph.poses()
+            if self.smoothed is None
+            else self.smoothed.poses()[[s.node for s in self.closed]]
+        )
 
     def _links(self, n: int) -> np.ndarray:
         linked = np.full(n, -1, dtype=np.int64)
@@ -341,42 +348,8 @@ class HierarchicalSlam:
 
     def loop_rows(self) -> list[dict]:
         """loops.csv's rows; ``inlier``: whether the graph kept an accepted closure inside its kernel."""
-        return [r.row(self.graph.loop_inlier(r.factor) if r.factor >= 0 else None) for r in self.loops]
-
-
-def chi2(pred: np.ndarray, pred_cov: np.ndarray, pose: np.ndarray, cov: np.ndarray) -> float:
-    """Mahalanobis² of a measured a→b ``pose`` against the graph's prediction ``pred``, on the sum of the
-    prediction's joint-marginal covariance and the measurement's (both of (x, y, θ) in a's frame)."""
-    e = np.asarray(pose, dtype=float) - pred
-    e[2] = wrap_angle(e[2])
-    return float(e @ np.linalg.solve(pred_cov + cov, e))
-
-
-def agree(poses: list[np.ndarray]) -> bool:
-    """Whether the global poses one submap's closures imply are all within AGREE_XY / AGREE_THETA."""
-    if len(poses) < 2:
-        return True
-    P = np.array(poses)
-    d = np.hypot(*(P[:, None, :2] - P[None, :, :2]).transpose(2, 0, 1))
-    dth = np.abs(wrap_angle(P[:, None, 2] - P[None, :, 2]))
-    return bool(d.max() <= AGREE_XY and dth.max() <= AGREE_THETA)
-
-
-def place_table(table: dict[str, np.ndarray], origin: np.ndarray, index: int) -> dict[str, np.ndarray]:
-    """A submap's landmark columns moved into the global frame by its ``origin``."""
-    n = len(table["id"])
-    xy = transform_points(np.column_stack((table["x"], table["y"])), origin)
-    cov = np.stack((table["var_x"], table["cov_xy"], table["cov_xy"], table["var_y"]), axis=-1)
-    cov = rotate_covariance(cov.reshape(-1, 2, 2), float(origin[2]))
-    return {
-        **table,
-        "x": xy[:, 0],
-        "y": xy[:, 1],
-        "var_x": cov[:, 0, 0],
-        "var_y": cov[:, 1, 1],
-        "cov_xy": cov[:, 0, 1],
-        "submap": np.full(n, index, dtype=np.int64),
-    }
+        g = self.smoothed or self.graph
+        return [r.row(g.loop_inlier(r.factor) if r.factor >= 0 else None) for r in self.loops]
 
 
 def globalise(

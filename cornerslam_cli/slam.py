@@ -17,9 +17,10 @@ import numpy as np
 from .association import make_associator
 from .association.params import AssociationConfig
 from .filter import Ekf
+from .filter.models import increment_noise
 from .filter.params import EkfConfig
 from .frontend import Frame
-from .geometry import matrix_from_pose
+from .geometry import matrix_from_pose, relative
 from .logs.params import OdomJumpConfig
 from .types import Segments
 
@@ -100,6 +101,7 @@ class Slam:
         self.first_step = np.zeros(0, dtype=np.int64)  # per landmark id, kept in step with the filter's ids
         self.last_step = np.zeros(0, dtype=np.int64)
         self.prev_motion: np.ndarray | None = None  # the previous frame's motion input
+        self.step_cov = np.zeros((3, 3))  # the last step's motion noise (step_noise)
         self.n_steps = 0
 
     @classmethod
@@ -130,6 +132,29 @@ class Slam:
         inflate = (self.odom_jump.sigma_xy, self.odom_jump.sigma_theta) if jump else None
         return Motion(self.prev_motion, cur, frame.motion_cov, inflate)
 
+    def step_noise(self, m: Motion) -> np.ndarray:
+        """The covariance (3, 3) of motion ``m``'s increment in the frame it starts from, as the
+        filter's prediction took it (its own, else the odometry noise model; a jump's inflation added);
+        zero at the first frame. The pose graph's keyframe factors (hierarchy.py) carry it."""
+        if m.prev is None:
+            return np.zeros((3, 3))
+        cfg = self.ekf.cfg
+        if m.cov is not None:
+            cov = np.array(m.cov, dtype=float)
+        else:
+            inc = relative(m.prev, m.cur)
+            cov = increment_noise(
+                inc,
+                cfg.alphas,
+                cfg.min_sigma_xy,
+                cfg.min_sigma_theta,
+                cfg.pure_rotation_eps,
+                cfg.reverse_motion,
+            )
+        if m.inflate is not None:
+            cov += np.diag([m.inflate[0] ** 2, m.inflate[0] ** 2, m.inflate[1] ** 2])
+        return cov
+
     def step(self, frame: Frame) -> StepRecord:
         """One step of the paper's loop on an extracted frame: predict, associate, update, augment."""
         k = self.n_steps
@@ -141,6 +166,7 @@ class Slam:
             if m.inflate is not None:
                 self.ekf.inflate_pose(*m.inflate)
         self.prev_motion = m.cur
+        self.step_cov = self.step_noise(m)
         t2 = time.perf_counter()
         result = self.associate(z, C, self.ekf.predict_observations())  # Alg 3-5
         t3 = time.perf_counter()

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from cornerslam_cli.evaluate import align_se2, apply_se2, ate, relation_error, rpe
+from cornerslam_cli.evaluate import align_se2, apply_se2, ate, relation_error, relation_errors, rpe
 from cornerslam_cli.geometry import relative
 
 
@@ -63,6 +63,10 @@ def test_relation_error_with_time_offset_and_interpolation():
     assert e.n == 2 and e.n_total == 3
     assert e.trans_mean == pytest.approx(0.1)
     assert e.rot_mean_deg == pytest.approx(5.0)
+    inside, trans, rot = relation_errors(t, est, rel, time_offset=off)
+    assert inside.tolist() == [True, True, False]
+    assert trans == pytest.approx([0.2, 0.0]) and rot == pytest.approx([0.0, 10.0])
+    assert relation_error(t, est, rel[2:], time_offset=off).n == 0  # none inside: nothing to score
 
 
 # ---------------------------------------------------------------------------- files as users give them

@@ -15,6 +15,7 @@ from cornerslam_cli.geometry import (
     matrix_from_pose,
     normalize_quaternion,
     pose_from_matrix,
+    reanchor,
     relative,
     transform_points,
     wrap_angle,
@@ -190,3 +191,19 @@ def test_yaw_of_a_normalised_and_a_scaled_quaternion(yaw, roll, k):
     )
     assert abs(wrap_angle(yaw_from_quaternion(*q) - yaw)) < 1e-9
     assert abs(wrap_angle(yaw_from_quaternion(*normalize_quaternion(*(k * q))) - yaw)) < 1e-9
+
+
+def test_reanchor_moves_a_relative_pose_onto_two_poses_with_its_covariance():
+    """a⁻¹ ∘ T ∘ b by hand (T a quarter turn), and its covariance against 20,000 draws of T."""
+    T, a, b = np.array([2.0, 1.0, math.pi / 2]), np.array([1.0, 0.0, 0.0]), np.array([1.0, 0.0, 0.0])
+    z, _ = reanchor(T, np.eye(3), a, b)
+    np.testing.assert_allclose(z, [1.0, 2.0, math.pi / 2], atol=1e-12)  # b's x axis turned to +y
+    rng = np.random.default_rng(4)
+    T, a, b = np.array([3.0, -1.0, 0.7]), np.array([0.5, 2.0, -0.4]), np.array([4.0, 1.0, 0.3])
+    cov = np.array([[0.02, 0.005, 0.001], [0.005, 0.01, -0.002], [0.001, -0.002, 0.004]])
+    z, cz = reanchor(T, cov, a, b)
+    np.testing.assert_allclose(z, relative(a, compose(T, b)), atol=1e-12)
+    draws = relative(a, compose(rng.multivariate_normal(T, cov, 20000), b))
+    d = draws - z
+    d[:, 2] = wrap_angle(d[:, 2])
+    np.testing.assert_allclose(np.cov(d.T), cz, rtol=0.08, atol=2e-4)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections import Counter
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -18,8 +19,9 @@ import cornerslam_cli.hierarchy as hierarchy
 from cornerslam_cli.config import config_from
 from cornerslam_cli.frontend import frames, open_input
 from cornerslam_cli.geometry import compose, compose_inverse_cov, inverse, relative, wrap_angle
+from cornerslam_cli.graph.loops import agree
 from cornerslam_cli.graph.submap import LoopMatch
-from cornerslam_cli.hierarchy import HierarchicalSlam, LoopRecord, agree
+from cornerslam_cli.hierarchy import HierarchicalSlam, LoopRecord
 from cornerslam_cli.report.tables import LOOP_COLUMNS, MAP_COLUMNS, TRAJECTORY_COLUMNS, read_csv
 
 
@@ -237,6 +239,7 @@ def test_closures_placing_a_submap_apart_agree_within_the_uncertainty_between_th
     ]
     hs = HierarchicalSlam.__new__(HierarchicalSlam)
     hs.graph, hs.cfg = _Graph(sigma), config_from({}, [])
+    hs.closed = [SimpleNamespace(node=k) for k in range(2)]  # (a1's and a2's origins: nodes 0, 1)
     assert not agree([hs.placed(r) for r in rows])
     assert hs.consistent(rows) == consistent
     assert hs.consistent(rows + rows[:1]) == consistent  # a third closure agreeing with the first

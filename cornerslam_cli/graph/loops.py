@@ -328,3 +328,24 @@ def overlap_fitness(points: np.ndarray, local: LocalMap, pose: np.ndarray, inlie
     if overlap < MIN_OVERLAP_POINTS:
         return 0.0
     return float(np.count_nonzero(dist < inlier_distance)) / overlap
+
+
+AGREE_XY, AGREE_THETA = 0.5, 0.2  # m, rad: two closures of one submap agree on where it is
+
+
+def chi2(pred: np.ndarray, pred_cov: np.ndarray, pose: np.ndarray, cov: np.ndarray) -> float:
+    """Mahalanobis² of a measured a→b ``pose`` against the graph's prediction ``pred``, on the sum of the
+    prediction's joint-marginal covariance and the measurement's (both of (x, y, θ) in a's frame)."""
+    e = np.asarray(pose, dtype=float) - pred
+    e[2] = wrap_angle(e[2])
+    return float(e @ np.linalg.solve(pred_cov + cov, e))
+
+
+def agree(poses: list[np.ndarray]) -> bool:
+    """Whether the global poses one submap's closures imply are all within AGREE_XY / AGREE_THETA."""
+    if len(poses) < 2:
+        return True
+    P = np.array(poses)
+    d = np.hypot(*(P[:, None, :2] - P[None, :, :2]).transpose(2, 0, 1))
+    dth = np.abs(wrap_angle(P[:, None, 2] - P[None, :, 2]))
+    return bool(d.max() <= AGREE_XY and dth.max() <= AGREE_THETA)

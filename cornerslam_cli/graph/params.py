@@ -89,14 +89,18 @@ class LoopConfig:
 
 @dataclass(frozen=True)
 class GraphConfig:
-    """The global pose graph (graph/posegraph.py, GTSAM): submap origins joined by each submap's final
-    relative pose and covariance, and loop closures under a robust kernel."""
+    """The global pose graph (graph/posegraph.py, GTSAM): keyframe nodes along each closed submap (one
+    where the robot has moved ``node_spacing`` m or turned ``node_angle`` rad since the last, and at its
+    last step: the next submap's origin) joined by the steps' motion, and loop closures between them
+    under a robust kernel (hierarchy.py)."""
 
     solver: Literal["isam2", "lm"] = "isam2"  # incremental (iSAM2) or batch Levenberg–Marquardt
     kernel: Literal["cauchy", "dcs", "none"] = "cauchy"  # robust kernel of loop-closure factors
     # in units of the factor's σ (whitened residual): √χ²₃(0.95) = 2.8, so a right closure keeps full
     # weight 95 % of the time (at 1.0 Cauchy halved the median right closure and iSAM2 converged slowly)
     kernel_scale: float = num(2.8, gt=0.0, le=1e6)
+    node_spacing: float = num(1.0, ge=0.0, le=1e6)  # m between keyframe nodes (0: every keyframe)
+    node_angle: float = num(0.5, ge=0.0, le=math.pi)  # rad: a turn this large makes a node too
 
     def __post_init__(self) -> None:
         check_ranges(self)

@@ -1,9 +1,11 @@
-"""The global pose graph over submap origins, on GTSAM (issue 16, the global level).
+"""The global pose graph, on GTSAM (issue 16, the global level).
 
-Node 0 is the first submap's origin, held by a tight prior; node j > 0 joins node j−1 by the closed
-submap's final relative pose and covariance (a *sequential* factor) and any earlier node by loop
-closures (*loop* factors, under ``graph.kernel``). ``graph.solver`` picks iSAM2 (incremental: each
-:meth:`PoseGraph.optimize` adds what came since the last one) or batch Levenberg–Marquardt.
+Node 0 is the first submap's origin, held by a tight prior; node j > 0 joins node j−1 by a relative
+pose and covariance (a *sequential* factor: a closed submap's end pose in hierarchy.py's online graph, a
+link of a keyframe chain in graph/smooth.py's) and any earlier node by loop closures (*loop* factors,
+under ``graph.kernel``). ``graph.solver`` picks
+iSAM2 (incremental: each :meth:`PoseGraph.optimize` adds what came since the last one) or batch
+Levenberg–Marquardt.
 
 Covariance conventions (the crux; tests/test_posegraph.py checks them by Monte Carlo):
 
@@ -131,13 +133,17 @@ class PoseGraph:
 
     # --- building ---------------------------------------------------------------------------------
 
-    def add_sequential(self, rel, cov) -> int:
+    def add_sequential(self, rel, cov, guess=None) -> int:
         """New node j = len(self), joined to node j−1 by ``rel`` (j's origin in j−1's frame) with
-        covariance ``cov`` (3, 3, in j−1's frame); its initial guess is pose(j−1) ∘ rel. Returns j."""
+        covariance ``cov`` (3, 3, in j−1's frame); its initial guess ``guess`` (x, y, θ), by default
+        pose(j−1) ∘ rel. Returns j."""
         j = len(self)
         rel = _check_pose(rel, f"sequential factor {j - 1}→{j}")
         noise = self._noise(rel, cov, f"sequential factor {j - 1}→{j}")
-        guess = _array(_pose2(self._poses[-1]).compose(_pose2(rel)))
+        if guess is None:
+            guess = _array(_pose2(self._poses[-1]).compose(_pose2(rel)))
+        else:
+            guess = _check_pose(guess, f"initial guess of node {j}")
         self._poses.append(guess)
         self._add_factor(gtsam.BetweenFactorPose2(j - 1, j, _pose2(rel), noise))
         self._add_guess(j, guess)

@@ -9,9 +9,13 @@ GTSAM's tangent space).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
+
+from ..geometry import relative, rotate_covariance, rotate_pose_covariance, transform_points, wrap_angle
+from ..motion.icp import voxel_thin
 
 
 @dataclass(frozen=True)
@@ -28,6 +32,9 @@ class Submap:
     end_pose: np.ndarray  # (3,) the robot at the last step: the next submap's origin
     end_cov: np.ndarray  # (3, 3) its covariance: the sequential factor of the graph
     poses: np.ndarray  # (s, 3) the robot at each of its steps (filtered, causal)
+    node: int = 0  # its origin's node in the pose graph
+    step_nodes: np.ndarray | None = None  # (s,) the graph node each step hangs from (its anchor) …
+    anchor_poses: np.ndarray | None = None  # (s, 3) … and that node's pose in this submap's frame
 
 
 @dataclass(frozen=True)
@@ -41,3 +48,115 @@ class LoopMatch:
     accepted: bool
     reason: str = ""  # why not accepted ("" when accepted)
     pairs: np.ndarray | None = None  # (k, 2) matched corners: rows of b.landmarks, rows of a.landmarks
+
+
+class OpenSubmap:
+    """The submap being built: its steps' local poses, its scans' points, how far the robot went."""
+
+    def __init__(self, index: int, first_step: int, node: int):
+        self.index = index
+        self.first_step = first_step
+        self.node = node  # its origin's node in the keyframe graph (graph/smooth.py)
+        self.poses: list[np.ndarray] = []
+        self.covs: list[np.ndarray] = []  # each step's motion noise (Slam.step_noise)
+        self.points: list[np.ndarray] = []
+        self.n_points = 0
+        self.travelled = 0.0
+
+    def add(self, pose: np.ndarray, cov: np.ndarray, points: np.ndarray | None, voxel: float) -> None:
+        if self.poses:
+            self.travelled += math.hypot(*(pose[:2] - self.poses[-1][:2]))
+        self.poses.append(pose)
+        self.covs.append(cov)
+        if points is not None and len(points):
+            self.points.append(points)
+            self.n_points += len(points)
+            if self.n_points > 200_000:  # thin as it grows: bounded memory on a long submap
+                self.points = [self.thinned(voxel)]
+                self.n_points = len(self.points[0])
+
+    def thinned(self, voxel: float) -> np.ndarray:
+        if not self.points:
+            return np.zeros((0, 2))
+        p = np.concatenate(self.points)
+        return p[voxel_thin(p, voxel)]
+
+
+def overlap_steps(a: Submap, b: Submap, pose: np.ndarray) -> tuple[int, int]:
+    """Where two submaps overlap under ``pose`` (b's origin in a's frame): the indices into ``a.poses``
+    and ``b.poses`` of their closest pair of robot positions."""
+    pb = transform_points(b.poses[:, :2], pose)
+    d2 = ((a.poses[:, None, :2] - pb[None, :, :]) ** 2).sum(axis=-1)
+    i, j = np.unravel_index(int(np.argmin(d2)), d2.shape)
+    return int(i), int(j)
+
+
+def keyframe_nodes(poses: np.ndarray, spacing: float, angle: float) -> np.ndarray:
+    """The steps of a closed submap (its local ``poses``) that become pose-graph nodes: one once the
+    robot has moved ``spacing`` m or turned ``angle`` rad since the last node (the origin first), and
+    always the last step (the next submap's origin). Indices into ``poses``."""
+    nodes, ref = [], np.zeros(3)
+    for k, p in enumerate(poses[:-1]):
+        if math.hypot(p[0] - ref[0], p[1] - ref[1]) >= spacing or abs(wrap_angle(p[2] - ref[2])) >= angle:
+            nodes.append(k)
+            ref = p
+    nodes.append(len(poses) - 1)
+    return np.array(nodes)
+
+
+def keyframe_factors(
+    poses: np.ndarray, covs: np.ndarray, end_cov: np.ndarray, nodes: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """A closed submap as a chain of pose-graph factors between its ``nodes`` (keyframe_nodes): each
+    node's pose relative to the one before (the first's to the origin), with the steps' motion noise
+    ``covs`` (s, 3, 3) propagated between them — all scaled so the chain is as sure of the last pose as
+    the filter was (``end_cov``: its corners narrowed what the motion noise alone would say; the volumes,
+    det^(1/3), matched). Returns (rel (m, 3), cov (m, 3, 3))."""
+    prev = np.vstack((np.zeros(3), poses[:-1]))
+    total, part, ref, parts = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros(3), []
+    is_node = np.zeros(len(poses), dtype=bool)
+    is_node[nodes] = True
+    for k, (p0, p1, c) in enumerate(zip(prev, poses, covs, strict=True)):
+        total = _propagate(total, p0, p1, c)
+        part = _propagate(part, relative(ref, p0), relative(ref, p1), c)
+        if is_node[k]:
+            parts.append(part)
+            part, ref = np.zeros((3, 3)), p1
+    scale = 1.0
+    if det3(total) > 0 and det3(end_cov) > 0:
+        scale = float(np.cbrt(det3(end_cov) / det3(total)))
+    anchors = np.vstack((np.zeros(3), poses[nodes[:-1]]))
+    return relative(anchors, poses[nodes]), np.array(parts) * scale
+
+
+def det3(m: np.ndarray) -> float:
+    """A 3 × 3 determinant by cofactors (not LAPACK's: the same bits under every BLAS kernel set)."""
+    return float(
+        m[0, 0] * (m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1])
+        - m[0, 1] * (m[1, 0] * m[2, 2] - m[1, 2] * m[2, 0])
+        + m[0, 2] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0])
+    )
+
+
+def _propagate(acc: np.ndarray, p0: np.ndarray, p1: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """Covariance of pose p1 = p0 ∘ δ (both in one frame) from p0's ``acc`` and δ's ``cov`` (p0's frame)."""
+    G = np.eye(3)
+    G[:2, 2] = (p0[1] - p1[1], p1[0] - p0[0])  # ∂(p0 ∘ δ)/∂p0
+    return G @ acc @ G.T + rotate_pose_covariance(cov, p0[2])
+
+
+def place_table(table: dict[str, np.ndarray], origin: np.ndarray, index: int) -> dict[str, np.ndarray]:
+    """A submap's landmark columns moved into the global frame by its ``origin``."""
+    n = len(table["id"])
+    xy = transform_points(np.column_stack((table["x"], table["y"])), origin)
+    cov = np.stack((table["var_x"], table["cov_xy"], table["cov_xy"], table["var_y"]), axis=-1)
+    cov = rotate_covariance(cov.reshape(-1, 2, 2), float(origin[2]))
+    return {
+        **table,
+        "x": xy[:, 0],
+        "y": xy[:, 1],
+        "var_x": cov[:, 0, 0],
+        "var_y": cov[:, 1, 1],
+        "cov_xy": cov[:, 0, 1],
+        "submap": np.full(n, index, dtype=np.int64),
+    }

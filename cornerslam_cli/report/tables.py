@@ -47,9 +47,10 @@ COMPARISON_COLUMNS = (
 
 def csv_value(v) -> str:
     """One CSV cell: bools and integers as integers, floats rounded to 9 decimals (``nan`` for NaN;
-    ``repr`` from 1e15 up), anything else as ``str``."""
+    ``repr`` from 1e15 up; one that rounds to zero is 0.0 whatever its sign: a last-bit -1e-30 is not
+    news), anything else as ``str``."""
     if type(v) is float:  # the common case first (same result as the branch below)
-        return "nan" if v != v else repr(round(v, 9)) if abs(v) < 1e15 else repr(v)
+        return "nan" if v != v else repr(round(v, 9) + 0.0) if abs(v) < 1e15 else repr(v)
     if isinstance(v, (bool, np.bool_)):
         return str(int(v))
     if isinstance(v, (int, np.integer)):
@@ -58,7 +59,7 @@ def csv_value(v) -> str:
         v = float(v)
         if v != v:
             return "nan"
-        return repr(round(v, 9)) if abs(v) < 1e15 else repr(v)
+        return repr(round(v, 9) + 0.0) if abs(v) < 1e15 else repr(v)
     return str(v)
 
 
@@ -125,11 +126,13 @@ def read_csv(path: str | Path) -> dict[str, np.ndarray]:
 
 
 def write_tum(path: Path, stamps: np.ndarray, poses: np.ndarray) -> None:
-    """TUM trajectory: ``stamp x y z qx qy qz qw`` with z = 0 and a yaw-only quaternion."""
+    """TUM trajectory: ``stamp x y z qx qy qz qw`` with z = 0 and a yaw-only quaternion (9 decimals; a
+    value that rounds to zero is written without a sign)."""
     th = poses[:, 2]
     with open(path, "w") as f:
         for t, x, y, a in zip(stamps, poses[:, 0], poses[:, 1], th, strict=True):
-            f.write(f"{t:.9f} {x:.9f} {y:.9f} 0 0 0 {np.sin(a / 2):.9f} {np.cos(a / 2):.9f}\n")
+            x, y, qz, qw = (round(float(v), 9) + 0.0 for v in (x, y, np.sin(a / 2), np.cos(a / 2)))
+            f.write(f"{t:.9f} {x:.9f} {y:.9f} 0 0 0 {qz:.9f} {qw:.9f}\n")
 
 
 TUM_LAYOUT = "stamp x y z qx qy qz qw"

@@ -1,0 +1,87 @@
+"""The pose graph's keyframe nodes (graph/submap.py, hierarchy.py): which steps become nodes, the chain
+of factors a closed submap enters as (poses and covariances against an independent propagation), and a
+run's smoothed trajectory read from the nodes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cornerslam_cli.config import config_from
+from cornerslam_cli.frontend import frames, open_input
+from cornerslam_cli.geometry import compose, wrap_angle
+from cornerslam_cli.graph.submap import keyframe_factors, keyframe_nodes
+from cornerslam_cli.hierarchy import HierarchicalSlam
+
+
+def arc(n: int = 12, step: float = 0.4, turn: float = 0.15) -> tuple[np.ndarray, np.ndarray]:
+    """n steps of ``step`` m and ``turn`` rad each: (increments (n, 3), poses (n, 3) from the origin)."""
+    inc = np.tile([step, 0.0, turn], (n, 1))
+    poses = [inc[0]]
+    for d in inc[1:]:
+        poses.append(compose(poses[-1], d))
+    return inc, np.array(poses)
+
+
+def test_nodes_every_spacing_metres_or_angle_and_at_the_last_step():
+    _, poses = arc(12, 0.4, 0.0)  # straight: 0.4, 0.8, 1.2 … m from the origin
+    assert keyframe_nodes(poses, 1.0, 0.5).tolist() == [2, 5, 8, 11]  # 1.2 m, then 1.2 m more, …, last
+    assert keyframe_nodes(poses, 0.0, 0.5).tolist() == list(range(12))  # every keyframe
+    turn = np.column_stack((np.zeros(6), np.zeros(6), 0.2 * np.arange(1, 7)))  # turning in place
+    assert keyframe_nodes(turn, 1.0, 0.5).tolist() == [2, 5]
+
+
+def test_factors_chain_back_to_the_poses_and_carry_the_propagated_covariance():
+    inc, poses = arc(12)
+    rng = np.random.default_rng(7)
+    covs = np.array([np.diag(rng.uniform(1e-4, 4e-4, 2).tolist() + [rng.uniform(1e-5, 4e-5)]) for _ in inc])
+    nodes = keyframe_nodes(poses, 1.0, 0.5)
+    # the filter as sure of the last pose as the motion alone: no scaling
+    mc = monte_carlo(inc, covs, 20000, rng)
+    rel, cov = keyframe_factors(poses, covs, np.cov(last_errors(mc, poses).T), nodes)
+    chained = [rel[0]]
+    for r in rel[1:]:
+        chained.append(compose(chained[-1], r))
+    np.testing.assert_allclose(chained, poses[nodes], atol=1e-12)
+    # each factor's covariance: the steps' noise between its two nodes, in the first node's frame
+    a, b = nodes[0], nodes[1]
+    seg = monte_carlo(inc[a + 1 : b + 1], covs[a + 1 : b + 1], 20000, rng)
+    seg_err = seg[:, -1] - rel[1]
+    seg_err[:, 2] = wrap_angle(seg_err[:, 2])
+    np.testing.assert_allclose(cov[1], np.cov(seg_err.T), rtol=0.15, atol=2e-6)
+    # a filter twice as sure of the end (its corners): every factor's covariance scaled to match
+    end = np.cov(last_errors(mc, poses).T)
+    _, half = keyframe_factors(poses, covs, end / 2, nodes)
+    np.testing.assert_allclose(half / cov, 0.5, rtol=0.1)
+
+
+def monte_carlo(inc: np.ndarray, covs: np.ndarray, n: int, rng) -> np.ndarray:
+    """(n, s, 3) poses from chaining ``inc`` with Gaussian noise of ``covs`` (each in its start frame)."""
+    out = np.zeros((n, len(inc), 3))
+    pose = np.zeros((n, 3))
+    for k, (d, c) in enumerate(zip(inc, covs, strict=True)):
+        pose = compose(pose, d + rng.multivariate_normal(np.zeros(3), c, n))
+        out[:, k] = pose
+    return out
+
+
+def last_errors(mc: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    e = mc[:, -1] - poses[-1]
+    e[:, 2] = wrap_angle(e[:, 2])
+    return e
+
+
+@pytest.mark.parametrize("spacing", [0.0, 1.0])
+def test_a_runs_smoothed_poses_hang_from_the_nodes(sim_log, spacing):
+    """Without loop closing the keyframe graph is a chain: its smoothed trajectory is the filter's own
+    (each submap's steps at its origin), whatever the node spacing; each step's node is at or before it."""
+    cfg = config_from({}, ["submaps.max_steps=6", "loops.enabled=false", f"graph.node_spacing={spacing}"])
+    src = open_input(sim_log, cfg)
+    hs = HierarchicalSlam(cfg, src.laser2base)
+    online = [hs.step(f).pose for f in frames(src, cfg)]
+    hs.finish()
+    np.testing.assert_allclose(hs.final_poses(), online, atol=1e-6)
+    nodes = np.frombuffer(hs.step_node, dtype=np.int64)
+    assert np.all(np.diff(nodes) >= 0) and nodes[-1] == len(hs.smoothed) - 1
+    if spacing == 0.0:
+        assert len(hs.smoothed) == hs.n_steps + 1  # a node per keyframe and the first origin
