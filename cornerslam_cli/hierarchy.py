@@ -348,7 +348,7 @@ class HierarchicalSlam:
 
     def loop_rows(self) -> list[dict]:
         """loops.csv's rows; ``inlier``: whether the graph kept an accepted closure inside its kernel."""
-        g = self.smoothed or self.graph
+        g = self.graph if self.smoothed is None else self.smoothed  # the keyframe graph once solved
         return [r.row(g.loop_inlier(r.factor) if r.factor >= 0 else None) for r in self.loops]
 
 
