@@ -99,10 +99,11 @@ def report(rows: list[dict], k: int) -> list[str]:
         "chosen automatically). Each log runs as it is and in "
         f"{k} copies, each with the x of one ODOM line moved by 1 µm — far below any sensor's resolution. "
         "Every run is deterministic, but on some logs the result is chaotic in its inputs: a last-bit "
-        "change of the arithmetic (another build, another BLAS, a reordered sum) moves the figure as far as "
+        "change of the arithmetic (another build, another BLAS, a reordered sum) moves the figure much as "
         "these changes do. **Read a panel figure with its spread**: a figure that moves by more than its "
-        "spread between two builds is a real change; one that moves inside it is not. The spread is "
-        f"sampled from {k + 1} runs, so it is a lower bound: a move just outside it is weak evidence.",
+        "spread between two builds is a real change; one that moves inside it is not. The spread is a "
+        f"lower bound — {k + 1} runs, and a change of the input need not reach every rounding a change of "
+        "the build does — so a move just outside it is weak evidence.",
         "",
         "Figures: ATE RMSE against the corrected poses beside each radish log; Intel (intel-noisy-odom.log): "
         "relation error, translation mean (Kümmerle et al. 2009). Perturbed lines: 1-based index among the "
