@@ -106,8 +106,6 @@ class HierarchicalSlam:
         self.loops: list[LoopRecord] = []
         self.step_submap = array("l")
         self.local_poses = array("d")
-        self.step_node = array("l")  # per step of a closed submap: the keyframe node it hangs from …
-        self.step_offset = array("d")  # … and its pose relative to that node (the filter's)
         self.chains: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # per closed submap (smooth)
         self.n_nodes = 1  # keyframe nodes so far (node 0: the first origin)
         self.smoothed: PoseGraph | None = None  # the keyframe graph, solved by finish()
@@ -184,8 +182,6 @@ class HierarchicalSlam:
         step_nodes = np.where(before >= 0, self.n_nodes + before, sub.node)
         self.n_nodes += len(nodes)
         anchor_poses = np.where((before >= 0)[:, None], poses[nodes[before.clip(0)]], 0.0)
-        self.step_node.extend(step_nodes)
-        self.step_offset.extend(relative(anchor_poses, poses).ravel())
         table = self.slam.landmark_table()
         n = len(table["id"])
         state = (3 + 3 * table["id"][:, None] + np.arange(3)).reshape(-1)
@@ -315,8 +311,8 @@ class HierarchicalSlam:
         if self.smoothed is None:
             local = np.frombuffer(self.local_poses).reshape(-1, 3)
             return compose(self.graph.poses()[np.frombuffer(self.step_submap, dtype=np.int64)], local)
-        nodes = self.smoothed.poses()[np.frombuffer(self.step_node, dtype=np.int64)]
-        return compose(nodes, np.frombuffer(self.step_offset).reshape(-1, 3))
+        nodes = self.smoothed.poses()[np.concatenate([s.step_nodes for s in self.closed])]
+        return compose(nodes, np.vstack([relative(s.anchor_poses, s.poses) for s in self.closed]))
 
     def landmark_table(self) -> dict[str, np.ndarray]:
         """map.csv's columns: every submap's landmarks at its optimised origin (global frame), their

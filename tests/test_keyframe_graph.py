@@ -81,7 +81,7 @@ def test_a_runs_smoothed_poses_hang_from_the_nodes(sim_log, spacing):
     online = [hs.step(f).pose for f in frames(src, cfg)]
     hs.finish()
     np.testing.assert_allclose(hs.final_poses(), online, atol=1e-6)
-    nodes = np.frombuffer(hs.step_node, dtype=np.int64)
+    nodes = np.concatenate([s.step_nodes for s in hs.closed])
     assert np.all(np.diff(nodes) >= 0) and nodes[-1] == len(hs.smoothed) - 1
     if spacing == 0.0:
         assert len(hs.smoothed) == hs.n_steps + 1  # a node per keyframe and the first origin
