@@ -23,6 +23,7 @@ from .association import load_kernels as load_association_kernels
 from .config import Config
 from .errors import ConfigError, LogError
 from .features import extract, load_kernels, signals_deferred
+from .filter import load_kernels as load_filter_kernels
 from .filter.models import increment_noise
 from .geometry import matrix_from_pose, transform_points
 from .lasers import mount_source
@@ -133,6 +134,7 @@ def open_input(log_path: str | Path, cfg: Config, span: Span | None = None) -> I
     load_kernels(cfg.sensor, cfg.lines)
     with signals_deferred():
         load_association_kernels()
+        load_filter_kernels()
     if matcher is not None or (cfg.submaps.enabled and cfg.loops.enabled):  # loop closing runs ICP too
         with signals_deferred():
             load_motion_kernels()
