@@ -280,6 +280,32 @@ def test_voxel_thin_matches_a_brute_force_cell_count():
     np.testing.assert_array_equal(voxel_thin(pts, 0.0), np.arange(len(pts)))
 
 
+def _numpy_voxel_thin(points, size):
+    """voxel_thin as numpy computed it before its kernel: the first index of each unique cell key."""
+    cells = np.floor(np.clip(points / size, -(2**31), 2**31 - 1)).astype(np.int64)
+    _, first = np.unique((cells[:, 0] << 32) + (cells[:, 1] & 0xFFFFFFFF), return_index=True)
+    return np.sort(first)
+
+
+@pytest.mark.parametrize("size", [0.05, 0.5])
+def test_compiled_voxel_thin_keeps_the_same_points_as_numpy(size):
+    """The same indices on scattered, quantised (many points per cell, exact cell edges), duplicated,
+    huge and non-finite coordinates."""
+    rng = np.random.default_rng(12)
+    for trial in range(60):
+        n = int(rng.integers(1, 2000))
+        pts = [
+            rng.normal(0, 10, (n, 2)),
+            np.round(rng.uniform(-3, 3, (n, 2)), 2),
+            np.repeat(rng.normal(0, 1, (n // 3 + 1, 2)), 3, axis=0),
+            rng.normal(0, 1e12, (n, 2)),
+        ][trial % 4]
+        if trial % 5 == 0:
+            pts[0, 0], pts[-1, 1] = np.nan, -np.inf
+        with np.errstate(invalid="ignore"):
+            np.testing.assert_array_equal(voxel_thin(pts, size), _numpy_voxel_thin(pts, size))
+
+
 @pytest.mark.parametrize(
     "key,value",
     [

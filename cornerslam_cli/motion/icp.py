@@ -39,7 +39,7 @@ from ..geometry import (
 )
 from .correlative import Window, search
 from .fusion import OdometryFusion, student_fit
-from .kernels import gauss_newton_step, line_terms, neighbour_scatter
+from .kernels import first_in_cell, gauss_newton_step, line_terms, neighbour_scatter
 from .nearest import BucketGrid
 from .params import ScanMatchConfig
 
@@ -59,15 +59,7 @@ def voxel_thin(points: np.ndarray, size: float) -> np.ndarray:
     """Indices of one point per ``size`` × ``size`` cell (the first in input order); all when size is 0."""
     if size <= 0 or len(points) == 0:
         return np.arange(len(points))
-    _, first = np.unique(cell_keys(points, size), return_index=True)
-    return np.sort(first)
-
-
-def cell_keys(points: np.ndarray, size: float) -> np.ndarray:
-    """(n,) int64 key of the ``size`` × ``size`` cell of each point (one int64 per cell: 1-D unique
-    is fast)."""
-    cells = np.floor(np.clip(points / size, -(2**31), 2**31 - 1)).astype(np.int64)  # no int overflow
-    return (cells[:, 0] << 32) + (cells[:, 1] & 0xFFFFFFFF)
+    return first_in_cell(np.ascontiguousarray(points, dtype=float), float(size))
 
 
 def line_normals(points: np.ndarray, grid: BucketGrid) -> tuple[np.ndarray, np.ndarray]:
@@ -134,7 +126,7 @@ def load_kernels() -> None:
     not pay it: one :func:`register` of a corner against itself, one fit of a single sample."""
     s = np.linspace(0.0, 1.0, 21)
     corner = np.concatenate((np.column_stack((s, 0.0 * s)), np.column_stack((0.0 * s, s))))
-    register(corner, LocalMap.build(corner), np.zeros(3), ScanMatchConfig())
+    register(corner[voxel_thin(corner, 0.05)], LocalMap.build(corner), np.zeros(3), ScanMatchConfig())
     student_fit(np.zeros((1, 3)), np.eye(3)[None], np.zeros((1, 3, 2)))
 
 

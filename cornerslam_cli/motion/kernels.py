@@ -107,3 +107,42 @@ def gauss_newton_step(J, w, r, prior, off, step):
     x1 = (y1 - l21 * x2) / l11
     x0 = (y0 - l10 * x1 - l20 * x2) / l00
     step[0], step[1], step[2] = -x0, -x1, -x2
+
+
+@kernel
+def _cell_index(v):
+    """⌊v⌋ as int64 of v clipped to the int32 range (no overflow); INT64_MIN for NaN, as numpy's cast
+    gives on x86."""
+    if math.isnan(v):
+        return np.int64(-(2**63))
+    return np.int64(math.floor(min(max(v, -(2.0**31)), 2.0**31 - 1)))
+
+
+@kernel
+def _cell_key(x, y, size):
+    """The int64 key of the ``size`` cell of (x, y): (i << 32) + (j & 0xFFFFFFFF), as numpy computed it."""
+    return (_cell_index(x / size) << 32) + (_cell_index(y / size) & 0xFFFFFFFF)
+
+
+@kernel
+def first_in_cell(points, size):
+    """Indices, ascending, of the first point (in input order) of every ``size`` × ``size`` cell: a hash
+    set of the cells' keys, one pass (``np.unique(keys, return_index=True)`` sorted the keys)."""
+    n = len(points)
+    bits = 1
+    while (1 << bits) < 2 * n:
+        bits += 1
+    mask = (1 << bits) - 1
+    table, filled = np.empty(mask + 1, np.int64), np.zeros(mask + 1, np.bool_)
+    keep = np.empty(n, np.int64)
+    m = 0
+    for i in range(n):
+        key = _cell_key(points[i, 0], points[i, 1], size)
+        slot = ((key * -7046029254386353131) >> 24) & mask  # Fibonacci hashing (2⁶⁴/φ), linear probing
+        while filled[slot] and table[slot] != key:
+            slot = (slot + 1) & mask
+        if not filled[slot]:
+            filled[slot], table[slot] = True, key
+            keep[m] = i
+            m += 1
+    return keep[:m]
