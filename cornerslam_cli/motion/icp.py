@@ -30,7 +30,6 @@ import numpy as np
 
 from ..geometry import (
     compose,
-    matrix_from_pose,
     pose_from_matrix,
     relative,
     rotate_pose_covariance,
@@ -39,7 +38,7 @@ from ..geometry import (
 )
 from .correlative import Window, search
 from .fusion import OdometryFusion, student_fit
-from .kernels import first_in_cell, gauss_newton_step, line_terms, neighbour_scatter
+from .kernels import first_in_cell, icp_iterations, line_terms, neighbour_scatter
 from .nearest import BucketGrid
 from .params import ScanMatchConfig
 
@@ -147,22 +146,14 @@ def register(
     """ICP of ``points`` (base frame) against ``local`` from ``start``, with a weak prior towards
     ``prior`` (default ``start``): the odometry's guess, so an ill-posed direction stays with it."""
     guess = start if prior is None else prior
-    M = matrix_from_pose(start)
     prior_info = np.array([cfg.prior_sigma_xy**-2, cfg.prior_sigma_xy**-2, cfg.prior_sigma_theta**-2])
     prior_info_scaled = prior_info * cfg.robust_scale**2  # the data term below is in units of robust_scale²
-    dmax = cfg.max_distance
-    step = np.empty(3)
-    for _ in range(cfg.max_iterations):
-        terms = _point_to_line(points, local, M, dmax, cfg.robust_scale)
-        if terms is None:  # fewer than 3 usable correspondences
-            break
-        off = pose_from_matrix(M) - guess
-        off[2] = wrap_angle(off[2])
-        gauss_newton_step(*terms, prior_info_scaled, off, step)  # −(JᵀWJ + prior)⁻¹ (JᵀWr + prior·off)
-        M = matrix_from_pose(pose_from_matrix(M) + step)
-        dmax = max(cfg.min_distance, dmax * SHRINK)
-        if np.abs(step).max() < CONVERGED and dmax <= cfg.min_distance:
-            break
+    loop = (cfg.max_iterations, cfg.min_distance, SHRINK, CONVERGED, cfg.robust_scale)
+    M = icp_iterations(
+        np.ascontiguousarray(points, dtype=float), local.grid.arrays(), local.padded_points,
+        local.padded_normals, np.asarray(start, dtype=float), np.asarray(guess, dtype=float),
+        prior_info_scaled, float(cfg.max_distance), loop,
+    )  # fmt: skip
     q = points @ M[:2, :2].T + M[:2, 2]
     dist, idx = local.grid.query(q, cfg.inlier_distance)
     fit = float(np.mean(dist < cfg.inlier_distance))
@@ -170,16 +161,9 @@ def register(
     return Registration(pose_from_matrix(M), fit, _covariance(terms, prior_info, cfg))
 
 
-def _point_to_line(points: np.ndarray, local: LocalMap, M: np.ndarray, dmax: float, scale: float):
-    """Jacobian J (n, 3), Cauchy weights w and point-to-line residuals r of ``points`` placed by ``M``
-    against their nearest map point within ``dmax``; None with fewer than 3 usable correspondences."""
-    q = points @ M[:2, :2].T + M[:2, 2]
-    _, idx = local.grid.query(q, dmax)
-    return _line_terms(q, idx, local, M, scale)
-
-
 def _line_terms(q: np.ndarray, idx: np.ndarray, local: LocalMap, M: np.ndarray, scale: float):
-    """:func:`_point_to_line` of points ``q`` already placed, given their nearest map points ``idx``."""
+    """Jacobian J (n, 3), Cauchy weights w and point-to-line residuals r of the placed points ``q``
+    against their nearest map points ``idx``; None with fewer than 3 usable correspondences."""
     J, w, r = np.empty((len(q), 3)), np.empty(len(q)), np.empty(len(q))
     # ∂r/∂(x, y, θ) of the pose itself (turning about the robot, not the map origin: far from the
     # origin that keeps rotation and translation decoupled): (n_x, n_y, (q − t) × n); zero rows: no

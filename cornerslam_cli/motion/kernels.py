@@ -6,9 +6,11 @@ for operation, in loops: elementwise + − × ÷ round as numpy's float64 loops 
 accumulates from +0 as numpy's does, and a sum over a row of ≤ 7 numbers is sequential from −0.0, as
 numpy's pairwise sum is below 8 elements. What numpy computes with other kernels — the (n, 2) @ (2, 2)
 placement (BLAS, fused multiply-adds), arctan2, hypot, sin and cos (SIMD versions) — stays in numpy.
-tests/test_scanmatch.py checks the kernels against the numpy expressions exactly. One exception,
-:func:`gauss_newton_step`: the normal equations and their 3 × 3 solve, which numpy computed with BLAS
-and LAPACK (sums in another order, fused multiply-adds), equal to rounding only.
+tests/test_scanmatch.py checks the kernels against the numpy expressions exactly. Two exceptions, equal
+to rounding only: :func:`gauss_newton_step`, the normal equations and their 3 × 3 solve, which numpy
+computed with BLAS and LAPACK (sums in another order, fused multiply-adds); and :func:`icp_iterations`,
+the whole Gauss–Newton loop of icp.register in one kernel (its placement of the points and its heading
+are libm's, not BLAS's and numpy's SIMD arctan2).
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import math
 import numpy as np
 
 from ..features.jit import kernel
+from .nearest import nearest_within
 
 
 @kernel
@@ -146,3 +149,36 @@ def first_in_cell(points, size):
             keep[m] = i
             m += 1
     return keep[:m]
+
+
+@kernel
+def icp_iterations(points, grid, padded_points, padded_normals, start, guess, prior, dmax, cfg):
+    """The Gauss–Newton iterations of icp.register from pose ``start``: the (3, 3) matrix of the pose
+    they end at. Each places ``points``, takes their nearest map points within ``dmax`` (``grid``:
+    BucketGrid.arrays), their point-to-line terms, and steps −(JᵀWJ + prior)⁻¹ (JᵀWr + prior·off), off
+    the pose's offset from ``guess``; ``dmax`` shrinks to ``min_distance``; they stop with fewer than 3
+    usable correspondences or a step below ``converged`` at the least ``dmax``. ``cfg``:
+    (max_iterations, min_distance, shrink, converged, robust_scale)."""
+    max_iterations, min_distance, shrink, converged, scale = cfg
+    n = len(points)
+    q, dist, idx = np.empty((n, 2)), np.empty(n), np.empty(n, np.int64)
+    J, w, r = np.empty((n, 3)), np.empty(n), np.empty(n)
+    t, off, step = np.array([start[0], start[1]]), np.empty(3), np.empty(3)
+    c, s = math.cos(start[2]), math.sin(start[2])
+    for _ in range(max_iterations):
+        for i in range(n):
+            q[i, 0] = points[i, 0] * c - points[i, 1] * s + t[0]
+            q[i, 1] = points[i, 0] * s + points[i, 1] * c + t[1]
+        nearest_within(q, dmax, *grid, dist, idx)
+        if line_terms(q, idx, padded_points, padded_normals, t, scale, J, w, r) < 3:
+            break
+        theta = math.atan2(s, c)
+        off[0], off[1] = t[0] - guess[0], t[1] - guess[1]
+        off[2] = (theta - guess[2] + np.pi) % (2.0 * np.pi) - np.pi
+        gauss_newton_step(J, w, r, prior, off, step)
+        t[0], t[1] = t[0] + step[0], t[1] + step[1]
+        c, s = math.cos(theta + step[2]), math.sin(theta + step[2])
+        dmax = max(min_distance, dmax * shrink)
+        if max(abs(step[0]), abs(step[1]), abs(step[2])) < converged and dmax <= min_distance:
+            break
+    return np.array([[c, -s, t[0]], [s, c, t[1]], [0.0, 0.0, 1.0]])
