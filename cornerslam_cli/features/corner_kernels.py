@@ -225,7 +225,8 @@ def _margin(rho, sensor, margin):
 
 @kernel
 def _hidden(x, y, ranges, angles, spacing, sensor, margin):
-    """The point lies behind both beams bracketing its bearing by more than the margin."""
+    """The point lies behind both beams bracketing its bearing by more than the margin (both must be in
+    front: next to a corner a steep wall legitimately comes nearer by several centimetres per beam)."""
     measured = _measured(ranges, angles, spacing, math.atan2(y, x), np.nan, True)
     return measured < math.hypot(x, y) - _margin(measured, sensor, margin)
 
@@ -233,7 +234,10 @@ def _hidden(x, y, ranges, angles, spacing, sensor, margin):
 @kernel
 def _seen_through(cx, cy, segs, p1, p2, ranges, angles, spacing, sensor, margin):
     """A type I corner's segments, extended from their nearer ends to it, cross space the scan saw through
-    (a beam measured more than the margin beyond the extension; dropped beams count as seen through)."""
+    (a beam measured more than the margin beyond the extension; dropped beams count as seen through).
+
+    This rejects "virtual" intersections, e.g. a box face extended to a wall 15 cm behind it; at a real
+    corner the beams between a segment's end and the corner hit that same wall."""
     for s in segs:
         d1 = math.hypot(p1[s, 0] - cx, p1[s, 1] - cy)
         d2 = math.hypot(p2[s, 0] - cx, p2[s, 1] - cy)
