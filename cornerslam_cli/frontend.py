@@ -19,9 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
+from .association import load_kernels as load_association_kernels
 from .config import Config
 from .errors import ConfigError, LogError
 from .features import extract, load_kernels, signals_deferred
+from .filter import load_kernels as load_filter_kernels
 from .filter.models import increment_noise
 from .geometry import matrix_from_pose, transform_points
 from .lasers import mount_source
@@ -130,6 +132,9 @@ def open_input(log_path: str | Path, cfg: Config, span: Span | None = None) -> I
     laser2base, source = _laser_mount(reader, cfg)
     matcher = ScanMatcher(cfg.scan_match, odometry_noise(cfg)) if cfg.scan_match.enabled else None
     load_kernels(cfg.sensor, cfg.lines)
+    with signals_deferred():
+        load_association_kernels()
+        load_filter_kernels()
     if matcher is not None or (cfg.submaps.enabled and cfg.loops.enabled):  # loop closing runs ICP too
         with signals_deferred():
             load_motion_kernels()

@@ -13,7 +13,8 @@ from hypothesis import strategies as st
 
 from cornerslam_cli import simworld as sw
 from cornerslam_cli.features import CornersConfig, LinesConfig, SensorConfig, extract
-from cornerslam_cli.features.corners import intersections, type_one
+from cornerslam_cli.features.corner_kernels import intersection
+from cornerslam_cli.features.corners import type_one
 from cornerslam_cli.types import Scan, Segments
 
 CFG = (LinesConfig(), CornersConfig())
@@ -134,6 +135,13 @@ def test_duplicates_are_merged():
         assert d.min() >= CornersConfig().duplicate_radius
         b = np.arctan2(corners.z[:, 1], corners.z[:, 0])
         assert np.all(np.diff(b) >= 0)  # bearing order
+
+
+def intersections(segs, i, j):
+    """Eq 9–13 of the compiled kernel for the line pairs (i, j): (m, 3) corners, (m, 3, 3) covariances."""
+    out = [intersection(segs.alpha[a], segs.alpha[b], segs.r[a], segs.r[b], segs.cov[a], segs.cov[b])
+           for a, b in zip(i, j, strict=True)]  # fmt: skip
+    return np.array([z for z, _ in out]), np.array([c for _, c in out])
 
 
 def test_intersection_jacobian_matches_finite_differences():
@@ -280,3 +288,46 @@ def test_noisy_office_scans_give_finite_spd_features(x, y, th, seed):
         sw.office_world(), (x, y, th), HOKUYO, 30.0, lambda r: 0.03 * np.maximum(r, 1.0), 0.003, rng
     )
     _check_output(*extract(scan, SensorConfig(), *CFG))
+
+
+# --- the compiled extraction against the numpy version ------------------------------------------------
+
+
+def _same_corners(got, ref):
+    assert got.kind.tolist() == ref.kind.tolist() and got.segs.tolist() == ref.segs.tolist()
+    np.testing.assert_allclose(got.z, ref.z, rtol=1e-12, atol=1e-12)
+    scale = np.abs(ref.cov).max() if len(ref) else 1.0
+    np.testing.assert_allclose(got.cov, ref.cov, rtol=1e-9, atol=1e-12 * scale)
+
+
+@pytest.mark.parametrize(
+    "corners",
+    [
+        CornersConfig(),
+        CornersConfig(endpoints=False),
+        CornersConfig(drop_occluded=False, free_space_check=False),
+        CornersConfig(d_min=1.0, dp_max=0.5, duplicate_radius=0.3),
+    ],
+)
+@pytest.mark.parametrize("sensor", [SensorConfig(), PRECISE])
+def test_compiled_corners_equal_the_numpy_version(corners, sensor):
+    """Corners of noisy office and clutter-room scans from every pose of a path: the same corners (kind,
+    segments, order) as tests/_corners_reference.py's numpy extraction, equal to rounding."""
+    from _corners_reference import extract_corners as reference
+
+    from cornerslam_cli.features import extract_corners, extract_segments
+
+    rng = np.random.default_rng(11)
+    cases = [(sw.office_world(), p) for p in sw.path_poses(sw.OFFICE_LOOP, 1.5)]
+    cases += [
+        (clutter_room(), (x, y, th)) for x, y, th in rng.uniform([0.5, 0.5, -3], [7.5, 5.5, 3], (15, 3))
+    ]
+    kinds = []
+    with np.errstate(all="ignore"):
+        for world, pose in cases:
+            scan = sw.simulate_scan(world, pose, HOKUYO, 30.0, PRECISE.a, PRECISE.sigma_theta, rng)
+            segs, jac = extract_segments(scan, sensor, LinesConfig())
+            got = extract_corners(scan, segs, jac, sensor, corners)
+            _same_corners(got, reference(scan, segs, jac, sensor, corners))
+            kinds += got.kind.tolist()
+    assert len(kinds) > len(cases) and set(kinds) == ({1, 2} if corners.endpoints else {1})  # many compared

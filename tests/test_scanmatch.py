@@ -55,6 +55,51 @@ def test_register_recovers_a_known_pose(office):
     assert reg.fit > 0.8
 
 
+def _numpy_icp(points, local, start, guess, cfg):
+    """register's Gauss–Newton loop as numpy ran it before its kernel (icp_iterations): the end pose."""
+    from cornerslam_cli.geometry import matrix_from_pose, pose_from_matrix
+    from cornerslam_cli.motion.icp import CONVERGED, SHRINK
+    from cornerslam_cli.motion.kernels import gauss_newton_step, line_terms
+
+    prior = np.array([cfg.prior_sigma_xy**-2, cfg.prior_sigma_xy**-2, cfg.prior_sigma_theta**-2])
+    M, dmax, step, n = matrix_from_pose(start), cfg.max_distance, np.empty(3), len(points)
+    for _ in range(cfg.max_iterations):
+        q = points @ M[:2, :2].T + M[:2, 2]
+        _, idx = local.grid.query(q, dmax)
+        J, w, r = np.empty((n, 3)), np.empty(n), np.empty(n)
+        if (
+            line_terms(q, idx, local.padded_points, local.padded_normals, M[:2, 2], cfg.robust_scale, J, w, r)
+            < 3
+        ):
+            break
+        off = pose_from_matrix(M) - guess
+        off[2] = wrap_angle(off[2])
+        gauss_newton_step(J, w, r, prior * cfg.robust_scale**2, off, step)
+        M = matrix_from_pose(pose_from_matrix(M) + step)
+        dmax = max(cfg.min_distance, dmax * SHRINK)
+        if np.abs(step).max() < CONVERGED and dmax <= cfg.min_distance:
+            break
+    return pose_from_matrix(M)
+
+
+def test_compiled_icp_loop_equals_the_numpy_loop(office):
+    """register's compiled iterations end where the numpy loop does (to rounding), from near and far
+    starts, with a prior elsewhere, and with a short iteration budget."""
+    rng = np.random.default_rng(21)
+    for trial in range(12):
+        ref_pose = np.array([rng.uniform(3, 27), rng.uniform(3, 17), rng.uniform(-3, 3)])
+        local = LocalMap.build(transform_points(scan_points(office, ref_pose, rng, 0.01), ref_pose))
+        true_pose = ref_pose + [*rng.normal(0, 0.3, 2), rng.normal(0, 0.1)]
+        points = scan_points(office, true_pose, rng, 0.01)
+        start = true_pose + [*rng.normal(0, 0.1, 2), rng.normal(0, 0.05)]
+        guess = start if trial % 3 else true_pose
+        cfg = ScanMatchConfig(max_iterations=3) if trial % 4 == 0 else ScanMatchConfig()
+        reg = register(points, local, start, cfg, prior=guess)
+        expected = _numpy_icp(points, local, start, guess, cfg)
+        np.testing.assert_allclose(reg.pose[:2], expected[:2], rtol=0, atol=1e-9)
+        assert abs(wrap_angle(reg.pose[2] - expected[2])) < 1e-9
+
+
 def test_search_then_icp_recovers_from_half_a_metre_and_20_degrees(office):
     """From a guess 0.5 m and 20° off, the correlative search over a window that holds the truth finds
     the basin and ICP refines it to the truth."""
@@ -278,6 +323,32 @@ def test_voxel_thin_matches_a_brute_force_cell_count():
     assert len(thin) == len(cells)
     assert {(math.floor(x / 0.5), math.floor(y / 0.5)) for x, y in thin} == cells
     np.testing.assert_array_equal(voxel_thin(pts, 0.0), np.arange(len(pts)))
+
+
+def _numpy_voxel_thin(points, size):
+    """voxel_thin as numpy computed it before its kernel: the first index of each unique cell key."""
+    cells = np.floor(np.clip(points / size, -(2**31), 2**31 - 1)).astype(np.int64)
+    _, first = np.unique((cells[:, 0] << 32) + (cells[:, 1] & 0xFFFFFFFF), return_index=True)
+    return np.sort(first)
+
+
+@pytest.mark.parametrize("size", [0.05, 0.5])
+def test_compiled_voxel_thin_keeps_the_same_points_as_numpy(size):
+    """The same indices on scattered, quantised (many points per cell, exact cell edges), duplicated,
+    huge and non-finite coordinates."""
+    rng = np.random.default_rng(12)
+    for trial in range(60):
+        n = int(rng.integers(1, 2000))
+        pts = [
+            rng.normal(0, 10, (n, 2)),
+            np.round(rng.uniform(-3, 3, (n, 2)), 2),
+            np.repeat(rng.normal(0, 1, (n // 3 + 1, 2)), 3, axis=0),
+            rng.normal(0, 1e12, (n, 2)),
+        ][trial % 4]
+        if trial % 5 == 0:
+            pts[0, 0], pts[-1, 1] = np.nan, -np.inf
+        with np.errstate(invalid="ignore"):
+            np.testing.assert_array_equal(voxel_thin(pts, size), _numpy_voxel_thin(pts, size))
 
 
 @pytest.mark.parametrize(

@@ -19,6 +19,7 @@ import numpy as np
 
 from ..errors import ConfigError, did_you_mean
 from ..types import AssociationResult, Prediction
+from .gating import load_kernels
 from .icnn import Icnn
 from .jcbb import Jcbb
 from .params import AssociationConfig
@@ -56,5 +57,6 @@ __all__ = [
     "Jcbb",
     "Pca",
     "associator_class",
+    "load_kernels",
     "make_associator",
 ]

@@ -2,7 +2,7 @@
 
 Individual compatibility of corner i and landmark k: innovation ν_ik = z_i − h_k (φ wrapped),
 S_ik = H_k P H_kᵀ + C_i, D²_ik = ν_ikᵀ S_ik⁻¹ ν_ik < χ²(d, 1 − α), d = 3 (x, y, φ) or 2 (x, y) when
-``use_phi`` is off. :func:`gate` evaluates all m × n pairs at once (a closed-form batched Cholesky of
+``use_phi`` is off. :func:`gate` evaluates all m × n pairs at once (compiled, a closed-form Cholesky of
 the 3 × 3 blocks), optionally skipping the Mahalanobis test for pairs farther apart than a Euclidean gate.
 
 Joint compatibility of a hypothesis H = {(i_1↔k_1), …, (i_h↔k_h)}: ν_H stacked, S_H the block matrix
@@ -26,8 +26,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.special import gammaincinv
 
-from ..geometry import wrap_angle
 from ..types import AssociationResult, Prediction
+from .kernels import commit_pairing, cross_blocks, gate_pairs, try_pairing
 from .params import AssociationConfig
 
 _PIVOT_RTOL = (
@@ -50,90 +50,9 @@ def chi2_gate(dof: int | np.ndarray, alpha: float) -> np.ndarray:
     return _chi2_table(float(alpha), size)[dof]
 
 
-def mahalanobis2(nu: np.ndarray, S: np.ndarray) -> np.ndarray:
-    """Batched νᵀ S⁻¹ ν for d ∈ {1, 2, 3} by a closed-form Cholesky of each d × d block.
-
-    nu : (..., d);  S : (..., d, d) symmetric.  Returns (...,), ``inf`` where S is not positive definite.
-    """
-    d = nu.shape[-1]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s11 = S[..., 0, 0]
-        bad = ~(s11 > 0)
-        l11 = np.sqrt(s11)
-        y1 = nu[..., 0] / l11
-        out = y1 * y1
-        if d >= 2:
-            l21 = S[..., 1, 0] / l11
-            a22 = S[..., 1, 1] - l21 * l21
-            bad |= ~(a22 > _PIVOT_RTOL * S[..., 1, 1])
-            l22 = np.sqrt(a22)
-            y2 = (nu[..., 1] - l21 * y1) / l22
-            out = out + y2 * y2
-        if d == 3:
-            l31 = S[..., 2, 0] / l11
-            l32 = (S[..., 2, 1] - l31 * l21) / l22
-            a33 = S[..., 2, 2] - l31 * l31 - l32 * l32
-            bad |= ~(a33 > _PIVOT_RTOL * S[..., 2, 2])
-            l33 = np.sqrt(a33)
-            y3 = (nu[..., 2] - l31 * y1 - l32 * y2) / l33
-            out = out + y3 * y3
-        if d > 3:
-            raise ValueError(f"mahalanobis2 supports d <= 3, got {d}")
-    out = np.where(bad | ~np.isfinite(out), np.inf, out)
-    return out
-
-
-def _tril_inv_small(L: list[list[float]], d: int) -> list[list[float]]:
-    """Inverse of a d × d (d ≤ 3) lower-triangular matrix with positive diagonal, by substitution
-    (written out: this runs for every pairing a search tries)."""
-    i11 = 1.0 / L[0][0]
-    if d == 1:
-        return [[i11]]
-    i22 = 1.0 / L[1][1]
-    i21 = -(L[1][0] * i11) / L[1][1]
-    if d == 2:
-        return [[i11, 0.0], [i21, i22]]
-    i33 = 1.0 / L[2][2]
-    i31 = -(L[2][0] * i11 + L[2][1] * i21) / L[2][2]
-    i32 = -(L[2][1] * i22) / L[2][2]
-    return [[i11, 0.0, 0.0], [i21, i22, 0.0], [i31, i32, i33]]
-
-
-def _lower_times(M: list[list[float]], r: list[float], d: int) -> list[float]:
-    """M r for a lower-triangular d × d M (d ≤ 3), written out."""
-    if d == 1:
-        return [M[0][0] * r[0]]
-    if d == 2:
-        return [M[0][0] * r[0], M[1][0] * r[0] + M[1][1] * r[1]]
-    return [M[0][0] * r[0], M[1][0] * r[0] + M[1][1] * r[1], M[2][0] * r[0] + M[2][1] * r[1] + M[2][2] * r[2]]
-
-
 def scan_order(z: np.ndarray) -> list[int]:
     """Corner indices by increasing bearing atan2(y, x): the order a scan sweeps them."""
     return np.argsort(np.arctan2(z[:, 1], z[:, 0]), kind="stable").tolist() if len(z) else []
-
-
-def _chol_small(A: list[list[float]], d: int) -> list[list[float]] | None:
-    """Lower Cholesky factor of a d × d (d ≤ 3) SPD matrix given as nested lists; None if not PD."""
-    a11 = A[0][0]
-    if not a11 > 0.0:
-        return None
-    l11 = math.sqrt(a11)
-    if d == 1:
-        return [[l11]]
-    l21 = A[1][0] / l11
-    a22 = A[1][1] - l21 * l21
-    if not a22 > _PIVOT_RTOL * A[1][1]:
-        return None
-    l22 = math.sqrt(a22)
-    if d == 2:
-        return [[l11, 0.0], [l21, l22]]
-    l31 = A[2][0] / l11
-    l32 = (A[2][1] - l31 * l21) / l22
-    a33 = A[2][2] - l31 * l31 - l32 * l32
-    if not a33 > _PIVOT_RTOL * A[2][2]:
-        return None
-    return [[l11, 0.0, 0.0], [l21, l22, 0.0], [l31, l32, math.sqrt(a33)]]
 
 
 @dataclass
@@ -158,8 +77,7 @@ class Gated:
     hph: np.ndarray
     _universe: list[int] = field(default_factory=list, repr=False)
     _loc: dict[int, int] = field(default_factory=dict, repr=False)
-    _rows: dict[int, np.ndarray] = field(default_factory=dict, repr=False)
-    _factors: tuple | None = field(default=None, repr=False)  # Prediction.row_factors of the universe
+    _blocks: np.ndarray | None = field(default=None, repr=False)  # (u, u, d, d) cross covariances
 
     def __post_init__(self):
         universe = np.unique(np.concatenate([np.zeros(0, np.int64), *self.candidates]))
@@ -173,23 +91,20 @@ class Gated:
             j = len(self._universe)
             self._universe.append(k)
             self._loc[k] = j
-            self._rows.clear()
-            self._factors = None
+            self._blocks = None
         return j
 
     def cross_row(self, k: int) -> np.ndarray:
-        """(u, d, d) blocks H_l P H_kᵀ for every landmark l of the universe, gathered once per k.
+        """(u, d, d) blocks H_l P H_kᵀ for every landmark l of the universe.
 
-        The universe is the landmarks of all candidate lists: only those can enter a hypothesis.
+        The universe is the landmarks of all candidate lists: only those can enter a hypothesis. Its
+        blocks are computed together, at the first row asked for (again when the universe widens).
         """
-        row = self._rows.get(k)
-        if row is None:
-            d, universe = self.d, np.asarray(self._universe)
-            if self._factors is None:
-                self._factors = self.pred.row_factors(universe)
-            row = self.pred.hph_blocks(universe, np.array([k]), self._factors)[:, 0, :d, :d]
-            self._rows[k] = row
-        return row
+        if self._blocks is None:
+            p, universe = self.pred, np.asarray(self._universe, dtype=np.int64)
+            H_r, H_l = np.ascontiguousarray(p.H_r, dtype=float), np.ascontiguousarray(p.H_l, dtype=float)
+            self._blocks = cross_blocks(p.P, H_r, H_l, universe, self.d)
+        return self._blocks[:, self._loc[k]]
 
     @property
     def m(self) -> int:
@@ -213,28 +128,14 @@ def gate(z: np.ndarray, C: np.ndarray, pred: Prediction, cfg: AssociationConfig)
 
     z : (m, 3) corners (x, y, φ), base frame;  C : (m, 3, 3) their covariances.
     """
-    z = np.asarray(z, dtype=float).reshape(-1, 3)
-    C = np.asarray(C, dtype=float).reshape(-1, 3, 3)
-    m, n = len(z), len(pred)
-    d = 3 if cfg.use_phi else 2
-    nu = z[:, None, :] - np.asarray(pred.h, dtype=float)[None, :, :]  # (m, n, 3)
-    nu[..., 2] = wrap_angle(nu[..., 2])
-    d2 = np.full((m, n), np.inf)
-    hph = np.zeros((n, 3, 3))
-    if m and n:
-        if cfg.euclidean_gate > 0:  # cheap pre-gate: only pairs this close get the Mahalanobis test
-            near = np.hypot(nu[..., 0], nu[..., 1]) <= cfg.euclidean_gate
-            ks = np.flatnonzero(near.any(axis=0))
-            if len(ks):
-                hph[ks] = pred.hph_blocks(ks)
-            I, K = np.nonzero(near)
-            d2[I, K] = mahalanobis2(nu[I, K, :d], hph[K][:, :d, :d] + C[I][:, :d, :d])
-        else:
-            hph[:] = pred.hph_diag()
-            d2[:] = mahalanobis2(nu[..., :d], hph[None, :, :d, :d] + C[:, None, :d, :d])  # (m, n)
+    z = np.ascontiguousarray(z, dtype=float).reshape(-1, 3)
+    C = np.ascontiguousarray(C, dtype=float).reshape(-1, 3, 3)
+    m, d = len(z), 3 if cfg.use_phi else 2
+    h, H_r, H_l = (np.ascontiguousarray(a, dtype=float) for a in (pred.h, pred.H_r, pred.H_l))
+    nu, d2, hph = gate_pairs(z, C, h.reshape(-1, 3), pred.P, H_r, H_l, d, cfg.euclidean_gate, _PIVOT_RTOL)
     threshold = float(chi2_gate(d, cfg.alpha))
     # each row by increasing D² (stable: ties by landmark id); its first `count` entries pass the gate
-    # (d2 holds no NaN: mahalanobis2 returns inf for those)
+    # (d2 holds no NaN: gate_pairs returns inf for those)
     order = np.argsort(d2, axis=1, kind="stable")
     count = (d2 < threshold).sum(axis=1).tolist()
     candidates = [order[i, : count[i]] for i in range(m)]
@@ -253,8 +154,8 @@ class JointCompatibility:
     State: M_H = L_H⁻¹ (lower triangular, grown one block row per commit from the 3 × 3 factors, never by
     inverting a matrix) and y_H = M_H ν_H. ``try_add`` costs one product W = M_H S_{H,new} (d·h × d) and a
     3 × 3 Cholesky; ``commit`` appends the block row [−L_new⁻¹ Wᵀ M_H, L_new⁻¹]; ``pop`` just forgets
-    rows. (A triangular solve per try would avoid M_H, but BLAS/LAPACK call overhead on these tiny
-    operands dominated: 10–450 µs per solve versus 1–5 µs per product on the test machine.)
+    rows. Both run compiled (kernels.py: ~25 µs a try in numpy calls, call overhead on these tiny
+    operands, against a few µs).
     Cross covariances H_k P H_lᵀ are gathered one landmark row at a time, lazily, and cached by
     :meth:`Gated.cross_row`, so searches on the same ``Gated`` share them.
     """
@@ -273,27 +174,18 @@ class JointCompatibility:
         self.locs = np.zeros(capacity, dtype=np.int64)  # landmark index into the row universe
         self.size = 0
         self._pending: tuple | None = None
+        self._no_row = np.zeros((0, d, d))
 
     def try_add(self, i: int, k: int) -> float:
         """Joint D² of the committed hypothesis plus (i↔k); ``inf`` if the joint S is not PD."""
         g, d, h = self.g, self.d, self.size
-        dh = d * h
         loc = g.loc(k)
+        row = g.cross_row(k) if h else self._no_row  # blocks H_{k_a} P H_kᵀ of S_{H,new}
         S_new = g.hph[k, :d, :d] + g.C[i, :d, :d]
-        nu_new = g.nu[i, k, :d]
-        if h:
-            B = g.cross_row(k)[self.locs[:h]].reshape(dh, d)  # S_{H,new}: blocks H_{k_a} P H_kᵀ
-            W = self.M[:dh, :dh] @ B
-            schur = S_new - W.T @ W  # Schur complement of S_H in S_{H+new}
-            r = nu_new - W.T @ self.y[:dh]
-        else:
-            W, schur, r = None, S_new, nu_new
-        Lnew = _chol_small(schur.tolist(), d)
-        if Lnew is None:
-            return math.inf
-        Minv = _tril_inv_small(Lnew, d)
-        ynew = _lower_times(Minv, r.tolist(), d)
-        d2 = self.d2[h] + sum(v * v for v in ynew)
+        inc, W, Minv, ynew = try_pairing(
+            self.M, self.y, row, self.locs, S_new, g.nu[i, k, :d], h, _PIVOT_RTOL
+        )
+        d2 = self.d2[h] + inc
         if not math.isfinite(d2):
             return math.inf
         self.d2[h + 1] = d2
@@ -305,12 +197,7 @@ class JointCompatibility:
         """Keep the pairing of the last successful ``try_add``."""
         h, W, Minv, ynew = self._pending
         assert h == self.size, "commit() must follow a successful try_add()"
-        d, dh = self.d, self.d * h
-        Minv = np.array(Minv)
-        if h:
-            self.M[dh : dh + d, :dh] = -Minv @ (W.T @ self.M[:dh, :dh])
-        self.M[dh : dh + d, dh : dh + d] = Minv
-        self.y[dh : dh + d] = ynew
+        commit_pairing(self.M, self.y, W, Minv, ynew, h)
         self._pending = None
         self.size += 1
 
@@ -359,3 +246,19 @@ def build_result(
         budget_hit=bool(budget_hit),
         extra=dict(extra or {}),
     )
+
+
+def load_kernels() -> None:
+    """Load (on a machine's first run: compile) the kernels of kernels.py now, so that the first timed
+    association of a run does not pay it: a two-corner, two-landmark hypothesis tried and kept, with the
+    state covariance a view of a larger buffer (the filter's, while it has spare capacity) and a whole
+    array (full capacity), both gate settings, both dimensions."""
+    h = np.array([[1.0, 0.0, 1.5], [0.0, 1.0, 1.5]])
+    H = np.tile(np.eye(3), (2, 1, 1))
+    for P in (np.eye(12)[:9, :9], np.eye(9)):
+        for cfg in (AssociationConfig(), AssociationConfig(use_phi=False, euclidean_gate=0.0)):
+            g = gate(h, np.tile(0.01 * np.eye(3), (2, 1, 1)), Prediction(h, -H, H, P), cfg)
+            jc = JointCompatibility(g, 2)
+            for i in range(2):
+                jc.try_add(i, i)
+                jc.commit()

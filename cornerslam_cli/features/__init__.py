@@ -35,20 +35,21 @@ __all__ = [
 
 
 def load_kernels(sensor: SensorConfig, lines: LinesConfig) -> None:
-    """Load (on a machine's first run: compile, 10–30 s) the Numba kernels of ``extract`` for this
+    """Load (on a machine's first run: compile, 20–60 s) the Numba kernels of ``extract`` for this
     configuration now, so that the first timed extraction of a run does not pay it (~0.5 s from the
-    cache): one extraction of a synthetic room corner.
+    cache): one extraction of a synthetic room corner, its segments and its corners.
 
     SIGINT and SIGTERM wait until the kernels are loaded: arriving inside Numba's compiler they break
     it half-way (an internal error, or noise on stderr) instead of stopping the run cleanly.
     """
-    angles = np.linspace(-1.0, 1.0, 101)
-    ranges = np.minimum(2.0 / np.maximum(np.cos(angles), 1e-3), 3.0 / np.maximum(np.sin(angles + 1.2), 1e-3))
+    angles = np.linspace(-1.0, 1.4, 121)  # walls x = 2 and y = 1.5, meeting in the field of view
+    ranges = np.minimum(2.0 / np.maximum(np.cos(angles), 1e-3), 1.5 / np.maximum(np.sin(angles), 1e-3))
     scan = Scan(
-        0.0, ranges, angles, np.arange(101, dtype=np.int64), 101, 0.01, 10.0, float(angles[1] - angles[0])
+        0.0, ranges, angles, np.arange(121, dtype=np.int64), 121, 0.01, 10.0, float(angles[1] - angles[0])
     )
     with signals_deferred(), np.errstate(all="ignore"):
-        extract_segments(scan, sensor, lines)
+        segments, jac_ends = extract_segments(scan, sensor, lines)
+        extract_corners(scan, segments, jac_ends, sensor, CornersConfig())
 
 
 @contextmanager

@@ -40,7 +40,7 @@ import numpy as np
 from ..types import Scan, Segments
 from . import fit_kernels, segment_kernels
 from .params import LinesConfig, SensorConfig
-from .sensor import COV_FLOOR, beam_variances
+from .sensor import COV_FLOOR, beam_variances, kernel_model
 
 
 @dataclass(frozen=True)
@@ -199,8 +199,7 @@ def fit_ranges(rho, theta, sensor: SensorConfig, starts, ends, compiled: bool = 
 def _fit_ranges_compiled(rho, theta, sensor: SensorConfig, starts, ends) -> LineFits:
     """:func:`fit_ranges` by the kernels of ``fit_kernels.py``: the same numbers, bit for bit (numpy's
     arctan2 and hypot between the kernels; tests/test_features_lines.py compares the two)."""
-    model = (sensor.model == "linear", sensor.a, sensor.b, sensor.near_range, sensor.sigma_r_near,
-             sensor.sigma_r_rel, sensor.sigma_theta)  # fmt: skip
+    model = kernel_model(sensor)
     rho, theta = np.ascontiguousarray(rho, dtype=float), np.ascontiguousarray(theta, dtype=float)
     beams = fit_kernels.first_pass(rho, theta, starts, ends, model)
     idx, seg, offs, cnt, x, y, cos_t, sin_t, vt, (_, mx, my, sxx, syy, sxy) = beams

@@ -10,6 +10,13 @@ from .params import SensorConfig
 COV_FLOOR = 1e-12
 
 
+def kernel_model(sensor: SensorConfig) -> tuple:
+    """The noise model as the compiled kernels take it: (linear, a, b, near_range, sigma_r_near,
+    sigma_r_rel, sigma_theta)."""
+    return (sensor.model == "linear", sensor.a, sensor.b, sensor.near_range, sensor.sigma_r_near,
+            sensor.sigma_r_rel, sensor.sigma_theta)  # fmt: skip
+
+
 def sigma_range(rho: np.ndarray, sensor: SensorConfig) -> np.ndarray:
     """σρ(ρ) in metres for ranges ``rho`` (any shape, metres).
 

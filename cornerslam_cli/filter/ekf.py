@@ -25,6 +25,7 @@ import numpy as np
 from ..errors import NumericalError
 from ..geometry import rotate_pose_covariance, wrap_angle
 from ..types import Prediction
+from .kernels import sequential_update
 from .models import (
     inverse_observe,
     motion_model,
@@ -186,6 +187,13 @@ class Ekf:
         """
         P, mu, d = self._P_buf[: self._dim, : self._dim], self._mu_buf, self._dim
         fuse = self.cfg.fuse
+        if fuse and not self.cfg.joseph:  # the defaults: compiled (filter/kernels.py)
+            U = np.empty((d, 3 * len(ids)))
+            nis, failed = sequential_update(P, mu, ids, np.ascontiguousarray(z), np.ascontiguousarray(C), U)
+            if failed >= 0:
+                raise self._not_positive_definite()
+            self._apply_low_rank(U, U)
+            return nis
         width = 6 if self.cfg.joseph else 3
         if fuse:
             U = np.empty((d, width * len(ids)))
@@ -242,10 +250,7 @@ class Ekf:
         try:
             L = np.linalg.cholesky(S)  # S = L Lᵀ
         except np.linalg.LinAlgError:
-            raise NumericalError(  # n_steps = predictions so far = the pipeline's step index
-                f"innovation covariance S is not positive definite at step {self.n_steps}",
-                "corner covariances or Σ are corrupt; check the corner extractor's covariances",
-            ) from None
+            raise self._not_positive_definite() from None
         B = np.linalg.solve(L, np.hstack((nu, PHt.T)))  # L⁻¹ [ν, (ΣHᵀ)ᵀ]
         a = B[:, :1]  # L⁻¹ν
         V = B[:, 1:].T  # ΣHᵀ L⁻ᵀ, (d, r)
@@ -255,6 +260,12 @@ class Ekf:
             K = np.linalg.solve(L.T, B[:, 1:]).T  # eq 25, K = ΣHᵀ S⁻¹ = V L⁻¹ (solve, never inv)
             return np.hstack((PHt, K)), np.hstack((K, PHt - K @ S)), nis
         return V, V, nis
+
+    def _not_positive_definite(self) -> NumericalError:
+        return NumericalError(  # n_steps = predictions so far = the pipeline's step index
+            f"innovation covariance S is not positive definite at step {self.n_steps}",
+            "corner covariances or Σ are corrupt; check the corner extractor's covariances",
+        )
 
     def _apply_low_rank(self, U: np.ndarray, Y: np.ndarray) -> None:
         """Σ ← Σ − U Yᵀ in place, O(N²·rank), U Yᵀ symmetric by construction.

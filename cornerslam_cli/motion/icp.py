@@ -30,7 +30,6 @@ import numpy as np
 
 from ..geometry import (
     compose,
-    matrix_from_pose,
     pose_from_matrix,
     relative,
     rotate_pose_covariance,
@@ -39,7 +38,7 @@ from ..geometry import (
 )
 from .correlative import Window, search
 from .fusion import OdometryFusion, student_fit
-from .kernels import gauss_newton_step, line_terms, neighbour_scatter
+from .kernels import first_in_cell, icp_iterations, line_terms, neighbour_scatter
 from .nearest import BucketGrid
 from .params import ScanMatchConfig
 
@@ -59,15 +58,7 @@ def voxel_thin(points: np.ndarray, size: float) -> np.ndarray:
     """Indices of one point per ``size`` × ``size`` cell (the first in input order); all when size is 0."""
     if size <= 0 or len(points) == 0:
         return np.arange(len(points))
-    _, first = np.unique(cell_keys(points, size), return_index=True)
-    return np.sort(first)
-
-
-def cell_keys(points: np.ndarray, size: float) -> np.ndarray:
-    """(n,) int64 key of the ``size`` × ``size`` cell of each point (one int64 per cell: 1-D unique
-    is fast)."""
-    cells = np.floor(np.clip(points / size, -(2**31), 2**31 - 1)).astype(np.int64)  # no int overflow
-    return (cells[:, 0] << 32) + (cells[:, 1] & 0xFFFFFFFF)
+    return first_in_cell(np.ascontiguousarray(points, dtype=float), float(size))
 
 
 def line_normals(points: np.ndarray, grid: BucketGrid) -> tuple[np.ndarray, np.ndarray]:
@@ -134,7 +125,7 @@ def load_kernels() -> None:
     not pay it: one :func:`register` of a corner against itself, one fit of a single sample."""
     s = np.linspace(0.0, 1.0, 21)
     corner = np.concatenate((np.column_stack((s, 0.0 * s)), np.column_stack((0.0 * s, s))))
-    register(corner, LocalMap.build(corner), np.zeros(3), ScanMatchConfig())
+    register(corner[voxel_thin(corner, 0.05)], LocalMap.build(corner), np.zeros(3), ScanMatchConfig())
     student_fit(np.zeros((1, 3)), np.eye(3)[None], np.zeros((1, 3, 2)))
 
 
@@ -155,22 +146,14 @@ def register(
     """ICP of ``points`` (base frame) against ``local`` from ``start``, with a weak prior towards
     ``prior`` (default ``start``): the odometry's guess, so an ill-posed direction stays with it."""
     guess = start if prior is None else prior
-    M = matrix_from_pose(start)
     prior_info = np.array([cfg.prior_sigma_xy**-2, cfg.prior_sigma_xy**-2, cfg.prior_sigma_theta**-2])
     prior_info_scaled = prior_info * cfg.robust_scale**2  # the data term below is in units of robust_scale²
-    dmax = cfg.max_distance
-    step = np.empty(3)
-    for _ in range(cfg.max_iterations):
-        terms = _point_to_line(points, local, M, dmax, cfg.robust_scale)
-        if terms is None:  # fewer than 3 usable correspondences
-            break
-        off = pose_from_matrix(M) - guess
-        off[2] = wrap_angle(off[2])
-        gauss_newton_step(*terms, prior_info_scaled, off, step)  # −(JᵀWJ + prior)⁻¹ (JᵀWr + prior·off)
-        M = matrix_from_pose(pose_from_matrix(M) + step)
-        dmax = max(cfg.min_distance, dmax * SHRINK)
-        if np.abs(step).max() < CONVERGED and dmax <= cfg.min_distance:
-            break
+    loop = (cfg.max_iterations, cfg.min_distance, SHRINK, CONVERGED, cfg.robust_scale)
+    M = icp_iterations(
+        np.ascontiguousarray(points, dtype=float), local.grid.arrays(), local.padded_points,
+        local.padded_normals, np.asarray(start, dtype=float), np.asarray(guess, dtype=float),
+        prior_info_scaled, float(cfg.max_distance), loop,
+    )  # fmt: skip
     q = points @ M[:2, :2].T + M[:2, 2]
     dist, idx = local.grid.query(q, cfg.inlier_distance)
     fit = float(np.mean(dist < cfg.inlier_distance))
@@ -178,16 +161,9 @@ def register(
     return Registration(pose_from_matrix(M), fit, _covariance(terms, prior_info, cfg))
 
 
-def _point_to_line(points: np.ndarray, local: LocalMap, M: np.ndarray, dmax: float, scale: float):
-    """Jacobian J (n, 3), Cauchy weights w and point-to-line residuals r of ``points`` placed by ``M``
-    against their nearest map point within ``dmax``; None with fewer than 3 usable correspondences."""
-    q = points @ M[:2, :2].T + M[:2, 2]
-    _, idx = local.grid.query(q, dmax)
-    return _line_terms(q, idx, local, M, scale)
-
-
 def _line_terms(q: np.ndarray, idx: np.ndarray, local: LocalMap, M: np.ndarray, scale: float):
-    """:func:`_point_to_line` of points ``q`` already placed, given their nearest map points ``idx``."""
+    """Jacobian J (n, 3), Cauchy weights w and point-to-line residuals r of the placed points ``q``
+    against their nearest map points ``idx``; None with fewer than 3 usable correspondences."""
     J, w, r = np.empty((len(q), 3)), np.empty(len(q)), np.empty(len(q))
     # ∂r/∂(x, y, θ) of the pose itself (turning about the robot, not the map origin: far from the
     # origin that keeps rotation and translation decoupled): (n_x, n_y, (q − t) × n); zero rows: no

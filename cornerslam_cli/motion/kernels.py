@@ -6,9 +6,11 @@ for operation, in loops: elementwise + − × ÷ round as numpy's float64 loops 
 accumulates from +0 as numpy's does, and a sum over a row of ≤ 7 numbers is sequential from −0.0, as
 numpy's pairwise sum is below 8 elements. What numpy computes with other kernels — the (n, 2) @ (2, 2)
 placement (BLAS, fused multiply-adds), arctan2, hypot, sin and cos (SIMD versions) — stays in numpy.
-tests/test_scanmatch.py checks the kernels against the numpy expressions exactly. One exception,
-:func:`gauss_newton_step`: the normal equations and their 3 × 3 solve, which numpy computed with BLAS
-and LAPACK (sums in another order, fused multiply-adds), equal to rounding only.
+tests/test_scanmatch.py checks the kernels against the numpy expressions exactly. Two exceptions, equal
+to rounding only: :func:`gauss_newton_step`, the normal equations and their 3 × 3 solve, which numpy
+computed with BLAS and LAPACK (sums in another order, fused multiply-adds); and :func:`icp_iterations`,
+the whole Gauss–Newton loop of icp.register in one kernel (its placement of the points and its heading
+are libm's, not BLAS's and numpy's SIMD arctan2).
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import math
 import numpy as np
 
 from ..features.jit import kernel
+from .nearest import nearest_within
 
 
 @kernel
@@ -107,3 +110,75 @@ def gauss_newton_step(J, w, r, prior, off, step):
     x1 = (y1 - l21 * x2) / l11
     x0 = (y0 - l10 * x1 - l20 * x2) / l00
     step[0], step[1], step[2] = -x0, -x1, -x2
+
+
+@kernel
+def _cell_index(v):
+    """⌊v⌋ as int64 of v clipped to the int32 range (no overflow); INT64_MIN for NaN, as numpy's cast
+    gives on x86."""
+    if math.isnan(v):
+        return np.int64(-(2**63))
+    return np.int64(math.floor(min(max(v, -(2.0**31)), 2.0**31 - 1)))
+
+
+@kernel
+def _cell_key(x, y, size):
+    """The int64 key of the ``size`` cell of (x, y): (i << 32) + (j & 0xFFFFFFFF), as numpy computed it."""
+    return (_cell_index(x / size) << 32) + (_cell_index(y / size) & 0xFFFFFFFF)
+
+
+@kernel
+def first_in_cell(points, size):
+    """Indices, ascending, of the first point (in input order) of every ``size`` × ``size`` cell: a hash
+    set of the cells' keys, one pass (``np.unique(keys, return_index=True)`` sorted the keys)."""
+    n = len(points)
+    bits = 1
+    while (1 << bits) < 2 * n:
+        bits += 1
+    mask = (1 << bits) - 1
+    table, filled = np.empty(mask + 1, np.int64), np.zeros(mask + 1, np.bool_)
+    keep = np.empty(n, np.int64)
+    m = 0
+    for i in range(n):
+        key = _cell_key(points[i, 0], points[i, 1], size)
+        slot = ((key * -7046029254386353131) >> 24) & mask  # Fibonacci hashing (2⁶⁴/φ), linear probing
+        while filled[slot] and table[slot] != key:
+            slot = (slot + 1) & mask
+        if not filled[slot]:
+            filled[slot], table[slot] = True, key
+            keep[m] = i
+            m += 1
+    return keep[:m]
+
+
+@kernel
+def icp_iterations(points, grid, padded_points, padded_normals, start, guess, prior, dmax, cfg):
+    """The Gauss–Newton iterations of icp.register from pose ``start``: the (3, 3) matrix of the pose
+    they end at. Each places ``points``, takes their nearest map points within ``dmax`` (``grid``:
+    BucketGrid.arrays), their point-to-line terms, and steps −(JᵀWJ + prior)⁻¹ (JᵀWr + prior·off), off
+    the pose's offset from ``guess``; ``dmax`` shrinks to ``min_distance``; they stop with fewer than 3
+    usable correspondences or a step below ``converged`` at the least ``dmax``. ``cfg``:
+    (max_iterations, min_distance, shrink, converged, robust_scale)."""
+    max_iterations, min_distance, shrink, converged, scale = cfg
+    n = len(points)
+    q, dist, idx = np.empty((n, 2)), np.empty(n), np.empty(n, np.int64)
+    J, w, r = np.empty((n, 3)), np.empty(n), np.empty(n)
+    t, off, step = np.array([start[0], start[1]]), np.empty(3), np.empty(3)
+    c, s = math.cos(start[2]), math.sin(start[2])
+    for _ in range(max_iterations):
+        for i in range(n):
+            q[i, 0] = points[i, 0] * c - points[i, 1] * s + t[0]
+            q[i, 1] = points[i, 0] * s + points[i, 1] * c + t[1]
+        nearest_within(q, dmax, *grid, dist, idx)
+        if line_terms(q, idx, padded_points, padded_normals, t, scale, J, w, r) < 3:
+            break
+        theta = math.atan2(s, c)
+        off[0], off[1] = t[0] - guess[0], t[1] - guess[1]
+        off[2] = (theta - guess[2] + np.pi) % (2.0 * np.pi) - np.pi
+        gauss_newton_step(J, w, r, prior, off, step)
+        t[0], t[1] = t[0] + step[0], t[1] + step[1]
+        c, s = math.cos(theta + step[2]), math.sin(theta + step[2])
+        dmax = max(min_distance, dmax * shrink)
+        if max(abs(step[0]), abs(step[1]), abs(step[2])) < converged and dmax <= min_distance:
+            break
+    return np.array([[c, -s, t[0]], [s, c, t[1]], [0.0, 0.0, 1.0]])

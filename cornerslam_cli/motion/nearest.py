@@ -59,14 +59,19 @@ class BucketGrid:
         np.cumsum(np.bincount(key, minlength=nx * ny), out=start[1:])
         return BucketGrid(np.ascontiguousarray(points[order]), order, start, lo, cell, nx, ny)
 
+    def arrays(self) -> tuple:
+        """The grid as :func:`nearest_within` takes it after the queries: (xy, index, start, ox, oy,
+        cell, nx, ny)."""
+        ox, oy = float(self.origin[0]), float(self.origin[1])
+        return self.xy, self.index, self.start, ox, oy, self.cell, self.nx, self.ny
+
     def query(self, q: np.ndarray, bound: float) -> tuple[np.ndarray, np.ndarray]:
         """(distance, index) of the nearest map point to each row of ``q`` closer than ``bound``; where
         there is none, inf and k (the number of map points) — as cKDTree.query with
         ``distance_upper_bound``."""
         dist = np.empty(len(q))
         idx = np.empty(len(q), dtype=np.int64)
-        ox, oy = float(self.origin[0]), float(self.origin[1])
-        _query(q, bound, self.xy, self.index, self.start, ox, oy, self.cell, self.nx, self.ny, dist, idx)
+        nearest_within(q, bound, *self.arrays(), dist, idx)
         return dist, idx
 
     def neighbours(self, k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -82,7 +87,7 @@ class BucketGrid:
 
 
 @kernel
-def _query(q, bound, xy, index, start, ox, oy, cell, nx, ny, dist, idx):
+def nearest_within(q, bound, xy, index, start, ox, oy, cell, nx, ny, dist, idx):
     """Fill ``dist``/``idx`` (see :meth:`BucketGrid.query`)."""
     k = len(xy)
     best_d2, best_i = np.empty(1), np.empty(1, dtype=np.int64)
