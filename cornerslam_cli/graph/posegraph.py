@@ -123,6 +123,7 @@ class PoseGraph:
         self._marginals = None  # LM: gtsam.Marginals of the last optimize(), built when first asked
         self.iterations = 0  # the last optimize()'s iSAM2 updates or LM iterations
         self.converged = True  # whether it stopped before its step limit
+        self.qr = False  # iSAM2 eliminates by QR since Cholesky found the system indeterminate
         self._isam = gtsam.ISAM2(self._isam2_params()) if cfg.solver == "isam2" else None
         prior = gtsam.noiseModel.Isotropic.Sigma(3, PRIOR_SIGMA)
         self._add_factor(gtsam.PriorFactorPose2(0, _pose2(origin), prior))
@@ -179,10 +180,12 @@ class PoseGraph:
             self._estimate.insert(key, _pose2(pose))
 
     @staticmethod
-    def _isam2_params() -> gtsam.ISAM2Params:
+    def _isam2_params(qr: bool = False) -> gtsam.ISAM2Params:
         params = gtsam.ISAM2Params()
         params.setRelinearizeThreshold(ISAM2_RELINEARIZE)
         params.relinearizeSkip = 1
+        if qr:
+            params.setFactorization("QR")
         return params
 
     # --- solving ----------------------------------------------------------------------------------
@@ -214,12 +217,28 @@ class PoseGraph:
 
     def _isam2_steps(self) -> tuple[int, bool]:
         """iSAM2 update with the new factors and nodes, then updates that relinearise where a step
-        moved a variable, until none does. Returns (updates, whether that point was reached)."""
-        self._isam.update(self._new_factors, self._new_values)
-        for k in range(ISAM2_MAX_STEPS):
-            if self._isam.update().getVariablesRelinearized() == 0:
-                return k + 2, True
-        return ISAM2_MAX_STEPS + 1, False
+        moved a variable, until none does. Returns (updates, whether that point was reached).
+
+        iSAM2 eliminates by Cholesky, which squares the condition number: with loop factors of a few
+        millimetres beside sequential factors of metres (an odometry-only submap of a sparse log) GTSAM
+        can find the system "indeterminate" although it is well posed. Then iSAM2 starts again on the
+        whole graph with QR elimination (from the last estimate and the new nodes' guesses) and keeps QR
+        for the rest of the run; a graph that never hits it is solved exactly as before."""
+        try:
+            self._isam.update(self._new_factors, self._new_values)
+            for k in range(ISAM2_MAX_STEPS):
+                if self._isam.update().getVariablesRelinearized() == 0:
+                    return k + 2, True
+            return ISAM2_MAX_STEPS + 1, False
+        except RuntimeError as err:
+            if "Indeterminate" not in str(err) or self.qr:
+                raise
+        self.qr = True
+        values = gtsam.Values(self._estimate)
+        values.insert(self._new_values)
+        self._isam = gtsam.ISAM2(self._isam2_params(qr=True))
+        self._new_factors, self._new_values = self._graph, values
+        return self._isam2_steps()
 
     # --- answers ----------------------------------------------------------------------------------
 
