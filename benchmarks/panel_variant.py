@@ -12,7 +12,10 @@ luck on no log. So every log (the seven radish buildings with noisy and with exa
 runs as it is and in K copies with one ODOM line moved by 1 µm (as panel_spread.py does), in both builds.
 Per log: the mean and range of the K + 1 figures (ATE RMSE; Intel: relation error, translation mean) and
 of the scan-matched chain's; the verdict is **better** or **worse** only when the two ranges do not
-overlap. Writes a markdown report (default docs/results/variant_<settings>.md).
+overlap. The 1 µm copies sample only the input's chaos, not every decision a change of the algorithm moves
+(a log stable under them may still move by centimetres under any change): read a verdict as "this change
+moved this log", and judge a change by the whole table. Writes a markdown report (default
+docs/results/variant_<settings>.md, or variant_vs_<REV>.md).
 """
 
 from __future__ import annotations
@@ -119,9 +122,10 @@ def report(rows: list[dict], sets: list[str], base_rev: str, k: int) -> list[str
     if base_rev != "HEAD":
         cmd += f" --baseline {base_rev}"
     base = "the defaults" if base_rev == "HEAD" else f"revision {revision(base_rev)}, its defaults"
-    variant = ", ".join(f"`{s}`" for s in sets) or "the defaults"
+    variant = ", ".join(f"`{s}`" for s in sets) or "its defaults"
+    title = ", ".join(f"`{s}`" for s in sets) or f"this build ({revision()})"
     return [
-        f"# Panel: {variant} against {base}",
+        f"# Panel: {title} against {base}",
         "",
         f"`{cmd}` at {revision()}. Variant: this build with {variant}; baseline: {base}. Each log runs "
         f"as it is and in {k} copies with one ODOM line moved by 1 µm (panel_spread.py), in both builds; "
@@ -137,8 +141,10 @@ def report(rows: list[dict], sets: list[str], base_rev: str, k: int) -> list[str
     ]
 
 
-def slug(sets: list[str]) -> str:
-    return re.sub(r"[^A-Za-z0-9.=_-]+", "_", "_".join(sets) or "defaults")
+def slug(sets: list[str], base_rev: str) -> str:
+    """A file name for the comparison: the settings (``scan_match.window-20``), or the baseline revision."""
+    text = "_".join(sets) if sets else f"vs_{base_rev}"
+    return re.sub(r"[^A-Za-z0-9._-]+", "-", text)
 
 
 def main() -> None:
@@ -161,7 +167,7 @@ def main() -> None:
         logs = [x for x in logs if x[0] in wanted]
     if missing := [str(p) for _, p, _ in logs if not p.exists()]:
         ap.error(f"{', '.join(missing)} not found (pass --data DIR)")
-    out = args.out or ROOT / "docs" / "results" / f"variant_{slug(args.sets)}.md"
+    out = args.out or ROOT / "docs" / "results" / f"variant_{slug(args.sets, args.baseline)}.md"
     sets = [x for s in args.sets for x in ("--set", s)]
     with tempfile.TemporaryDirectory(prefix="panel-variant-") as tmp, contextlib.ExitStack() as stack:
         src = ROOT if args.baseline == "HEAD" else stack.enter_context(source_tree(args.baseline))
