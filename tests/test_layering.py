@@ -27,6 +27,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("", "blas", "errors", "fpenv", "geometry", "ranges", "types", "workers", "features.jit"),
     (
         "textfile",
+        "smallmat",  # compiled 3 × 3 algebra (features.jit's kernels) shared by association and filter
         "association.params",
         "features.params",
         "filter.params",

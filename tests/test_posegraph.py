@@ -178,6 +178,25 @@ def test_an_ill_conditioned_graph_is_solved_by_qr_and_matches_lm(seed):
     assert np.isfinite(got.marginal(len(got) - 1)).all()
 
 
+def test_a_failed_qr_retry_leaves_the_graph_as_it_was(monkeypatch):
+    """Both eliminations refuse the graph: the error is raised, and the graph keeps its solver and its
+    factors (a loop added afterwards is one factor, not two)."""
+    import cornerslam_cli.graph.posegraph as pg
+
+    def refuse(isam, factors, values):
+        raise RuntimeError("\nIndeterminant linear system detected while working near variable 3")
+
+    seq, loops = square_measurements(seed=11)
+    g = build(GraphConfig(), (0.0, 0.0, 0.0), seq, loops)
+    before, isam = g._graph.size(), g._isam
+    monkeypatch.setattr(pg, "_isam2_solve", refuse)
+    g.add_loop(1, 7, (2.0, 0.0, np.pi), LOOP_COV)
+    with pytest.raises(RuntimeError, match="Indeterminant"):  # GTSAM < 4.3's spelling is caught too
+        g.optimize()
+    assert not g.qr and g._isam is isam
+    assert g._graph.size() == before + 1 and g._new_factors is not g._graph
+
+
 def test_a_well_posed_graph_keeps_cholesky():
     seq, loops = square_measurements(seed=11)
     assert not build(GraphConfig(), (0.0, 0.0, 0.0), seq, loops).qr

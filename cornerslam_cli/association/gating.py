@@ -156,8 +156,9 @@ class JointCompatibility:
     3 × 3 Cholesky; ``commit`` appends the block row [−L_new⁻¹ Wᵀ M_H, L_new⁻¹]; ``pop`` just forgets
     rows. Both run compiled (kernels.py: ~25 µs a try in numpy calls, call overhead on these tiny
     operands, against a few µs).
-    Cross covariances H_k P H_lᵀ are gathered one landmark row at a time, lazily, and cached by
-    :meth:`Gated.cross_row`, so searches on the same ``Gated`` share them.
+    Cross covariances H_k P H_lᵀ are computed for the whole universe at the first row asked for (again
+    when the universe widens) and cached by :meth:`Gated.cross_row`, so searches on the same ``Gated``
+    share them.
     """
 
     def __init__(self, g: Gated, capacity: int):

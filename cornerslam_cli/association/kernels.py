@@ -20,26 +20,7 @@ import math
 import numpy as np
 
 from ..features.jit import kernel
-
-
-@kernel
-def _cholesky(A, d, rtol):
-    """Lower Cholesky factor of the d × d (d ≤ 3) SPD A; the zero matrix when A is not PD (a pivot at or
-    below ``rtol`` times its diagonal entry)."""
-    L = np.zeros((d, d))
-    for j in range(d):
-        s = A[j, j]
-        for t in range(j):
-            s -= L[j, t] * L[j, t]
-        if not (s > rtol * A[j, j] if j else s > 0.0):
-            return np.zeros((d, d))
-        L[j, j] = math.sqrt(s)
-        for i in range(j + 1, d):
-            s = A[i, j]
-            for t in range(j):
-                s -= L[i, t] * L[j, t]
-            L[i, j] = s / L[j, j]
-    return L
+from ..smallmat import cholesky
 
 
 @kernel
@@ -81,7 +62,7 @@ def try_pairing(M, y, row, locs, S_new, nu_new, h, rtol):
         for t in range(dh):
             s += W[t, a] * y[t]
         r[a] -= s
-    L = _cholesky(schur, d, rtol)
+    L = cholesky(schur, d, rtol)
     ynew = np.zeros(d)
     if L[0, 0] == 0.0:
         return math.inf, W, L, ynew
@@ -153,7 +134,7 @@ def cross_blocks(P, H_r, H_l, universe, d):
 def mahalanobis2(nu, S, d, rtol):
     """νᵀ S⁻¹ ν of the first d components by a Cholesky of S; inf where S is not positive definite or the
     result is not finite."""
-    L = _cholesky(S, d, rtol)
+    L = cholesky(S, d, rtol)
     if L[0, 0] == 0.0:
         return math.inf
     out = 0.0

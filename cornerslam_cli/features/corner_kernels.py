@@ -201,7 +201,8 @@ def type_two(rho, theta, beam_index, first, last, alpha, r, seg_cov, jac_ends, s
 
 @kernel
 def _measured(ranges, angles, spacing, bearing, dropped, farther):
-    """``corners.measured_range`` at one bearing: the nearer (``farther``: the farther) of the at most two
+    """The measured range at one bearing (the numpy version: tests/_corners_reference.py's
+    ``measured_range``): the nearer (``farther``: the farther) of the at most two
     valid beams within one beam spacing of it; ``dropped`` in a gap of dropped beams, nan outside the
     field of view."""
     n = len(ranges)

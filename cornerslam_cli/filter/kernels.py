@@ -16,6 +16,7 @@ import math
 import numpy as np
 
 from ..features.jit import kernel
+from ..smallmat import cholesky
 
 
 @kernel
@@ -42,25 +43,6 @@ def _columns(P, U, r, k):
                 s -= U[row, q] * U[col, q]
             A[row, j] = s
     return A
-
-
-@kernel
-def _cholesky3(S):
-    """Lower Cholesky factor of a 3 × 3 S; the zero matrix when S is not positive definite."""
-    L = np.zeros((3, 3))
-    for j in range(3):
-        s = S[j, j]
-        for t in range(j):
-            s -= L[j, t] * L[j, t]
-        if not s > 0.0:
-            return np.zeros((3, 3))
-        L[j, j] = math.sqrt(s)
-        for i in range(j + 1, 3):
-            s = S[i, j]
-            for t in range(j):
-                s -= L[i, t] * L[j, t]
-            L[i, j] = s / L[j, j]
-    return L
 
 
 @kernel
@@ -101,7 +83,7 @@ def sequential_update(P, mu, ids, z, C, U):
                     s += H[a, j] * PHt[j if j < 3 else 3 * k + j, b]
                 S[a, b] = s + C[t, a, b]
         S = 0.5 * (S + S.T)
-        L = _cholesky3(S)
+        L = cholesky(S, 3, 0.0)
         if L[0, 0] == 0.0:
             return nis, t
         nu = z[t] - h

@@ -48,6 +48,16 @@ LM_MAX_ITERATIONS = 100
 _ASYMMETRY = 1e-9  # a covariance whose |Σ − Σᵀ| exceeds this share of max |Σ| is rejected
 
 
+def _isam2_solve(isam: gtsam.ISAM2, factors, values) -> tuple[int, bool]:
+    """``isam.update`` with ``factors`` and ``values``, then updates until no variable is relinearised
+    (at most ``ISAM2_MAX_STEPS``): (updates made, whether that point was reached)."""
+    isam.update(factors, values)
+    for k in range(ISAM2_MAX_STEPS):
+        if isam.update().getVariablesRelinearized() == 0:
+            return k + 2, True
+    return ISAM2_MAX_STEPS + 1, False
+
+
 def tangent_from_frame(cov: np.ndarray, pose) -> np.ndarray:
     """Covariance (3, 3) of ``pose`` given in its parent frame (ours: (x, y, θ)) → in GTSAM's tangent
     space at ``pose`` (body frame): J⁻¹ Σ J⁻ᵀ with J = blockdiag(R(θ), 1)."""
@@ -221,24 +231,22 @@ class PoseGraph:
 
         iSAM2 eliminates by Cholesky, which squares the condition number: with loop factors of a few
         millimetres beside sequential factors of metres (an odometry-only submap of a sparse log) GTSAM
-        can find the system "indeterminate" although it is well posed. Then iSAM2 starts again on the
-        whole graph with QR elimination (from the last estimate and the new nodes' guesses) and keeps QR
-        for the rest of the run; a graph that never hits it is solved exactly as before."""
+        can find the system "indeterminate" although it is well posed. Then a new iSAM2 eliminating by
+        QR takes the whole graph (from the last estimate and the new nodes' guesses) and is kept for the
+        rest of the run — only once it has solved it: a QR failure leaves the graph as it was and is
+        raised. A graph that never hits it is solved exactly as before."""
         try:
-            self._isam.update(self._new_factors, self._new_values)
-            for k in range(ISAM2_MAX_STEPS):
-                if self._isam.update().getVariablesRelinearized() == 0:
-                    return k + 2, True
-            return ISAM2_MAX_STEPS + 1, False
+            return _isam2_solve(self._isam, self._new_factors, self._new_values)
         except RuntimeError as err:
-            if "Indeterminate" not in str(err) or self.qr:
+            # GTSAM ≥ 4.3 says "Indeterminate linear system", earlier versions "Indeterminant …"
+            if "Indetermina" not in str(err) or self.qr:
                 raise
-        self.qr = True
         values = gtsam.Values(self._estimate)
         values.insert(self._new_values)
-        self._isam = gtsam.ISAM2(self._isam2_params(qr=True))
-        self._new_factors, self._new_values = self._graph, values
-        return self._isam2_steps()
+        isam = gtsam.ISAM2(self._isam2_params(qr=True))
+        steps = _isam2_solve(isam, self._graph, values)
+        self._isam, self.qr = isam, True
+        return steps
 
     # --- answers ----------------------------------------------------------------------------------
 

@@ -141,7 +141,8 @@ def first_in_cell(points, size):
     m = 0
     for i in range(n):
         key = _cell_key(points[i, 0], points[i, 1], size)
-        slot = ((key * -7046029254386353131) >> 24) & mask  # Fibonacci hashing (2⁶⁴/φ), linear probing
+        # Fibonacci hashing (2⁶⁴/φ, unsigned: wraps by definition) on the top bits, linear probing
+        slot = np.int64((np.uint64(key) * np.uint64(11400714819323198485)) >> np.uint64(64 - bits))
         while filled[slot] and table[slot] != key:
             slot = (slot + 1) & mask
         if not filled[slot]:
