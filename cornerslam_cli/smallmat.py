@@ -28,3 +28,17 @@ def cholesky(A, d, rtol):
                 s -= L[i, t] * L[j, t]
             L[i, j] = s / L[j, j]
     return L
+
+
+@kernel
+def product(A, B):
+    """A B of small matrices, summed in index order."""
+    p, q, r = A.shape[0], A.shape[1], B.shape[1]
+    out = np.zeros((p, r))
+    for i in range(p):
+        for j in range(r):
+            s = 0.0
+            for t in range(q):
+                s += A[i, t] * B[t, j]
+            out[i, j] = s
+    return out

@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from ..features.jit import kernel
-from ..smallmat import cholesky
+from ..smallmat import cholesky, product
 
 
 @kernel
@@ -80,19 +80,8 @@ def commit_pairing(M, y, W, Minv, ynew, h):
     """Append the block row [−L_new⁻¹ Wᵀ M_H, L_new⁻¹] to M and y_new to y (in place)."""
     d = len(ynew)
     dh = d * h
-    T = np.zeros((d, dh))  # Wᵀ M_H
+    M[dh : dh + d, :dh] = product(-Minv, product(W[:dh].T, M[:dh, :dh]))  # −L_new⁻¹ Wᵀ M_H
     for a in range(d):
-        for c in range(dh):
-            s = 0.0
-            for t in range(dh):
-                s += W[t, a] * M[t, c]
-            T[a, c] = s
-    for a in range(d):
-        for c in range(dh):
-            s = 0.0
-            for t in range(d):
-                s += -Minv[a, t] * T[t, c]
-            M[dh + a, c] = s
         for c in range(d):
             M[dh + a, dh + c] = Minv[a, c]
         y[dh + a] = ynew[a]

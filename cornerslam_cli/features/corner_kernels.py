@@ -18,6 +18,7 @@ import math
 
 import numpy as np
 
+from ..smallmat import product
 from .jit import kernel
 from .sensor import COV_FLOOR
 
@@ -42,21 +43,7 @@ def _sigma_range(rho, sensor):
 @kernel
 def _sandwich(F, C):
     """F C Fᵀ of small matrices."""
-    return _product(_product(F, C), F.T)
-
-
-@kernel
-def _product(A, B):
-    """A B of small matrices, summed in index order."""
-    p, q, r = A.shape[0], A.shape[1], B.shape[1]
-    out = np.zeros((p, r))
-    for i in range(p):
-        for j in range(r):
-            s = 0.0
-            for t in range(q):
-                s += A[i, t] * B[t, j]
-            out[i, j] = s
-    return out
+    return product(product(F, C), F.T)
 
 
 @kernel
@@ -157,9 +144,9 @@ def end_corner(rho_b, theta_b, a, r, seg_cov, jac_end, var_r, var_t):
     ct, st = math.cos(theta_b), math.sin(theta_b)
     Q = np.array([[ct, -rho_b * st], [st, rho_b * ct]])  # ∂q/∂(ρ, θ)
     P = np.array([[sa * sa, -sa * ca], [-ca * sa, ca * ca]])  # d dᵀ, d = (−sin α, cos α)
-    AJ = _product(A, jac_end)
+    AJ = product(A, jac_end)
     Ce = np.array([[var_r, 0.0], [0.0, var_t]])
-    Ge = AJ + _product(P, Q)
+    Ge = AJ + product(P, Q)
     return c, _sandwich(A, seg_cov) - _sandwich(AJ, Ce) + _sandwich(Ge, Ce), P
 
 
