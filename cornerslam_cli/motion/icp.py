@@ -116,8 +116,7 @@ class LocalMap:
 
     def fit(self, placed: np.ndarray, inlier_distance: float) -> float:
         """Share of the ``placed`` points (motion frame) within ``inlier_distance`` of the map."""
-        dist, _ = self.grid.query(placed, inlier_distance)
-        return float(np.mean(dist < inlier_distance))
+        return overlap(self.grid, placed, inlier_distance)
 
 
 def load_kernels() -> None:
@@ -224,6 +223,12 @@ def near_scans(poses: np.ndarray, pose: np.ndarray, radius: float, angle: float,
     if len(idx) > most:
         idx = np.sort(idx[np.argsort(d[idx], kind="stable")[:most]])
     return idx
+
+
+def overlap(grid: BucketGrid, points: np.ndarray, inlier_distance: float) -> float:
+    """Share of ``points`` within ``inlier_distance`` of the points of ``grid``."""
+    dist, _ = grid.query(points, inlier_distance)
+    return float(np.mean(dist < inlier_distance))
 
 
 @dataclass(frozen=True)
@@ -365,15 +370,23 @@ class ScanMatcher:
         if len(self.scans) == self.scans.maxlen:
             self.history.append(self.scans[0])  # leaves the window (kept when near_history > 0)
         self.scans.append(MapScan(pose.copy(), placed[voxel_thin(placed, cfg.voxel)]))  # thinned alone first
-        pts = np.concatenate([s.points for s in (*self.scans, *self._near(pose))])
+        window = np.concatenate([s.points for s in self.scans])
+        pts = np.concatenate([window, *(s.points for s in self._near(pose, window))])
         self.local = LocalMap.build(pts[voxel_thin(pts, cfg.voxel)])
 
-    def _near(self, pose: np.ndarray) -> list[MapScan]:
+    def _near(self, pose: np.ndarray, window: np.ndarray) -> list[MapScan]:
         """The history's scans near ``pose`` (the scan that joined: the map serves the scans until the
-        next joins, within ``map_update_distance`` of it), oldest first."""
+        next joins, within ``map_update_distance`` of it), oldest first; with ``near_min_fit`` > 0 only
+        those of which that share of points lies within ``inlier_distance`` of the ``window``'s points
+        (a scan placed with a pose the chain has since drifted from would double the walls)."""
         if not self.history:
             return []
         cfg = self.cfg
         poses = np.array([s.pose for s in self.history])
-        near = near_scans(poses, pose, cfg.near_radius, cfg.near_angle, cfg.near_max)
-        return [self.history[i] for i in near]
+        near = [
+            self.history[i] for i in near_scans(poses, pose, cfg.near_radius, cfg.near_angle, cfg.near_max)
+        ]
+        if cfg.near_min_fit <= 0 or not near:
+            return near
+        grid = BucketGrid.build(window)
+        return [s for s in near if overlap(grid, s.points, cfg.inlier_distance) >= cfg.near_min_fit]

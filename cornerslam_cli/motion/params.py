@@ -42,6 +42,8 @@ class ScanMatchConfig:
     near_radius: float = num(2.0, ge=0.0, le=1000.0)  # m
     near_angle: float = num(math.pi, ge=0.0, le=math.pi)  # rad
     near_max: int = num(10, ge=1, le=1000)
+    # ... and (> 0) only a scan of which this share of points lies within inlier_distance of the window's
+    near_min_fit: float = num(0.0, ge=0.0, le=1.0)
     # m: a scan joins the local map when the robot moved this far ...
     map_update_distance: float = num(0.1, ge=0.0, le=1000.0)
     # rad: ... or turned this much since the last scan that joined
