@@ -89,6 +89,12 @@ def line_normals(points: np.ndarray, grid: BucketGrid) -> tuple[np.ndarray, np.n
     return normals, on_line & (k == NORMAL_NEIGHBOURS)
 
 
+def overlap(grid: BucketGrid, points: np.ndarray, inlier_distance: float) -> float:
+    """Share of ``points`` within ``inlier_distance`` of the points of ``grid``."""
+    dist, _ = grid.query(points, inlier_distance)
+    return float(np.mean(dist < inlier_distance))
+
+
 @dataclass
 class LocalMap:
     """Map points (k, 2), their bucket grid (the nearest-point queries of ICP and the normals'
@@ -223,12 +229,6 @@ def near_scans(poses: np.ndarray, pose: np.ndarray, radius: float, angle: float,
     if len(idx) > most:
         idx = np.sort(idx[np.argsort(d[idx], kind="stable")[:most]])
     return idx
-
-
-def overlap(grid: BucketGrid, points: np.ndarray, inlier_distance: float) -> float:
-    """Share of ``points`` within ``inlier_distance`` of the points of ``grid``."""
-    dist, _ = grid.query(points, inlier_distance)
-    return float(np.mean(dist < inlier_distance))
 
 
 @dataclass(frozen=True)
@@ -370,8 +370,9 @@ class ScanMatcher:
         if len(self.scans) == self.scans.maxlen:
             self.history.append(self.scans[0])  # leaves the window (kept when near_history > 0)
         self.scans.append(MapScan(pose.copy(), placed[voxel_thin(placed, cfg.voxel)]))  # thinned alone first
-        window = np.concatenate([s.points for s in self.scans])
-        pts = np.concatenate([window, *(s.points for s in self._near(pose, window))])
+        pts = window = np.concatenate([s.points for s in self.scans])
+        if near := self._near(pose, window):
+            pts = np.concatenate([window, *(s.points for s in near)])
         self.local = LocalMap.build(pts[voxel_thin(pts, cfg.voxel)])
 
     def _near(self, pose: np.ndarray, window: np.ndarray) -> list[MapScan]:
