@@ -41,7 +41,7 @@ class ScanMatchConfig:
     near_history: int = num(0, ge=0, le=5000)  # (≤ 5000: each kept scan holds its thinned points)
     near_radius: float = num(2.0, ge=0.0, le=1000.0)  # m
     near_angle: float = num(math.pi, ge=0.0, le=math.pi)  # rad
-    near_max: int = num(10, ge=1, le=1000)
+    near_max: int = num(5, ge=1, le=1000)  # (5 on the panel: better than 10, variant_*.md)
     # ... and (> 0) only a scan of which this share of points lies within inlier_distance of the window's
     near_min_fit: float = num(0.0, ge=0.0, le=1.0)
     # m: a scan joins the local map when the robot moved this far ...
