@@ -55,8 +55,10 @@ def test_local_maps_are_built_once_kept_for_the_most_recent_and_equal_a_fresh_bu
     fresh = local_map(submaps[0])
     for name in ("points", "normals", "has_normal", "padded_points", "padded_normals"):
         assert np.array_equal(getattr(first, name), getattr(fresh, name))
-    maps(submaps[1])
+    second = maps(submaps[1])
     maps(submaps[0])  # 0 is now the most recent, 1 the least
     maps(submaps[2])  # evicts 1
     assert maps(submaps[0]) is first
-    assert len(maps._maps) == 2 and 1 not in maps._maps
+    assert maps(submaps[1]) is not second  # built again
+    other = _submap(0, rng.uniform(0, 10, (200, 2)))  # another submap 0 (another run): its own map
+    assert np.array_equal(maps(other).points, other.points)

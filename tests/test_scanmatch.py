@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cornerslam_cli.config import load_config
-from cornerslam_cli.errors import ConfigError
+from cornerslam_cli.errors import ConfigError, NumericalError
 from cornerslam_cli.evaluate import ate
 from cornerslam_cli.frontend import odometry_noise
 from cornerslam_cli.geometry import compose, relative, transform_points, wrap_angle
@@ -488,6 +488,35 @@ def test_the_compiled_gauss_newton_step_solves_icps_normal_equations():
         got = np.empty(3)
         gauss_newton_step(J, w, r, prior, off, got)
         np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-14)
+
+
+def test_compiled_search_breaks_ties_as_the_numpy_search():
+    """Where many poses score the same — an empty map (every score 0 but the pull), a lattice matched
+    against itself (a translation of one lattice step fits as well) — with and without an exclusion of
+    the best, the compiled search keeps the pose, score and count numpy's argmax order gives."""
+    from _correlative_reference import search as numpy_search
+
+    grid = np.stack(np.meshgrid(np.arange(7.0), np.arange(7.0)), axis=-1).reshape(-1, 2) * 0.5
+    far = grid + 100.0  # nothing of the map near where the scan can land
+    cases = [(grid, np.zeros(3)), (far, np.zeros(3)), (grid, np.array([0.05, -0.05, 0.0]))]
+    for map_pts, guess in cases:
+        for window in (Window(0.6, 0.1), Window(0.5, 0.0), Window(0.1, 0.2)):
+            found = numpy_search(grid, map_pts, guess, window, 0.1, 0.1)
+            for exclude in (None, *(Exclusion(found.pose, xy, 0.2) for xy in (0.05, 0.3, 10.0))):
+                got = search(grid, map_pts, guess, window, 0.1, 0.1, exclude=exclude)
+                want = numpy_search(grid, map_pts, guess, window, 0.1, 0.1, exclude=exclude)
+                assert np.array_equal(got.pose, want.pose) and got.score == want.score
+                assert got.evaluated == want.evaluated
+
+
+def test_search_refuses_what_its_compiled_sums_cannot_take(office):
+    """A blur of zero (a field of NaN) and poses so far out that the field's cells cannot hold them are
+    errors, never a read beyond the field."""
+    points = scan_points(office, np.array([6.0, 5.0, 0.0]))
+    with pytest.raises(ValueError, match="sigma"):
+        search(points, points, np.zeros(3), Window(0.5, 0.1), 0.1, 0.0)
+    with pytest.raises(NumericalError, match="off the field"):
+        search(points, points + 1e16, np.array([1e16, 1e16, 0.0]), Window(0.5, 0.1), 0.1, 0.1)
 
 
 def test_compiled_pairwise_sum_is_numpys_bit_for_bit():

@@ -2,8 +2,8 @@
 
 A submap's path is kept thinned (one position per ``PATH_CELL``, its own frame) with a disc holding it.
 Which earlier paths come within a radius of a new one, under the graph's current origins: the discs rule
-out the far submaps first, so the exact point-to-point distances are computed only near the new path —
-the cost no longer grows with every submap of the log, and the distances found are the same.
+out the far submaps first (one distance per submap), so the exact point-to-point distances — the cost
+that grew with every submap of the log — are computed only near the new path, and are the same.
 """
 
 from __future__ import annotations

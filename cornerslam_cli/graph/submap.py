@@ -46,18 +46,20 @@ def local_map(submap: Submap) -> LocalMap:
 class LocalMaps:
     """:func:`local_map` of the ``size`` submaps most recently asked for: loop closing verifies a new
     submap against the same few neighbours close after close (a revisited corridor); memory stays
-    bounded by ``size``. The maps are the ones :func:`local_map` builds (immutable)."""
+    bounded by ``size``. The maps are the ones :func:`local_map` builds (immutable); a submap that is not
+    the one a map was built for (the same index) gets its own."""
 
     def __init__(self, size: int):
-        self.size = size
-        self._maps: OrderedDict[int, LocalMap] = OrderedDict()
+        self.size = max(1, size)
+        self._maps: OrderedDict[int, tuple[Submap, LocalMap]] = OrderedDict()
 
     def __call__(self, submap: Submap) -> LocalMap:
-        found = self._maps.pop(submap.index, None)
-        self._maps[submap.index] = found if found is not None else local_map(submap)
+        kept = self._maps.pop(submap.index, None)
+        built = kept[1] if kept is not None and kept[0] is submap else local_map(submap)
+        self._maps[submap.index] = (submap, built)
         if len(self._maps) > self.size:
             self._maps.popitem(last=False)
-        return self._maps[submap.index]
+        return built
 
 
 @dataclass(frozen=True)

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from ..errors import NumericalError
 from .search_kernels import branch_and_bound, coarse_sums
 
 BLOCK = 4  # fine cells per coarse cell side
@@ -56,9 +57,9 @@ class Exclusion:
         dy = guess[1] + oy * res - self.pose[1]
         return dx[:, None] ** 2 + dy[None, :] ** 2 <= self.xy**2
 
-    def turned(self, theta: float) -> bool:
-        """Whether heading ``theta`` is within ``theta`` radians of the pose's."""
-        return abs(math.remainder(theta - float(self.pose[2]), math.tau)) <= self.theta
+    def turned(self, heading: float) -> bool:
+        """Whether ``heading`` is within ``self.theta`` radians of the pose's."""
+        return abs(math.remainder(heading - float(self.pose[2]), math.tau)) <= self.theta
 
     def covers(
         self, guess: np.ndarray, ox: np.ndarray, oy: np.ndarray, res: float, theta: float
@@ -125,7 +126,7 @@ def search(
     return Search.prepare(points, map_points, guess, window, res, sigma).best(exclude)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Search:
     """One search's field, rotated points and coarse bounds (:meth:`prepare`), asked for its best pose
     (:meth:`best`) once or more: the runner-up of an ambiguity test searches the same field again."""
@@ -150,6 +151,10 @@ class Search:
         res: float,
         sigma: float,
     ) -> Search:
+        """The field of ``map_points`` around where ``points`` can land from ``guess`` within ``window``,
+        the points' cells at each rotation and the coarse bounds (arguments as :func:`search`)."""
+        if not (sigma > 0.0 and math.isfinite(sigma)):
+            raise ValueError(f"correlative search: sigma must be positive and finite, got {sigma}")
         W = int(np.ceil(window.xy / res))
         n_side = 2 * W + 1
         dthetas = angle_steps(points, window.theta, res)
@@ -168,6 +173,10 @@ class Search:
         n = points.shape[0]
         nc = -(-n_side // BLOCK)  # coarse cells per side
         offs = BLOCK * np.arange(nc)
+        # the compiled sums index without bounds checks: every cell they read must be on the field
+        reach = max(2 * W, int(offs[-1]))
+        if min(px.min(), py.min()) < 0 or px.max() + reach >= L.shape[0] or py.max() + reach >= L.shape[1]:
+            raise NumericalError(f"correlative search: poses off the field (guess {guess}, window {window})")
         # bound[a, i, j] = Σ_points U[px + 4i, py + 4j] / n ≥ every fine score of coarse cell (i, j)
         bound = coarse_sums(block_max(L, BLOCK), px, py, offs) / n
         # minus the smallest pull towards the guess inside each coarse cell: still a bound

@@ -99,8 +99,9 @@ def _cell_sums(L, pxa, pya, x0, x1, y0, y1, out, column):
 
 @kernel
 def coarse_sums(U, px, py, offs):
-    """S (A, nc, nc): S[a, i, j] = Σ_p U[px[a, p] + offs[i], py[a, p] + offs[j]] (correlative.coarse_sums),
-    summed as numpy sums that gather over its points axis (pairwise when nc = 1)."""
+    """S (A, nc, nc): S[a, i, j] = Σ_p U[px[a, p] + offs[i], py[a, p] + offs[j]] (the coarse bounds of
+    correlative.Search.prepare), summed as numpy sums that gather over its points axis (pairwise when
+    nc = 1)."""
     A, n = px.shape
     nc = len(offs)
     out = np.empty((A, nc, nc))
