@@ -39,11 +39,19 @@ from .geometry import (
     transform_points,
 )
 from .graph.loops import FEW_CORNERS, LOW_FITNESS, NO_HYPOTHESIS, agree, chi2, loop_associator, match_submaps
+from .graph.paths import Paths
 from .graph.points import POINTS, match_points, searchable
 from .graph.posegraph import PoseGraph
 from .graph.smooth import smooth
-from .graph.submap import LoopMatch, OpenSubmap, Submap, keyframe_factors, keyframe_nodes, place_table
-from .motion.icp import voxel_thin
+from .graph.submap import (
+    LocalMaps,
+    LoopMatch,
+    OpenSubmap,
+    Submap,
+    keyframe_factors,
+    keyframe_nodes,
+    place_table,
+)
 from .slam import Slam, StepRecord
 
 if TYPE_CHECKING:
@@ -51,7 +59,6 @@ if TYPE_CHECKING:
     from .frontend import Frame
 
 COV_FLOOR = np.diag([1e-8, 1e-8, 1e-10])  # added to a submap's end covariance: a still robot gives Σ = 0
-PATH_CELL = 0.5  # m: a submap's path kept for finding candidates, one position per cell
 # the corners gave no verdict (too few in common, no hypothesis) or a pose the points refute (low fitness:
 # usually a corner constellation repeated elsewhere): the points decide, around the graph's prediction
 TO_POINTS = (FEW_CORNERS, NO_HYPOTHESIS, LOW_FITNESS)
@@ -100,8 +107,9 @@ class HierarchicalSlam:
         self.slam = Slam.from_config(cfg, laser2base)
         self.graph = PoseGraph(cfg.graph)
         self.loop_associate = loop_associator(cfg.association, cfg.loops)
+        self.local_maps = LocalMaps(2 * cfg.loops.max_candidates)  # ICP maps of recent candidates
         self.closed: list[Submap] = []
-        self.paths: list[np.ndarray] = []  # per closed submap: its robot positions thinned (own frame)
+        self.paths = Paths()  # per closed submap: where the robot went (candidates)
         self.tables: list[dict[str, np.ndarray]] = []  # per closed submap: its landmarks (own frame)
         self.loops: list[LoopRecord] = []
         self.step_submap = array("l")
@@ -204,7 +212,7 @@ class HierarchicalSlam:
         )
         self.closed.append(closed)
         self.tables.append({**table, "id": ids})
-        self.paths.append(closed.poses[voxel_thin(closed.poses[:, :2], PATH_CELL), :2])
+        self.paths.add(closed.poses[:, :2])
         return closed
 
     def _close_loops(self, b: Submap, step: int) -> None:
@@ -212,14 +220,15 @@ class HierarchicalSlam:
         cfg = self.cfg.loops
         found, searched = [], 0
         for a in self.candidates(b):
-            m = match_submaps(a, b, cfg, self.loop_associate, self.cfg.scan_match)
+            m = match_submaps(a, b, cfg, self.loop_associate, self.cfg.scan_match, self.local_maps)
             on_points = cfg.point_search and searched < cfg.point_searches and m.reason in TO_POINTS
             on_points = on_points and searchable(a, b)  # (one that cannot run spends no search)
             searched += on_points
             pred = self.graph.relative(a.index, b.index) if on_points or m.accepted else None
             if on_points:
                 kept = 0 if m.reason == LOW_FITNESS else m.n_corners  # (0: the points refuted their pose)
-                m = replace(match_points(a, b, *pred, cfg, self.cfg.scan_match), n_corners=kept)
+                found_on_points = match_points(a, b, *pred, cfg, self.cfg.scan_match, self.local_maps)
+                m = replace(found_on_points, n_corners=kept)
             m = replace(m, cov=m.cov * self._match_scale)
             d2 = chi2(*pred, m.pose, m.cov) if m.accepted else float("nan")
             reason = m.reason or ("" if d2 <= cfg.gate else f"disagrees with the graph (chi2 {d2:.1f})")
@@ -290,18 +299,14 @@ class HierarchicalSlam:
         if last < 0:
             return []
         poses = self.graph.poses()
-        path_b = transform_points(self.paths[b.index], poses[b.index])
         Sb = self.graph.marginal(b.index)
-        reach = float(np.hypot(*self.paths[b.index].T).max())
+        reach = self.paths.reach(b.index)
         sigma = (
             math.sqrt(max(np.linalg.eigvalsh(Sb[:2, :2]).max(), 0.0)) + math.sqrt(max(Sb[2, 2], 0.0)) * reach
         )
-        owner = np.concatenate([np.full(len(self.paths[a]), a) for a in range(last + 1)])
-        path_a = np.concatenate([transform_points(self.paths[a], poses[a]) for a in range(last + 1)])
-        d = np.sqrt(((path_a[:, None, :] - path_b[None, :, :]) ** 2).sum(axis=2)).min(axis=1)
-        closest = np.full(last + 1, np.inf)
-        np.minimum.at(closest, owner, d)
-        near = np.flatnonzero(closest <= cfg.candidate_distance + cfg.candidate_sigmas * sigma)
+        radius = cfg.candidate_distance + cfg.candidate_sigmas * sigma
+        closest = self.paths.closest(b.index, last, poses, radius)
+        near = np.flatnonzero(closest <= radius)
         near = near[np.argsort(closest[near], kind="stable")][: cfg.max_candidates]
         return [self.closed[a] for a in near]
 

@@ -99,7 +99,7 @@ class FakeVerifier:
         self.hs: HierarchicalSlam | None = None
         self.calls = 0
 
-    def __call__(self, a, b, cfg, associate, icp):
+    def __call__(self, a, b, cfg, associate, icp, maps=None):
         self.calls += 1
         pred, _ = self.hs.graph.relative(a.index, b.index)
         off = self.offsets(a.index) if callable(self.offsets) else self.offsets
@@ -148,10 +148,10 @@ def test_closures_that_agree_with_each_other_against_the_graph_enter_it(sim_log,
 def test_closures_found_on_points_are_no_evidence_against_the_graph(sim_log, monkeypatch):
     # the same agreeing closures 1 m off, but found on points around the graph's own prediction: they
     # may not outvote the graph (the group rule is for corner-verified closures only)
-    def corners(a, b, cfg, associate, icp):
+    def corners(a, b, cfg, associate, icp, maps=None):
         return LoopMatch(np.full(3, np.nan), np.full((3, 3), np.nan), 1, 0.0, False, "few corners")
 
-    def points(a, b, prior, prior_cov, cfg, icp):
+    def points(a, b, prior, prior_cov, cfg, icp, maps=None):
         return LoopMatch(compose(prior, (1.0, 0.0, 0.0)), np.diag([1e-4, 1e-4, 1e-5]), 0, 0.9, True, "")
 
     monkeypatch.setattr(hierarchy, "match_points", points)
@@ -276,12 +276,12 @@ def test_pairs_the_corners_cannot_verify_are_verified_on_points(
     # too few corners seen from both (a corridor driven the other way) is no evidence either way, nor is a
     # corner pose the points refute (a constellation repeated elsewhere): the points decide, around the
     # graph's prediction; an ambiguous corner match (two poses fit) stays refused
-    def corners(a, b, cfg, associate, icp):
+    def corners(a, b, cfg, associate, icp, maps=None):
         return LoopMatch(np.full(3, np.nan), np.full((3, 3), np.nan), 2, 0.0, False, corner_reason)
 
     priors, current = [], []
 
-    def points(a, b, prior, prior_cov, cfg, icp):
+    def points(a, b, prior, prior_cov, cfg, icp, maps=None):
         # the prior is the graph's own prediction of b's origin in a's frame, with its covariance
         want, want_cov = current[0].graph.relative(a.index, b.index)
         np.testing.assert_allclose(prior, want)
@@ -334,10 +334,10 @@ def test_verification_stops_once_max_closures_are_accepted(sim_log, monkeypatch)
 
 def test_points_are_searched_for_the_nearest_candidates_only(sim_log, monkeypatch):
     # each search costs a correlative search or two: at most loops.point_searches per closed submap
-    def corners(a, b, cfg, associate, icp):
+    def corners(a, b, cfg, associate, icp, maps=None):
         return LoopMatch(np.full(3, np.nan), np.full((3, 3), np.nan), 2, 0.0, False, "few corners")
 
-    def points(a, b, prior, prior_cov, cfg, icp):
+    def points(a, b, prior, prior_cov, cfg, icp, maps=None):
         return LoopMatch(
             compose(prior, (0.5, 0.0, 0.0)), np.diag([1e-4, 1e-4, 1e-5]), 0, 0.9, False, "ambiguous"
         )

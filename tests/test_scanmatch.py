@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cornerslam_cli.config import load_config
-from cornerslam_cli.errors import ConfigError
+from cornerslam_cli.errors import ConfigError, NumericalError
 from cornerslam_cli.evaluate import ate
 from cornerslam_cli.frontend import odometry_noise
 from cornerslam_cli.geometry import compose, relative, transform_points, wrap_angle
@@ -148,21 +148,64 @@ def test_branch_and_bound_equals_the_exhaustive_search(office):
 
 
 @pytest.mark.parametrize("nc", [1, 2, 6, 26])
-def test_coarse_bounds_summed_in_blocks_are_the_whole_gathers_bit_for_bit(monkeypatch, nc):
-    """The search's coarse bounds, gathered a block of angles and points at a time (bounded memory), are
-    the sums numpy gives for the whole gather at once — also when one angle's terms exceed the cap."""
-    from cornerslam_cli.motion import correlative
+def test_compiled_coarse_bounds_are_numpys_sums_of_the_whole_gather_bit_for_bit(nc):
+    """The search's coarse bounds, summed in a compiled loop without the gather, are the sums numpy gives
+    for the whole gather at once (pairwise over the points for one coarse cell, in order for more)."""
+    from cornerslam_cli.motion.search_kernels import coarse_sums
 
     rng = np.random.default_rng(8)
     U = rng.random((4 * nc + 40, 4 * nc + 40))
-    px, py = rng.integers(0, 40, (2, 31, 300))
     offs = BLOCK * np.arange(nc)
-    whole = U[
-        px[:, :, None, None] + offs[None, None, :, None], py[:, :, None, None] + offs[None, None, None, :]
-    ]
-    for cap in (1 << 21, 7 * 300 * nc * nc, 45 * nc * nc, 1):  # all at once, 7 angles, 45 points, one
-        monkeypatch.setattr(correlative, "BOUND_TERMS", cap)
-        assert np.array_equal(correlative.coarse_sums(U, px, py, offs), whole.sum(axis=1))
+    for n in (1, 7, 8, 9, 127, 128, 129, 300, 1000):  # the branches of numpy's pairwise sum
+        px, py = rng.integers(0, 40, (2, 31, n))
+        whole = U[
+            px[:, :, None, None] + offs[None, None, :, None], py[:, :, None, None] + offs[None, None, None, :]
+        ]
+        assert np.array_equal(coarse_sums(U, px, py, offs), whole.sum(axis=1))
+
+
+def test_compiled_cell_sums_are_numpys_sums_of_the_gather_bit_for_bit():
+    """One cell of fine offsets, summed in a compiled loop, is numpy's sum of the gather over its points:
+    in order for cells of two or more offsets, pairwise for one (its gather is contiguous)."""
+    from cornerslam_cli.motion.search_kernels import _cell_sums
+
+    rng = np.random.default_rng(9)
+    L = rng.random((60, 60))
+    out = np.empty((BLOCK, BLOCK))
+    for n in (1, 7, 8, 9, 127, 128, 129, 300, 1000):
+        pxa, pya = rng.integers(0, 50, (2, n))
+        for nx, ny in ((1, 1), (1, 4), (4, 1), (3, 2), (4, 4)):
+            ox, oy = np.arange(2, 2 + nx), np.arange(5, 5 + ny)
+            want = L[pxa[:, None, None] + ox[None, :, None], pya[:, None, None] + oy[None, None, :]].sum(
+                axis=0
+            )
+            _cell_sums(L, pxa, pya, 2, 2 + nx, 5, 5 + ny, out, np.empty(n))
+            assert np.array_equal(out[:nx, :ny], want), (n, nx, ny)
+
+
+def test_compiled_search_equals_the_numpy_search_exactly(office):
+    """The compiled branch and bound returns the numpy search's pose, score and count bit for bit (tests/
+    _correlative_reference.py): windows whose side is and is not a multiple of the coarse cell (one-cell
+    coarse rims, summed pairwise by numpy), one coarse cell in all, with and without an exclusion."""
+    from _correlative_reference import search as numpy_search
+
+    rng = np.random.default_rng(31)
+    for trial in range(40):
+        ref_pose = np.array([rng.uniform(3, 27), rng.uniform(3, 17), rng.uniform(-3, 3)])
+        map_pts = transform_points(scan_points(office, ref_pose, rng, 0.01), ref_pose)
+        true_pose = ref_pose + [*rng.normal(0, 0.3, 2), rng.normal(0, 0.1)]
+        points = scan_points(office, true_pose, rng, 0.01)[:: 1 + trial % 5]
+        guess = true_pose + [*rng.normal(0, 0.1, 2), rng.normal(0, 0.05)]
+        res = (0.1, 0.2, 0.05)[trial % 3]
+        window = Window(float(rng.uniform(0.0, 1.2)), float(rng.uniform(0.0, 0.5)))
+        exclude = None
+        if trial % 2:
+            found = numpy_search(points, map_pts, guess, window, res, 0.1)
+            exclude = Exclusion(found.pose, 0.3, float(rng.uniform(0.05, 0.3)))
+        got = search(points, map_pts, guess, window, res, 0.1, exclude=exclude)
+        want = numpy_search(points, map_pts, guess, window, res, 0.1, exclude=exclude)
+        assert np.array_equal(got.pose, want.pose), trial
+        assert got.score == want.score and got.evaluated == want.evaluated, trial
 
 
 def test_a_wide_search_window_stays_within_bounded_memory(office):
@@ -445,3 +488,44 @@ def test_the_compiled_gauss_newton_step_solves_icps_normal_equations():
         got = np.empty(3)
         gauss_newton_step(J, w, r, prior, off, got)
         np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-14)
+
+
+def test_compiled_search_breaks_ties_as_the_numpy_search():
+    """Where many poses score the same — an empty map (every score 0 but the pull), a lattice matched
+    against itself (a translation of one lattice step fits as well) — with and without an exclusion of
+    the best, the compiled search keeps the pose, score and count numpy's argmax order gives."""
+    from _correlative_reference import search as numpy_search
+
+    grid = np.stack(np.meshgrid(np.arange(7.0), np.arange(7.0)), axis=-1).reshape(-1, 2) * 0.5
+    far = grid + 100.0  # nothing of the map near where the scan can land
+    cases = [(grid, np.zeros(3)), (far, np.zeros(3)), (grid, np.array([0.05, -0.05, 0.0]))]
+    for map_pts, guess in cases:
+        for window in (Window(0.6, 0.1), Window(0.5, 0.0), Window(0.1, 0.2)):
+            found = numpy_search(grid, map_pts, guess, window, 0.1, 0.1)
+            for exclude in (None, *(Exclusion(found.pose, xy, 0.2) for xy in (0.05, 0.3, 10.0))):
+                got = search(grid, map_pts, guess, window, 0.1, 0.1, exclude=exclude)
+                want = numpy_search(grid, map_pts, guess, window, 0.1, 0.1, exclude=exclude)
+                assert np.array_equal(got.pose, want.pose) and got.score == want.score
+                assert got.evaluated == want.evaluated
+
+
+def test_search_refuses_what_its_compiled_sums_cannot_take(office):
+    """A blur of zero (a field of NaN) and poses so far out that the field's cells cannot hold them are
+    errors, never a read beyond the field."""
+    points = scan_points(office, np.array([6.0, 5.0, 0.0]))
+    with pytest.raises(ValueError, match="sigma"):
+        search(points, points, np.zeros(3), Window(0.5, 0.1), 0.1, 0.0)
+    with pytest.raises(NumericalError, match="off the field"):
+        search(points, points + 1e16, np.array([1e16, 1e16, 0.0]), Window(0.5, 0.1), 0.1, 0.1)
+
+
+def test_compiled_pairwise_sum_is_numpys_bit_for_bit():
+    """The compiled pairwise sum adds as numpy's sum of a contiguous float64 run: below 8, blocks of
+    8 partial sums up to 128, halves above (split at a multiple of 8), at any start."""
+    from cornerslam_cli.motion.search_kernels import pairwise_sum
+
+    rng = np.random.default_rng(10)
+    v = rng.random(5000) * 10.0 ** rng.integers(-8, 8, 5000)  # magnitudes apart: the order shows
+    for n in (0, 1, 7, 8, 9, 15, 16, 127, 128, 129, 130, 255, 256, 257, 1000, 1023, 4096, 4999):
+        for lo in (0, 1):
+            assert pairwise_sum(v, lo, n) == np.sum(v[lo : lo + n]), (n, lo)

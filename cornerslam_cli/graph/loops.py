@@ -54,6 +54,7 @@ prediction: graph/points.py (hierarchy.py decides when, ``loops.point_search``).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -64,7 +65,7 @@ from ..geometry import transform_points, wrap_angle
 from ..motion.icp import NORMAL_NEIGHBOURS, LocalMap, register
 from ..motion.params import ScanMatchConfig
 from .params import LoopConfig
-from .submap import LoopMatch, Submap
+from .submap import LoopMatch, Submap, local_map
 
 VOTE_XY = 0.5  # m: Hough cell of a hypothesis' translation, for the votes that order them
 VOTE_THETA = 0.2  # rad: ... and of its heading
@@ -125,9 +126,15 @@ class CornerSet:
 
 
 def match_submaps(
-    a: Submap, b: Submap, cfg: LoopConfig, associate: Associator, icp: ScanMatchConfig
+    a: Submap,
+    b: Submap,
+    cfg: LoopConfig,
+    associate: Associator,
+    icp: ScanMatchConfig,
+    maps: Callable[[Submap], LocalMap] = local_map,
 ) -> LoopMatch:
-    """Verify a loop closure between submaps a and b (module docstring); never raises on empty input."""
+    """Verify a loop closure between submaps a and b (module docstring); never raises on empty input.
+    ``maps``: a's points as ICP's map (a cache of them: graph/submap.LocalMaps)."""
     hyps = pair_hypotheses(a.landmarks, b.landmarks, cfg)
     sets = corner_sets(a, b, hyps, cfg, associate)
     if not sets:
@@ -141,7 +148,7 @@ def match_submaps(
         return rejected(best.pose, best.n, AMBIGUOUS)
     if len(a.points) < NORMAL_NEIGHBOURS or len(b.points) < 3:  # nothing to refine or measure with
         return rejected(best.pose, best.n, LOW_FITNESS)
-    local = LocalMap.build(a.points)
+    local = maps(a)
     reg = register(b.points, local, best.pose, icp)
     fitness = overlap_fitness(b.points, local, reg.pose, cfg.inlier_distance)
     accepted = fitness >= cfg.min_fitness

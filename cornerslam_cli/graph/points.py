@@ -13,10 +13,11 @@ a's frame, the match's covariance in a's frame.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
-from ..motion.correlative import Exclusion, Window, search
+from ..motion.correlative import Exclusion, Search, Window
 from ..motion.icp import NORMAL_NEIGHBOURS, LocalMap, register, voxel_thin
 from ..motion.params import ScanMatchConfig
 from .loops import (
@@ -29,7 +30,7 @@ from .loops import (
     rejected,
 )
 from .params import LoopConfig
-from .submap import LoopMatch, Submap
+from .submap import LoopMatch, Submap, local_map
 
 NOT_DISTINCT = "not distinct on points"  # the points fit as well moved along the fit's weak direction
 POINTS = "verified on points"  # accepted on the scan points alone (the corners could not verify it)
@@ -44,12 +45,18 @@ POINT_RES = 2.0
 
 
 def match_points(
-    a: Submap, b: Submap, prior: np.ndarray, prior_cov: np.ndarray, cfg: LoopConfig, icp: ScanMatchConfig
+    a: Submap,
+    b: Submap,
+    prior: np.ndarray,
+    prior_cov: np.ndarray,
+    cfg: LoopConfig,
+    icp: ScanMatchConfig,
+    maps: Callable[[Submap], LocalMap] = local_map,
 ) -> LoopMatch:
     """Verify a→b on the two submaps' scan points alone, for a pair whose corners cannot (too few seen
     from both: a corridor driven the other way round; or a corner pose the points refute). Unlike
     :func:`match_submaps` this needs a prior: the graph's predicted a→b ``prior`` and its covariance
-    ``prior_cov`` (a's frame).
+    ``prior_cov`` (a's frame); ``maps``: a's points as ICP's map (a cache of them: graph/submap.LocalMaps).
 
     The correlative search (motion/correlative.py) finds the best pose of b's points (thinned) on a's
     within ±3σ of the prior (at least ICP's basin; at most ``point_max_xy`` / ``point_max_theta`` and
@@ -68,8 +75,9 @@ def match_points(
     window = points_window(prior_cov, cfg, res)
     pts = b.points[voxel_thin(b.points, POINT_VOXEL)]
     pts = pts[:: -(-len(pts) // POINT_MAX)]
-    found = search(pts, a.points, prior, window, res, icp.search_sigma)
-    local = LocalMap.build(a.points)
+    field = Search.prepare(pts, a.points, prior, window, res, icp.search_sigma)
+    found = field.best()
+    local = maps(a)
     reg = register(b.points, local, found.pose, icp)
     fitness = overlap_fitness(b.points, local, reg.pose, cfg.inlier_distance)
     if fitness < cfg.min_fitness:
@@ -77,7 +85,7 @@ def match_points(
     if not distinct(b.points, local, reg.pose, reg.cov, fitness, cfg):
         return LoopMatch(reg.pose, reg.cov, 0, fitness, False, NOT_DISTINCT)
     away = Exclusion(found.pose, AMBIGUOUS_XY, AMBIGUOUS_THETA)
-    other = search(pts, a.points, prior, window, res, icp.search_sigma, exclude=away)
+    other = field.best(exclude=away)
     if np.isfinite(other.score) and other.score >= cfg.point_distinct * found.score:
         return LoopMatch(reg.pose, reg.cov, 0, fitness, False, AMBIGUOUS)
     return LoopMatch(reg.pose, reg.cov, 0, fitness, True, "")

@@ -10,12 +10,13 @@ GTSAM's tangent space).
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..geometry import relative, rotate_covariance, rotate_pose_covariance, transform_points, wrap_angle
-from ..motion.icp import voxel_thin
+from ..motion.icp import LocalMap, voxel_thin
 
 
 @dataclass(frozen=True)
@@ -35,6 +36,30 @@ class Submap:
     node: int = 0  # its origin's node in the pose graph
     step_nodes: np.ndarray | None = None  # (s,) the graph node each step hangs from (its anchor) …
     anchor_poses: np.ndarray | None = None  # (s, 3) … and that node's pose in this submap's frame
+
+
+def local_map(submap: Submap) -> LocalMap:
+    """Submap's points as ICP's map (normals, nearest-point grid)."""
+    return LocalMap.build(submap.points)
+
+
+class LocalMaps:
+    """:func:`local_map` of the ``size`` submaps most recently asked for: loop closing verifies a new
+    submap against the same few neighbours close after close (a revisited corridor); memory stays
+    bounded by ``size``. The maps are the ones :func:`local_map` builds (immutable); a submap that is not
+    the one a map was built for (the same index) gets its own."""
+
+    def __init__(self, size: int):
+        self.size = max(1, size)
+        self._maps: OrderedDict[int, tuple[Submap, LocalMap]] = OrderedDict()
+
+    def __call__(self, submap: Submap) -> LocalMap:
+        kept = self._maps.pop(submap.index, None)
+        built = kept[1] if kept is not None and kept[0] is submap else local_map(submap)
+        self._maps[submap.index] = (submap, built)
+        if len(self._maps) > self.size:
+            self._maps.popitem(last=False)
+        return built
 
 
 @dataclass(frozen=True)

@@ -24,10 +24,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from ..errors import NumericalError
+from .search_kernels import branch_and_bound, coarse_sums
+
 BLOCK = 4  # fine cells per coarse cell side
-# the coarse bounds are summed over at most this many (angle, point, coarse cell) terms at a time: their
-# memory (8 bytes each) stays bounded whatever the window (a 5 m window gathered all at once took 293 MB)
-BOUND_TERMS = 1 << 21
 MAX_ANGLES = 121  # rotations scored per window at most (the step grows on wide windows)
 MIN_ANGLE_STEP = 0.002  # rad
 # score lost per (offset / window half-width)² on each axis: among poses that fit about equally (along a
@@ -51,15 +51,21 @@ class Exclusion:
     xy: float
     theta: float
 
+    def near(self, guess: np.ndarray, ox: np.ndarray, oy: np.ndarray, res: float) -> np.ndarray:
+        """(len(ox), len(oy)) whether the positions guess + (ox, oy)·res are within ``xy`` of the pose."""
+        dx = guess[0] + ox * res - self.pose[0]
+        dy = guess[1] + oy * res - self.pose[1]
+        return dx[:, None] ** 2 + dy[None, :] ** 2 <= self.xy**2
+
+    def turned(self, heading: float) -> bool:
+        """Whether ``heading`` is within ``self.theta`` radians of the pose's."""
+        return abs(math.remainder(heading - float(self.pose[2]), math.tau)) <= self.theta
+
     def covers(
         self, guess: np.ndarray, ox: np.ndarray, oy: np.ndarray, res: float, theta: float
     ) -> np.ndarray:
         """(len(ox), len(oy)) whether the poses guess + (ox, oy)·res at heading ``theta`` are excluded."""
-        dx = guess[0] + ox * res - self.pose[0]
-        dy = guess[1] + oy * res - self.pose[1]
-        near = dx[:, None] ** 2 + dy[None, :] ** 2 <= self.xy**2
-        turned = abs(math.remainder(theta - float(self.pose[2]), math.tau)) <= self.theta
-        return near & turned
+        return self.near(guess, ox, oy, res) & self.turned(theta)
 
 
 @dataclass(frozen=True)
@@ -96,27 +102,6 @@ def block_max(L: np.ndarray, b: int) -> np.ndarray:
     return U
 
 
-def coarse_sums(U: np.ndarray, px: np.ndarray, py: np.ndarray, offs: np.ndarray) -> np.ndarray:
-    """S (A, nc, nc) with S[a, i, j] = Σ_p U[px[a, p] + offs[i], py[a, p] + offs[j]], gathered a block of
-    angles and points at a time (at most ``BOUND_TERMS`` terms): the sums of the whole gather, bit for
-    bit — numpy sums a middle axis in order, so a block's sum continues from the previous one's."""
-    A, n = px.shape
-    per_point = len(offs) ** 2
-    # one coarse cell: numpy sums the points pairwise (a contiguous axis), so they are not split
-    points_step = n if per_point == 1 else max(1, min(n, BOUND_TERMS // per_point))
-    angles_step = max(1, BOUND_TERMS // (points_step * per_point))
-    out = np.empty((A, len(offs), len(offs)))
-    for a in range(0, A, angles_step):
-        rows = slice(a, a + angles_step)
-        acc = None
-        for p in range(0, n, points_step):  # more than one block only when one angle's terms exceed the cap
-            cols = slice(p, p + points_step)
-            terms = U[px[rows, cols, None, None] + offs[:, None], py[rows, cols, None, None] + offs]
-            acc = (terms if acc is None else np.concatenate((acc[:, None], terms), axis=1)).sum(axis=1)
-        out[rows] = acc
-    return out
-
-
 def angle_steps(points: np.ndarray, theta: float, res: float) -> np.ndarray:
     """Rotations (offsets from the guess) of a window of half-width ``theta``: a step that moves the
     90th-percentile-range point by one cell (Olson), coarser when that would exceed MAX_ANGLES."""
@@ -138,59 +123,101 @@ def search(
     """The pose in ``window`` around ``guess`` that maximises the mean likelihood of ``points`` (base
     frame) on the field of ``map_points`` (motion frame) minus a small pull towards the guess;
     ``exclude``: poses near one already found are not candidates (the runner-up of an ambiguity test)."""
-    W = int(np.ceil(window.xy / res))
-    n_side = 2 * W + 1
-    dthetas = angle_steps(points, window.theta, res)
-    thetas = guess[2] + dthetas
-    c, s = np.cos(thetas), np.sin(thetas)
-    # (A, n, 2) scan points rotated by each candidate heading and placed at the guess's position
-    rx = c[:, None] * points[None, :, 0] - s[:, None] * points[None, :, 1] + guess[0]
-    ry = s[:, None] * points[None, :, 0] + c[:, None] * points[None, :, 1] + guess[1]
-    margin = window.xy + 3.0 * sigma + 2.0 * res
-    lo = np.array([rx.min() - margin, ry.min() - margin])
-    hi = np.array([rx.max() + margin, ry.max() + margin])
-    shape = tuple(int(v) for v in np.ceil((hi - lo) / res) + BLOCK)
-    L = likelihood_field(map_points, lo, shape, res, sigma)
-    # cell of each rotated point at the window's lowest translation offset (−W, −W)
-    px = np.floor((rx - lo[0]) / res).astype(np.int64) - W
-    py = np.floor((ry - lo[1]) / res).astype(np.int64) - W
-    n = points.shape[0]
-    nc = -(-n_side // BLOCK)  # coarse cells per side
-    U = block_max(L, BLOCK)
-    offs = BLOCK * np.arange(nc)
-    # bound[a, i, j] = Σ_points U[px + 4i, py + 4j] / n ≥ the score of every fine offset of coarse cell (i, j)
-    bound = coarse_sums(U, px, py, offs) / n
-    # minus the smallest pull towards the guess inside each coarse cell: still a bound
-    near = np.clip(0, offs - W, offs + BLOCK - 1 - W)  # per axis, the cell offset closest to the guess
-    bound -= PULL * (
-        (dthetas / max(window.theta, 1e-9))[:, None, None] ** 2
-        + ((near * res / window.xy) ** 2)[None, :, None]
-        + ((near * res / window.xy) ** 2)[None, None, :]
-    )
-    order = np.argsort(-bound, axis=None, kind="stable")
-    best, best_pose, evaluated = -1.0, guess.copy(), 0
-    fine = np.arange(BLOCK)
-    for flat in order:
-        a, i, j = np.unravel_index(flat, bound.shape)
-        if bound[a, i, j] <= best:
-            break
-        ox = (BLOCK * i + fine)[BLOCK * i + fine < n_side]
-        oy = (BLOCK * j + fine)[BLOCK * j + fine < n_side]
-        sc = (
-            L[px[a][:, None, None] + ox[None, :, None], py[a][:, None, None] + oy[None, None, :]].sum(axis=0)
-            / n
+    return Search.prepare(points, map_points, guess, window, res, sigma).best(exclude)
+
+
+@dataclass(frozen=True, eq=False)
+class Search:
+    """One search's field, rotated points and coarse bounds (:meth:`prepare`), asked for its best pose
+    (:meth:`best`) once or more: the runner-up of an ambiguity test searches the same field again."""
+
+    guess: np.ndarray
+    window: Window
+    res: float
+    W: int  # the window's half-width in cells: offsets −W..W on each axis
+    dthetas: np.ndarray  # (A,) rotations from the guess
+    L: np.ndarray  # the likelihood field
+    px: np.ndarray  # (A, n) cell of each rotated point at the window's lowest offset (−W, −W)
+    py: np.ndarray
+    bound: np.ndarray  # (A, nc, nc) upper bound of every fine score in each coarse cell
+    order: np.ndarray  # flat indices of ``bound``, best first
+
+    @staticmethod
+    def prepare(
+        points: np.ndarray,
+        map_points: np.ndarray,
+        guess: np.ndarray,
+        window: Window,
+        res: float,
+        sigma: float,
+    ) -> Search:
+        """The field of ``map_points`` around where ``points`` can land from ``guess`` within ``window``,
+        the points' cells at each rotation and the coarse bounds (arguments as :func:`search`)."""
+        if not (sigma > 0.0 and math.isfinite(sigma)):
+            raise ValueError(f"correlative search: sigma must be positive and finite, got {sigma}")
+        W = int(np.ceil(window.xy / res))
+        n_side = 2 * W + 1
+        dthetas = angle_steps(points, window.theta, res)
+        thetas = guess[2] + dthetas
+        c, s = np.cos(thetas), np.sin(thetas)
+        # (A, n, 2) scan points rotated by each candidate heading and placed at the guess's position
+        rx = c[:, None] * points[None, :, 0] - s[:, None] * points[None, :, 1] + guess[0]
+        ry = s[:, None] * points[None, :, 0] + c[:, None] * points[None, :, 1] + guess[1]
+        margin = window.xy + 3.0 * sigma + 2.0 * res
+        lo = np.array([rx.min() - margin, ry.min() - margin])
+        hi = np.array([rx.max() + margin, ry.max() + margin])
+        shape = tuple(int(v) for v in np.ceil((hi - lo) / res) + BLOCK)
+        L = likelihood_field(map_points, lo, shape, res, sigma)
+        px = np.floor((rx - lo[0]) / res).astype(np.int64) - W
+        py = np.floor((ry - lo[1]) / res).astype(np.int64) - W
+        n = points.shape[0]
+        nc = -(-n_side // BLOCK)  # coarse cells per side
+        offs = BLOCK * np.arange(nc)
+        # the compiled sums index without bounds checks: every cell they read must be on the field
+        reach = max(2 * W, int(offs[-1]))
+        if min(px.min(), py.min()) < 0 or px.max() + reach >= L.shape[0] or py.max() + reach >= L.shape[1]:
+            raise NumericalError(f"correlative search: poses off the field (guess {guess}, window {window})")
+        # bound[a, i, j] = Σ_points U[px + 4i, py + 4j] / n ≥ every fine score of coarse cell (i, j)
+        bound = coarse_sums(block_max(L, BLOCK), px, py, offs) / n
+        # minus the smallest pull towards the guess inside each coarse cell: still a bound
+        near = np.clip(0, offs - W, offs + BLOCK - 1 - W)  # per axis, the cell offset closest to the guess
+        bound -= PULL * (
+            (dthetas / max(window.theta, 1e-9))[:, None, None] ** 2
+            + ((near * res / window.xy) ** 2)[None, :, None]
+            + ((near * res / window.xy) ** 2)[None, None, :]
         )
-        sc = sc - PULL * (
-            (dthetas[a] / max(window.theta, 1e-9)) ** 2
-            + ((ox - W) * res / window.xy)[:, None] ** 2
-            + ((oy - W) * res / window.xy)[None, :] ** 2
+        order = np.argsort(-bound, axis=None, kind="stable")
+        return Search(guess, window, res, W, dthetas, L, px, py, bound, order)
+
+    def best(self, exclude: Exclusion | None = None) -> SearchResult:
+        """The best pose of the window (but those ``exclude`` covers): branch and bound over the coarse
+        cells, best bound first (search_kernels.branch_and_bound)."""
+        guess, window, res, W = self.guess, self.window, self.res, self.W
+        n_side = 2 * W + 1
+        thetas = guess[2] + self.dthetas
+        offsets = np.arange(n_side) - W
+        shift_term = (offsets * res / window.xy) ** 2
+        turn_term = np.array([(d / max(window.theta, 1e-9)) ** 2 for d in self.dthetas])
+        if exclude is None:
+            excluded, turned = np.zeros((n_side, n_side), dtype=bool), np.zeros(len(thetas), dtype=bool)
+        else:
+            excluded = exclude.near(guess, offsets, offsets, res)
+            turned = np.array([exclude.turned(t) for t in thetas], dtype=bool)
+        score, a, ox, oy, evaluated = branch_and_bound(
+            self.L,
+            self.px,
+            self.py,
+            self.bound,
+            self.order,
+            n_side,
+            BLOCK,
+            PULL,
+            turn_term,
+            shift_term,
+            excluded,
+            turned,
         )
-        if exclude is not None:
-            sc = np.where(exclude.covers(guess, ox - W, oy - W, res, thetas[a]), -np.inf, sc)
-        evaluated += sc.size
-        k = int(np.argmax(sc))
-        if sc.flat[k] > best:
-            bi, bj = np.unravel_index(k, sc.shape)
-            best = float(sc.flat[k])
-            best_pose = np.array([guess[0] + (ox[bi] - W) * res, guess[1] + (oy[bj] - W) * res, thetas[a]])
-    return SearchResult(best_pose, best, evaluated)
+        if a < 0:
+            return SearchResult(guess.copy(), score, evaluated)
+        pose = np.array([guess[0] + (ox - W) * res, guess[1] + (oy - W) * res, thetas[a]])
+        return SearchResult(pose, score, evaluated)

@@ -127,11 +127,13 @@ class LocalMap:
 
 def load_kernels() -> None:
     """Load (on a machine's first run: compile) the scan matcher's Numba kernels (motion/nearest.py,
-    motion/kernels.py, the fusion's Student-t fit) now, so that the first timed match of a run does
-    not pay it: one :func:`register` of a corner against itself, one fit of a single sample."""
+    motion/kernels.py, search_kernels.py, the fusion's Student-t fit) now, so that the first timed match
+    of a run does not pay it: one :func:`register` of a corner against itself, one correlative search of
+    it, one fit of a single sample."""
     s = np.linspace(0.0, 1.0, 21)
     corner = np.concatenate((np.column_stack((s, 0.0 * s)), np.column_stack((0.0 * s, s))))
     register(corner[voxel_thin(corner, 0.05)], LocalMap.build(corner), np.zeros(3), ScanMatchConfig())
+    search(corner, corner, np.zeros(3), Window(0.2, 0.1), 0.1, 0.1)
     student_fit(np.zeros((1, 3)), np.eye(3)[None], np.zeros((1, 3, 2)))
 
 
