@@ -2,6 +2,7 @@
 >= 300 scans/s with scan matching on), this build side by side with another (default: main).
 
     python benchmarks/bench_run.py [--laps 1] [--baseline main] [--repeat 2]   # writes docs/results/run.md
+    python benchmarks/bench_run.py --set scan_match.near_history=100   # this build so: run_<set>.md
 
 Both builds run the same log in one benchmark run, interleaved (baseline, this, baseline, this, ...) so
 that the shared machine's load falls on both alike, after one untimed short run of each (a fresh
@@ -20,6 +21,7 @@ import csv
 import json
 import os
 import platform
+import re
 import subprocess
 import sys
 import tempfile
@@ -99,14 +101,16 @@ def same_outputs(a: Path, b: Path) -> bool:
     return all((a / f).read_bytes() == (b / f).read_bytes() for f in OUTPUTS)
 
 
-def side_by_side(builds: dict[str, dict], log: Path, tmp: Path, repeat: int) -> list[tuple]:
-    """(case, build label, best run) for every case and build, interleaved."""
-    rows = []
+def side_by_side(builds: dict[str, dict], log: Path, tmp: Path, repeat: int, sets: list[str]) -> list[tuple]:
+    """(case, build label, best run) for every case and build, interleaved; ``sets`` (``--set`` options)
+    for the last build (this one)."""
+    rows, this = [], list(builds)[-1]
     for label, extra in CASES:
         best: dict[str, dict] = {}
         for rep in range(repeat):
             for name, env in builds.items():
-                r = run_once(env, log, tmp / f"{name}-{len(rows)}-{rep}", "pca", extra)
+                own = sets if name == this else []
+                r = run_once(env, log, tmp / f"{name}-{len(rows)}-{rep}", "pca", [*extra, *own])
                 print(name, label, f"{r['sps']:.0f} scans/s", flush=True)
                 if name not in best or r["sps"] > best[name]["sps"]:
                     best[name] = r
@@ -119,8 +123,11 @@ def main() -> int:
     ap.add_argument("--laps", type=int, default=1)
     ap.add_argument("--baseline", default="main", help="git revision to compare with ('' for none)")
     ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
+                    help="config override of this build's runs (report: run_<KEY-VALUE>.md)")  # fmt: skip
     args = ap.parse_args()
-    this = f"this build ({revision()})"
+    sets = [x for kv in args.sets for x in ("--set", kv)]
+    this = f"this build ({revision()})" + "".join(f" `{kv}`" for kv in args.sets)
     with tempfile.TemporaryDirectory() as t, source_tree(args.baseline or "HEAD") as base_src:
         tmp = Path(t)
         log = tmp / "bench.mcap"
@@ -133,13 +140,13 @@ def main() -> int:
         builds[this] = cur_env
         for i, env in enumerate(builds.values()):  # untimed: a fresh source tree compiles its kernels
             run_once(env, log, tmp / f"warm-{i}", "pca", ["--max-scans", "20"])
-        rows = side_by_side(builds, log, tmp, args.repeat)
+        rows = side_by_side(builds, log, tmp, args.repeat, sets)
         assoc_rows = []
         for assoc in ("icnn", "jcbb"):
-            r = run_once(cur_env, log, tmp / f"assoc-{assoc}", assoc, [])
+            r = run_once(cur_env, log, tmp / f"assoc-{assoc}", assoc, sets)
             assoc_rows.append((assoc, r))
         profiles = [
-            (label, profile(cur_env, log, tmp / f"prof-{i}", extra))
+            (label, profile(cur_env, log, tmp / f"prof-{i}", [*extra, *sets]))
             for i, (label, extra) in enumerate(CASES[:2])
         ]
         identical = {
@@ -149,7 +156,8 @@ def main() -> int:
         }
         versions = rows[-1][2]["versions"]
         text = report(args, rows, assoc_rows, identical, versions, this, profiles)
-    (ROOT / "docs" / "results" / "run.md").write_text(text)
+    name = "run" + "".join("_" + re.sub(r"[^A-Za-z0-9._-]+", "-", kv) for kv in args.sets)
+    (ROOT / "docs" / "results" / f"{name}.md").write_text(text)
     print(text)
     return 0
 

@@ -8,7 +8,8 @@ odometry increment by registering the scan; the refined pose chain is then the f
 Frames: points in the robot base frame; poses (x, y, θ) in the *motion frame*, which starts at the first
 odometry pose and is what the filter's prediction differentiates. The local map holds the last
 ``window`` scans that moved the robot far enough, placed with their refined poses and thinned to one
-point per voxel. Per scan:
+point per voxel, and (``near_history`` > 0) those of the older map scans whose pose lies near the robot's
+(:func:`near_scans`: a place revisited, or passed slowly). Per scan:
 
 1. guess = previous refined pose ∘ wheel increment;
 2. Gauss–Newton on Σ ρ(nᵢ·(R pᵢ + t − qᵢ)) with qᵢ the nearest map point and nᵢ its normal (PCA of its 5
@@ -88,6 +89,12 @@ def line_normals(points: np.ndarray, grid: BucketGrid) -> tuple[np.ndarray, np.n
     return normals, on_line & (k == NORMAL_NEIGHBOURS)
 
 
+def overlap(grid: BucketGrid, points: np.ndarray, inlier_distance: float) -> float:
+    """Share of ``points`` within ``inlier_distance`` of the points of ``grid``."""
+    dist, _ = grid.query(points, inlier_distance)
+    return float(np.mean(dist < inlier_distance))
+
+
 @dataclass
 class LocalMap:
     """Map points (k, 2), their bucket grid (the nearest-point queries of ICP and the normals'
@@ -115,8 +122,7 @@ class LocalMap:
 
     def fit(self, placed: np.ndarray, inlier_distance: float) -> float:
         """Share of the ``placed`` points (motion frame) within ``inlier_distance`` of the map."""
-        dist, _ = self.grid.query(placed, inlier_distance)
-        return float(np.mean(dist < inlier_distance))
+        return overlap(self.grid, placed, inlier_distance)
 
 
 def load_kernels() -> None:
@@ -209,6 +215,25 @@ def _ar1_inflation(r: np.ndarray) -> float:
 
 
 @dataclass(frozen=True)
+class MapScan:
+    """One scan of the local map: its refined pose (3,) and its points (k, 2) placed with it (motion
+    frame), thinned to one point per voxel."""
+
+    pose: np.ndarray
+    points: np.ndarray
+
+
+def near_scans(poses: np.ndarray, pose: np.ndarray, radius: float, angle: float, most: int) -> np.ndarray:
+    """Indices, in increasing order, of the ``poses`` (k, 3) within ``radius`` (m) of ``pose`` and within
+    ``angle`` (rad) of its heading; of more than ``most`` such, the ``most`` nearest (ties: the older)."""
+    d = np.hypot(poses[:, 0] - pose[0], poses[:, 1] - pose[1])
+    idx = np.flatnonzero((d <= radius) & (np.abs(wrap_angle(poses[:, 2] - pose[2])) <= angle))
+    if len(idx) > most:
+        idx = np.sort(idx[np.argsort(d[idx], kind="stable")[:most]])
+    return idx
+
+
+@dataclass(frozen=True)
 class MatchResult:
     pose: np.ndarray  # fused pose of the scan in the motion frame (the filter's motion input)
     fit: float  # share of scan points within inlier_distance of the map after the match
@@ -224,7 +249,8 @@ class ScanMatcher:
         self.cfg = cfg
         self.odometry_noise = odometry_noise  # covariance of an odometry increment (the filter's model)
         self.fusion = OdometryFusion(cfg)
-        self.scans: deque[np.ndarray] = deque(maxlen=cfg.window)  # motion-frame points per map scan
+        self.scans: deque[MapScan] = deque(maxlen=cfg.window)  # the last map scans
+        self.history: deque[MapScan] = deque(maxlen=cfg.near_history)  # older ones (near_scans)
         self.local: LocalMap | None = None
         self.pose: np.ndarray | None = None  # fused pose of the previous scan
         self.odom: np.ndarray | None = None  # wheel pose of the previous scan
@@ -330,8 +356,9 @@ class ScanMatcher:
 
     def _grow_map(self, points: np.ndarray, pose: np.ndarray) -> None:
         """Add the scan to the local map if the robot moved enough since the last one that joined; the
-        map is the union of the window's scans thinned to one point per voxel, normals computed on it
-        (denser than one scan: better normals on sparse 1° scans)."""
+        map is the union of the window's scans and of the history's near this one (:meth:`_near`), thinned
+        to one point per voxel (the window's first: the newest placements win a cell), normals computed on
+        it (denser than one scan: better normals on sparse 1° scans)."""
         cfg = self.cfg
         if self.last_map_pose is not None:
             d = np.hypot(*(pose[:2] - self.last_map_pose[:2]))
@@ -342,6 +369,27 @@ class ScanMatcher:
             return
         self.last_map_pose = pose.copy()
         placed = transform_points(points, pose)
-        self.scans.append(placed[voxel_thin(placed, cfg.voxel)])  # thinned alone first: a smaller union
-        pts = np.concatenate(self.scans)
+        if len(self.scans) == self.scans.maxlen:
+            self.history.append(self.scans[0])  # leaves the window (kept when near_history > 0)
+        self.scans.append(MapScan(pose.copy(), placed[voxel_thin(placed, cfg.voxel)]))  # thinned alone first
+        pts = window = np.concatenate([s.points for s in self.scans])
+        if near := self._near(pose, window):
+            pts = np.concatenate([window, *(s.points for s in near)])
         self.local = LocalMap.build(pts[voxel_thin(pts, cfg.voxel)])
+
+    def _near(self, pose: np.ndarray, window: np.ndarray) -> list[MapScan]:
+        """The history's scans near ``pose`` (the scan that joined: the map serves the scans until the
+        next joins, within ``map_update_distance`` of it), oldest first; with ``near_min_fit`` > 0 only
+        those of which that share of points lies within ``inlier_distance`` of the ``window``'s points
+        (a scan placed with a pose the chain has since drifted from would double the walls)."""
+        if not self.history:
+            return []
+        cfg = self.cfg
+        poses = np.array([s.pose for s in self.history])
+        near = [
+            self.history[i] for i in near_scans(poses, pose, cfg.near_radius, cfg.near_angle, cfg.near_max)
+        ]
+        if cfg.near_min_fit <= 0 or not near:
+            return near
+        grid = BucketGrid.build(window)
+        return [s for s in near if overlap(grid, s.points, cfg.inlier_distance) >= cfg.near_min_fit]

@@ -34,6 +34,16 @@ class ScanMatchConfig:
 
     enabled: bool = True
     window: int = num(10, ge=1, le=1000)  # scans kept in the local map
+    # --- near scans (issue 15): map scans that left the window, the last near_history of them kept (0 =
+    # off: the last window scans alone), join the local map when their pose lies within near_radius of the
+    # robot's and their heading within near_angle of its heading (π: any heading, a corridor driven back
+    # the other way too); of more, the near_max nearest
+    near_history: int = num(0, ge=0, le=5000)  # (≤ 5000: each kept scan holds its thinned points)
+    near_radius: float = num(2.0, ge=0.0, le=1000.0)  # m
+    near_angle: float = num(math.pi, ge=0.0, le=math.pi)  # rad
+    near_max: int = num(5, ge=1, le=1000)  # (5 on the panel: better than 10, variant_*.md)
+    # ... and (> 0) only a scan of which this share of points lies within inlier_distance of the window's
+    near_min_fit: float = num(0.0, ge=0.0, le=1.0)
     # m: a scan joins the local map when the robot moved this far ...
     map_update_distance: float = num(0.1, ge=0.0, le=1000.0)
     # rad: ... or turned this much since the last scan that joined
