@@ -12,7 +12,8 @@ scans (``--max-scans``) of one simulated multi-lap office log (10 Hz, 1,081 beam
 keyframe), so memory is compared between a short and a 10× longer run of the same world. Writes
 ``docs/results/submap_scaling.md``. Every figure in it is from one run of this script on one machine:
 the ratios are the claim; absolute times vary with the machine and its load (say so when quoting).
-The real log's two-level run is repeated ``--repeat`` times (its outputs are the same each time, its
+A short run before them compiles the kernels of a fresh checkout. The real log's two-level run is
+repeated ``--repeat`` times (its outputs are the same each time, its
 times are not): the table shows the run of median last/first, a line below the range of all.
 """
 
@@ -146,6 +147,9 @@ def main() -> None:
         logs = [("infinite-corridor", corridor, [])]
         sim = simulated(tmp, max(args.short, args.scans))
         logs += [(f"simulated, {n:,} scans", sim, ["--max-scans", str(n)]) for n in (args.short, args.scans)]
+        # a short run first: a fresh checkout compiles its Numba kernels in its first run (a minute), which
+        # would land in the first timed run's wall time and memory
+        run(corridor, tmp / "warm-up", ["--max-scans", "50"])
         repeats = []
         for name, log, limit in logs:
             for mode, extra in MODES.items():
