@@ -522,7 +522,7 @@ def test_search_refuses_what_its_compiled_sums_cannot_take(office):
 def test_compiled_pairwise_sum_is_numpys_bit_for_bit():
     """The compiled pairwise sum adds as numpy's sum of a contiguous float64 run: below 8, blocks of
     8 partial sums up to 128, halves above (split at a multiple of 8), at any start."""
-    from cornerslam_cli.motion.search_kernels import pairwise_sum
+    from cornerslam_cli.smallmat import pairwise_sum
 
     rng = np.random.default_rng(10)
     v = rng.random(5000) * 10.0 ** rng.integers(-8, 8, 5000)  # magnitudes apart: the order shows

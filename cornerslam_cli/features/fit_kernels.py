@@ -15,42 +15,9 @@ import math
 
 import numpy as np
 
+from ..smallmat import pairwise_sum
 from .jit import kernel
 from .sensor import COV_FLOOR
-
-_PW_BLOCK = 128  # numpy's PW_BLOCKSIZE
-
-
-@kernel
-def _pairwise(a, s, n):
-    """numpy's pairwise summation of a[s:s + n] (``pairwise_sum`` in its float64 add loop)."""
-    if n < 8:
-        res = -0.0  # numpy 2 starts from −0.0, so a sum of −0.0s stays −0.0 (and x + −0.0 is x)
-        for i in range(s, s + n):
-            res += a[i]
-        return res
-    if n <= _PW_BLOCK:
-        r0, r1, r2, r3 = a[s], a[s + 1], a[s + 2], a[s + 3]
-        r4, r5, r6, r7 = a[s + 4], a[s + 5], a[s + 6], a[s + 7]
-        i, m = 8, n - n % 8
-        while i < m:
-            r0 += a[s + i]
-            r1 += a[s + i + 1]
-            r2 += a[s + i + 2]
-            r3 += a[s + i + 3]
-            r4 += a[s + i + 4]
-            r5 += a[s + i + 5]
-            r6 += a[s + i + 6]
-            r7 += a[s + i + 7]
-            i += 8
-        res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-        while i < n:
-            res += a[s + i]
-            i += 1
-        return res
-    n2 = n // 2
-    n2 -= n2 % 8
-    return _pairwise(a, s, n2) + _pairwise(a, s + n2, n - n2)
 
 
 @kernel
@@ -58,7 +25,7 @@ def _segment_sums(a, offs, cnt):
     """``np.add.reduceat(a, offs)`` for ranges [offs, offs + cnt), every cnt >= 1."""
     out = np.empty(len(offs))
     for j in range(len(offs)):
-        out[j] = a[offs[j]] + _pairwise(a, offs[j] + 1, cnt[j] - 1)
+        out[j] = a[offs[j]] + pairwise_sum(a, offs[j] + 1, cnt[j] - 1)
     return out
 
 

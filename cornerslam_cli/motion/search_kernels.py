@@ -14,67 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..features.jit import kernel
-
-_PW_BLOCK = 128  # numpy's PW_BLOCKSIZE
-
-
-@kernel
-def _block_sum(v, lo, n):
-    """Σ v[lo : lo + n], n ≤ 128, as numpy's pairwise sum adds a block: in order below 8 numbers, else 8
-    partial sums combined in a tree, then the rest in order."""
-    if n < 8:
-        res = -0.0
-        for i in range(lo, lo + n):
-            res += v[i]
-        return res
-    r = v[lo : lo + 8].copy()
-    i = 8
-    while i < n - n % 8:
-        for k in range(8):
-            r[k] += v[lo + i + k]
-        i += 8
-    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
-    while i < n:
-        res += v[lo + i]
-        i += 1
-    return res
-
-
-@kernel
-def pairwise_sum(v, lo, n):
-    """Σ v[lo : lo + n] as numpy's float64 pairwise summation adds them: blocks of at most 128
-    (:func:`_block_sum`), longer runs split in two halves (the first a multiple of 8) summed apart and
-    added. Without recursion (Numba's cache loads recursive kernels broken): a stack of the halves
-    pending, each frame's state 0 = not split yet, 1 = its first half being summed, 2 = its second."""
-    if n <= _PW_BLOCK:
-        return _block_sum(v, lo, n)
-    starts, lengths = np.empty(64, np.int64), np.empty(64, np.int64)
-    state, first = np.zeros(64, np.int64), np.empty(64)
-    starts[0], lengths[0], top = lo, n, 0
-    ret, returning = 0.0, False
-    while True:
-        if returning:
-            if top < 0:
-                return ret
-            if state[top] == 1:  # its first half is summed: sum the second
-                first[top], state[top] = ret, 2
-                half = lengths[top] // 2 - (lengths[top] // 2) % 8
-                starts[top + 1], lengths[top + 1], state[top + 1] = starts[top] + half, lengths[top] - half, 0
-                top += 1
-                returning = False
-            else:  # both halves summed
-                ret = first[top] + ret
-                top -= 1
-            continue
-        if lengths[top] <= _PW_BLOCK:
-            ret = _block_sum(v, starts[top], lengths[top])
-            top -= 1
-            returning = True
-            continue
-        half = lengths[top] // 2 - (lengths[top] // 2) % 8
-        state[top] = 1
-        starts[top + 1], lengths[top + 1], state[top + 1] = starts[top], half, 0
-        top += 1
+from ..smallmat import pairwise_sum
 
 
 @kernel
