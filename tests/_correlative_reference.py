@@ -50,7 +50,8 @@ def search(
             + ((oy - W) * res / window.xy)[None, :] ** 2
         )
         if exclude is not None:
-            sc = np.where(exclude.covers(guess, ox - W, oy - W, res, thetas[a]), -np.inf, sc)
+            covered = exclude.near(guess, ox - W, oy - W, res) & exclude.turned(thetas[a])
+            sc = np.where(covered, -np.inf, sc)
         evaluated += sc.size
         k = int(np.argmax(sc))
         if sc.flat[k] > best:

@@ -167,7 +167,7 @@ def test_compiled_coarse_bounds_are_numpys_sums_of_the_whole_gather_bit_for_bit(
 def test_compiled_cell_sums_are_numpys_sums_of_the_gather_bit_for_bit():
     """One cell of fine offsets, summed in a compiled loop, is numpy's sum of the gather over its points:
     in order for cells of two or more offsets, pairwise for one (its gather is contiguous)."""
-    from cornerslam_cli.motion.search_kernels import _cell_sums
+    from cornerslam_cli.motion.search_kernels import _offset_sums
 
     rng = np.random.default_rng(9)
     L = rng.random((60, 60))
@@ -179,7 +179,7 @@ def test_compiled_cell_sums_are_numpys_sums_of_the_gather_bit_for_bit():
             want = L[pxa[:, None, None] + ox[None, :, None], pya[:, None, None] + oy[None, None, :]].sum(
                 axis=0
             )
-            _cell_sums(L, pxa, pya, 2, 2 + nx, 5, 5 + ny, out, np.empty(n))
+            _offset_sums(L, pxa, pya, ox, oy, out, np.empty(n))
             assert np.array_equal(out[:nx, :ny], want), (n, nx, ny)
 
 

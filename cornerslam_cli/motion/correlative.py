@@ -61,12 +61,6 @@ class Exclusion:
         """Whether ``heading`` is within ``self.theta`` radians of the pose's."""
         return abs(math.remainder(heading - float(self.pose[2]), math.tau)) <= self.theta
 
-    def covers(
-        self, guess: np.ndarray, ox: np.ndarray, oy: np.ndarray, res: float, theta: float
-    ) -> np.ndarray:
-        """(len(ox), len(oy)) whether the poses guess + (ox, oy)·res at heading ``theta`` are excluded."""
-        return self.near(guess, ox, oy, res) & self.turned(theta)
-
 
 @dataclass(frozen=True)
 class SearchResult:

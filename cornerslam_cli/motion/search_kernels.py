@@ -18,23 +18,25 @@ from ..smallmat import pairwise_sum
 
 
 @kernel
-def _cell_sums(L, pxa, pya, x0, x1, y0, y1, out, column):
-    """out[ox − x0, oy − y0] = Σ_p L[pxa[p] + ox, pya[p] + oy] for the offsets of one cell, summed as numpy
-    sums the gather L[pxa[:, None, None] + ox, pya[:, None, None] + oy] over its first axis; ``column``:
-    scratch of len(pxa)."""
+def _offset_sums(F, pxa, pya, ox, oy, out, column):
+    """out[i, j] = Σ_p F[pxa[p] + ox[i], pya[p] + oy[j]] for the offsets ``ox`` × ``oy``, summed as numpy
+    sums the gather F[pxa[:, None, None] + ox[:, None], pya[:, None, None] + oy] over its points: in
+    order, but pairwise for a single offset (that gather is contiguous); ``column``: scratch of
+    len(pxa)."""
     n = len(pxa)
-    if x1 - x0 == 1 and y1 - y0 == 1:  # a gather of one offset is contiguous: numpy sums it pairwise
+    if len(ox) == 1 and len(oy) == 1:
         for p in range(n):
-            column[p] = L[pxa[p] + x0, pya[p] + y0]
+            column[p] = F[pxa[p] + ox[0], pya[p] + oy[0]]
         out[0, 0] = -0.0 + pairwise_sum(column, 0, n)
         return
-    for i in range(x1 - x0):
-        for j in range(y1 - y0):
+    for i in range(len(ox)):
+        for j in range(len(oy)):
             out[i, j] = -0.0
     for p in range(n):
-        for i in range(x1 - x0):
-            for j in range(y1 - y0):
-                out[i, j] += L[pxa[p] + x0 + i, pya[p] + y0 + j]
+        for i in range(len(ox)):
+            row = pxa[p] + ox[i]
+            for j in range(len(oy)):
+                out[i, j] += F[row, pya[p] + oy[j]]
 
 
 @kernel
@@ -43,25 +45,10 @@ def coarse_sums(U, px, py, offs):
     correlative.Search.prepare), summed as numpy sums that gather over its points axis (pairwise when
     nc = 1)."""
     A, n = px.shape
-    nc = len(offs)
-    out = np.empty((A, nc, nc))
+    out = np.empty((A, len(offs), len(offs)))
     column = np.empty(n)
-    cell = np.empty((nc, nc))
     for a in range(A):
-        if nc == 1:
-            for p in range(n):
-                column[p] = U[px[a, p] + offs[0], py[a, p] + offs[0]]
-            out[a, 0, 0] = -0.0 + pairwise_sum(column, 0, n)
-            continue
-        for i in range(nc):
-            for j in range(nc):
-                cell[i, j] = -0.0
-        for p in range(n):
-            for i in range(nc):
-                row = px[a, p] + offs[i]
-                for j in range(nc):
-                    cell[i, j] += U[row, py[a, p] + offs[j]]
-        out[a] = cell
+        _offset_sums(U, px[a], py[a], offs, offs, out[a], column)
     return out
 
 
@@ -76,6 +63,7 @@ def branch_and_bound(L, px, py, bound, order, n_side, block, pull, turn_term, sh
     n = px.shape[1]
     out = np.empty((block, block))
     column = np.empty(n)
+    offsets = np.arange(n_side)
     best, best_a, best_x, best_y, evaluated = -1.0, -1, -1, -1, 0
     for flat in order:
         a = flat // (nc * nc)
@@ -85,7 +73,7 @@ def branch_and_bound(L, px, py, bound, order, n_side, block, pull, turn_term, sh
             break
         x0, y0 = block * i, block * j
         x1, y1 = min(x0 + block, n_side), min(y0 + block, n_side)
-        _cell_sums(L, px[a], py[a], x0, x1, y0, y1, out, column)
+        _offset_sums(L, px[a], py[a], offsets[x0:x1], offsets[y0:y1], out, column)
         cell_best, cx, cy = -np.inf, x0, y0
         first = True
         for ox in range(x0, x1):
