@@ -14,7 +14,9 @@ keyframe), so memory is compared between a short and a 10× longer run of the sa
 the ratios are the claim; absolute times vary with the machine and its load (say so when quoting).
 A short run before them compiles the kernels of a fresh checkout. The real log's two-level run is
 repeated ``--repeat`` times (its outputs are the same each time, its
-times are not): the table shows the run of median last/first, a line below the range of all.
+times are not): the table shows the run of median last/first, a line below the range of all, and
+that run's per-step time by tenth of the log (its first tenth is before any revisit: no loop
+candidates yet).
 """
 
 from __future__ import annotations
@@ -64,6 +66,8 @@ def run(log: Path, out: Path, extra: list[str]) -> dict:
         "last_ms": 1e3 * last,
         "ratio": last / first,
         "last_loop_ms": 1e3 * loop[-tenth:].mean(),
+        "tenths_ms": [1e3 * c.mean() for c in np.array_split(t, 10)],  # per-step time by tenth of the log
+        "tenths_loop_ms": [1e3 * c.mean() for c in np.array_split(loop, 10)],
         "scans_per_s": timing["scans_per_second"],
         "run_scans_per_s": len(t) / timing["wall_time"],
         "wall": timing["wall_time"],
@@ -117,6 +121,13 @@ def repeat_line(name: str, mode: str, runs: list[dict]) -> str:
     )
 
 
+def tenths_line(name: str, mode: str, r: dict) -> str:
+    """Per-step time by tenth of the log (the run in the table): is the cost growing, or a tenth's?"""
+    tenths = ", ".join(f"{t:.1f}" for t in r["tenths_ms"])
+    loops = ", ".join(f"{t:.1f}" for t in r["tenths_loop_ms"])
+    return f"{name}, {mode}, per-step time by tenth of the log: {tenths} ms; of which loops {loops} ms."
+
+
 def memory_lines(rows: list[tuple[str, str, dict]]) -> list[str]:
     """Peak memory of the long simulated run against the short one, per mode."""
     sim = [(mode, r) for log, mode, r in rows if log.startswith("simulated")]
@@ -160,7 +171,7 @@ def main() -> None:
                 runs.sort(key=lambda r: r["ratio"])
                 rows.append((name, mode, runs[(len(runs) - 1) // 2]))
                 if n > 1:
-                    repeats.append(repeat_line(name, mode, runs))
+                    repeats += [repeat_line(name, mode, runs), tenths_line(name, mode, rows[-1][2])]
     text = [
         "# Cost against log length: submaps + pose graph vs the single map",
         "",

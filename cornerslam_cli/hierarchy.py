@@ -41,7 +41,7 @@ from .geometry import (
 from .graph.loops import FEW_CORNERS, LOW_FITNESS, NO_HYPOTHESIS, agree, chi2, loop_associator, match_submaps
 from .graph.paths import Paths
 from .graph.points import POINTS, match_points, searchable
-from .graph.posegraph import PoseGraph
+from .graph.posegraph import ONLINE_RELINEARIZE, PoseGraph
 from .graph.smooth import smooth
 from .graph.submap import (
     LocalMaps,
@@ -105,7 +105,7 @@ class HierarchicalSlam:
         self.cfg = cfg
         self.laser2base = laser2base
         self.slam = Slam.from_config(cfg, laser2base)
-        self.graph = PoseGraph(cfg.graph)
+        self.graph = PoseGraph(cfg.graph, relinearize=ONLINE_RELINEARIZE)
         self.loop_associate = loop_associator(cfg.association, cfg.loops)
         self.local_maps = LocalMaps(2 * cfg.loops.max_candidates)  # ICP maps of recent candidates
         self.closed: list[Submap] = []
