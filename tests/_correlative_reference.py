@@ -1,12 +1,14 @@
 """The numpy version of the correlative search's branch and bound (cornerslam_cli/motion/correlative.py
 before its loop was compiled, search_kernels.branch_and_bound): the reference the compiled search is
 compared with. The field and the coarse bounds are Search.prepare's (the compiled coarse sums are
-compared with numpy's gather on their own). Kept only for the tests.
+compared with numpy's gather on their own). Also what the compiled field inputs replaced (scipy's
+distance transform for search_kernels.squared_distances, numpy's block maximum). Kept only for the tests.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy import ndimage
 
 from cornerslam_cli.motion.correlative import BLOCK, PULL, Exclusion, Search, SearchResult, Window
 
@@ -59,3 +61,21 @@ def search(
             best = float(sc.flat[k])
             best_pose = np.array([guess[0] + (ox[bi] - W) * res, guess[1] + (oy[bj] - W) * res, thetas[a]])
     return SearchResult(best_pose, best, evaluated)
+
+
+def distances(free: np.ndarray) -> np.ndarray:
+    """The likelihood field's distances in cells before search_kernels.squared_distances: scipy's exact
+    Euclidean distance transform."""
+    return ndimage.distance_transform_edt(free)
+
+
+def block_max(L: np.ndarray, b: int) -> np.ndarray:
+    """U[i, j] = max of L[i : i + b, j : j + b] (cells beyond the edge count as 0): numpy, shift by shift."""
+    P = np.zeros((L.shape[0] + b - 1, L.shape[1] + b - 1))
+    P[: L.shape[0], : L.shape[1]] = L
+    U = L.copy()
+    for di in range(b):
+        for dj in range(b):
+            if di or dj:
+                np.maximum(U, P[di : di + L.shape[0], dj : dj + L.shape[1]], out=U)
+    return U

@@ -183,6 +183,47 @@ def test_compiled_cell_sums_are_numpys_sums_of_the_gather_bit_for_bit():
             assert np.array_equal(out[:nx, :ny], want), (n, nx, ny)
 
 
+def _occupancy_grids(rng):
+    """Grids of free cells with some not free: random densities and shapes, and the edge cases of the
+    two passes (one row, one column, one cell not free, whole rows and columns not free)."""
+    for _ in range(300):
+        nx, ny = rng.integers(1, 45, 2)
+        free = rng.random((nx, ny)) > rng.choice([0.002, 0.02, 0.2, 0.6, 0.95])
+        free[rng.integers(nx), rng.integers(ny)] = False
+        yield free
+    for shape in ((1, 1), (1, 30), (30, 1), (200, 3), (3, 200)):
+        free = np.ones(shape, dtype=bool)
+        free[-1, -1] = False
+        yield free
+    free = np.ones((40, 50), dtype=bool)
+    free[7], free[:, 13] = False, False
+    yield free
+
+
+def test_compiled_distance_transform_is_scipys_exactly():
+    """The likelihood field's distances: the compiled transform's squared distances, square-rooted, are
+    scipy's exact Euclidean distance transform bit for bit (ties between nearest cells included)."""
+    from _correlative_reference import distances
+
+    from cornerslam_cli.motion.search_kernels import squared_distances
+
+    rng = np.random.default_rng(10)
+    for free in _occupancy_grids(rng):
+        assert np.array_equal(np.sqrt(squared_distances(free)), distances(free)), free.shape
+
+
+@pytest.mark.parametrize("b", [1, 2, 4, 5])
+def test_compiled_block_max_is_numpys_shift_by_shift(b):
+    from _correlative_reference import block_max as numpy_block_max
+
+    from cornerslam_cli.motion.search_kernels import block_max
+
+    rng = np.random.default_rng(11)
+    for nx, ny in ((1, 1), (1, 9), (9, 1), (3, 3), (17, 40), (64, 31)):
+        L = np.where(rng.random((nx, ny)) < 0.3, 0.0, rng.random((nx, ny)))  # a field: ≥ 0, some zeros
+        assert np.array_equal(block_max(L, b), numpy_block_max(L, b)), (nx, ny)
+
+
 def test_compiled_search_equals_the_numpy_search_exactly(office):
     """The compiled branch and bound returns the numpy search's pose, score and count bit for bit (tests/
     _correlative_reference.py): windows whose side is and is not a multiple of the coarse cell (one-cell

@@ -22,10 +22,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
 from ..errors import NumericalError
-from .search_kernels import branch_and_bound, coarse_sums
+from .search_kernels import block_max, branch_and_bound, coarse_sums, squared_distances
 
 BLOCK = 4  # fine cells per coarse cell side
 MAX_ANGLES = 121  # rotations scored per window at most (the step grows on wide windows)
@@ -80,20 +79,8 @@ def likelihood_field(
     free[cells[inside, 0], cells[inside, 1]] = False
     if free.all():
         return np.zeros(shape)
-    d = ndimage.distance_transform_edt(free) * res
+    d = np.sqrt(squared_distances(free)) * res  # ndimage.distance_transform_edt(free) * res, compiled
     return np.exp(-0.5 * (d / sigma) ** 2)
-
-
-def block_max(L: np.ndarray, b: int) -> np.ndarray:
-    """U[i, j] = max of L[i : i + b, j : j + b] (cells beyond the edge count as 0)."""
-    P = np.zeros((L.shape[0] + b - 1, L.shape[1] + b - 1))
-    P[: L.shape[0], : L.shape[1]] = L
-    U = L.copy()
-    for di in range(b):
-        for dj in range(b):
-            if di or dj:
-                np.maximum(U, P[di : di + L.shape[0], dj : dj + L.shape[1]], out=U)
-    return U
 
 
 def angle_steps(points: np.ndarray, theta: float, res: float) -> np.ndarray:
