@@ -76,6 +76,7 @@ OVERLAP_DISTANCE = 1.0  # m: a point of b this close to a point of a overlaps a 
 MIN_OVERLAP_POINTS = 20  # fewer overlapping points are no evidence: fitness 0
 SUPPORT_DISTANCE = 0.3  # m: a corner of b this close to one of a at a hypothesis' pose supports it
 SUPPORT_SLACK = 1  # a hypothesis is associated when its support ≥ the best set's corners − this
+_EKF = EkfConfig()  # the filter that predicts a's corners from b's origin under a hypothesis (checked once)
 
 # why a match was rejected (LoopMatch.reason)
 NO_HYPOTHESIS = "no hypothesis"  # no pair of b's corners agrees with a pair of a's
@@ -286,7 +287,6 @@ def corner_sets(
     P = np.zeros((3 + 3 * n, 3 + 3 * n))  # the state [hypothesis, a's corners]: blockdiag(Σ_hyp, a's P)
     P[:3, :3] = np.diag([cfg.hypothesis_sigma_xy**2] * 2 + [cfg.hypothesis_sigma_theta**2])
     P[3:, 3:] = a.landmark_P
-    ekf_cfg = EkfConfig()
     found: list[CornerSet] = []
     most = 0  # corners of the best set so far
     for h in range(len(hyps)):
@@ -294,7 +294,7 @@ def corner_sets(
             break  # sorted by support: the rest can neither beat nor tie the best set
         if any(s.n >= cfg.min_corners and not _far_apart(s.pose, hyps.poses[h]) for s in found):
             continue  # the same solution as a set already found
-        ekf = Ekf.from_state(ekf_cfg, np.concatenate((hyps.poses[h], a.landmarks.reshape(-1))), P)
+        ekf = Ekf.from_state(_EKF, np.concatenate((hyps.poses[h], a.landmarks.reshape(-1))), P)
         result = associate(z, C, ekf.predict_observations())
         matched = np.flatnonzero(result.pairs >= 0)
         pairs = np.column_stack((matched, result.pairs[matched])).astype(np.int64)
@@ -307,10 +307,10 @@ def corner_sets(
     return found
 
 
-def _diagonal_blocks(P: np.ndarray) -> np.ndarray:
-    """(n, 3, 3) diagonal blocks of a (3n, 3n) joint covariance."""
-    n = len(P) // 3
-    idx = 3 * np.arange(n)[:, None] + np.arange(3)
+def _diagonal_blocks(P: np.ndarray, which: np.ndarray | None = None) -> np.ndarray:
+    """(n, 3, 3) diagonal blocks of a (3n, 3n) joint covariance (``which``: only those landmarks')."""
+    rows = np.arange(len(P) // 3) if which is None else which
+    idx = 3 * rows[:, None] + np.arange(3)
     return P[idx[:, :, None], idx[:, None, :]]
 
 
@@ -322,7 +322,7 @@ def fit_rigid(b: Submap, a: Submap, pairs: np.ndarray) -> np.ndarray:
     change with the frame, so it only gated the pairs.
     """
     p, q = b.landmarks[pairs[:, 0], :2], a.landmarks[pairs[:, 1], :2]
-    Cb, Ca = _diagonal_blocks(b.landmark_P)[pairs[:, 0]], _diagonal_blocks(a.landmark_P)[pairs[:, 1]]
+    Cb, Ca = _diagonal_blocks(b.landmark_P, pairs[:, 0]), _diagonal_blocks(a.landmark_P, pairs[:, 1])
     w = 2.0 / (np.trace(Cb[:, :2, :2], axis1=1, axis2=2) + np.trace(Ca[:, :2, :2], axis1=1, axis2=2))
     w = w / w.sum()
     mp, mq = w @ p, w @ q
