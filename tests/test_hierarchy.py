@@ -20,9 +20,19 @@ from cornerslam_cli.config import config_from
 from cornerslam_cli.frontend import frames, open_input
 from cornerslam_cli.geometry import compose, compose_inverse_cov, inverse, relative, wrap_angle
 from cornerslam_cli.graph.loops import agree
+from cornerslam_cli.graph.params import GraphConfig
+from cornerslam_cli.graph.posegraph import ISAM2_RELINEARIZE, ONLINE_RELINEARIZE, PoseGraph
 from cornerslam_cli.graph.submap import LoopMatch
 from cornerslam_cli.hierarchy import HierarchicalSlam, LoopRecord
 from cornerslam_cli.report.tables import LOOP_COLUMNS, MAP_COLUMNS, TRAJECTORY_COLUMNS, read_csv
+
+
+def test_the_online_graph_is_solved_to_the_online_tolerance():
+    """The hierarchy's online graph stops at ONLINE_RELINEARIZE (graph/posegraph.py says why; its
+    accuracy against a batch solve: tests/test_posegraph.py); a PoseGraph by default at the tight one."""
+    hs = HierarchicalSlam(config_from({}, []), (0.0, 0.0, 0.0))
+    assert hs.graph.relinearize == ONLINE_RELINEARIZE
+    assert PoseGraph(GraphConfig()).relinearize == ISAM2_RELINEARIZE
 
 
 def hierarchical(sim_log: Path, *sets: str) -> HierarchicalSlam:

@@ -18,11 +18,9 @@ import pytest
 from scipy.linalg import solve_triangular
 from scipy.optimize import least_squares
 
-from cornerslam_cli.config import config_from
 from cornerslam_cli.geometry import compose, relative, wrap_angle
 from cornerslam_cli.graph.params import GraphConfig
 from cornerslam_cli.graph.posegraph import ISAM2_RELINEARIZE, ONLINE_RELINEARIZE, PoseGraph
-from cornerslam_cli.hierarchy import HierarchicalSlam
 
 SOLVERS = ("isam2", "lm")
 SEQ_COV = np.array(
@@ -339,12 +337,6 @@ def test_online_tolerance_stays_within_a_millimetre_of_lm(seed):
         d = g.poses() - batch.poses()
         d[:, 2] = wrap_angle(d[:, 2])
         assert g.converged and np.abs(d).max() < tol
-
-
-def test_the_hierarchy_solves_its_online_graph_to_the_online_tolerance():
-    hs = HierarchicalSlam(config_from({}, []), (0.0, 0.0, 0.0))
-    assert hs.graph.relinearize == ONLINE_RELINEARIZE
-    assert PoseGraph(GraphConfig()).relinearize == ISAM2_RELINEARIZE < ONLINE_RELINEARIZE
 
 
 # --- bad input ------------------------------------------------------------------------------------

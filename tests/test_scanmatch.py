@@ -198,6 +198,7 @@ def _occupancy_grids(rng):
     free = np.ones((40, 50), dtype=bool)
     free[7], free[:, 13] = False, False
     yield free
+    yield rng.random((430, 310)) > 0.003  # a real field's size (200–450 cells a side), sparse walls
 
 
 def test_compiled_distance_transform_is_scipys_exactly():
@@ -210,10 +211,14 @@ def test_compiled_distance_transform_is_scipys_exactly():
     rng = np.random.default_rng(10)
     for free in _occupancy_grids(rng):
         assert np.array_equal(np.sqrt(squared_distances(free)), distances(free)), free.shape
+    free = np.ones((3, 4), dtype=bool)  # nothing to be near: every cell beyond any real distance
+    assert (squared_distances(free) > 3**2 + 4**2).all()
 
 
 @pytest.mark.parametrize("b", [1, 2, 4, 5])
 def test_compiled_block_max_is_numpys_shift_by_shift(b):
+    """The coarse cells' bound: the compiled block maximum is numpy's shift-by-shift one, bit for bit,
+    on fields (values in [0, 1], some exactly 0) of edge shapes and of sides not a multiple of b."""
     from _correlative_reference import block_max as numpy_block_max
 
     from cornerslam_cli.motion.search_kernels import block_max

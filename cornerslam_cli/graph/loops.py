@@ -188,9 +188,13 @@ def _far_apart(p: np.ndarray, q: np.ndarray) -> bool:
 # ---------------------------------------------------------------------------------------- 1. hypotheses
 
 
-@functools.lru_cache(maxsize=256)
+KEPT_PAIRS = 64  # corner counts whose index pairs are kept (8·n² bytes each)
+
+
+@functools.lru_cache(maxsize=KEPT_PAIRS)
 def _upper_pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """``np.triu_indices(n, 1)``, read-only and kept: it cost a fifth of :func:`pair_hypotheses`."""
+    """``np.triu_indices(n, 1)``, read-only and kept: a sixth of :func:`pair_hypotheses` on
+    infinite-corridor's revisits (submaps of 1–26 corners), where each call costs far more than its use."""
     i, j = np.triu_indices(n, 1)
     i.flags.writeable = j.flags.writeable = False
     return i, j
@@ -198,7 +202,8 @@ def _upper_pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
 
 def _corner_pairs(lm: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """All pairs i < j of corners (n, 3) and their lengths."""
-    i, j = _upper_pairs(len(lm))
+    n = len(lm)
+    i, j = _upper_pairs(n) if n <= KEPT_PAIRS else np.triu_indices(n, 1)
     return i, j, np.hypot(lm[j, 0] - lm[i, 0], lm[j, 1] - lm[i, 1])
 
 

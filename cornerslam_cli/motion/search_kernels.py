@@ -102,19 +102,21 @@ def squared_distances(free):
     """D (float64, shape of ``free``): the squared Euclidean distance, in cells, from each cell to the
     nearest cell that is not ``free`` (0 on those) — ``ndimage.distance_transform_edt(free) ** 2`` before
     its square root. Exact: Felzenszwalb & Huttenlocher's two passes (the distance along each column,
-    then the lower envelope of parabolas along each row) on integers held exactly in float64; the
-    parabolas' intersections are the only divisions, and one rounded to the wrong side of an integer
-    cell can only be a tie, where both parabolas give the same value. Needs a cell that is not free
-    (the caller's ``free.all()`` case). Rows are walked in memory order."""
+    then the lower envelope of parabolas along each row) on integers held exactly in float64 (sides
+    < 2²⁵ cells). The parabolas' intersections are the only divisions; rounding is monotone, so a rounded
+    comparison of two of them can only drop a parabola that is lowest on no integer cell, and a rounded
+    intersection cannot cross an integer cell but where both parabolas are equal on it. A grid with no
+    cell that is not free (the caller's ``free.all()`` case) gives ``far`` everywhere. Rows are walked in
+    memory order."""
     nx, ny = free.shape
-    inf = float(nx * nx + ny * ny + 1)  # beyond every real squared distance
-    g = np.empty((nx, ny))  # squared distance along each column (inf: none in the column)
+    far = float(nx * nx + ny * ny + 1)  # beyond every real squared distance
+    g = np.empty((nx, ny))  # squared distance along each column (far: none in the column)
     near = np.full(ny, -1)  # per column: the last cell not free seen (downwards, then upwards)
     for i in range(nx):
         for j in range(ny):
             if not free[i, j]:
                 near[j] = i
-            g[i, j] = inf if near[j] < 0 else float((i - near[j]) * (i - near[j]))
+            g[i, j] = far if near[j] < 0 else float((i - near[j]) * (i - near[j]))
     near[:] = -1
     for i in range(nx - 1, -1, -1):
         for j in range(ny):
@@ -129,7 +131,7 @@ def squared_distances(free):
         k, s = -1, 0.0
         for q in range(ny):
             f = g[i, q]
-            if f >= inf:
+            if f >= far:
                 continue
             while k >= 0:
                 p = v[k]
@@ -143,6 +145,9 @@ def squared_distances(free):
                 k += 1
                 z[k] = s
             v[k], z[k + 1] = q, np.inf
+        if k < 0:  # no column holds a cell that is not free: the whole grid is free
+            out[i, :] = far
+            continue
         k = 0
         for q in range(ny):
             while z[k + 1] < q:
