@@ -62,6 +62,7 @@ class Gated:
     d2 : (m, n) individual D², ``inf`` where skipped by the Euclidean gate or S not positive definite
     candidates : m int arrays, the individually compatible landmarks of each corner by increasing D²
     hph : (n, 3, 3) H_k P H_kᵀ (zero for landmarks no corner came near)
+    cand_off, cand_flat : the candidate lists in one array, corner i's cand_flat[cand_off[i] : cand_off[i+1]]
     """
 
     z: np.ndarray
@@ -76,9 +77,15 @@ class Gated:
     _universe: list[int] = field(default_factory=list, repr=False)
     _loc: dict[int, int] = field(default_factory=dict, repr=False)
     _blocks: np.ndarray | None = field(default=None, repr=False)  # (u, u, d, d) cross covariances
+    _search: tuple | None = field(default=None, repr=False)  # search_arrays()
+    cand_off: np.ndarray = field(init=False, repr=False)
+    cand_flat: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self):
-        universe = np.unique(np.concatenate([np.zeros(0, np.int64), *self.candidates]))
+        self.cand_flat = np.concatenate([np.zeros(0, np.int64), *self.candidates]).astype(np.int64)
+        self.cand_off = np.zeros(len(self.candidates) + 1, dtype=np.int64)
+        self.cand_off[1:] = np.cumsum([len(c) for c in self.candidates])
+        universe = np.unique(self.cand_flat)
         self._universe = universe.tolist()
         self._loc = {k: j for j, k in enumerate(self._universe)}
 
@@ -89,7 +96,7 @@ class Gated:
             j = len(self._universe)
             self._universe.append(k)
             self._loc[k] = j
-            self._blocks = None
+            self._blocks = self._search = None
         return j
 
     def cross_row(self, k: int) -> np.ndarray:
@@ -109,12 +116,23 @@ class Gated:
         return self._blocks
 
     def search_arrays(self) -> tuple:
-        """(nu, C, hph, blocks, loc_of), what the compiled searches read (search_kernels.py): the
-        universe's cross covariances (:meth:`universe_blocks`) and loc_of[k], landmark k's position in the
-        universe (−1 outside it: a search pairs only landmarks of the candidate lists)."""
-        loc_of = np.full(len(self.hph), -1, dtype=np.int64)
-        loc_of[self._universe] = np.arange(len(self._universe))
-        return self.nu, self.C, self.hph, self.universe_blocks(), loc_of
+        """(nu, C, hph, blocks, loc_of, cand_off, cand_flat), what the compiled searches read
+        (search_kernels.py): the universe's cross covariances (:meth:`universe_blocks`), loc_of[k] landmark
+        k's position in the universe (−1 outside it: a search pairs only landmarks of the candidate
+        lists), the candidate lists. Built once (again when the universe widens)."""
+        if self._search is None:
+            loc_of = np.full(len(self.hph), -1, dtype=np.int64)
+            loc_of[self._universe] = np.arange(len(self._universe))
+            self._search = (
+                self.nu,
+                self.C,
+                self.hph,
+                self.universe_blocks(),
+                loc_of,
+                self.cand_off,
+                self.cand_flat,
+            )
+        return self._search
 
     @property
     def m(self) -> int:

@@ -31,6 +31,7 @@ Readings chosen (the textbook pseudo-code is ambiguous or inexact here):
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from collections.abc import Sequence
@@ -74,8 +75,7 @@ class Best:
 
 def csr(rows: Sequence[Sequence], *shape: int) -> tuple[np.ndarray, np.ndarray]:
     """(offsets, flat) of a list of lists: row r is flat[offsets[r] : offsets[r + 1]], items of ``shape``."""
-    offsets = np.zeros(len(rows) + 1, dtype=np.int64)
-    offsets[1:] = np.cumsum([len(r) for r in rows])
+    offsets = np.array([*itertools.accumulate(map(len, rows), initial=0)], dtype=np.int64)
     return offsets, np.array([x for r in rows for x in r], dtype=np.int64).reshape(-1, *shape)
 
 
@@ -84,13 +84,13 @@ def run_search(search, g: Gated, jc: JointCompatibility, budget: Budget, explore
     pairings, counting its nodes in ``budget``. jc's arrays change as its try_add / commit would change
     them; its size does not."""
     counters = np.array([budget.max_nodes, budget.nodes, 0], dtype=np.int64)
-    found = (np.zeros(1, np.int64), np.full(1, math.inf), np.zeros((jc.capacity, 2), np.int64))
+    found = (np.zeros(1, np.int64), np.full(1, math.inf), np.empty((jc.capacity, 2), np.int64))
     state = (jc.arrays(), g.search_arrays(), jc.size)
     search(*state, *args, explore_ties, counters, budget.deadline, found, PIVOT_RTOL)
     budget.nodes, budget.hit = int(counters[1]), budget.hit or bool(counters[2])
     best = Best(explore_ties)
     best.count, best.d2 = int(found[0][0]), float(found[1][0])
-    best.pairs = [(int(i), int(k)) for i, k in found[2][: best.count]]
+    best.pairs = [(i, k) for i, k in found[2][: best.count].tolist()]
     return best
 
 
@@ -111,10 +111,8 @@ def jcbb_search(
     ``Best.pairs`` includes them. ``jc`` keeps its size, also when the budget runs out. Compiled
     (search_kernels.jcbb_kernel).
     """
-    order = [i for i in corners if len(g.candidates[i])]
-    offsets, flat = csr([g.candidates[i] for i in order])
-    order = np.array(order, dtype=np.int64)
-    return run_search(jcbb_kernel, g, jc, budget, explore_ties, order, offsets, flat, bool(exact))
+    corners = np.asarray(corners, dtype=np.int64).reshape(-1)
+    return run_search(jcbb_kernel, g, jc, budget, explore_ties, corners, bool(exact))
 
 
 def greedy_fallback(g: Gated, corners: Sequence[int], best: Best) -> Best:

@@ -37,6 +37,7 @@ Readings chosen where the pseudo-code is garbled or ambiguous:
 
 from __future__ import annotations
 
+import itertools
 import time
 
 import numpy as np
@@ -76,8 +77,8 @@ def combine_groups(
 ) -> Best:
     """PCBB + NUBB (Algorithms 4–5): the best combination of each group's H_g or a subset of its U_g.
     Compiled (search_kernels.combine_kernel)."""
-    rem_after = np.zeros(len(unit_pairs) + 1, dtype=np.int64)  # corners with candidates in groups after t
-    rem_after[:-1] = np.cumsum([len(U) for U in unit_pairs][::-1])[::-1]
+    after = [*itertools.accumulate(map(len, reversed(unit_pairs)), initial=0)]
+    rem_after = np.array(after[::-1], dtype=np.int64)  # corners with candidates in groups from t on
     same = np.array([set(Hg) == set(U) for Hg, U in zip(group_best, unit_pairs, strict=True)], dtype=np.bool_)
     searched = (*csr(group_best, 2), *csr(unit_pairs, 2), same, rem_after)
     return run_search(combine_kernel, g, jc, budget, explore_ties, *searched)

@@ -13,7 +13,7 @@ keeps a stack of frames, one per pending call of the recursive step it replaces.
 
 jc : (M, y, d2, corners, landmarks, locs, gate), :meth:`gating.JointCompatibility.arrays` (changed in place
      as its try_add / commit change them); ``size`` its committed pairings, where the search starts
-g : (nu, C, hph, blocks, loc_of), :meth:`gating.Gated.search_arrays`
+g : (nu, C, hph, blocks, loc_of, cand_off, cand_flat), :meth:`gating.Gated.search_arrays`
 budget : int64 [max_nodes (0 = none), nodes, hit] (jcbb.Budget), ``deadline`` its perf_counter() end
      (inf = none), checked every 256 nodes through object mode (Numba has no clock)
 best : (int64 [count], float64 [joint D²], int64 (capacity, 2) pairs), :class:`jcbb.Best`'s fields
@@ -79,7 +79,7 @@ def _try_add(jc, g, i, k, h, rtol):
     """JointCompatibility.try_add(i, k) on h committed pairings: (joint D², inf if S is not PD; and the
     W, L_new⁻¹, y_new that commit_pairing keeps)."""
     M, y, d2s, corners, landmarks, locs, _ = jc
-    nu, C, hph, blocks, loc_of = g
+    nu, C, hph, blocks, loc_of, _, _ = g
     d = blocks.shape[3]
     loc = loc_of[k]
     S_new = hph[k, :d, :d] + C[i, :d, :d]
@@ -100,16 +100,19 @@ def _jcbb_leaf(jc, best, size, exact):
 
 
 @kernel
-def jcbb_kernel(jc, g, size, order, offsets, flat, exact, explore_ties, budget, deadline, best, rtol):
-    """jcbb.jcbb_search over the corners ``order`` (those with candidates), corner order[t]'s candidates
-    flat[offsets[t] : offsets[t + 1]]. Frame t visits corner order[t] (the stack's depth is t; a leaf is
-    no frame): nxt[t] its next candidate, child[t] the landmark its running child committed (−1: the
-    "no match" child, or none), skipped[t] whether it took that "no match" branch."""
+def jcbb_kernel(jc, g, size, corners, exact, explore_ties, budget, deadline, best, rtol):
+    """jcbb.jcbb_search over ``corners``, in that order; those without candidates are skipped. Frame t
+    visits the t-th corner with candidates, order[t] (the stack's depth is t; a leaf is no frame): nxt[t]
+    its next candidate, child[t] the landmark its running child committed (−1: the "no match" child, or
+    none), skipped[t] whether it took that "no match" branch."""
+    cand_off, flat = g[5], g[6]
+    order = corners[cand_off[corners + 1] > cand_off[corners]]
+    first, last = cand_off[order], cand_off[order + 1]
     n, gate = len(order), jc[6]
     used = np.zeros(len(g[2]), np.bool_)
     for a in range(size):
         used[jc[4][a]] = True
-    at, nxt = np.empty(n, np.int64), offsets[:n].copy()
+    at, nxt = np.empty(n, np.int64), first.copy()
     child, skipped = np.full(n, -1, np.int64), np.zeros(n, np.bool_)
     if not _tick(budget, deadline):
         return
@@ -124,7 +127,7 @@ def jcbb_kernel(jc, g, size, order, offsets, flat, exact, explore_ties, budget, 
         h, rest, go = at[t], n - t - 1, False
         if not skipped[t]:
             gate_next = gate[h + 1 + rest] if exact else gate[h + 1]
-            while not go and nxt[t] < offsets[t + 1]:
+            while not go and nxt[t] < last[t]:
                 k = flat[nxt[t]]
                 nxt[t] += 1
                 if used[k]:
@@ -146,7 +149,7 @@ def jcbb_kernel(jc, g, size, order, offsets, flat, exact, explore_ties, budget, 
             _jcbb_leaf(jc, best, size, exact)
         else:
             t += 1
-            at[t], nxt[t], child[t], skipped[t] = size, offsets[t], -1, False
+            at[t], nxt[t], child[t], skipped[t] = size, first[t], -1, False
 
 
 @kernel
