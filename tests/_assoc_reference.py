@@ -1,5 +1,5 @@
-"""The Python searches of JCBB and PCA (cornerslam_cli/association/jcbb.py ``jcbb_search`` and pca.py
-``combine_groups`` before they were compiled, association/search_kernels.py): recursive, one
+"""The Python searches of JCBB and PCA before they were compiled (association/search_kernels.py):
+jcbb.py's ``jcbb_search``, pca.py's loop of it over the groups and its ``combine_groups``; recursive, one
 :class:`JointCompatibility` try / commit per node. The reference the compiled searches are compared with
 (tests/test_search_kernels.py: pairs, joint D², nodes and budget stop, exactly). Kept only for the tests.
 """
@@ -82,6 +82,18 @@ def jcbb_search(
         pass
     assert jc.size == base
     return best
+
+
+def group_searches(
+    g: Gated,
+    groups: list[list[int]],
+    jc: JointCompatibility,
+    budget: Budget,
+    exact: bool = False,
+    explore_ties: bool = True,
+) -> list[list[tuple[int, int]]]:
+    """pca.Pca's loop of Algorithm 3 as it was: the Python JCBB of each group in turn."""
+    return [jcbb_search(g, grp, jc, budget, exact, explore_ties).pairs for grp in groups]
 
 
 def combine_groups(

@@ -54,7 +54,7 @@ def reference_result(monkeypatch, associator, p):
     """The associator's result with the Python searches in place of the compiled ones."""
     with monkeypatch.context() as mp:
         mp.setattr(jcbb, "jcbb_search", ref.jcbb_search)
-        mp.setattr(pca, "jcbb_search", ref.jcbb_search)
+        mp.setattr(pca, "group_searches", ref.group_searches)
         mp.setattr(pca, "combine_groups", ref.combine_groups)
         return associator(p.z, p.C, p.pred)
 
@@ -197,7 +197,7 @@ def test_load_kernels_compiles_every_search_a_run_uses():
     """After association.load_kernels, associating a real-sized problem with either method, gate or tie
     mode compiles nothing more: the searches' argument types are the warm-up's."""
     load_kernels()
-    kernels = (search_kernels.jcbb_kernel, search_kernels.combine_kernel)
+    kernels = (search_kernels.jcbb_kernel, search_kernels.groups_kernel, search_kernels.combine_kernel)
     loaded = [len(k.signatures) for k in kernels]
     assert all(loaded)
     rng = np.random.default_rng(3)

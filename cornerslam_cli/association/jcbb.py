@@ -79,15 +79,21 @@ def csr(rows: Sequence[Sequence], *shape: int) -> tuple[np.ndarray, np.ndarray]:
     return offsets, np.array([x for r in rows for x in r], dtype=np.int64).reshape(-1, *shape)
 
 
-def run_search(search, g: Gated, jc: JointCompatibility, budget: Budget, explore_ties: bool, *args) -> Best:
+def run_compiled(search, g: Gated, jc: JointCompatibility, budget: Budget, *args):
     """Run a compiled search of search_kernels.py (``args``: its own arguments) from jc's committed
-    pairings, counting its nodes in ``budget``. jc's arrays change as its try_add / commit would change
-    them; its size does not."""
+    pairings, counting its nodes in ``budget``; what it returns. jc's arrays change as its try_add /
+    commit would change them; its size does not."""
     counters = np.array([budget.max_nodes, budget.nodes, 0], dtype=np.int64)
-    found = (np.zeros(1, np.int64), np.full(1, math.inf), np.empty((jc.capacity, 2), np.int64))
-    state = (jc.arrays(), g.search_arrays(), jc.size)
-    search(*state, *args, explore_ties, counters, budget.deadline, found, PIVOT_RTOL)
+    out = search(jc.arrays(), g.search_arrays(), jc.size, counters, budget.deadline, PIVOT_RTOL, *args)
     budget.nodes, budget.hit = int(counters[1]), budget.hit or bool(counters[2])
+    return out
+
+
+def run_search(search, g: Gated, jc: JointCompatibility, budget: Budget, explore_ties: bool, *args) -> Best:
+    """:func:`run_compiled` of a search for one best hypothesis (``explore_ties`` and the best its last
+    arguments)."""
+    found = (np.zeros(1, np.int64), np.full(1, math.inf), np.empty((jc.capacity, 2), np.int64))
+    run_compiled(search, g, jc, budget, *args, explore_ties, found)
     best = Best(explore_ties)
     best.count, best.d2 = int(found[0][0]), float(found[1][0])
     best.pairs = [(i, k) for i, k in found[2][: best.count].tolist()]

@@ -45,9 +45,9 @@ import numpy as np
 from ..types import AssociationResult, Prediction
 from . import gating
 from .gating import Gated, JointCompatibility, build_result, gate, scan_order
-from .jcbb import Best, Budget, Jcbb, csr, greedy_fallback, jcbb_search, run_search
+from .jcbb import Best, Budget, Jcbb, csr, greedy_fallback, run_compiled, run_search
 from .params import AssociationConfig
-from .search_kernels import combine_kernel
+from .search_kernels import combine_kernel, groups_kernel
 
 
 def make_groups(z: np.ndarray, p: int, grouping: str = "scan") -> list[list[int]]:
@@ -65,6 +65,22 @@ def make_groups(z: np.ndarray, p: int, grouping: str = "scan") -> list[list[int]
         taken = set(groups[-1])
         remaining = [i for i in remaining if i not in taken]
     return groups
+
+
+def group_searches(
+    g: Gated,
+    groups: list[list[int]],
+    jc: JointCompatibility,
+    budget: Budget,
+    exact: bool = False,
+    explore_ties: bool = True,
+) -> list[list[tuple[int, int]]]:
+    """Algorithm 3's local best hypotheses H_g: :func:`.jcbb.jcbb_search` of each group in turn from jc's
+    state, the budget shared. Compiled (search_kernels.groups_kernel)."""
+    offsets, corners = csr(groups)
+    out = np.empty((len(groups), jc.capacity, 2), dtype=np.int64)
+    counts = run_compiled(groups_kernel, g, jc, budget, offsets, corners, bool(exact), explore_ties, out)
+    return [[(i, k) for i, k in out[t, :c].tolist()] for t, c in enumerate(counts.tolist())]
 
 
 def combine_groups(
@@ -96,13 +112,11 @@ class Pca:
         g = gate(z, C, pred, self.cfg)
         budget = Budget(pcfg.max_nodes, pcfg.max_seconds)
         groups = make_groups(g.z, pcfg.group_size, pcfg.grouping)
-        group_best, unit_pairs = [], []
         local = JointCompatibility(g, max(pcfg.group_size, 1))
-        nearest = g.nearest()
+        nearest = g.nearest().tolist()
         exact, ties = self.cfg.jcbb.joint_gate == "exact", self.cfg.jcbb.explore_ties
-        for grp in groups:  # Algorithm 3
-            group_best.append(jcbb_search(g, grp, local, budget, exact, ties).pairs)
-            unit_pairs.append([(i, int(nearest[i])) for i in grp if nearest[i] >= 0])
+        group_best = group_searches(g, groups, local, budget, exact, ties)  # Algorithm 3
+        unit_pairs = [[(i, nearest[i]) for i in grp if nearest[i] >= 0] for grp in groups]
         group_nodes = budget.nodes
         jc = JointCompatibility(g, max(g.m, 1))
         best = combine_groups(g, group_best, unit_pairs, jc, budget, ties) if not budget.hit else Best()

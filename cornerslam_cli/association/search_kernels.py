@@ -16,6 +16,7 @@ jc : (M, y, d2, corners, landmarks, locs, gate), :meth:`gating.JointCompatibilit
 g : (nu, C, hph, blocks, loc_of, cand_off, cand_flat), :meth:`gating.Gated.search_arrays`
 budget : int64 [max_nodes (0 = none), nodes, hit] (jcbb.Budget), ``deadline`` its perf_counter() end
      (inf = none), checked every 256 nodes through object mode (Numba has no clock)
+rtol : the Cholesky pivot tolerance (gating.PIVOT_RTOL)
 best : (int64 [count], float64 [joint D²], int64 (capacity, 2) pairs), :class:`jcbb.Best`'s fields
 """
 
@@ -100,7 +101,7 @@ def _jcbb_leaf(jc, best, size, exact):
 
 
 @kernel
-def jcbb_kernel(jc, g, size, corners, exact, explore_ties, budget, deadline, best, rtol):
+def jcbb_kernel(jc, g, size, budget, deadline, rtol, corners, exact, explore_ties, best):
     """jcbb.jcbb_search over ``corners``, in that order; those without candidates are skipped. Frame t
     visits the t-th corner with candidates, order[t] (the stack's depth is t; a leaf is no frame): nxt[t]
     its next candidate, child[t] the landmark its running child committed (−1: the "no match" child, or
@@ -150,6 +151,20 @@ def jcbb_kernel(jc, g, size, corners, exact, explore_ties, budget, deadline, bes
         else:
             t += 1
             at[t], nxt[t], child[t], skipped[t] = size, first[t], -1, False
+
+
+@kernel
+def groups_kernel(jc, g, size, budget, deadline, rtol, group_off, group_corners, exact, explore_ties, out):
+    """PCA's per-group JCBB (Algorithm 3): jcbb_kernel over each group group_corners[group_off[t] :
+    group_off[t + 1]] in turn, from the same ``size`` committed pairings, the budget shared. Group t's
+    best pairs go to out[t] (G, capacity, 2); returns their counts."""
+    counts = np.zeros(len(group_off) - 1, np.int64)
+    for t in range(len(counts)):
+        best = (np.zeros(1, np.int64), np.full(1, math.inf), out[t])
+        corners = group_corners[group_off[t] : group_off[t + 1]]
+        jcbb_kernel(jc, g, size, budget, deadline, rtol, corners, exact, explore_ties, best)
+        counts[t] = best[0][0]
+    return counts
 
 
 @kernel
@@ -220,7 +235,7 @@ def _nubb_step(f, size, jc, g, u_off, units, used, same, rem_after, explore_ties
 
 @kernel
 def combine_kernel(
-    jc, g, size, gb_off, gb, u_off, units, same, rem_after, explore_ties, budget, deadline, best, rtol
+    jc, g, size, budget, deadline, rtol, gb_off, gb, u_off, units, same, rem_after, explore_ties, best
 ):
     """pca.combine_groups: group t's H_g is gb[gb_off[t] : gb_off[t + 1]], its unit pairs units[u_off[t] :
     u_off[t + 1]] ((corner, landmark) rows), ``same[t]`` whether they are the same set, rem_after[t] the
