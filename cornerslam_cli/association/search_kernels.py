@@ -1,5 +1,6 @@
-"""Compiled (Numba) searches of the associators: JCBB's interpretation tree (jcbb.jcbb_search) and PCA's
-combination of its groups, PCBB + NUBB (pca.combine_groups), bit for bit the Python searches they replace.
+"""Compiled (Numba) searches of the associators: JCBB's interpretation tree (jcbb.jcbb_search, and PCA's
+JCBB of each group, pca.group_searches) and PCA's combination of its groups, PCBB + NUBB
+(pca.combine_groups), bit for bit the Python searches they replace.
 
 In Python every node of these searches called the compiled try / commit kernels (kernels.py) through
 :class:`gating.JointCompatibility`, and the recursion around them was most of an association's time (in
@@ -95,7 +96,7 @@ def _try_add(jc, g, i, k, h, rtol):
 
 @kernel
 def _jcbb_leaf(jc, best, size, exact):
-    """A leaf of JCBB's tree: offered if every pairing has been visited (exact: if it passes its gate)."""
+    """A leaf of JCBB's tree (every corner visited): offered as the best (exact: if it passes its gate)."""
     if not exact or jc[2][size] < jc[6][size]:
         _offer(best, jc, size)
 
@@ -239,7 +240,7 @@ def combine_kernel(
 ):
     """pca.combine_groups: group t's H_g is gb[gb_off[t] : gb_off[t + 1]], its unit pairs units[u_off[t] :
     u_off[t + 1]] ((corner, landmark) rows), ``same[t]`` whether they are the same set, rem_after[t] the
-    unit pairs of the groups after t. Frames (KIND, T, S, TAKEN, H, STAGE, ADDED): a PCBB call pcbb(t) or
+    unit pairs of groups t, t + 1, … Frames (KIND, T, S, TAKEN, H, STAGE, ADDED): a PCBB call pcbb(t) or
     a NUBB call nubb(t, s, taken)."""
     used = np.zeros(len(g[2]), np.bool_)
     frames = np.zeros((2 * len(gb_off) + len(units) + 1, 7), np.int64)
