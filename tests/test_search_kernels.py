@@ -206,3 +206,15 @@ def test_load_kernels_compiles_every_search_a_run_uses():
         Pca(cfg)(p.z, p.C, p.pred)
         Jcbb(cfg)(p.z, p.C, p.pred)
     assert [len(k.signatures) for k in kernels] == loaded
+
+
+def test_a_search_beyond_the_hypothesis_capacity_is_refused():
+    """The compiled searches write without bounds checks: JCBB over more corners than the hypothesis can
+    hold, or PCA's groups larger than it, is a ValueError before any search."""
+    p = random_problem(np.random.default_rng(5), 6, 10)
+    g = gate(p.z, p.C, p.pred, AssociationConfig())
+    with pytest.raises(ValueError, match="capacity 3"):
+        jcbb.jcbb_search(g, range(6), JointCompatibility(g, 3), Budget())
+    with pytest.raises(ValueError, match="capacity 2"):
+        pca.group_searches(g, [[0, 1], [2, 3, 4]], JointCompatibility(g, 2), Budget())
+    assert jcbb.jcbb_search(g, range(3), JointCompatibility(g, 3), Budget()).count <= 3

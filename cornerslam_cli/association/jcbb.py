@@ -79,6 +79,15 @@ def csr(rows: Sequence[Sequence], *shape: int) -> tuple[np.ndarray, np.ndarray]:
     return offsets, np.array([x for r in rows for x in r], dtype=np.int64).reshape(-1, *shape)
 
 
+def check_capacity(jc: JointCompatibility, corners: int) -> None:
+    """ValueError unless jc can hold a pairing of each of ``corners`` more corners (the compiled searches
+    write without bounds checks)."""
+    if jc.size + corners > jc.capacity:
+        raise ValueError(
+            f"{corners} corners on {jc.size} pairings exceed the hypothesis' capacity {jc.capacity}"
+        )
+
+
 def run_compiled(search, g: Gated, jc: JointCompatibility, budget: Budget, *args):
     """Run a compiled search of search_kernels.py (``args``: its own arguments) from jc's committed
     pairings, counting its nodes in ``budget``; what it returns. jc's arrays change as its try_add /
@@ -118,6 +127,7 @@ def jcbb_search(
     (search_kernels.jcbb_kernel).
     """
     corners = np.asarray(corners, dtype=np.int64).reshape(-1)
+    check_capacity(jc, len(corners))
     return run_search(jcbb_kernel, g, jc, budget, explore_ties, corners, bool(exact))
 
 

@@ -45,7 +45,7 @@ import numpy as np
 from ..types import AssociationResult, Prediction
 from . import gating
 from .gating import Gated, JointCompatibility, build_result, gate, scan_order
-from .jcbb import Best, Budget, Jcbb, csr, greedy_fallback, run_compiled, run_search
+from .jcbb import Best, Budget, Jcbb, check_capacity, csr, greedy_fallback, run_compiled, run_search
 from .params import AssociationConfig
 from .search_kernels import combine_kernel, groups_kernel
 
@@ -77,6 +77,7 @@ def group_searches(
 ) -> list[list[tuple[int, int]]]:
     """Algorithm 3's local best hypotheses H_g: :func:`.jcbb.jcbb_search` of each group in turn from jc's
     state, the budget shared. Compiled (search_kernels.groups_kernel)."""
+    check_capacity(jc, max(map(len, groups), default=0))
     offsets, corners = csr(groups)
     out = np.empty((len(groups), jc.capacity, 2), dtype=np.int64)
     counts = run_compiled(groups_kernel, g, jc, budget, offsets, corners, bool(exact), explore_ties, out)
