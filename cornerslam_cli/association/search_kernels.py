@@ -179,11 +179,11 @@ def _pcbb_step(f, size, jc, g, gb_off, gb, used, rem_after, explore_ties, best, 
             return size, RETURN, 0, 0, 0
         lo, hi = gb_off[t], gb_off[t + 1]
         f[STAGE] = 2
-        if hi > lo and not used[gb[lo:hi, 1]].any():  # take H_g whole
+        if hi > lo and not used[gb[lo:hi, 1]].any():  # Alg 4 lines 14–17: take H_g whole
             gate_all, added = jc[6][size + hi - lo], 0
             for a in range(lo, hi):
                 d2, W, Minv, ynew = _try_add(jc, g, gb[a, 0], gb[a, 1], size, rtol)
-                if not d2 < gate_all:
+                if not d2 < gate_all:  # D² only grows: already beyond the final gate
                     break
                 commit_pairing(jc[0], jc[1], W, Minv, ynew, size)
                 size, added = size + 1, added + 1
@@ -192,7 +192,7 @@ def _pcbb_step(f, size, jc, g, gb_off, gb, used, rem_after, explore_ties, best, 
                 f[STAGE], f[ADDED] = 1, added
                 return size, PCBB, t + 1, 0, 0
             size -= added
-        return size, NUBB, t, 0, 0
+        return size, NUBB, t, 0, 0  # Alg 4 line 19
     if f[STAGE] == 1:  # H_g's branch returned
         used[gb[gb_off[t] : gb_off[t + 1], 1]] = False
         f[STAGE] = 2
@@ -219,7 +219,7 @@ def _nubb_step(f, size, jc, g, u_off, units, used, same, rem_after, explore_ties
     rest = count - s - 1 + rem_after[t + 1]
     if f[STAGE] == 0:
         f[H] = size
-        if not used[k]:  # append the unit pair
+        if not used[k]:  # Alg 5 lines 1–9: append the unit pair
             d2, W, Minv, ynew = _try_add(jc, g, i, k, size, rtol)
             if d2 < jc[6][size + 1] and _can_improve(best, explore_ties, size + 1, rest, d2):
                 commit_pairing(jc[0], jc[1], W, Minv, ynew, size)
@@ -229,7 +229,7 @@ def _nubb_step(f, size, jc, g, u_off, units, used, same, rem_after, explore_ties
         used[k] = False
         size -= 1
     f[STAGE] = 2
-    if _can_improve(best, explore_ties, f[H], rest, jc[2][f[H]]):  # skip it
+    if _can_improve(best, explore_ties, f[H], rest, jc[2][f[H]]):  # Alg 5 lines 10–16: skip it
         return size, NUBB, t, s + 1, taken
     return size, RETURN, 0, 0, 0
 
