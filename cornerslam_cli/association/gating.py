@@ -20,6 +20,7 @@ pairing is added, which the branch and bound searches use to prune.
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 from dataclasses import dataclass, field
 
@@ -82,9 +83,12 @@ class Gated:
     cand_flat: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self):
-        self.cand_flat = np.concatenate([np.zeros(0, np.int64), *self.candidates]).astype(np.int64)
-        self.cand_off = np.zeros(len(self.candidates) + 1, dtype=np.int64)
-        self.cand_off[1:] = np.cumsum([len(c) for c in self.candidates])
+        self.cand_flat = np.concatenate([np.zeros(0, np.int64), *self.candidates]).astype(
+            np.int64, copy=False
+        )
+        self.cand_off = np.array(
+            [*itertools.accumulate(map(len, self.candidates), initial=0)], dtype=np.int64
+        )
         universe = np.unique(self.cand_flat)
         self._universe = universe.tolist()
         self._loc = {k: j for j, k in enumerate(self._universe)}
