@@ -19,11 +19,10 @@ import numpy as np
 
 from ..errors import ConfigError, did_you_mean
 from ..types import AssociationResult, Prediction
-from .gating import load_kernels
 from .icnn import Icnn
 from .jcbb import Jcbb
 from .params import AssociationConfig
-from .pca import Pca
+from .pca import Pca, load_kernels
 
 
 class Associator(Protocol):

@@ -20,6 +20,7 @@ pairing is added, which the branch and bound searches use to prune.
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 from dataclasses import dataclass, field
 
@@ -30,9 +31,7 @@ from ..types import AssociationResult, Prediction
 from .kernels import commit_pairing, cross_blocks, gate_pairs, try_pairing
 from .params import AssociationConfig
 
-_PIVOT_RTOL = (
-    1e-12  # a Cholesky pivot below this fraction of its diagonal entry means "not positive definite"
-)
+PIVOT_RTOL = 1e-12  # a Cholesky pivot below this fraction of its diagonal entry means "not positive definite"
 
 
 @functools.lru_cache(maxsize=32)
@@ -64,6 +63,7 @@ class Gated:
     d2 : (m, n) individual D², ``inf`` where skipped by the Euclidean gate or S not positive definite
     candidates : m int arrays, the individually compatible landmarks of each corner by increasing D²
     hph : (n, 3, 3) H_k P H_kᵀ (zero for landmarks no corner came near)
+    cand_off, cand_flat : the candidate lists in one array, corner i's cand_flat[cand_off[i] : cand_off[i+1]]
     """
 
     z: np.ndarray
@@ -78,9 +78,18 @@ class Gated:
     _universe: list[int] = field(default_factory=list, repr=False)
     _loc: dict[int, int] = field(default_factory=dict, repr=False)
     _blocks: np.ndarray | None = field(default=None, repr=False)  # (u, u, d, d) cross covariances
+    _search: tuple | None = field(default=None, repr=False)  # search_arrays()
+    cand_off: np.ndarray = field(init=False, repr=False)
+    cand_flat: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self):
-        universe = np.unique(np.concatenate([np.zeros(0, np.int64), *self.candidates]))
+        self.cand_flat = np.concatenate([np.zeros(0, np.int64), *self.candidates]).astype(
+            np.int64, copy=False
+        )
+        self.cand_off = np.array(
+            [*itertools.accumulate(map(len, self.candidates), initial=0)], dtype=np.int64
+        )
+        universe = np.unique(self.cand_flat)
         self._universe = universe.tolist()
         self._loc = {k: j for j, k in enumerate(self._universe)}
 
@@ -91,7 +100,7 @@ class Gated:
             j = len(self._universe)
             self._universe.append(k)
             self._loc[k] = j
-            self._blocks = None
+            self._blocks = self._search = None
         return j
 
     def cross_row(self, k: int) -> np.ndarray:
@@ -100,11 +109,34 @@ class Gated:
         The universe is the landmarks of all candidate lists: only those can enter a hypothesis. Its
         blocks are computed together, at the first row asked for (again when the universe widens).
         """
+        return self.universe_blocks()[:, self._loc[k]]
+
+    def universe_blocks(self) -> np.ndarray:
+        """(u, u, d, d) blocks H_l P H_kᵀ of every two landmarks of the universe (computed once)."""
         if self._blocks is None:
             p, universe = self.pred, np.asarray(self._universe, dtype=np.int64)
             H_r, H_l = np.ascontiguousarray(p.H_r, dtype=float), np.ascontiguousarray(p.H_l, dtype=float)
             self._blocks = cross_blocks(p.P, H_r, H_l, universe, self.d)
-        return self._blocks[:, self._loc[k]]
+        return self._blocks
+
+    def search_arrays(self) -> tuple:
+        """(nu, C, hph, blocks, loc_of, cand_off, cand_flat), what the compiled searches read
+        (search_kernels.py): the universe's cross covariances (:meth:`universe_blocks`), loc_of[k] landmark
+        k's position in the universe (−1 outside it: a search pairs only landmarks of the candidate
+        lists), the candidate lists. Built once (again when the universe widens)."""
+        if self._search is None:
+            loc_of = np.full(len(self.hph), -1, dtype=np.int64)
+            loc_of[self._universe] = np.arange(len(self._universe))
+            self._search = (
+                self.nu,
+                self.C,
+                self.hph,
+                self.universe_blocks(),
+                loc_of,
+                self.cand_off,
+                self.cand_flat,
+            )
+        return self._search
 
     @property
     def m(self) -> int:
@@ -132,7 +164,7 @@ def gate(z: np.ndarray, C: np.ndarray, pred: Prediction, cfg: AssociationConfig)
     C = np.ascontiguousarray(C, dtype=float).reshape(-1, 3, 3)
     m, d = len(z), 3 if cfg.use_phi else 2
     h, H_r, H_l = (np.ascontiguousarray(a, dtype=float) for a in (pred.h, pred.H_r, pred.H_l))
-    nu, d2, hph = gate_pairs(z, C, h.reshape(-1, 3), pred.P, H_r, H_l, d, cfg.euclidean_gate, _PIVOT_RTOL)
+    nu, d2, hph = gate_pairs(z, C, h.reshape(-1, 3), pred.P, H_r, H_l, d, cfg.euclidean_gate, PIVOT_RTOL)
     threshold = float(chi2_gate(d, cfg.alpha))
     # each row by increasing D² (stable: ties by landmark id); its first `count` entries pass the gate
     # (d2 holds no NaN: gate_pairs returns inf for those)
@@ -183,9 +215,7 @@ class JointCompatibility:
         loc = g.loc(k)
         row = g.cross_row(k) if h else self._no_row  # blocks H_{k_a} P H_kᵀ of S_{H,new}
         S_new = g.hph[k, :d, :d] + g.C[i, :d, :d]
-        inc, W, Minv, ynew = try_pairing(
-            self.M, self.y, row, self.locs, S_new, g.nu[i, k, :d], h, _PIVOT_RTOL
-        )
+        inc, W, Minv, ynew = try_pairing(self.M, self.y, row, self.locs, S_new, g.nu[i, k, :d], h, PIVOT_RTOL)
         d2 = self.d2[h] + inc
         if not math.isfinite(d2):
             return math.inf
@@ -212,6 +242,11 @@ class JointCompatibility:
 
     def pairs(self) -> list[tuple[int, int]]:
         return [(int(self.corners[a]), int(self.landmarks[a])) for a in range(self.size)]
+
+    def arrays(self) -> tuple:
+        """(M, y, d2, corners, landmarks, locs, gate), the state the compiled searches grow and shrink
+        in place as try_add / commit do (search_kernels.py)."""
+        return self.M, self.y, self.d2, self.corners, self.landmarks, self.locs, self.gate
 
 
 def joint_d2_of(g: Gated, pairs: list[tuple[int, int]]) -> float:
@@ -249,17 +284,23 @@ def build_result(
     )
 
 
-def load_kernels() -> None:
-    """Load (on a machine's first run: compile) the kernels of kernels.py now, so that the first timed
-    association of a run does not pay it: a two-corner, two-landmark hypothesis tried and kept, with the
-    state covariance a view of a larger buffer (the filter's, while it has spare capacity) and a whole
-    array (full capacity), both gate settings, both dimensions."""
+def warm_up_problems() -> list[tuple[np.ndarray, np.ndarray, Prediction, AssociationConfig]]:
+    """(z, C, pred, cfg) of the kernels' warm-up: two corners on two landmarks, with the state covariance
+    a view of a larger buffer (the filter's, while it has spare capacity) and a whole array (full
+    capacity), both gate settings, both dimensions."""
     h = np.array([[1.0, 0.0, 1.5], [0.0, 1.0, 1.5]])
     H = np.tile(np.eye(3), (2, 1, 1))
-    for P in (np.eye(12)[:9, :9], np.eye(9)):
-        for cfg in (AssociationConfig(), AssociationConfig(use_phi=False, euclidean_gate=0.0)):
-            g = gate(h, np.tile(0.01 * np.eye(3), (2, 1, 1)), Prediction(h, -H, H, P), cfg)
-            jc = JointCompatibility(g, 2)
-            for i in range(2):
-                jc.try_add(i, i)
-                jc.commit()
+    C = np.tile(0.01 * np.eye(3), (2, 1, 1))
+    configs = (AssociationConfig(), AssociationConfig(use_phi=False, euclidean_gate=0.0))
+    return [(h, C, Prediction(h, -H, H, P), cfg) for P in (np.eye(12)[:9, :9], np.eye(9)) for cfg in configs]
+
+
+def load_kernels() -> None:
+    """Load (on a machine's first run: compile) the kernels of kernels.py now, so that the first timed
+    association of a run does not pay it: a two-corner, two-landmark hypothesis tried and kept on each
+    :func:`warm_up_problems` problem."""
+    for z, C, pred, cfg in warm_up_problems():
+        jc = JointCompatibility(gate(z, C, pred, cfg), 2)
+        for i in range(2):
+            jc.try_add(i, i)
+            jc.commit()

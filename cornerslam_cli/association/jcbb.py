@@ -23,7 +23,7 @@ Readings chosen (the textbook pseudo-code is ambiguous or inexact here):
   unless a later leaf of equal count is reached with smaller D²).
 * **remaining** counts only the corners still to visit that have at least one candidate (a corner with
   none can only take "no match"); such corners are not branched on at all.
-* **nodes** = interpretation-tree nodes visited (calls of the recursive step, leaves included).
+* **nodes** = interpretation-tree nodes visited (leaves included).
 * **Budget**: ``max_nodes`` / ``max_seconds`` stop the search; the better of the best hypothesis found
   so far and a greedy one (ICNN's pairs in scan order, each kept if collision-free and jointly
   compatible) is returned with ``budget_hit`` set.
@@ -31,6 +31,7 @@ Readings chosen (the textbook pseudo-code is ambiguous or inexact here):
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from collections.abc import Sequence
@@ -38,31 +39,23 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..types import AssociationResult, Prediction
-from .gating import Gated, JointCompatibility, build_result, gate, scan_order
+from .gating import PIVOT_RTOL, Gated, JointCompatibility, build_result, gate, scan_order
 from .params import AssociationConfig
-
-
-class BudgetExhausted(Exception):
-    """Raised inside a search when its node or time budget runs out."""
+from .search_kernels import jcbb_kernel
 
 
 class Budget:
-    """Node / wall-time budget shared by the searches of one associator call (0 = unlimited)."""
+    """Node / wall-time budget shared by the searches of one associator call (0 = unlimited).
+
+    A search counts a node as it enters it; it stops when ``max_nodes`` have been counted, or when the
+    count reaches a multiple of 256 past ``deadline``, and sets ``hit``.
+    """
 
     def __init__(self, max_nodes: int = 0, max_seconds: float = 0.0):
         self.max_nodes = max_nodes
         self.deadline = time.perf_counter() + max_seconds if max_seconds > 0 else math.inf
         self.nodes = 0
         self.hit = False
-
-    def tick(self) -> None:
-        if self.max_nodes and self.nodes >= self.max_nodes:
-            self.hit = True
-            raise BudgetExhausted
-        self.nodes += 1
-        if self.nodes & 255 == 0 and time.perf_counter() > self.deadline:
-            self.hit = True
-            raise BudgetExhausted
 
 
 class Best:
@@ -74,15 +67,46 @@ class Best:
         self.d2 = math.inf
         self.pairs: list[tuple[int, int]] = []
 
-    def can_improve(self, count: int, remaining: int, d2: float) -> bool:
-        """Could a hypothesis with ``count`` pairings and D² ``d2`` still beat the best?"""
-        reach = count + remaining
-        return reach > self.count or (self.explore_ties and reach == self.count and d2 < self.d2)
-
     def offer(self, jc: JointCompatibility) -> None:
         h, d2 = jc.size, jc.joint_d2
         if h > self.count or (h == self.count and d2 < self.d2):
             self.count, self.d2, self.pairs = h, d2, jc.pairs()
+
+
+def csr(rows: Sequence[Sequence], *shape: int) -> tuple[np.ndarray, np.ndarray]:
+    """(offsets, flat) of a list of lists: row r is flat[offsets[r] : offsets[r + 1]], items of ``shape``."""
+    offsets = np.array([*itertools.accumulate(map(len, rows), initial=0)], dtype=np.int64)
+    return offsets, np.array([x for r in rows for x in r], dtype=np.int64).reshape(-1, *shape)
+
+
+def check_capacity(jc: JointCompatibility, corners: int) -> None:
+    """ValueError unless jc can hold a pairing of each of ``corners`` more corners (the compiled searches
+    write without bounds checks)."""
+    if jc.size + corners > jc.capacity:
+        raise ValueError(
+            f"{corners} corners on {jc.size} pairings exceed the hypothesis' capacity {jc.capacity}"
+        )
+
+
+def run_compiled(search, g: Gated, jc: JointCompatibility, budget: Budget, *args):
+    """Run a compiled search of search_kernels.py (``args``: its own arguments) from jc's committed
+    pairings, counting its nodes in ``budget``; what it returns. jc's arrays change as its try_add /
+    commit would change them; its size does not."""
+    counters = np.array([budget.max_nodes, budget.nodes, 0], dtype=np.int64)
+    out = search(jc.arrays(), g.search_arrays(), jc.size, counters, budget.deadline, PIVOT_RTOL, *args)
+    budget.nodes, budget.hit = int(counters[1]), budget.hit or bool(counters[2])
+    return out
+
+
+def run_search(search, g: Gated, jc: JointCompatibility, budget: Budget, explore_ties: bool, *args) -> Best:
+    """:func:`run_compiled` of a search for one best hypothesis (``explore_ties`` and the best its last
+    arguments)."""
+    found = (np.zeros(1, np.int64), np.full(1, math.inf), np.empty((jc.capacity, 2), np.int64))
+    run_compiled(search, g, jc, budget, *args, explore_ties, found)
+    best = Best(explore_ties)
+    best.count, best.d2 = int(found[0][0]), float(found[1][0])
+    best.pairs = [(i, k) for i, k in found[2][: best.count].tolist()]
+    return best
 
 
 def jcbb_search(
@@ -99,47 +123,12 @@ def jcbb_search(
     exact True: H is pruned only when D²_H ≥ χ²(d·(|H| + remaining), 1 − α) — no extension can pass
     its gate then, because D² never decreases — and leaves are tested against χ²(d·|H|, 1 − α).
     Pairings already committed in ``jc`` (and their landmarks) stay in every hypothesis; the returned
-    ``Best.pairs`` includes them. ``jc`` is left as it was found, also when the budget runs out.
+    ``Best.pairs`` includes them. ``jc`` keeps its size, also when the budget runs out. Compiled
+    (search_kernels.jcbb_kernel).
     """
-    order = [i for i in corners if len(g.candidates[i])]
-    cands = [g.candidates[i].tolist() for i in order]
-    remaining = list(range(len(order), -1, -1))  # remaining[t]: corners with candidates from t on
-    used = {k for _, k in jc.pairs()}
-    best = Best(explore_ties)
-    base = jc.size
-    gate = jc.gate
-
-    def visit(t: int) -> None:
-        budget.tick()
-        i, h = (order[t], jc.size) if t < len(order) else (-1, jc.size)
-        if t == len(order):
-            if not exact or jc.d2[h] < gate[h]:
-                best.offer(jc)
-            return
-        rest = remaining[t + 1]
-        gate_next = gate[h + 1 + rest] if exact else gate[h + 1]
-        for k in cands[t]:
-            if k in used:
-                continue
-            d2 = jc.try_add(i, k)
-            if d2 < gate_next and best.can_improve(h + 1, rest, d2):
-                jc.commit()
-                used.add(k)
-                try:
-                    visit(t + 1)
-                finally:
-                    used.discard(k)
-                    jc.pop()
-        d2 = jc.d2[h]
-        if best.can_improve(h, rest, d2) and (not exact or d2 < gate[h + rest]):  # corner i unmatched
-            visit(t + 1)
-
-    try:
-        visit(0)
-    except BudgetExhausted:
-        pass
-    assert jc.size == base
-    return best
+    corners = np.asarray(corners, dtype=np.int64).reshape(-1)
+    check_capacity(jc, len(corners))
+    return run_search(jcbb_kernel, g, jc, budget, explore_ties, corners, bool(exact))
 
 
 def greedy_fallback(g: Gated, corners: Sequence[int], best: Best) -> Best:

@@ -37,14 +37,17 @@ Readings chosen where the pseudo-code is garbled or ambiguous:
 
 from __future__ import annotations
 
+import itertools
 import time
 
 import numpy as np
 
 from ..types import AssociationResult, Prediction
+from . import gating
 from .gating import Gated, JointCompatibility, build_result, gate, scan_order
-from .jcbb import Best, Budget, BudgetExhausted, greedy_fallback, jcbb_search
+from .jcbb import Best, Budget, Jcbb, check_capacity, csr, greedy_fallback, run_compiled, run_search
 from .params import AssociationConfig
+from .search_kernels import combine_kernel, groups_kernel
 
 
 def make_groups(z: np.ndarray, p: int, grouping: str = "scan") -> list[list[int]]:
@@ -64,6 +67,23 @@ def make_groups(z: np.ndarray, p: int, grouping: str = "scan") -> list[list[int]
     return groups
 
 
+def group_searches(
+    g: Gated,
+    groups: list[list[int]],
+    jc: JointCompatibility,
+    budget: Budget,
+    exact: bool = False,
+    explore_ties: bool = True,
+) -> list[list[tuple[int, int]]]:
+    """Algorithm 3's local best hypotheses H_g: :func:`.jcbb.jcbb_search` of each group in turn from jc's
+    state, the budget shared. Compiled (search_kernels.groups_kernel)."""
+    check_capacity(jc, max(map(len, groups), default=0))
+    offsets, corners = csr(groups)
+    out = np.empty((len(groups), jc.capacity, 2), dtype=np.int64)
+    counts = run_compiled(groups_kernel, g, jc, budget, offsets, corners, bool(exact), explore_ties, out)
+    return [[(i, k) for i, k in out[t, :c].tolist()] for t, c in enumerate(counts.tolist())]
+
+
 def combine_groups(
     g: Gated,
     group_best: list[list[tuple[int, int]]],
@@ -72,66 +92,13 @@ def combine_groups(
     budget: Budget,
     explore_ties: bool = True,
 ) -> Best:
-    """PCBB + NUBB (Algorithms 4–5): the best combination of each group's H_g or a subset of its U_g."""
-    G = len(group_best)
-    rem_after = [0] * (G + 1)  # corners with candidates in groups after t
-    for t in range(G - 1, -1, -1):
-        rem_after[t] = rem_after[t + 1] + len(unit_pairs[t])
-    same = [set(group_best[t]) == set(unit_pairs[t]) for t in range(G)]
-    used: set[int] = set()
-    best = Best(explore_ties)
-
-    def pcbb(t: int) -> None:
-        budget.tick()
-        if t == G:
-            best.offer(jc)
-            return
-        Hg, h = group_best[t], jc.size
-        if Hg and not any(k in used for _, k in Hg):  # Alg 4 lines 14–17: take H_g whole
-            gate_all = jc.gate[h + len(Hg)]
-            added = 0
-            for i, k in Hg:
-                d2 = jc.try_add(i, k)
-                if not d2 < gate_all:  # D² only grows: already beyond the final gate
-                    break
-                jc.commit()
-                added += 1
-            if added == len(Hg) and best.can_improve(jc.size, rem_after[t + 1], jc.joint_d2):
-                used.update(k for _, k in Hg)
-                try:
-                    pcbb(t + 1)
-                finally:
-                    used.difference_update(k for _, k in Hg)
-            jc.pop(added)
-        nubb(t, 0, 0)  # Alg 4 line 19
-
-    def nubb(t: int, s: int, taken: int) -> None:
-        budget.tick()
-        U = unit_pairs[t]
-        if s == len(U):
-            if not (same[t] and taken == len(U) and U):  # that leaf repeats the H_g branch
-                pcbb(t + 1)
-            return
-        i, k = U[s]
-        h, rest = jc.size, len(U) - s - 1 + rem_after[t + 1]
-        if k not in used:  # Alg 5 lines 1–9: append the unit pair
-            d2 = jc.try_add(i, k)
-            if d2 < jc.gate[h + 1] and best.can_improve(h + 1, rest, d2):
-                jc.commit()
-                used.add(k)
-                try:
-                    nubb(t, s + 1, taken + 1)
-                finally:
-                    used.discard(k)
-                    jc.pop()
-        if best.can_improve(h, rest, jc.d2[h]):  # Alg 5 lines 10–16: skip it
-            nubb(t, s + 1, taken)
-
-    try:
-        pcbb(0)
-    except BudgetExhausted:
-        pass
-    return best
+    """PCBB + NUBB (Algorithms 4–5): the best combination of each group's H_g or a subset of its U_g.
+    Compiled (search_kernels.combine_kernel)."""
+    after = [*itertools.accumulate(map(len, reversed(unit_pairs)), initial=0)]
+    rem_after = np.array(after[::-1], dtype=np.int64)  # corners with candidates in groups from t on
+    same = np.array([set(Hg) == set(U) for Hg, U in zip(group_best, unit_pairs, strict=True)], dtype=np.bool_)
+    searched = (*csr(group_best, 2), *csr(unit_pairs, 2), same, rem_after)
+    return run_search(combine_kernel, g, jc, budget, explore_ties, *searched)
 
 
 class Pca:
@@ -146,13 +113,11 @@ class Pca:
         g = gate(z, C, pred, self.cfg)
         budget = Budget(pcfg.max_nodes, pcfg.max_seconds)
         groups = make_groups(g.z, pcfg.group_size, pcfg.grouping)
-        group_best, unit_pairs = [], []
         local = JointCompatibility(g, max(pcfg.group_size, 1))
-        nearest = g.nearest()
+        nearest = g.nearest().tolist()
         exact, ties = self.cfg.jcbb.joint_gate == "exact", self.cfg.jcbb.explore_ties
-        for grp in groups:  # Algorithm 3
-            group_best.append(jcbb_search(g, grp, local, budget, exact, ties).pairs)
-            unit_pairs.append([(i, int(nearest[i])) for i in grp if nearest[i] >= 0])
+        group_best = group_searches(g, groups, local, budget, exact, ties)  # Algorithm 3
+        unit_pairs = [[(i, nearest[i]) for i in grp if nearest[i] >= 0] for grp in groups]
         group_nodes = budget.nodes
         jc = JointCompatibility(g, max(g.m, 1))
         best = combine_groups(g, group_best, unit_pairs, jc, budget, ties) if not budget.hit else Best()
@@ -167,3 +132,13 @@ class Pca:
             "combine_nodes": budget.nodes - group_nodes,
         }
         return build_result(g, best.pairs, best.d2, budget.nodes, budget.hit, extra)
+
+
+def load_kernels() -> None:
+    """Load (on a machine's first run: compile) the association's kernels now, so that the first timed
+    association of a run does not pay it: gating.load_kernels (the gate, try and commit) and the compiled
+    searches (search_kernels.py), by PCA and JCBB on each of its problems."""
+    gating.load_kernels()
+    for z, C, pred, cfg in gating.warm_up_problems():
+        Pca(cfg)(z, C, pred)
+        Jcbb(cfg)(z, C, pred)
