@@ -51,7 +51,7 @@ class LoopConfig:
     # candidate_sigmas σ of the new one's marginal (hierarchy.py)
     candidate_distance: float = num(3.0, ge=0.0, le=1e6)  # m
     candidate_sigmas: float = num(3.0, gt=0.0, le=100.0)
-    max_candidates: int = num(8, ge=1, le=1000)  # candidates verified per closed submap (nearest first)
+    max_candidates: int = num(5, ge=1, le=1000)  # candidates verified per closed submap (nearest first)
     # ... stopping once this many were accepted by the gate: on ground revisited many times every close
     # had 8 candidates to verify, and a third or fourth agreeing closure of one submap adds little
     max_closures: int = num(3, ge=1, le=1000)
