@@ -91,8 +91,10 @@ class ScanMatchConfig:
     # overlap in turns) raised the learnt odometry noise of an exact odometry for its length
     adapt_window: int = num(400, ge=1, le=100000)
     # keyframes matched once to learn the scales before the run (0 = off: learnt as the run goes). Off by
-    # default: over the whole panel (docs/results/frontend_panel.md) it did not pay — the first matches
-    # judged with learnt scales changed which marginal ones were kept, for better or worse per log
+    # default: over the whole panel it did not pay — the first matches judged with learnt scales changed
+    # which marginal ones were kept, for better or worse per log (docs/results/frontend_panel.md; again at
+    # 20 on 2026-12-02, variant_scan_match.warmup-20.md: 8 logs better, 5 worse beyond their spread, fhw-exact
+    # 0.007 → 0.261 m and edmonton 0.379 → 0.173)
     warmup: int = num(0, ge=0, le=10000)
     adapt_every: int = num(25, ge=1, le=100000)  # keyframes between two re-estimates
     adapt_min_samples: int = num(5, ge=2, le=100000)  # ... the model itself (scale 1) until this many
