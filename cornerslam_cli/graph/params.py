@@ -53,7 +53,7 @@ class LoopConfig:
     candidate_sigmas: float = num(3.0, gt=0.0, le=100.0)
     max_candidates: int = num(5, ge=1, le=1000)  # candidates verified per closed submap (nearest first)
     # ... stopping once this many were accepted by the gate: on ground revisited many times every close
-    # had 8 candidates to verify, and a third or fourth agreeing closure of one submap adds little
+    # had all its candidates to verify (8 then), and a third or fourth agreeing closure adds little
     max_closures: int = num(3, ge=1, le=1000)
     # a pair the corners cannot verify (few corners, no hypothesis: a corridor seen the other way round;
     # low fitness: a corner pose the points refute) is searched on its scan points inside the graph's
