@@ -34,6 +34,16 @@ from .params import AssociationConfig
 PIVOT_RTOL = 1e-12  # a Cholesky pivot below this fraction of its diagonal entry means "not positive definite"
 
 
+def row_offsets(rows) -> np.ndarray:
+    """(len(rows) + 1,) where each row of ``rows`` starts in their concatenation, and its end."""
+    return np.array([*itertools.accumulate(map(len, rows), initial=0)], dtype=np.int64)
+
+
+def csr(rows, *shape: int) -> tuple[np.ndarray, np.ndarray]:
+    """(offsets, flat) of a list of lists: row r is flat[offsets[r] : offsets[r + 1]], items of ``shape``."""
+    return row_offsets(rows), np.array([x for r in rows for x in r], dtype=np.int64).reshape(-1, *shape)
+
+
 @functools.lru_cache(maxsize=32)
 def _chi2_table(alpha: float, size: int) -> np.ndarray:
     # scipy.stats.chi2.ppf(q, dof) is 2·gammaincinv(dof/2, q), the same digits, without importing
@@ -63,7 +73,7 @@ class Gated:
     d2 : (m, n) individual D², ``inf`` where skipped by the Euclidean gate or S not positive definite
     candidates : m int arrays, the individually compatible landmarks of each corner by increasing D²
     hph : (n, 3, 3) H_k P H_kᵀ (zero for landmarks no corner came near)
-    cand_off, cand_flat : the candidate lists in one array, corner i's cand_flat[cand_off[i] : cand_off[i+1]]
+    cand_flat : the candidate lists in one array (corner i's from row_offsets(candidates)[i] on)
     """
 
     z: np.ndarray
@@ -79,15 +89,11 @@ class Gated:
     _loc: dict[int, int] = field(default_factory=dict, repr=False)
     _blocks: np.ndarray | None = field(default=None, repr=False)  # (u, u, d, d) cross covariances
     _search: tuple | None = field(default=None, repr=False)  # search_arrays()
-    cand_off: np.ndarray = field(init=False, repr=False)
     cand_flat: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self):
         self.cand_flat = np.concatenate([np.zeros(0, np.int64), *self.candidates]).astype(
             np.int64, copy=False
-        )
-        self.cand_off = np.array(
-            [*itertools.accumulate(map(len, self.candidates), initial=0)], dtype=np.int64
         )
         universe = np.unique(self.cand_flat)
         self._universe = universe.tolist()
@@ -123,7 +129,8 @@ class Gated:
         """(nu, C, hph, blocks, loc_of, cand_off, cand_flat), what the compiled searches read
         (search_kernels.py): the universe's cross covariances (:meth:`universe_blocks`), loc_of[k] landmark
         k's position in the universe (−1 outside it: a search pairs only landmarks of the candidate
-        lists), the candidate lists. Built once (again when the universe widens)."""
+        lists), the candidate lists (:func:`row_offsets`, ``cand_flat``). Built once (again when the
+        universe widens): only the searches ask, so ICNN's calls never build it."""
         if self._search is None:
             loc_of = np.full(len(self.hph), -1, dtype=np.int64)
             loc_of[self._universe] = np.arange(len(self._universe))
@@ -133,7 +140,7 @@ class Gated:
                 self.hph,
                 self.universe_blocks(),
                 loc_of,
-                self.cand_off,
+                row_offsets(self.candidates),
                 self.cand_flat,
             )
         return self._search

@@ -31,7 +31,6 @@ Readings chosen (the textbook pseudo-code is ambiguous or inexact here):
 
 from __future__ import annotations
 
-import itertools
 import math
 import time
 from collections.abc import Sequence
@@ -71,12 +70,6 @@ class Best:
         h, d2 = jc.size, jc.joint_d2
         if h > self.count or (h == self.count and d2 < self.d2):
             self.count, self.d2, self.pairs = h, d2, jc.pairs()
-
-
-def csr(rows: Sequence[Sequence], *shape: int) -> tuple[np.ndarray, np.ndarray]:
-    """(offsets, flat) of a list of lists: row r is flat[offsets[r] : offsets[r + 1]], items of ``shape``."""
-    offsets = np.array([*itertools.accumulate(map(len, rows), initial=0)], dtype=np.int64)
-    return offsets, np.array([x for r in rows for x in r], dtype=np.int64).reshape(-1, *shape)
 
 
 def check_capacity(jc: JointCompatibility, corners: int) -> None:

@@ -44,8 +44,8 @@ import numpy as np
 
 from ..types import AssociationResult, Prediction
 from . import gating
-from .gating import Gated, JointCompatibility, build_result, gate, scan_order
-from .jcbb import Best, Budget, Jcbb, check_capacity, csr, greedy_fallback, run_compiled, run_search
+from .gating import Gated, JointCompatibility, build_result, csr, gate, scan_order
+from .jcbb import Best, Budget, Jcbb, check_capacity, greedy_fallback, run_compiled, run_search
 from .params import AssociationConfig
 from .search_kernels import combine_kernel, groups_kernel
 
