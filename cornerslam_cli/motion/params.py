@@ -38,7 +38,7 @@ class ScanMatchConfig:
     # off: the last window scans alone), join the local map when their pose lies within near_radius of the
     # robot's and their heading within near_angle of its heading (π: any heading, a corridor driven back
     # the other way too); of more, the near_max nearest
-    near_history: int = num(0, ge=0, le=5000)  # (≤ 5000: each kept scan holds its thinned points)
+    near_history: int = num(100, ge=0, le=5000)  # (≤ 5000: each kept scan holds its thinned points)
     near_radius: float = num(2.0, ge=0.0, le=1000.0)  # m
     near_angle: float = num(math.pi, ge=0.0, le=math.pi)  # rad
     near_max: int = num(5, ge=1, le=1000)  # (5 on the panel: better than 10, variant_*.md)
