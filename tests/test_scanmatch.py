@@ -215,6 +215,25 @@ def test_compiled_distance_transform_is_scipys_exactly():
     assert (squared_distances(free) > 3**2 + 4**2).all()
 
 
+@pytest.mark.parametrize(
+    "res,sigma",
+    [(0.1, 0.1), (0.2, 0.1), (0.05, 0.1), (0.1, 0.5), (0.5, 0.02), (0.01, 10.0)],  # last: a table too large
+)
+def test_blur_by_table_is_the_direct_formula_bit_for_bit(res, sigma):
+    """The likelihood field's blur exp(−d²/2σ²), d = √sq · res, looked up in a table of the distinct
+    squared distances (cut where it underflows to 0) is the formula on the whole field, bit for bit."""
+    from cornerslam_cli.motion.correlative import blur
+    from cornerslam_cli.motion.search_kernels import squared_distances
+
+    rng = np.random.default_rng(12)
+    for free in _occupancy_grids(rng):
+        if free.all():
+            continue
+        sq = squared_distances(free)
+        direct = np.exp(-0.5 * ((np.sqrt(sq) * res) / sigma) ** 2)
+        assert np.array_equal(blur(sq, res, sigma).view(np.int64), direct.view(np.int64)), free.shape
+
+
 @pytest.mark.parametrize("b", [1, 2, 4, 5])
 def test_compiled_block_max_is_numpys_shift_by_shift(b):
     """The coarse cells' bound: the compiled block maximum is numpy's shift-by-shift one, bit for bit,
