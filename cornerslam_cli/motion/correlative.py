@@ -88,10 +88,11 @@ EXP_ZERO = 746.0
 
 def blur(sq: np.ndarray, res: float, sigma: float) -> np.ndarray:
     """exp(−d²/2σ²) of d = √sq · res, for ``sq`` (float64) holding squared cell distances (integers): the
-    same numpy arithmetic as on the whole field, but on one table of the distinct values 0 … k and a
-    gather — a field has ~10⁵ cells and a few hundred values before the blur underflows to 0.0 (k: the
-    first of those; the cells beyond take it). Bit for bit the direct formula (tested): the same
-    correctly rounded √, ×, ÷ and the same exp on each value."""
+    same numpy arithmetic as on the whole field, but on one table of the values 0 … k and a gather — a
+    field has ~10⁵ cells, and past k = ⌈2 · EXP_ZERO · (σ/res)²⌉ (~1,500 at the front end's σ = res; ~370
+    for loop closing's coarser grid) the blur is 0.0, which the cells beyond k take from the table's last
+    entry. Bit for bit the direct formula (tested): the same correctly rounded √, ×, ÷ and the same exp on
+    each value; the direct formula when the table would be no smaller than the field."""
     top = int(sq.max()) if sq.size else 0
     zero_at = 2.0 * EXP_ZERO * (sigma / res) ** 2  # (√k·res/σ)²/2 ≥ EXP_ZERO from here on
     k = min(top, int(math.ceil(zero_at)))
