@@ -84,6 +84,19 @@ def previous_output(d: Path, kind: str = "run") -> Path:
     return d
 
 
+def previous_results_mcap(path: Path) -> Path:
+    """A results MCAP of an earlier run at ``path`` (its Header names report/mcap_out.LIBRARY)."""
+    from mcap.writer import Writer
+
+    from cornerslam_cli.report.mcap_out import LIBRARY
+
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start(profile="", library=LIBRARY)
+        w.finish()
+    return path
+
+
 def dead_pid() -> int:
     """The pid of a process that has just exited."""
     proc = subprocess.Popen(["true"])
@@ -334,8 +347,7 @@ def interrupted_while_writing_mcap_out(w: World) -> Case:
     """interrupted while `--mcap-out` is written: the previous MCAP and output directory kept, no
     temporary file left"""
     out = previous_output(w.tmp / "out")
-    mc = w.tmp / "res.mcap"
-    mc.write_bytes(b"previous results\n")
+    mc = previous_results_mcap(w.tmp / "res.mcap")
     w.mp.setattr("cornerslam_cli.report.mcap_out.write_results_mcap", interrupt)
     return Case(["run", w.log, "--out", out, "--mcap-out", mc])
 
@@ -491,6 +503,35 @@ def mcap_out_unwritable(w: World) -> Case:
     locked.mkdir()
     fail_writes_under(w.mp, locked, errno.EACCES)
     return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", locked / "r.mcap"], locked / "r.mcap")
+
+
+@fault(2, "exists and is not a results file cornerslam wrote")
+def mcap_out_is_a_users_file(w: World) -> Case:
+    """`--mcap-out` an existing file cornerslam did not write (a user's text, a log `simulate` wrote):
+    refused before any work, the file kept (before, it was replaced)"""
+    mc = w.tmp / "thesis.txt"
+    mc.write_text("a user's file\n")
+    return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", mc], mc)
+
+
+@fault(2, "exists and is not a results file cornerslam wrote")
+def mcap_out_is_a_simulated_log(w: World) -> Case:
+    """`--mcap-out` an MCAP log cornerslam's `simulate` wrote (not results): refused, the log kept"""
+    mc = w.tmp / "other.mcap"
+    shutil.copyfile(w.log, mc)
+    return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", mc], mc)
+
+
+@fault(0)
+def mcap_out_replaces_earlier_results(w: World) -> Case:
+    """`--mcap-out` an earlier run's results MCAP: replaced with this run's"""
+    mc = previous_results_mcap(w.tmp / "res.mcap")
+    before = mc.read_bytes()
+
+    def after():
+        assert mc.read_bytes() != before and mc.read_bytes()[:8] == b"\x89MCAP0\r\n"
+
+    return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", mc], after=after)
 
 
 @fault(2, "is an input of this run")
