@@ -600,6 +600,15 @@ def simulate_into_a_pipe(w: World) -> Case:
     return Case(["simulate", w.tmp / "s.mcap", "--beams", "11", "--rate", "1"], fifo)
 
 
+@fault(2, "exists and is not part of a log cornerslam simulate wrote")
+def simulate_over_a_users_file(w: World) -> Case:
+    """`simulate OUT.mcap` where OUT.mcap or OUT.gt.tum / OUT.corners.csv exists and OUT.mcap is not a
+    log cornerslam wrote: refused before any work, the files kept (before, they were replaced); over
+    its own earlier log it writes the set again"""
+    (w.tmp / "s.gt.tum").write_text("a user's trajectory\n")
+    return Case(["simulate", w.tmp / "s.mcap", "--beams", "11", "--rate", "1"], w.tmp / "s.gt.tum")
+
+
 # 7. numbers on the command line; 13. --config that is not a regular file
 @fault(2, "--seed must be >= 0")
 def simulate_seed_negative(w: World) -> Case:
@@ -897,3 +906,12 @@ def main() -> None:
 
 if __name__ == "__main__":
     main()
+
+
+def test_simulate_writes_over_its_own_earlier_log(tmp_path):
+    """`simulate` into the place of a log it wrote before replaces the set (a re-run is the usual case)."""
+    out = tmp_path / "s.mcap"
+    for seed in ("1", "2"):
+        res = CliRunner().invoke(cli, ["simulate", str(out), "--beams", "11", "--rate", "1", "--seed", seed])
+        assert res.exit_code == 0, res.output
+    assert out.with_suffix(".gt.tum").exists() and out.with_suffix(".corners.csv").exists()

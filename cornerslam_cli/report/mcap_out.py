@@ -63,6 +63,7 @@ import numpy as np
 from ..errors import display_path
 from ..geometry import compose_inverse
 from .occupancy import ScanStore
+from .ownership import mcap_library
 from .run_dir import ELLIPSE_SIGMA, ellipse_polygons, load_run
 from .tables import json_text
 
@@ -274,30 +275,15 @@ def _stamp_texts(path: Path) -> list[str]:
         return [row["stamp"] for row in reader]
 
 
-MCAP_MAGIC = b"\x89MCAP0\r\n"
 # the Header record's library of every results MCAP written here (a log `simulate` writes says
 # "cornerslam": before 2026-12-02 results did too, and are not recognised as results now)
 LIBRARY = "cornerslam results"
 
 
 def is_results_mcap(path: Path) -> bool:
-    """Whether ``path`` is an MCAP this module wrote (its Header record names ``LIBRARY``): what
-    ``--mcap-out`` may replace. Reads the magic and the Header record only (opcode 0x01, u64 length,
-    then the profile and the library as u32-length-prefixed strings); anything else is not ours."""
-    try:
-        with open(path, "rb") as f:
-            head = f.read(len(MCAP_MAGIC) + 9 + 4 + 4096)
-    except OSError:
-        return False
-    pos = len(MCAP_MAGIC) + 9  # magic, opcode, record length
-    if not head.startswith(MCAP_MAGIC) or len(head) < pos + 4 or head[len(MCAP_MAGIC)] != 0x01:
-        return False
-    profile = int.from_bytes(head[pos : pos + 4], "little")
-    pos += 4 + profile
-    if len(head) < pos + 4:
-        return False
-    size = int.from_bytes(head[pos : pos + 4], "little")
-    return head[pos + 4 : pos + 4 + size] == LIBRARY.encode()
+    """Whether ``path`` is an MCAP this module wrote (its Header names ``LIBRARY``): what ``--mcap-out``
+    may replace."""
+    return mcap_library(path) == LIBRARY
 
 
 def write_results_mcap(
