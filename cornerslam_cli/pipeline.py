@@ -17,6 +17,7 @@ from .config import Config
 from .errors import OutputError, display_path
 from .frontend import Frame, Input, check_processed, frames, open_input, warn_default_mount
 from .hierarchy import HierarchicalSlam
+from .report.mcap_out import is_results_mcap
 from .report.occupancy import ScanStore
 from .report.oserrors import output_errors
 from .report.outdir import StagedDir
@@ -59,7 +60,7 @@ def run(
     gt = ground_truth or find_ground_truth(Path(log_path))
     inputs = [p for p in (log_path, gt, relations, config_path) if p]
     with StagedDir(out_dir, "run", inputs, log_path, own_log_only=not out) as stage:
-        mcap_path = stage.stage_file(mcap_out) if mcap_out else None
+        mcap_path = stage.stage_file(mcap_out, ours=is_results_mcap) if mcap_out else None
         ref = load_reference(Path(log_path), ground_truth, relations, time_offset)  # bad files fail first
         src = open_input(log_path, cfg, span)
         scans = ScanStore() if mcap_path else None  # kept for the results MCAP's scans

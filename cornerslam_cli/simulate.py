@@ -22,10 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import ConfigError
+from .errors import ConfigError, OutputError
 from .geometry import compose, relative, wrap_angle
 from .logs.writers import RawScan, write_mcap
-from .report.ownership import refuse_special_file
+from .logs.writers.mcap import LIBRARY as LOG_LIBRARY
+from .report.ownership import mcap_library, refuse_special_file
 from .report.tables import write_tum
 from .simworld import OFFICE_LOOP, World, office_world, raycast, true_corners
 from .types import OdomSample
@@ -142,8 +143,14 @@ def simulate_log(
         raise ConfigError(f"simulate needs at least 2 waypoints, got {len(waypoints)}")
     p = SimParams(rate=rate, beams=beams, speed=speed)
     check_options(seed, laps, p, waypoints)
-    for path in (out, out.with_suffix(".gt.tum"), out.with_suffix(".corners.csv")):
+    paths = (out, out.with_suffix(".gt.tum"), out.with_suffix(".corners.csv"))
+    for path in paths:
         refuse_special_file(path, path)
+    # replaced only as a set this command wrote: a log whose MCAP header names the log writer's library
+    if any(path.exists() for path in paths) and mcap_library(out) != LOG_LIBRARY:
+        there = next(path for path in paths if path.exists())
+        why = "give a new name, or move those files away"
+        raise OutputError(f"'{there}' exists and is not part of a log cornerslam simulate wrote", why)
     rng = np.random.default_rng(seed)
     dt = 1.0 / p.odom_rate
     truth = drive(waypoints, laps, p, dt)  # at the odometry rate

@@ -84,6 +84,19 @@ def previous_output(d: Path, kind: str = "run") -> Path:
     return d
 
 
+def previous_results_mcap(path: Path) -> Path:
+    """A results MCAP of an earlier run at ``path`` (its Header names report/mcap_out.LIBRARY)."""
+    from mcap.writer import Writer
+
+    from cornerslam_cli.report.mcap_out import LIBRARY
+
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start(profile="", library=LIBRARY)
+        w.finish()
+    return path
+
+
 def dead_pid() -> int:
     """The pid of a process that has just exited."""
     proc = subprocess.Popen(["true"])
@@ -334,8 +347,7 @@ def interrupted_while_writing_mcap_out(w: World) -> Case:
     """interrupted while `--mcap-out` is written: the previous MCAP and output directory kept, no
     temporary file left"""
     out = previous_output(w.tmp / "out")
-    mc = w.tmp / "res.mcap"
-    mc.write_bytes(b"previous results\n")
+    mc = previous_results_mcap(w.tmp / "res.mcap")
     w.mp.setattr("cornerslam_cli.report.mcap_out.write_results_mcap", interrupt)
     return Case(["run", w.log, "--out", out, "--mcap-out", mc])
 
@@ -493,6 +505,35 @@ def mcap_out_unwritable(w: World) -> Case:
     return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", locked / "r.mcap"], locked / "r.mcap")
 
 
+@fault(2, "exists and is not a results file cornerslam wrote")
+def mcap_out_is_a_users_file(w: World) -> Case:
+    """`--mcap-out` an existing file cornerslam did not write (a user's text, a log `simulate` wrote):
+    refused before any work, the file kept (before, it was replaced)"""
+    mc = w.tmp / "thesis.txt"
+    mc.write_text("a user's file\n")
+    return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", mc], mc)
+
+
+@fault(2, "exists and is not a results file cornerslam wrote")
+def mcap_out_is_a_simulated_log(w: World) -> Case:
+    """`--mcap-out` an MCAP log cornerslam's `simulate` wrote (not results): refused, the log kept"""
+    mc = w.tmp / "other.mcap"
+    shutil.copyfile(w.log, mc)
+    return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", mc], mc)
+
+
+@fault(0)
+def mcap_out_replaces_earlier_results(w: World) -> Case:
+    """`--mcap-out` an earlier run's results MCAP: replaced with this run's"""
+    mc = previous_results_mcap(w.tmp / "res.mcap")
+    before = mc.read_bytes()
+
+    def after():
+        assert mc.read_bytes() != before and mc.read_bytes()[:8] == b"\x89MCAP0\r\n"
+
+    return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", mc], after=after)
+
+
 @fault(2, "is an input of this run")
 def mcap_out_is_the_log(w: World) -> Case:
     """`--mcap-out` naming the input log: refused"""
@@ -557,6 +598,15 @@ def simulate_into_a_pipe(w: World) -> Case:
     fifo = w.tmp / "s.gt.tum"
     os.mkfifo(fifo)
     return Case(["simulate", w.tmp / "s.mcap", "--beams", "11", "--rate", "1"], fifo)
+
+
+@fault(2, "exists and is not part of a log cornerslam simulate wrote")
+def simulate_over_a_users_file(w: World) -> Case:
+    """`simulate OUT.mcap` where OUT.mcap or OUT.gt.tum / OUT.corners.csv exists and OUT.mcap is not a
+    log cornerslam wrote: refused before any work, the files kept (before, they were replaced); over
+    its own earlier log it writes the set again"""
+    (w.tmp / "s.gt.tum").write_text("a user's trajectory\n")
+    return Case(["simulate", w.tmp / "s.mcap", "--beams", "11", "--rate", "1"], w.tmp / "s.gt.tum")
 
 
 # 7. numbers on the command line; 13. --config that is not a regular file
@@ -856,3 +906,12 @@ def main() -> None:
 
 if __name__ == "__main__":
     main()
+
+
+def test_simulate_writes_over_its_own_earlier_log(tmp_path):
+    """`simulate` into the place of a log it wrote before replaces the set (a re-run is the usual case)."""
+    out = tmp_path / "s.mcap"
+    for seed in ("1", "2"):
+        res = CliRunner().invoke(cli, ["simulate", str(out), "--beams", "11", "--rate", "1", "--seed", seed])
+        assert res.exit_code == 0, res.output
+    assert out.with_suffix(".gt.tum").exists() and out.with_suffix(".corners.csv").exists()

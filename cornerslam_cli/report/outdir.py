@@ -30,7 +30,7 @@ import shutil
 import signal
 import socket
 import tempfile
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -263,10 +263,12 @@ class StagedDir:
             return self.shown / p.resolve().relative_to(self.path.resolve())
         return next((final for staged, final in self.files if staged == p), self.shown)
 
-    def stage_file(self, dest: str | Path) -> Path:
+    def stage_file(self, dest: str | Path, ours: Callable[[Path], bool] | None = None) -> Path:
         """Where to write the file ``dest`` so that it is committed with this directory: inside the
         staging directory when ``dest`` lies in the target, else a hidden file beside ``dest`` (made
-        now: an unwritable place fails before any work) that :meth:`commit` renames onto it."""
+        now: an unwritable place fails before any work) that :meth:`commit` renames onto it. Outside
+        the target an existing ``dest`` is replaced only when ``ours(dest)`` says cornerslam wrote it
+        (``None``: any file)."""
         shown = Path(dest)
         final = shown.resolve()
         with output_errors(shown):
@@ -279,6 +281,9 @@ class StagedDir:
             if final.is_dir():
                 raise OutputError(f"'{shown}' is a directory", "give a file name")
             refuse_special_file(final, shown)
+            if ours is not None and final.is_file() and not ours(final):
+                why = "give a new file name, or move that file away"
+                raise OutputError(f"'{shown}' exists and is not a results file cornerslam wrote", why)
             final.parent.mkdir(parents=True, exist_ok=True)
             clear_stale(final)
             staged = staged_file(final)

@@ -254,3 +254,25 @@ def claim_dir(path: str | Path, kind: str) -> Path:
         if read_marker(target) is None:
             mark_output(target, kind)
     return target
+
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+def mcap_library(path: Path) -> str | None:
+    """The library an MCAP file's Header record names (what wrote it), or None for a file that is not
+    an MCAP or cannot be read. Reads the magic and the Header record only: opcode 0x01, u64 length,
+    then the profile and the library as u32-length-prefixed strings."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(len(MCAP_MAGIC) + 9 + 4 + 4096)
+    except OSError:
+        return None
+    pos = len(MCAP_MAGIC) + 9  # magic, opcode, record length
+    if not head.startswith(MCAP_MAGIC) or len(head) < pos + 4 or head[len(MCAP_MAGIC)] != 0x01:
+        return None
+    pos += 4 + int.from_bytes(head[pos : pos + 4], "little")  # past the profile
+    if len(head) < pos + 4:
+        return None
+    size = int.from_bytes(head[pos : pos + 4], "little")
+    return head[pos + 4 : pos + 4 + size].decode("utf-8", "replace")

@@ -9,6 +9,8 @@ from ...types import OdomSample
 from .base import RawScan
 from .ros import RosTopics, ros_messages, serializer, shuffled
 
+LIBRARY = "cornerslam"  # the Header record's library of a log written here (simulate.py checks it)
+
 
 def write_mcap(
     path: str | Path,
@@ -47,7 +49,7 @@ def write_mcap(
         )
         kw = {} if summary else dict(no_summary, index_types=IndexType.NONE)
         w = Writer(f, chunk_size=chunk_size, compression=comp, **kw)
-        w.start(profile=ros.profile, library="cornerslam")
+        w.start(profile=ros.profile, library=LIBRARY)
         channels: dict[str, int] = {}
         for topic, typename, t, data in messages:
             cid = channels.get(topic)
