@@ -17,10 +17,10 @@ from .config import Config
 from .errors import OutputError, display_path
 from .frontend import Frame, Input, check_processed, frames, open_input, warn_default_mount
 from .hierarchy import HierarchicalSlam
-from .report.mcap_out import is_results_mcap
 from .report.occupancy import ScanStore
 from .report.oserrors import output_errors
 from .report.outdir import StagedDir
+from .report.ownership import is_results_mcap
 from .report.run_writer import Reference, RunWriter, find_ground_truth, load_reference
 from .results import RunSummary
 from .slam import Slam

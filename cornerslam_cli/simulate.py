@@ -24,9 +24,10 @@ import numpy as np
 
 from .errors import ConfigError, OutputError
 from .geometry import compose, relative, wrap_angle
+from .logs.mcap import header_library
 from .logs.writers import RawScan, write_mcap
 from .logs.writers.mcap import LIBRARY as LOG_LIBRARY
-from .report.ownership import mcap_library, refuse_special_file
+from .report.ownership import refuse_special_file
 from .report.tables import write_tum
 from .simworld import OFFICE_LOOP, World, office_world, raycast, true_corners
 from .types import OdomSample
@@ -147,7 +148,7 @@ def simulate_log(
     for path in paths:
         refuse_special_file(path, path)
     # replaced only as a set this command wrote: a log whose MCAP header names the log writer's library
-    if any(path.exists() for path in paths) and mcap_library(out) != LOG_LIBRARY:
+    if any(path.exists() for path in paths) and header_library(out) != LOG_LIBRARY:
         there = next(path for path in paths if path.exists())
         why = "give a new name, or move those files away"
         raise OutputError(f"'{there}' exists and is not part of a log cornerslam simulate wrote", why)

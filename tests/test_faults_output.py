@@ -85,14 +85,14 @@ def previous_output(d: Path, kind: str = "run") -> Path:
 
 
 def previous_results_mcap(path: Path) -> Path:
-    """A results MCAP of an earlier run at ``path`` (its Header names report/mcap_out.LIBRARY)."""
+    """A results MCAP of an earlier run at ``path`` (its Header names ownership.RESULTS_MCAP_LIBRARY)."""
     from mcap.writer import Writer
 
-    from cornerslam_cli.report.mcap_out import LIBRARY
+    from cornerslam_cli.report.ownership import RESULTS_MCAP_LIBRARY
 
     with open(path, "wb") as f:
         w = Writer(f)
-        w.start(profile="", library=LIBRARY)
+        w.start(profile="", library=RESULTS_MCAP_LIBRARY)
         w.finish()
     return path
 

@@ -49,6 +49,26 @@ _CHUNK = struct.Struct("<QQQI")
 _STATS = struct.Struct("<QHIIIIQQ")
 REORDER_BYTES = 64 << 20  # messages held back to restore log-time order across overlapping chunks
 
+
+def header_library(path: str | Path) -> str | None:
+    """The library an MCAP file's Header record names (what wrote it), or None for a file that is not an
+    MCAP or cannot be read. Reads the magic and the Header record only: its opcode and u64 length,
+    then the profile and the library as u32-length-prefixed strings."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(len(MAGIC) + _REC.size + _U32.size + 4096)
+    except OSError:
+        return None
+    pos = len(MAGIC) + _REC.size
+    if not head.startswith(MAGIC) or len(head) < pos + _U32.size or head[len(MAGIC)] != OP_HEADER:
+        return None
+    pos += _U32.size + _U32.unpack_from(head, pos)[0]  # past the profile
+    if len(head) < pos + _U32.size:
+        return None
+    size = _U32.unpack_from(head, pos)[0]
+    return head[pos + _U32.size : pos + _U32.size + size].decode("utf-8", "replace")
+
+
 Message = tuple[int, int, memoryview]  # channel id, log time (ns), data
 
 

@@ -63,7 +63,7 @@ import numpy as np
 from ..errors import display_path
 from ..geometry import compose_inverse
 from .occupancy import ScanStore
-from .ownership import mcap_library
+from .ownership import RESULTS_MCAP_LIBRARY
 from .run_dir import ELLIPSE_SIGMA, ellipse_polygons, load_run
 from .tables import json_text
 
@@ -275,17 +275,6 @@ def _stamp_texts(path: Path) -> list[str]:
         return [row["stamp"] for row in reader]
 
 
-# the Header record's library of every results MCAP written here (a log `simulate` writes says
-# "cornerslam": before 2026-12-02 results did too, and are not recognised as results now)
-LIBRARY = "cornerslam results"
-
-
-def is_results_mcap(path: Path) -> bool:
-    """Whether ``path`` is an MCAP this module wrote (its Header names ``LIBRARY``): what ``--mcap-out``
-    may replace."""
-    return mcap_library(path) == LIBRARY
-
-
 def write_results_mcap(
     out_dir: Path,
     path: Path,
@@ -335,7 +324,7 @@ def write_results_mcap(
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "wb") as f:
         w = Writer(f)
-        w.start(profile="", library=LIBRARY)
+        w.start(profile="", library=RESULTS_MCAP_LIBRARY)
         schema_ids = {
             name: w.register_schema(name, "jsonschema", json.dumps(schema).encode())
             for name, schema in SCHEMAS.items()

@@ -25,6 +25,7 @@ from pathlib import Path
 
 from .. import __version__
 from ..errors import OutputError
+from ..logs.mcap import header_library
 from .oserrors import output_errors
 
 MARKER = ".cornerslam-output"
@@ -256,23 +257,12 @@ def claim_dir(path: str | Path, kind: str) -> Path:
     return target
 
 
-MCAP_MAGIC = b"\x89MCAP0\r\n"
+# the Header record's library of every results MCAP cornerslam writes (report/mcap_out.py; a log
+# `simulate` writes says "cornerslam": before 2026-12-02 results did too, and are not recognised now)
+RESULTS_MCAP_LIBRARY = "cornerslam results"
 
 
-def mcap_library(path: Path) -> str | None:
-    """The library an MCAP file's Header record names (what wrote it), or None for a file that is not
-    an MCAP or cannot be read. Reads the magic and the Header record only: opcode 0x01, u64 length,
-    then the profile and the library as u32-length-prefixed strings."""
-    try:
-        with open(path, "rb") as f:
-            head = f.read(len(MCAP_MAGIC) + 9 + 4 + 4096)
-    except OSError:
-        return None
-    pos = len(MCAP_MAGIC) + 9  # magic, opcode, record length
-    if not head.startswith(MCAP_MAGIC) or len(head) < pos + 4 or head[len(MCAP_MAGIC)] != 0x01:
-        return None
-    pos += 4 + int.from_bytes(head[pos : pos + 4], "little")  # past the profile
-    if len(head) < pos + 4:
-        return None
-    size = int.from_bytes(head[pos : pos + 4], "little")
-    return head[pos + 4 : pos + 4 + size].decode("utf-8", "replace")
+def is_results_mcap(path: Path) -> bool:
+    """Whether ``path`` is a results MCAP cornerslam wrote (its Header names ``RESULTS_MCAP_LIBRARY``):
+    what ``--mcap-out`` may replace."""
+    return header_library(path) == RESULTS_MCAP_LIBRARY
