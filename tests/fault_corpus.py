@@ -449,6 +449,8 @@ def _config_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
         ("nan", "input:\n  laser:\n    x: .nan\n", bad, ("'input.laser.x' = nan is not a finite number",)),
         ("inf", "keyframes:\n  linear_update: .inf\n", bad, ("'keyframes.linear_update' = inf",)),
         ("degrees", "input:\n  laser:\n    yaw: 90\n", bad, ("'input.laser.yaw' = 90.0 is out of range",)),
+        ("5000_digits", "ekf:\n  alpha2: 1" + "0" * 5000 + "\n", bad,
+         ("'ekf.alpha2' = 1000", "(5,001 digits) is out of range", "allowed: [0, 100]")),
     ]  # fmt: skip
     for name, content, behaviour, message in files:
         path = _write(d, f"config_{name}.yaml", content)
@@ -461,6 +463,8 @@ def _config_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
         ("yaml_minus_inf", "corners.d_min=-.inf", ("'corners.d_min' = -inf",)),
         ("1e999", "sensor.sigma_theta=1e999", ("'sensor.sigma_theta' = inf",)),
         ("400_digits", "ekf.alpha2=1" + "0" * 400, ("'ekf.alpha2' = inf",)),
+        ("5000_digits", "ekf.initial_capacity=-1" + "0" * 5000,
+         ("'ekf.initial_capacity' = -1000", "(5,001 digits) is out of range", "[1, 1000]")),
         ("capacity", "ekf.initial_capacity=10000000000", ("'ekf.initial_capacity' = 1000000", "[1, 1000]")),
         ("sigma_1e300", "sensor.sigma_r_near=1e300", ("'sensor.sigma_r_near' = 1e+300 is out of range",)),
         ("group_size", "association.pca.group_size=1000000", ("'association.pca.group_size'", "[1, 1000]")),
