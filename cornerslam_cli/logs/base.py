@@ -268,10 +268,10 @@ def make_scan(
     if n == 0:
         stats.scans_skipped += 1
         return None
-    r = np.asarray(ranges, dtype=np.float64)
     lo = range_min if math.isfinite(range_min) else 0.0
     hi = range_max if not math.isnan(range_max) else math.inf
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore"):  # a signalling NaN (damaged bytes) raises "invalid" in the cast
+        r = np.asarray(ranges, dtype=np.float64)
         valid = (r > 0.0) & (r >= lo) & (r < hi)  # NaN compares False; inf fails r < hi
     idx = np.flatnonzero(valid)
     stats.scans += 1
