@@ -143,6 +143,16 @@ def mcap_records(data: bytes) -> Iterator[tuple[int, int, int]]:
         off += 9 + n
 
 
+def cut_before_first_scan(dst: Path) -> Path:
+    """The valid log, uncompressed, cut right after its /scan channel record: the channel is known,
+    none of its messages is in the file."""
+    data = write_mcap(dst, make_scans(), make_odoms(), compression="none").read_bytes()
+    topic = data.index(struct.pack("<I", 5) + b"/scan")  # the channel record's topic string
+    (encoding,) = struct.unpack_from("<I", data, topic + 9)
+    (metadata,) = struct.unpack_from("<I", data, topic + 13 + encoding)
+    return cut(dst, dst, topic + 17 + encoding + metadata)
+
+
 def corrupt_chunk(src: Path, dst: Path, which: int = 1) -> Path:
     """Copy of an MCAP with 64 bytes in the middle of its ``which``-th chunk zeroed."""
     data = bytearray(src.read_bytes())
@@ -229,10 +239,37 @@ def build_corpus(d: str | Path) -> dict[str, tuple[Path, Expected]]:
 
     # -- damaged files
     size = good.stat().st_size
+    cut_short = "the recorder stopped early", "record again, or give the complete file"
     add(
         "mcap_cut_in_header",
         cut(good, d / "cut_header.mcap", 40),
-        Expected("exit 2: no topics left", 2, ("cut_header.mcap", "has no sensor_msgs/LaserScan topic")),
+        Expected(
+            "exit 2: truncated, no LaserScan topic before the cut",
+            2,
+            ("'cut_header.mcap' is truncated: no sensor_msgs/LaserScan topic before the cut", *cut_short),
+        ),
+    )
+    first_chunk = next((s, n) for op, s, n in mcap_records(good.read_bytes()) if op == 0x06)
+    add(
+        "mcap_cut_in_first_chunk",
+        cut(good, d / "cut_first_chunk.mcap", first_chunk[0] + first_chunk[1] // 2),
+        Expected(
+            "exit 2: truncated, no LaserScan topic before the cut",
+            2,
+            (
+                "'cut_first_chunk.mcap' is truncated: no sensor_msgs/LaserScan topic before the cut",
+                *cut_short,
+            ),
+        ),
+    )
+    add(
+        "mcap_cut_before_first_scan",
+        cut_before_first_scan(d / "cut_before_scan.mcap"),
+        Expected(
+            "exit 2: truncated, no scan message before the cut",
+            2,
+            ("'cut_before_scan.mcap' is truncated: no message of topic '/scan' before the cut", *cut_short),
+        ),
     )
     for pct in (30, 60, 90):
         add(

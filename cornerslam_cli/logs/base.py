@@ -124,6 +124,7 @@ class ReadStats:
     size_mismatch: int = 0  # scans whose ranges count disagreed with angle_min/max/increment
     decode_failed: int = 0  # messages / lines that could not be decoded (skipped)
     first_failure: str = ""  # what the first of them was (the error names it when nothing was usable)
+    truncated: bool = False  # the file ends early (a recorder stopped): what came after the cut is lost
     warnings: list[str] = field(default_factory=list)
 
     def warn(self, msg: str, *args: object) -> None:
