@@ -821,6 +821,26 @@ def _probe2_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
         ),
     )
 
+    # -- a CARMEN log whose only laser line is cut mid-line: the log is to blame, not a span
+    flaser = f"FLASER 181 {' '.join(['2.5'] * 181)} 0 0 0 0 0 0 {T0 + 0.15:.3f} host {T0 + 0.15:.3f}"
+    odom_lines = [f"ODOM {o.x} {o.y} {o.theta} 0 0 0 {o.stamp:.3f} host {o.stamp:.3f}" for o in make_odoms()]
+    cut_laser = _write(d, "cut_flaser.clf", "\n".join([*odom_lines, flaser[: len(flaser) // 2]]))
+    for name, args in (("", ()), ("_max_scans", ("--max-scans", "5")), ("_start", ("--start", "1"))):
+        add(
+            f"carmen_only_laser_line_cut{name}",
+            cut_laser,
+            Expected(
+                "exit 2: the log has no complete laser line (not: the span selects no scan)",
+                2,
+                (
+                    "CARMEN log 'cut_flaser.clf' has no complete laser line",
+                    "its only FLASER line cannot be read (line 42:",
+                    "give a log with whole laser lines",
+                ),
+                args=args,
+            ),
+        )
+
     # -- chunks not in time order and no summary (no chunk index): read in file order; the warning
     # says so instead of only blaming the stamps
     add(
