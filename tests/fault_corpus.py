@@ -508,6 +508,8 @@ def _config_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
         ("adapt_samples", "scan_match.adapt_min_samples=1000", ("adapt_min_samples = 1000 exceeds",)),
         ("search_window", "scan_match.search_max_xy=100", ("'scan_match.search_max_xy' = 100", "(0, 5]")),
         ("on_as_string", "input.odom_frame=on", ("'input.odom_frame' must be a string, got True", "quote")),
+        ("unknown_laser_preset", "input.laser_preset=x",
+         ("config key 'input.laser_preset' = 'x' is not a laser preset", "choices: auto, none")),
         ("no_equals", "ekf.alpha1", ("is not key=value",)),
         ("empty_key", "=0.1", ("has an empty key",)),
         ("empty_key_part", "association..alpha=0.1", ("has an empty key",)),
