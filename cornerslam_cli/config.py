@@ -34,7 +34,7 @@ from .filter.params import EkfConfig
 from .graph.params import GraphConfig, LoopConfig, SubmapConfig
 from .logs.params import KeyframeConfig, OdomJumpConfig
 from .motion.params import ScanMatchConfig
-from .ranges import RangeError, check_ranges, num, short_repr, short_text
+from .ranges import Range, RangeError, check_ranges, field_range, num, short_repr, short_text
 from .textfile import read_text
 
 log = logging.getLogger("cornerslam.config")
@@ -135,6 +135,17 @@ def _number_text(value: str) -> bool:
     return bool(_YAML11_EXPONENT.match(v) or _NON_FINITE.match(v))
 
 
+@dataclass(frozen=True, repr=False)
+class LongInteger:
+    """A YAML integer with more digits than Python converts to ``int`` (``sys.get_int_max_str_digits()``,
+    4,300 by default; PyYAML raised ValueError on it): kept as its text, refused by every key."""
+
+    text: str
+
+    def __repr__(self) -> str:
+        return f"{self.text[:10]}... ({sum(c.isdigit() for c in self.text):,} digits)"
+
+
 def _as_float(value: int | float) -> float:
     try:
         return float(value)
@@ -142,10 +153,15 @@ def _as_float(value: int | float) -> float:
         return math.inf if value > 0 else -math.inf
 
 
-def _coerce(value: Any, tp: Any, key: str) -> Any:
-    """Check ``value`` against the annotation ``tp``; return it converted (int → float, list → tuple)."""
+def _coerce(value: Any, tp: Any, key: str, allowed: Range | None = None) -> Any:
+    """Check ``value`` against the annotation ``tp`` (and a number against its range ``allowed``, where
+    the range check cannot); return it converted (int → float, list → tuple)."""
     origin = typing.get_origin(tp)
     got = short_repr(value)
+    if tp in (int, float) and isinstance(value, LongInteger):  # past every range; no int can hold it
+        raise ConfigError(
+            f"config key '{key}' = {got} is out of range", f"allowed: {allowed}" if allowed else None
+        )
     if dataclasses.is_dataclass(tp):
         if not isinstance(value, dict):
             raise ConfigError(f"config key '{key}' must be a mapping, got {got}")
@@ -202,7 +218,8 @@ def _coerce(value: Any, tp: Any, key: str) -> Any:
 def from_dict(cls: type, data: dict, prefix: str = "") -> Any:
     """Build the dataclass ``cls`` from a (partial) mapping, validating every key at every depth."""
     hints = typing.get_type_hints(cls)
-    names = [f.name for f in dataclasses.fields(cls)]
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    names = list(fields)
     kwargs = {}
     retired = getattr(cls, "RETIRED", {})
     for key, value in data.items():
@@ -212,7 +229,7 @@ def from_dict(cls: type, data: dict, prefix: str = "") -> Any:
         if key not in names:
             name = short_text(key) if isinstance(key, str) else short_repr(key)
             raise ConfigError(f"unknown config key '{prefix}{name}'", _closest(str(key)[:100], names))
-        kwargs[key] = _coerce(value, hints[key], prefix + key)
+        kwargs[key] = _coerce(value, hints[key], prefix + key, field_range(fields[key]))
     try:
         return cls(**kwargs)
     except RangeError as e:  # a number outside the range declared with ranges.num
@@ -242,6 +259,15 @@ class _ConfigLoader(yaml.SafeLoader):
                 )
             seen[k] = key_node.start_mark
         return super().construct_mapping(node, deep)
+
+    def construct_yaml_int(self, node: yaml.ScalarNode) -> int | LongInteger:
+        try:
+            return super().construct_yaml_int(node)
+        except ValueError:  # more digits than int() converts: the resolver matched an integer
+            return LongInteger(str(self.construct_scalar(node)))
+
+
+_ConfigLoader.add_constructor("tag:yaml.org,2002:int", _ConfigLoader.construct_yaml_int)
 
 
 def _expanded_size(node: yaml.Node, sizes: dict[int, int | None], where: str) -> int:

@@ -22,6 +22,7 @@ from pathlib import Path
 from .config import Config, LaserMountConfig, config_from, read_config_file
 from .errors import ConfigError, did_you_mean
 from .logs import open_log
+from .ranges import short_text
 from .types import Scan
 
 
@@ -141,9 +142,9 @@ def resolve_config(
     elif choice in PRESETS:
         name = choice
     else:
-        hint = did_you_mean(choice, PRESETS, then=" ")
+        hint = did_you_mean(choice[:100], PRESETS, then=" ")
         raise ConfigError(
-            f"unknown laser preset 'input.laser_preset={choice}'",
+            f"config key 'input.laser_preset' = '{short_text(choice)}' is not a laser preset",
             f"{hint}choices: auto, none, {', '.join(PRESETS)}",
         )
     cfg = config_from(data, overrides, base=PRESETS[name].config)

@@ -143,6 +143,16 @@ def mcap_records(data: bytes) -> Iterator[tuple[int, int, int]]:
         off += 9 + n
 
 
+def cut_before_first_scan(dst: Path) -> Path:
+    """The valid log, uncompressed, cut right after its /scan channel record: the channel is known,
+    none of its messages is in the file."""
+    data = write_mcap(dst, make_scans(), make_odoms(), compression="none").read_bytes()
+    topic = data.index(struct.pack("<I", 5) + b"/scan")  # the channel record's topic string
+    (encoding,) = struct.unpack_from("<I", data, topic + 9)
+    (metadata,) = struct.unpack_from("<I", data, topic + 13 + encoding)
+    return cut(dst, dst, topic + 17 + encoding + metadata)
+
+
 def corrupt_chunk(src: Path, dst: Path, which: int = 1) -> Path:
     """Copy of an MCAP with 64 bytes in the middle of its ``which``-th chunk zeroed."""
     data = bytearray(src.read_bytes())
@@ -229,10 +239,37 @@ def build_corpus(d: str | Path) -> dict[str, tuple[Path, Expected]]:
 
     # -- damaged files
     size = good.stat().st_size
+    cut_short = "the recorder stopped early", "record again, or give the complete file"
     add(
         "mcap_cut_in_header",
         cut(good, d / "cut_header.mcap", 40),
-        Expected("exit 2: no topics left", 2, ("cut_header.mcap", "has no sensor_msgs/LaserScan topic")),
+        Expected(
+            "exit 2: truncated, no LaserScan topic before the cut",
+            2,
+            ("'cut_header.mcap' is truncated: no sensor_msgs/LaserScan topic before the cut", *cut_short),
+        ),
+    )
+    first_chunk = next((s, n) for op, s, n in mcap_records(good.read_bytes()) if op == 0x06)
+    add(
+        "mcap_cut_in_first_chunk",
+        cut(good, d / "cut_first_chunk.mcap", first_chunk[0] + first_chunk[1] // 2),
+        Expected(
+            "exit 2: truncated, no LaserScan topic before the cut",
+            2,
+            (
+                "'cut_first_chunk.mcap' is truncated: no sensor_msgs/LaserScan topic before the cut",
+                *cut_short,
+            ),
+        ),
+    )
+    add(
+        "mcap_cut_before_first_scan",
+        cut_before_first_scan(d / "cut_before_scan.mcap"),
+        Expected(
+            "exit 2: truncated, no scan message before the cut",
+            2,
+            ("'cut_before_scan.mcap' is truncated: no message of topic '/scan' before the cut", *cut_short),
+        ),
     )
     for pct in (30, 60, 90):
         add(
@@ -449,6 +486,8 @@ def _config_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
         ("nan", "input:\n  laser:\n    x: .nan\n", bad, ("'input.laser.x' = nan is not a finite number",)),
         ("inf", "keyframes:\n  linear_update: .inf\n", bad, ("'keyframes.linear_update' = inf",)),
         ("degrees", "input:\n  laser:\n    yaw: 90\n", bad, ("'input.laser.yaw' = 90.0 is out of range",)),
+        ("5000_digits", "ekf:\n  alpha2: 1" + "0" * 5000 + "\n", bad,
+         ("'ekf.alpha2' = 1000", "(5,001 digits) is out of range", "allowed: [0, 100]")),
     ]  # fmt: skip
     for name, content, behaviour, message in files:
         path = _write(d, f"config_{name}.yaml", content)
@@ -461,12 +500,16 @@ def _config_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
         ("yaml_minus_inf", "corners.d_min=-.inf", ("'corners.d_min' = -inf",)),
         ("1e999", "sensor.sigma_theta=1e999", ("'sensor.sigma_theta' = inf",)),
         ("400_digits", "ekf.alpha2=1" + "0" * 400, ("'ekf.alpha2' = inf",)),
+        ("5000_digits", "ekf.initial_capacity=-1" + "0" * 5000,
+         ("'ekf.initial_capacity' = -1000", "(5,001 digits) is out of range", "[1, 1000]")),
         ("capacity", "ekf.initial_capacity=10000000000", ("'ekf.initial_capacity' = 1000000", "[1, 1000]")),
         ("sigma_1e300", "sensor.sigma_r_near=1e300", ("'sensor.sigma_r_near' = 1e+300 is out of range",)),
         ("group_size", "association.pca.group_size=1000000", ("'association.pca.group_size'", "[1, 1000]")),
         ("adapt_samples", "scan_match.adapt_min_samples=1000", ("adapt_min_samples = 1000 exceeds",)),
         ("search_window", "scan_match.search_max_xy=100", ("'scan_match.search_max_xy' = 100", "(0, 5]")),
         ("on_as_string", "input.odom_frame=on", ("'input.odom_frame' must be a string, got True", "quote")),
+        ("unknown_laser_preset", "input.laser_preset=x",
+         ("config key 'input.laser_preset' = 'x' is not a laser preset", "choices: auto, none")),
         ("no_equals", "ekf.alpha1", ("is not key=value",)),
         ("empty_key", "=0.1", ("has an empty key",)),
         ("empty_key_part", "association..alpha=0.1", ("has an empty key",)),
@@ -779,6 +822,26 @@ def _probe2_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
             {"steps": N - 1, "scans_skipped": 1, "scan_time_backwards": 0},
         ),
     )
+
+    # -- a CARMEN log whose only laser line is cut mid-line: the log is to blame, not a span
+    flaser = f"FLASER 181 {' '.join(['2.5'] * 181)} 0 0 0 0 0 0 {T0 + 0.15:.3f} host {T0 + 0.15:.3f}"
+    odom_lines = [f"ODOM {o.x} {o.y} {o.theta} 0 0 0 {o.stamp:.3f} host {o.stamp:.3f}" for o in make_odoms()]
+    cut_laser = _write(d, "cut_flaser.clf", "\n".join([*odom_lines, flaser[: len(flaser) // 2]]))
+    for name, args in (("", ()), ("_max_scans", ("--max-scans", "5")), ("_start", ("--start", "1"))):
+        add(
+            f"carmen_only_laser_line_cut{name}",
+            cut_laser,
+            Expected(
+                "exit 2: the log has no complete laser line (not: the span selects no scan)",
+                2,
+                (
+                    "CARMEN log 'cut_flaser.clf' has no complete laser line",
+                    "its only FLASER line cannot be read (line 42:",
+                    "give a log with whole laser lines",
+                ),
+                args=args,
+            ),
+        )
 
     # -- chunks not in time order and no summary (no chunk index): read in file order; the warning
     # says so instead of only blaming the stamps

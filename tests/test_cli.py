@@ -428,5 +428,9 @@ def test_config_prints_the_resolved_config_that_run_uses(tmp_path):
     assert invoke("config").stdout == dump_config(Config())
     res = invoke("config", "--preset", "hokuyo_urg04lx")
     assert yaml.safe_load(res.stdout)["input"]["laser_preset"] == "hokuyo_urg04lx"
-    one_line_error(invoke("config", "--preset", "hokuyo"), "unknown laser preset", "hokuyo_urg04lx")
+    one_line_error(
+        invoke("config", "--preset", "hokuyo"),
+        "config key 'input.laser_preset' = 'hokuyo' is not a laser preset",
+        "hokuyo_urg04lx",
+    )
     one_line_error(invoke("config", "--set", "ekf.alpha1=nan"), "ekf.alpha1")

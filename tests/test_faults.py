@@ -10,7 +10,9 @@ import dataclasses
 import json
 import os
 import shutil
+import struct
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +22,7 @@ from click.testing import CliRunner
 from fault_corpus import N, build_corpus, build_long_log, check_error_line, make_odoms, make_scans
 
 from cornerslam_cli.cli import cli
-from cornerslam_cli.logs.writers import write_mcap
+from cornerslam_cli.logs.writers import write_mcap, write_rosbag1
 
 _DIR = tempfile.mkdtemp(prefix="cornerslam-faults-")
 atexit.register(shutil.rmtree, _DIR, True)
@@ -176,6 +178,37 @@ def test_bad_pairing_from_an_associator_is_caught(corpus, tmp_path, monkeypatch)
     res = invoke("run", path, "--out", out)
     check_error_line(res, ("step 4", "not positive definite"))
     no_partial_output(out)
+
+
+def signalling_nan_bag(path: Path) -> Path:
+    """The corpus's valid ROS 1 bag with one range of scan 3 overwritten, in the file, by the bytes of a
+    signalling NaN (0x7fa00000: damaged data; a writer would have stored a quiet one)."""
+    mark = 7.25  # exact in float32, and in no other message of the bag
+
+    def ranges(i, r):
+        return np.where(np.arange(len(r)) == 5, mark, r) if i == 3 else r
+
+    data = bytearray(write_rosbag1(path, make_scans(ranges=ranges), make_odoms()).read_bytes())
+    assert data.count(struct.pack("<f", mark)) == 1
+    i = data.index(struct.pack("<f", mark))
+    data[i : i + 4] = struct.pack("<I", 0x7FA00000)
+    path.write_bytes(bytes(data))
+    return path
+
+
+def test_a_signalling_nan_range_is_an_invalid_beam_without_numpy_noise(tmp_path):
+    """A bag whose range bytes are a signalling NaN: the beam counted invalid like any NaN, and no numpy
+    RuntimeWarning ("invalid value encountered in cast", raised by the float32 → float64 cast of the
+    ranges) on stderr, which `-q` leaves empty (found by a hostile-user probe)."""
+    log = signalling_nan_bag(tmp_path / "snan.bag")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = invoke("run", log, "--out", tmp_path / "out", "-q")
+    assert res.exit_code == 0, res.output
+    assert [str(w.message) for w in caught if issubclass(w.category, RuntimeWarning)] == []
+    assert res.stderr == ""
+    counts = strict_load(tmp_path / "out" / "summary.json")["counts"]
+    assert (counts["steps"], counts["beams_invalid"]) == (N, 1)
 
 
 def test_previous_output_survives_a_failed_run(corpus, tmp_path):

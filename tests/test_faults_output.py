@@ -435,6 +435,26 @@ def permission_denied(w: World) -> Case:
     return Case(["compare", w.log, "--assoc", "icnn", "--out", locked / "cmp"], locked / "cmp")
 
 
+@fault(2, "cannot write", "its directory accepts no new files, as in /proc", "on a disk")
+def out_in_a_directory_that_accepts_no_files(w: World) -> Case:
+    """`--out /proc/foo` (a directory whose file system creates no files: ENOENT although it exists):
+    refused before any work, naming the path (before: FileNotFoundError on the lock file, exit 1)"""
+    proc = w.tmp / "proc"
+    proc.mkdir()
+    fail_writes_under(w.mp, proc, errno.ENOENT)
+    return Case(["run", w.log, "--out", proc / "foo"], proc / "foo")
+
+
+@fault(2, "cannot write", "its directory accepts no new files")
+def mcap_out_in_a_directory_that_accepts_no_files(w: World) -> Case:
+    """`--mcap-out /proc/r.mcap`, `compare` / `batch --out /proc/foo`, `simulate /proc/s.mcap`: refused
+    the same way"""
+    proc = w.tmp / "proc"
+    proc.mkdir()
+    fail_writes_under(w.mp, proc, errno.ENOENT)
+    return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", proc / "r.mcap"], proc / "r.mcap")
+
+
 @fault(2, "cannot write", "no space left on device", "free some space")
 def disk_full(w: World) -> Case:
     """disk full (ENOSPC) or over quota (EDQUOT) while a run writes: exit 2 naming the output, the
@@ -713,6 +733,29 @@ def test_a_kill_between_the_two_renames_puts_the_previous_output_back(tmp_path):
     before = snapshot(aside)
     clear_stale(tmp_path / "out")
     assert snapshot(tmp_path / "out") == before and not aside.exists()
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs Linux's /proc")
+@pytest.mark.parametrize(
+    "args, named",
+    [
+        (["run", "{log}", "--out", "/proc/cornerslam-out"], "/proc/cornerslam-out"),
+        (["run", "{log}", "--out", "/proc/cornerslam-out/sub"], "/proc/cornerslam-out/sub"),
+        (["run", "{log}", "--out", "{tmp}/out", "--mcap-out", "/proc/r.mcap"], "/proc/r.mcap"),
+        (["compare", "{log}", "--assoc", "icnn", "--out", "/proc/cornerslam-cmp"], "/proc/cornerslam-cmp"),
+        (["batch", "{log}", "--out", "/proc/cornerslam-batch"], "/proc/cornerslam-batch"),
+        (["simulate", "/proc/s.mcap"], "/proc/s.mcap"),
+    ],
+)
+def test_outputs_in_the_real_proc_are_refused_naming_them(args, named, valid_log, tmp_path):
+    """The real /proc (ENOENT on every new name): exit 2 naming the path, nothing written anywhere."""
+    res = invoke(*[a.format(log=valid_log, tmp=tmp_path) for a in args], "-q")
+    assert res.exit_code == 2, res.output
+    last = res.stderr.strip().splitlines()[-1]
+    assert last == f"error: cannot write '{named}': its directory accepts no new files, as in /proc " + (
+        "(write to a directory on a disk)"
+    )
+    assert list(tmp_path.iterdir()) == []
 
 
 # ---------------------------------------------------------------------------- real processes

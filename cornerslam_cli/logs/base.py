@@ -124,6 +124,7 @@ class ReadStats:
     size_mismatch: int = 0  # scans whose ranges count disagreed with angle_min/max/increment
     decode_failed: int = 0  # messages / lines that could not be decoded (skipped)
     first_failure: str = ""  # what the first of them was (the error names it when nothing was usable)
+    truncated: bool = False  # the file ends early (a recorder stopped): what came after the cut is lost
     warnings: list[str] = field(default_factory=list)
 
     def warn(self, msg: str, *args: object) -> None:
@@ -268,10 +269,10 @@ def make_scan(
     if n == 0:
         stats.scans_skipped += 1
         return None
-    r = np.asarray(ranges, dtype=np.float64)
     lo = range_min if math.isfinite(range_min) else 0.0
     hi = range_max if not math.isnan(range_max) else math.inf
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore"):  # a signalling NaN (damaged bytes) raises "invalid" in the cast
+        r = np.asarray(ranges, dtype=np.float64)
         valid = (r > 0.0) & (r >= lo) & (r < hi)  # NaN compares False; inf fails r < hi
     idx = np.flatnonzero(valid)
     stats.scans += 1

@@ -320,6 +320,7 @@ class CarmenReader:
         scan_tag, odom_tag = self.scan_topic, self.odom_topic
         max_range = self._max_range(scan_tag)
         where = self.path.name
+        unread, first_unread = 0, ""  # laser lines that could not be read; the first's number and why
         for lineno, line in enumerate(_lines(self.path, st), 1):
             tok = line.split()
             tag = tok[0] if tok else ""
@@ -338,6 +339,9 @@ class CarmenReader:
                 las = parse_laser(tok, max_range)
             except (ValueError, IndexError) as exc:
                 st.failed("%s:%d: malformed %s line skipped (%s)", where, lineno, tag, exc)
+                if tag == scan_tag:
+                    unread += 1
+                    first_unread = first_unread or f"line {lineno}: {exc}"
                 continue
             if tag == odom_tag and not st.bad_odometry(f"{where}:{lineno}", las.stamp, las.robot):
                 st.odoms += 1
@@ -350,6 +354,16 @@ class CarmenReader:
                 yield scan
         if st.decode_failed > 5:
             st.warn("%s: %d malformed lines skipped in total", where, st.decode_failed)
+        if unread and st.scans == st.scans_skipped == 0:  # the log's fault, whatever span was asked for
+            which = (
+                f"its only {scan_tag} line cannot"
+                if unread == 1
+                else f"none of its {unread} {scan_tag} lines can"
+            )
+            raise LogError(
+                f"CARMEN log '{where}' has no complete laser line: {which} be read ({first_unread})",
+                "a recorder stopped mid-line, or the file is damaged: give a log with whole laser lines",
+            )
         st.check_scans_yielded(where, scan_tag)
 
     def close(self) -> None:

@@ -187,6 +187,7 @@ class McapSource:
             self._warn_cut(pos, "before the footer")
 
     def _warn_cut(self, pos: int, what: str) -> None:
+        self.stats.truncated = True
         self.stats.warn(
             "%s ends early at byte %d of %d (%s; recorder stopped?): messages after the cut are lost",
             self.name,

@@ -162,6 +162,14 @@ class RosLogReader:
     def _topics_of(self, *types: str) -> list[str]:
         return sorted(t for t, c in self._channels.items() if normalize_msgtype(c.msgtype) in types)
 
+    def _cut_short(self, missing: str) -> tuple[str, str]:
+        """(problem, hint) when what a run needs is ``missing`` from a file that ends early: the cut,
+        not the recording's topics, is the problem."""
+        return (
+            f"log '{self.path.name}' is truncated: {missing} before the cut",
+            "the recorder stopped early and what came after is lost; record again, or give the complete file",
+        )
+
     def _select_scan(self) -> tuple[str, str, str]:
         """(topic, problem, hint)."""
         name = self.path.name
@@ -169,6 +177,8 @@ class RosLogReader:
         if self._want_scan:
             want = short_text(self._want_scan)
             c = self._channels.get(self._want_scan)
+            if c is None and self.stats.truncated:
+                return "", *self._cut_short(f"no topic '{want}'")
             if c is None:
                 return (
                     "",
@@ -183,6 +193,8 @@ class RosLogReader:
                     f"choose a LaserScan topic with --scan-topic ({listing(scans)})",
                 )
             return self._want_scan, "", ""
+        if not scans and self.stats.truncated:
+            return "", *self._cut_short("no sensor_msgs/LaserScan topic")
         if not scans:
             return (
                 "",
@@ -204,6 +216,8 @@ class RosLogReader:
         if self._want_odom:
             want = short_text(self._want_odom)
             c = self._channels.get(self._want_odom)
+            if c is None and self.stats.truncated:
+                return _OdomSel("", "", *self._cut_short(f"no topic '{want}'"))
             if c is None:
                 return _OdomSel(
                     "",
@@ -236,6 +250,8 @@ class RosLogReader:
             )
         if tfs:
             return _OdomSel("/tf" if "/tf" in tfs else tfs[0], "tf")
+        if self.stats.truncated:
+            return _OdomSel("", "", *self._cut_short("no nav_msgs/Odometry topic and no tf topic"))
         return _OdomSel(
             "",
             "",
@@ -276,6 +292,8 @@ class RosLogReader:
         if problems:
             raise LogError(*problems[0])
         for topic in (self.scan_topic, self.odom_topic):
+            if self._channels[topic].count == 0 and self.stats.truncated:
+                raise LogError(*self._cut_short(f"no message of topic '{short_text(topic)}'"))
             if self._channels[topic].count == 0:
                 raise LogError(
                     f"topic '{short_text(topic)}' of log '{self.path.name}' has no messages",

@@ -2,12 +2,14 @@
 
 :func:`output_error` maps the OSErrors of a hostile environment — read-only file
 system, permission denied, disk full or over quota, a busy mount point, a cross-device rename, a name
-too long, a file where a directory should be — to an OutputError naming the path; others stay bugs.
+too long, a file where a directory should be, a directory that refuses new entries (``/proc``) — to
+an OutputError naming the path; others stay bugs.
 """
 
 from __future__ import annotations
 
 import errno
+import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -29,12 +31,18 @@ _REASONS = {
     errno.EEXIST: ("a part of the path is a file, not a directory", "check the path"),
     errno.EISDIR: ("it is a directory", "give a file name"),
 }
+# ENOENT on a name whose directory exists: a file system that creates no files there (procfs)
+_NO_NEW_FILES = ("its directory accepts no new files, as in /proc", "write to a directory on a disk")
 
 
 def output_error(exc: OSError, path: str | Path) -> OutputError | None:
     """The one-line error for an OSError while writing ``path``; None when ``exc`` is not an
     environment fault (a bug stays a bug)."""
     reason = _REASONS.get(exc.errno)  # type: ignore[arg-type]
+    if exc.errno == errno.ENOENT and exc.filename is not None:
+        name = os.fsdecode(exc.filename)
+        if os.path.isdir(os.path.dirname(name) or "."):  # else a directory vanished: a bug stays a bug
+            reason = _NO_NEW_FILES
     if reason is None:
         return None
     return OutputError(f"cannot write '{path}': {reason[0]}", reason[1])
