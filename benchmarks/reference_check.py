@@ -11,24 +11,43 @@ front end builds it); scan k is scored at its reference pose (share of its point
 ``SEARCH_XY`` m / ± ``SEARCH_THETA`` rad around it, refined by ICP (motion/). A keyframe *refutes* the
 reference when the best pose fits at least ``REFUTE_FIT`` better and lies more than ``REFUTE_XY`` m or
 ``REFUTE_THETA`` rad from it. Nothing here is fed back into a default: it says how far the panel's
-exact-odometry figures can be trusted. Writes ``docs/results/reference_check.md``; deterministic.
+exact-odometry figures can be trusted.
+
+A second table measures the **small-scale** disagreement, keyframe by keyframe: ICP of scan k on the same
+map, started at its reference pose — how far it moves (the pose its scan fits best near the reference)
+and the median point-to-line distance of the scan's points to the map (nearest map point within
+``P2L_CAP``, along its normal) at the reference pose and at ICP's. ICP fits 3 numbers to ~100–300
+points, so on exact poses it lowers that residual by a few per cent and moves by its own noise: the
+**control** row is the same check on a simulated log (`cornerslam simulate`, 1° beams, ``SIM_RATE`` Hz, so
+keyframes as sparse as the panel's) against its exact ground truth. Where a reference moves much more
+than the control, and its scans fit clearly better where ICP puts them, the reference itself is off by
+about that much per keyframe — a floor under any relative-pose error measured against it. Writes
+``docs/results/reference_check.md``; deterministic.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+import tempfile
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from frontend_panel import keyframes  # noqa: E402
 from radish_panel import BUILDINGS  # noqa: E402
 from real_logs import ROOT, default_data  # noqa: E402
 
-from cornerslam_cli.geometry import relative, transform_points, wrap_angle  # noqa: E402
+from cornerslam_cli.geometry import (  # noqa: E402
+    interpolate,
+    relative,
+    transform_points,
+    wrap_angle,
+    yaw_from_quaternion,
+)
 from cornerslam_cli.motion.correlative import Window, search  # noqa: E402
 from cornerslam_cli.motion.icp import LocalMap, register, voxel_thin  # noqa: E402
 from cornerslam_cli.motion.params import ScanMatchConfig  # noqa: E402
@@ -37,21 +56,56 @@ WINDOW = ScanMatchConfig().window  # keyframes in the local map by default (the 
 SEARCH_XY, SEARCH_THETA = 0.3, 0.3  # m, rad: the search around the reference pose
 REFUTE_FIT = 0.2  # the best pose fits this much better (share of points) ...
 REFUTE_XY, REFUTE_THETA = 0.1, np.radians(3.0)  # ... and lies this far away: the reference is refuted
+P2L_CAP = 0.15  # m: a scan point counts for the point-to-line residual when a map point is this near
+SIM_SEED, SIM_BEAMS, SIM_RATE = 1, 271, 1.0  # the control: 1° beams over 270°, a scan a second (0.5 m)
+
+
+def point_to_line(local: LocalMap, tree: cKDTree, placed: np.ndarray) -> float:
+    """Median distance of the ``placed`` points to the map along the normal of their nearest map point
+    (those with a map point within P2L_CAP that has a normal)."""
+    d, i = tree.query(placed)
+    ok = (d < P2L_CAP) & local.has_normal[np.minimum(i, len(local.points) - 1)]
+    r = np.einsum("ij,ij->i", placed[ok] - local.points[i[ok]], local.normals[i[ok]])
+    return float(np.median(np.abs(r))) if ok.any() else float("nan")
 
 
 def check(args: tuple[Path, list[str]]) -> dict:
     log, sets = args
     run_cfg, src, pairs = keyframes(log, sets)
-    cfg = run_cfg.scan_match
-    ref = np.array([p.odom for p in pairs])  # -exact logs: the reference poses are the odometry
-    pts = [transform_points(p.scan.points(), src.laser2base) for p in pairs]  # base frame
-    refuted = []
+    if log.suffix == ".mcap":  # the simulated control: its ground truth at the keyframes' stamps
+        ref = truth_at(log.with_suffix(".gt.tum"), np.array([p.scan.stamp for p in pairs]))
+    else:
+        ref = np.array([p.odom for p in pairs])  # -exact logs: the reference poses are the odometry
+    return scored(log.name.removesuffix(".log"), run_cfg.scan_match, src.laser2base, pairs, ref)
+
+
+def truth_at(gt: Path, stamps: np.ndarray) -> np.ndarray:
+    """A TUM file's poses interpolated at ``stamps``."""
+    g = np.loadtxt(gt)
+    yaw = np.array([yaw_from_quaternion(*q) for q in g[:, 4:8]])
+    return interpolate(g[:, 0], np.column_stack((g[:, 1], g[:, 2], yaw)), stamps)
+
+
+def scored(name: str, cfg: ScanMatchConfig, laser2base, pairs, ref: np.ndarray) -> dict:
+    pts = [transform_points(p.scan.points(), laser2base) for p in pairs]  # base frame
+    refuted, small = [], []
     for k in range(cfg.window, len(pairs)):
         m = np.concatenate([transform_points(pts[i], ref[i]) for i in range(k - cfg.window, k)])
         local = LocalMap.build(m[voxel_thin(m, cfg.voxel)])
         q = pts[k][voxel_thin(pts[k], cfg.scan_voxel)]
         if len(q) < 10:
             continue
+        tree = cKDTree(local.points)
+        near = register(q, local, ref[k], cfg).pose  # ICP from the reference pose
+        d = relative(ref[k], near)
+        small.append(
+            (
+                float(np.hypot(d[0], d[1])),
+                abs(float(wrap_angle(d[2]))),
+                point_to_line(local, tree, transform_points(q, ref[k])),
+                point_to_line(local, tree, transform_points(q, near)),
+            )
+        )
         found = search(
             q, local.points, ref[k], Window(SEARCH_XY, SEARCH_THETA), cfg.search_resolution, cfg.search_sigma
         )
@@ -62,7 +116,28 @@ def check(args: tuple[Path, list[str]]) -> dict:
         d = relative(ref[k], best)
         if gain >= REFUTE_FIT and (np.hypot(d[0], d[1]) > REFUTE_XY or abs(wrap_angle(d[2])) > REFUTE_THETA):
             refuted.append((k, gain, float(np.hypot(d[0], d[1])), float(np.degrees(wrap_angle(d[2])))))
-    return {"log": log.name.removesuffix(".log"), "keyframes": len(pairs), "refuted": refuted}
+    return {"log": name, "keyframes": len(pairs), "refuted": refuted, "small": np.array(small)}
+
+
+def control(data_dir: Path) -> Path:
+    """The simulated control log (written once into ``data_dir``)."""
+    from cornerslam_cli.simulate import simulate_log
+
+    log = data_dir / f"control_{SIM_BEAMS}beams_{SIM_RATE:g}hz.mcap"
+    if not log.exists():
+        simulate_log(log, seed=SIM_SEED, laps=1, rate=SIM_RATE, beams=SIM_BEAMS, speed=0.5)
+    return log
+
+
+def small_row(r: dict) -> str:
+    s = r["small"]
+    moved, turned, at_ref, at_icp = s[:, 0], np.degrees(s[:, 1]), s[:, 2], s[:, 3]
+    ok = np.isfinite(at_ref) & np.isfinite(at_icp)
+    return (
+        f"| {r['log']} | {len(s)} | {100 * np.mean(moved):.1f} / {100 * np.median(moved):.1f} "
+        f"| {np.mean(turned):.2f} | {1000 * np.mean(at_ref[ok]):.1f} | {1000 * np.mean(at_icp[ok]):.1f} "
+        f"| {100 * np.mean(at_icp[ok] < at_ref[ok]):.0f} % |"
+    )
 
 
 def main() -> None:
@@ -71,8 +146,11 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=2)
     args = ap.parse_args()
     logs = [args.data / "radish" / f"{b}-exact.log" for b in BUILDINGS]
-    with ProcessPoolExecutor(args.jobs) as ex:
-        rows = list(ex.map(check, [(log, []) for log in logs]))
+    with tempfile.TemporaryDirectory() as tmp:
+        logs.append(control(Path(tmp)))
+        with ProcessPoolExecutor(args.jobs) as ex:
+            rows = list(ex.map(check, [(log, []) for log in logs]))
+    rows, sim = rows[:-1], rows[-1]
     lines = [
         "# Where the reference poses disagree with their own scans",
         "",
@@ -91,6 +169,29 @@ def main() -> None:
         where = "; ".join(f"{k}: +{g:.2f}, {d:.2f} m, {a:+.1f}°" for k, g, d, a in r["refuted"][:12])
         more = f" … ({len(r['refuted']) - 12} more)" if len(r["refuted"]) > 12 else ""
         lines.append(f"| {r['log']} | {r['keyframes']} | {len(r['refuted'])} | {where}{more} |")
+    lines += [
+        "",
+        "## Small-scale disagreement: ICP started at each reference pose",
+        "",
+        "The same map per keyframe; ICP (the front end's, default config) started at the keyframe's "
+        "reference pose. *Moved*: how far the pose its scan fits best lies from the reference (mean / "
+        "median). *Residual*: the median distance of the scan's points to the map along the normal of "
+        f"their nearest map point (within {P2L_CAP} m), at the reference pose and at ICP's, averaged over "
+        "the keyframes. *Control*: the same check on a simulated log (`cornerslam simulate --seed "
+        f"{SIM_SEED} --beams {SIM_BEAMS} --rate {SIM_RATE:g}`: 1° beams, a scan every 0.5 m) against its "
+        "exact ground truth — what ICP's own noise and its fit of 3 numbers to the points give when the "
+        "reference is right. Its laser sees 270° with less range noise than the radish lasers (residual "
+        "7 mm against their 11–27), so ICP moves less there; but fitting 3 numbers to ~100–300 points "
+        "cannot by itself lower the residual by a fifth at more than four keyframes in five. The "
+        "references (or the scans' mount or stamps they assume: the laser at the robot's origin, as the "
+        "logs give it) disagree with their scans by about what ICP moves, per keyframe.",
+        "",
+        "| log | keyframes | moved (cm, mean / median) | turned (°, mean) | residual at reference (mm) "
+        "| residual at ICP (mm) | keyframes ICP fits better |",
+        "|---|---:|---|---:|---:|---:|---:|",
+        *(small_row(r) for r in rows),
+        small_row({**sim, "log": "control (simulated, exact)"}),
+    ]
     text = "\n".join(lines) + "\n"
     (ROOT / "docs" / "results" / "reference_check.md").write_text(text)
     print(text)
