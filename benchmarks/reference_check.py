@@ -37,17 +37,11 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from frontend_panel import keyframes  # noqa: E402
+from frontend_panel import keyframes, reference  # noqa: E402
 from radish_panel import BUILDINGS  # noqa: E402
 from real_logs import ROOT, default_data  # noqa: E402
 
-from cornerslam_cli.geometry import (  # noqa: E402
-    interpolate,
-    relative,
-    transform_points,
-    wrap_angle,
-    yaw_from_quaternion,
-)
+from cornerslam_cli.geometry import relative, transform_points, wrap_angle  # noqa: E402
 from cornerslam_cli.motion.correlative import Window, search  # noqa: E402
 from cornerslam_cli.motion.icp import LocalMap, register, voxel_thin  # noqa: E402
 from cornerslam_cli.motion.params import ScanMatchConfig  # noqa: E402
@@ -73,17 +67,10 @@ def check(args: tuple[Path, list[str]]) -> dict:
     log, sets = args
     run_cfg, src, pairs = keyframes(log, sets)
     if log.suffix == ".mcap":  # the simulated control: its ground truth at the keyframes' stamps
-        ref = truth_at(log.with_suffix(".gt.tum"), np.array([p.scan.stamp for p in pairs]))
+        ref = reference(log, log.parent, np.array([p.scan.stamp for p in pairs]))
     else:
         ref = np.array([p.odom for p in pairs])  # -exact logs: the reference poses are the odometry
     return scored(log.name.removesuffix(".log"), run_cfg.scan_match, src.laser2base, pairs, ref)
-
-
-def truth_at(gt: Path, stamps: np.ndarray) -> np.ndarray:
-    """A TUM file's poses interpolated at ``stamps``."""
-    g = np.loadtxt(gt)
-    yaw = np.array([yaw_from_quaternion(*q) for q in g[:, 4:8]])
-    return interpolate(g[:, 0], np.column_stack((g[:, 1], g[:, 2], yaw)), stamps)
 
 
 def scored(name: str, cfg: ScanMatchConfig, laser2base, pairs, ref: np.ndarray) -> dict:
