@@ -93,6 +93,18 @@ class _Cli(click.Group):
     discarded); a closed stdout (`| head -1`) exits 141 quietly, as a Unix tool killed by SIGPIPE
     does (the output directory of a finished run is already committed)."""
 
+    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        """The group's own options (``cornerslam --bogus``): a usage error is one line too; no
+        arguments at all still print the help."""
+        given = bool(args)  # (the parser consumes the list)
+        try:
+            return super().parse_args(ctx, args)
+        except click.exceptions.UsageError as e:
+            if not given:
+                raise
+            click.echo(f"error: {usage_line(e)}", err=True)
+            ctx.exit(e.exit_code)
+
     def invoke(self, ctx: click.Context):
         if sys.stderr is None:  # started with stderr closed (`2>&-`): messages go nowhere, not into a crash
             sys.stderr = open(os.devnull, "w")  # noqa: SIM115  # open until the process ends
@@ -106,6 +118,9 @@ class _Cli(click.Group):
                 text = text.replace(copy, given)  # a --config pipe read into a temporary copy
             click.echo(f"error: {text}", err=True)
             ctx.exit(2)
+        except click.exceptions.UsageError as e:  # a subcommand's arguments: one line, as our own errors
+            click.echo(f"error: {usage_line(e)}", err=True)
+            ctx.exit(e.exit_code)
         except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
             raise
         except KeyboardInterrupt as e:
@@ -131,6 +146,16 @@ class _Cli(click.Group):
         finally:
             if main_thread and previous is not None:
                 signal.signal(signal.SIGTERM, previous)
+
+
+def usage_line(e: click.exceptions.UsageError) -> str:
+    """Click's usage error as one line: its message, lower-cased first letter and no final full stop (as
+    our own errors read), and where the command's help is — instead of click's usage, hint and message
+    on four lines."""
+    msg = " ".join(e.format_message().split()).replace(". (Did you mean", " (did you mean")
+    msg = (msg[:1].lower() + msg[1:]).removesuffix(".")
+    where = e.ctx.command_path if e.ctx is not None else "cornerslam"
+    return f"{msg} (see '{where} --help')"
 
 
 def _interrupted(ctx: click.Context, e: KeyboardInterrupt) -> None:

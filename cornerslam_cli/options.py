@@ -203,7 +203,11 @@ def parse_assocs(text: str | None, allow_many: bool) -> list[str]:
     if text is None or (not allow_many and not text):
         return []
     names = [a.strip() for a in text.split(",") if a.strip()] if allow_many else [text.strip()]
-    if not names or len(set(names)) != len(names):
+    if not names:
+        raise click.BadParameter(
+            f"'{text}' names no associator: give e.g. icnn,jcbb,pca", param_hint="--assoc"
+        )
+    if len(set(names)) != len(names):
         raise click.BadParameter(
             f"'{text}' must list distinct associators, e.g. icnn,jcbb,pca", param_hint="--assoc"
         )

@@ -21,7 +21,7 @@ T0 = 1_700_000_000.0
 
 
 def invoke(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
+    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False, prog_name="cornerslam")
 
 
 def one_line_error(result, *fragments):
@@ -315,13 +315,48 @@ def test_parse_assocs_good_names():
     assert parse_assocs("", allow_many=False) == []  # run's default: the config's associator
 
 
-@pytest.mark.parametrize("text", ["pca,pca", " icnn,icnn ", "", ",", " , "])
-def test_parse_assocs_repeated_or_empty_list_is_a_usage_error(text):
+@pytest.mark.parametrize("text", ["pca,pca", " icnn,icnn "])
+def test_parse_assocs_repeated_list_is_a_usage_error(text):
     with pytest.raises(click.BadParameter) as e:
         parse_assocs(text, allow_many=True)
     assert e.value.format_message() == (
         f"Invalid value for --assoc: '{text}' must list distinct associators, e.g. icnn,jcbb,pca"
     )
+
+
+@pytest.mark.parametrize("text", ["", ",", " , "])
+def test_parse_assocs_empty_list_is_a_usage_error(text):
+    with pytest.raises(click.BadParameter) as e:
+        parse_assocs(text, allow_many=True)
+    assert e.value.format_message() == (
+        f"Invalid value for --assoc: '{text}' names no associator: give e.g. icnn,jcbb,pca"
+    )
+
+
+@pytest.mark.parametrize(
+    ("args", "line"),
+    [
+        (["run"], "error: missing argument 'LOG' (see 'cornerslam run --help')"),
+        (
+            ["run", "x.log", "--bogus"],
+            "error: no such option '--bogus' (did you mean one of: '--out', '--verbose'?) "
+            "(see 'cornerslam run --help')",
+        ),
+        (
+            ["simulate", "x.mcap", "--seed", "q"],
+            "error: invalid value for '--seed': 'q' is not a valid integer "
+            "(see 'cornerslam simulate --help')",
+        ),
+        (["bogus"], "error: no such command 'bogus' (see 'cornerslam --help')"),
+        (["--bogus"], "error: no such option '--bogus' (see 'cornerslam --help')"),
+    ],
+)
+def test_a_usage_error_is_one_line_naming_the_help(args, line, tmp_path, monkeypatch):
+    """Click's own usage errors read as ours: one line, exit 2 — not usage, hint and message on four."""
+    monkeypatch.chdir(tmp_path)
+    res = invoke(*args)
+    assert res.exit_code == 2 and res.stderr == line + "\n"
+    assert not list(tmp_path.iterdir())  # nothing written
 
 
 @pytest.mark.parametrize(
@@ -356,8 +391,9 @@ def test_every_command_reports_a_bad_assoc_in_the_same_words(command, sim_log, t
     assert res.exit_code == 2 and not (tmp_path / "o").exists()
     if command != "run":
         res = invoke(command, sim_log, "--assoc", "pca,pca", *out)
-        assert res.exit_code == 2 and res.stderr.endswith(
-            "Error: Invalid value for --assoc: 'pca,pca' must list distinct associators, e.g. icnn,jcbb,pca\n"
+        assert res.exit_code == 2 and res.stderr == (
+            "error: invalid value for --assoc: 'pca,pca' must list distinct associators, e.g. icnn,jcbb,pca "
+            f"(see 'cornerslam {command} --help')\n"
         )
     res = invoke(command, sim_log, "--set", "association.method=pcaa", *out)
     assert res.stderr == "error: unknown associator 'pcaa' (did you mean 'pca'? (icnn, jcbb, pca))\n"
