@@ -16,19 +16,22 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 
 from .errors import CornerslamError
+from .ranges import short_text
 from .results import ScanSpan
 from .types import Scan
+
+INDEX_DIGITS = 100  # a '#INDEX' of more digits is refused (past any log; int() stops at 4,300 anyway)
 
 
 @dataclass(frozen=True)
 class Bound:
     """One end of a span: ``value`` seconds from the first scan, or a scan index when ``index``."""
 
-    value: float
+    value: float | int  # an index is kept an int: '#<20 digits>' is echoed as given, not via a float
     index: bool
 
     def text(self) -> str:
-        return f"#{int(self.value)}" if self.index else f"{self.value:g}"
+        return f"#{self.value}" if self.index else f"{self.value:g}"
 
     def reached(self, i: int, t: float) -> bool:
         """Whether scan ``i`` at ``t`` seconds from the first scan is at or past this bound."""
@@ -39,9 +42,12 @@ def parse_bound(text: str) -> Bound:
     """``'12.5'`` (seconds, ≥ 0) or ``'#40'`` (scan index, ≥ 0); ValueError saying what is wrong."""
     s = text.strip()
     if s.startswith("#"):
-        if not s[1:].isdigit():
-            raise ValueError(f"'{text}' is not a scan index (# followed by digits, e.g. #100)")
-        return Bound(float(int(s[1:])), True)
+        digits = s[1:]
+        if not (digits.isascii() and digits.isdigit()):  # ('²' is a digit to str.isdigit, not to int)
+            raise ValueError(f"'{short_text(text)}' is not a scan index (# followed by digits, e.g. #100)")
+        if len(digits) > INDEX_DIGITS:
+            raise ValueError(f"'#{digits[:10]}...' ({len(digits):,} digits) is past any scan of a log")
+        return Bound(int(digits), True)
     try:
         v = float(s)
     except ValueError:

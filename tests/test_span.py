@@ -25,9 +25,20 @@ def stamps(out):
 def test_parse_bound_seconds_and_index():
     assert parse_bound("12.5") == Bound(12.5, False)
     assert parse_bound(" #40 ") == Bound(40.0, True)
-    for bad in ("#", "#1.5", "#-3", "-1", "nan", "inf", "ten"):
+    for bad in ("#", "#1.5", "#-3", "-1", "nan", "inf", "ten", "#²", "#٣"):  # (non-ASCII digits too)
         with pytest.raises(ValueError):
             parse_bound(bad)
+
+
+def test_a_huge_scan_index_is_echoed_as_given_or_refused_in_one_short_line():
+    """An index is kept an int (a float round trip turned #99999999999999999999999 into
+    #99999999999999991611392 in the error); past INDEX_DIGITS digits it is refused, the message cut short
+    (int() itself refuses more than 4,300 digits with a traceback-worthy ValueError)."""
+    big = "9" * 23
+    assert parse_bound(f"#{big}").text() == f"#{big}"
+    with pytest.raises(ValueError) as e:
+        parse_bound("#" + "9" * 5000)
+    assert str(e.value) == "'#9999999999...' (5,000 digits) is past any scan of a log"
 
 
 def test_expected_scans_for_the_progress_line():
