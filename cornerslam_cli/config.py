@@ -19,6 +19,7 @@ import dataclasses
 import logging
 import math
 import re
+import sys
 import types
 import typing
 from dataclasses import dataclass, field
@@ -143,7 +144,9 @@ class LongInteger:
     text: str
 
     def __repr__(self) -> str:
-        return f"{self.text[:10]}... ({sum(c.isdigit() for c in self.text):,} digits)"
+        body = self.text.lstrip("+-")
+        body = body[2:] if body[:2].lower() in ("0x", "0o", "0b") else body
+        return f"{self.text[:10]}... ({sum(c.isalnum() for c in body):,} digits)"
 
 
 def _as_float(value: int | float) -> float:
@@ -262,9 +265,13 @@ class _ConfigLoader(yaml.SafeLoader):
 
     def construct_yaml_int(self, node: yaml.ScalarNode) -> int | LongInteger:
         try:
-            return super().construct_yaml_int(node)
+            value = super().construct_yaml_int(node)
         except ValueError:  # more digits than int() converts: the resolver matched an integer
             return LongInteger(str(self.construct_scalar(node)))
+        limit = sys.get_int_max_str_digits()  # (0: no limit)
+        if limit and abs(value).bit_length() > limit * math.log2(10):  # 0x…, 0o…, 0b…: converted, but
+            return LongInteger(str(self.construct_scalar(node)))  # no message could print it in decimal
+        return value
 
 
 _ConfigLoader.add_constructor("tag:yaml.org,2002:int", _ConfigLoader.construct_yaml_int)

@@ -6,6 +6,7 @@ from cornerslam_cli.blas import single_threaded_blas
 # compute exactly what `cornerslam run` computes.
 single_threaded_blas()
 
+import os  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import pytest  # noqa: E402
@@ -19,3 +20,9 @@ def sim_log(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("sim") / "sim.mcap"
     simulate_log(out, seed=7, rate=2.0, beams=541)
     return out
+
+
+def pytest_xdist_auto_num_workers(config) -> int:
+    """``-n auto`` (pyproject.toml): the CPUs this process may run on (a container's or taskset's),
+    not the host's cores that psutil would count."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)

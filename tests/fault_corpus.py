@@ -271,6 +271,19 @@ def build_corpus(d: str | Path) -> dict[str, tuple[Path, Expected]]:
             ("'cut_before_scan.mcap' is truncated: no message of topic '/scan' before the cut", *cut_short),
         ),
     )
+    add(
+        "mcap_cut_with_a_mistyped_scan_topic",
+        cut(good, d / "cut_typo.mcap", size * 9 // 10),
+        Expected(
+            "exit 2: no such topic, the file's LaserScan topics listed (a typo is as likely as the cut)",
+            2,
+            (
+                "has no topic '/scna' before the cut (the file is truncated) (LaserScan topics: /scan)",
+                "check --scan-topic",
+            ),
+            args=("--scan-topic", "/scna"),
+        ),
+    )
     for pct in (30, 60, 90):
         add(
             f"mcap_cut_{pct}pct",
@@ -502,6 +515,10 @@ def _config_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
         ("400_digits", "ekf.alpha2=1" + "0" * 400, ("'ekf.alpha2' = inf",)),
         ("5000_digits", "ekf.initial_capacity=-1" + "0" * 5000,
          ("'ekf.initial_capacity' = -1000", "(5,001 digits) is out of range", "[1, 1000]")),
+        ("5000_hex_digits", "ekf.alpha1=0x" + "f" * 5000,  # int() converts it, no message could print it
+         ("'ekf.alpha1' = 0xffffffff... (5,000 digits) is out of range", "[0, 100]")),
+        ("20000_binary_digits_as_topic", "input.scan_topic=0b" + "1" * 20000,
+         ("'input.scan_topic' must be a string, got 0b11111111... (20,000 digits)",)),
         ("capacity", "ekf.initial_capacity=10000000000", ("'ekf.initial_capacity' = 1000000", "[1, 1000]")),
         ("sigma_1e300", "sensor.sigma_r_near=1e300", ("'sensor.sigma_r_near' = 1e+300 is out of range",)),
         ("group_size", "association.pca.group_size=1000000", ("'association.pca.group_size'", "[1, 1000]")),
@@ -842,6 +859,21 @@ def _probe2_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
                 args=args,
             ),
         )
+
+    # ... and whose only laser line holds a 20,000-character token: the reader's reason is cut short
+    huge = flaser.replace(" 2.5 ", " " + "x" * 20000 + " ", 1)
+    add(
+        "carmen_only_laser_line_huge_token",
+        _write(d, "huge_token.clf", "\n".join([*odom_lines, huge])),
+        Expected(
+            "exit 2: the log has no complete laser line, the bad token quoted short",
+            2,
+            (
+                "its only FLASER line cannot be read (line 42:",
+                "could not convert string to float: 'xxxxxxxxxxx...",
+            ),
+        ),
+    )
 
     # -- chunks not in time order and no summary (no chunk index): read in file order; the warning
     # says so instead of only blaming the stamps

@@ -958,3 +958,22 @@ def test_simulate_writes_over_its_own_earlier_log(tmp_path):
         res = CliRunner().invoke(cli, ["simulate", str(out), "--beams", "11", "--rate", "1", "--seed", seed])
         assert res.exit_code == 0, res.output
     assert out.with_suffix(".gt.tum").exists() and out.with_suffix(".corners.csv").exists()
+
+
+def test_enoent_is_a_user_error_only_where_the_directory_creates_no_files(tmp_path, monkeypatch):
+    """ENOENT while writing is '/proc'-like (exit 2) only when a fresh file cannot be created beside the
+    name either; a file that should be there and is not (a read of a staged file a writer forgot), or
+    a vanished directory, stays a bug (None: exit 1 with the traceback saved)."""
+    from cornerslam_cli.report.oserrors import output_error
+
+    with pytest.raises(OSError) as missing:
+        open(tmp_path / "forgotten.csv")  # noqa: SIM115
+    assert output_error(missing.value, tmp_path / "out") is None
+    gone = OSError(errno.ENOENT, "No such file or directory", str(tmp_path / "gone" / "x.csv"))
+    assert output_error(gone, tmp_path / "out") is None
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".cornerslam-probe")]  # probe removed
+    proc = tmp_path / "proc"
+    proc.mkdir()
+    fail_writes_under(monkeypatch, proc, errno.ENOENT)
+    refused = OSError(errno.ENOENT, "No such file or directory", str(proc / "foo"))
+    assert "its directory accepts no new files" in str(output_error(refused, proc / "foo"))

@@ -341,7 +341,7 @@ class CarmenReader:
                 st.failed("%s:%d: malformed %s line skipped (%s)", where, lineno, tag, exc)
                 if tag == scan_tag:
                     unread += 1
-                    first_unread = first_unread or f"line {lineno}: {exc}"
+                    first_unread = first_unread or f"line {lineno}: {short_text(str(exc), 100)}"
                 continue
             if tag == odom_tag and not st.bad_odometry(f"{where}:{lineno}", las.stamp, las.robot):
                 st.odoms += 1

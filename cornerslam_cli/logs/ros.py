@@ -170,6 +170,10 @@ class RosLogReader:
             "the recorder stopped early and what came after is lost; record again, or give the complete file",
         )
 
+    def _cut_note(self) -> str:
+        """Said of a topic that is not there, when the file ends early."""
+        return " before the cut (the file is truncated)" if self.stats.truncated else ""
+
     def _select_scan(self) -> tuple[str, str, str]:
         """(topic, problem, hint)."""
         name = self.path.name
@@ -177,12 +181,11 @@ class RosLogReader:
         if self._want_scan:
             want = short_text(self._want_scan)
             c = self._channels.get(self._want_scan)
-            if c is None and self.stats.truncated:
-                return "", *self._cut_short(f"no topic '{want}'")
-            if c is None:
+            if c is None:  # (a typo as often as the cut: the topics there are listed either way)
                 return (
                     "",
-                    f"log '{name}' has no topic '{want}' (LaserScan topics: {listing(scans)})",
+                    f"log '{name}' has no topic '{want}'{self._cut_note()} "
+                    f"(LaserScan topics: {listing(scans)})",
                     "check --scan-topic; `cornerslam info LOG` lists the topics",
                 )
             if normalize_msgtype(c.msgtype) != LASERSCAN:
@@ -216,13 +219,11 @@ class RosLogReader:
         if self._want_odom:
             want = short_text(self._want_odom)
             c = self._channels.get(self._want_odom)
-            if c is None and self.stats.truncated:
-                return _OdomSel("", "", *self._cut_short(f"no topic '{want}'"))
             if c is None:
                 return _OdomSel(
                     "",
                     "",
-                    f"log '{name}' has no topic '{want}' "
+                    f"log '{name}' has no topic '{want}'{self._cut_note()} "
                     f"(Odometry topics: {listing(odoms)}; tf topics: {listing(tfs)})",
                     "check --odom-topic; `cornerslam info LOG` lists the topics",
                 )

@@ -31,7 +31,7 @@ _REASONS = {
     errno.EEXIST: ("a part of the path is a file, not a directory", "check the path"),
     errno.EISDIR: ("it is a directory", "give a file name"),
 }
-# ENOENT on a name whose directory exists: a file system that creates no files there (procfs)
+# ENOENT where a file was to be created in a directory that exists but creates none (procfs)
 _NO_NEW_FILES = ("its directory accepts no new files, as in /proc", "write to a directory on a disk")
 
 
@@ -39,13 +39,27 @@ def output_error(exc: OSError, path: str | Path) -> OutputError | None:
     """The one-line error for an OSError while writing ``path``; None when ``exc`` is not an
     environment fault (a bug stays a bug)."""
     reason = _REASONS.get(exc.errno)  # type: ignore[arg-type]
-    if exc.errno == errno.ENOENT and exc.filename is not None:
-        name = os.fsdecode(exc.filename)
-        if os.path.isdir(os.path.dirname(name) or "."):  # else a directory vanished: a bug stays a bug
-            reason = _NO_NEW_FILES
+    if exc.errno == errno.ENOENT and exc.filename is not None and _creates_no_files(exc.filename):
+        reason = _NO_NEW_FILES  # else a file or directory that should be there is not: a bug stays a bug
     if reason is None:
         return None
     return OutputError(f"cannot write '{path}': {reason[0]}", reason[1])
+
+
+def _creates_no_files(filename: str | bytes) -> bool:
+    """Whether ENOENT on ``filename`` is its directory refusing new files (/proc): the directory exists
+    and creating a fresh file in it fails with ENOENT too (a read of a missing file, or a vanished
+    directory, is not that)."""
+    folder = os.path.dirname(os.fsdecode(filename)) or "."
+    if not os.path.isdir(folder):
+        return False
+    probe = os.path.join(folder, f".cornerslam-probe-{os.getpid()}")
+    try:
+        os.close(os.open(probe, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600))
+    except OSError as e:
+        return e.errno == errno.ENOENT
+    os.unlink(probe)
+    return False
 
 
 @contextmanager
