@@ -144,9 +144,8 @@ class LongInteger:
     text: str
 
     def __repr__(self) -> str:
-        body = self.text.lstrip("+-")
-        body = body[2:] if body[:2].lower() in ("0x", "0o", "0b") else body
-        return f"{self.text[:10]}... ({sum(c.isalnum() for c in body):,} digits)"
+        based = self.text.lstrip("+-")[1:2].lower() in ("x", "o", "b")  # the 0x / 0o / 0b is no digit
+        return f"{self.text[:10]}... ({sum(c.isalnum() for c in self.text) - 2 * based:,} digits)"
 
 
 def _as_float(value: int | float) -> float:
@@ -264,14 +263,12 @@ class _ConfigLoader(yaml.SafeLoader):
         return super().construct_mapping(node, deep)
 
     def construct_yaml_int(self, node: yaml.ScalarNode) -> int | LongInteger:
-        try:
+        try:  # more digits than int() converts (ValueError), or a 0x… / 0b… no message could print
             value = super().construct_yaml_int(node)
-        except ValueError:  # more digits than int() converts: the resolver matched an integer
-            return LongInteger(str(self.construct_scalar(node)))
-        limit = sys.get_int_max_str_digits()  # (0: no limit)
-        if limit and abs(value).bit_length() > limit * math.log2(10):  # 0x…, 0o…, 0b…: converted, but
-            return LongInteger(str(self.construct_scalar(node)))  # no message could print it in decimal
-        return value
+        except ValueError:
+            value = None
+        bits = sys.get_int_max_str_digits() * math.log2(10) or math.inf  # (0: no limit)
+        return value if value is not None and abs(value).bit_length() <= bits else LongInteger(node.value)
 
 
 _ConfigLoader.add_constructor("tag:yaml.org,2002:int", _ConfigLoader.construct_yaml_int)
