@@ -18,10 +18,11 @@ map, started at its reference pose — how far it moves (the pose its scan fits 
 and the median point-to-line distance of the scan's points to the map (nearest map point within
 ``P2L_CAP``, along its normal) at the reference pose and at ICP's. ICP fits 3 numbers to ~100–300
 points, so on exact poses it lowers that residual by a few per cent and moves by its own noise: the
-**control** row is the same check on a simulated log (`cornerslam simulate`, 1° beams, ``SIM_RATE`` Hz, so
-keyframes as sparse as the panel's) against its exact ground truth. Where a reference moves much more
-than the control, and its scans fit clearly better where ICP puts them, the reference itself is off by
-about that much per keyframe — a floor under any relative-pose error measured against it. Writes
+**control** rows are the same check on simulated logs (simulate.simulate_log, 1° beams, ``SIM_RATE`` Hz,
+so keyframes as sparse as the panel's; ``CONTROLS``: the simulator's 270° laser, and 180° ones like
+the radish lasers with 1 and 3 cm of range noise) against their exact ground truth. Where a reference
+moves much more than the controls, and its scans fit clearly better where ICP puts them, the reference
+itself is off — a floor under any relative-pose error measured against it. Writes
 ``docs/results/reference_check.md``; deterministic.
 """
 
@@ -51,7 +52,9 @@ SEARCH_XY, SEARCH_THETA = 0.3, 0.3  # m, rad: the search around the reference po
 REFUTE_FIT = 0.2  # the best pose fits this much better (share of points) ...
 REFUTE_XY, REFUTE_THETA = 0.1, np.radians(3.0)  # ... and lies this far away: the reference is refuted
 P2L_CAP = 0.15  # m: a scan point counts for the point-to-line residual when a map point is this near
-SIM_SEED, SIM_BEAMS, SIM_RATE = 1, 271, 1.0  # the control: 1° beams over 270°, a scan a second (0.5 m)
+SIM_SEED, SIM_RATE = 1, 1.0  # the controls: a scan a second (0.5 m at the simulator's speed)
+# (name, field of view °, beams: 1° apart, σ of the range noise's constant part m)
+CONTROLS = (("270°, 1 cm", 270, 271, 0.01), ("180°, 1 cm", 180, 181, 0.01), ("180°, 3 cm", 180, 181, 0.03))
 
 
 def point_to_line(local: LocalMap, tree: cKDTree, placed: np.ndarray) -> float:
@@ -106,13 +109,18 @@ def scored(name: str, cfg: ScanMatchConfig, laser2base, pairs, ref: np.ndarray) 
     return {"log": name, "keyframes": len(pairs), "refuted": refuted, "small": np.array(small)}
 
 
-def control(data_dir: Path) -> Path:
-    """The simulated control log, written into ``data_dir``."""
+def controls(data_dir: Path) -> list[Path]:
+    """The simulated control logs (``CONTROLS``), written into ``data_dir``."""
     from cornerslam_cli.simulate import simulate_log
 
-    log = data_dir / f"control_{SIM_BEAMS}beams_{SIM_RATE:g}hz.mcap"
-    simulate_log(log, seed=SIM_SEED, laps=1, rate=SIM_RATE, beams=SIM_BEAMS, speed=0.5)
-    return log
+    logs = []
+    for i, (_, fov, beams, sigma) in enumerate(CONTROLS):
+        log = data_dir / f"control{i}.mcap"
+        simulate_log(
+            log, seed=SIM_SEED, rate=SIM_RATE, beams=beams, speed=0.5, fov=np.radians(fov), sigma_a=sigma
+        )
+        logs.append(log)
+    return logs
 
 
 def small_row(r: dict) -> str:
@@ -133,10 +141,10 @@ def main() -> None:
     args = ap.parse_args()
     logs = [args.data / "radish" / f"{b}-exact.log" for b in BUILDINGS]
     with tempfile.TemporaryDirectory() as tmp:
-        logs.append(control(Path(tmp)))
+        logs += controls(Path(tmp))
         with ProcessPoolExecutor(args.jobs) as ex:
             rows = list(ex.map(check, [(log, []) for log in logs]))
-    rows, sim = rows[:-1], rows[-1]
+    rows, sims = rows[: -len(CONTROLS)], rows[-len(CONTROLS) :]
     lines = [
         "# Where the reference poses disagree with their own scans",
         "",
@@ -163,21 +171,23 @@ def main() -> None:
         "reference pose. *Moved*: how far the pose its scan fits best lies from the reference (mean / "
         "median). *Residual*: the median distance of the scan's points to the map along the normal of "
         f"their nearest map point (within {P2L_CAP} m), at the reference pose and at ICP's, averaged over "
-        "the keyframes. *Control*: the same check on a simulated log (`cornerslam simulate --seed "
-        f"{SIM_SEED} --beams {SIM_BEAMS} --rate {SIM_RATE:g}`: 1° beams, a scan every 0.5 m) against its "
-        "exact ground truth — what ICP's own noise and its fit of 3 numbers to the points give when the "
-        "reference is right. Its laser sees 270° with less range noise than the radish lasers (residual "
-        "7 mm against their 11–27), so ICP moves less there, and the control is not matched; but fitting "
-        "3 numbers to ~100–300 points does not by itself lower the residual by a sixth or more at four "
-        "keyframes in five. The references (or the scans' mount or stamps they assume: the laser at "
-        "the robot's origin, as the logs give it) are inconsistent with their scans; ICP's move is an "
-        "estimate of by how much, per keyframe, not a measurement of it.",
+        "the keyframes. *Controls*: the same check on simulated logs (the office, seed "
+        f"{SIM_SEED}, a scan every 0.5 m, 1° beams; the simulator's 270° laser, and 180° ones like the "
+        "radish lasers with 1 and 3 cm of range noise, plus 0.2 % of the range) against their exact "
+        "ground truth — what ICP's own noise and its fit of 3 numbers to the points give when the "
+        "reference is right. The references (or the scans' mount or stamps they assume: the laser at "
+        "the robot's origin, as the logs give it) are inconsistent with their scans where they move "
+        "well beyond the controls and fit better at far more than half the keyframes; ICP's move is an "
+        "estimate of by how much, per keyframe, not a measurement of it (the worlds differ).",
         "",
         "| log | keyframes | moved (cm, mean / median) | turned (°, mean) | residual at reference (mm) "
         "| residual at ICP (mm) | keyframes ICP fits better |",
         "|---|---:|---|---:|---:|---:|---:|",
         *(small_row(r) for r in rows),
-        small_row({**sim, "log": "control (simulated, exact)"}),
+        *(
+            small_row({**r, "log": f"control: simulated, exact, {c[0]}"})
+            for r, c in zip(sims, CONTROLS, strict=True)
+        ),
     ]
     text = "\n".join(lines) + "\n"
     (ROOT / "docs" / "results" / "reference_check.md").write_text(text)

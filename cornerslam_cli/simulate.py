@@ -128,13 +128,16 @@ def simulate_log(
     speed: float = 0.5,
     world: World | None = None,
     waypoints: np.ndarray | None = None,
+    fov: float = SimParams.fov,
+    sigma_a: float = SimParams.sigma_a,
 ) -> dict:
     """Write the synthetic log ``out`` (.mcap), ``out.gt.tum`` and ``out.corners.csv``.
 
     ``world`` and ``waypoints`` (library use, not CLI options): another world (simworld.py) and the
     closed loop (k, 2) the robot drives through it, starting at its first waypoint; both default to
     the office and its corridor loop (``OFFICE_LOOP``). The waypoints must be joined by free space:
-    the robot drives straight between them and does not avoid walls.
+    the robot drives straight between them and does not avoid walls. ``fov`` (rad) and ``sigma_a`` (m,
+    the range noise's constant part) likewise: a laser like another log's (benchmarks/reference_check.py).
     """
     if out.suffix != ".mcap":
         raise ConfigError(f"simulate writes MCAP: '{out}' must end in .mcap")
@@ -142,7 +145,7 @@ def simulate_log(
     waypoints = OFFICE_LOOP if waypoints is None else np.asarray(waypoints, dtype=float).reshape(-1, 2)
     if len(waypoints) < 2:
         raise ConfigError(f"simulate needs at least 2 waypoints, got {len(waypoints)}")
-    p = SimParams(rate=rate, beams=beams, speed=speed)
+    p = SimParams(rate=rate, beams=beams, speed=speed, fov=fov, sigma_a=sigma_a)
     check_options(seed, laps, p, waypoints)
     paths = (out, out.with_suffix(".gt.tum"), out.with_suffix(".corners.csv"))
     for path in paths:

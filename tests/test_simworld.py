@@ -91,3 +91,21 @@ def test_scan_from_ranges_keeps_valid_beams():
     np.testing.assert_array_equal(scan.beam_index, [0, 3])
     np.testing.assert_allclose(scan.ranges, [1.0, 2.0])
     assert scan.n_beams == 5 and scan.n_invalid == 3 and scan.angle_increment == pytest.approx(0.25)
+
+
+def test_simulate_log_takes_another_lasers_field_of_view_and_noise(tmp_path):
+    """simulate_log's library-only fov and sigma_a (benchmarks/reference_check.py's controls): the scans
+    span the field of view given, and the noise given is the one drawn (same seed, other σ: other ranges)."""
+    from cornerslam_cli.logs import open_log
+    from cornerslam_cli.simulate import simulate_log
+
+    first = []
+    for sigma in (0.01, 0.01, 0.03):
+        log = tmp_path / f"s{len(first)}.mcap"
+        simulate_log(log, seed=4, rate=1.0, beams=181, fov=math.radians(180.0), sigma_a=sigma)
+        reader = open_log(log)
+        scan = next(m for m in reader.messages() if hasattr(m, "ranges"))
+        reader.close()
+        assert scan.n_beams == 181 and scan.angle_increment * 180 == pytest.approx(math.pi)
+        first.append(np.asarray(scan.ranges, dtype=float))
+    assert np.array_equal(first[0], first[1]) and not np.array_equal(first[0], first[2])
