@@ -102,8 +102,7 @@ class _Cli(click.Group):
         except click.exceptions.UsageError as e:
             if not given:
                 raise
-            click.echo(f"error: {usage_line(e)}", err=True)
-            ctx.exit(e.exit_code)
+            _usage_exit(ctx, e)
 
     def invoke(self, ctx: click.Context):
         if sys.stderr is None:  # started with stderr closed (`2>&-`): messages go nowhere, not into a crash
@@ -119,8 +118,7 @@ class _Cli(click.Group):
             click.echo(f"error: {text}", err=True)
             ctx.exit(2)
         except click.exceptions.UsageError as e:  # a subcommand's arguments: one line, as our own errors
-            click.echo(f"error: {usage_line(e)}", err=True)
-            ctx.exit(e.exit_code)
+            _usage_exit(ctx, e)
         except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
             raise
         except KeyboardInterrupt as e:
@@ -146,6 +144,11 @@ class _Cli(click.Group):
         finally:
             if main_thread and previous is not None:
                 signal.signal(signal.SIGTERM, previous)
+
+
+def _usage_exit(ctx: click.Context, e: click.exceptions.UsageError) -> None:
+    click.echo(f"error: {usage_line(e)}", err=True)
+    ctx.exit(e.exit_code)
 
 
 def usage_line(e: click.exceptions.UsageError) -> str:

@@ -96,10 +96,11 @@ def blur(sq: np.ndarray, res: float, sigma: float) -> np.ndarray:
     top = int(sq.max()) if sq.size else 0
     zero_at = 2.0 * EXP_ZERO * (sigma / res) ** 2  # (√k·res/σ)²/2 ≥ EXP_ZERO from here on
     k = min(top, int(math.ceil(zero_at)))
-    table = np.exp(-0.5 * ((np.sqrt(np.arange(k + 1, dtype=float)) * res) / sigma) ** 2)
-    if k + 1 > sq.size or (k < top and table[k] != 0.0):  # a table no smaller than the field, or no zero
-        return np.exp(-0.5 * ((np.sqrt(sq) * res) / sigma) ** 2)
-    return table[np.minimum(sq, k).astype(np.intp)]
+    if k + 1 <= sq.size:  # (a table no smaller than the field saves nothing: not built)
+        table = np.exp(-0.5 * ((np.sqrt(np.arange(k + 1, dtype=float)) * res) / sigma) ** 2)
+        if k == top or table[k] == 0.0:  # (else no zero where one was expected: the formula)
+            return table[np.minimum(sq, k).astype(np.intp)]
+    return np.exp(-0.5 * ((np.sqrt(sq) * res) / sigma) ** 2)
 
 
 def angle_steps(points: np.ndarray, theta: float, res: float) -> np.ndarray:
