@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import os
 import platform
 import subprocess
 import sys
@@ -233,9 +234,11 @@ def cm(score: tuple[float, float]) -> str:
     return f"{100 * mean:.1f} ({100 * share:.0f} %)"
 
 
-def commit() -> str:
+def commit(written: Path) -> str:
+    """HEAD's short hash, marked when the clone has changes other than the file ``written``."""
     head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True)
-    dirty = subprocess.run(["git", "status", "--porcelain"], cwd=ROOT, capture_output=True, text=True)
+    status = ["git", "status", "--porcelain", "--", ".", f":!{written.resolve()}"]
+    dirty = subprocess.run(status, cwd=ROOT, capture_output=True, text=True)
     return head.stdout.strip() + (" (uncommitted changes)" if dirty.stdout.strip() else "")
 
 
@@ -245,10 +248,10 @@ def loops(r: dict) -> str:
     return f"{r['submaps']}, {r['loops'][0]} / {r['loops'][1]}"
 
 
-def floor_table(rows: list[dict], what: str) -> list[str]:
+def floor_table(rows: list[dict], what: str, ref: str) -> list[str]:
     cols = ("reference", "output", "chain", "odometry")
     out = [
-        f"| {what} | steps | points | reference: {cols[0]} | our output | scan-matched chain | odometry "
+        f"| {what} | steps | points | {ref} | our output | scan-matched chain | odometry "
         "| submaps, loops accepted / refused |",
         "|---|---:|---:|---:|---:|---:|---:|---|",
     ]
@@ -318,8 +321,8 @@ def main() -> None:
     lines = [
         "# The floor of the revisit misalignment",
         "",
-        f"`python benchmarks/revisit_floor.py` (see its docstring), commit {commit()}, "
-        f"{platform.machine()} {platform.processor() or ''} ({platform.node()}), Python "
+        f"`python benchmarks/revisit_floor.py` (see its docstring), commit {commit(args.out)}, "
+        f"{platform.machine()} ({os.cpu_count()} cores, {platform.node()}), Python "
         f"{platform.python_version()}; {wall:.0f} s wall with {args.jobs} processes. Default config "
         "(Mines: `configs/mines.yaml`). Revisit misalignment (report/consistency.py, the figure of "
         "summary.json's `consistency`): for each kept scan point placed with the trajectory, the "
@@ -336,7 +339,7 @@ def main() -> None:
         "keyframes lie 0.3–1 m apart: this is what a published-quality trajectory scores on real "
         "data, not the URG's floor.",
         "",
-        *floor_table([by[c["name"]] for c in radish], "log"),
+        *floor_table([by[c["name"]] for c in radish], "log", "reference poses"),
         "",
         "## Simulated URG-like laser, placed with the exact ground truth",
         "",
@@ -346,7 +349,7 @@ def main() -> None:
         "(`input.max_range`). *Reference* here is the exact ground truth: the floor of the metric "
         "with perfect poses in an idealised world (straight walls, no clutter, no glass).",
         "",
-        *floor_table([by[c["name"]] for c in sims], "control"),
+        *floor_table([by[c["name"]] for c in sims], "control", "exact ground truth"),
         "",
         f"Laser preset the runs chose: {', '.join(sorted({by[c['name']]['preset'] for c in sims}))}.",
         "",
