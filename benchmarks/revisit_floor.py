@@ -237,7 +237,9 @@ def cm(score: tuple[float, float]) -> str:
 def commit(written: Path) -> str:
     """HEAD's short hash, marked when the clone has changes other than the file ``written``."""
     head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True)
-    status = ["git", "status", "--porcelain", "--", ".", f":!{written.resolve()}"]
+    status = ["git", "status", "--porcelain", "--", "."]
+    if written.resolve().is_relative_to(ROOT):
+        status.append(f":(exclude){written.resolve().relative_to(ROOT)}")
     dirty = subprocess.run(status, cwd=ROOT, capture_output=True, text=True)
     return head.stdout.strip() + (" (uncommitted changes)" if dirty.stdout.strip() else "")
 
