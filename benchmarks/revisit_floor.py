@@ -172,13 +172,17 @@ def sections(pts, traj: dict[str, np.ndarray]) -> list[dict]:
 
 
 def step_table(dest: Path) -> dict[str, np.ndarray]:
-    """Per step of a run: its submap (trajectory.csv), corners and matched corners (timing.csv)."""
+    """Per step of a run: its submap and the filter's heading σ (rad; trajectory.csv), corners and
+    matched corners (timing.csv)."""
     with open(dest / "trajectory.csv") as f:
-        submap = np.array([int(r["submap"]) for r in csv.DictReader(f)])
+        rows = list(csv.DictReader(f))
+    submap = np.array([int(r["submap"]) for r in rows])
+    sigma_theta = np.sqrt([float(r["var_theta"]) for r in rows])
     with open(dest / "timing.csv") as f:
         rows = list(csv.DictReader(f))
     return {
         "submap": submap,
+        "sigma_theta": sigma_theta,
         "corners": np.array([int(r["n_corners"]) for r in rows]),
         "matched": np.array([int(r["n_matched"]) for r in rows]),
     }
@@ -186,7 +190,8 @@ def step_table(dest: Path) -> dict[str, np.ndarray]:
 
 def departures(pts, out: np.ndarray, chain: np.ndarray, steps: dict) -> tuple[list, dict]:
     """The steps whose increment of the output departs most in heading from the chain's increment:
-    (step, submap, Δθ °, Δxy m, corners, matched) of the ``DEPARTURES`` largest; and the revisit
+    (step, submap, Δθ °, Δxy m, corners, matched, the filter's heading σ ° at the step before) of the
+    ``DEPARTURES`` largest; and the revisit
     figure of the output with its n largest replaced by the chain's increments (n in ``REPAIRED``)."""
     inc_out, inc_chain = relative(out[:-1], out[1:]), relative(chain[:-1], chain[1:])
     dth = wrap_angle(inc_out[:, 2] - inc_chain[:, 2])
@@ -194,7 +199,7 @@ def departures(pts, out: np.ndarray, chain: np.ndarray, steps: dict) -> tuple[li
     order = np.argsort(-np.abs(dth), kind="stable")
     listed = [
         (k + 1, steps["submap"][k + 1], np.degrees(dth[k]), dxy[k], steps["corners"][k + 1])
-        + (steps["matched"][k + 1],)
+        + (steps["matched"][k + 1], np.degrees(steps["sigma_theta"][k]))
         for k in order[:DEPARTURES].tolist()
     ]
     repaired = {}
@@ -376,15 +381,16 @@ def main() -> None:
         "",
         "Per step, the output's increment (laser pose k−1 → k) against the chain's: the "
         f"{DEPARTURES} largest heading differences, with the step's corners and matched corners "
-        "(timing.csv) and submap. Then the output with its n largest such steps given the chain's "
-        "increment instead (everything else the output's), scored again: how much of the gap to the "
-        "chain those steps make.",
+        "(timing.csv), submap, and the filter's own heading σ at the step before (trajectory.csv "
+        "`var_theta`: how uncertain the filter held its heading when the corner came). Then the "
+        "output with its n largest such steps given the chain's increment instead (everything else "
+        "the output's), scored again: how much of the gap to the chain those steps make.",
         "",
-        "| step | submap | Δθ (°) | Δxy (cm) | corners | matched |",
-        "|---:|---:|---:|---:|---:|---:|",
+        "| step | submap | Δθ (°) | Δxy (cm) | corners | matched | filter's σθ before (°) |",
+        "|---:|---:|---:|---:|---:|---:|---:|",
         *(
-            f"| {k} | {sm} | {dth:+.2f} | {100 * dxy:.1f} | {c} | {m} |"
-            for k, sm, dth, dxy, c, m in by["exp4"]["departures"]
+            f"| {k} | {sm} | {dth:+.2f} | {100 * dxy:.1f} | {c} | {m} | {sd:.2f} |"
+            for k, sm, dth, dxy, c, m, sd in by["exp4"]["departures"]
         ),
         "",
         "| output with n steps repaired | " + " | ".join(f"n = {n}" for n in REPAIRED) + " |",
