@@ -172,8 +172,8 @@ def sections(pts, traj: dict[str, np.ndarray]) -> list[dict]:
 
 
 def step_table(dest: Path) -> dict[str, np.ndarray]:
-    """Per step of a run: its submap and the filter's heading σ (rad; trajectory.csv), corners and
-    matched corners (timing.csv)."""
+    """Per step of a run: its submap and heading σ (rad; trajectory.csv: with submaps, the local
+    filter's variance plus the submap origin's), corners and matched corners (timing.csv)."""
     with open(dest / "trajectory.csv") as f:
         rows = list(csv.DictReader(f))
     submap = np.array([int(r["submap"]) for r in rows])
@@ -190,7 +190,7 @@ def step_table(dest: Path) -> dict[str, np.ndarray]:
 
 def departures(pts, out: np.ndarray, chain: np.ndarray, steps: dict) -> tuple[list, dict]:
     """The steps whose increment of the output departs most in heading from the chain's increment:
-    (step, submap, Δθ °, Δxy m, corners, matched, the filter's heading σ ° at the step before) of the
+    (step, submap, Δθ °, Δxy m, corners, matched, the heading σ ° at the step before) of the
     ``DEPARTURES`` largest; and the revisit
     figure of the output with its n largest replaced by the chain's increments (n in ``REPAIRED``)."""
     inc_out, inc_chain = relative(out[:-1], out[1:]), relative(chain[:-1], chain[1:])
@@ -381,12 +381,13 @@ def main() -> None:
         "",
         "Per step, the output's increment (laser pose k−1 → k) against the chain's: the "
         f"{DEPARTURES} largest heading differences, with the step's corners and matched corners "
-        "(timing.csv), submap, and the filter's own heading σ at the step before (trajectory.csv "
-        "`var_theta`: how uncertain the filter held its heading when the corner came). Then the "
+        "(timing.csv), submap, and the heading σ at the step before (trajectory.csv `var_theta`: the "
+        "local filter's variance plus its submap origin's, so the local filter's own in submap 0 only). "
+        "Then the "
         "output with its n largest such steps given the chain's increment instead (everything else "
         "the output's), scored again: how much of the gap to the chain those steps make.",
         "",
-        "| step | submap | Δθ (°) | Δxy (cm) | corners | matched | filter's σθ before (°) |",
+        "| step | submap | Δθ (°) | Δxy (cm) | corners | matched | σθ before (°) |",
         "|---:|---:|---:|---:|---:|---:|---:|",
         *(
             f"| {k} | {sm} | {dth:+.2f} | {100 * dxy:.1f} | {c} | {m} | {sd:.2f} |"
