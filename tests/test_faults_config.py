@@ -10,7 +10,6 @@ import math
 import os
 import shutil
 import threading
-import time
 import tracemalloc
 import typing
 
@@ -136,10 +135,9 @@ def test_keys_of_earlier_versions_are_ignored_with_a_warning():
 
 
 # ---------------------------------------------------------------------------- YAML
-def _peak_mib(fn) -> tuple[float, float, Exception]:
-    """(seconds, peak traced MiB, the exception) of ``fn()``, which must raise."""
+def _peak_mib(fn) -> tuple[float, Exception]:
+    """(peak traced MiB, the exception) of ``fn()``, which must raise."""
     tracemalloc.start()
-    t0 = time.perf_counter()
     try:
         fn()
     except Exception as e:  # noqa: BLE001 - returned for the caller's checks
@@ -147,27 +145,27 @@ def _peak_mib(fn) -> tuple[float, float, Exception]:
     else:
         raise AssertionError("no error")
     finally:
-        seconds = time.perf_counter() - t0
         _, peak = tracemalloc.get_traced_memory()
         tracemalloc.stop()
-    return seconds, peak / 2**20, err
+    return peak / 2**20, err
 
 
-def test_an_alias_bomb_is_refused_fast_in_constant_memory(tmp_path):
-    """9 levels of 9 aliases expand to 387 million scalars (GiBs): refused on the node graph in well
-    under a second, tracing < 5 MiB, with a one-line message that quotes no value."""
+def test_an_alias_bomb_is_refused_in_constant_memory(tmp_path):
+    """9 levels of 9 aliases expand to 387 million scalars (GiBs, minutes): refused on the node graph
+    before anything is built — tracing < 5 MiB, which no expansion fits in (memory, not time: a timed
+    test flakes on a shared machine) — with a one-line message that quotes no value."""
     p = tmp_path / "bomb.yaml"
     p.write_text(alias_bomb(9, 9))
-    seconds, mib, err = _peak_mib(lambda: load_config(p))
+    mib, err = _peak_mib(lambda: load_config(p))
     assert isinstance(err, ConfigError) and "expands to more than 10,000 YAML nodes" in str(err)
-    assert seconds < 1.0 and mib < 5.0, (seconds, mib)
+    assert mib < 5.0, mib
     assert len(str(err)) < 250 and "lol" not in str(err)
     # the same bomb in one --set value (flow style)
     levels = ["&a0 [" + ", ".join(["lol"] * 9) + "]"]
     levels += [f"&a{i} [" + ", ".join([f"*a{i - 1}"] * 9) + "]" for i in range(1, 9)]
-    seconds, mib, err = _peak_mib(lambda: load_config(None, ["ekf.alpha1=[" + ", ".join(levels) + "]"]))
+    mib, err = _peak_mib(lambda: load_config(None, ["ekf.alpha1=[" + ", ".join(levels) + "]"]))
     assert isinstance(err, ConfigError) and "--set 'ekf.alpha1=[&a0" in str(err)
-    assert seconds < 1.0 and mib < 5.0 and len(str(err)) < 250
+    assert mib < 5.0 and len(str(err)) < 250
 
 
 def test_aliases_below_the_bound_are_fine_and_a_merge_key_may_be_overridden(tmp_path):
