@@ -1,7 +1,7 @@
 """Steps where one matched corner turns the filter's heading away from the scan-matched chain.
 
     python benchmarks/single_corner_steps.py LOG [--config FILE] [--set K=V]... [--steps 127,454]
-                                             [--json OUT.json] [--variant none|verify|skip]
+                                             [--json OUT.json] [--variant none|handed|verify|skip]
 
 A diagnostic (nothing here changes the library or a default): the run of ``cornerslam run`` with its
 stages observed by patching them in this process —
@@ -18,7 +18,9 @@ and every EKF update's pre-update state. Prints, per log:
   or the chain's at step k); with a reference (LOG.gt.tum) also the reference's increment;
 * ``--steps``: the full record of those steps.
 
-``--variant`` (experiments, not defaults): ``skip`` never updates the filter with a single matched pair;
+``--variant`` (experiments, not defaults): ``handed`` refuses a pair whose corner lies on the other side
+of its walls than the landmark did when it was created (``corner_sides``: a mirror image that φ cannot
+tell); ``skip`` never updates the filter with a single matched pair;
 ``verify`` keeps a single pair's update only when the scan's points fit the open submap's earlier
 points no worse (``VERIFY_MARGIN``) at the updated pose than at the predicted one, else restores the
 filter and drops the pair. Findings: docs/results/single_corner_steps.md.
@@ -28,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 import json
 import sys
 import tempfile
@@ -40,6 +43,7 @@ from scipy.spatial import cKDTree
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import cornerslam_cli.frontend as fe  # noqa: E402
+import cornerslam_cli.slam as slam_module  # noqa: E402
 from cornerslam_cli.filter.ekf import Ekf  # noqa: E402
 from cornerslam_cli.filter.models import observe_one  # noqa: E402
 from cornerslam_cli.geometry import compose, relative, wrap_angle  # noqa: E402
@@ -61,15 +65,19 @@ class Observer:
     """What the patched stages saw, by step."""
 
     def __init__(self, variant: str = "none"):
-        self.variant = variant  # "none"; "skip": no update from one pair; "verify": one pair's update kept
-        # only when the scan fits the open submap's points no worse at the updated pose
-        self.n_reverted = 0
+        self.variant = variant  # "none", "handed", "verify" or "skip" (the module docstring)
+        self.n_reverted = 0  # pairs the variant refused or whose update it dropped
         self.cur_points: np.ndarray | None = None
         self.cur_sub = None
         self.laser2base = np.zeros(3)
         self.step = -1
         self.submap = 0
         self.kinds: dict[float, np.ndarray] = {}
+        self.sides: dict[float, np.ndarray] = {}  # per scan: each corner's side (corner_sides), sensor frame
+        self.cur_sides: np.ndarray | None = None  # the current frame's, base frame
+        self.cur_slam = None
+        self.new_sides: np.ndarray | None = None  # the sides of the corners the step will augment
+        self.landmark_side: dict[tuple[int, int], float] = {}  # (submap, id): its side, submap frame
         self.frames: list[dict] = []
         self.updates: dict[int, dict] = {}
         self.sightings: dict[tuple[int, int], list[tuple[int, np.ndarray, np.ndarray]]] = {}
@@ -80,10 +88,12 @@ class Observer:
         extract0, scan_matched0 = fe.extract, fe._scan_matched
         fuse0, fallback0 = OdometryFusion.fuse, ScanMatcher._fallback
         update0, augment0, hstep0 = Ekf.update, Ekf.augment, HierarchicalSlam.step
+        make0 = slam_module.make_associator
 
         def extract(scan, *a, **k):
             segments, corners = extract0(scan, *a, **k)
             obs.kinds[scan.stamp] = corners.kind.copy()
+            obs.sides[scan.stamp] = corner_sides(segments, corners)
             return segments, corners
 
         def scan_matched(frame, scan, matcher, laser2base):
@@ -147,22 +157,56 @@ class Observer:
 
         def augment(self, z, C):
             new = augment0(self, z, C)
-            for i, zi in zip(np.asarray(new).tolist(), np.asarray(z), strict=True):
+            sides = obs.new_sides if obs.new_sides is not None and len(obs.new_sides) == len(new) else None
+            for j, (i, zi) in enumerate(zip(np.asarray(new).tolist(), np.asarray(z), strict=True)):
                 obs.sightings[(obs.submap, i)] = [(obs.step, self.mu[:3].copy(), zi.copy())]
+                if sides is not None:
+                    obs.landmark_side[(obs.submap, i)] = float(sides[j] + self.mu[2])
             return new
 
         def hstep(self, frame):
             obs.step, obs.submap = self.slam.n_steps, self._open.index
-            obs.cur_points, obs.cur_sub, obs.laser2base = (
-                frame.points,
-                self._open,
-                np.asarray(self.laser2base),
-            )
+            obs.cur_points, obs.cur_sub = frame.points, self._open
+            obs.laser2base = np.asarray(self.laser2base)
+            side = obs.sides.pop(frame.stamp, None)
+            obs.cur_sides = None if side is None else side + self.laser2base[2]
+            obs.cur_slam = self.slam
             return hstep0(self, frame)
 
-        fe.extract, fe._scan_matched = extract, scan_matched
+        def make(cfg):
+            assoc = make0(cfg)
+
+            def associate(z, C, pred):
+                r = assoc(z, C, pred)
+                return obs.handed(r) if obs.variant == "handed" else obs.keep_sides(r)
+
+            return associate
+
+        fe.extract, fe._scan_matched, slam_module.make_associator = extract, scan_matched, make
         OdometryFusion.fuse, ScanMatcher._fallback = fuse, fallback
         Ekf.update, Ekf.augment, HierarchicalSlam.step = update, augment, hstep
+
+    def keep_sides(self, r):
+        """Note the sides of the corners the step will augment (those ``r`` left unmatched)."""
+        self.new_sides = None if self.cur_sides is None else self.cur_sides[r.pairs < 0]
+        return r
+
+    def handed(self, r):
+        """``r`` without the pairs whose corner and landmark lie on opposite sides: the corner's side
+        in the submap (robot heading + its side in the base frame) more than 90° from the side the
+        landmark was created with (a mirror image: the other jamb of a door, the same angle opening the
+        other way). Those corners become new landmarks."""
+        if self.cur_sides is not None:
+            heading = float(self.cur_slam.ekf.pose[2])
+            pairs = r.pairs.copy()
+            for m, i in enumerate(pairs.tolist()):
+                side = self.landmark_side.get((self.submap, i))
+                if i >= 0 and side is not None:
+                    if abs(wrap_angle(self.cur_sides[m] + heading - side)) > 0.5 * np.pi:
+                        pairs[m] = -1
+                        self.n_reverted += 1
+            r = dataclasses.replace(r, pairs=pairs, d2=np.where(pairs >= 0, r.d2, np.nan))
+        return self.keep_sides(r)
 
     def scans_agree(self, before: np.ndarray, after: np.ndarray) -> bool:
         """The scan's points fit the open submap's earlier points (its frame) no worse at pose
@@ -222,6 +266,22 @@ def agreement(obs: Observer, poses: np.ndarray, laser2base: np.ndarray, k: int) 
     later = np.vstack([placed(i) for i in range(k, min(len(poses), k + AFTER))])
     d, _ = cKDTree(past).query(later, distance_upper_bound=CAP)
     return float(np.minimum(d, CAP).mean())
+
+
+def corner_sides(segments, corners) -> np.ndarray:
+    """(m,) each corner's side, sensor frame (rad): the direction from the corner into the wall(s) that
+    make it — towards its segment's middle (end point), the bisector of its two segments' directions
+    (intersection). φ, the angle between the lines, is the same for a corner and its mirror image; the
+    side is not."""
+    out = np.zeros(len(corners))
+    for m in range(len(corners)):
+        v = np.zeros(2)
+        for j in corners.segs[m]:
+            if j >= 0:
+                d = 0.5 * (segments.p1[j] + segments.p2[j]) - corners.z[m, :2]
+                v += d / max(np.hypot(*d), 1e-9)
+        out[m] = np.arctan2(v[1], v[0])
+    return out
 
 
 def nearest(zs: np.ndarray, z: np.ndarray) -> int:
@@ -328,7 +388,7 @@ def main() -> None:
     ap.add_argument("--set", dest="sets", action="append", default=[])
     ap.add_argument("--steps", default="")
     ap.add_argument("--json", type=Path)
-    ap.add_argument("--variant", choices=("none", "skip", "verify"), default="none")
+    ap.add_argument("--variant", choices=("none", "handed", "verify", "skip"), default="none")
     args = ap.parse_args()
     detail = [int(s) for s in args.steps.split(",") if s]
     obs, files = run(args.log, args.config, args.sets, args.variant)
