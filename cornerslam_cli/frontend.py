@@ -28,7 +28,8 @@ from .filter.models import increment_noise
 from .geometry import matrix_from_pose, transform_points
 from .lasers import mount_source
 from .logs import ReadStats, open_log
-from .logs.sync import SyncStats, reanchor_odometry, select_keyframes, synchronise
+from .logs.deskew import deskew
+from .logs.sync import Synced, SyncStats, reanchor_odometry, select_keyframes, synchronise
 from .motion import ScanMatcher
 from .motion.icp import load_kernels as load_motion_kernels
 from .ranges import short_text
@@ -176,6 +177,8 @@ def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None 
     msgs = reanchor_odometry(msgs, cfg.input.odom_jump, src.stats, src.reader.stats.warn)
     synced = synchronise(msgs, src.stats, src.reader.stats.warn)  # its warning lands in summary.json too
     pairs = select_keyframes(synced, cfg.keyframes, src.stats)
+    if cfg.input.deskew:
+        pairs = (deskewed(pair, cfg.input.beam_time, src.laser2base) for pair in pairs)
     if src.matcher is not None and cfg.scan_match.warmup > 0:
         head = list(itertools.islice(pairs, cfg.scan_match.warmup))
         src.matcher.warm_up([(transform_points(p.scan.points(), src.laser2base), p.odom) for p in head])
@@ -187,6 +190,13 @@ def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None 
         yield frame
         if progress is not None:
             progress(src.stats.scans_in, src.total_scans)
+
+
+def deskewed(pair: Synced, beam_time: float, laser2base: tuple[float, float, float]) -> Synced:
+    """The pair with its scan corrected for the robot's motion during the sweep (logs/deskew.py): the
+    beams' times from the message's own time_increment, else ``beam_time`` (input.beam_time)."""
+    dt = pair.scan.time_increment or beam_time
+    return replace(pair, scan=deskew(pair.scan, pair.twist, dt, laser2base))
 
 
 def check_processed(src: Input, n_frames: int, n_points: int) -> None:

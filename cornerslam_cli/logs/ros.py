@@ -417,10 +417,8 @@ class RosLogReader:
         for topic, log_time, data in self.source.raw_messages({scan_t, odom_t}):
             try:
                 if topic == scan_t:
-                    (sec, nsec), frame, a_min, a_max, a_inc, r_min, r_max, ranges = scan_dec.laserscan(data)
-                    scan = make_scan(
-                        st, where, sec + nsec * 1e-9, a_min, a_max, a_inc, r_min, r_max, ranges, frame
-                    )
+                    (sec, nsec), frame, *geometry, ranges, t_inc = scan_dec.laserscan(data)
+                    scan = make_scan(st, where, sec + nsec * 1e-9, *geometry, ranges, frame, t_inc)
                     if scan is not None:
                         yield scan
                     continue

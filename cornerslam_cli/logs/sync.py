@@ -23,11 +23,11 @@ from __future__ import annotations
 import logging
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..geometry import compose, interpolate, inverse, wrap_angle
+from ..geometry import compose, interpolate, inverse, relative, wrap_angle
 from ..types import OdomSample, Scan
 from .params import KeyframeConfig, OdomJumpConfig
 
@@ -41,11 +41,14 @@ MAX_ODOM = 10_000  # odometry samples kept ahead of the scans at most
 @dataclass(frozen=True)
 class Synced:
     """A scan and the odometry pose at its stamp; ``odom_jump``: the odometry jumped (and was
-    re-anchored, :func:`reanchor_odometry`) since the previous pair was yielded."""
+    re-anchored, :func:`reanchor_odometry`) since the previous pair was yielded; ``twist``: the
+    robot's velocity (vx, vy, ω; base frame, m/s and rad/s) between the two odometry samples that
+    bracket the stamp (zero when one sample is all there is), what deskewing needs (logs/deskew.py)."""
 
     scan: Scan
     odom: np.ndarray
     odom_jump: bool = False
+    twist: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 @dataclass
@@ -84,11 +87,18 @@ def synchronise(
     last_odom_stamp = -np.inf
     first_odom_stamp = np.inf
     waited_out = 0  # scans that waited too long since the last odometry sample
-    jumped = False  # an odometry sample since the last pair yielded was re-anchored across a jump
+    # stamps of the odometry samples re-anchored across a jump since the last pair yielded: a pair carries
+    # those up to the first sample at or after its stamp (the sample its interpolation ends at)
+    jumps: deque[float] = deque()
 
-    def emit_ready() -> Iterator[Synced]:
-        nonlocal jumped
-        while pending and odom and odom[-1].stamp >= pending[0].stamp:
+    def emit_ready(last: bool = False) -> Iterator[Synced]:
+        # a scan waits for a sample after its stamp (the velocity at it needs one; ``last``: the log has
+        # ended, a sample at its stamp is all there will be)
+        while (
+            pending
+            and odom
+            and (odom[-1].stamp > pending[0].stamp or (last and odom[-1].stamp == pending[0].stamp))
+        ):
             scan = pending.popleft()
             t = scan.stamp
             if t < odom[0].stamp:  # before all odometry, or before the samples still kept
@@ -107,8 +117,13 @@ def synchronise(
                 continue
             st.scans_out += 1
             bracket = np.array([[a.x, a.y, a.theta], [b.x, b.y, b.theta]])
-            yield Synced(scan, interpolate(np.array([a.stamp, b.stamp]), bracket, t), jumped)
-            jumped = False
+            dt = b.stamp - a.stamp
+            twist = relative(bracket[0], bracket[1]) / dt if dt > 0 else np.zeros(3)
+            until = a.stamp if a.stamp == t else b.stamp
+            jumped = bool(jumps) and jumps[0] <= until
+            while jumps and jumps[0] <= until:
+                jumps.popleft()
+            yield Synced(scan, interpolate(np.array([a.stamp, b.stamp]), bracket, t), jumped, twist)
 
     for msg in messages:
         if isinstance(msg, Scan):
@@ -128,7 +143,8 @@ def synchronise(
                 pending.popleft()  # no odometry came for it: dropped now, counted when it is known why
                 waited_out += 1
         elif isinstance(msg, OdomSample):
-            jumped |= msg.jumped
+            if msg.jumped:  # (one whose stamp went backwards: the next pair's, as any before it)
+                jumps.append(max(msg.stamp, last_odom_stamp))
             if msg.stamp <= last_odom_stamp:
                 st.odom_time_backwards += 1
                 continue
@@ -143,6 +159,7 @@ def synchronise(
             if len(odom) > MAX_ODOM:
                 odom.popleft()
         yield from emit_ready()
+    yield from emit_ready(last=True)
     st.after_last_odom += len(pending) + waited_out
     _warn_skipped(st, warn)
 
