@@ -167,3 +167,5 @@ def test_a_skewed_simulated_log_is_straightened(tmp_path):
     still = run_cli(tmp_path / "still.mcap", tmp_path / "still")
     assert on["accuracy"]["scan_odom_ate"]["rmse"] < 1.5 * still["accuracy"]["scan_odom_ate"]["rmse"]
     assert off["accuracy"]["scan_odom_ate"]["rmse"] > 2.5 * on["accuracy"]["scan_odom_ate"]["rmse"]
+    assert [s["input"]["beam_times"] for s in (on, off, still)] == ["log", "off", "none"]
+    assert on["input"]["beam_time"] == pytest.approx(0.075 / 360)
