@@ -173,15 +173,20 @@ def odometry_noise(cfg: Config) -> Callable[[np.ndarray], np.ndarray]:
     )
 
 
-def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None = None) -> Iterator[Frame]:
-    """Synchronised keyframes of the log, features extracted, motion scan-matched (streaming)."""
+def keyframe_pairs(src: Input, cfg: Config) -> Iterator[Synced]:
+    """The log's keyframes (streaming): scans prepared (logs/sync.py's synchroniser, keyframe selection)
+    with the odometry at their stamps, deskewed."""
     msgs = scans_prepared(src.reader, cfg)
     if src.span.given:
         msgs = select(msgs, src.span, src.span_used, src.path.name)
     msgs = reanchor_odometry(msgs, cfg.input.odom_jump, src.stats, src.reader.stats.warn)
     synced = synchronise(msgs, src.stats, src.reader.stats.warn)  # its warning lands in summary.json too
-    pairs = select_keyframes(synced, cfg.keyframes, src.stats)
-    pairs = _deskewed(pairs, src, cfg)
+    return _deskewed(select_keyframes(synced, cfg.keyframes, src.stats), src, cfg)
+
+
+def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None = None) -> Iterator[Frame]:
+    """Synchronised keyframes of the log, features extracted, motion scan-matched (streaming)."""
+    pairs = keyframe_pairs(src, cfg)
     if src.matcher is not None and cfg.scan_match.warmup > 0:
         head = list(itertools.islice(pairs, cfg.scan_match.warmup))
         src.matcher.warm_up([(transform_points(p.scan.points(), src.laser2base), p.odom) for p in head])

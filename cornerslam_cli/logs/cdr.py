@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import struct
 from functools import lru_cache
+from typing import NamedTuple
 
 import numpy as np
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
@@ -26,8 +27,21 @@ from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_
 from .base import Channel, normalize_msgtype, ros2_typename, strip_frame
 
 Stamp = tuple[int, int]
-# (stamp, frame_id, angle_min, angle_max, angle_increment, range_min, range_max, ranges, time_increment)
-LaserScanTuple = tuple[Stamp, str, float, float, float, float, float, np.ndarray, float]
+
+
+class LaserScanTuple(NamedTuple):
+    """The fields of a sensor_msgs/LaserScan that a run uses (ranges as float32, as in the message)."""
+
+    stamp: Stamp
+    frame_id: str
+    angle_min: float
+    angle_max: float
+    angle_increment: float
+    range_min: float
+    range_max: float
+    ranges: np.ndarray
+    time_increment: float  # s between beams; 0 = not given
+
 
 _HDR_LE = struct.Struct("<iII")
 _HDR_BE = struct.Struct(">iII")
@@ -77,7 +91,7 @@ def decode_laserscan_cdr(data: bytes | memoryview) -> LaserScanTuple:
         raise DecodeError(f"LaserScan ranges ({n}) overrun the message ({size} bytes)")
     _check_intensities(data, off + 4 * n, (_U32_LE if le else _U32_BE))
     ranges = np.frombuffer(data, dtype=_F32_LE if le else _F32_BE, count=n, offset=off)
-    return (sec, nsec), frame, a_min, a_max, a_inc, r_min, r_max, ranges, t_inc
+    return LaserScanTuple((sec, nsec), frame, a_min, a_max, a_inc, r_min, r_max, ranges, t_inc)
 
 
 def decode_laserscan_ros1(data: bytes | memoryview) -> LaserScanTuple:
@@ -96,7 +110,7 @@ def decode_laserscan_ros1(data: bytes | memoryview) -> LaserScanTuple:
         raise DecodeError(f"LaserScan ranges ({n}) overrun the message ({size} bytes)")
     _check_intensities(data, off + 4 * n, _U32_LE)
     ranges = np.frombuffer(data, dtype=_F32_LE, count=n, offset=off)
-    return (sec, nsec), frame, a_min, a_max, a_inc, r_min, r_max, ranges, t_inc
+    return LaserScanTuple((sec, nsec), frame, a_min, a_max, a_inc, r_min, r_max, ranges, t_inc)
 
 
 def decode_odometry_cdr(

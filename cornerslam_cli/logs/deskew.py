@@ -39,6 +39,15 @@ def motion(twist: np.ndarray, t: np.ndarray) -> np.ndarray:
     return np.column_stack((k * (c * vx - s * vy), k * (s * vx + c * vy), th))
 
 
+def velocity(rel: np.ndarray, dt: float) -> np.ndarray:
+    """(3,) the constant body-frame velocity (vx, vy, ω) that moves the robot by ``rel`` (x, y, θ: the
+    second pose in the first's frame) in ``dt`` seconds: the inverse of :func:`motion` (SE(2)'s log)."""
+    x, y, th = (float(v) for v in rel)
+    k = dt * float(np.sinc(th / (2.0 * np.pi)))  # t(dt) = R(θ/2) · v · k
+    c, s = math.cos(0.5 * th), math.sin(0.5 * th)
+    return np.array([(c * x + s * y) / k, (-s * x + c * y) / k, th / dt])
+
+
 def beam_times(scan: Scan, time_increment: float) -> np.ndarray:
     """(k,) each valid beam's time after the scan's stamp (s): its index in the message × the
     time between beams (negative for a laser whose beams run against their index)."""

@@ -101,8 +101,9 @@ class JsonDecoder:
             _number(msg, k) for k in ("angle_min", "angle_max", "angle_increment", "range_min", "range_max")
         )
         stamp, frame = json_stamp(_field(msg, "header")), _frame(msg, "header", "frame_id")
-        t_inc = _number(msg, "time_increment") if "time_increment" in msg else 0.0
-        return stamp, frame, a_min, a_max, a_inc, r_min, r_max, r, t_inc
+        t_inc = msg.get("time_increment")  # optional: absent or not a number = not given
+        t_inc = float(t_inc) if isinstance(t_inc, (int, float)) and not isinstance(t_inc, bool) else 0.0
+        return LaserScanTuple(stamp, frame, a_min, a_max, a_inc, r_min, r_max, r, t_inc)
 
     def odometry(self, data: bytes | memoryview) -> tuple[Stamp, float, float, Quaternion]:
         """(stamp, x, y, quaternion xyzw) of a nav_msgs/Odometry."""

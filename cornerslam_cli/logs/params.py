@@ -76,9 +76,10 @@ class InputConfig:
     # correct each beam for the robot's motion while the laser swept (logs/deskew.py), when the beams'
     # times are known: the scan message's time_increment, else ``beam_time``
     deskew: bool = True
-    # seconds between two beams when the log does not say (0 = not known: no correction); laser presets
-    # set it from the sensor's data sheet
-    beam_time: float = num(0.0, ge=-0.01, le=0.01)
+    # seconds between two beams when the log does not say (0 = not known: no correction), e.g. from
+    # the laser's data sheet (a URG-04LX: 0.1 s a turn of 1,024 steps); negative: beams numbered
+    # against time
+    beam_time: float = num(0.0, ge=-0.001, le=0.001)
     laser_preset: str = "auto"  # auto (by the scan's geometry) | none | a name in lasers.PRESETS
     laser: LaserMountConfig = field(default_factory=LaserMountConfig)
     odom_jump: OdomJumpConfig = field(default_factory=OdomJumpConfig)

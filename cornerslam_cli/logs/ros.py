@@ -417,8 +417,12 @@ class RosLogReader:
         for topic, log_time, data in self.source.raw_messages({scan_t, odom_t}):
             try:
                 if topic == scan_t:
-                    (sec, nsec), frame, *geometry, ranges, t_inc = scan_dec.laserscan(data)
-                    scan = make_scan(st, where, sec + nsec * 1e-9, *geometry, ranges, frame, t_inc)
+                    m = scan_dec.laserscan(data)
+                    sec, nsec = m.stamp
+                    scan = make_scan(
+                        st, where, sec + nsec * 1e-9, m.angle_min, m.angle_max, m.angle_increment,
+                        m.range_min, m.range_max, m.ranges, m.frame_id, m.time_increment,
+                    )  # fmt: skip
                     if scan is not None:
                         yield scan
                     continue
