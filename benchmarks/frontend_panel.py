@@ -36,14 +36,12 @@ SPANS = (1, 10, 50)
 
 
 def keyframes(log: Path, sets: list[str]):
-    """The run's config, opened input and synchronised keyframe pairs of ``log`` (as frontend.frames)."""
-    from cornerslam_cli.frontend import open_input, scans_prepared
-    from cornerslam_cli.logs.sync import reanchor_odometry, select_keyframes, synchronise
+    """The run's config, opened input and synchronised keyframe pairs of ``log`` (frontend.frames')."""
+    from cornerslam_cli.frontend import keyframe_pairs, open_input
 
     cfg = resolve_config(log, None, sets)
     src = open_input(log, cfg)
-    msgs = reanchor_odometry(scans_prepared(src.reader, cfg), cfg.input.odom_jump, src.stats)
-    return cfg, src, list(select_keyframes(synchronise(msgs, src.stats), cfg.keyframes, src.stats))
+    return cfg, src, list(keyframe_pairs(src, cfg))
 
 
 def chain(log: Path, sets: list[str]) -> dict:

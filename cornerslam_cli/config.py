@@ -33,7 +33,7 @@ from .errors import ConfigError, did_you_mean
 from .features.params import CornersConfig, LinesConfig, SensorConfig
 from .filter.params import EkfConfig
 from .graph.params import GraphConfig, LoopConfig, SubmapConfig
-from .logs.params import KeyframeConfig, OdomJumpConfig
+from .logs.params import InputConfig, KeyframeConfig
 from .motion.params import ScanMatchConfig
 from .ranges import Range, RangeError, check_ranges, field_range, num, short_repr, short_text
 from .textfile import read_text
@@ -44,42 +44,6 @@ TWO_PI = 2.0 * math.pi
 MAX_CONFIG_BYTES = 1 << 20  # configs/default.yaml, every key, is 2.5 KB
 MAX_YAML_NODES = 10_000  # nodes of a config document with every alias expanded (default.yaml: ~250)
 CONFIG_FILE = "a YAML config file, e.g. configs/default.yaml"
-
-
-@dataclass(frozen=True)
-class LaserMountConfig:
-    """Pose of the laser in the robot base frame (used when the log has no tf for it)."""
-
-    x: float = num(0.0, ge=-100.0, le=100.0)  # metres
-    y: float = num(0.0, ge=-100.0, le=100.0)  # metres
-    yaw: float = num(0.0, ge=-TWO_PI, le=TWO_PI)  # radians
-    from_tf: bool = True  # prefer a static transform base→laser found in the log
-
-    def __post_init__(self) -> None:
-        check_ranges(self)
-
-
-@dataclass(frozen=True)
-class InputConfig:
-    """Which topics to read and how to treat beams."""
-
-    scan_topic: str = ""  # "" = choose by message type
-    odom_topic: str = ""  # "" = nav_msgs/Odometry topic, else tf odom→base
-    odom_frame: str = "odom"
-    base_frame: str = "base_link"
-    # metres; 0 = use the scan's range_max; beams at or beyond are "no return"
-    max_range: float = num(0.0, ge=0.0, le=10_000.0)
-    # beams at the start of each scan to ignore (e.g. robot body)
-    skip_beams_start: int = num(0, ge=0, le=100_000)
-    skip_beams_end: int = num(0, ge=0, le=100_000)
-    # seconds added to every scan stamp before syncing with odometry (large enough to bridge two clocks)
-    scan_time_offset: float = num(0.0, ge=-1e10, le=1e10)
-    laser_preset: str = "auto"  # auto (by the scan's geometry) | none | a name in lasers.PRESETS
-    laser: LaserMountConfig = field(default_factory=LaserMountConfig)
-    odom_jump: OdomJumpConfig = field(default_factory=OdomJumpConfig)
-
-    def __post_init__(self) -> None:
-        check_ranges(self)
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,8 @@ from .filter.models import increment_noise
 from .geometry import matrix_from_pose, transform_points
 from .lasers import mount_source
 from .logs import ReadStats, open_log
-from .logs.sync import SyncStats, reanchor_odometry, select_keyframes, synchronise
+from .logs.deskew import deskew
+from .logs.sync import Synced, SyncStats, reanchor_odometry, select_keyframes, synchronise
 from .motion import ScanMatcher
 from .motion.icp import load_kernels as load_motion_kernels
 from .ranges import short_text
@@ -113,6 +114,10 @@ class Input:
     odom_on_tf: bool = False  # the log's tf carries odom→base (odometry from tf, or seen beside it)
     span: Span = dataclasses.field(default_factory=Span)  # the part of the log to process (span.py)
     span_used: SpanUsed = dataclasses.field(default_factory=SpanUsed)  # the scans it kept
+    # where the beams' times of the deskewed keyframes came from: the log's time_increment, the config's
+    # input.beam_time, none known (scans as they are) or off (input.deskew false); and the first one's value
+    beam_times: str = "none"
+    beam_time: float = 0.0
 
 
 def open_input(log_path: str | Path, cfg: Config, span: Span | None = None) -> Input:
@@ -168,14 +173,20 @@ def odometry_noise(cfg: Config) -> Callable[[np.ndarray], np.ndarray]:
     )
 
 
-def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None = None) -> Iterator[Frame]:
-    """Synchronised keyframes of the log, features extracted, motion scan-matched (streaming)."""
+def keyframe_pairs(src: Input, cfg: Config) -> Iterator[Synced]:
+    """The log's keyframes (streaming): scans prepared (logs/sync.py's synchroniser, keyframe selection)
+    with the odometry at their stamps, deskewed."""
     msgs = scans_prepared(src.reader, cfg)
     if src.span.given:
         msgs = select(msgs, src.span, src.span_used, src.path.name)
     msgs = reanchor_odometry(msgs, cfg.input.odom_jump, src.stats, src.reader.stats.warn)
     synced = synchronise(msgs, src.stats, src.reader.stats.warn)  # its warning lands in summary.json too
-    pairs = select_keyframes(synced, cfg.keyframes, src.stats)
+    return _deskewed(select_keyframes(synced, cfg.keyframes, src.stats), src, cfg)
+
+
+def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None = None) -> Iterator[Frame]:
+    """Synchronised keyframes of the log, features extracted, motion scan-matched (streaming)."""
+    pairs = keyframe_pairs(src, cfg)
     if src.matcher is not None and cfg.scan_match.warmup > 0:
         head = list(itertools.islice(pairs, cfg.scan_match.warmup))
         src.matcher.warm_up([(transform_points(p.scan.points(), src.laser2base), p.odom) for p in head])
@@ -187,6 +198,23 @@ def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None 
         yield frame
         if progress is not None:
             progress(src.stats.scans_in, src.total_scans)
+
+
+def _deskewed(pairs: Iterator[Synced], src: Input, cfg: Config) -> Iterator[Synced]:
+    """The pairs with their scans corrected for the robot's motion during the sweep (logs/deskew.py):
+    the beams' times from each message's own time_increment, else ``input.beam_time``; where they came
+    from (the first keyframe's) noted on ``src`` for summary.json."""
+    if not cfg.input.deskew:
+        src.beam_times = "off"
+        yield from pairs
+        return
+    first = True
+    for pair in pairs:
+        dt = pair.scan.time_increment or cfg.input.beam_time
+        if first:
+            src.beam_times = "log" if pair.scan.time_increment else "config" if dt else "none"
+            src.beam_time, first = dt, False
+        yield replace(pair, scan=deskew(pair.scan, pair.twist, dt, src.laser2base)) if dt else pair
 
 
 def check_processed(src: Input, n_frames: int, n_points: int) -> None:

@@ -19,9 +19,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from .config import Config, LaserMountConfig, config_from, read_config_file
+from .config import Config, config_from, read_config_file
 from .errors import ConfigError, did_you_mean
 from .logs import open_log
+from .logs.params import LaserMountConfig
 from .ranges import short_text
 from .types import Scan
 

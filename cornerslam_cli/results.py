@@ -127,6 +127,11 @@ class RunInput(JsonResult):
     laser_to_base_source: str  # tf, config, preset or default (lasers.mount_source)
     odom_on_tf: bool | None = optional()  # the log's tf carries odom → base (absent before issue 17)
     span: ScanSpan | None = optional()  # absent when the whole log was processed
+    # appended: where the beams' times of the deskewing came from — log (the messages' time_increment),
+    # config (input.beam_time), none (not known: scans as recorded) or off (input.deskew false) — and the
+    # first keyframe's time between beams, s
+    beam_times: str | None = optional()
+    beam_time: float | None = optional()
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -130,6 +130,7 @@ def simulate_log(
     waypoints: np.ndarray | None = None,
     fov: float = SimParams.fov,
     sigma_a: float = SimParams.sigma_a,
+    sweep: float = 0.0,
 ) -> dict:
     """Write the synthetic log ``out`` (.mcap), ``out.gt.tum`` and ``out.corners.csv``.
 
@@ -138,6 +139,9 @@ def simulate_log(
     the office and its corridor loop (``OFFICE_LOOP``). The waypoints must be joined by free space:
     the robot drives straight between them and does not avoid walls. ``fov`` (rad) and ``sigma_a`` (m,
     the range noise's constant part) likewise: a laser like another log's (benchmarks/reference_check.py).
+    ``sweep`` (s, library only): the time from a scan's first beam to its last — each beam is cast from
+    the robot's true pose at its own time, the stamp is the first beam's and the messages carry
+    ``time_increment`` (a laser whose scans are skewed by the motion: logs/deskew.py); 0 = all at once.
     """
     if out.suffix != ".mcap":
         raise ConfigError(f"simulate writes MCAP: '{out}' must end in .mcap")
@@ -147,6 +151,8 @@ def simulate_log(
         raise ConfigError(f"simulate needs at least 2 waypoints, got {len(waypoints)}")
     p = SimParams(rate=rate, beams=beams, speed=speed, fov=fov, sigma_a=sigma_a)
     check_options(seed, laps, p, waypoints)
+    if not 0.0 <= sweep <= 1.0 / rate:
+        raise ConfigError(f"sweep must be in [0, 1/rate = {1.0 / rate:g}] s, got {sweep}")
     paths = (out, out.with_suffix(".gt.tum"), out.with_suffix(".corners.csv"))
     for path in paths:
         refuse_special_file(path, path)
@@ -169,15 +175,22 @@ def simulate_log(
     angle_min = -p.fov / 2
     inc = p.fov / (p.beams - 1)
     angles = angle_min + inc * np.arange(p.beams)
+    beam_time = sweep / (p.beams - 1)
     scans = []
     for ts, (x, y, th) in zip(t_scan, gt, strict=True):
-        laser = (x + p.laser_x * np.cos(th), y + p.laser_x * np.sin(th), th)
-        r = raycast(world, laser, angles, p.max_range)
+        if sweep > 0.0:  # the base's true pose at each beam's time
+            tb = ts + beam_time * np.arange(p.beams)
+            x, y = np.interp(tb, t, truth[:, 0]), np.interp(tb, t, truth[:, 1])
+            th = wrap_angle(np.interp(tb, t, np.unwrap(truth[:, 2])))
+        laser = np.column_stack((x + p.laser_x * np.cos(th), y + p.laser_x * np.sin(th), th))
+        r = raycast(world, laser if sweep > 0.0 else laser[0], angles, p.max_range)
         r = r + rng.normal(0.0, 1.0, len(r)) * (p.sigma_a + p.sigma_b * np.where(np.isfinite(r), r, 0))
         r[rng.random(len(r)) < p.dropout] = np.nan
         r[~(r < p.max_range)] = np.inf
         r[np.isfinite(r) & (r < 0.05)] = 0.05
-        scans.append(RawScan(float(ts), angle_min, inc, r.astype(np.float32), 0.05, p.max_range, "laser"))
+        scans.append(
+            RawScan(float(ts), angle_min, inc, r.astype(np.float32), 0.05, p.max_range, "laser", beam_time)
+        )
     odoms = [OdomSample(float(ti), *o) for ti, o in zip(t, odom, strict=True)]
     write_mcap(out, scans, odoms, tf_static=(p.laser_x, 0.0, 0.0))
     gt_path = out.with_suffix(".gt.tum")

@@ -108,17 +108,20 @@ def room(
 # --- ray casting ------------------------------------------------------------------------------------------
 
 
-def raycast(world: World, pose: Sequence[float], angles: np.ndarray, max_range: float = np.inf) -> np.ndarray:
+def raycast(
+    world: World, pose: Sequence[float] | np.ndarray, angles: np.ndarray, max_range: float = np.inf
+) -> np.ndarray:
     """Range of the first wall hit along each beam, (k,) metres; inf where nothing within ``max_range``.
 
-    pose : (x, y, θ) of the sensor in the world frame;  angles : (k,) beam bearings in the sensor frame.
+    pose : (x, y, θ) of the sensor in the world frame, or (k, 3) one per beam (a laser that moves while
+    it sweeps);  angles : (k,) beam bearings in the sensor frame.
     Vectorised over beams × walls: solve o + t·d = a + s·(b − a) for t > 0, s in [0, 1].
     """
     angles = np.asarray(angles, dtype=float)
     if len(world.walls) == 0 or angles.size == 0:
         return np.full(angles.shape, np.inf)
-    ox, oy, oth = (float(v) for v in pose)
-    dx, dy = np.cos(angles + oth)[:, None], np.sin(angles + oth)[:, None]
+    ox, oy, oth = (v[:, None] if np.ndim(v) else float(v) for v in np.asarray(pose, dtype=float).T)
+    dx, dy = np.cos(angles[:, None] + oth), np.sin(angles[:, None] + oth)
     a = world.walls[:, 0]
     ex, ey = (world.walls[:, 1] - a).T
     ax, ay = a[:, 0] - ox, a[:, 1] - oy

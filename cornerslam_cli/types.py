@@ -19,6 +19,8 @@ class Scan:
     angles : (k,) float64, radians, sensor frame, bearing of each valid beam
     beam_index : (k,) int64, index of each valid beam in the original message (gaps = dropped beams)
     n_beams : beams in the original message; n_invalid = n_beams - k were dropped.
+    time_increment : seconds between two beams of the message (its own field; 0 = not given), beam i
+    at ``stamp + i · time_increment`` (logs/deskew.py)
     """
 
     stamp: float
@@ -30,6 +32,7 @@ class Scan:
     range_max: float
     angle_increment: float
     frame_id: str = ""
+    time_increment: float = 0.0
 
     @property
     def n_invalid(self) -> int:

@@ -116,7 +116,8 @@ def _ref(raw, enc):
 def test_decoder_equals_rosbags(enc, frame):
     rng = np.random.default_rng(len(frame))
     ros = RosSerializer("ros1" if enc == "ros1" else "cdr")
-    s = RawScan(1234.5678, -2.1, 0.0043, rng.uniform(0, 30, 1081).astype(np.float32), 0.02, 30.0, frame)
+    ranges = rng.uniform(0, 30, 1081).astype(np.float32)
+    s = RawScan(1234.5678, -2.1, 0.0043, ranges, 0.02, 30.0, frame, time_increment=1.3e-4)
     raw = ros.laserscan(s)
     if enc == "cdr-be":
         raw = bytes(
@@ -124,16 +125,18 @@ def test_decoder_equals_rosbags(enc, frame):
         )
     ref = _ref(raw, "ros1" if enc == "ros1" else "cdr")
     dec = decode_laserscan_ros1 if enc == "ros1" else decode_laserscan_cdr
-    (sec, nsec), fr, a_min, a_max, a_inc, r_min, r_max, ranges = dec(raw)
+    (sec, nsec), fr, a_min, a_max, a_inc, r_min, r_max, ranges, t_inc = dec(raw)
     assert (sec, nsec) == (ref.header.stamp.sec, ref.header.stamp.nanosec)
     assert fr == ref.header.frame_id
-    assert (a_min, a_max, a_inc, r_min, r_max) == (
+    assert (a_min, a_max, a_inc, r_min, r_max, t_inc) == (
         ref.angle_min,
         ref.angle_max,
         ref.angle_increment,
         ref.range_min,
         ref.range_max,
+        ref.time_increment,
     )
+    assert t_inc == pytest.approx(1.3e-4)
     np.testing.assert_array_equal(ranges, ref.ranges)
 
 

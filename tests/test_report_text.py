@@ -64,6 +64,10 @@ def test_summary_lines_without_reference():
     ]
     tf = replace(s, input=replace(s.input, laser_to_base=(0.1, 0.0, 0.0), laser_to_base_source="tf"))
     assert summary_lines(tf)[1] == "laser mount: x=0.100 m y=0.000 m yaw=0.000 rad (from the log's tf)"
+    skewed = replace(s, input=replace(s.input, beam_times="log", beam_time=0.1 / 1024))
+    assert summary_lines(skewed)[2] == "deskewed: beams 97.66 µs apart (the log's time_increment)"
+    for no in ("none", "off"):  # nothing said when the scans were used as recorded
+        assert summary_lines(replace(s, input=replace(s.input, beam_times=no))) == summary_lines(s)
 
 
 def test_summary_lines_with_ground_truth_and_relations():

@@ -118,6 +118,8 @@ INPUT_KEYS = [
     "laser_to_base",
     "laser_to_base_source",
     "odom_on_tf",  # appended (issue 17): the log's tf carries odom → base
+    "beam_times",  # appended: where the deskewing's beam times came from
+    "beam_time",
 ]
 COUNT_KEYS = [
     "steps", "landmarks", "matched_total", "beams_total", "beams_invalid", "scans_bad_geometry",

@@ -100,6 +100,16 @@ def test_an_odometry_jump_travels_with_the_next_pair_and_the_next_keyframe():
     assert [(s.scan.stamp, s.odom_jump) for s in kept] == [(0.5, False), (3.5, True)]
 
 
+def test_a_jump_after_a_scan_on_a_sample_flags_the_next_scan():
+    """Scans stamped exactly on the odometry samples: the scan at 2 s waits for the sample at 3 s (for the
+    velocity after it) but the jump between 2 s and 3 s happened after it: the scan at 3 s carries it."""
+    odom = [OdomSample(float(t), 0.1 * t, 0.0, 0.0) for t in range(6)]
+    odom[3:] = [OdomSample(o.stamp, o.x + 50.0, o.y, o.theta) for o in odom[3:]]
+    msgs = [m for t in range(6) for m in (odom[t], scan(float(t)))]
+    synced = list(synchronise(reanchor_odometry(msgs, OdomJumpConfig(), SyncStats())))
+    assert [(s.scan.stamp, s.odom_jump) for s in synced] == [(float(t), t == 3) for t in range(6)]
+
+
 def test_scan_time_offset_shifts_the_stamp_used_for_interpolation(tmp_path):
     import math
 

@@ -39,6 +39,7 @@ from ..errors import LogError, printable
 from ..geometry import normalize_quaternion, yaw_from_quaternion
 from ..ranges import short_text
 from ..types import OdomSample, Scan
+from .deskew import MAX_SWEEP
 
 logger = logging.getLogger("cornerslam.logs")
 
@@ -122,6 +123,7 @@ class ReadStats:
     beams_dropped: int = 0  # of which invalid (NaN, inf, <= 0, < range_min, >= range_max)
     scans_skipped: int = 0  # scans not yielded: bad angle_increment, no beams
     size_mismatch: int = 0  # scans whose ranges count disagreed with angle_min/max/increment
+    bad_time_increment: int = 0  # scans whose time_increment was unusable (taken as not given)
     decode_failed: int = 0  # messages / lines that could not be decoded (skipped)
     first_failure: str = ""  # what the first of them was (the error names it when nothing was usable)
     truncated: bool = False  # the file ends early (a recorder stopped): what came after the cut is lost
@@ -232,10 +234,13 @@ def make_scan(
     range_max: float,
     ranges: np.ndarray,
     frame_id: str = "",
+    time_increment: float = 0.0,
 ) -> Scan | None:
     """Build a :class:`Scan` of the valid beams of one message, updating ``stats``; None = skipped.
 
-    angle_max None means "not given" (CARMEN): no size check.
+    angle_max None means "not given" (CARMEN): no size check. A ``time_increment`` that is not finite
+    or would spread the beams over more than ``deskew.MAX_SWEEP`` seconds is taken as not given (0),
+    counted in ``stats.bad_time_increment`` and warned about once.
     """
     n = len(ranges)
     last_angle = angle_min + max(n - 1, 0) * angle_increment  # inf for absurd increments (1e308)
@@ -275,6 +280,15 @@ def make_scan(
         r = np.asarray(ranges, dtype=np.float64)
         valid = (r > 0.0) & (r >= lo) & (r < hi)  # NaN compares False; inf fails r < hi
     idx = np.flatnonzero(valid)
+    if time_increment and not abs(time_increment) * n <= MAX_SWEEP:  # (NaN fails it too)
+        stats.bad_time_increment += 1
+        if stats.bad_time_increment == 1:
+            stats.warn(
+                "%s: scan at %.3f has time_increment %r s (its %d beams would take longer than %g s): "
+                "the beams' times are taken as unknown, the scan is not corrected for motion",
+                where, stamp, time_increment, n, MAX_SWEEP,
+            )  # fmt: skip
+        time_increment = 0.0
     stats.scans += 1
     stats.beams += n
     stats.beams_dropped += n - len(idx)
@@ -288,6 +302,7 @@ def make_scan(
         range_max=float(hi),
         angle_increment=float(angle_increment),
         frame_id=frame_id,
+        time_increment=float(time_increment),
     )
 
 

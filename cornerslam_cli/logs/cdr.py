@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import struct
 from functools import lru_cache
+from typing import NamedTuple
 
 import numpy as np
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
@@ -26,7 +27,21 @@ from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_
 from .base import Channel, normalize_msgtype, ros2_typename, strip_frame
 
 Stamp = tuple[int, int]
-LaserScanTuple = tuple[Stamp, str, float, float, float, float, float, np.ndarray]
+
+
+class LaserScanTuple(NamedTuple):
+    """The fields of a sensor_msgs/LaserScan that a run uses (ranges as float32, as in the message)."""
+
+    stamp: Stamp
+    frame_id: str
+    angle_min: float
+    angle_max: float
+    angle_increment: float
+    range_min: float
+    range_max: float
+    ranges: np.ndarray
+    time_increment: float  # s between beams; 0 = not given
+
 
 _HDR_LE = struct.Struct("<iII")
 _HDR_BE = struct.Struct(">iII")
@@ -55,7 +70,8 @@ def _check_intensities(data: bytes | memoryview, off: int, u32: struct.Struct) -
 
 
 def decode_laserscan_cdr(data: bytes | memoryview) -> LaserScanTuple:
-    """(stamp, frame_id, angle_min, angle_max, angle_increment, range_min, range_max, ranges float32)."""
+    """(stamp, frame_id, angle_min, angle_max, angle_increment, range_min, range_max, ranges float32,
+    time_increment)."""
     size = len(data)
     if size < 24:
         raise DecodeError(f"LaserScan of {size} bytes is too short")
@@ -69,13 +85,13 @@ def decode_laserscan_cdr(data: bytes | memoryview) -> LaserScanTuple:
         raise DecodeError("LaserScan frame_id overruns the message")
     frame = bytes(data[16 : off - 1]).decode("utf-8", "replace")
     off = 4 + ((off - 4 + 3) & ~3)  # align 4 (relative to the encapsulation header)
-    a_min, a_max, a_inc, _, _, r_min, r_max, n = (_SCAN_LE if le else _SCAN_BE).unpack_from(data, off)
+    a_min, a_max, a_inc, t_inc, _, r_min, r_max, n = (_SCAN_LE if le else _SCAN_BE).unpack_from(data, off)
     off += 32
     if off + 4 * n > size:
         raise DecodeError(f"LaserScan ranges ({n}) overrun the message ({size} bytes)")
     _check_intensities(data, off + 4 * n, (_U32_LE if le else _U32_BE))
     ranges = np.frombuffer(data, dtype=_F32_LE if le else _F32_BE, count=n, offset=off)
-    return (sec, nsec), frame, a_min, a_max, a_inc, r_min, r_max, ranges
+    return LaserScanTuple((sec, nsec), frame, a_min, a_max, a_inc, r_min, r_max, ranges, t_inc)
 
 
 def decode_laserscan_ros1(data: bytes | memoryview) -> LaserScanTuple:
@@ -88,13 +104,13 @@ def decode_laserscan_ros1(data: bytes | memoryview) -> LaserScanTuple:
     if off + 32 > size:
         raise DecodeError("LaserScan frame_id overruns the message")
     frame = bytes(data[16:off]).decode("utf-8", "replace")
-    a_min, a_max, a_inc, _, _, r_min, r_max, n = _SCAN_LE.unpack_from(data, off)
+    a_min, a_max, a_inc, t_inc, _, r_min, r_max, n = _SCAN_LE.unpack_from(data, off)
     off += 32
     if off + 4 * n > size:
         raise DecodeError(f"LaserScan ranges ({n}) overrun the message ({size} bytes)")
     _check_intensities(data, off + 4 * n, _U32_LE)
     ranges = np.frombuffer(data, dtype=_F32_LE, count=n, offset=off)
-    return (sec, nsec), frame, a_min, a_max, a_inc, r_min, r_max, ranges
+    return LaserScanTuple((sec, nsec), frame, a_min, a_max, a_inc, r_min, r_max, ranges, t_inc)
 
 
 def decode_odometry_cdr(

@@ -85,7 +85,8 @@ class JsonDecoder:
         self.channel = channel
 
     def laserscan(self, data: bytes | memoryview) -> LaserScanTuple:
-        """(stamp, frame_id, angle_min, angle_max, angle_increment, range_min, range_max, ranges)."""
+        """(stamp, frame_id, angle_min, angle_max, angle_increment, range_min, range_max, ranges,
+        time_increment: 0 when the message has none)."""
         msg = _object(data)
         ranges = _field(msg, "ranges")
         if not isinstance(ranges, list):
@@ -100,7 +101,9 @@ class JsonDecoder:
             _number(msg, k) for k in ("angle_min", "angle_max", "angle_increment", "range_min", "range_max")
         )
         stamp, frame = json_stamp(_field(msg, "header")), _frame(msg, "header", "frame_id")
-        return stamp, frame, a_min, a_max, a_inc, r_min, r_max, r
+        t_inc = msg.get("time_increment")  # optional: absent or not a number = not given
+        t_inc = float(t_inc) if isinstance(t_inc, (int, float)) and not isinstance(t_inc, bool) else 0.0
+        return LaserScanTuple(stamp, frame, a_min, a_max, a_inc, r_min, r_max, r, t_inc)
 
     def odometry(self, data: bytes | memoryview) -> tuple[Stamp, float, float, Quaternion]:
         """(stamp, x, y, quaternion xyzw) of a nav_msgs/Odometry."""

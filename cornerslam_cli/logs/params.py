@@ -1,10 +1,11 @@
-"""Config sections of the log stage: odometry jumps (``input.odom_jump``) and keyframe selection
-(``keyframes``), used by ``sync.py``; ``config.py`` assembles them into the full config."""
+"""Config sections of the log stage: the input (``input``: topics, beams, the laser mount, deskewing),
+odometry jumps (``input.odom_jump``) and keyframe selection (``keyframes``), used by ``sync.py`` and
+the front end; ``config.py`` assembles them into the full config."""
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from ..ranges import check_ranges, num
 
@@ -39,6 +40,49 @@ class KeyframeConfig:
     linear_update: float = num(0.0, ge=0.0, le=1000.0)  # metres; 0 with angular_update 0 = every scan
     angular_update: float = num(0.0, ge=0.0, le=TWO_PI)  # radians
     max_interval: float = num(0.0, ge=0.0, le=1e6)  # seconds; 0 = no time-based keyframes
+
+    def __post_init__(self) -> None:
+        check_ranges(self)
+
+
+@dataclass(frozen=True)
+class LaserMountConfig:
+    """Pose of the laser in the robot base frame (used when the log has no tf for it)."""
+
+    x: float = num(0.0, ge=-100.0, le=100.0)  # metres
+    y: float = num(0.0, ge=-100.0, le=100.0)  # metres
+    yaw: float = num(0.0, ge=-TWO_PI, le=TWO_PI)  # radians
+    from_tf: bool = True  # prefer a static transform base→laser found in the log
+
+    def __post_init__(self) -> None:
+        check_ranges(self)
+
+
+@dataclass(frozen=True)
+class InputConfig:
+    """Which topics to read and how to treat beams."""
+
+    scan_topic: str = ""  # "" = choose by message type
+    odom_topic: str = ""  # "" = nav_msgs/Odometry topic, else tf odom→base
+    odom_frame: str = "odom"
+    base_frame: str = "base_link"
+    # metres; 0 = use the scan's range_max; beams at or beyond are "no return"
+    max_range: float = num(0.0, ge=0.0, le=10_000.0)
+    # beams at the start of each scan to ignore (e.g. robot body)
+    skip_beams_start: int = num(0, ge=0, le=100_000)
+    skip_beams_end: int = num(0, ge=0, le=100_000)
+    # seconds added to every scan stamp before syncing with odometry (large enough to bridge two clocks)
+    scan_time_offset: float = num(0.0, ge=-1e10, le=1e10)
+    # correct each beam for the robot's motion while the laser swept (logs/deskew.py), when the beams'
+    # times are known: the scan message's time_increment, else ``beam_time``
+    deskew: bool = True
+    # seconds between two beams when the log does not say (0 = not known: no correction), e.g. from
+    # the laser's data sheet (a URG-04LX: 0.1 s a turn of 1,024 steps); negative: beams numbered
+    # against time
+    beam_time: float = num(0.0, ge=-0.001, le=0.001)
+    laser_preset: str = "auto"  # auto (by the scan's geometry) | none | a name in lasers.PRESETS
+    laser: LaserMountConfig = field(default_factory=LaserMountConfig)
+    odom_jump: OdomJumpConfig = field(default_factory=OdomJumpConfig)
 
     def __post_init__(self) -> None:
         check_ranges(self)

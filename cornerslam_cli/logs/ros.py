@@ -417,10 +417,12 @@ class RosLogReader:
         for topic, log_time, data in self.source.raw_messages({scan_t, odom_t}):
             try:
                 if topic == scan_t:
-                    (sec, nsec), frame, a_min, a_max, a_inc, r_min, r_max, ranges = scan_dec.laserscan(data)
+                    m = scan_dec.laserscan(data)
+                    sec, nsec = m.stamp
                     scan = make_scan(
-                        st, where, sec + nsec * 1e-9, a_min, a_max, a_inc, r_min, r_max, ranges, frame
-                    )
+                        st, where, sec + nsec * 1e-9, m.angle_min, m.angle_max, m.angle_increment,
+                        m.range_min, m.range_max, m.ranges, m.frame_id, m.time_increment,
+                    )  # fmt: skip
                     if scan is not None:
                         yield scan
                     continue

@@ -23,12 +23,13 @@ from __future__ import annotations
 import logging
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..geometry import compose, interpolate, inverse, wrap_angle
+from ..geometry import compose, interpolate, inverse, relative, wrap_angle
 from ..types import OdomSample, Scan
+from .deskew import velocity
 from .params import KeyframeConfig, OdomJumpConfig
 
 log = logging.getLogger(__name__)
@@ -36,16 +37,24 @@ log = logging.getLogger(__name__)
 MAX_GAP = 30.0  # s: odometry this far apart does not bracket a scan; a scan waits this long for odometry
 MAX_PENDING = 1000  # scans waiting for odometry at most
 MAX_ODOM = 10_000  # odometry samples kept ahead of the scans at most
+# s: a scan's velocity (deskewing: logs/deskew.py) is the odometry's mean over this long after its stamp —
+# a 10 Hz laser's whole sweep, and several samples of a fast odometry, whose single steps are noisy
+VELOCITY_WINDOW = 0.1
 
 
 @dataclass(frozen=True)
 class Synced:
     """A scan and the odometry pose at its stamp; ``odom_jump``: the odometry jumped (and was
-    re-anchored, :func:`reanchor_odometry`) since the previous pair was yielded."""
+    re-anchored, :func:`reanchor_odometry`) since the previous pair was yielded; ``twist``: the
+    robot's velocity (vx, vy, ω; base frame, m/s and rad/s) during the laser's sweep, taken as the
+    odometry's mean over the ``VELOCITY_WINDOW`` after the stamp (the SE(2) logarithm of the odometry's motion
+    over it; zero when the odometry ends at the stamp or has a gap after it), what deskewing needs
+    (logs/deskew.py)."""
 
     scan: Scan
     odom: np.ndarray
     odom_jump: bool = False
+    twist: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 @dataclass
@@ -84,11 +93,21 @@ def synchronise(
     last_odom_stamp = -np.inf
     first_odom_stamp = np.inf
     waited_out = 0  # scans that waited too long since the last odometry sample
-    jumped = False  # an odometry sample since the last pair yielded was re-anchored across a jump
+    # stamps of the odometry samples re-anchored across a jump since the last pair yielded: a pair carries
+    # those up to the first sample at or after its stamp (the sample its interpolation ends at)
+    jumps: deque[float] = deque()
 
-    def emit_ready() -> Iterator[Synced]:
-        nonlocal jumped
-        while pending and odom and odom[-1].stamp >= pending[0].stamp:
+    def emit_ready(last: bool = False) -> Iterator[Synced]:
+        # a scan waits for the odometry up to VELOCITY_WINDOW after its stamp (its velocity; ``last``:
+        # no more will come, what is there is all there will be)
+        while (
+            pending
+            and odom
+            and (
+                odom[-1].stamp >= pending[0].stamp + VELOCITY_WINDOW
+                or (last and odom[-1].stamp >= pending[0].stamp)
+            )
+        ):
             scan = pending.popleft()
             t = scan.stamp
             if t < odom[0].stamp:  # before all odometry, or before the samples still kept
@@ -107,8 +126,13 @@ def synchronise(
                 continue
             st.scans_out += 1
             bracket = np.array([[a.x, a.y, a.theta], [b.x, b.y, b.theta]])
-            yield Synced(scan, interpolate(np.array([a.stamp, b.stamp]), bracket, t), jumped)
-            jumped = False
+            pose = interpolate(np.array([a.stamp, b.stamp]), bracket, t)
+            twist = _velocity(odom, t, pose) if b.stamp - a.stamp <= MAX_GAP else np.zeros(3)
+            until = a.stamp if a.stamp == t else b.stamp
+            jumped = bool(jumps) and jumps[0] <= until
+            while jumps and jumps[0] <= until:
+                jumps.popleft()
+            yield Synced(scan, pose, jumped, twist)
 
     for msg in messages:
         if isinstance(msg, Scan):
@@ -125,13 +149,19 @@ def synchronise(
             last_scan_stamp = msg.stamp
             pending.append(msg)
             while len(pending) > MAX_PENDING or msg.stamp - pending[0].stamp > MAX_GAP:
+                if (
+                    odom[-1].stamp >= pending[0].stamp
+                ):  # waiting for its velocity's window: given a shorter one
+                    yield from emit_ready(last=True)
+                    continue
                 pending.popleft()  # no odometry came for it: dropped now, counted when it is known why
                 waited_out += 1
         elif isinstance(msg, OdomSample):
-            jumped |= msg.jumped
             if msg.stamp <= last_odom_stamp:
                 st.odom_time_backwards += 1
                 continue
+            if msg.jumped:
+                jumps.append(msg.stamp)
             last_odom_stamp = msg.stamp
             first_odom_stamp = min(first_odom_stamp, msg.stamp)
             st.odom_gap += waited_out  # odometry resumed after them
@@ -143,8 +173,21 @@ def synchronise(
             if len(odom) > MAX_ODOM:
                 odom.popleft()
         yield from emit_ready()
+    yield from emit_ready(last=True)
     st.after_last_odom += len(pending) + waited_out
     _warn_skipped(st, warn)
+
+
+def _velocity(odom: deque[OdomSample], t: float, pose: np.ndarray) -> np.ndarray:
+    """The constant velocity (logs/deskew.py) that takes the robot from ``pose`` (the odometry at ``t``)
+    to the odometry's pose VELOCITY_WINDOW later (or at its last sample, when it ends sooner); zero with
+    no sample after ``t``."""
+    end = min(t + VELOCITY_WINDOW, odom[-1].stamp)
+    if end <= t:
+        return np.zeros(3)
+    stamps = np.array([o.stamp for o in odom])
+    poses = np.array([[o.x, o.y, o.theta] for o in odom])
+    return velocity(relative(pose, interpolate(stamps, poses, end)), end - t)
 
 
 def _warn_skipped(st: SyncStats, warn: Callable[..., None]) -> None:

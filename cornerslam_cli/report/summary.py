@@ -79,6 +79,8 @@ def build_summary(
             laser_to_base_source=src.laser_source,
             odom_on_tf=src.odom_on_tf,
             span=src.span_used.record(src.span),
+            beam_times=src.beam_times,
+            beam_time=src.beam_time,
         ),
         assoc=cfg.association.method,
         counts=run_counts(src, totals, n_landmarks, graph),

@@ -42,6 +42,7 @@ def summary_lines(s: RunSummary) -> list[str]:
         f"{c.keyframes_skipped} between keyframes), {c.landmarks} landmarks, "
         f"{c.matched_total} matches with {s.assoc}",
         mount_line(s.input),
+        *deskew_lines(s.input),
         f"time: extract {t.t_extract:.2f}s scan match {t.t_scan_match or 0.0:.2f}s "
         f"predict {t.t_predict:.2f}s match {t.t_match:.2f}s "
         f"update {t.t_update:.2f}s ({t.scans_per_second:.0f} steps/s), wall {t.wall_time:.1f}s",
@@ -80,6 +81,14 @@ def mount_line(inp: RunInput) -> str:
     x, y, yaw = inp.laser_to_base
     source = MOUNT_SOURCES.get(inp.laser_to_base_source, inp.laser_to_base_source)
     return f"laser mount: x={x:.3f} m y={y:.3f} m yaw={yaw:.3f} rad ({source})"
+
+
+def deskew_lines(inp: RunInput) -> list[str]:
+    """A line saying the scans were deskewed and with what beam times; none when they were not."""
+    if inp.beam_times not in ("log", "config"):
+        return []
+    where = "the log's time_increment" if inp.beam_times == "log" else "input.beam_time"
+    return [f"deskewed: beams {1e6 * abs(inp.beam_time):.2f} µs apart ({where})"]
 
 
 def comparison_lines(summaries: list[RunSummary]) -> list[str]:

@@ -18,6 +18,7 @@ class RawScan:
     """A scan to write: every beam of the message, in bearing order.
 
     ranges : (n,) metres, inf/NaN or >= range_max = no return; beam i at angle_min + i * angle_increment.
+    time_increment : seconds between two beams (beam i at stamp + i · time_increment; 0 = not given).
     """
 
     stamp: float
@@ -27,6 +28,7 @@ class RawScan:
     range_min: float = 0.0
     range_max: float = 30.0
     frame_id: str = "laser"
+    time_increment: float = 0.0
 
     @property
     def angle_max(self) -> float:

@@ -100,7 +100,7 @@ class RosSerializer:
             angle_min=float(s.angle_min),
             angle_max=float(s.angle_max),
             angle_increment=float(s.angle_increment),
-            time_increment=0.0,
+            time_increment=float(s.time_increment),
             scan_time=0.0,
             range_min=float(s.range_min),
             range_max=float(s.range_max),
@@ -175,7 +175,7 @@ class JsonSerializer:
         msg = {
             "header": self.header(s.stamp, s.frame_id),
             **{k: float(np.float32(getattr(s, k))) for k in ("angle_min", "angle_max", "angle_increment")},
-            "time_increment": 0.0,
+            "time_increment": float(s.time_increment),
             "scan_time": 0.0,
             "range_min": float(np.float32(s.range_min)),
             "range_max": float(np.float32(s.range_max)),
