@@ -149,9 +149,8 @@ def synchronise(
             last_scan_stamp = msg.stamp
             pending.append(msg)
             while len(pending) > MAX_PENDING or msg.stamp - pending[0].stamp > MAX_GAP:
-                if (
-                    odom[-1].stamp >= pending[0].stamp
-                ):  # waiting for its velocity's window: given a shorter one
+                # one waiting only for the rest of its velocity's window: synchronised with a shorter one
+                if odom[-1].stamp >= pending[0].stamp:
                     yield from emit_ready(last=True)
                     continue
                 pending.popleft()  # no odometry came for it: dropped now, counted when it is known why
@@ -185,8 +184,13 @@ def _velocity(odom: deque[OdomSample], t: float, pose: np.ndarray) -> np.ndarray
     end = min(t + VELOCITY_WINDOW, odom[-1].stamp)
     if end <= t:
         return np.zeros(3)
-    stamps = np.array([o.stamp for o in odom])
-    poses = np.array([[o.x, o.y, o.theta] for o in odom])
+    near = []  # the samples up to the first at or after ``end`` (the deque may run far ahead)
+    for o in odom:
+        near.append(o)
+        if o.stamp >= end:
+            break
+    stamps = np.array([o.stamp for o in near])
+    poses = np.array([[o.x, o.y, o.theta] for o in near])
     return velocity(relative(pose, interpolate(stamps, poses, end)), end - t)
 
 
