@@ -5,12 +5,11 @@ A 2D laser measures its beams one after the other while its mirror turns: a Hoku
 turns 3.8° during one URG scan, so a straight wall seen while turning comes out bent, and the scans
 of a turn disagree with each other by centimetres at a few metres' range. The beams' times are
 known: beam ``i`` (its index in the message) at ``stamp + i · time_increment`` (the ROS LaserScan
-convention: the stamp is the first beam's time). With the robot's velocity from the odometry at the
-scan (logs/sync.py, ``Synced.twist``: the body-frame velocity between the two odometry samples that
-bracket the stamp), each beam's end point is moved from the laser's pose at its own time into the
-laser's pose at the stamp — as ROS's laser_geometry "high fidelity" projection and KISS-ICP's
-deskewing do. The motion during one scan is taken as constant (the scan lasts 7–67 ms, the
-odometry's samples are ~100 ms apart).
+convention: the stamp is the first beam's time). With the robot's velocity from the odometry
+(logs/sync.py, ``Synced.twist``: the body-frame mean over the 0.1 s after the stamp), each beam's end
+point is moved from the laser's pose at its own time into the laser's pose at the stamp — as ROS's
+laser_geometry "high fidelity" projection and KISS-ICP's deskewing do. The motion during one scan is
+taken as constant (a scan lasts 7–67 ms).
 
 The corrected scan keeps its beams' order and indices; their ranges and bearings change (bearings are
 no longer exactly evenly spaced: extraction works on each beam's own bearing).
