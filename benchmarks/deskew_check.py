@@ -37,11 +37,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _baseline import revision  # noqa: E402
 from real_logs import MINES, ROOT, default_data  # noqa: E402
 
-from cornerslam_cli.frontend import open_input, scans_prepared  # noqa: E402
+from cornerslam_cli.frontend import keyframe_pairs, open_input  # noqa: E402
 from cornerslam_cli.geometry import relative, transform_points  # noqa: E402
 from cornerslam_cli.lasers import resolve_config  # noqa: E402
 from cornerslam_cli.logs.deskew import deskew  # noqa: E402
-from cornerslam_cli.logs.sync import reanchor_odometry, synchronise  # noqa: E402
 from cornerslam_cli.motion.icp import LocalMap, register  # noqa: E402
 from cornerslam_cli.motion.params import ScanMatchConfig  # noqa: E402
 from cornerslam_cli.simulate import simulate_log  # noqa: E402
@@ -86,11 +85,11 @@ def simulated(work: Path) -> list[str]:
 
 
 def turning_pairs(log: Path, sets: list[str]):
-    """Pairs of consecutive synchronised scans while the robot turns faster than TURNING."""
-    cfg = resolve_config(log, MINES, sets)
+    """Pairs of consecutive synchronised scans (every scan, not deskewed: each variant deskews its own)
+    while the robot turns faster than TURNING."""
+    cfg = resolve_config(log, MINES, [*sets, "input.deskew=false"])
     src = open_input(log, cfg)
-    msgs = reanchor_odometry(scans_prepared(src.reader, cfg), cfg.input.odom_jump, src.stats, lambda *a: None)
-    synced = list(synchronise(msgs, src.stats, lambda *a: None))
+    synced = list(keyframe_pairs(src, cfg))
     return src.laser2base, [
         (a, b) for a, b in zip(synced, synced[1:], strict=False) if abs(b.twist[2]) > TURNING
     ]

@@ -255,30 +255,27 @@ def loops(r: dict) -> str:
     return f"{r['submaps']}, {r['loops'][0]} / {r['loops'][1]}"
 
 
-def floor_table(rows: list[dict], what: str, ref: str) -> list[str]:
-    cols = ("reference", "output", "chain", "odometry")
+def score_table(rows: list[dict], cols: tuple[str, ...], head: str) -> list[str]:
+    """One row per run: steps, points, the revisit score of each trajectory in ``cols`` (``head``
+    their column titles, after the first column's), submaps and loops."""
     out = [
-        f"| {what} | steps | points | {ref} | our output | scan-matched chain | odometry "
-        "| submaps, loops accepted / refused |",
+        f"| {head} | submaps, loops accepted / refused |",
         "|---|---:|---:|---:|---:|---:|---:|---|",
     ]
     for r in rows:
         cells = " | ".join(cm(r["scores"][k]) if k in r["scores"] else "–" for k in cols)
         out.append(f"| {r['name']} | {r['steps']} | {r['points']:,} | {cells} | {loops(r)} |")
     return out
+
+
+def floor_table(rows: list[dict], what: str, ref: str) -> list[str]:
+    head = f"{what} | steps | points | {ref} | our output | scan-matched chain | odometry"
+    return score_table(rows, ("reference", "output", "chain", "odometry"), head)
 
 
 def mines_table(rows: list[dict]) -> list[str]:
-    cols = ("output", "online", "chain", "odometry")
-    out = [
-        "| log | steps | points | output (smoothed) | online (causal) | scan-matched chain | odometry "
-        "| submaps, loops accepted / refused |",
-        "|---|---:|---:|---:|---:|---:|---:|---|",
-    ]
-    for r in rows:
-        cells = " | ".join(cm(r["scores"][k]) if k in r["scores"] else "–" for k in cols)
-        out.append(f"| {r['name']} | {r['steps']} | {r['points']:,} | {cells} | {loops(r)} |")
-    return out
+    head = "log | steps | points | output (smoothed) | online (causal) | scan-matched chain | odometry"
+    return score_table(rows, ("output", "online", "chain", "odometry"), head)
 
 
 def section_table(rows: list[dict]) -> list[str]:
