@@ -27,7 +27,7 @@ single_threaded_blas()  # before numpy is first imported (blas.py says why)
 import click  # noqa: E402
 
 from . import __version__  # noqa: E402
-from .errors import CornerslamError, display_path  # noqa: E402
+from .errors import CornerslamError, LogError, display_path, one_line  # noqa: E402
 from .options import (  # noqa: E402
     CONFIG_COPIES,
     FINITE,
@@ -333,11 +333,19 @@ def compare(
 @verbosity_options
 def info(log_path, scan_topic, odom_topic, verbose, quiet):
     """Show what is in LOG: format, topics, types, counts, rates, and what `run` would use."""
+    from .lasers import detect_preset, first_scan
     from .logs import open_log
 
     setup_logging(verbose, quiet)
     reader = open_log(Path(log_path), scan_topic=scan_topic or "", odom_topic=odom_topic or "")
-    _echo(info_lines(log_path, reader.info(), reader.laser_to_base()))
+    log_info, laser = reader.info(), reader.laser_to_base()
+    scan, unread = None, ""
+    try:
+        scan = first_scan(reader) if log_info.scan_topic else None
+    except LogError as e:  # info lists what it can: the topics, and why no scan could be read
+        unread = f"the first scan could not be read: {one_line(e)}"
+    preset = None if scan is None else detect_preset(scan.n_beams, scan.angle_increment)
+    _echo(info_lines(log_path, log_info, laser, scan, preset, unread))
 
 
 @cli.command()

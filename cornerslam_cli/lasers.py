@@ -99,6 +99,11 @@ def detect_preset(n_beams: int, angle_increment: float) -> str | None:
     return None
 
 
+def first_scan(reader) -> Scan | None:
+    """The first scan a log reader (logs/base.py) gives, None when it has none."""
+    return next((msg for msg in reader.messages() if isinstance(msg, Scan)), None)
+
+
 def first_scan_geometry(log_path: str | Path, cfg: Config) -> tuple[int, float] | None:
     """(beams, angle increment) of the log's first scan, None when it has none.
 
@@ -116,10 +121,8 @@ def first_scan_geometry(log_path: str | Path, cfg: Config) -> tuple[int, float] 
             odom_frame=inp.odom_frame,
             base_frame=inp.base_frame,
         ) as reader:
-            for msg in reader.messages():
-                if isinstance(msg, Scan):
-                    return msg.n_beams, msg.angle_increment
-        return None
+            scan = first_scan(reader)
+        return None if scan is None else (scan.n_beams, scan.angle_increment)
     finally:
         reader_log.setLevel(level)
 

@@ -109,6 +109,38 @@ def test_info_names_the_topics_run_would_use(sim_log):
     assert "scans     /scan" in res.output and "odometry  /odom" in res.output
 
 
+def test_info_shows_the_first_scans_beams_preset_and_beam_times(sim_log, tmp_path):
+    """The simulated log: 541 beams over 270° (no preset has them), no time_increment (scans as
+    recorded); 181 SICK-like beams with time_increment: the SICK preset, the beam times and sweep."""
+    res = invoke("info", sim_log)
+    assert res.exit_code == 0, res.output
+    assert "  beams     541 over 270.0° (0.500° apart), 0.050–30.000 m: no laser preset matches" in res.output
+    assert "  beam times not in the log: scans used as recorded (input.beam_time to deskew)" in res.output
+    r = np.full(181, 5.0)
+    scans = [
+        RawScan(T0 + 0.1 * i, -math.pi / 2, math.pi / 180, r, 0.1, 30.0, time_increment=1e-4)
+        for i in range(3)
+    ]
+    odoms = [OdomSample(T0 + 0.1 * i, 0.0, 0.0, 0.0) for i in range(4)]
+    res = invoke("info", write_mcap(tmp_path / "ti.mcap", scans, odoms))
+    assert res.exit_code == 0, res.output
+    assert "  beams     181 over 180.0° (1.000° apart), 0.100–30.000 m: preset sick_lms_1deg" in res.output
+    assert "  beam times 100.00 µs apart (the log's time_increment, 18.0 ms a sweep): deskewed" in res.output
+
+
+def test_info_lists_the_topics_of_a_log_whose_first_scan_cannot_be_read(tmp_path):
+    """A CARMEN log whose only laser line is cut: info still lists the topics (exit 0) and says why it
+    shows no beams, in the words run refuses the log with."""
+    log = tmp_path / "cut.clf"
+    log.write_text("ODOM 0 0 0 0 0 0 1.0 host 1.0\nFLASER 180 1.0 1.0 1.0\n")
+    res = invoke("info", log)
+    assert res.exit_code == 0, res.output
+    assert "FLASER" in res.output and "  beams " not in res.output
+    why = "CARMEN log 'cut.clf' has no complete laser line: its only FLASER line cannot be read"
+    assert f"problem:   the first scan could not be read: {why}" in res.output
+    one_line_error(invoke("run", log, "--out", tmp_path / "out"), why)
+
+
 def test_extract_prints_and_plots(sim_log, tmp_path):
     png = tmp_path / "scan.png"
     res = invoke("extract", sim_log, "--step", 3, "--plot", png)

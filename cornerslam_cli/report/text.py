@@ -192,9 +192,18 @@ def batch_counts(rows: list[dict]) -> tuple[int, int]:
     return sum(r["status"] == "failed" for r in rows), sum(r["status"] == "skipped" for r in rows)
 
 
-def info_lines(log_path: str | Path, i: LogInfo, laser: tuple[float, float, float] | None) -> list[str]:
+def info_lines(
+    log_path: str | Path,
+    i: LogInfo,
+    laser: tuple[float, float, float] | None,
+    scan: Scan | None = None,
+    preset: str | None = None,
+    unread: str = "",
+) -> list[str]:
     """``cornerslam info``: the log's format, topics with counts and rates, what a run would use
-    (``laser``: the laser's (x, y, yaw) in the base frame from tf, or None), problems and notes."""
+    (``laser``: the laser's (x, y, yaw) in the base frame from tf, or None; ``scan``: the first scan, its
+    geometry and beam times, with the laser ``preset`` it matches; ``unread``: why it could not be read),
+    problems and notes."""
     lines = [f"file:      {display_path(log_path)}", f"format:    {i.format}", f"messages:  {i.n_messages}"]
     if i.start is not None:
         lines.append(f"start:     {i.start:.3f} s")
@@ -212,8 +221,31 @@ def info_lines(log_path: str | Path, i: LogInfo, laser: tuple[float, float, floa
         lines.append(f"  laser     x={laser[0]:.3f} m y={laser[1]:.3f} m yaw={laser[2]:.3f} rad (from tf)")
     else:
         lines.append("  laser     not on tf: from the config's input.laser (built-in default x=0 y=0 yaw=0)")
-    lines += [f"problem:   {text}" for text in i.problems]
+    if scan is not None:
+        lines += scan_lines(scan, preset)
+    lines += [f"problem:   {text}" for text in (*i.problems, *([unread] if unread else []))]
     lines += [f"note:      {text}" for text in i.notes]
+    return lines
+
+
+def scan_lines(scan: Scan, preset: str | None) -> list[str]:
+    """``info``'s lines on the first scan: its beams, the laser preset a run would take for them
+    (lasers.py, ``input.laser_preset: auto``) and whether its beams' times are known (deskewing)."""
+    inc = math.degrees(abs(scan.angle_increment))
+    fov = inc * max(scan.n_beams - 1, 0)
+    which = f"preset {preset}" if preset else "no laser preset matches (the config's sensor model)"
+    lines = [
+        f"  beams     {scan.n_beams} over {fov:.1f}° ({inc:.3f}° apart), "
+        f"{scan.range_min:.3f}–{scan.range_max:.3f} m: {which}"
+    ]
+    if scan.time_increment:
+        sweep = 1e3 * abs(scan.time_increment) * max(scan.n_beams - 1, 0)
+        lines.append(
+            f"  beam times {1e6 * abs(scan.time_increment):.2f} µs apart (the log's time_increment, "
+            f"{sweep:.1f} ms a sweep): deskewed"
+        )
+    else:
+        lines.append("  beam times not in the log: scans used as recorded (input.beam_time to deskew)")
     return lines
 
 
