@@ -68,6 +68,13 @@ def test_summary_lines_without_reference():
     assert summary_lines(skewed)[2] == "deskewed: beams 97.66 µs apart (the log's time_increment)"
     for no in ("none", "off"):  # nothing said when the scans were used as recorded
         assert summary_lines(replace(s, input=replace(s.input, beam_times=no))) == summary_lines(s)
+    for preset, line in (
+        ("sick_lms_1deg", "sick_lms_1deg (its sensor model and extraction settings, under the config)"),
+        ("auto", "none matches the scans (the config's sensor model)"),
+        ("none", "none (input.laser_preset: none; the config's sensor model)"),
+    ):
+        config = {**s.config, "input": {"laser_preset": preset}}
+        assert summary_lines(replace(s, config=config))[2] == f"laser preset: {line}"
 
 
 def test_summary_lines_with_ground_truth_and_relations():

@@ -42,6 +42,7 @@ def summary_lines(s: RunSummary) -> list[str]:
         f"{c.keyframes_skipped} between keyframes), {c.landmarks} landmarks, "
         f"{c.matched_total} matches with {s.assoc}",
         mount_line(s.input),
+        *preset_lines(s.config),
         *deskew_lines(s.input),
         f"time: extract {t.t_extract:.2f}s scan match {t.t_scan_match or 0.0:.2f}s "
         f"predict {t.t_predict:.2f}s match {t.t_match:.2f}s "
@@ -81,6 +82,19 @@ def mount_line(inp: RunInput) -> str:
     x, y, yaw = inp.laser_to_base
     source = MOUNT_SOURCES.get(inp.laser_to_base_source, inp.laser_to_base_source)
     return f"laser mount: x={x:.3f} m y={y:.3f} m yaw={yaw:.3f} rad ({source})"
+
+
+def preset_lines(config: dict) -> list[str]:
+    """Which laser preset (lasers.py) the run's config was layered on — its sensor model and extraction
+    settings, under the user's config; nothing when the config does not say (an older summary)."""
+    name = config.get("input", {}).get("laser_preset")
+    if name is None:
+        return []
+    if name == "auto":  # (resolved to a preset's name when one matched the scans)
+        return ["laser preset: none matches the scans (the config's sensor model)"]
+    if name == "none":
+        return ["laser preset: none (input.laser_preset: none; the config's sensor model)"]
+    return [f"laser preset: {name} (its sensor model and extraction settings, under the config)"]
 
 
 def deskew_lines(inp: RunInput) -> list[str]:
