@@ -325,8 +325,8 @@ class HierarchicalSlam:
         ``linked_to`` (the id of the corner it was matched to across an accepted closure, or -1)."""
         poses = self._origins()
         parts = [place_table(t, poses[i], i) for i, t in enumerate(self.tables)]
-        if not parts:
-            return self.slam.landmark_table() | {"submap": np.zeros(0, int), "linked_to": np.zeros(0, int)}
+        if not parts:  # none closed yet: the open submap 0's, whose frame is the global one
+            return self.slam.landmark_table()
         table = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
         table["linked_to"] = self._links(len(table["id"]))
         return table

@@ -100,6 +100,24 @@ def test_submaps_off_keeps_the_single_map_and_says_nothing_of_submaps(sim_log, t
     assert "submaps" not in s["counts"] and "t_loop" not in s["timing"]
 
 
+def test_the_map_before_any_submap_closed_is_the_open_ones_with_columns_of_one_length(sim_log):
+    """Before the first submap closes the map is the open submap's (its frame is the global one):
+    every column as long as the others, ``submap`` 0 and ``linked_to`` -1 on every row."""
+    cfg = config_from({}, ["submaps.enabled=true", "loops.enabled=false"])
+    src = open_input(sim_log, cfg)
+    hs = HierarchicalSlam(cfg, src.laser2base)
+    for k, frame in enumerate(frames(src, cfg)):
+        hs.step(frame)
+        if k == 5:
+            break
+    assert not hs.closed
+    table = hs.landmark_table()
+    n = len(table["id"])
+    assert n > 0 and {len(v) for v in table.values()} == {n}
+    assert np.all(table["submap"] == 0) and np.all(table["linked_to"] == -1)
+    assert set(MAP_COLUMNS) <= set(table)  # every map.csv column
+
+
 class FakeVerifier:
     """Stands in for graph/loops.py: answers every candidate pair with the graph's own prediction
     moved by ``offset`` (per earlier submap a, or for all), accepted, so the gate alone decides."""
