@@ -3,9 +3,10 @@
 GTSAM) with loop closures verified by the configured associator (graph/loops.py).
 
 - **Local level.** The filter runs in the open submap's frame (its origin = the robot's pose at the
-  submap's first step, zero relative uncertainty). A submap closes when it reaches ``submaps.max_steps``
-  steps, ``max_distance`` metres travelled or ``max_landmarks`` landmarks; its final pose and robot
-  covariance become the sequential factor to the next origin, so per-step cost is bounded by the submap.
+  previous submap's last step — the first submap's: the first step —, with zero relative uncertainty).
+  A submap closes when it reaches ``submaps.max_steps`` steps, ``max_distance`` metres travelled or
+  ``max_landmarks`` landmarks; its final pose and robot covariance become the sequential factor to the
+  next origin, so per-step cost is bounded by the submap.
 - **Global level.** After each closed submap: candidates are earlier submaps whose robot path came
   within ``loops.candidate_distance`` + ``candidate_sigmas`` σ of the closed submap's (its global
   marginal) under the graph's estimate (nearest first, at most ``max_candidates``); each is verified
@@ -35,7 +36,6 @@ from .geometry import (
     compose,
     compose_inverse_cov,
     relative,
-    rotate_pose_covariance,
     transform_points,
 )
 from .graph.loops import FEW_CORNERS, LOW_FITNESS, NO_HYPOTHESIS, agree, chi2, loop_associator, match_submaps
@@ -51,6 +51,7 @@ from .graph.submap import (
     keyframe_factors,
     keyframe_nodes,
     place_table,
+    propagate,
 )
 from .slam import Slam, StepRecord
 
@@ -325,8 +326,8 @@ class HierarchicalSlam:
         ``linked_to`` (the id of the corner it was matched to across an accepted closure, or -1)."""
         poses = self._origins()
         parts = [place_table(t, poses[i], i) for i, t in enumerate(self.tables)]
-        if not parts:
-            return self.slam.landmark_table() | {"submap": np.zeros(0, int), "linked_to": np.zeros(0, int)}
+        if not parts:  # none closed yet: the open submap 0's, whose frame is the global one
+            return self.slam.landmark_table()
         table = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
         table["linked_to"] = self._links(len(table["id"]))
         return table
@@ -357,15 +358,17 @@ def globalise(
     r: StepRecord, origin: np.ndarray, origin_cov: np.ndarray, index: int, t_loop: float
 ) -> StepRecord:
     """A local step record in the global frame: its submap's ``origin`` ∘ the local pose; the pose's
-    covariance the local one turned by the origin plus the origin's marginal ``origin_cov`` (the
-    lever arm of the origin's heading error ignored); segments moved with it."""
-    cov = np.array(
+    covariance to first order from the origin's marginal ``origin_cov`` (with the lever arm of its
+    heading error over the local pose) and the local one turned by the origin (its x–θ and y–θ
+    covariances are not in the record: taken as 0); segments moved with it."""
+    local = np.array(
         [[r.pose_var[0], r.cov_xy, 0.0], [r.cov_xy, r.pose_var[1], 0.0], [0.0, 0.0, r.pose_var[2]]]
     )
-    cov = rotate_pose_covariance(cov, float(origin[2])) + origin_cov
+    pose = compose(origin, r.pose)
+    cov = propagate(origin_cov, origin, pose, local)
     return replace(
         r,
-        pose=compose(origin, r.pose),
+        pose=pose,
         pose_var=np.diag(cov).copy(),
         cov_xy=float(cov[0, 1]),
         segments_map=transform_points(r.segments_map.reshape(-1, 2), origin).reshape(-1, 4),

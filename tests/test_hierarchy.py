@@ -100,6 +100,24 @@ def test_submaps_off_keeps_the_single_map_and_says_nothing_of_submaps(sim_log, t
     assert "submaps" not in s["counts"] and "t_loop" not in s["timing"]
 
 
+def test_the_map_before_any_submap_closed_is_the_open_ones_with_columns_of_one_length(sim_log):
+    """Before the first submap closes the map is the open submap's (its frame is the global one):
+    every column as long as the others, ``submap`` 0 and ``linked_to`` -1 on every row."""
+    cfg = config_from({}, ["submaps.enabled=true", "loops.enabled=false"])
+    src = open_input(sim_log, cfg)
+    hs = HierarchicalSlam(cfg, src.laser2base)
+    for k, frame in enumerate(frames(src, cfg)):
+        hs.step(frame)
+        if k == 5:
+            break
+    assert not hs.closed
+    table = hs.landmark_table()
+    n = len(table["id"])
+    assert n > 0 and {len(v) for v in table.values()} == {n}
+    assert np.all(table["submap"] == 0) and np.all(table["linked_to"] == -1)
+    assert set(MAP_COLUMNS) <= set(table)  # every map.csv column
+
+
 class FakeVerifier:
     """Stands in for graph/loops.py: answers every candidate pair with the graph's own prediction
     moved by ``offset`` (per earlier submap a, or for all), accepted, so the gate alone decides."""
@@ -366,3 +384,36 @@ def test_points_are_searched_for_the_nearest_candidates_only(sim_log, monkeypatc
     assert all(searched[b] == 1 for b in per_submap)
     for b in per_submap:  # the nearest (first) candidate was the one searched
         assert next(r for r in hs.loops if r.submap_to == b).reason == "ambiguous"
+
+
+def test_a_step_in_the_global_frame_carries_the_lever_arm_of_its_origins_heading():
+    """globalise's covariance against Monte Carlo: the origin drawn from its marginal, the local pose
+    from its own (x–θ, y–θ uncorrelated, as the step record holds them), composed 200,000 times. A pose
+    8 m from its origin, whose heading σ is 2°: the lever arm more than doubles the xy spread."""
+    from cornerslam_cli.geometry import compose, wrap_angle
+    from cornerslam_cli.hierarchy import globalise
+    from cornerslam_cli.slam import StepRecord
+
+    rng = np.random.default_rng(3)
+    origin, local = np.array([2.0, -1.0, 0.7]), np.array([6.0, 5.0, -0.4])
+    origin_cov = np.diag([0.02**2, 0.03**2, np.radians(2.0) ** 2])
+    origin_cov[0, 1] = origin_cov[1, 0] = 0.3 * 0.02 * 0.03
+    local_var, local_cxy = np.array([0.05**2, 0.04**2, 0.01**2]), 0.5 * 0.05 * 0.04
+    r = StepRecord(
+        0, 0.0, local, local_var, np.zeros(3), np.zeros(3), 0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0.0,
+        np.zeros((0, 4)), cov_xy=local_cxy,
+    )  # fmt: skip
+    g = globalise(r, origin, origin_cov, 3, 0.0)
+    n = 200_000
+    lc = np.diag(local_var)
+    lc[0, 1] = lc[1, 0] = local_cxy
+    o = rng.multivariate_normal(origin, origin_cov, n)
+    loc = rng.multivariate_normal(local, lc, n)
+    p = compose(o, loc)
+    d = p - compose(origin, local)
+    d[:, 2] = wrap_angle(d[:, 2])
+    mc = np.cov(d.T)
+    assert g.submap == 3 and np.allclose(g.pose, compose(origin, local))
+    assert np.allclose(g.pose_var, np.diag(mc), rtol=0.03)
+    assert g.cov_xy == pytest.approx(mc[0, 1], rel=0.05)
+    assert g.pose_var[:2].sum() > 2 * (np.trace(origin_cov[:2, :2]) + local_var[:2].sum())

@@ -66,13 +66,12 @@ class LoopConfig:
     # search or two, ~15 ms; at 8 a close, loop closing made infinite-corridor's last 10 % of steps 2.6×
     # its first
     point_searches: int = num(1, ge=0, le=1000)
-    point_max_xy: float = num(
-        2.0, gt=0.0, le=100.0
-    )  # m (and at most 25 cells of scan_match.search_resolution)
+    # m, and at most 25 cells of the point search's grid (graph/points.py: 2 × scan_match.search_resolution)
+    point_max_xy: float = num(2.0, gt=0.0, le=100.0)
     point_max_theta: float = num(0.5, gt=0.0, le=math.pi)  # rad
     point_shift: float = num(0.5, gt=0.0, le=100.0)  # m
     point_distinct: float = num(0.7, gt=0.0, le=1.0)
-    min_gap: int = num(2, ge=1, le=1_000_000)  # submaps between a and b (neighbours share a factor)
+    min_gap: int = num(2, ge=1, le=1_000_000)  # b − a at least (1: neighbours too, which share a factor)
     # a closure must agree with the graph's prediction within this χ²₃ (Mahalanobis², marginal covariance)
     gate: float = num(30.7, gt=0.0, le=1e9)
     # ... unless two or more closures of the new submap agree with each other and each is within this

@@ -1,7 +1,9 @@
 """What the two levels exchange: a closed submap (the local EKF's result in its own frame) and the
 result of matching two submaps for a loop closure.
 
-Frames: a submap's frame is the robot's pose at its first step (its origin). A relative pose ``a→b`` is
+Frames: a submap's frame (its origin) is the robot's pose where the submap before it ended — its last
+step, which the filter's new map starts from with zero uncertainty (the first submap's: the first step);
+so a submap's first pose is one step's motion from its origin, not zero. A relative pose ``a→b`` is
 b's origin expressed in a's frame (x, y, θ); its covariance is of those three numbers, in a's frame —
 the convention of the EKF's robot block Σ_rr when a's origin is fixed (graph/posegraph.py turns it into
 GTSAM's tangent space).
@@ -142,8 +144,8 @@ def keyframe_factors(
     is_node = np.zeros(len(poses), dtype=bool)
     is_node[nodes] = True
     for k, (p0, p1, c) in enumerate(zip(prev, poses, covs, strict=True)):
-        total = _propagate(total, p0, p1, c)
-        part = _propagate(part, relative(ref, p0), relative(ref, p1), c)
+        total = propagate(total, p0, p1, c)
+        part = propagate(part, relative(ref, p0), relative(ref, p1), c)
         if is_node[k]:
             parts.append(part)
             part, ref = np.zeros((3, 3)), p1
@@ -163,7 +165,7 @@ def det3(m: np.ndarray) -> float:
     )
 
 
-def _propagate(acc: np.ndarray, p0: np.ndarray, p1: np.ndarray, cov: np.ndarray) -> np.ndarray:
+def propagate(acc: np.ndarray, p0: np.ndarray, p1: np.ndarray, cov: np.ndarray) -> np.ndarray:
     """Covariance of pose p1 = p0 ∘ δ (both in one frame) from p0's ``acc`` and δ's ``cov`` (p0's frame)."""
     G = np.eye(3)
     G[:2, 2] = (p0[1] - p1[1], p1[0] - p0[0])  # ∂(p0 ∘ δ)/∂p0
