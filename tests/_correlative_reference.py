@@ -48,8 +48,8 @@ def search(
         )
         sc = sc - PULL * (
             (dthetas[a] / max(window.theta, 1e-9)) ** 2
-            + ((ox - W) * res / window.xy)[:, None] ** 2
-            + ((oy - W) * res / window.xy)[None, :] ** 2
+            + ((ox - W) * res / max(window.xy, 1e-9))[:, None] ** 2
+            + ((oy - W) * res / max(window.xy, 1e-9))[None, :] ** 2
         )
         if exclude is not None:
             covered = exclude.near(guess, ox - W, oy - W, res) & exclude.turned(thetas[a])

@@ -147,6 +147,20 @@ def test_branch_and_bound_equals_the_exhaustive_search(office):
     assert got.evaluated < 0.2 * len(angle_steps(points, window.theta, res)) * (2 * W + 1) ** 2
 
 
+def test_a_window_of_no_width_still_searches_the_headings(office):
+    """A window of 0 m (an odometry model with no translation noise on a turn in place: ekf.alpha4 = 0,
+    min_sigma_xy = 0) and 0.3 rad: the turn is found at the guess's position, not lost to 0/0 in the
+    pull towards the guess (NaN scores: the guess came back with score −1)."""
+    rng = np.random.default_rng(3)
+    ref_pose, true_pose = np.array([6.0, 5.0, 0.0]), np.array([6.0, 5.0, 0.2])
+    map_pts = transform_points(scan_points(office, ref_pose, rng, 0.005), ref_pose)
+    points = scan_points(office, true_pose, rng, 0.005)
+    found = search(points, map_pts, ref_pose, Window(0.0, 0.3), 0.1, 0.1)
+    assert np.isfinite(found.score) and found.score > 0.5
+    np.testing.assert_array_equal(found.pose[:2], ref_pose[:2])
+    assert abs(found.pose[2] - true_pose[2]) < 0.02
+
+
 @pytest.mark.parametrize("nc", [1, 2, 6, 26])
 def test_compiled_coarse_bounds_are_numpys_sums_of_the_whole_gather_bit_for_bit(nc):
     """The search's coarse bounds, summed in a compiled loop without the gather, are the sums numpy gives

@@ -182,10 +182,11 @@ class Search:
         bound = coarse_sums(block_max(L, BLOCK), px, py, offs) / n
         # minus the smallest pull towards the guess inside each coarse cell: still a bound
         near = np.clip(0, offs - W, offs + BLOCK - 1 - W)  # per axis, the cell offset closest to the guess
+        xy = max(window.xy, 1e-9)  # (a window of no width: one cell, no pull — not 0/0)
         bound -= PULL * (
             (dthetas / max(window.theta, 1e-9))[:, None, None] ** 2
-            + ((near * res / window.xy) ** 2)[None, :, None]
-            + ((near * res / window.xy) ** 2)[None, None, :]
+            + ((near * res / xy) ** 2)[None, :, None]
+            + ((near * res / xy) ** 2)[None, None, :]
         )
         order = np.argsort(-bound, axis=None, kind="stable")
         return Search(guess, window, res, W, dthetas, L, px, py, bound, order)
@@ -197,7 +198,7 @@ class Search:
         n_side = 2 * W + 1
         thetas = guess[2] + self.dthetas
         offsets = np.arange(n_side) - W
-        shift_term = (offsets * res / window.xy) ** 2
+        shift_term = (offsets * res / max(window.xy, 1e-9)) ** 2
         turn_term = np.array([(d / max(window.theta, 1e-9)) ** 2 for d in self.dthetas])
         if exclude is None:
             excluded, turned = np.zeros((n_side, n_side), dtype=bool), np.zeros(len(thetas), dtype=bool)

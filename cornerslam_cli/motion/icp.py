@@ -16,9 +16,12 @@ point per voxel, and (``near_history`` > 0) those of the older map scans whose p
    neighbours; points on no line get none and are skipped), ρ a Cauchy kernel, correspondences within a
    distance shrinking from ``max_distance`` to ``min_distance``, plus a weak prior towards the guess so a
    corridor (unconstrained along its axis) keeps the wheel estimate along it;
-3. fit = share of scan points within ``inlier_distance`` of the map; below ``retry_fit`` the match is
-   retried from headings around the guess (a wrong odometry turn is the usual cause) and the best fit
-   kept; below ``min_fit`` the wheel increment is used and the frame is flagged.
+3. fit = share of scan points within ``inlier_distance`` of the map; when the odometry's window
+   (``search_sigmas`` σ of its noise model) is wider than ICP's basin (``search_min_*``), ICP also runs
+   from the best pose of a correlative search over it (motion/correlative.py: a wrong odometry turn is
+   the usual cause) and is kept when it fits better by ``FIT_MARGIN``;
+4. below ``min_fit`` the wheel increment is used and the frame is flagged; otherwise the match is fused
+   with the wheel increment by their covariances (motion/fusion.py).
 """
 
 from __future__ import annotations

@@ -60,7 +60,8 @@ class ScanMatchConfig:
     inlier_distance: float = num(0.1, gt=0.0, le=1000.0)
     # fit below this: use the odometry increment alone
     min_fit: float = num(0.3, ge=0.0, le=1.0)
-    # m: weak pull of ICP towards its start (keeps a featureless corridor well-posed along its axis)
+    # m: weak pull of ICP towards the odometry's guess (keeps a featureless corridor well-posed along
+    # its axis)
     prior_sigma_xy: float = num(0.5, ge=1e-6, le=1000.0)
     prior_sigma_theta: float = num(0.5, ge=1e-6, le=2 * math.pi)  # rad
     # --- match covariance: (JᵀWJ / (σ̂²·cov_inflation) + prior)⁻¹, σ̂ the residuals' own spread
