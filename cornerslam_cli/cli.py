@@ -27,7 +27,7 @@ single_threaded_blas()  # before numpy is first imported (blas.py says why)
 import click  # noqa: E402
 
 from . import __version__  # noqa: E402
-from .errors import CornerslamError, display_path  # noqa: E402
+from .errors import CornerslamError, display_path, one_line  # noqa: E402
 from .options import (  # noqa: E402
     CONFIG_COPIES,
     FINITE,
@@ -112,7 +112,7 @@ class _Cli(click.Group):
         try:
             return super().invoke(ctx)
         except CornerslamError as e:
-            text = str(e)
+            text = one_line(e)  # a message quoting a library's error may span lines (rosbags' YAML errors)
             for copy, given in ctx.meta.get(CONFIG_COPIES, {}).items():
                 text = text.replace(copy, given)  # a --config pipe read into a temporary copy
             click.echo(f"error: {text}", err=True)
@@ -139,7 +139,7 @@ class _Cli(click.Group):
             fd, path = tempfile.mkstemp(prefix="cornerslam-crash-", suffix=".txt")
             with os.fdopen(fd, "w") as f:
                 traceback.print_exc(file=f)
-            click.echo(f"internal error: {type(exc).__name__}: {exc} (traceback saved to {path})", err=True)
+            click.echo(f"internal error: {one_line(exc)} (traceback saved to {path})", err=True)
             ctx.exit(1)
         finally:
             if main_thread and previous is not None:

@@ -14,7 +14,8 @@ range noise), so every entry is the same small, valid run with one fault added:
 * reading (``_input_faults_ii``): JSON-encoded MCAP (foxglove_bridge / rosbridge), a topic in an
   encoding we do not decode, chunks not in time order, unnormalised and zero odometry quaternions,
   simulated time starting at stamp 0, tab-separated CARMEN, scans outside or far beyond the
-  odometry, ``input.skip_beams_*`` removing every beam.
+  odometry, ``input.skip_beams_*`` removing every beam;
+* ROS 2 bags (``_probe14_faults``): a metadata.yaml that is not YAML.
 
 ``python tests/fault_corpus.py DIR`` writes the corpus and prints what each entry expects.
 """
@@ -22,6 +23,7 @@ range noise), so every entry is the same small, valid run with one fault added:
 from __future__ import annotations
 
 import math
+import shutil
 import struct
 import sys
 from collections.abc import Callable, Iterator
@@ -30,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cornerslam_cli.logs.writers import RawScan, write_carmen, write_mcap, write_rosbag1
+from cornerslam_cli.logs.writers import RawScan, write_carmen, write_mcap, write_rosbag1, write_rosbag2
 from cornerslam_cli.simworld import make_world, raycast, rectangle, room
 from cornerslam_cli.types import OdomSample
 
@@ -455,6 +457,7 @@ def build_corpus(d: str | Path) -> dict[str, tuple[Path, Expected]]:
     _ground_truth_faults(d, add)
     _input_faults_ii(d, add)
     _probe2_faults(d, add)
+    _probe14_faults(d, add)
     return out
 
 
@@ -932,6 +935,28 @@ def _probe2_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
             ),
         ),
     )
+
+
+def _probe14_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
+    """Faults found by the 14th probe: a ROS 2 bag directory whose metadata.yaml is not YAML (rosbags
+    quotes PyYAML's error, several lines long: the error was printed on four lines)."""
+    bag = d / "rosbag2"
+    shutil.rmtree(bag, ignore_errors=True)
+    write_rosbag2(bag, make_scans(), make_odoms())
+    for name, metadata in (("not_yaml", b"rosbag2_bagfile_information: [\n"), ("nul", b"\x00\n")):
+        damaged = d / f"rosbag2_metadata_{name}"
+        shutil.rmtree(damaged, ignore_errors=True)
+        shutil.copytree(bag, damaged)
+        (damaged / "metadata.yaml").write_bytes(metadata)
+        add(
+            f"rosbag2_metadata_{name}",
+            damaged,
+            Expected(
+                "exit 2: the bag and its metadata.yaml named, on one line",
+                2,
+                (f"cannot read ROS 2 bag 'rosbag2_metadata_{name}'", "metadata.yaml", "(check the bag)"),
+            ),
+        )
 
 
 # --------------------------------------------------------------------------- the long log
