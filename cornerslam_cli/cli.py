@@ -30,6 +30,7 @@ from . import __version__  # noqa: E402
 from .errors import CornerslamError, display_path, one_line  # noqa: E402
 from .options import (  # noqa: E402
     CONFIG_COPIES,
+    FIGURE_PATH,
     FINITE,
     command_config,
     config_options,
@@ -398,7 +399,7 @@ def evaluate(out_dir, ground_truth, relations, time_offset, verbose, quiet):
     "--step", default=0, show_default=True, type=click.IntRange(min=0), help="Index of the scan (0 = first)."
 )
 @click.option(
-    "--plot", "plot_path", type=click.Path(dir_okay=False), help="Draw the scan and features to a PNG."
+    "--plot", "plot_path", type=FIGURE_PATH, help="Draw the scan and features to a PNG (or .pdf, .svg)."
 )
 @config_options
 @topic_options
@@ -422,6 +423,7 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
         from .report.oserrors import output_errors
 
         with output_errors(plot_path):
+            Path(plot_path).parent.mkdir(parents=True, exist_ok=True)  # as --out and --mcap-out do
             plot_extraction(scan, segments, corners, plot_path)
         click.echo(f"wrote {plot_path}")
 

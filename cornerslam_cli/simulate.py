@@ -192,6 +192,7 @@ def simulate_log(
             RawScan(float(ts), angle_min, inc, r.astype(np.float32), 0.05, p.max_range, "laser", beam_time)
         )
     odoms = [OdomSample(float(ti), *o) for ti, o in zip(t, odom, strict=True)]
+    out.parent.mkdir(parents=True, exist_ok=True)  # as --out and --mcap-out do
     write_mcap(out, scans, odoms, tf_static=(p.laser_x, 0.0, 0.0))
     gt_path = out.with_suffix(".gt.tum")
     write_tum(gt_path, t_scan, gt)
