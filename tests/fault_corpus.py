@@ -15,7 +15,7 @@ range noise), so every entry is the same small, valid run with one fault added:
   encoding we do not decode, chunks not in time order, unnormalised and zero odometry quaternions,
   simulated time starting at stamp 0, tab-separated CARMEN, scans outside or far beyond the
   odometry, ``input.skip_beams_*`` removing every beam;
-* ROS 2 bags (``_probe14_faults``): a metadata.yaml that is not YAML.
+* ``_probe14_faults``: a ROS 2 bag whose metadata.yaml is not YAML; scan angles in degrees.
 
 ``python tests/fault_corpus.py DIR`` writes the corpus and prints what each entry expects.
 """
@@ -939,7 +939,8 @@ def _probe2_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
 
 def _probe14_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
     """Faults found by the 14th probe: a ROS 2 bag directory whose metadata.yaml is not YAML (rosbags
-    quotes PyYAML's error, several lines long: the error was printed on four lines)."""
+    quotes PyYAML's error, several lines long: the error was printed on four lines); scan angles in
+    degrees (processed without a word)."""
     bag = d / "rosbag2"
     shutil.rmtree(bag, ignore_errors=True)
     write_rosbag2(bag, make_scans(), make_odoms())
@@ -957,6 +958,28 @@ def _probe14_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None
                 (f"cannot read ROS 2 bag 'rosbag2_metadata_{name}'", "metadata.yaml", "(check the bag)"),
             ),
         )
+
+    # -- angles in degrees (a driver's or converter's mistake): 181 beams over 270 "radians", 43 turns
+    degrees = (replace(s, angle_min=-135.0, angle_increment=1.5) for s in make_scans())
+    add(
+        "angles_in_degrees",
+        write_mcap(d / "degrees.mcap", degrees, make_odoms()),
+        Expected(
+            "exit 2: every scan's beams span more than a full turn (it was processed into a map of noise)",
+            2,
+            ("degrees.mcap", f"all {N} scans on '/scan' were skipped", "beams over more than a full turn"),
+        ),
+    )
+    full_turn = (replace(s, angle_min=-math.pi, angle_increment=2 * math.pi / 180) for s in make_scans())
+    add(
+        "full_turn_with_the_first_beam_repeated",
+        write_mcap(d / "full_turn.mcap", full_turn, make_odoms()),
+        Expected(
+            "processed: a 360° scan may repeat its first beam's direction",
+            0,
+            counts={"steps": N, "scans_bad_geometry": 0},
+        ),
+    )
 
 
 # --------------------------------------------------------------------------- the long log

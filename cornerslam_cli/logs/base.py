@@ -21,7 +21,8 @@ Conventions (all formats)
   is the driver's "no return"). Invalid beams are dropped and counted.
 * A scan whose ranges count differs from ``(angle_max - angle_min) / angle_increment + 1`` is kept:
   ``len(ranges)`` beams from angle_min with angle_increment (counted in ``stats.size_mismatch``).
-  A scan with angle_increment <= 0 or non-finite is skipped (``stats.scans_skipped``).
+  A scan with angle_increment <= 0 or non-finite is skipped (``stats.scans_skipped``), and so is one
+  whose beams span more than a full turn (angles in degrees: 1081 beams of 0.25 "rad").
 """
 
 from __future__ import annotations
@@ -196,7 +197,8 @@ class ReadStats:
         if self.scans == 0 and self.scans_skipped > 0:
             raise LogError(
                 f"log '{name}': all {self.scans_skipped} scans on '{short_text(topic)}' were skipped "
-                "(angle_increment <= 0 or not finite, no beams, or no valid stamp)",
+                "(angle_increment <= 0 or not finite, beams over more than a full turn, no beams, "
+                "or no valid stamp)",
                 "check the LaserScan messages' angle_min/angle_increment; `cornerslam extract` shows one",
             )
 
@@ -250,6 +252,14 @@ def make_scan(
             stats.warn(
                 "%s: scan at %.3f has angle_min %r, angle_increment %r: skipped",
                 where, stamp, angle_min, angle_increment,
+            )  # fmt: skip
+        return None
+    if (n - 1) * angle_increment > 2.0 * math.pi + angle_increment:  # (one more: a 360° scan's repeated beam)
+        stats.scans_skipped += 1
+        if stats.scans_skipped <= 3:
+            stats.warn(
+                "%s: scan at %.3f has %d beams of angle_increment %r, %.1f turns (degrees?): skipped",
+                where, stamp, n, angle_increment, (n - 1) * angle_increment / (2.0 * math.pi),
             )  # fmt: skip
         return None
     if not math.isfinite(stamp):
