@@ -361,6 +361,17 @@ def compare_interrupted_while_drawing(w: World) -> Case:
     return Case(["compare", w.log, "--assoc", "icnn", "--out", out])
 
 
+@fault(130, KEPT)
+def simulate_interrupted_while_writing(w: World) -> Case:
+    """`simulate` interrupted while it writes its files: the earlier log, ground truth and corners kept
+    whole, no partial or hidden file left (the MCAP was written in place: a truncated log stayed)"""
+    from cornerslam_cli.simulate import simulate_log
+
+    simulate_log(w.tmp / "s.mcap", beams=11, rate=1.0, seed=1)
+    w.mp.setattr("cornerslam_cli.simulate.write_tum", interrupt)  # after the MCAP is written
+    return Case(["simulate", w.tmp / "s.mcap", "--beams", "11", "--rate", "1"])
+
+
 # 3. leftovers, concurrent runs, permissions
 @fault(0)
 def staging_left_by_a_killed_run(w: World) -> Case:
