@@ -15,7 +15,8 @@ range noise), so every entry is the same small, valid run with one fault added:
   encoding we do not decode, chunks not in time order, unnormalised and zero odometry quaternions,
   simulated time starting at stamp 0, tab-separated CARMEN, scans outside or far beyond the
   odometry, ``input.skip_beams_*`` removing every beam;
-* ``_probe14_faults``: a ROS 2 bag whose metadata.yaml is not YAML; scan angles in degrees.
+* ``_probe14_faults``: a ROS 2 bag whose metadata.yaml is not YAML; scan angles in degrees; an
+  odometry sample 1e300 m away.
 
 ``python tests/fault_corpus.py DIR`` writes the corpus and prints what each entry expects.
 """
@@ -940,7 +941,7 @@ def _probe2_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
 def _probe14_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
     """Faults found by the 14th probe: a ROS 2 bag directory whose metadata.yaml is not YAML (rosbags
     quotes PyYAML's error, several lines long: the error was printed on four lines); scan angles in
-    degrees (processed without a word)."""
+    degrees (processed without a word); an odometry sample 1e300 m away (an internal error)."""
     bag = d / "rosbag2"
     shutil.rmtree(bag, ignore_errors=True)
     write_rosbag2(bag, make_scans(), make_odoms())
@@ -968,6 +969,18 @@ def _probe14_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None
             "exit 2: every scan's beams span more than a full turn (it was processed into a map of noise)",
             2,
             ("degrees.mcap", f"all {N} scans on '/scan' were skipped", "beams over more than a full turn"),
+        ),
+    )
+    # -- one odometry sample 1e300 m away (damaged bytes): it overflowed the motion noise (exit 1)
+    far = make_odoms(edit=lambda i, p: p + np.array([1e300, 0.0, 0.0]) if i == 10 else p)
+    add(
+        "odom_one_sample_1e300",
+        write_mcap(d / "odom_1e300.mcap", make_scans(), far),
+        Expected(
+            "processed; the far sample skipped, counted, warned",
+            0,
+            ("has a position (1e+300,", "farther than 1e+09 m: skipped"),
+            dict(VALID_COUNTS, messages_failed=1),
         ),
     )
     full_turn = (replace(s, angle_min=-math.pi, angle_increment=2 * math.pi / 180) for s in make_scans())

@@ -16,7 +16,8 @@ Conventions (all formats)
   recordings, :mod:`.jsonmsg`); a chosen topic in another encoding (protobuf, flatbuffer, ...) is a
   LogError naming it, a tf topic in one is skipped with a warning.
 * Odometry orientation quaternions are normalised before the yaw is taken; a degenerate one (norm
-  ~0, or a non-finite component) skips its sample (counted in ``stats.decode_failed``, warned).
+  ~0, or a non-finite component) skips its sample (counted in ``stats.decode_failed``, warned), and
+  so does a position beyond ``MAX_ODOM_XY`` (damaged bytes).
 * A beam is valid when finite, > 0, >= range_min and < range_max (a reading equal to range_max
   is the driver's "no return"). Invalid beams are dropped and counted.
 * A scan whose ranges count differs from ``(angle_max - angle_min) / angle_increment + 1`` is kept:
@@ -45,6 +46,7 @@ from .deskew import MAX_SWEEP
 logger = logging.getLogger("cornerslam.logs")
 
 ENCODINGS = ("cdr", "ros1", "json")  # message encodings the ROS-message readers decode
+MAX_ODOM_XY = 1e9  # metres: odometry in UTM or ECEF coordinates stays below 1e7
 
 Pose2 = tuple[float, float, float]
 
@@ -153,11 +155,18 @@ class ReadStats:
             self.warn(msg, *args)
 
     def bad_odometry(self, where: str, stamp: float, pose: tuple[float, float, float]) -> bool:
-        """True (counted in ``decode_failed``, warned) if an odometry sample has a non-finite field."""
-        if math.isfinite(stamp) and all(math.isfinite(v) for v in pose):
-            return False
-        self.failed("%s: odometry sample at %r has a non-finite pose %r: skipped", where, stamp, pose)
-        return True
+        """True (counted in ``decode_failed``, warned) if an odometry sample has a non-finite field or
+        a position farther than ``MAX_ODOM_XY`` from the origin (damaged bytes: 1e300 m)."""
+        if not (math.isfinite(stamp) and all(math.isfinite(v) for v in pose)):
+            self.failed("%s: odometry sample at %r has a non-finite pose %r: skipped", where, stamp, pose)
+            return True
+        if max(abs(pose[0]), abs(pose[1])) > MAX_ODOM_XY:
+            self.failed(
+                "%s: odometry sample at %r has a position %r farther than %g m: skipped",
+                where, stamp, pose[:2], MAX_ODOM_XY,
+            )  # fmt: skip
+            return True
+        return False
 
     def odometry_sample(
         self, where: str, stamp: float, x: float, y: float, q: tuple[float, float, float, float]
