@@ -30,6 +30,7 @@ from . import __version__  # noqa: E402
 from .errors import CornerslamError, LogError, display_path, one_line  # noqa: E402
 from .options import (  # noqa: E402
     CONFIG_COPIES,
+    FIGURE_PATH,
     FINITE,
     command_config,
     config_options,
@@ -112,7 +113,7 @@ class _Cli(click.Group):
         try:
             return super().invoke(ctx)
         except CornerslamError as e:
-            text = str(e)
+            text = one_line(e)  # a message quoting a library's error may span lines (rosbags' YAML errors)
             for copy, given in ctx.meta.get(CONFIG_COPIES, {}).items():
                 text = text.replace(copy, given)  # a --config pipe read into a temporary copy
             click.echo(f"error: {text}", err=True)
@@ -139,7 +140,7 @@ class _Cli(click.Group):
             fd, path = tempfile.mkstemp(prefix="cornerslam-crash-", suffix=".txt")
             with os.fdopen(fd, "w") as f:
                 traceback.print_exc(file=f)
-            click.echo(f"internal error: {type(exc).__name__}: {exc} (traceback saved to {path})", err=True)
+            click.echo(f"internal error: {one_line(exc)} (traceback saved to {path})", err=True)
             ctx.exit(1)
         finally:
             if main_thread and previous is not None:
@@ -406,7 +407,7 @@ def evaluate(out_dir, ground_truth, relations, time_offset, verbose, quiet):
     "--step", default=0, show_default=True, type=click.IntRange(min=0), help="Index of the scan (0 = first)."
 )
 @click.option(
-    "--plot", "plot_path", type=click.Path(dir_okay=False), help="Draw the scan and features to a PNG."
+    "--plot", "plot_path", type=FIGURE_PATH, help="Draw the scan and features to a PNG (or .pdf, .svg)."
 )
 @config_options
 @topic_options
@@ -430,6 +431,7 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
         from .report.oserrors import output_errors
 
         with output_errors(plot_path):
+            Path(plot_path).parent.mkdir(parents=True, exist_ok=True)  # as --out and --mcap-out do
             plot_extraction(scan, segments, corners, plot_path)
         click.echo(f"wrote {plot_path}")
 

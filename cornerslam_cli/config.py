@@ -90,14 +90,16 @@ def _closest(key: str, valid: list[str]) -> str:
 
 
 _YAML11_EXPONENT = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)[eE][+-]?\d+$")
+_SIGNED_FRACTION = re.compile(r"^[+-]\.\d+$")
 _NON_FINITE = re.compile(r"^[+-]?(nan|inf|infinity)$", re.IGNORECASE)
 
 
 def _number_text(value: str) -> bool:
-    """Text that means a number where a number is expected: YAML 1.1 reads 1e-6 (no dot) as a string,
-    and ``--set k=nan`` / ``inf`` arrive as strings (they are then refused as not finite)."""
+    """Text that means a number where a number is expected: YAML 1.1 reads 1e-6 (no dot) and -.5 (a
+    sign before the dot; .5 is a number) as strings, and ``--set k=nan`` / ``inf`` arrive as strings
+    (they are then refused as not finite)."""
     v = value.strip()
-    return bool(_YAML11_EXPONENT.match(v) or _NON_FINITE.match(v))
+    return bool(_YAML11_EXPONENT.match(v) or _SIGNED_FRACTION.match(v) or _NON_FINITE.match(v))
 
 
 @dataclass(frozen=True, repr=False)

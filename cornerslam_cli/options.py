@@ -100,6 +100,26 @@ class _Finite(click.ParamType):
 FINITE = _Finite()
 
 
+class _FigurePath(click.ParamType):
+    """A figure file (``extract --plot``): a path, not a directory, ending in an extension matplotlib
+    writes (it appends .png to a name without one, and refuses an unknown one after the work)."""
+
+    name = "FILE.png"
+
+    def convert(self, value, param, ctx):
+        from matplotlib.backend_bases import FigureCanvasBase
+
+        path = click.Path(dir_okay=False).convert(value, param, ctx)
+        formats = sorted(FigureCanvasBase.get_supported_filetypes())
+        if os.path.splitext(path)[1][1:].lower() not in formats:
+            shown = click.format_filename(path)
+            self.fail(f"'{shown}' does not end in a figure format (.{', .'.join(formats)})", param, ctx)
+        return path
+
+
+FIGURE_PATH = _FigurePath()
+
+
 def reference_options(f):
     """What a run is scored against: ``--ground-truth``, ``--relations``, ``--time-offset``."""
     f = click.option(

@@ -9,6 +9,7 @@ written by the run writer (report/run_writer.py) into a staged output directory 
 from __future__ import annotations
 
 import logging
+import os
 import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -30,7 +31,8 @@ log = logging.getLogger("cornerslam.run")
 
 
 def default_out_dir(log_path: Path, assoc: str) -> Path:
-    stem = display_path(log_path.name.split(".")[0]) or "log"  # a name that is not UTF-8: printable
+    name = Path(os.path.abspath(log_path)).name  # `run .` in a ROS 2 bag directory: the directory's name
+    stem = display_path(name.split(".")[0]) or "log"  # a name that is not UTF-8: printable
     return Path("cornerslam_out") / f"{stem}_{assoc}"
 
 

@@ -17,6 +17,7 @@ and writes beside the log ``OUT.gt.tum`` (true base poses at the scan stamps) an
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,6 +28,7 @@ from .geometry import compose, relative, wrap_angle
 from .logs.mcap import header_library
 from .logs.writers import RawScan, write_mcap
 from .logs.writers.mcap import LIBRARY as LOG_LIBRARY
+from .report.outdir import clear_stale, staged_file
 from .report.ownership import refuse_special_file
 from .report.tables import write_tum
 from .simworld import OFFICE_LOOP, World, office_world, raycast, true_corners
@@ -192,12 +194,21 @@ def simulate_log(
             RawScan(float(ts), angle_min, inc, r.astype(np.float32), 0.05, p.max_range, "laser", beam_time)
         )
     odoms = [OdomSample(float(ti), *o) for ti, o in zip(t, odom, strict=True)]
-    write_mcap(out, scans, odoms, tf_static=(p.laser_x, 0.0, 0.0))
-    gt_path = out.with_suffix(".gt.tum")
-    write_tum(gt_path, t_scan, gt)
-    corners_path = out.with_suffix(".corners.csv")
-    c = true_corners(world)
-    np.savetxt(corners_path, c, delimiter=",", header="x,y,phi", comments="", fmt="%.6f")
+    out.parent.mkdir(parents=True, exist_ok=True)  # as --out and --mcap-out do
+    gt_path, corners_path = paths[1:]
+    for path in paths:
+        clear_stale(path)  # hidden files of a killed simulate
+    staged = {path: staged_file(path) for path in paths}  # written beside, renamed when all are written
+    try:
+        write_mcap(staged[out], scans, odoms, tf_static=(p.laser_x, 0.0, 0.0))
+        write_tum(staged[gt_path], t_scan, gt)
+        c = true_corners(world)
+        np.savetxt(staged[corners_path], c, delimiter=",", header="x,y,phi", comments="", fmt="%.6f")
+        for path, tmp in staged.items():
+            os.replace(tmp, path)
+    finally:  # Ctrl-C or a full disk: no partial log, and an earlier log is kept whole
+        for tmp in staged.values():
+            tmp.unlink(missing_ok=True)
     return {
         "log": str(out),
         "gt": str(gt_path),

@@ -81,8 +81,11 @@ class Span:
         return " ".join(p for p in parts if p)
 
     def order_problem(self) -> str | None:
-        """Why ``--end`` cannot come after ``--start`` when both are of the same kind, else None."""
+        """Why ``--end`` cannot come after ``--start`` when both are of the same kind, or at the first
+        scan (``--end 0``, ``--end '#0'``: before any start), else None."""
         s, e = self.start, self.end
+        if e is not None and e.value == 0:
+            return f"'{e.text()}' is the log's first scan: a span ending before it holds none"
         if s is not None and e is not None and s.index == e.index and e.value <= s.value:
             return f"'{e.text()}' is not after --start {s.text()}"
         return None

@@ -65,7 +65,8 @@ def plan(
     key=value``); unknown associators raise ConfigError with the closest name. Each combination's
     config is resolved as ``cornerslam run`` resolves it (:func:`lasers.resolve_config`: the laser
     preset matching the log's first scan under the user's layers); a log that cannot be opened is not
-    an error here but failed rows in :func:`run_batch`. Logs listed twice are run once.
+    an error here but failed rows in :func:`run_batch`. A log listed twice, however its path is spelled
+    (``x.mcap``, ``./x.mcap``), is run once.
     """
     from .association import associator_class
     from .config import load_config
@@ -85,7 +86,10 @@ def plan(
                 raise ConfigError(f"--sweep {key}={v}: {e.msg}", e.hint) from None
     if not assocs or len(set(assocs)) != len(assocs):
         raise ConfigError(f"associators {','.join(assocs)!r} must be distinct and non-empty")
-    logs = list(dict.fromkeys(str(p) for p in logs))
+    first: dict[str, str] = {}  # a log listed twice, however spelled (x.mcap, ./x.mcap): its first spelling
+    for p in map(str, logs):
+        first.setdefault(os.path.realpath(p), p)
+    logs = list(first.values())
     labels = _log_labels(logs)
     combos = []
     for log, assoc in itertools.product(logs, assocs):

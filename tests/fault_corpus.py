@@ -14,7 +14,9 @@ range noise), so every entry is the same small, valid run with one fault added:
 * reading (``_input_faults_ii``): JSON-encoded MCAP (foxglove_bridge / rosbridge), a topic in an
   encoding we do not decode, chunks not in time order, unnormalised and zero odometry quaternions,
   simulated time starting at stamp 0, tab-separated CARMEN, scans outside or far beyond the
-  odometry, ``input.skip_beams_*`` removing every beam.
+  odometry, ``input.skip_beams_*`` removing every beam;
+* ``_probe14_faults``: a ROS 2 bag whose metadata.yaml is not YAML; scan angles in degrees; an
+  odometry sample 1e300 m away.
 
 ``python tests/fault_corpus.py DIR`` writes the corpus and prints what each entry expects.
 """
@@ -22,6 +24,7 @@ range noise), so every entry is the same small, valid run with one fault added:
 from __future__ import annotations
 
 import math
+import shutil
 import struct
 import sys
 from collections.abc import Callable, Iterator
@@ -30,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cornerslam_cli.logs.writers import RawScan, write_carmen, write_mcap, write_rosbag1
+from cornerslam_cli.logs.writers import RawScan, write_carmen, write_mcap, write_rosbag1, write_rosbag2
 from cornerslam_cli.simworld import make_world, raycast, rectangle, room
 from cornerslam_cli.types import OdomSample
 
@@ -455,6 +458,7 @@ def build_corpus(d: str | Path) -> dict[str, tuple[Path, Expected]]:
     _ground_truth_faults(d, add)
     _input_faults_ii(d, add)
     _probe2_faults(d, add)
+    _probe14_faults(d, add)
     return out
 
 
@@ -930,6 +934,63 @@ def _probe2_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
                 f"{N + 1} messages could not be decoded",
                 "zero-length orientation quaternion",
             ),
+        ),
+    )
+
+
+def _probe14_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
+    """Faults found by the 14th probe: a ROS 2 bag directory whose metadata.yaml is not YAML (rosbags
+    quotes PyYAML's error, several lines long: the error was printed on four lines); scan angles in
+    degrees (processed without a word); an odometry sample 1e300 m away (an internal error)."""
+    bag = d / "rosbag2"
+    shutil.rmtree(bag, ignore_errors=True)
+    write_rosbag2(bag, make_scans(), make_odoms())
+    for name, metadata in (("not_yaml", b"rosbag2_bagfile_information: [\n"), ("nul", b"\x00\n")):
+        damaged = d / f"rosbag2_metadata_{name}"
+        shutil.rmtree(damaged, ignore_errors=True)
+        shutil.copytree(bag, damaged)
+        (damaged / "metadata.yaml").write_bytes(metadata)
+        add(
+            f"rosbag2_metadata_{name}",
+            damaged,
+            Expected(
+                "exit 2: the bag and its metadata.yaml named, on one line",
+                2,
+                (f"cannot read ROS 2 bag 'rosbag2_metadata_{name}'", "metadata.yaml", "(check the bag)"),
+            ),
+        )
+
+    # -- angles in degrees (a driver's or converter's mistake): 181 beams over 270 "radians", 43 turns
+    degrees = (replace(s, angle_min=-135.0, angle_increment=1.5) for s in make_scans())
+    add(
+        "angles_in_degrees",
+        write_mcap(d / "degrees.mcap", degrees, make_odoms()),
+        Expected(
+            "exit 2: every scan's beams span more than a full turn (it was processed into a map of noise)",
+            2,
+            ("degrees.mcap", f"all {N} scans on '/scan' were skipped", "beams over more than a full turn"),
+        ),
+    )
+    # -- one odometry sample 1e300 m away (damaged bytes): it overflowed the motion noise (exit 1)
+    far = make_odoms(edit=lambda i, p: p + np.array([1e300, 0.0, 0.0]) if i == 10 else p)
+    add(
+        "odom_one_sample_1e300",
+        write_mcap(d / "odom_1e300.mcap", make_scans(), far),
+        Expected(
+            "processed; the far sample skipped, counted, warned",
+            0,
+            ("has a position (1e+300,", "farther than 1e+09 m: skipped"),
+            dict(VALID_COUNTS, messages_failed=1),
+        ),
+    )
+    full_turn = (replace(s, angle_min=-math.pi, angle_increment=2 * math.pi / 180) for s in make_scans())
+    add(
+        "full_turn_with_the_first_beam_repeated",
+        write_mcap(d / "full_turn.mcap", full_turn, make_odoms()),
+        Expected(
+            "processed: a 360° scan may repeat its first beam's direction",
+            0,
+            counts={"steps": N, "scans_bad_geometry": 0},
         ),
     )
 

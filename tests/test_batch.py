@@ -83,6 +83,14 @@ def test_plan_names_stay_distinct_for_clashing_logs_and_unsafe_values():
     assert names[0] != names[1]
 
 
+def test_plan_runs_a_log_once_however_its_path_is_spelled(tmp_path, monkeypatch):
+    """`batch x.mcap ./x.mcap $PWD/x.mcap`: one combination (they were refused as two combinations
+    mapping to one directory name, blamed on sweep values)."""
+    monkeypatch.chdir(tmp_path)
+    spellings = ["x.mcap", "./x.mcap", str(tmp_path / "x.mcap"), "sub/../x.mcap"]
+    assert [(c.log, c.name) for c in plan(spellings, ["pca"])] == [("x.mcap", "x__pca")]
+
+
 def test_plan_resolves_each_config_as_run_does():
     from cornerslam_cli.lasers import resolve_config
 

@@ -196,19 +196,33 @@ def signalling_nan_bag(path: Path) -> Path:
     return path
 
 
+def quiet_run(log: Path, out: Path) -> dict:
+    """``run LOG --out OUT -q``: exit 0, nothing on stderr and no numpy RuntimeWarning; its summary."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = invoke("run", log, "--out", out, "-q")
+    assert res.exit_code == 0, res.output
+    assert [str(w.message) for w in caught if issubclass(w.category, RuntimeWarning)] == []
+    assert res.stderr == ""
+    return strict_load(out / "summary.json")
+
+
 def test_a_signalling_nan_range_is_an_invalid_beam_without_numpy_noise(tmp_path):
     """A bag whose range bytes are a signalling NaN: the beam counted invalid like any NaN, and no numpy
     RuntimeWarning ("invalid value encountered in cast", raised by the float32 → float64 cast of the
     ranges) on stderr, which `-q` leaves empty (found by a hostile-user probe)."""
-    log = signalling_nan_bag(tmp_path / "snan.bag")
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        res = invoke("run", log, "--out", tmp_path / "out", "-q")
-    assert res.exit_code == 0, res.output
-    assert [str(w.message) for w in caught if issubclass(w.category, RuntimeWarning)] == []
-    assert res.stderr == ""
-    counts = strict_load(tmp_path / "out" / "summary.json")["counts"]
+    counts = quiet_run(signalling_nan_bag(tmp_path / "snan.bag"), tmp_path / "out")["counts"]
     assert (counts["steps"], counts["beams_invalid"]) == (N, 1)
+
+
+def test_an_infinite_laser_mount_on_tf_is_ignored_without_numpy_noise(tmp_path):
+    """A /tf_static base_link→laser whose x is inf: ignored with a warning, the run goes on, and no
+    numpy RuntimeWarning ("invalid value encountered in matmul", chaining the transforms) on stderr,
+    which `-q` leaves empty (found by a hostile-user probe)."""
+    log = write_mcap(tmp_path / "tf_inf.mcap", make_scans(), make_odoms(), tf_static=(np.inf, 0.0, 0.0))
+    summary = quiet_run(log, tmp_path / "out")
+    assert summary["counts"]["steps"] == N
+    assert any("the tf base_link→laser is not finite: ignored" in w for w in summary["warnings"])
 
 
 def test_previous_output_survives_a_failed_run(corpus, tmp_path):

@@ -207,6 +207,17 @@ def test_booleans_follow_yaml_1_1(tmp_path):
             load_config(None, [bad])
 
 
+@pytest.mark.parametrize("text, value", [("-.5", -0.5), ("+.25", 0.25), (".5", 0.5), ("-.5e-1", -0.05)])
+def test_a_fraction_without_a_leading_zero_is_a_number_whatever_its_sign(tmp_path, text, value):
+    """YAML 1.1 reads .5 as a number but -.5 as a string: it was refused as 'must be a number'."""
+    p = tmp_path / "c.yaml"
+    p.write_text(f"input:\n  laser:\n    x: {text}\n")
+    assert load_config(p).input.laser.x == value
+    assert load_config(None, [f"input.laser.x={text}"]).input.laser.x == value
+    with pytest.raises(ConfigError, match="'ekf.initial_capacity' must be an integer, got '-.5'"):
+        load_config(None, ["ekf.initial_capacity=-.5"])
+
+
 def test_non_utf8_names_the_line_and_a_utf8_bom_is_fine(tmp_path):
     p = tmp_path / "c.yaml"
     p.write_bytes(b"# ok\nekf:\n  alpha1: 0.05  # \xb5m\n")

@@ -15,7 +15,7 @@ from click.testing import CliRunner
 from fault_corpus import N, check_error_line, make_odoms, make_scans, peak_bytes, write_gt
 
 from cornerslam_cli.cli import cli
-from cornerslam_cli.logs.writers import write_mcap
+from cornerslam_cli.logs.writers import write_mcap, write_rosbag2
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="POSIX only")
 
@@ -96,6 +96,25 @@ def test_batch_fails_the_rows_of_a_pipe_and_runs_the_others(tmp_path, good):
     rows = (tmp_path / "b" / "batch.csv").read_text().splitlines()[1:]
     assert rows[0].startswith(f"{fifo},pca,failed,") and "is a pipe" in rows[0]
     assert rows[1].startswith(f"{good},pca,ok,")
+
+
+# ---------------------------------------------------------------------------- a ROS 2 bag run from inside
+def test_run_dot_inside_a_ros2_bag_directory(tmp_path, monkeypatch):
+    """`cd BAG && cornerslam run .` (and `run ..` from a folder inside it): the bag runs, its output is
+    named after the bag's directory and its ground truth found beside it (an internal error: '.' has
+    no file name)."""
+    bag = write_rosbag2(tmp_path / "bag", make_scans(), make_odoms(), storage="mcap")
+    write_gt(bag)  # tmp_path/bag.gt.tum
+    monkeypatch.chdir(bag)
+    res = invoke("run", ".", "-q")
+    assert res.exit_code == 0, res.output
+    s = json.loads((bag / "cornerslam_out" / "bag_pca" / "summary.json").read_text())
+    assert s["counts"]["steps"] == N and s["accuracy"]["ground_truth"].endswith("/bag.gt.tum")
+    (bag / "sub").mkdir()
+    monkeypatch.chdir(bag / "sub")
+    res = invoke("run", "..", "--out", tmp_path / "o", "-q")
+    assert res.exit_code == 0, res.output
+    assert json.loads((tmp_path / "o" / "summary.json").read_text())["accuracy"]["ate"]["rmse"] < 0.01
 
 
 # ---------------------------------------------------------------------------- names that are not UTF-8

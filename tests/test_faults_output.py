@@ -361,6 +361,17 @@ def compare_interrupted_while_drawing(w: World) -> Case:
     return Case(["compare", w.log, "--assoc", "icnn", "--out", out])
 
 
+@fault(130, KEPT)
+def simulate_interrupted_while_writing(w: World) -> Case:
+    """`simulate` interrupted while it writes its files: the earlier log, ground truth and corners kept
+    whole, no partial or hidden file left (the MCAP was written in place: a truncated log stayed)"""
+    from cornerslam_cli.simulate import simulate_log
+
+    simulate_log(w.tmp / "s.mcap", beams=11, rate=1.0, seed=1)
+    w.mp.setattr("cornerslam_cli.simulate.write_tum", interrupt)  # after the MCAP is written
+    return Case(["simulate", w.tmp / "s.mcap", "--beams", "11", "--rate", "1"])
+
+
 # 3. leftovers, concurrent runs, permissions
 @fault(0)
 def staging_left_by_a_killed_run(w: World) -> Case:
@@ -653,6 +664,42 @@ def time_offset_not_finite(w: World) -> Case:
 def extract_step_negative(w: World) -> Case:
     """`extract --step -1`: usage error"""
     return Case(["extract", w.log, "--step", "-1"])
+
+
+@fault(2, "invalid value for '--plot'", "does not end in a figure format (", ".pdf, ", ".png, ")
+def extract_plot_not_a_figure(w: World) -> Case:
+    """`extract --plot scan.txt`: usage error naming the file and the formats, before any work (it was
+    an internal error after the work)"""
+    return Case(["extract", w.log, "--plot", w.tmp / "scan.txt"], w.tmp / "scan.txt")
+
+
+@fault(2, "does not end in a figure format")
+def extract_plot_without_an_extension(w: World) -> Case:
+    """`extract --plot scan`: usage error (matplotlib wrote scan.png, and `wrote scan` was printed)"""
+    return Case(["extract", w.log, "--plot", w.tmp / "scan"], w.tmp / "scan")
+
+
+@fault(0)
+def extract_plot_into_a_new_directory(w: World) -> Case:
+    """`extract --plot new/scan.png`: the directory made, as `--out` and `--mcap-out` make theirs (it
+    was an internal error)"""
+    figure = w.tmp / "new" / "sub" / "scan.PNG"
+
+    def after():
+        assert figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+    return Case(["extract", w.log, "--plot", figure], after=after)
+
+
+@fault(0)
+def simulate_into_a_new_directory(w: World) -> Case:
+    """`simulate new/s.mcap`: the directory made (it was an internal error)"""
+    out = w.tmp / "new" / "sub" / "s.mcap"
+
+    def after():
+        assert sorted(p.name for p in out.parent.iterdir()) == ["s.corners.csv", "s.gt.tum", "s.mcap"]
+
+    return Case(["simulate", out, "--beams", "11", "--rate", "1"], after=after)
 
 
 @fault(0)

@@ -100,6 +100,16 @@ def test_bad_span_values_exit_2_naming_the_option(sim_log, tmp_path, command, ar
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.parametrize("end", [("0",), ("0.0",), ("#0",), ("0", "--start", "#0")])
+def test_an_end_at_the_first_scan_is_refused_naming_the_option(sim_log, tmp_path, end):
+    """`--end 0` holds no scan: a usage error (it read the log up to its first scan, then said the log
+    held '1 scans over 0.0 s')."""
+    res = invoke("run", sim_log, "--out", tmp_path / "o", "--end", *end)
+    assert res.exit_code == 2, res.output
+    assert "invalid value for --end" in res.stderr and "is the log's first scan" in res.stderr, res.stderr
+    assert not (tmp_path / "o").exists()
+
+
 def test_span_past_the_end_of_the_log_is_one_line_error(sim_log, tmp_path):
     res = invoke("run", sim_log, "--out", tmp_path / "o", "--start", "#100000")
     assert res.exit_code == 2, res.output

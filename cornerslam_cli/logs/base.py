@@ -16,12 +16,14 @@ Conventions (all formats)
   recordings, :mod:`.jsonmsg`); a chosen topic in another encoding (protobuf, flatbuffer, ...) is a
   LogError naming it, a tf topic in one is skipped with a warning.
 * Odometry orientation quaternions are normalised before the yaw is taken; a degenerate one (norm
-  ~0, or a non-finite component) skips its sample (counted in ``stats.decode_failed``, warned).
+  ~0, or a non-finite component) skips its sample (counted in ``stats.decode_failed``, warned), and
+  so does a position beyond ``MAX_ODOM_XY`` (damaged bytes).
 * A beam is valid when finite, > 0, >= range_min and < range_max (a reading equal to range_max
   is the driver's "no return"). Invalid beams are dropped and counted.
 * A scan whose ranges count differs from ``(angle_max - angle_min) / angle_increment + 1`` is kept:
   ``len(ranges)`` beams from angle_min with angle_increment (counted in ``stats.size_mismatch``).
-  A scan with angle_increment <= 0 or non-finite is skipped (``stats.scans_skipped``).
+  A scan with angle_increment <= 0 or non-finite is skipped (``stats.scans_skipped``), and so is one
+  whose beams span more than a full turn (angles in degrees: 1081 beams of 0.25 "rad").
 """
 
 from __future__ import annotations
@@ -44,6 +46,7 @@ from .deskew import MAX_SWEEP
 logger = logging.getLogger("cornerslam.logs")
 
 ENCODINGS = ("cdr", "ros1", "json")  # message encodings the ROS-message readers decode
+MAX_ODOM_XY = 1e9  # metres: odometry in UTM or ECEF coordinates stays below 1e7
 
 Pose2 = tuple[float, float, float]
 
@@ -152,11 +155,18 @@ class ReadStats:
             self.warn(msg, *args)
 
     def bad_odometry(self, where: str, stamp: float, pose: tuple[float, float, float]) -> bool:
-        """True (counted in ``decode_failed``, warned) if an odometry sample has a non-finite field."""
-        if math.isfinite(stamp) and all(math.isfinite(v) for v in pose):
-            return False
-        self.failed("%s: odometry sample at %r has a non-finite pose %r: skipped", where, stamp, pose)
-        return True
+        """True (counted in ``decode_failed``, warned) if an odometry sample has a non-finite field or
+        a position farther than ``MAX_ODOM_XY`` from the origin (damaged bytes: 1e300 m)."""
+        if not (math.isfinite(stamp) and all(math.isfinite(v) for v in pose)):
+            self.failed("%s: odometry sample at %r has a non-finite pose %r: skipped", where, stamp, pose)
+            return True
+        if max(abs(pose[0]), abs(pose[1])) > MAX_ODOM_XY:
+            self.failed(
+                "%s: odometry sample at %r has a position %r farther than %g m: skipped",
+                where, stamp, pose[:2], MAX_ODOM_XY,
+            )  # fmt: skip
+            return True
+        return False
 
     def odometry_sample(
         self, where: str, stamp: float, x: float, y: float, q: tuple[float, float, float, float]
@@ -196,7 +206,8 @@ class ReadStats:
         if self.scans == 0 and self.scans_skipped > 0:
             raise LogError(
                 f"log '{name}': all {self.scans_skipped} scans on '{short_text(topic)}' were skipped "
-                "(angle_increment <= 0 or not finite, no beams, or no valid stamp)",
+                "(angle_increment <= 0 or not finite, beams over more than a full turn, no beams, "
+                "or no valid stamp)",
                 "check the LaserScan messages' angle_min/angle_increment; `cornerslam extract` shows one",
             )
 
@@ -250,6 +261,14 @@ def make_scan(
             stats.warn(
                 "%s: scan at %.3f has angle_min %r, angle_increment %r: skipped",
                 where, stamp, angle_min, angle_increment,
+            )  # fmt: skip
+        return None
+    if (n - 1) * angle_increment > 2.0 * math.pi + angle_increment:  # (one more: a 360° scan's repeated beam)
+        stats.scans_skipped += 1
+        if stats.scans_skipped <= 3:
+            stats.warn(
+                "%s: scan at %.3f has %d beams of angle_increment %r, %.1f turns (degrees?): skipped",
+                where, stamp, n, angle_increment, (n - 1) * angle_increment / (2.0 * math.pi),
             )  # fmt: skip
         return None
     if not math.isfinite(stamp):

@@ -395,7 +395,8 @@ class RosLogReader:
         if frame is None:
             self._laser2base = None
             return None
-        T = chain_transform(edges, self.base_frame, frame)
+        with np.errstate(invalid="ignore", over="ignore"):  # an inf in a tf: the result is checked below
+            T = chain_transform(edges, self.base_frame, frame)
         self._laser2base = None if T is None else pose2_from_matrix(T)
         if self._laser2base is not None and not all(math.isfinite(v) for v in self._laser2base):
             self.stats.warn("%s: the tf %s→%s is not finite: ignored", self.path.name, self.base_frame, frame)

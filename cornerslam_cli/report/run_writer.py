@@ -15,6 +15,7 @@ is written by name, never by position. The accuracy is measured against a :class
 
 from __future__ import annotations
 
+import os
 import time
 from array import array
 from contextlib import ExitStack
@@ -248,7 +249,12 @@ class RunWriter:
 
 
 def find_ground_truth(log_path: Path) -> Path | None:
-    """``LOG.gt.tum`` beside the log (also without the log's extension), if present."""
+    """``LOG.gt.tum`` beside the log (also without the log's extension), if present; for ``.`` or
+    ``..`` (a ROS 2 bag directory run from inside it), beside that directory."""
+    if log_path.name in ("", ".."):
+        log_path = Path(os.path.abspath(log_path))
+        if not log_path.name:  # the root directory
+            return None
     candidates = [log_path.with_name(log_path.name + ".gt.tum"), log_path.with_suffix(".gt.tum")]
     return next((c for c in candidates if c.is_file()), None)
 
