@@ -41,6 +41,11 @@ class Window:
     xy: float
     theta: float
 
+    def pull_widths(self) -> tuple[float, float]:
+        """(xy, theta) that scale the pull towards the guess: at least 1e-9 (a window of no width is one
+        cell with no pull, not 0/0)."""
+        return max(self.xy, 1e-9), max(self.theta, 1e-9)
+
 
 @dataclass(frozen=True)
 class Exclusion:
@@ -182,9 +187,9 @@ class Search:
         bound = coarse_sums(block_max(L, BLOCK), px, py, offs) / n
         # minus the smallest pull towards the guess inside each coarse cell: still a bound
         near = np.clip(0, offs - W, offs + BLOCK - 1 - W)  # per axis, the cell offset closest to the guess
-        xy = max(window.xy, 1e-9)  # (a window of no width: one cell, no pull — not 0/0)
+        xy, theta = window.pull_widths()
         bound -= PULL * (
-            (dthetas / max(window.theta, 1e-9))[:, None, None] ** 2
+            (dthetas / theta)[:, None, None] ** 2
             + ((near * res / xy) ** 2)[None, :, None]
             + ((near * res / xy) ** 2)[None, None, :]
         )
@@ -198,8 +203,9 @@ class Search:
         n_side = 2 * W + 1
         thetas = guess[2] + self.dthetas
         offsets = np.arange(n_side) - W
-        shift_term = (offsets * res / max(window.xy, 1e-9)) ** 2
-        turn_term = np.array([(d / max(window.theta, 1e-9)) ** 2 for d in self.dthetas])
+        xy, theta = window.pull_widths()
+        shift_term = (offsets * res / xy) ** 2
+        turn_term = np.array([(d / theta) ** 2 for d in self.dthetas])
         if exclude is None:
             excluded, turned = np.zeros((n_side, n_side), dtype=bool), np.zeros(len(thetas), dtype=bool)
         else:
