@@ -15,9 +15,7 @@ import logging
 import os
 import signal
 import sys
-import tempfile
 import threading
-import traceback
 from pathlib import Path
 
 from .blas import single_threaded_blas
@@ -27,7 +25,7 @@ single_threaded_blas()  # before numpy is first imported (blas.py says why)
 import click  # noqa: E402
 
 from . import __version__  # noqa: E402
-from .errors import CornerslamError, LogError, display_path, one_line  # noqa: E402
+from .errors import CornerslamError, LogError, display_path, one_line, save_traceback  # noqa: E402
 from .options import (  # noqa: E402
     CONFIG_COPIES,
     FIGURE_PATH,
@@ -137,9 +135,7 @@ class _Cli(click.Group):
                     f"error: cannot write to standard output: {reason} (redirect it elsewhere)", err=True
                 )
                 ctx.exit(2)
-            fd, path = tempfile.mkstemp(prefix="cornerslam-crash-", suffix=".txt")
-            with os.fdopen(fd, "w") as f:
-                traceback.print_exc(file=f)
+            path = save_traceback(exc)
             click.echo(f"internal error: {one_line(exc)} (traceback saved to {path})", err=True)
             ctx.exit(1)
         finally:
@@ -461,7 +457,8 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
     """Run every LOG × associator × swept config value into OUT/<name>/ and tabulate in OUT/batch.csv.
 
     A bad log fails its rows without stopping the batch; rerunning the same command skips the
-    combinations already complete with the same log, config and version.
+    combinations already complete with the same log, config and version. Exit 0 only if every
+    combination ran or was skipped; otherwise 2 (bad input), or 1 if any failed by a bug.
 
     \b
     Example:
@@ -492,12 +489,19 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
         )
         raise click.exceptions.Exit(130) from None
     progress.close()
-    failed, _ = batch_counts(rows)
     if not quiet:
         _echo(batch_lines(rows, [k for k, _ in combos[0].sweep]))
         click.echo(f"wrote {Path(out) / BATCH_CSV}")
-    elif failed:
-        click.echo(f"{failed} of {len(rows)} combinations failed (see {Path(out) / BATCH_CSV})", err=True)
+    failed, _ = batch_counts(rows)
+    if failed:  # as make: a batch with a failed combination is no success (1 if a bug, else 2)
+        bugs = sum(bool(r["internal"]) for r in rows)
+        word = "internal error" if bugs else "error"
+        which = f" ({bugs} by an internal error: a bug, traceback saved)" if bugs else ""
+        click.echo(
+            f"{word}: {failed} of {len(rows)} combinations failed{which}: see {Path(out) / BATCH_CSV}",
+            err=True,
+        )
+        raise click.exceptions.Exit(1 if bugs else 2)
 
 
 @cli.command("config")
