@@ -236,7 +236,7 @@ def run(
     from .pipeline import run as run_pipeline
 
     setup_logging(verbose, quiet)
-    names = parse_assocs(assoc, allow_many=False)
+    names = parse_assocs(assoc, allow_many=False, log_path=log_path)
     span = parse_span(start, end, max_scans)
     cfg = command_config(
         config_path, overrides, names[0] if names else None, scan_topic, odom_topic, log_path
