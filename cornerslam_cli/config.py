@@ -292,8 +292,32 @@ def _yaml_problem(e: yaml.YAMLError, text: str) -> str:
     return (f" at line {mark.line + 1}" if mark is not None else "") + (f": {what}" if what else "")
 
 
+def _empty_null_sections(data: dict, cls: type, where: str, prefix: str = "") -> dict:
+    """``data`` (a file's mapping for the dataclass ``cls``) with every null section — ``ekf:`` with
+    all its keys commented out, which YAML reads as null — taken as an empty one (its defaults, or
+    the laser preset's); a section given as a scalar or a list is refused naming the file and key.
+    Other keys are left to :func:`from_dict`."""
+    hints = typing.get_type_hints(cls)
+    out = dict(data)
+    for k, v in data.items():
+        tp = hints.get(k) if isinstance(k, str) else None
+        if tp is None or not dataclasses.is_dataclass(tp):
+            continue
+        if v is None:
+            out[k] = {}
+        elif isinstance(v, dict):
+            out[k] = _empty_null_sections(v, tp, where, f"{prefix}{k}.")
+        else:
+            raise ConfigError(
+                f"{where}: section '{prefix}{k}' must be a mapping of its keys, got {short_repr(v)}",
+                f"indent its keys under '{k}:', e.g. configs/default.yaml",
+            )
+    return out
+
+
 def read_config_file(path: str | Path) -> dict:
-    """The mapping a YAML config file holds (``{}`` for an empty file), not yet validated as a config."""
+    """The mapping a YAML config file holds (``{}`` for an empty file; a null section is an empty
+    one), not yet validated as a config."""
     p = Path(path)
     where = f"config file '{p}'"
     text = read_text(p, "config file", ConfigError, CONFIG_FILE, max_bytes=MAX_CONFIG_BYTES)
@@ -305,7 +329,7 @@ def read_config_file(path: str | Path) -> dict:
         return {}
     if not isinstance(loaded, dict):
         raise ConfigError(f"{where} must contain a mapping of sections, not {type(loaded).__name__}")
-    return loaded
+    return _empty_null_sections(loaded, Config, where)
 
 
 def _parse_override(text: str) -> tuple[list[str], Any]:

@@ -494,7 +494,7 @@ def _config_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
         ("too_large", "#" * (1 << 20) + "\n", "exit 2: larger than 1 MiB", ("larger than 1024 KiB",)),
         ("a_list", "- ekf\n- lines\n", bad, ("must contain a mapping of sections, not list",)),
         ("a_scalar", "3\n", bad, ("must contain a mapping of sections, not int",)),
-        ("section_scalar", "ekf: 3\n", bad, ("'ekf' must be a mapping, got 3",)),
+        ("section_scalar", "ekf: 3\n", bad, ("section 'ekf' must be a mapping of its keys, got 3",)),
         ("control_char", "ekf:\n  alpha1: 0.05\n  alpha2: \x07\n", bad, ("line 3", "control character #x07")),
         ("two_documents", "ekf: {}\n---\nekf: {}\n", bad, ("line 2", "expected a single document")),
         ("duplicated_key", "ekf:\n  alpha1: 0.1\n  alpha1: 0.2\n", bad, ("line 3", "is given twice")),
@@ -537,8 +537,13 @@ def _config_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
     ]  # fmt: skip
     for name, text, message in sets:
         add(f"set_{name}", good, Expected(f"--set {text[:40]}: exit 2", 2, message, args=("--set", text)))
-    fine = [  # processed with the defaults: an empty config, YAML 1.1 booleans (yes/off), an alias
+    fine = [  # processed with the defaults: an empty config, YAML 1.1 booleans (yes/off), an alias,
+        # sections left empty (every key commented out: YAML reads null)
         ("config_dev_null", Path("/dev/null")),
+        (
+            "config_empty_sections",
+            _write(d, "config_empty.yaml", "ekf:\n#  alpha1: 0.1\nassociation:\n  jcbb:\n"),
+        ),
         ("config_yes_off", _write(d, "config_yes.yaml", "ekf:\n  fuse: yes\n  joseph: off\n")),
         ("config_alias", _write(d, "config_alias.yaml", "ekf:\n  alpha1: &a 0.05\n  alpha3: *a\n")),
     ]

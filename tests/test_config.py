@@ -92,3 +92,39 @@ def test_dump_round_trips(tmp_path):
     p = tmp_path / "dump.yaml"
     p.write_text(dump_config(cfg))
     assert load_config(p) == cfg
+
+
+# ---------------------------------------------------------------------------- sections left empty
+def test_a_null_section_is_an_empty_one(tmp_path):
+    """`ekf:` with every key commented out (YAML: null) means the defaults — or the laser preset's
+    values, which it must not wipe — at any depth (it was "must be a mapping, got None")."""
+    from cornerslam_cli.lasers import PRESETS, resolve_config
+
+    p = tmp_path / "c.yaml"
+    p.write_text("ekf:\n#  alpha1: 0.1\nsensor:\nassociation:\n  alpha: 0.01\n  jcbb: ~\n")
+    cfg = load_config(p)
+    assert cfg.ekf == Config().ekf and cfg.association.jcbb == Config().association.jcbb
+    assert cfg.association.alpha == 0.01
+    preset = PRESETS["sick_lms_1deg"].config
+    assert preset["sensor"]["model"] == "linear"  # the preset sets the section the file leaves empty
+    assert load_config(p, base=preset).sensor == load_config(None, base=preset).sensor
+    cfg = resolve_config(None, p, ["input.laser_preset=sick_lms_1deg"])
+    assert cfg.sensor.model == "linear" and cfg.association.alpha == 0.01
+
+
+@pytest.mark.parametrize(
+    ("text", "key", "got"),
+    [
+        ("ekf: 5\n", "ekf", "5"),
+        ("ekf: [1, 2]\n", "ekf", "[1, 2]"),
+        ("input:\n  laser: x\n", "input.laser", "'x'"),
+    ],
+)
+def test_a_section_given_as_a_scalar_or_list_is_refused_naming_the_file_and_key(tmp_path, text, key, got):
+    p = tmp_path / "c.yaml"
+    p.write_text(text)
+    with pytest.raises(ConfigError) as e:
+        load_config(p)
+    assert str(e.value).startswith(
+        f"config file '{p}': section '{key}' must be a mapping of its keys, got {got}"
+    )
