@@ -389,10 +389,12 @@ def evaluate(out_dir, ground_truth, relations, time_offset, verbose, quiet):
       cornerslam evaluate cornerslam_out/intel_pca --relations intel.relations --time-offset 976052857.334
     """
     from .evaluate import evaluate_files
+    from .report.run_dir import check_one_run
 
     setup_logging(verbose, quiet)
     if not ground_truth and not relations:
         raise click.UsageError("give --ground-truth FILE.tum or --relations FILE")
+    check_one_run(out_dir)  # a compare or batch directory: names its run directories
     res = evaluate_files(out_dir, ground_truth, relations, time_offset)
     _echo(evaluation_lines(res))
 
