@@ -3,7 +3,9 @@
 :func:`sweep.plan` expands the grid into combinations (validating every key and value before any
 work; sweep.py also names their directories); :func:`run_batch` runs each into ``OUT/<name>/`` — a
 complete ``run`` output directory — and writes ``OUT/batch.csv`` with one row per combination, in
-the plan's order.
+the plan's order. A failed row's error is its one line: a bad input's message (a CornerslamError), or
+``internal error: …`` naming the file its traceback was saved to (a bug); the rows returned carry
+``internal`` (not a column) so that the CLI exits 1 for a bug and 2 for bad input.
 
 Resume: a combination is skipped (status ``skipped``, its figures re-read) when ``OUT/<name>/summary.json``
 is complete and its ``hashes`` (sha256 of the log's bytes, sha256 of the resolved config, version)
@@ -38,7 +40,7 @@ from pathlib import Path
 
 from . import __version__
 from .blas import single_threaded_blas, single_threaded_blas_env
-from .errors import CornerslamError, ResultsError, display_path, one_line
+from .errors import CornerslamError, ResultsError, display_path, one_line, save_traceback
 from .report.oserrors import output_errors
 from .report.outdir import clear_stale, staged_file
 from .report.ownership import claim_dir
@@ -159,10 +161,12 @@ def _size(path: str) -> int:
         return 0
 
 
-def _row(c: Combo, status: str, error: str = "", figures: dict | None = None) -> dict:
+def _row(c: Combo, status: str, error: str = "", figures: dict | None = None, internal: bool = False) -> dict:
+    """A row of batch.csv (its columns), and ``internal``: whether the failure was a bug."""
     row = {"log": display_path(c.log), "assoc": c.assoc, **dict(c.sweep), "status": status, "error": error}
     row.update({k: (figures or {}).get(k) for k in FIGURES})
     row["out_dir"] = c.name if status in ("ok", "skipped") else ""
+    row["internal"] = internal
     return row
 
 
@@ -211,8 +215,13 @@ def run_one(log: str, config: dict, out_dir: str) -> dict:
 
 
 def _failed(e: BaseException) -> dict:
-    """The failure row's status and one-line error."""
-    return {"status": "failed", "error": one_line(e)}
+    """The failure row's status and one-line error: bad input (a CornerslamError) as its message, a
+    bug as ``internal error: …`` with its traceback saved to a file the line names (as ``cli.py``
+    reports one)."""
+    if isinstance(e, CornerslamError):
+        return {"status": "failed", "error": one_line(e)}
+    error = f"internal error: {one_line(e)} (traceback saved to {save_traceback(e)})"
+    return {"status": "failed", "error": error, "internal": True}
 
 
 def _run_local(tasks: list[tuple], jobs: int, finished: Callable[[int, dict], None]) -> None:

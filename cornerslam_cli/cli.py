@@ -15,9 +15,7 @@ import logging
 import os
 import signal
 import sys
-import tempfile
 import threading
-import traceback
 from pathlib import Path
 
 from .blas import single_threaded_blas
@@ -27,7 +25,7 @@ single_threaded_blas()  # before numpy is first imported (blas.py says why)
 import click  # noqa: E402
 
 from . import __version__  # noqa: E402
-from .errors import CornerslamError, LogError, display_path, one_line  # noqa: E402
+from .errors import CornerslamError, LogError, display_path, one_line, save_traceback  # noqa: E402
 from .options import (  # noqa: E402
     CONFIG_COPIES,
     FIGURE_PATH,
@@ -137,9 +135,7 @@ class _Cli(click.Group):
                     f"error: cannot write to standard output: {reason} (redirect it elsewhere)", err=True
                 )
                 ctx.exit(2)
-            fd, path = tempfile.mkstemp(prefix="cornerslam-crash-", suffix=".txt")
-            with os.fdopen(fd, "w") as f:
-                traceback.print_exc(file=f)
+            path = save_traceback(exc)
             click.echo(f"internal error: {one_line(exc)} (traceback saved to {path})", err=True)
             ctx.exit(1)
         finally:
@@ -240,7 +236,7 @@ def run(
     from .pipeline import run as run_pipeline
 
     setup_logging(verbose, quiet)
-    names = parse_assocs(assoc, allow_many=False)
+    names = parse_assocs(assoc, allow_many=False, log_path=log_path)
     span = parse_span(start, end, max_scans)
     cfg = command_config(
         config_path, overrides, names[0] if names else None, scan_topic, odom_topic, log_path
@@ -393,10 +389,12 @@ def evaluate(out_dir, ground_truth, relations, time_offset, verbose, quiet):
       cornerslam evaluate cornerslam_out/intel_pca --relations intel.relations --time-offset 976052857.334
     """
     from .evaluate import evaluate_files
+    from .report.run_dir import check_one_run
 
     setup_logging(verbose, quiet)
     if not ground_truth and not relations:
         raise click.UsageError("give --ground-truth FILE.tum or --relations FILE")
+    check_one_run(out_dir)  # a compare or batch directory: names its run directories
     res = evaluate_files(out_dir, ground_truth, relations, time_offset)
     _echo(evaluation_lines(res))
 
@@ -461,7 +459,8 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
     """Run every LOG × associator × swept config value into OUT/<name>/ and tabulate in OUT/batch.csv.
 
     A bad log fails its rows without stopping the batch; rerunning the same command skips the
-    combinations already complete with the same log, config and version.
+    combinations already complete with the same log, config and version. Exit 0 only if every
+    combination ran or was skipped; otherwise 2 (bad input), or 1 if any failed by a bug.
 
     \b
     Example:
@@ -492,12 +491,19 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
         )
         raise click.exceptions.Exit(130) from None
     progress.close()
-    failed, _ = batch_counts(rows)
     if not quiet:
         _echo(batch_lines(rows, [k for k, _ in combos[0].sweep]))
         click.echo(f"wrote {Path(out) / BATCH_CSV}")
-    elif failed:
-        click.echo(f"{failed} of {len(rows)} combinations failed (see {Path(out) / BATCH_CSV})", err=True)
+    failed, _ = batch_counts(rows)
+    if failed:  # as make: a batch with a failed combination is no success (1 if a bug, else 2)
+        bugs = sum(bool(r["internal"]) for r in rows)
+        word = "internal error" if bugs else "error"
+        which = f" ({bugs} by an internal error: a bug, traceback saved)" if bugs else ""
+        click.echo(
+            f"{word}: {failed} of {len(rows)} combinations failed{which}: see {Path(out) / BATCH_CSV}",
+            err=True,
+        )
+        raise click.exceptions.Exit(1 if bugs else 2)
 
 
 @cli.command("config")

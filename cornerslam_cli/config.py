@@ -9,7 +9,13 @@ and the closest valid one or the allowed range. Each pipeline stage receives onl
 A config file is UTF-8 YAML of at most 1 MiB, one document, no key given twice. Anchors and aliases
 are allowed, but a document that expands to more than ``MAX_YAML_NODES`` nodes (an alias bomb:
 aliases of lists of aliases) is refused before anything is built from it, and error messages quote
-at most a short prefix of any value.
+at most a short prefix of any value. A plain value YAML 1.1 reads as a base-60 number (``1:30`` is
+90, ``1:30.5`` is 90.5: a time written as minutes:seconds) is refused naming the key and the text,
+in a file and in ``--set``: no key takes such text, and 90 is rarely what was meant.
+
+Over 400 lines because the YAML reading (a safe loader refusing keys given twice, alias bombs and
+base-60 numbers, its errors naming file and line) sits beside the validation it feeds: both decide
+what a user's config may say; the YAML half could move to a module of its own, as textfile.py did.
 """
 
 from __future__ import annotations
@@ -209,8 +215,37 @@ def from_dict(cls: type, data: dict, prefix: str = "") -> Any:
 
 
 # --------------------------------------------------------------------------- YAML
+_INT_TAG = "tag:yaml.org,2002:int"
+_FLOAT_TAG = "tag:yaml.org,2002:float"
+_SEXAGESIMAL_TAG = "tag:cornerslam,2026:sexagesimal"
+
+
+@dataclass(frozen=True)
+class Sexagesimal:
+    """A plain YAML scalar that YAML 1.1 reads as a base-60 number (``1:30`` → 90): ``text`` as
+    written, ``value`` what YAML 1.1 makes of it, ``line`` (1-based) where it stands. Never a config
+    value: :func:`_refuse_sexagesimal` refuses it under the key it was given for."""
+
+    text: str
+    value: int | float | LongInteger
+    line: int
+
+
 class _ConfigLoader(yaml.SafeLoader):
-    """PyYAML's safe loader that refuses a key given twice in one mapping (PyYAML keeps the last)."""
+    """PyYAML's safe loader that refuses a key given twice in one mapping (PyYAML keeps the last) and
+    keeps a base-60 number (``1:30``) as a :class:`Sexagesimal`, to be refused; everything else is
+    resolved and built as ``yaml.safe_load`` does."""
+
+    def resolve(self, kind: type, value: str, implicit: tuple[bool, bool]) -> str:
+        tag = super().resolve(kind, value, implicit)
+        if tag in (_INT_TAG, _FLOAT_TAG) and ":" in value:  # only YAML 1.1's base-60 forms have a colon
+            return _SEXAGESIMAL_TAG
+        return tag
+
+    def construct_sexagesimal(self, node: yaml.ScalarNode) -> Sexagesimal:
+        as_float = "." in node.value
+        value = self.construct_yaml_float(node) if as_float else self.construct_yaml_int(node)
+        return Sexagesimal(node.value, value, node.start_mark.line + 1)
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
         seen: dict[tuple[str, str], yaml.Mark] = {}
@@ -237,7 +272,43 @@ class _ConfigLoader(yaml.SafeLoader):
         return value if value is not None and abs(value).bit_length() <= bits else LongInteger(node.value)
 
 
-_ConfigLoader.add_constructor("tag:yaml.org,2002:int", _ConfigLoader.construct_yaml_int)
+_ConfigLoader.add_constructor(_INT_TAG, _ConfigLoader.construct_yaml_int)
+_ConfigLoader.add_constructor(_SEXAGESIMAL_TAG, _ConfigLoader.construct_sexagesimal)
+
+
+def _find_sexagesimal(value: Any, key: str = "") -> tuple[str, Sexagesimal] | None:
+    """The first base-60 number in ``value`` (parsed YAML) and the dotted key it is under."""
+    if isinstance(value, Sexagesimal):
+        return key, value
+    if isinstance(value, dict):
+        items = value.items()
+    elif isinstance(value, list):
+        items = ((f"[{i}]", v) for i, v in enumerate(value))
+    else:
+        return None
+    for k, v in items:
+        name = k.text if isinstance(k, Sexagesimal) else str(k)
+        sub = f"{key}{name}" if name.startswith("[") else f"{key}.{name}" if key else name
+        if isinstance(k, Sexagesimal):
+            return sub, k
+        if found := _find_sexagesimal(v, sub):
+            return found
+    return None
+
+
+def _refuse_sexagesimal(value: Any, key: str = "", where: str = "") -> None:
+    """ConfigError if ``value`` (parsed YAML, under the dotted ``key``) holds a base-60 number;
+    ``where`` names the file it was read from."""
+    found = _find_sexagesimal(value, key)
+    if found is None:
+        return
+    name, s = found
+    at = f"{where} line {s.line}: " if where else ""
+    raise ConfigError(
+        f"{at}config key '{short_text(name)}' = {short_text(s.text)} is a base-60 number to YAML 1.1, "
+        f"read as {short_repr(s.value)}",
+        f"write the number itself, in seconds for a time, or quote it ('{short_text(s.text)}') if it is text",
+    )
 
 
 def _expanded_size(node: yaml.Node, sizes: dict[int, int | None], where: str) -> int:
@@ -292,8 +363,32 @@ def _yaml_problem(e: yaml.YAMLError, text: str) -> str:
     return (f" at line {mark.line + 1}" if mark is not None else "") + (f": {what}" if what else "")
 
 
+def _empty_null_sections(data: dict, cls: type, where: str, prefix: str = "") -> dict:
+    """``data`` (a file's mapping for the dataclass ``cls``) with every null section — ``ekf:`` with
+    all its keys commented out, which YAML reads as null — taken as an empty one (its defaults, or
+    the laser preset's); a section given as a scalar or a list is refused naming the file and key.
+    Other keys are left to :func:`from_dict`."""
+    hints = typing.get_type_hints(cls)
+    out = dict(data)
+    for k, v in data.items():
+        tp = hints.get(k) if isinstance(k, str) else None
+        if tp is None or not dataclasses.is_dataclass(tp):
+            continue
+        if v is None:
+            out[k] = {}
+        elif isinstance(v, dict):
+            out[k] = _empty_null_sections(v, tp, where, f"{prefix}{k}.")
+        else:
+            raise ConfigError(
+                f"{where}: section '{prefix}{k}' must be a mapping of its keys, got {short_repr(v)}",
+                f"indent its keys under '{k}:', e.g. configs/default.yaml",
+            )
+    return out
+
+
 def read_config_file(path: str | Path) -> dict:
-    """The mapping a YAML config file holds (``{}`` for an empty file), not yet validated as a config."""
+    """The mapping a YAML config file holds (``{}`` for an empty file; a null section is an empty
+    one), not yet validated as a config."""
     p = Path(path)
     where = f"config file '{p}'"
     text = read_text(p, "config file", ConfigError, CONFIG_FILE, max_bytes=MAX_CONFIG_BYTES)
@@ -305,7 +400,8 @@ def read_config_file(path: str | Path) -> dict:
         return {}
     if not isinstance(loaded, dict):
         raise ConfigError(f"{where} must contain a mapping of sections, not {type(loaded).__name__}")
-    return loaded
+    _refuse_sexagesimal(loaded, where=where)
+    return _empty_null_sections(loaded, Config, where)
 
 
 def _parse_override(text: str) -> tuple[list[str], Any]:
@@ -320,6 +416,7 @@ def _parse_override(text: str) -> tuple[list[str], Any]:
         value = _parse_yaml(raw, f"--set '{shown}'") if raw.strip() else ""
     except yaml.YAMLError:
         value = raw
+    _refuse_sexagesimal(value, ".".join(keys))  # as a value error of --set: naming the key
     return keys, value
 
 

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import difflib
 import os
+import tempfile
+import traceback
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -52,6 +54,15 @@ def one_line(e: BaseException) -> str:
     """An error as one line: a CornerslamError's message (and hint), a bug's type and message."""
     text = str(e) if isinstance(e, CornerslamError) else f"{type(e).__name__}: {e}"
     return " ".join(text.split())
+
+
+def save_traceback(exc: BaseException) -> str:
+    """Write the traceback of ``exc`` (a bug) to a new temporary file and return its path: an internal
+    error is reported as one line naming that file."""
+    fd, path = tempfile.mkstemp(prefix="cornerslam-crash-", suffix=".txt")
+    with os.fdopen(fd, "w") as f:
+        traceback.print_exception(type(exc), exc, exc.__traceback__, file=f)
+    return path
 
 
 def printable(text: str) -> str:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import shlex
 import stat
 import sys
 import tempfile
@@ -213,16 +214,28 @@ def command_config(config_path, overrides, assoc=None, scan_topic=None, odom_top
     return cfg
 
 
-def parse_assocs(text: str | None, allow_many: bool) -> list[str]:
+def parse_assocs(text: str | None, allow_many: bool, log_path: str | None = None) -> list[str]:
     """The associators an ``--assoc`` value names, each checked against ``association.ASSOCIATORS``
     (an unknown one: ConfigError with the closest name). ``None`` (and ``""`` for a single name) is
     ``[]``: the config's. A list is comma-separated, blanks ignored, and must name distinct
-    associators (a usage error otherwise); a single name is taken whole, spaces around it ignored."""
+    associators (a usage error otherwise); a single name is taken whole, spaces around it ignored,
+    and a list given where one is taken (``run``) is a usage error pointing to ``compare`` (on
+    ``log_path``, when given)."""
     from .association import associator_class
 
     if text is None or (not allow_many and not text):
         return []
-    names = [a.strip() for a in text.split(",") if a.strip()] if allow_many else [text.strip()]
+    listed = [a.strip() for a in text.split(",") if a.strip()]
+    if not allow_many and len(listed) > 1:
+        from .errors import display_path
+
+        log = shlex.quote(display_path(log_path)) if log_path else "LOG"
+        raise click.BadParameter(
+            f"'{text}' lists {len(listed)} associators, but run takes one; to run several side by side: "
+            f"cornerslam compare {log} --assoc {','.join(listed)}",
+            param_hint="--assoc",
+        )
+    names = listed if allow_many else [text.strip()]
     if not names:
         raise click.BadParameter(
             f"'{text}' names no associator: give e.g. icnn,jcbb,pca", param_hint="--assoc"

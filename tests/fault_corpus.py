@@ -494,11 +494,13 @@ def _config_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
         ("too_large", "#" * (1 << 20) + "\n", "exit 2: larger than 1 MiB", ("larger than 1024 KiB",)),
         ("a_list", "- ekf\n- lines\n", bad, ("must contain a mapping of sections, not list",)),
         ("a_scalar", "3\n", bad, ("must contain a mapping of sections, not int",)),
-        ("section_scalar", "ekf: 3\n", bad, ("'ekf' must be a mapping, got 3",)),
+        ("section_scalar", "ekf: 3\n", bad, ("section 'ekf' must be a mapping of its keys, got 3",)),
         ("control_char", "ekf:\n  alpha1: 0.05\n  alpha2: \x07\n", bad, ("line 3", "control character #x07")),
         ("two_documents", "ekf: {}\n---\nekf: {}\n", bad, ("line 2", "expected a single document")),
         ("duplicated_key", "ekf:\n  alpha1: 0.1\n  alpha1: 0.2\n", bad, ("line 3", "is given twice")),
         ("number_as_key", "1: 2\n", bad, ("unknown config key '1'",)),
+        ("base_60", "keyframes:\n  max_interval: 1:30\n", bad,
+         ("line 2", "'keyframes.max_interval' = 1:30 is a base-60 number to YAML 1.1, read as 90")),
         ("bool_as_1", "ekf:\n  fuse: 1\n", bad, ("'ekf.fuse' must be true or false, got 1",)),
         ("nan", "input:\n  laser:\n    x: .nan\n", bad, ("'input.laser.x' = nan is not a finite number",)),
         ("inf", "keyframes:\n  linear_update: .inf\n", bad, ("'keyframes.linear_update' = inf",)),
@@ -531,14 +533,20 @@ def _config_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
         ("on_as_string", "input.odom_frame=on", ("'input.odom_frame' must be a string, got True", "quote")),
         ("unknown_laser_preset", "input.laser_preset=x",
          ("config key 'input.laser_preset' = 'x' is not a laser preset", "choices: auto, none")),
+        ("base_60", "keyframes.max_interval=1:30", ("'keyframes.max_interval' = 1:30 is a base-60 number",)),
         ("no_equals", "ekf.alpha1", ("is not key=value",)),
         ("empty_key", "=0.1", ("has an empty key",)),
         ("empty_key_part", "association..alpha=0.1", ("has an empty key",)),
     ]  # fmt: skip
     for name, text, message in sets:
         add(f"set_{name}", good, Expected(f"--set {text[:40]}: exit 2", 2, message, args=("--set", text)))
-    fine = [  # processed with the defaults: an empty config, YAML 1.1 booleans (yes/off), an alias
+    fine = [  # processed with the defaults: an empty config, YAML 1.1 booleans (yes/off), an alias,
+        # sections left empty (every key commented out: YAML reads null)
         ("config_dev_null", Path("/dev/null")),
+        (
+            "config_empty_sections",
+            _write(d, "config_empty.yaml", "ekf:\n#  alpha1: 0.1\nassociation:\n  jcbb:\n"),
+        ),
         ("config_yes_off", _write(d, "config_yes.yaml", "ekf:\n  fuse: yes\n  joseph: off\n")),
         ("config_alias", _write(d, "config_alias.yaml", "ekf:\n  alpha1: &a 0.05\n  alpha3: *a\n")),
     ]

@@ -36,13 +36,14 @@ def logs(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def first(logs, tmp_path_factory):
-    """The reference batch, run through the CLI with two worker processes: (out dir, rows, output)."""
+    """The reference batch, run through the CLI with two worker processes: (out dir, rows, result).
+    Its bad log's rows fail: exit 2, as make exits non-zero when a target failed."""
     good, bad = logs
     out = tmp_path_factory.mktemp("batch") / "out"
     args = ["batch", str(good), str(bad), "--assoc", "icnn,pca", *SWEEP, "--out", str(out), "--jobs", "2"]
     res = CliRunner().invoke(cli, args)
-    assert res.exit_code == 0, res.output
-    return out, read_batch(out / "batch.csv"), res.output
+    assert res.exit_code == 2, res.output
+    return out, read_batch(out / "batch.csv"), res
 
 
 def _figures(rows):
@@ -129,7 +130,8 @@ def test_unknown_associator_and_malformed_sweep_exit_2(tmp_path):
 
 
 def test_bad_log_fails_its_rows_and_the_rest_succeed(first, logs):
-    out, rows, output = first
+    out, rows, res = first
+    output = res.stdout
     good, bad = logs
     assert list(rows[0]) == batch_columns([KEY])
     assert [(r["log"], r["assoc"], r[KEY]) for r in rows] == [
@@ -146,6 +148,9 @@ def test_bad_log_fails_its_rows_and_the_rest_succeed(first, logs):
         assert r["steps"] == "" and r["out_dir"] == ""
     assert not (out / "bad__pca__association.pca.group_size=3").exists()
     assert "4 failed" in output and str(out / "batch.csv") in output
+    # the batch is no success: one line on stderr says so and where to look (exit 2: bad input only)
+    assert res.exit_code == 2
+    assert res.stderr.splitlines()[-1] == f"error: 4 of 8 combinations failed: see {out / 'batch.csv'}"
     # pca's group size matters, icnn ignores it
     assert rows[0]["landmarks"] == rows[1]["landmarks"] and rows[0]["ate_rmse"] == rows[1]["ate_rmse"]
     # no staging left, only the marker that makes OUT a batch directory (resumable, never replaced)
@@ -199,7 +204,7 @@ def test_dask_cluster_gives_the_same_batch_csv(first, logs, tmp_path):
     ) as cluster:
         args = ["batch", *map(str, logs), "--assoc", "icnn,pca", *SWEEP, "--out", str(tmp_path), "-q"]
         res = CliRunner().invoke(cli, [*args, "--scheduler", cluster.scheduler_address])
-    assert res.exit_code == 0, res.output
+    assert res.exit_code == 2, res.output  # the bad log's rows failed
     assert _figures(read_batch(tmp_path / "batch.csv")) == _figures(rows)
 
 
@@ -219,4 +224,50 @@ def test_a_bug_in_one_combination_is_a_failed_row(monkeypatch, logs, tmp_path):
 
     monkeypatch.setattr("cornerslam_cli.pipeline.run", boom)
     out = batch_mod.run_one(str(logs[0]), plan(logs[:1], ["pca"])[0].config, str(tmp_path / "x"))
-    assert out == {"status": "failed", "error": "ZeroDivisionError: division by zero"}
+    assert out["status"] == "failed" and out["internal"] is True
+    head = "internal error: ZeroDivisionError: division by zero (traceback saved to "
+    assert out["error"].startswith(head) and out["error"].endswith(")"), out
+    saved = Path(out["error"][len(head) : -1])
+    try:
+        assert "in boom" in saved.read_text() and "ZeroDivisionError" in saved.read_text()
+    finally:
+        saved.unlink()
+
+
+@pytest.mark.parametrize(
+    ("statuses", "exit_code", "line"),
+    [
+        (["ok", "skipped"], 0, None),
+        (["ok", "failed", "failed"], 2, "error: 2 of 3 combinations failed: see "),
+        (
+            ["failed", "internal", "ok"],
+            1,
+            "internal error: 2 of 3 combinations failed (1 by an internal error: a bug, traceback saved): "
+            "see ",
+        ),
+    ],
+)
+def test_exit_code_says_whether_every_combination_succeeded(monkeypatch, tmp_path, statuses, exit_code, line):
+    """0 only when every combination ran or was skipped as complete (make, GNU parallel); else one
+    line on stderr, and 2 when every failure was bad input, 1 when any was a bug. Also with -q."""
+    names = [f"log{i}.mcap" for i in range(len(statuses))]
+
+    results = {
+        "ok": {"status": "ok"},
+        "skipped": {"status": "skipped"},
+        "failed": batch_mod._failed(CornerslamError("log 'x' is bad")),
+        "internal": {"status": "failed", "error": "internal error: ZeroDivisionError", "internal": True},
+    }
+
+    def fake_run_batch(combos, out, jobs, scheduler, progress):
+        return [batch_mod._row(c, **results[s]) for c, s in zip(combos, statuses, strict=True)]
+
+    monkeypatch.setattr(batch_mod, "run_batch", fake_run_batch)
+    out = tmp_path / "o"
+    for quiet in ([], ["-q"]):
+        res = CliRunner().invoke(cli, ["batch", *names, "--out", str(out), *quiet])
+        assert res.exit_code == exit_code, res.output
+        if line is None:
+            assert res.stderr == ""
+        else:
+            assert res.stderr.splitlines() == [line + str(out / "batch.csv")]

@@ -397,7 +397,7 @@ def test_a_usage_error_is_one_line_naming_the_help(args, line, tmp_path, monkeyp
         ("icnn,jbcc", True, "unknown associator 'jbcc' (did you mean 'jcbb'? (icnn, jcbb, pca))"),
         ("icnn,qqqq", True, "unknown associator 'qqqq' (choose one of: icnn, jcbb, pca)"),
         ("jbcc", False, "unknown associator 'jbcc' (did you mean 'jcbb'? (icnn, jcbb, pca))"),
-        ("icnn,pca", False, "unknown associator 'icnn,pca' (did you mean 'icnn'? (icnn, jcbb, pca))"),
+        ("pca,", False, "unknown associator 'pca,' (did you mean 'pca'? (icnn, jcbb, pca))"),  # one name
         ("  ", False, "unknown associator '' (choose one of: icnn, jcbb, pca)"),
         ("PCA", False, "unknown associator 'PCA' (choose one of: icnn, jcbb, pca)"),
     ],
@@ -429,6 +429,22 @@ def test_every_command_reports_a_bad_assoc_in_the_same_words(command, sim_log, t
         )
     res = invoke(command, sim_log, "--set", "association.method=pcaa", *out)
     assert res.stderr == "error: unknown associator 'pcaa' (did you mean 'pca'? (icnn, jcbb, pca))\n"
+
+
+def test_run_given_several_associators_points_to_compare(sim_log, tmp_path):
+    """`run --assoc pca,icnn`: run takes one associator; the usage error says so and gives the compare
+    command that runs the list (it suggested 'icnn' for the unknown name 'pca,icnn')."""
+    res = invoke("run", sim_log, "--assoc", "pca, icnn", "--out", tmp_path / "o")
+    assert res.exit_code == 2 and not (tmp_path / "o").exists()
+    assert res.stderr == (
+        "error: invalid value for --assoc: 'pca, icnn' lists 2 associators, but run takes one; to run "
+        f"several side by side: cornerslam compare {sim_log} --assoc pca,icnn (see 'cornerslam run --help')\n"
+    )
+    with pytest.raises(click.BadParameter, match="cornerslam compare 'my log.bag' --assoc icnn,jcbb,pca"):
+        parse_assocs("icnn,jcbb,pca", allow_many=False, log_path="my log.bag")
+    with pytest.raises(click.BadParameter, match="cornerslam compare LOG --assoc icnn,jcbb"):
+        parse_assocs("icnn,jcbb", allow_many=False)
+    assert parse_assocs(" jcbb ", allow_many=False) == ["jcbb"]
 
 
 def test_relations_are_scored_in_run_and_compare(sim_log, tmp_path):

@@ -92,3 +92,98 @@ def test_dump_round_trips(tmp_path):
     p = tmp_path / "dump.yaml"
     p.write_text(dump_config(cfg))
     assert load_config(p) == cfg
+
+
+# ---------------------------------------------------------------------------- sections left empty
+def test_a_null_section_is_an_empty_one(tmp_path):
+    """`ekf:` with every key commented out (YAML: null) means the defaults — or the laser preset's
+    values, which it must not wipe — at any depth (it was "must be a mapping, got None")."""
+    from cornerslam_cli.lasers import PRESETS, resolve_config
+
+    p = tmp_path / "c.yaml"
+    p.write_text("ekf:\n#  alpha1: 0.1\nsensor:\nassociation:\n  alpha: 0.01\n  jcbb: ~\n")
+    cfg = load_config(p)
+    assert cfg.ekf == Config().ekf and cfg.association.jcbb == Config().association.jcbb
+    assert cfg.association.alpha == 0.01
+    preset = PRESETS["sick_lms_1deg"].config
+    assert preset["sensor"]["model"] == "linear"  # the preset sets the section the file leaves empty
+    assert load_config(p, base=preset).sensor == load_config(None, base=preset).sensor
+    cfg = resolve_config(None, p, ["input.laser_preset=sick_lms_1deg"])
+    assert cfg.sensor.model == "linear" and cfg.association.alpha == 0.01
+
+
+@pytest.mark.parametrize(
+    ("text", "key", "got"),
+    [
+        ("ekf: 5\n", "ekf", "5"),
+        ("ekf: [1, 2]\n", "ekf", "[1, 2]"),
+        ("input:\n  laser: x\n", "input.laser", "'x'"),
+    ],
+)
+def test_a_section_given_as_a_scalar_or_list_is_refused_naming_the_file_and_key(tmp_path, text, key, got):
+    p = tmp_path / "c.yaml"
+    p.write_text(text)
+    with pytest.raises(ConfigError) as e:
+        load_config(p)
+    assert str(e.value).startswith(
+        f"config file '{p}': section '{key}' must be a mapping of its keys, got {got}"
+    )
+
+
+# ---------------------------------------------------------------------------- YAML 1.1 base-60 numbers
+@pytest.mark.parametrize(
+    ("line", "key", "text", "read_as"),
+    [
+        ("ekf:\n  alpha1: 1:30\n", "ekf.alpha1", "1:30", "90"),
+        ("keyframes:\n  max_interval: 1:02:03\n", "keyframes.max_interval", "1:02:03", "3723"),
+        ("input:\n  scan_time_offset: -1:30.5\n", "input.scan_time_offset", "-1:30.5", "-90.5"),
+        ("input:\n  odom_frame: 2:15\n", "input.odom_frame", "2:15", "135"),  # a string key too
+        ("loops:\n  min_gap: [1:30]\n", "loops.min_gap[0]", "1:30", "90"),
+    ],
+)
+def test_a_base_60_number_is_refused_naming_the_file_key_and_text(tmp_path, line, key, text, read_as):
+    """YAML 1.1 (PyYAML) reads `1:30` as 90: a time written as minutes:seconds became 90 silently."""
+    p = tmp_path / "c.yaml"
+    p.write_text("# a config\n" + line)
+    with pytest.raises(ConfigError) as e:
+        load_config(p)
+    assert str(e.value) == (
+        f"config file '{p}' line {line.count(chr(10)) + 1}: config key '{key}' = {text} is a base-60 number "
+        f"to YAML 1.1, read as {read_as} (write the number itself, in seconds for a time, or quote it "
+        f"('{text}') if it is text)"
+    )
+    with pytest.raises(ConfigError, match=rf"^config key '{key.split('[')[0]}' = {text} is a base-60 number"):
+        load_config(None, [f"{key.split('[')[0]}={text}"])  # --set likewise
+
+
+def test_base_60_text_quoted_is_text_and_every_other_scalar_reads_as_safe_load_reads_it(tmp_path):
+    import yaml
+
+    from cornerslam_cli.config import read_config_file
+
+    p = tmp_path / "c.yaml"
+    p.write_text("input:\n  odom_frame: '1:30'\n")
+    assert load_config(p).input.odom_frame == "1:30"
+    assert load_config(None, ["input.odom_frame='1:30'"]).input.odom_frame == "1:30"
+    # a colon that YAML 1.1 does not read as a number stays text; every other form is untouched
+    text = (
+        "a: [0:30, 1:60, 12:5a, 0x1F, 0o17, 017, 0b101, 1_000, +12, 1e3, 1.5e3, 1.5, .5, -.5, "
+        ".inf, -.Inf, .nan, yes, off, ~, null, 2001-12-14, '2001-12-14 21:59:43.10', 2001-12-14 21:59:43.10, "
+        "'1:30', \"1:30\", a:b, 'x', 190, -3]\n"
+    )
+    p.write_text(text)
+    mine, theirs = read_config_file(p)["a"], yaml.safe_load(text)["a"]
+    assert [type(v) for v in mine] == [type(v) for v in theirs]
+    assert [repr(v) for v in mine] == [repr(v) for v in theirs]
+
+
+def test_shipped_configs_read_exactly_as_yaml_safe_load_reads_them():
+    import yaml
+
+    from cornerslam_cli.config import read_config_file
+
+    paths = sorted((ROOT / "configs").rglob("*.yaml"))
+    assert len(paths) >= 7
+    for p in paths:
+        mine, theirs = read_config_file(p), yaml.safe_load(p.read_text())
+        assert mine == theirs and repr(mine) == repr(theirs), p

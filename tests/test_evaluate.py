@@ -211,3 +211,35 @@ def test_rpe_per_metre_is_a_dash_when_the_path_is_shorter_than_a_metre(tmp_path)
     write_tum(tmp_path / "gt.tum", t, g)
     res = evaluate(tmp_path / "gt.tum", "--ground-truth", tmp_path / "gt.tum")
     assert res.exit_code == 0 and "per metre - m/m" in res.stdout and "nan" not in res.stdout
+
+
+@pytest.mark.parametrize(
+    ("kind", "runs", "each"),
+    [("compare", ["icnn", "pca"], "associator"), ("batch", ["a__pca", "b__pca"], "combination")],
+)
+def test_a_compare_or_batch_directory_names_the_run_directories_to_evaluate(
+    files, tmp_path, kind, runs, each
+):
+    """`evaluate` pointed at a compare (or batch) output: it holds one run directory per associator
+    (combination), not a trajectory — exit 2 naming them (it said trajectory.tum does not exist)."""
+    import shutil
+
+    from cornerslam_cli.report.ownership import mark_output
+
+    est, gt = files
+    out = tmp_path / "out"
+    for name in runs:
+        (out / name).mkdir(parents=True)
+        shutil.copy(est, out / name / "trajectory.tum")
+        mark_output(out / name, "run")
+    (out / "notes").mkdir()  # a directory that is no run is not offered
+    mark_output(out, kind)
+    res = evaluate(out, "--ground-truth", gt)
+    assert res.exit_code == 2, res.output
+    assert res.stderr == (
+        f"error: '{out}' is a cornerslam {kind} output: it holds one run directory per {each} "
+        f"({', '.join(runs)}) (evaluate one of them with the same options: e.g. cornerslam evaluate "
+        f"{out / runs[0]})\n"
+    )
+    res = evaluate(out / runs[1], "--ground-truth", gt)
+    assert res.exit_code == 0 and "ATE" in res.output, res.output

@@ -92,7 +92,8 @@ def test_batch_fails_the_rows_of_a_pipe_and_runs_the_others(tmp_path, good):
         res = invoke(
             "batch", fifo, good, "--out", tmp_path / "b", "--jobs", "1", "--set", "input.laser_preset=none"
         )
-    assert res.exit_code == 0, res.output
+    assert res.exit_code == 2, res.output  # one combination failed on bad input
+    assert res.stderr.splitlines()[-1].startswith("error: 1 of 2 combinations failed: see ")
     rows = (tmp_path / "b" / "batch.csv").read_text().splitlines()[1:]
     assert rows[0].startswith(f"{fifo},pca,failed,") and "is a pipe" in rows[0]
     assert rows[1].startswith(f"{good},pca,ok,")

@@ -53,7 +53,8 @@ class World:
 
 @dataclass
 class Case:
-    """A scenario's command line, the path its error must name, and checks after an exit 0."""
+    """A scenario's command line, the path its error must name, and checks of what it wrote (then
+    also after an exit 2, instead of "nothing touched")."""
 
     args: list
     named: Path | str | None = None
@@ -307,10 +308,10 @@ def batch_into_a_run_output(w: World) -> Case:
     return Case(["batch", w.log, "--out", out], out)
 
 
-@fault(0)
+@fault(2, "error: 1 of 1 combinations failed: see ")
 def batch_row_dir_not_ours(w: World) -> Case:
     """a batch combination whose directory holds files cornerslam did not write: that row fails, the
-    files are kept, the batch goes on"""
+    files are kept, the batch goes on (and exits 2: a combination failed)"""
     out = w.tmp / "batch"
     row = out / "x__pca"
     row.mkdir(parents=True)
@@ -760,16 +761,18 @@ def test_output_fault(name, tmp_path, monkeypatch, valid_log):
             undo()
     assert "Traceback" not in res.output and "internal error" not in res.output, res.output
     assert res.exit_code == exp.exit_code, res.output
-    if exp.exit_code == 0:
-        if case.after is not None:
-            case.after()
-        assert leftovers(tmp_path) == []
-    else:
+    if exp.exit_code != 0:
         last = res.stderr.strip().splitlines()[-1]
         if exp.exit_code == 2:
             assert last.startswith(("error:", "Error:")), res.stderr  # ours, or click's usage error
         for fragment in (*exp.message, *([str(case.named)] if case.named else [])):
             assert fragment in last, (fragment, last)
+    if case.after is not None:  # it wrote what it should (a batch whose failed rows exit 2)
+        case.after()
+        assert leftovers(tmp_path) == []
+    elif exp.exit_code == 0:
+        assert leftovers(tmp_path) == []
+    else:
         assert snapshot(tmp_path) == before  # nothing touched, nothing left behind
 
 

@@ -1,5 +1,6 @@
 """A run output directory read back for drawing (report/plots.py) and for the results MCAP
 (report/mcap_out.py): its tables and summary, the trajectories in the map frame, landmark ellipses.
+:func:`check_one_run` refuses a compare or batch directory where one run's is expected (``evaluate``).
 
 Frames: the corrected trajectory and the map are in the map frame (the first corrected pose). The
 odometry is drawn in the map frame by anchoring its first pose on the first corrected pose, and the
@@ -14,8 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import LogError, display_path
 from ..evaluate import align_se2, apply_se2, interpolate_inside
 from ..results import RunSummary
+from .ownership import output_kind
 from .tables import read_csv, read_tum
 
 log = logging.getLogger(__name__)
@@ -69,6 +72,25 @@ class RunData:
                 "(%d submaps): not drawn", self.out_dir / "loops.csv", int((~known).sum()), len(origins)
             )  # fmt: skip
         return origins[ab[known].astype(np.int64)]
+
+
+def check_one_run(path: str | Path) -> None:
+    """Refuse ``path`` when it is a compare or batch output directory: it holds one run directory
+    per associator or combination, not a trajectory. The ``LogError`` names them, so that the user
+    can pick one (it used to say that ``path/trajectory.tum`` does not exist)."""
+    p = Path(path)
+    kind = output_kind(p) if p.is_dir() else None
+    if kind not in ("compare", "batch"):
+        return
+    runs = sorted(d for d in p.iterdir() if d.is_dir() and output_kind(d) == "run")
+    each = "associator" if kind == "compare" else "combination"
+    names = ", ".join(d.name for d in runs[:6]) + (f", … ({len(runs)} in all)" if len(runs) > 6 else "")
+    holds = f"one run directory per {each} ({names})" if runs else f"no run directory (one per {each})"
+    example = f"e.g. cornerslam evaluate {display_path(runs[0])}" if runs else "give a run's directory"
+    raise LogError(
+        f"'{display_path(p)}' is a cornerslam {kind} output: it holds {holds}",
+        f"evaluate one of them with the same options: {example}",
+    )
 
 
 def load_run(out_dir: str | Path, ground_truth: str | Path | None = None) -> RunData:
