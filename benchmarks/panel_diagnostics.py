@@ -31,11 +31,12 @@ from radish_panel import BUILDINGS  # noqa: E402
 from real_logs import ROOT, default_data  # noqa: E402
 from reference_check import check  # noqa: E402
 
-from cornerslam_cli.evaluate import align_se2, apply_se2, interpolate_inside  # noqa: E402
+from cornerslam_cli.evaluate import align_se2, align_sim2, apply_se2, interpolate_inside  # noqa: E402
 from cornerslam_cli.geometry import relative, wrap_angle  # noqa: E402
 from cornerslam_cli.report.tables import read_tum  # noqa: E402
 
 REFUTE_TURN = 5.0  # degrees
+REFUTED_WINDOW = 10  # keyframes either side of a refuted one left out of "outside refuted"
 FITNESS_STEPS = (0.3, 0.4, 0.45)
 
 
@@ -58,7 +59,23 @@ def trajectory(run: Path, gt: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return est, sub, ref
 
 
-def errors(run: Path, gt: Path, last_good: int | None = None) -> dict:
+def scaled_rmse(est: np.ndarray, ref: np.ndarray) -> tuple[float, float]:
+    """Scale of the best similarity of ``est`` (n, 3) onto ``ref`` (> 1: est is smaller) and the ATE
+    RMSE after it (evaluate.align_sim2)."""
+    scale, ang, t = align_sim2(est[:, :2], ref[:, :2])
+    c, s = np.cos(ang), np.sin(ang)
+    moved = scale * est[:, :2] @ np.array([[c, s], [-s, c]]) + t
+    return scale, float(np.sqrt(np.mean(np.sum((moved - ref[:, :2]) ** 2, axis=1))))
+
+
+def refuted_stamps(exact_run: Path, refuted: list[int]) -> np.ndarray:
+    """Stamps of the exact-odometry run's keyframes ``refuted`` (indices: its steps, reference_check's k)."""
+    with open(exact_run / "trajectory.csv") as f:
+        stamps = np.array([float(r["stamp"]) for r in csv.DictReader(f)])
+    return stamps[refuted]
+
+
+def errors(run: Path, gt: Path, last_good: int | None = None, refuted: np.ndarray | None = None) -> dict:
     est, sub, ref = trajectory(run, gt)
     ok = ~np.isnan(ref[:, 0])
     within = np.zeros(len(est))
@@ -77,9 +94,16 @@ def errors(run: Path, gt: Path, last_good: int | None = None) -> dict:
         "origin_xy": float(np.sqrt(np.mean(np.sum(d[:, :2] ** 2, axis=1)))) if len(d) else float("nan"),
         "origin_deg": float(np.degrees(np.sqrt(np.mean(d[:, 2] ** 2)))) if len(d) else float("nan"),
     }
+    row["scale"], row["ate_scaled"] = scaled_rmse(est[ok], ref[ok])
     if last_good is not None:
         keep = ok & (np.arange(len(est)) < last_good)
         row["before_refuted"] = aligned_rmse(est[keep], ref[keep])
+    if refuted is not None and len(refuted):
+        stamps, _ = read_tum(run / "trajectory.tum")
+        near = np.zeros(len(est), dtype=bool)
+        for k in np.searchsorted(stamps, refuted):
+            near[max(k - REFUTED_WINDOW, 0) : k + REFUTED_WINDOW + 1] = True
+        row["outside_refuted"] = aligned_rmse(est[ok & ~near], ref[ok & ~near])
     return row
 
 
@@ -110,29 +134,42 @@ def main() -> None:
         "",
         "`python benchmarks/panel_diagnostics.py` over the runs of `benchmarks/radish_panel.py` (see its "
         "docstring). *Inside submaps*: ATE RMSE with every submap aligned to the reference on its own. "
-        "*Origins*: RMS error of consecutive submap origins' relative pose. *Before refuted*: exact "
+        "*Origins*: RMS error of consecutive submap origins' relative pose. *Scale*: of the best "
+        "similarity (Umeyama with scale, evo's `--correct_scale`) of the trajectory onto the reference, "
+        "> 1 where ours is the smaller, and the ATE after it: a 2-D laser's trajectory takes its scale "
+        "from the ranges, so a scale off 1 is a disagreement between the scans and the reference, not "
+        "something to correct. *Before refuted*: exact "
         f"odometry, ATE over the keyframes before the last one whose reference its scans refute by more "
-        f"than {REFUTE_TURN:.0f}° (reference_check.py).",
+        f"than {REFUTE_TURN:.0f}° (reference_check.py). *Outside refuted*: the ATE (aligned again) "
+        f"without the keyframes within {REFUTED_WINDOW} of one whose reference its scans refute "
+        "(reference_check.py on the exact twin: same scans and stamps; the keyframes listed).",
         "",
-        "| log | ATE (m) | online ATE (m) | inside submaps (m) | origins (cm, °) | before refuted (m) |",
-        "|---|---:|---:|---:|---|---:|",
+        "| log | ATE (m) | online ATE (m) | inside submaps (m) | origins (cm, °) | scale "
+        "| ATE with scale (m) | before refuted (m) | outside refuted (m) |",
+        "|---|---:|---:|---:|---|---:|---:|---:|---|",
     ]
+    # (k, fit gain, m, °) per keyframe of the exact twin whose reference its scans refute
+    refutes = {b: check((radish / f"{b}-exact.log", []))["refuted"] for b in BUILDINGS}
+    refuted = {b: [k for k, _, _, _ in refutes[b]] for b in BUILDINGS}
     for variant in ("", "-exact"):
         for b in BUILDINGS:
             name = f"{b}{variant}"
             last_good = None
             if variant:
-                turns = [
-                    k
-                    for k, _, _, deg in check((radish / f"{name}.log", []))["refuted"]
-                    if abs(deg) > REFUTE_TURN
-                ]
+                turns = [k for k, _, _, deg in refutes[b] if abs(deg) > REFUTE_TURN]
                 last_good = max(turns) if turns else None
-            r = errors(args.work / name, radish / f"{name}.gt.tum", last_good)
+            stamps = refuted_stamps(args.work / f"{b}-exact", refuted[b])
+            r = errors(args.work / name, radish / f"{name}.gt.tum", last_good, stamps)
             before = f"{r['before_refuted']:.3f} (< {last_good})" if "before_refuted" in r else ""
+            outside = (
+                f"{r['outside_refuted']:.3f} (without {', '.join(map(str, refuted[b]))})"
+                if "outside_refuted" in r
+                else ""
+            )
             lines.append(
                 f"| {name} | {r['ate']:.3f} | {r['online']:.3f} | {r['within']:.3f} "
-                f"| {100 * r['origin_xy']:.1f}, {r['origin_deg']:.2f} | {before} |"
+                f"| {100 * r['origin_xy']:.1f}, {r['origin_deg']:.2f} | {r['scale']:.4f} "
+                f"| {r['ate_scaled']:.3f} | {before} | {outside} |"
             )
     out, right, low = Counter(), Counter(), []
     for b in BUILDINGS:

@@ -43,6 +43,21 @@ def align_se2(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray]:
     return ang, md - R @ ms
 
 
+def align_sim2(src: np.ndarray, dst: np.ndarray) -> tuple[float, float, np.ndarray]:
+    """Scale s, rotation angle and translation minimising Σ‖s·R·src_i + t − dst_i‖² (Umeyama with
+    scale, evo's ``--correct_scale``): the rotation is :func:`align_se2`'s, s = Σ (R·a_i)·b_i / Σ‖a_i‖²
+    over the centred points. s > 1: ``src`` is smaller than ``dst``. A diagnostic: a 2-D laser's
+    trajectory has its scale from the ranges, so a scale off 1 says the ranges and the reference disagree.
+    """
+    ang, _ = align_se2(src, dst)
+    ms, md = src.mean(axis=0), dst.mean(axis=0)
+    a, b = src - ms, dst - md
+    c, s = np.cos(ang), np.sin(ang)
+    ra = a @ np.array([[c, s], [-s, c]])  # R·a_i as rows
+    scale = float(np.sum(ra * b) / np.sum(a * a))
+    return scale, ang, md - scale * (np.array([[c, -s], [s, c]]) @ ms)
+
+
 def apply_se2(ang: float, t: np.ndarray, poses: np.ndarray) -> np.ndarray:
     c, s = np.cos(ang), np.sin(ang)
     xy = poses[:, :2] @ np.array([[c, s], [-s, c]]) + t

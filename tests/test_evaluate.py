@@ -2,8 +2,17 @@
 
 import numpy as np
 import pytest
+from scipy import optimize
 
-from cornerslam_cli.evaluate import align_se2, apply_se2, ate, relation_error, relation_errors, rpe
+from cornerslam_cli.evaluate import (
+    align_se2,
+    align_sim2,
+    apply_se2,
+    ate,
+    relation_error,
+    relation_errors,
+    rpe,
+)
 from cornerslam_cli.geometry import relative
 
 
@@ -40,6 +49,26 @@ def test_align_se2_recovers_a_known_transform():
     b = a @ np.array([[c, -s], [s, c]]).T + t
     ang2, t2 = align_se2(a, b)
     assert ang2 == pytest.approx(ang) and t2 == pytest.approx(t)
+
+
+def test_align_sim2_recovers_a_known_similarity_and_matches_a_numerical_fit():
+    rng = np.random.default_rng(2)
+    a = rng.normal(size=(40, 2)) * 5
+    scale, ang, t = 1.003, -2.9, np.array([-3.0, 0.5])
+    c, s = np.cos(ang), np.sin(ang)
+    b = scale * a @ np.array([[c, -s], [s, c]]).T + t
+    s2, ang2, t2 = align_sim2(a, b)
+    assert s2 == pytest.approx(scale, abs=1e-12) and ang2 == pytest.approx(ang) and t2 == pytest.approx(t)
+    # with noise: the closed form is the least-squares optimum a general solver finds
+    b = b + rng.normal(scale=0.1, size=b.shape)
+
+    def residual(p):
+        c, s = np.cos(p[1]), np.sin(p[1])
+        return (p[0] * a @ np.array([[c, -s], [s, c]]).T + p[2:] - b).ravel()
+
+    fit = optimize.least_squares(residual, [1.0, -2.5, 0.0, 0.0], xtol=1e-14, ftol=1e-14, gtol=1e-14)
+    s2, ang2, t2 = align_sim2(a, b)
+    assert [s2, ang2, *t2] == pytest.approx(list(fit.x), abs=1e-7)
 
 
 def test_rpe_per_step_of_a_scaled_trajectory():
