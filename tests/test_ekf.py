@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import _ekf_textbook as textbook
 import numpy as np
 import pytest
 from _ekf_dense import DenseEkf
@@ -476,3 +477,37 @@ def test_per_increment_motion_noise_equals_a_filter_configured_with_it():
     wheel.predict(a, b)
     assert_same_state(ekf, ref)
     assert wheel.P[2, 2] > 2 * ekf.P[2, 2] - P[2, 2]
+
+
+@pytest.mark.parametrize("mode", UPDATE_MODES)
+def test_filter_equals_a_textbook_ekf_sharing_no_code_with_it(mode):
+    """predict (odometry noise model and a given increment covariance), update and augment against
+    tests/_ekf_textbook.py, which re-derives h, every Jacobian and the odometry model instead of taking
+    them from filter/models.py; headings on both sides of ±π, a landmark matched twice in one call."""
+    rng = np.random.default_rng(41)
+    cfg = EkfConfig(**mode)
+    batched = cfg.update == "batched"
+    for trial in range(6):
+        n = 6
+        mu, P = random_state(rng, n)
+        mu[2] = (np.pi - 1e-3, -np.pi + 1e-4, 0.7)[trial % 3]
+        ekf, x, S = Ekf.from_state(cfg, mu, P), mu.copy(), P.copy()
+        o0 = np.array([1.0, -2.0, 3.1])
+        o1 = o0 + (rng.uniform(-0.4, 0.4), rng.uniform(-0.4, 0.4), rng.uniform(-0.4, 0.4))
+        ekf.predict(o0, o1)
+        x, S = textbook.predict(x, S, o0, o1, cfg.alphas, cfg.min_sigma_xy, cfg.min_sigma_theta)
+        Q = random_corner_cov(rng, 1)[0]
+        o2 = o1 + (rng.uniform(-0.4, 0.4), rng.uniform(-0.4, 0.4), rng.uniform(-0.4, 0.4))
+        ekf.predict(o1, o2, cov=Q)
+        x, S = textbook.predict(x, S, o1, o2, None, 0.0, 0.0, cov=Q)
+        ids = np.array([2, 5, 0]) if batched else np.array([2, 5, 2, 0])
+        z, C = measurements(rng, ekf.mu, ids), random_corner_cov(rng, len(ids))
+        nis = ekf.update(ids, z, C)
+        x, S, nis_ref = textbook.update(x, S, ids, z, C, joseph=cfg.joseph, batched=batched)
+        assert nis == pytest.approx(nis_ref, rel=1e-9)
+        zn = np.column_stack((rng.uniform(-6, 6, (2, 2)), rng.uniform(0.5, 2.5, 2)))
+        Cn = random_corner_cov(rng, 2)
+        ekf.augment(zn, Cn)
+        x, S = textbook.augment(x, S, zn, Cn)
+        np.testing.assert_allclose(ekf.mu, x, rtol=0, atol=TOL)
+        np.testing.assert_allclose(ekf.P, S, rtol=0, atol=TOL)

@@ -7,14 +7,28 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from _features_helpers import HOKUYO, PRECISE, clutter_room, mean_nees, nees_band, to_world
+from _features_helpers import (
+    HOKUYO,
+    PRECISE,
+    URG04LX,
+    beam_covariance,
+    beam_jacobian,
+    clutter_room,
+    mean_nees,
+    nees_band,
+    noisy_ranges,
+    to_world,
+    wall_bearings,
+)
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cornerslam_cli import simworld as sw
 from cornerslam_cli.features import CornersConfig, LinesConfig, SensorConfig, extract
-from cornerslam_cli.features.corner_kernels import intersection
+from cornerslam_cli.features.corner_kernels import end_corner, intersection
 from cornerslam_cli.features.corners import type_one
+from cornerslam_cli.features.lines import fit_lines, fit_ranges
+from cornerslam_cli.features.sensor import beam_variances
 from cornerslam_cli.types import Scan, Segments
 
 CFG = (LinesConfig(), CornersConfig())
@@ -331,3 +345,53 @@ def test_compiled_corners_equal_the_numpy_version(corners, sensor):
             _same_corners(got, reference(scan, segs, jac, sensor, corners))
             kinds += got.kind.tolist()
     assert len(kinds) > len(cases) and set(kinds) == ({1, 2} if corners.endpoints else {1})  # many compared
+
+
+def test_type_one_covariance_from_the_true_beams_is_honest_at_far_range():
+    """Eq 9–13 on the lines fitted to each wall's own beams (URG-04LX preset, a room corner 3.6 m away,
+    arms 2.5 and 1.5 m): the corner's (x, y, φ) covariance matches the Monte Carlo spread. The extractor
+    itself is over-confident there (segmentation: docs/results/review_features_filter.md §2); this
+    separates the covariance algebra from that."""
+    rng = np.random.default_rng(13)
+    walls = ((3.0, 0.0, -0.5, 2.0), (2.0, math.pi / 2, -3.0, -1.5))  # (r, α, u0, u1): x = 3 and y = 2
+    truth = np.array([3.0, 2.0, math.pi / 2])
+    bearings = [wall_bearings(r, a, u0, u1) for r, a, u0, u1 in walls]
+    err, cov = np.zeros((300, 3)), np.zeros((300, 3, 3))
+    for k in range(300):
+        fits = [
+            fit_ranges(noisy_ranges(r, a, th, URG04LX, rng), th, URG04LX, [0], [len(th)])
+            for (r, a, _, _), th in zip(walls, bearings, strict=True)
+        ]
+        (f1, f2) = fits
+        z, cov[k] = intersection(f1.alpha[0], f2.alpha[0], f1.r[0], f2.r[0], f1.cov[0], f2.cov[0])
+        err[k] = z - truth
+    pred = np.diag(cov.mean(0))
+    spread = np.var(err, axis=0) / pred
+    assert np.all((spread > 0.8) & (spread < 1.25)), spread
+    assert np.all(np.mean(err**2, axis=0) / pred < 1.4)  # bias included (lines.py's oblique-incidence bias)
+
+
+def test_type_two_covariance_is_exact_to_first_order_in_every_beam():
+    """end_corner's (x, y) covariance equals J C Jᵀ, J by central differences of "the end beam's point
+    projected on the TLS line of all the segment's beams" written in the test (weights fixed)."""
+    rng = np.random.default_rng(17)
+    theta = wall_bearings(2.0, 0.3, 0.2, 1.2)
+    rho = noisy_ranges(2.0, 0.3, theta, URG04LX, rng)
+    var_r, var_t = beam_variances(rho, URG04LX)
+    w = 1.0 / (var_r + rho**2 * var_t)
+    fit = fit_lines(rho, theta, var_r, var_t, [0], [len(rho)], w)
+
+    def corner(rh, th):
+        x, y = rh * np.cos(th), rh * np.sin(th)
+        mx, my = np.average(x, weights=w), np.average(y, weights=w)
+        sc = np.cov(np.vstack((x - mx, y - my)), aweights=w, bias=True)
+        n = np.linalg.eigh(sc)[1][:, 0]
+        q = np.array([x[-1], y[-1]])
+        return q - (n @ q - n @ (mx, my)) * n
+
+    J = beam_jacobian(corner, rho, theta)
+    C = J @ beam_covariance(var_r, var_t) @ J.T
+    c, cxy, _ = end_corner(rho[-1], theta[-1], fit.alpha[0], fit.r[0], fit.cov[0], fit.jac_ends[0, 1],
+                           float(var_r[-1]), float(var_t[-1]))  # fmt: skip
+    np.testing.assert_allclose(c, corner(rho, theta), atol=1e-12)
+    np.testing.assert_allclose(cxy, C, rtol=1e-6)

@@ -7,7 +7,19 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from _features_helpers import HOKUYO, PRECISE, clutter_room, mean_nees, nees_band, to_world
+from _features_helpers import (
+    HOKUYO,
+    PRECISE,
+    URG04LX,
+    beam_covariance,
+    beam_jacobian,
+    clutter_room,
+    mean_nees,
+    nees_band,
+    noisy_ranges,
+    to_world,
+    wall_bearings,
+)
 
 from cornerslam_cli import simworld as sw
 from cornerslam_cli.features import LinesConfig, SensorConfig, extract_segments, fit_lines, sigma_range
@@ -319,3 +331,72 @@ def test_a_signal_waits_until_the_kernels_are_loaded(monkeypatch):
     finally:
         signal.signal(signal.SIGINT, previous)
     assert seen_while_loading == [] and delivered == [signal.SIGINT]
+
+
+def _weighted_tls(rho, theta, w):
+    """Reference line fit written out again: the eigenvector of least weighted scatter, r >= 0."""
+    x, y = rho * np.cos(theta), rho * np.sin(theta)
+    mx, my = np.average(x, weights=w), np.average(y, weights=w)
+    dx, dy = x - mx, y - my
+    scatter = np.array([[w @ (dx * dx), w @ (dx * dy)], [w @ (dx * dy), w @ (dy * dy)]])
+    n = np.linalg.eigh(scatter)[1][:, 0]
+    r = n @ (mx, my)
+    if r < 0:
+        n, r = -n, -r
+    return r, math.atan2(n[1], n[0])
+
+
+def test_line_fit_equals_an_independent_weighted_tls_and_its_first_order_covariance():
+    """(r, α) equal an eigenvector TLS written in the test; C_l equals J C Jᵀ with J by central
+    differences of that reference (weights fixed, as in eq 5–8), end-beam Jacobians included."""
+    rng = np.random.default_rng(21)
+    theta = wall_bearings(2.0, 0.0, 0.9, 2.5)  # incidence 24°–51°
+    rho = noisy_ranges(2.0, 0.0, theta, URG04LX, rng)
+    var_r, var_t = beam_variances(rho, URG04LX)
+    w = 1.0 / (var_r + rho**2 * var_t)
+    fit = fit_lines(rho, theta, var_r, var_t, [0], [len(rho)], w)
+    r0, a0 = _weighted_tls(rho, theta, w)
+    assert (fit.r[0], fit.alpha[0]) == pytest.approx((r0, a0), abs=1e-12)
+    J = beam_jacobian(lambda rh, th: _weighted_tls(rh, th, w), rho, theta)
+    C = J @ beam_covariance(var_r, var_t) @ J.T
+    np.testing.assert_allclose(fit.cov[0], C, rtol=1e-6)
+    np.testing.assert_allclose(fit.jac_ends[0, 0], J[:, :2], rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(fit.jac_ends[0, 1], J[:, -2:], rtol=1e-6, atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    "r, u0, u1",
+    [(1.0, 0.5, 1.5), (2.0, -0.5, 0.5), (4.0, 3.5, 4.5), (2.0, 4.0, 7.0)],
+    ids=["1m-45deg", "2m-normal", "4m-45deg", "2m-grazing-63-74deg"],
+)
+def test_line_covariance_is_honest_on_a_short_range_hokuyo(r, u0, u1):
+    """URG-04LX preset, 1 m segments of 20–140 beams from 1 to 4 m, up to grazing: the predicted variance
+    of r and of α each within 20 % of the Monte Carlo variance (docs/results/review_features_filter.md §1)."""
+    rng = np.random.default_rng(5)
+    theta = wall_bearings(r, 0.0, u0, u1)
+    err, cov = np.zeros((400, 2)), np.zeros((400, 2, 2))
+    for k in range(400):
+        fit = fit_ranges(noisy_ranges(r, 0.0, theta, URG04LX, rng), theta, URG04LX, [0], [len(theta)])
+        err[k], cov[k] = (fit.r[0] - r, math.remainder(fit.alpha[0], 2 * math.pi)), fit.cov[0]
+    pred = np.diag(cov.mean(0))
+    spread = np.var(err, axis=0) / pred  # variance about the mean / predicted σ²
+    assert np.all((spread > 0.8) & (spread < 1.2)), spread
+    second = np.mean(err**2, axis=0) / pred  # E[e²] / σ²: with the oblique-incidence bias (below) up to ~1.3
+    assert np.all(second < 1.4), second
+
+
+@pytest.mark.xfail(strict=True, reason="finding, not fixed: isotropic-weight TLS tilts at oblique incidence")
+def test_line_fit_is_unbiased_at_oblique_incidence():
+    """Range noise lies along the beam, not across the line: E[scatter] gains Σ w_i Cov(p_i), which is not
+    a multiple of I at oblique incidence, so the TLS direction tilts towards the beams. Default sensor
+    (σρ 3 % of the range), a 1 m wall at 2 m seen at 45°: r and α are biased by −1.2 σ
+    (docs/results/review_features_filter.md §1). Passes once the fit removes that term."""
+    sensor = SensorConfig()
+    rng = np.random.default_rng(6)
+    theta = wall_bearings(2.0, 0.0, 1.5, 2.5)
+    err, cov = np.zeros((400, 2)), np.zeros((400, 2, 2))
+    for k in range(400):
+        fit = fit_ranges(noisy_ranges(2.0, 0.0, theta, sensor, rng), theta, sensor, [0], [len(theta)])
+        err[k], cov[k] = (fit.r[0] - 2.0, math.remainder(fit.alpha[0], 2 * math.pi)), fit.cov[0]
+    bias = err.mean(0) / np.sqrt(np.diag(cov.mean(0)))
+    assert np.all(np.abs(bias) < 0.3), bias

@@ -22,9 +22,12 @@ A corner is z = (x, y, φ) in the sensor frame with a 3×3 covariance.
   φ is not observable for an end point; it is set to ``endpoint_phi`` (default π/2: the line meets its
   normal, which also lets a type II sighting of a right-angled edge match the type I landmark of the same
   edge) with the prior variance ``endpoint_phi_sigma²``, uncorrelated with (x, y).
-  Covariance: exact first order in all the segment's beams. The end beam enters twice, through q and
-  through the line it helped fit, so C = A C_l Aᵀ − A J_e C_e J_eᵀ Aᵀ + G_e C_e G_eᵀ, with A = ∂c/∂(r, α),
-  J_e = ∂(r, α)/∂(ρ_e, θ_e), G_e = A J_e + (I − n nᵀ) ∂q/∂(ρ_e, θ_e), C_e = diag(σρ_e², σθ²).
+  Covariance of the projected point c: exact first order in all the segment's beams. The end beam enters
+  twice, through q and through the line it helped fit, so C = A C_l Aᵀ − A J_e C_e J_eᵀ Aᵀ + G_e C_e G_eᵀ,
+  with A = ∂c/∂(r, α), J_e = ∂(r, α)/∂(ρ_e, θ_e), G_e = A J_e + (I − n nᵀ) ∂q/∂(ρ_e, θ_e),
+  C_e = diag(σρ_e², σθ²). The shift to the middle of the gap is not propagated (C stays c's, plus the
+  gap²/12): the midpoint halves the end beam's share along the line, so the sensor part of the
+  along-line variance is overstated, up to ~3.8× at normal incidence (docs/results/review_features_filter.md).
 * **drop_occluded** (on by default): the end point on the farther side of a depth jump is the edge of an
   occlusion shadow that moves with the viewpoint; it is dropped when the beam next to it is nearer.
   Corners of either type lying farther behind the measured range at their bearing than

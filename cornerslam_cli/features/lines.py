@@ -20,6 +20,11 @@ Cartesian form used here (centroid and weighted scatter matrix, α = ½·atan2(�
 minimiser as the paper's polar eq 3.  Weights w_i = 1 / (σρ_i² + ρ_i²σθ²), the isotropic variance of the
 beam's point (the paper's w_i = 1/σθ² + 1/σρ² mixes units); they are held fixed in the covariance.
 
+The weights treat each point's noise as isotropic, but range noise lies along the beam: E[scatter] gains
+Σ w_i Cov(p_i), whose across/along-line term (σρ² − ρ²σθ²)·sin·cos(incidence) tilts the line at oblique
+incidence. r and α come out biased by ~0.3–0.6 σ with the URG-04LX preset and up to ~1.5 σ with the
+paper's 3 %-of-range model at 45–70° (docs/results/review_features_filter.md §1; not corrected here).
+
 Covariance (eq 5–8): C_l = J_ρ C_ρ J_ρᵀ + J_θ C_θ J_θᵀ with the full first-order Jacobian, including the
 dependence of r on α through the centroid that the paper's eq 7 drops:
     ∂α/∂p_i = −w_i (u_i n + e_i d) / (S_dd − S_nn),   ∂r/∂p_i = (w_i / W) n + (p̄·d) ∂α/∂p_i
