@@ -11,6 +11,7 @@ GTSAM's tangent space).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -38,6 +39,69 @@ class Submap:
     node: int = 0  # its origin's node in the pose graph
     step_nodes: np.ndarray | None = None  # (s,) the graph node each step hangs from (its anchor) …
     anchor_poses: np.ndarray | None = None  # (s, 3) … and that node's pose in this submap's frame
+
+    # What loop closing reads of a submap's corners for every candidate pair it is in, computed at the
+    # first (a closed submap does not change; read-only, so no caller can change them either).
+
+    @functools.cached_property
+    def landmark_blocks(self) -> np.ndarray:
+        """(n, 3, 3) each landmark's own covariance: the diagonal blocks of ``landmark_P``."""
+        return _read_only(diagonal_blocks(self.landmark_P))
+
+    @functools.cached_property
+    def corner_pairs(self) -> CornerPairs:
+        """Every pair of its corners (graph/loops.py's hypotheses)."""
+        return CornerPairs.of(self.landmarks)
+
+
+def diagonal_blocks(P: np.ndarray, which: np.ndarray | None = None) -> np.ndarray:
+    """(n, 3, 3) diagonal blocks of a (3n, 3n) joint covariance (``which``: only those landmarks')."""
+    rows = np.arange(len(P) // 3) if which is None else which
+    idx = 3 * rows[:, None] + np.arange(3)
+    return P[idx[:, :, None], idx[:, None, :]]
+
+
+KEPT_PAIRS = 64  # corner counts whose index pairs are kept (8·n² bytes each)
+
+
+@functools.lru_cache(maxsize=KEPT_PAIRS)
+def _upper_pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.triu_indices(n, 1)``, read-only and kept: on infinite-corridor's revisits (submaps of 1–26
+    corners) each call cost far more than its use."""
+    i, j = np.triu_indices(n, 1)
+    return _read_only(i), _read_only(j)
+
+
+@dataclass(frozen=True)
+class CornerPairs:
+    """All pairs i < j of a submap's corners (``np.triu_indices`` order) and their lengths, and the same
+    sorted by length (stable).
+
+    i, j : (p,) int64;  length : (p,) m;  sorted_i, sorted_j, sorted_length : (p,) by increasing length
+    """
+
+    i: np.ndarray
+    j: np.ndarray
+    length: np.ndarray
+    sorted_i: np.ndarray
+    sorted_j: np.ndarray
+    sorted_length: np.ndarray
+
+    @staticmethod
+    def of(landmarks: np.ndarray) -> CornerPairs:
+        """The pairs of corners (n, 3)."""
+        lm = np.asarray(landmarks, dtype=float).reshape(-1, 3)
+        n = len(lm)
+        i, j = _upper_pairs(n) if n <= KEPT_PAIRS else np.triu_indices(n, 1)
+        length = np.hypot(lm[j, 0] - lm[i, 0], lm[j, 1] - lm[i, 1])
+        order = np.argsort(length, kind="stable")
+        parts = (i, j, length, i[order], j[order], length[order])
+        return CornerPairs(*(_read_only(x) for x in parts))
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a.flags.writeable = False
+    return a
 
 
 def local_map(submap: Submap) -> LocalMap:
