@@ -105,6 +105,83 @@ def nearest_within(q, bound, xy, index, start, ox, oy, cell, nx, ny, dist, idx):
 
 
 @kernel
+def nearest_within_moving(q, bound, xy, index, start, ox, oy, cell, nx, ny, dist, idx, clear, at):
+    """:func:`nearest_within` of points that move a little between calls (ICP's iterations), the same
+    answers: a point's query that found nothing leaves in ``clear`` (len(q)) a distance within which no
+    map point lies from where it then was, kept in ``at`` (len(q), 2); while the point has moved less
+    than that distance less ``bound`` (and a rounding margin) since, nothing lies within ``bound`` of it
+    either (triangle inequality) and it is answered without a look. ``clear`` < 0: not known (the
+    caller starts with −1 everywhere)."""
+    k = len(xy)
+    for n in range(len(q)):
+        px, py = q[n, 0], q[n, 1]
+        if clear[n] >= 0.0 and clear[n] - math.hypot(px - at[n, 0], py - at[n, 1]) >= bound + _margin(
+            px, py, ox, oy
+        ):
+            dist[n], idx[n] = np.inf, k
+            continue
+        half = min(bound, FIRST_SQUARE * cell)
+        while True:
+            if half < bound:
+                best_d2, best_i = _nearest(px, py, half, xy, index, start, ox, oy, cell, nx, ny)
+                if best_i >= 0:
+                    break
+                half = min(2.0 * half, bound)
+                continue
+            # the last square: also how far every map point is from (px, py) at the least
+            best_d2, best_i, away = _nearest_and_clearance(
+                px, py, half, xy, index, start, ox, oy, cell, nx, ny
+            )
+            if best_i < 0:
+                clear[n], at[n, 0], at[n, 1] = away - _margin(px, py, ox, oy), px, py
+            break
+        if best_i < 0:
+            dist[n], idx[n] = np.inf, k
+        else:
+            dist[n], idx[n] = math.sqrt(best_d2), best_i
+            clear[n] = -1.0
+
+
+@kernel
+def _margin(px, py, ox, oy):
+    """Metres: far more than the rounding of a clearance and of a move at these coordinates."""
+    return 1e-9 * (1.0 + abs(px) + abs(py) + abs(ox) + abs(oy))
+
+
+@kernel
+def _nearest_and_clearance(px, py, half, xy, index, start, ox, oy, cell, nx, ny):
+    """:func:`_nearest`, and a distance from (px, py) within which no map point lies (rounding aside):
+    the least distance to the points of the cells looked at, or to the edge of those cells where cells
+    lie beyond it, whichever is less — or, when that is less, the distance to the grid's box, which holds
+    every map point."""
+    i0, i1, j0, j1 = _square(px, py, half, ox, oy, cell, nx, ny)
+    best_d2, best_i = half * half, -1
+    least = np.inf
+    for i in range(i0, i1 + 1):
+        for c in range(i * ny + j0, i * ny + j1 + 1):
+            for m in range(start[c], start[c + 1]):
+                dx = xy[m, 0] - px
+                dy = xy[m, 1] - py
+                e = dx * dx + dy * dy
+                least = min(least, e)
+                if e < best_d2 or (e == best_d2 and 0 <= index[m] < best_i):
+                    best_d2, best_i = e, index[m]
+    box = max(ox - px, px - (ox + nx * cell), oy - py, py - (oy + ny * cell), 0.0)
+    if i0 > i1 or j0 > j1:  # no cell looked at: the box alone
+        return best_d2, best_i, box
+    inner = math.sqrt(least)
+    if i0 > 0:
+        inner = min(inner, px - (ox + i0 * cell))
+    if i1 < nx - 1:
+        inner = min(inner, ox + (i1 + 1) * cell - px)
+    if j0 > 0:
+        inner = min(inner, py - (oy + j0 * cell))
+    if j1 < ny - 1:
+        inner = min(inner, oy + (j1 + 1) * cell - py)
+    return best_d2, best_i, max(box, inner)
+
+
+@kernel
 def _nearest(px, py, half, xy, index, start, ox, oy, cell, nx, ny):
     """(squared distance, index) of the least such pair among the points of the cells overlapping the
     square of half-width ``half`` around (px, py) whose squared distance is below half²; index −1 for
