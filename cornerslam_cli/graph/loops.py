@@ -246,12 +246,17 @@ def _votes(poses: np.ndarray, length: np.ndarray) -> tuple[np.ndarray, np.ndarra
     cells = np.floor(poses / np.array([VOTE_XY, VOTE_XY, VOTE_THETA]))
     cells = np.clip(cells, -(2**20), 2**20 - 1).astype(np.int64) + 2**20  # 21 bits each
     key = (cells[:, 0] << 42) | (cells[:, 1] << 21) | cells[:, 2]  # one int64 per cell
+    votes, rank = np.empty(len(key), dtype=np.int64), np.empty(len(key), dtype=np.int64)
+    if len(key) == 0:
+        return votes, rank
     by_cell = np.lexsort((-length, key))  # by cell, then by decreasing length: cells are runs
     run_key = key[by_cell]
-    first = np.flatnonzero(np.r_[True, run_key[1:] != run_key[:-1]])  # where each cell's run starts
-    counts = np.diff(np.r_[first, len(key)])
+    starts = np.ones(len(key), dtype=bool)
+    np.not_equal(run_key[1:], run_key[:-1], out=starts[1:])
+    first = np.flatnonzero(starts)  # where each cell's run starts
+    counts = np.empty_like(first)
+    counts[:-1], counts[-1] = first[1:] - first[:-1], len(key) - first[-1]
     cell = np.repeat(np.arange(len(first)), counts)  # each sorted pose's cell
-    votes, rank = np.empty(len(key), dtype=np.int64), np.empty(len(key), dtype=np.int64)
     votes[by_cell] = counts[cell]
     rank[by_cell] = np.arange(len(key)) - first[cell]
     return votes, rank
@@ -320,7 +325,7 @@ def fit_rigid(b: Submap, a: Submap, pairs: np.ndarray) -> np.ndarray:
     """
     p, q = b.landmarks[pairs[:, 0], :2], a.landmarks[pairs[:, 1], :2]
     Cb, Ca = b.landmark_blocks[pairs[:, 0]], a.landmark_blocks[pairs[:, 1]]
-    w = 2.0 / (np.trace(Cb[:, :2, :2], axis1=1, axis2=2) + np.trace(Ca[:, :2, :2], axis1=1, axis2=2))
+    w = 2.0 / ((Cb[:, 0, 0] + Cb[:, 1, 1]) + (Ca[:, 0, 0] + Ca[:, 1, 1]))  # the xy blocks' traces
     w = w / w.sum()
     mp, mq = w @ p, w @ q
     H = (w[:, None] * (p - mp)).T @ (q - mq)  # Σ w (p − p̄)(q − q̄)ᵀ
