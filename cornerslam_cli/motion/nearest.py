@@ -7,7 +7,10 @@ through scipy's cKDTree that was most of the scan-matching time, mostly per-call
 descent on a map of ~1,000 points. Here the map points are bucketed in square cells (a counting sort),
 and a query looks at the cells that overlap a square around its point, of half-width half a cell first,
 doubled until the square holds the answer (every point nearer than the square's half-width lies in it)
-or reaches the bound: most queries look at one to four cells.
+or reaches the bound: most queries look at one to four cells. When the first square holds no point, a
+summed-area table of the cells' counts tells whether the bound's square (the largest) holds any: if not,
+no square does, and the answer ("none") is given without looking at them (a submap's points beyond the
+other submap, in loop closing's fitness and first ICP iterations).
 
 The answer is the cKDTree's: squared distances are computed as it computes them (dx² + dy², no fused
 multiply-add), a point counts when that is strictly below bound², and the distance returned is its
@@ -35,11 +38,13 @@ SLACK = 1e-9  # relative (and metres): a square is widened by this (rounding of 
 @dataclass(frozen=True)
 class BucketGrid:
     """Map points bucketed by cell: points ``xy`` (k, 2) sorted by cell, their indices ``index`` in the
-    original array, and ``start`` (nx·ny + 1) where each cell's points begin (cell (i, j) is i·ny + j)."""
+    original array, and ``start`` (nx·ny + 1) where each cell's points begin (cell (i, j) is i·ny + j);
+    ``counts`` (nx + 1, ny + 1): how many points lie in the cells (< i, < j), a summed-area table."""
 
     xy: np.ndarray
     index: np.ndarray
     start: np.ndarray
+    counts: np.ndarray
     origin: np.ndarray  # lower-left corner of cell (0, 0)
     cell: float
     nx: int
@@ -55,15 +60,18 @@ class BucketGrid:
         ij = np.minimum(((points - lo) / cell).astype(np.int64), (nx - 1, ny - 1))
         key = ij[:, 0] * ny + ij[:, 1]
         order = np.argsort(key, kind="stable")
+        per_cell = np.bincount(key, minlength=nx * ny)
         start = np.zeros(nx * ny + 1, dtype=np.int64)
-        np.cumsum(np.bincount(key, minlength=nx * ny), out=start[1:])
-        return BucketGrid(np.ascontiguousarray(points[order]), order, start, lo, cell, nx, ny)
+        np.cumsum(per_cell, out=start[1:])
+        counts = np.zeros((nx + 1, ny + 1), dtype=np.int64)
+        np.cumsum(np.cumsum(per_cell.reshape(nx, ny), axis=0), axis=1, out=counts[1:, 1:])
+        return BucketGrid(np.ascontiguousarray(points[order]), order, start, counts, lo, cell, nx, ny)
 
     def arrays(self) -> tuple:
-        """The grid as :func:`nearest_within` takes it after the queries: (xy, index, start, ox, oy,
-        cell, nx, ny)."""
+        """The grid as :func:`nearest_within` takes it after the queries: (xy, index, start, counts, ox,
+        oy, cell, nx, ny)."""
         ox, oy = float(self.origin[0]), float(self.origin[1])
-        return self.xy, self.index, self.start, ox, oy, self.cell, self.nx, self.ny
+        return self.xy, self.index, self.start, self.counts, ox, oy, self.cell, self.nx, self.ny
 
     def query(self, q: np.ndarray, bound: float) -> tuple[np.ndarray, np.ndarray]:
         """(distance, index) of the nearest map point to each row of ``q`` closer than ``bound``; where
@@ -87,16 +95,22 @@ class BucketGrid:
 
 
 @kernel
-def nearest_within(q, bound, xy, index, start, ox, oy, cell, nx, ny, dist, idx):
+def nearest_within(q, bound, xy, index, start, counts, ox, oy, cell, nx, ny, dist, idx):
     """Fill ``dist``/``idx`` (see :meth:`BucketGrid.query`)."""
     k = len(xy)
     for n in range(len(q)):
         px, py = q[n, 0], q[n, 1]
         half = min(bound, FIRST_SQUARE * cell)
+        first = True
         while True:  # squares of doubling half-width: the first that holds a point within it has the nearest
             best_d2, best_i = _nearest(px, py, half, xy, index, start, ox, oy, cell, nx, ny)
             if best_i >= 0 or not half < bound:  # (not <: also a NaN bound ends it)
                 break
+            # the squares grow to the bound's, each inside the next (_square is monotone in half): with no
+            # point in that one, none finds one
+            if first and _count(px, py, bound, counts, ox, oy, cell, nx, ny) == 0:
+                break
+            first = False
             half = min(2.0 * half, bound)
         if best_i < 0:
             dist[n], idx[n] = np.inf, k
@@ -105,7 +119,7 @@ def nearest_within(q, bound, xy, index, start, ox, oy, cell, nx, ny, dist, idx):
 
 
 @kernel
-def nearest_within_moving(q, bound, xy, index, start, ox, oy, cell, nx, ny, dist, idx, clear, at):
+def nearest_within_moving(q, bound, xy, index, start, counts, ox, oy, cell, nx, ny, dist, idx, clear, at):
     """:func:`nearest_within` of points that move a little between calls (ICP's iterations), the same
     answers: a point's query that found nothing leaves in ``clear`` (len(q)) a distance within which no
     map point lies from where it then was, kept in ``at`` (len(q), 2); while the point has moved less
@@ -121,11 +135,19 @@ def nearest_within_moving(q, bound, xy, index, start, ox, oy, cell, nx, ny, dist
             dist[n], idx[n] = np.inf, k
             continue
         half = min(bound, FIRST_SQUARE * cell)
+        first = True
         while True:
             if half < bound:
                 best_d2, best_i = _nearest(px, py, half, xy, index, start, ox, oy, cell, nx, ny)
                 if best_i >= 0:
                     break
+                if first and _count(px, py, bound, counts, ox, oy, cell, nx, ny) == 0:
+                    # (nearest_within's shortcut) no map point in the cells of the bound's square
+                    i0, i1, j0, j1 = _square(px, py, bound, ox, oy, cell, nx, ny)
+                    away = _clearance(px, py, np.inf, i0, i1, j0, j1, ox, oy, cell, nx, ny)
+                    clear[n], at[n, 0], at[n, 1] = away - _margin(px, py, ox, oy), px, py
+                    break
+                first = False
                 half = min(2.0 * half, bound)
                 continue
             # the last square: also how far every map point is from (px, py) at the least
@@ -166,9 +188,18 @@ def _nearest_and_clearance(px, py, half, xy, index, start, ox, oy, cell, nx, ny)
                 least = min(least, e)
                 if e < best_d2 or (e == best_d2 and 0 <= index[m] < best_i):
                     best_d2, best_i = e, index[m]
+    return best_d2, best_i, _clearance(px, py, least, i0, i1, j0, j1, ox, oy, cell, nx, ny)
+
+
+@kernel
+def _clearance(px, py, least, i0, i1, j0, j1, ox, oy, cell, nx, ny):
+    """A distance from (px, py) within which no map point lies (rounding aside), the points of cells
+    i0..i1 × j0..j1 being at squared distance ``least`` at the least: the less of √least and the distance
+    to those cells' edge where cells lie beyond it — or, when more, the distance to the grid's box, which
+    holds every map point."""
     box = max(ox - px, px - (ox + nx * cell), oy - py, py - (oy + ny * cell), 0.0)
     if i0 > i1 or j0 > j1:  # no cell looked at: the box alone
-        return best_d2, best_i, box
+        return box
     inner = math.sqrt(least)
     if i0 > 0:
         inner = min(inner, px - (ox + i0 * cell))
@@ -178,7 +209,17 @@ def _nearest_and_clearance(px, py, half, xy, index, start, ox, oy, cell, nx, ny)
         inner = min(inner, py - (oy + j0 * cell))
     if j1 < ny - 1:
         inner = min(inner, oy + (j1 + 1) * cell - py)
-    return best_d2, best_i, max(box, inner)
+    return max(box, inner)
+
+
+@kernel
+def _count(px, py, half, counts, ox, oy, cell, nx, ny):
+    """How many map points lie in the cells of the square of half-width ``half`` around (px, py)
+    (:func:`_square`), from the summed-area table ``counts``."""
+    i0, i1, j0, j1 = _square(px, py, half, ox, oy, cell, nx, ny)
+    if i0 > i1 or j0 > j1:
+        return 0
+    return counts[i1 + 1, j1 + 1] - counts[i0, j1 + 1] - counts[i1 + 1, j0] + counts[i0, j0]
 
 
 @kernel
