@@ -103,7 +103,7 @@ def nearest_within(q, bound, xy, index, start, counts, ox, oy, cell, nx, ny, dis
         half = min(bound, FIRST_SQUARE * cell)
         first = True
         while True:  # squares of doubling half-width: the first that holds a point within it has the nearest
-            best_d2, best_i = _nearest(px, py, half, xy, index, start, ox, oy, cell, nx, ny)
+            best_d2, best_i, _ = _nearest(px, py, half, xy, index, start, ox, oy, cell, nx, ny)
             if best_i >= 0 or not half < bound:  # (not <: also a NaN bound ends it)
                 break
             # the squares grow to the bound's, each inside the next (_square is monotone in half): with no
@@ -138,7 +138,7 @@ def nearest_within_moving(q, bound, xy, index, start, counts, ox, oy, cell, nx, 
         first = True
         while True:
             if half < bound:
-                best_d2, best_i = _nearest(px, py, half, xy, index, start, ox, oy, cell, nx, ny)
+                best_d2, best_i, _ = _nearest(px, py, half, xy, index, start, ox, oy, cell, nx, ny)
                 if best_i >= 0:
                     break
                 if first and _count(px, py, bound, counts, ox, oy, cell, nx, ny) == 0:
@@ -176,18 +176,8 @@ def _nearest_and_clearance(px, py, half, xy, index, start, ox, oy, cell, nx, ny)
     the least distance to the points of the cells looked at, or to the edge of those cells where cells
     lie beyond it, whichever is less — or, when that is less, the distance to the grid's box, which holds
     every map point."""
+    best_d2, best_i, least = _nearest(px, py, half, xy, index, start, ox, oy, cell, nx, ny, True)
     i0, i1, j0, j1 = _square(px, py, half, ox, oy, cell, nx, ny)
-    best_d2, best_i = half * half, -1
-    least = np.inf
-    for i in range(i0, i1 + 1):
-        for c in range(i * ny + j0, i * ny + j1 + 1):
-            for m in range(start[c], start[c + 1]):
-                dx = xy[m, 0] - px
-                dy = xy[m, 1] - py
-                e = dx * dx + dy * dy
-                least = min(least, e)
-                if e < best_d2 or (e == best_d2 and 0 <= index[m] < best_i):
-                    best_d2, best_i = e, index[m]
     return best_d2, best_i, _clearance(px, py, least, i0, i1, j0, j1, ox, oy, cell, nx, ny)
 
 
@@ -223,22 +213,25 @@ def _count(px, py, half, counts, ox, oy, cell, nx, ny):
 
 
 @kernel
-def _nearest(px, py, half, xy, index, start, ox, oy, cell, nx, ny):
+def _nearest(px, py, half, xy, index, start, ox, oy, cell, nx, ny, track=False):
     """(squared distance, index) of the least such pair among the points of the cells overlapping the
-    square of half-width ``half`` around (px, py) whose squared distance is below half²; index −1 for
-    none. :func:`_collect` of a list of one entry, comparison for comparison, with the entry held in
-    local variables rather than arrays (what ICP's queries spend their time in)."""
+    square of half-width ``half`` around (px, py) whose squared distance is below half², index −1 for
+    none; with ``track``, the least squared distance of any point looked at (else inf).
+    :func:`_collect` of a list of one entry, comparison for comparison, with the entry held in local
+    variables rather than arrays (what ICP's queries spend their time in)."""
     i0, i1, j0, j1 = _square(px, py, half, ox, oy, cell, nx, ny)
-    best_d2, best_i = half * half, -1
+    best_d2, best_i, least = half * half, -1, np.inf
     for i in range(i0, i1 + 1):
         for c in range(i * ny + j0, i * ny + j1 + 1):
             for m in range(start[c], start[c + 1]):
                 dx = xy[m, 0] - px
                 dy = xy[m, 1] - py
                 e = dx * dx + dy * dy
+                if track:
+                    least = min(least, e)
                 if e < best_d2 or (e == best_d2 and 0 <= index[m] < best_i):
                     best_d2, best_i = e, index[m]
-    return best_d2, best_i
+    return best_d2, best_i, least
 
 
 @kernel
