@@ -45,6 +45,8 @@ TENTHS = 10
 # inside HierarchicalSlam._close (the code timing.csv's t_loop times): its CPU seconds, and with a profile
 # path cProfile (CPU time) of it; then the CLI (whole runs) or a replay of pickled frames (--replay)
 DRIVER = """
+from cornerslam_cli.blas import single_threaded_blas
+single_threaded_blas()  # before numpy is first imported, as the command does (cornerslam_cli/blas.py)
 import cProfile, hashlib, json, pickle, sys, time
 from cornerslam_cli import hierarchy
 out, prof_path, mode, *rest = sys.argv[1:]
@@ -219,7 +221,7 @@ def report(args, log: Path, names: dict, results: dict[str, list[dict]], profile
             ("Σ t_loop of timing.csv (per-step loop closing, wall clock)", "sum_t_loop"),
             ("summary t_loop (with the final keyframe graph, wall clock)", "summary_t_loop"),
             *rows,
-            ("CPU of the whole run", "cpu"),
+            ("CPU of the whole run (its process)", "cpu"),
         ]
     for label, key in rows:
         b, t = median([r[key] for r in results["base"]]), median([r[key] for r in results["this"]])
