@@ -9,8 +9,8 @@ import pytest
 
 from cornerslam_cli.config import config_from
 from cornerslam_cli.frontend import frames, open_input
-from cornerslam_cli.geometry import compose, wrap_angle
-from cornerslam_cli.graph.submap import keyframe_factors, keyframe_nodes
+from cornerslam_cli.geometry import compose, relative, wrap_angle
+from cornerslam_cli.graph.submap import det3, keyframe_factors, keyframe_nodes, propagate
 from cornerslam_cli.hierarchy import HierarchicalSlam
 
 
@@ -53,6 +53,46 @@ def test_factors_chain_back_to_the_poses_and_carry_the_propagated_covariance():
     end = np.cov(last_errors(mc, poses).T)
     _, half = keyframe_factors(poses, covs, end / 2, nodes)
     np.testing.assert_allclose(half / cov, 0.5, rtol=0.1)
+
+
+def keyframe_factors_step_by_step(poses, covs, end_cov, nodes):
+    """keyframe_factors as it was written before its terms were computed for all steps at once: one
+    :func:`propagate` of each chain per step (the reference its bits must equal)."""
+    prev = np.vstack((np.zeros(3), poses[:-1]))
+    total, part, ref, parts = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros(3), []
+    is_node = np.zeros(len(poses), dtype=bool)
+    is_node[nodes] = True
+    for k, (p0, p1, c) in enumerate(zip(prev, poses, covs, strict=True)):
+        total = propagate(total, p0, p1, c)
+        part = propagate(part, relative(ref, p0), relative(ref, p1), c)
+        if is_node[k]:
+            parts.append(part)
+            part, ref = np.zeros((3, 3)), p1
+    scale = 1.0
+    if det3(total) > 0 and det3(end_cov) > 0:
+        scale = float(np.cbrt(det3(end_cov) / det3(total)))
+    anchors = np.vstack((np.zeros(3), poses[nodes[:-1]]))
+    return relative(anchors, poses[nodes]), np.array(parts) * scale
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_factors_are_the_step_by_step_propagations_bit_for_bit(seed):
+    """Random walks (turns past ±π, nodes every step or far apart, a single step): the same bits as
+    the step-by-step computation."""
+    rng = np.random.default_rng(seed)
+    for n, spacing in ((1, 1.0), (2, 0.0), (40, 0.0), (300, 1.0), (300, 5.0)):
+        inc = np.column_stack((rng.uniform(0.0, 0.5, n), rng.normal(0.0, 0.05, n), rng.normal(0.0, 0.4, n)))
+        poses = [rng.normal(0.0, 0.1, 3)]
+        for d in inc[1:]:
+            poses.append(compose(poses[-1], d))
+        poses = np.array(poses)
+        A = rng.normal(0.0, 0.02, (n, 3, 3))
+        covs = A @ A.transpose(0, 2, 1) + 1e-6 * np.eye(3)
+        nodes = keyframe_nodes(poses, spacing, 0.5)
+        end = np.diag(rng.uniform(1e-4, 1e-2, 3))
+        rel, cov = keyframe_factors(poses, covs, end, nodes)
+        ref_rel, ref_cov = keyframe_factors_step_by_step(poses, covs, end, nodes)
+        assert rel.tobytes() == ref_rel.tobytes() and cov.tobytes() == ref_cov.tobytes()
 
 
 def monte_carlo(inc: np.ndarray, covs: np.ndarray, n: int, rng) -> np.ndarray:

@@ -7,7 +7,7 @@ from scipy.spatial import cKDTree
 
 from cornerslam_cli.motion.icp import NORMAL_TIE
 from cornerslam_cli.motion.kernels import line_terms, neighbour_scatter
-from cornerslam_cli.motion.nearest import BucketGrid
+from cornerslam_cli.motion.nearest import BucketGrid, nearest_within_moving
 
 
 def point_sets(rng):
@@ -111,3 +111,31 @@ def test_neighbour_scatter_kernel_is_the_numpy_expression_bit_for_bit(quantised)
     nb = (pts[idx] - mean) * w[..., None]
     expected = [(nb[..., 0] ** 2).sum(1), (nb[..., 0] * nb[..., 1]).sum(1), (nb[..., 1] ** 2).sum(1)]
     assert np.array_equal(out, np.array(expected))
+
+
+def test_moving_queries_answer_as_single_queries():
+    """nearest_within_moving (ICP's iterations: points that move a little between calls, most of them far
+    from the map) gives nearest_within's answers at every call, whatever the points skipped: random walks
+    of a scan near walls, far from them, off the grid, crossing its edges, shrinking bounds, NaN."""
+    rng = np.random.default_rng(11)
+    for pts in point_sets(rng):
+        grid = BucketGrid.build(pts)
+        lo, hi = pts.min(axis=0) - 3.0, pts.max(axis=0) + 3.0
+        q = np.vstack(
+            (pts[:60] + rng.normal(0.0, 0.2, (min(60, len(pts)), 2)), rng.uniform(lo, hi, (300, 2)))
+        )
+        q[-1] = np.nan
+        clear, at = np.full(len(q), -1.0), np.empty((len(q), 2))
+        moved = False
+        for it in range(12):
+            bound = max(0.1, 1.0 * 0.5**it)
+            step = rng.normal(0.0, [0.05, 0.003, 0.0][it % 3], 2)  # big, small, none
+            turn = rng.normal(0.0, 0.002)
+            c, s = np.cos(turn), np.sin(turn)
+            q = q @ np.array([[c, -s], [s, c]]).T + step
+            d_ref, i_ref = grid.query(q, bound)
+            d, i = np.empty(len(q)), np.empty(len(q), dtype=np.int64)
+            nearest_within_moving(q, bound, *grid.arrays(), d, i, clear, at)
+            assert np.array_equal(d, d_ref) and np.array_equal(i, i_ref)
+            moved |= bool(np.any(clear > bound))
+        assert moved or len(pts) < 10  # some points were answered from their clearance

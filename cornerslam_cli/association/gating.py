@@ -59,6 +59,20 @@ def chi2_gate(dof: int | np.ndarray, alpha: float) -> np.ndarray:
     return _chi2_table(float(alpha), size)[dof]
 
 
+@functools.lru_cache(maxsize=64)
+def _gate_threshold(d: int, alpha: float) -> float:
+    """``float(chi2_gate(d, alpha))``, kept: :func:`gate` asks it at every call."""
+    return float(chi2_gate(d, alpha))
+
+
+@functools.lru_cache(maxsize=64)
+def _gate_ladder(d: int, capacity: int, alpha: float) -> np.ndarray:
+    """``chi2_gate(d * np.arange(capacity + 2), alpha)``, kept (read-only: callers copy it)."""
+    ladder = chi2_gate(d * np.arange(capacity + 2), alpha)
+    ladder.flags.writeable = False
+    return ladder
+
+
 def scan_order(z: np.ndarray) -> list[int]:
     """Corner indices by increasing bearing atan2(y, x): the order a scan sweeps them."""
     return np.argsort(np.arctan2(z[:, 1], z[:, 0]), kind="stable").tolist() if len(z) else []
@@ -172,7 +186,7 @@ def gate(z: np.ndarray, C: np.ndarray, pred: Prediction, cfg: AssociationConfig)
     m, d = len(z), 3 if cfg.use_phi else 2
     h, H_r, H_l = (np.ascontiguousarray(a, dtype=float) for a in (pred.h, pred.H_r, pred.H_l))
     nu, d2, hph = gate_pairs(z, C, h.reshape(-1, 3), pred.P, H_r, H_l, d, cfg.euclidean_gate, PIVOT_RTOL)
-    threshold = float(chi2_gate(d, cfg.alpha))
+    threshold = _gate_threshold(d, float(cfg.alpha))
     # each row by increasing D² (stable: ties by landmark id); its first `count` entries pass the gate
     # (d2 holds no NaN: gate_pairs returns inf for those)
     order = np.argsort(d2, axis=1, kind="stable")
@@ -208,7 +222,7 @@ class JointCompatibility:
         self.M = np.zeros((d * capacity, d * capacity))  # L_H⁻¹
         self.y = np.zeros(d * capacity)
         self.d2 = np.zeros(capacity + 1)  # d2[h] = joint D² of the first h committed pairings
-        self.gate = chi2_gate(d * np.arange(capacity + 2), g.alpha)  # gate[h] = χ²(d·h, 1 − α)
+        self.gate = _gate_ladder(d, capacity, float(g.alpha)).copy()  # gate[h] = χ²(d·h, 1 − α)
         self.corners = np.zeros(capacity, dtype=np.int64)
         self.landmarks = np.zeros(capacity, dtype=np.int64)
         self.locs = np.zeros(capacity, dtype=np.int64)  # landmark index into the row universe

@@ -54,19 +54,19 @@ prediction: graph/points.py (hierarchy.py decides when, ``loops.point_search``).
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..association import AssociationConfig, Associator, make_associator
-from ..filter import Ekf, EkfConfig
+from ..filter.models import observe
 from ..geometry import transform_points, wrap_angle
 from ..motion.icp import NORMAL_NEIGHBOURS, LocalMap, register
 from ..motion.params import ScanMatchConfig
+from ..types import Prediction
 from .params import LoopConfig
-from .submap import LoopMatch, Submap, local_map
+from .submap import CornerPairs, LoopMatch, Submap, local_map
 
 VOTE_XY = 0.5  # m: Hough cell of a hypothesis' translation, for the votes that order them
 VOTE_THETA = 0.2  # rad: ... and of its heading
@@ -76,7 +76,6 @@ OVERLAP_DISTANCE = 1.0  # m: a point of b this close to a point of a overlaps a 
 MIN_OVERLAP_POINTS = 20  # fewer overlapping points are no evidence: fitness 0
 SUPPORT_DISTANCE = 0.3  # m: a corner of b this close to one of a at a hypothesis' pose supports it
 SUPPORT_SLACK = 1  # a hypothesis is associated when its support ≥ the best set's corners − this
-_EKF = EkfConfig()  # the filter that predicts a's corners from b's origin under a hypothesis (checked once)
 
 # why a match was rejected (LoopMatch.reason)
 NO_HYPOTHESIS = "no hypothesis"  # no pair of b's corners agrees with a pair of a's
@@ -137,7 +136,7 @@ def match_submaps(
 ) -> LoopMatch:
     """Verify a loop closure between submaps a and b (module docstring); never raises on empty input.
     ``maps``: a's points as ICP's map (a cache of them: graph/submap.LocalMaps)."""
-    hyps = pair_hypotheses(a.landmarks, b.landmarks, cfg)
+    hyps = pair_hypotheses(a.landmarks, b.landmarks, cfg, a.corner_pairs, b.corner_pairs)
     sets = corner_sets(a, b, hyps, cfg, associate)
     if not sets:
         return rejected(np.full(3, np.nan), 0, NO_HYPOTHESIS)
@@ -188,54 +187,46 @@ def _far_apart(p: np.ndarray, q: np.ndarray) -> bool:
 # ---------------------------------------------------------------------------------------- 1. hypotheses
 
 
-KEPT_PAIRS = 64  # corner counts whose index pairs are kept (8·n² bytes each)
-
-
-@functools.lru_cache(maxsize=KEPT_PAIRS)
-def _upper_pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """``np.triu_indices(n, 1)``, read-only and kept: a sixth of :func:`pair_hypotheses` on
-    infinite-corridor's revisits (submaps of 1–26 corners), where each call costs far more than its use."""
-    i, j = np.triu_indices(n, 1)
-    i.flags.writeable = j.flags.writeable = False
-    return i, j
-
-
-def _corner_pairs(lm: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """All pairs i < j of corners (n, 3) and their lengths."""
-    n = len(lm)
-    i, j = _upper_pairs(n) if n <= KEPT_PAIRS else np.triu_indices(n, 1)
-    return i, j, np.hypot(lm[j, 0] - lm[i, 0], lm[j, 1] - lm[i, 1])
-
-
-def pair_hypotheses(a: np.ndarray, b: np.ndarray, cfg: LoopConfig) -> Hypotheses:
+def pair_hypotheses(
+    a: np.ndarray,
+    b: np.ndarray,
+    cfg: LoopConfig,
+    a_pairs: CornerPairs | None = None,
+    b_pairs: CornerPairs | None = None,
+) -> Hypotheses:
     """Every agreement of a pair of b's corners (n_b, 3) with a pair of a's (n_a, 3) (module docstring),
-    at most ``cfg.max_hypotheses``, by support, then votes, then length."""
+    at most ``cfg.max_hypotheses``, by support, then votes, then length. ``a_pairs``/``b_pairs``: their
+    :class:`~cornerslam_cli.graph.submap.CornerPairs` when kept (a closed submap's), else made here."""
     a, b = np.asarray(a, dtype=float).reshape(-1, 3), np.asarray(b, dtype=float).reshape(-1, 3)
-    ai, aj, ad = _corner_pairs(a)
-    order = np.argsort(ad, kind="stable")
-    ai, aj, ad = ai[order], aj[order], ad[order]
-    bi, bj, bd = _corner_pairs(b)
+    a_pairs = CornerPairs.of(a) if a_pairs is None else a_pairs
+    b_pairs = CornerPairs.of(b) if b_pairs is None else b_pairs
+    ai, aj, ad = a_pairs.sorted_i, a_pairs.sorted_j, a_pairs.sorted_length
+    bi, bj, bd = b_pairs.i, b_pairs.j, b_pairs.length
     # a's pairs with |length − b's| < pair_distance: a window of the sorted lengths per b pair
     lo = np.searchsorted(ad, bd - cfg.pair_distance, side="right")
     count = np.searchsorted(ad, bd + cfg.pair_distance, side="left") - lo
     rb = np.repeat(np.arange(len(bd)), count)
     ra = lo[rb] + np.arange(len(rb)) - np.repeat(np.cumsum(count) - count, count)
     # both orderings: (i↔k, j↔l) and (i↔l, j↔k)
-    I, J = np.tile(bi[rb], 2), np.tile(bj[rb], 2)
+    I, J = np.concatenate((bi[rb], bi[rb])), np.concatenate((bj[rb], bj[rb]))
     K, L = np.concatenate((ai[ra], aj[ra])), np.concatenate((aj[ra], ai[ra]))
-    ok = (np.abs(wrap_angle(b[I, 2] - a[K, 2])) < cfg.pair_phi) & (
-        np.abs(wrap_angle(b[J, 2] - a[L, 2])) < cfg.pair_phi
-    )
+    same_phi = _same_phi(a, b, cfg.pair_phi)
+    ok = same_phi[I, K] & same_phi[J, L]
     pairs = np.column_stack((I, J, K, L))[ok]
-    length = np.tile(bd[rb], 2)[ok]
+    length = np.concatenate((bd[rb], bd[rb]))[ok]
     poses = pair_transform(b[pairs[:, 0], :2], b[pairs[:, 1], :2], a[pairs[:, 2], :2], a[pairs[:, 3], :2])
     votes, rank = _votes(poses, length)
     order = np.lexsort((-length, -votes, rank))[: cfg.max_hypotheses]
-    n = support(poses[order], a, b, cfg.pair_phi)
+    n = support(poses[order], a, b, cfg.pair_phi, same_phi)
     order = order[np.argsort(-n, kind="stable")]
     return Hypotheses(
         pairs[order].astype(np.int64), poses[order], length[order], votes[order], np.sort(n)[::-1]
     )
+
+
+def _same_phi(a: np.ndarray, b: np.ndarray, pair_phi: float) -> np.ndarray:
+    """(n_b, n_a) whether b's corner's φ is within ``pair_phi`` of a's corner's."""
+    return np.abs(wrap_angle(b[:, None, 2] - a[None, :, 2])) < pair_phi
 
 
 def pair_transform(p1: np.ndarray, p2: np.ndarray, q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
@@ -254,23 +245,34 @@ def _votes(poses: np.ndarray, length: np.ndarray) -> tuple[np.ndarray, np.ndarra
     and (h,) each one's rank in its cell by decreasing length (0 = the cell's longest pair)."""
     cells = np.floor(poses / np.array([VOTE_XY, VOTE_XY, VOTE_THETA]))
     cells = np.clip(cells, -(2**20), 2**20 - 1).astype(np.int64) + 2**20  # 21 bits each
-    key = (cells[:, 0] << 42) | (cells[:, 1] << 21) | cells[:, 2]  # one int64 per cell: 1-D unique is fast
-    _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
-    by_cell = np.lexsort((-length, key))
-    first = np.cumsum(counts) - counts  # where each cell starts in by_cell (cells in key order)
-    rank = np.empty(len(key), dtype=np.int64)
-    rank[by_cell] = np.arange(len(key)) - first[inverse[by_cell]]
-    return counts[inverse], rank
+    key = (cells[:, 0] << 42) | (cells[:, 1] << 21) | cells[:, 2]  # one int64 per cell
+    votes, rank = np.empty(len(key), dtype=np.int64), np.empty(len(key), dtype=np.int64)
+    if len(key) == 0:
+        return votes, rank
+    by_cell = np.lexsort((-length, key))  # by cell, then by decreasing length: cells are runs
+    run_key = key[by_cell]
+    starts = np.ones(len(key), dtype=bool)
+    np.not_equal(run_key[1:], run_key[:-1], out=starts[1:])
+    first = np.flatnonzero(starts)  # where each cell's run starts
+    counts = np.empty_like(first)
+    counts[:-1], counts[-1] = first[1:] - first[:-1], len(key) - first[-1]
+    cell = np.repeat(np.arange(len(first)), counts)  # each sorted pose's cell
+    votes[by_cell] = counts[cell]
+    rank[by_cell] = np.arange(len(key)) - first[cell]
+    return votes, rank
 
 
-def support(poses: np.ndarray, a: np.ndarray, b: np.ndarray, pair_phi: float) -> np.ndarray:
+def support(
+    poses: np.ndarray, a: np.ndarray, b: np.ndarray, pair_phi: float, same_phi: np.ndarray | None = None
+) -> np.ndarray:
     """(h,) for each pose (h, 3) a→b, how many of b's corners (n_b, 3) land within ``SUPPORT_DISTANCE``
-    of one of a's (n_a, 3) with φ within ``pair_phi``: O(h · n_b · n_a), vectorised."""
+    of one of a's (n_a, 3) with φ within ``pair_phi`` (``same_phi``: :func:`_same_phi` when at hand):
+    O(h · n_b · n_a), vectorised."""
     c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
     x = poses[:, :1] + c * b[None, :, 0] - s * b[None, :, 1]  # (h, n_b) b's corners in a's frame
     y = poses[:, 1:2] + s * b[None, :, 0] + c * b[None, :, 1]
     d2 = (x[..., None] - a[None, None, :, 0]) ** 2 + (y[..., None] - a[None, None, :, 1]) ** 2
-    same_phi = np.abs(wrap_angle(b[:, None, 2] - a[None, :, 2])) < pair_phi  # (n_b, n_a)
+    same_phi = _same_phi(a, b, pair_phi) if same_phi is None else same_phi  # (n_b, n_a)
     near = (d2 < SUPPORT_DISTANCE**2) & same_phi[None]
     return near.any(axis=2).sum(axis=1)
 
@@ -287,11 +289,12 @@ def corner_sets(
     find that solution again."""
     if len(hyps) == 0:
         return []
-    z, C = b.landmarks, _diagonal_blocks(b.landmark_P)
+    z, C = b.landmarks, b.landmark_blocks.copy()
     n = len(a.landmarks)
     P = np.zeros((3 + 3 * n, 3 + 3 * n))  # the state [hypothesis, a's corners]: blockdiag(Σ_hyp, a's P)
     P[:3, :3] = np.diag([cfg.hypothesis_sigma_xy**2] * 2 + [cfg.hypothesis_sigma_theta**2])
     P[3:, 3:] = a.landmark_P
+    P = 0.5 * (P + P.T)  # (symmetric to the last bit, as a filter holds it)
     found: list[CornerSet] = []
     most = 0  # corners of the best set so far
     for h in range(len(hyps)):
@@ -299,24 +302,18 @@ def corner_sets(
             break  # sorted by support: the rest can neither beat nor tie the best set
         if any(s.n >= cfg.min_corners and not _far_apart(s.pose, hyps.poses[h]) for s in found):
             continue  # the same solution as a set already found
-        ekf = Ekf.from_state(_EKF, np.concatenate((hyps.poses[h], a.landmarks.reshape(-1))), P)
-        result = associate(z, C, ekf.predict_observations())
+        # a's corners as the filter at the hypothesis' pose would predict them (models.observe)
+        h_, H_r, H_l = observe(hyps.poses[h], a.landmarks)
+        result = associate(z, C, Prediction(h=h_, H_r=H_r, H_l=H_l, P=P))
         matched = np.flatnonzero(result.pairs >= 0)
         pairs = np.column_stack((matched, result.pairs[matched])).astype(np.int64)
         pose = fit_rigid(b, a, pairs) if len(pairs) >= 2 else hyps.poses[h]
-        n_a = len(np.unique(pairs[:, 1]))
+        n_a = len(set(pairs[:, 1].tolist()))
         found.append(CornerSet(pairs, pose, n_a, result.joint_d2, h, result.budget_hit))
         if result.budget_hit:
             break  # the best set under this hypothesis is unknown: the match is rejected
         most = max(most, found[-1].n)
     return found
-
-
-def _diagonal_blocks(P: np.ndarray, which: np.ndarray | None = None) -> np.ndarray:
-    """(n, 3, 3) diagonal blocks of a (3n, 3n) joint covariance (``which``: only those landmarks')."""
-    rows = np.arange(len(P) // 3) if which is None else which
-    idx = 3 * rows[:, None] + np.arange(3)
-    return P[idx[:, :, None], idx[:, None, :]]
 
 
 def fit_rigid(b: Submap, a: Submap, pairs: np.ndarray) -> np.ndarray:
@@ -327,8 +324,8 @@ def fit_rigid(b: Submap, a: Submap, pairs: np.ndarray) -> np.ndarray:
     change with the frame, so it only gated the pairs.
     """
     p, q = b.landmarks[pairs[:, 0], :2], a.landmarks[pairs[:, 1], :2]
-    Cb, Ca = _diagonal_blocks(b.landmark_P, pairs[:, 0]), _diagonal_blocks(a.landmark_P, pairs[:, 1])
-    w = 2.0 / (np.trace(Cb[:, :2, :2], axis1=1, axis2=2) + np.trace(Ca[:, :2, :2], axis1=1, axis2=2))
+    Cb, Ca = b.landmark_blocks[pairs[:, 0]], a.landmark_blocks[pairs[:, 1]]
+    w = 2.0 / ((Cb[:, 0, 0] + Cb[:, 1, 1]) + (Ca[:, 0, 0] + Ca[:, 1, 1]))  # the xy blocks' traces
     w = w / w.sum()
     mp, mq = w @ p, w @ q
     H = (w[:, None] * (p - mp)).T @ (q - mq)  # Σ w (p − p̄)(q − q̄)ᵀ

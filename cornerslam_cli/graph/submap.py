@@ -11,6 +11,7 @@ GTSAM's tangent space).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -38,6 +39,69 @@ class Submap:
     node: int = 0  # its origin's node in the pose graph
     step_nodes: np.ndarray | None = None  # (s,) the graph node each step hangs from (its anchor) …
     anchor_poses: np.ndarray | None = None  # (s, 3) … and that node's pose in this submap's frame
+
+    # What loop closing reads of a submap's corners for every candidate pair it is in, computed at the
+    # first (a closed submap does not change; read-only, so no caller can change them either).
+
+    @functools.cached_property
+    def landmark_blocks(self) -> np.ndarray:
+        """(n, 3, 3) each landmark's own covariance: the diagonal blocks of ``landmark_P``."""
+        return _read_only(diagonal_blocks(self.landmark_P))
+
+    @functools.cached_property
+    def corner_pairs(self) -> CornerPairs:
+        """Every pair of its corners (graph/loops.py's hypotheses)."""
+        return CornerPairs.of(self.landmarks)
+
+
+def diagonal_blocks(P: np.ndarray, which: np.ndarray | None = None) -> np.ndarray:
+    """(n, 3, 3) diagonal blocks of a (3n, 3n) joint covariance (``which``: only those landmarks')."""
+    rows = np.arange(len(P) // 3) if which is None else which
+    idx = 3 * rows[:, None] + np.arange(3)
+    return P[idx[:, :, None], idx[:, None, :]]
+
+
+KEPT_PAIRS = 64  # corner counts whose index pairs are kept (8·n² bytes each)
+
+
+@functools.lru_cache(maxsize=KEPT_PAIRS)
+def _upper_pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.triu_indices(n, 1)``, read-only and kept: on infinite-corridor's revisits (submaps of 1–26
+    corners) each call cost far more than its use."""
+    i, j = np.triu_indices(n, 1)
+    return _read_only(i), _read_only(j)
+
+
+@dataclass(frozen=True)
+class CornerPairs:
+    """All pairs i < j of a submap's corners (``np.triu_indices`` order) and their lengths, and the same
+    sorted by length (stable).
+
+    i, j : (p,) int64;  length : (p,) m;  sorted_i, sorted_j, sorted_length : (p,) by increasing length
+    """
+
+    i: np.ndarray
+    j: np.ndarray
+    length: np.ndarray
+    sorted_i: np.ndarray
+    sorted_j: np.ndarray
+    sorted_length: np.ndarray
+
+    @staticmethod
+    def of(landmarks: np.ndarray) -> CornerPairs:
+        """The pairs of corners (n, 3)."""
+        lm = np.asarray(landmarks, dtype=float).reshape(-1, 3)
+        n = len(lm)
+        i, j = _upper_pairs(n) if n <= KEPT_PAIRS else np.triu_indices(n, 1)
+        length = np.hypot(lm[j, 0] - lm[i, 0], lm[j, 1] - lm[i, 1])
+        order = np.argsort(length, kind="stable")
+        parts = (i, j, length, i[order], j[order], length[order])
+        return CornerPairs(*(_read_only(x) for x in parts))
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a.flags.writeable = False
+    return a
 
 
 def local_map(submap: Submap) -> LocalMap:
@@ -140,20 +204,54 @@ def keyframe_factors(
     the filter was (``end_cov``: its corners narrowed what the motion noise alone would say; the volumes,
     det^(1/3), matched). Returns (rel (m, 3), cov (m, 3, 3))."""
     prev = np.vstack((np.zeros(3), poses[:-1]))
-    total, part, ref, parts = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros(3), []
+    anchors = np.vstack((np.zeros(3), poses[nodes[:-1]]))
+    # each step's poses before and after it in the frame of the node its link leaves from, and its noise
+    # turned into that frame and into the submap's: :func:`propagate`'s terms, all steps at once (its
+    # arithmetic row by row; only the two chains' recursions stay a loop)
+    ref = anchors[np.searchsorted(nodes, np.arange(len(poses)))]
+    rel0, rel1 = _relative_to_rows(ref, prev), _relative_to_rows(ref, poses)
+    noise_total, noise_part = (
+        _rotated_pose_covariances(covs, prev[:, 2]),
+        _rotated_pose_covariances(covs, rel0[:, 2]),
+    )
+    total, part, parts = np.zeros((3, 3)), np.zeros((3, 3)), []
     is_node = np.zeros(len(poses), dtype=bool)
     is_node[nodes] = True
-    for k, (p0, p1, c) in enumerate(zip(prev, poses, covs, strict=True)):
-        total = propagate(total, p0, p1, c)
-        part = propagate(part, relative(ref, p0), relative(ref, p1), c)
+    for k in range(len(poses)):
+        total = _moved(total, prev[k], poses[k]) + noise_total[k]
+        part = _moved(part, rel0[k], rel1[k]) + noise_part[k]
         if is_node[k]:
             parts.append(part)
-            part, ref = np.zeros((3, 3)), p1
+            part = np.zeros((3, 3))
     scale = 1.0
     if det3(total) > 0 and det3(end_cov) > 0:
         scale = float(np.cbrt(det3(end_cov) / det3(total)))
-    anchors = np.vstack((np.zeros(3), poses[nodes[:-1]]))
     return relative(anchors, poses[nodes]), np.array(parts) * scale
+
+
+def _relative_to_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(n, 3) :func:`~cornerslam_cli.geometry.relative` of each row of ``b`` to the same row of ``a``,
+    its arithmetic element for element (the trigonometry on a contiguous array, as of one pose)."""
+    th = np.ascontiguousarray(a[:, 2])
+    c, s = np.cos(th), np.sin(th)
+    dx, dy = b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]
+    return np.stack((c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[:, 2] - a[:, 2])), axis=-1)
+
+
+def _rotated_pose_covariances(covs: np.ndarray, yaws: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) :func:`~cornerslam_cli.geometry.rotate_pose_covariance` of each of ``covs`` by the same
+    row of ``yaws``: J Σ Jᵀ, the same two products per row."""
+    th = np.ascontiguousarray(yaws)
+    c, s = np.cos(th), np.sin(th)
+    J = np.zeros((len(th), 3, 3))
+    J[:, 0, 0], J[:, 0, 1], J[:, 1, 0], J[:, 1, 1], J[:, 2, 2] = c, -s, s, c, 1.0
+    return J @ np.asarray(covs, dtype=float) @ J.transpose(0, 2, 1)
+
+
+def _moved(acc: np.ndarray, p0: np.ndarray, p1: np.ndarray) -> np.ndarray:
+    """G acc Gᵀ of :func:`propagate`: p0's covariance ``acc`` carried to p1 = p0 ∘ δ."""
+    G = np.array([[1.0, 0.0, p0[1] - p1[1]], [0.0, 1.0, p1[0] - p0[0]], [0.0, 0.0, 1.0]])
+    return G @ acc @ G.T
 
 
 def det3(m: np.ndarray) -> float:

@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from ..features.jit import kernel
-from .nearest import nearest_within
+from .nearest import nearest_within_moving
 
 
 @kernel
@@ -163,6 +163,7 @@ def icp_iterations(points, grid, padded_points, padded_normals, start, guess, pr
     max_iterations, min_distance, shrink, converged, scale = cfg
     n = len(points)
     q, dist, idx = np.empty((n, 2)), np.empty(n), np.empty(n, np.int64)
+    clear, at = np.full(n, -1.0), np.empty((n, 2))  # points far from the map stay unlooked at a while
     J, w, r = np.empty((n, 3)), np.empty(n), np.empty(n)
     t, off, step = np.array([start[0], start[1]]), np.empty(3), np.empty(3)
     c, s = math.cos(start[2]), math.sin(start[2])
@@ -170,7 +171,7 @@ def icp_iterations(points, grid, padded_points, padded_normals, start, guess, pr
         for i in range(n):
             q[i, 0] = points[i, 0] * c - points[i, 1] * s + t[0]
             q[i, 1] = points[i, 0] * s + points[i, 1] * c + t[1]
-        nearest_within(q, dmax, *grid, dist, idx)
+        nearest_within_moving(q, dmax, *grid, dist, idx, clear, at)
         if line_terms(q, idx, padded_points, padded_normals, t, scale, J, w, r) < 3:
             break
         theta = math.atan2(s, c)
