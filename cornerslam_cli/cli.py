@@ -380,8 +380,14 @@ def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
 @click.option(
     "--time-offset", default=0.0, type=FINITE, show_default=True, help="Relation time − log time, seconds."
 )
+@click.option(
+    "--correct-scale",
+    is_flag=True,
+    help="ATE after the best similarity (as evo's -s), and its scale: a check of the ranges' scale "
+    "against the ground truth's, not the ATE of a 2-D laser (its scale comes from the ranges).",
+)
 @verbosity_options
-def evaluate(out_dir, ground_truth, relations, time_offset, verbose, quiet):
+def evaluate(out_dir, ground_truth, relations, time_offset, correct_scale, verbose, quiet):
     """Accuracy of a run's trajectory.tum against ground truth or relations.
 
     \b
@@ -394,8 +400,10 @@ def evaluate(out_dir, ground_truth, relations, time_offset, verbose, quiet):
     setup_logging(verbose, quiet)
     if not ground_truth and not relations:
         raise click.UsageError("give --ground-truth FILE.tum or --relations FILE")
+    if correct_scale and not ground_truth:
+        raise click.UsageError("--correct-scale scales the ATE: give --ground-truth FILE.tum too")
     check_one_run(out_dir)  # a compare or batch directory: names its run directories
-    res = evaluate_files(out_dir, ground_truth, relations, time_offset)
+    res = evaluate_files(out_dir, ground_truth, relations, time_offset, correct_scale)
     _echo(evaluation_lines(res))
 
 

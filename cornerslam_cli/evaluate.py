@@ -64,14 +64,23 @@ def apply_se2(ang: float, t: np.ndarray, poses: np.ndarray) -> np.ndarray:
     return np.column_stack((xy, wrap_angle(poses[:, 2] + ang)))
 
 
-def ate(est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray) -> Ate:
+def ate(
+    est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray, correct_scale: bool = False
+) -> Ate:
     """Absolute trajectory error of ``est`` against ``gt`` (interpolated at est's stamps), after SE(2)
-    alignment: RMSE, mean, max of the position error (m) and RMSE of the heading error (rad)."""
+    alignment: RMSE, mean, max of the position error (m) and RMSE of the heading error (rad). With
+    ``correct_scale`` after the best similarity instead (:func:`align_sim2`, evo's ``--correct_scale``),
+    its scale given: a diagnostic of the ranges' scale against the reference's, not a 2-D laser's ATE."""
     inside, g = interpolate_inside(gt_t, gt, est_t)
     e = est[inside]
     if len(e) < 2:
         return Ate(n=int(len(e)), rmse=float("nan"), mean=float("nan"), max=float("nan"))
-    ang, t = align_se2(e[:, :2], g[:, :2])
+    scale = None
+    if correct_scale:
+        scale, ang, t = align_sim2(e[:, :2], g[:, :2])
+        e = np.column_stack((scale * e[:, :2], e[:, 2]))
+    else:
+        ang, t = align_se2(e[:, :2], g[:, :2])
     ea = apply_se2(ang, t, e)
     d = np.linalg.norm(ea[:, :2] - g[:, :2], axis=1)
     dth = wrap_angle(ea[:, 2] - g[:, 2])
@@ -81,6 +90,7 @@ def ate(est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray) ->
         mean=float(np.mean(d)),
         max=float(np.max(d)),
         rot_rmse=float(np.sqrt(np.mean(dth**2))),
+        scale=scale,
     )
 
 
@@ -138,10 +148,11 @@ def evaluate_files(
     ground_truth: str | Path | None = None,
     relations: str | Path | None = None,
     time_offset: float = 0.0,
+    correct_scale: bool = False,
 ) -> Accuracy:
     """``cornerslam evaluate``: the TUM ``trajectory`` (or a run's output directory: its
     trajectory.tum) scored against a TUM ``ground_truth`` (``ate`` and the ``rpe_*`` fields) and/or a
-    ``relations`` file (``relations``).
+    ``relations`` file (``relations``); ``correct_scale``: the ATE after the best similarity (:func:`ate`).
 
     Raises ``LogError`` when the ground truth does not overlap the trajectory in time or no relation
     falls inside it: there is nothing to score, and a NaN is not a score."""
@@ -154,7 +165,7 @@ def evaluate_files(
         problem = overlap_problem(t, gt_t, f"ground truth '{ground_truth}'")
         if problem:
             raise LogError(problem, "is it this log's ground truth? Its stamps must use the log's clock")
-        out.update(ground_truth=display_path(ground_truth), ate=ate(t, est, gt_t, gt))
+        out.update(ground_truth=display_path(ground_truth), ate=ate(t, est, gt_t, gt, correct_scale))
         out.update(vars(rpe(t, est, gt_t, gt)))
     if relations:
         e = relation_error(t, est, read_relations(relations), time_offset)

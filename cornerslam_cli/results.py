@@ -47,13 +47,15 @@ def optional() -> Any:
 @dataclass(frozen=True, kw_only=True)
 class Ate(JsonResult):
     """Absolute trajectory error after SE(2) alignment (``evaluate.ate``): position error RMSE, mean,
-    max [m] over ``n`` poses, heading error RMSE [rad] (absent with fewer than two poses)."""
+    max [m] over ``n`` poses, heading error RMSE [rad] (absent with fewer than two poses); ``scale``:
+    present when aligned by a similarity instead (``evaluate --correct-scale``), its scale."""
 
     n: int
     rmse: float
     mean: float
     max: float
     rot_rmse: float | None = optional()
+    scale: float | None = optional()
 
 
 @dataclass(frozen=True, kw_only=True)

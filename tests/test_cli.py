@@ -102,6 +102,28 @@ def test_evaluate_reports_ate(sim_log, tmp_path):
     assert res.exit_code == 0 and "ATE  rmse" in res.output
 
 
+def test_evaluate_correct_scale_reports_the_scale_and_needs_ground_truth(tmp_path):
+    t = np.arange(40.0)
+    gt = np.column_stack((np.cos(t / 6) * 8, np.sin(t / 4) * 5, t / 6))
+
+    def rows(poses):  # TUM: stamp x y z qx qy qz qw
+        return "".join(
+            f"{s} {x} {y} 0 0 0 {np.sin(a / 2)} {np.cos(a / 2)}\n"
+            for s, (x, y, a) in zip(t, poses, strict=True)
+        )
+
+    (tmp_path / "gt.tum").write_text(rows(gt))
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "trajectory.tum").write_text(rows(gt * [1.002, 1.002, 1.0]))
+    res = invoke("evaluate", tmp_path / "run", "--ground-truth", tmp_path / "gt.tum", "--correct-scale")
+    assert res.exit_code == 0, res.output
+    assert "ATE  rmse 0.0000 m" in res.output and "scale corrected ×0.99800" in res.output
+    res = invoke("evaluate", tmp_path / "run", "--ground-truth", tmp_path / "gt.tum")
+    assert res.exit_code == 0 and "scale corrected" not in res.output and "ATE  rmse 0.0000" not in res.output
+    res = invoke("evaluate", tmp_path / "run", "--relations", tmp_path / "gt.tum", "--correct-scale")
+    assert res.exit_code == 2 and "--correct-scale" in res.output
+
+
 def test_info_names_the_topics_run_would_use(sim_log):
     res = invoke("info", sim_log)
     assert res.exit_code == 0, res.output

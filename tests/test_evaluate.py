@@ -71,6 +71,17 @@ def test_align_sim2_recovers_a_known_similarity_and_matches_a_numerical_fit():
     assert [s2, ang2, *t2] == pytest.approx(list(fit.x), abs=1e-7)
 
 
+def test_ate_with_correct_scale_removes_a_scale_and_reports_it():
+    t = np.arange(50.0)
+    gt = np.column_stack((np.cos(t / 8) * 10, np.sin(t / 5) * 6, t / 8))
+    est = gt * [0.99, 0.99, 1.0]  # every distance 1 % short
+    plain = ate(t, est, t, gt)
+    scaled = ate(t, est, t, gt, correct_scale=True)
+    assert plain.scale is None and plain.rmse > 0.02
+    assert scaled.scale == pytest.approx(1 / 0.99) and scaled.rmse == pytest.approx(0.0, abs=1e-9)
+    assert scaled.rot_rmse == pytest.approx(0.0, abs=1e-12)
+
+
 def test_rpe_per_step_of_a_scaled_trajectory():
     t = np.arange(11.0)
     gt = np.column_stack((t, np.zeros(11), np.zeros(11)))

@@ -270,7 +270,8 @@ def evaluation_lines(res: Accuracy) -> list[str]:
     if res.ate is not None:
         a = res.ate
         per_m = "-" if math.isnan(res.rpe_per_m) else f"{res.rpe_per_m:.4f}"  # path shorter than 1 m
-        lines.append(f"ATE  rmse {a.rmse:.4f} m  mean {a.mean:.4f} m  max {a.max:.4f} m  (n={a.n})")
+        scaled = "" if a.scale is None else f", scale corrected ×{a.scale:.5f}"
+        lines.append(f"ATE  rmse {a.rmse:.4f} m  mean {a.mean:.4f} m  max {a.max:.4f} m  (n={a.n}{scaled})")
         lines.append(f"RPE  per step {res.rpe_step_rmse:.4f} m  per metre {per_m} m/m")
     if res.relations is not None:
         lines.append(f"relations: {relation_text(res.relations)}")
