@@ -48,13 +48,22 @@ def align_sim2(src: np.ndarray, dst: np.ndarray) -> tuple[float, float, np.ndarr
     scale, evo's ``--correct_scale``): the rotation is :func:`align_se2`'s, s = Σ (R·a_i)·b_i / Σ‖a_i‖²
     over the centred points. s > 1: ``src`` is smaller than ``dst``. A diagnostic: a 2-D laser's
     trajectory has its scale from the ranges, so a scale off 1 says the ranges and the reference disagree.
+
+    Raises ``LogError`` when ``src`` is all one point (Σ‖a_i‖² = 0): no scale fits it, and a NaN is not
+    a score.
     """
     ang, _ = align_se2(src, dst)
     ms, md = src.mean(axis=0), dst.mean(axis=0)
     a, b = src - ms, dst - md
+    spread = float(np.sum(a * a))
+    if not spread > 0.0:
+        raise LogError(
+            "the trajectory's positions are all one point (it does not move): no scale fits it",
+            "evaluate it without --correct-scale",
+        )
     c, s = np.cos(ang), np.sin(ang)
     ra = a @ np.array([[c, s], [-s, c]])  # R·a_i as rows
-    scale = float(np.sum(ra * b) / np.sum(a * a))
+    scale = float(np.sum(ra * b)) / spread
     return scale, ang, md - scale * (np.array([[c, -s], [s, c]]) @ ms)
 
 

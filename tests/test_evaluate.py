@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from scipy import optimize
 
+from cornerslam_cli.errors import LogError
 from cornerslam_cli.evaluate import (
     align_se2,
     align_sim2,
@@ -80,6 +81,19 @@ def test_ate_with_correct_scale_removes_a_scale_and_reports_it():
     assert plain.scale is None and plain.rmse > 0.02
     assert scaled.scale == pytest.approx(1 / 0.99) and scaled.rmse == pytest.approx(0.0, abs=1e-9)
     assert scaled.rot_rmse == pytest.approx(0.0, abs=1e-12)
+
+
+def test_correct_scale_of_a_trajectory_that_does_not_move_is_refused_not_nan():
+    """A trajectory whose positions are all one point has no scale (Σ‖a_i‖² = 0): refused naming why,
+    not a NaN ATE with a RuntimeWarning (the plain ATE is still the reference's spread)."""
+    t = np.arange(20.0)
+    gt = np.column_stack((t * 0.01, np.zeros(20), np.zeros(20)))
+    est = np.tile([1.0, 2.0, 0.0], (20, 1))
+    assert ate(t, est, t, gt).rmse == pytest.approx(np.std(gt[:, 0]))
+    with pytest.raises(LogError, match="one point"):
+        align_sim2(est[:, :2], gt[:, :2])
+    with pytest.raises(LogError, match="one point"):
+        ate(t, est, t, gt, correct_scale=True)
 
 
 def test_rpe_per_step_of_a_scaled_trajectory():
