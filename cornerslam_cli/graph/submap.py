@@ -209,7 +209,7 @@ def keyframe_factors(
     # turned into that frame and into the submap's: :func:`propagate`'s terms, all steps at once (its
     # arithmetic row by row; only the two chains' recursions stay a loop)
     ref = anchors[np.searchsorted(nodes, np.arange(len(poses)))]
-    rel0, rel1 = _relative_to_rows(ref, prev), _relative_to_rows(ref, poses)
+    rel0, rel1 = relative(ref, prev), relative(ref, poses)
     noise_total, noise_part = (
         _rotated_pose_covariances(covs, prev[:, 2]),
         _rotated_pose_covariances(covs, rel0[:, 2]),
@@ -229,15 +229,6 @@ def keyframe_factors(
     return relative(anchors, poses[nodes]), np.array(parts) * scale
 
 
-def _relative_to_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(n, 3) :func:`~cornerslam_cli.geometry.relative` of each row of ``b`` to the same row of ``a``,
-    its arithmetic element for element (the trigonometry on a contiguous array, as of one pose)."""
-    th = np.ascontiguousarray(a[:, 2])
-    c, s = np.cos(th), np.sin(th)
-    dx, dy = b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]
-    return np.stack((c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[:, 2] - a[:, 2])), axis=-1)
-
-
 def _rotated_pose_covariances(covs: np.ndarray, yaws: np.ndarray) -> np.ndarray:
     """(n, 3, 3) :func:`~cornerslam_cli.geometry.rotate_pose_covariance` of each of ``covs`` by the same
     row of ``yaws``: J Σ Jᵀ, the same two products per row."""
@@ -249,7 +240,7 @@ def _rotated_pose_covariances(covs: np.ndarray, yaws: np.ndarray) -> np.ndarray:
 
 
 def _moved(acc: np.ndarray, p0: np.ndarray, p1: np.ndarray) -> np.ndarray:
-    """G acc Gᵀ of :func:`propagate`: p0's covariance ``acc`` carried to p1 = p0 ∘ δ."""
+    """G acc Gᵀ, G = ∂(p0 ∘ δ)/∂p0: p0's covariance ``acc`` carried to p1 = p0 ∘ δ (:func:`propagate`)."""
     G = np.array([[1.0, 0.0, p0[1] - p1[1]], [0.0, 1.0, p1[0] - p0[0]], [0.0, 0.0, 1.0]])
     return G @ acc @ G.T
 
@@ -265,9 +256,7 @@ def det3(m: np.ndarray) -> float:
 
 def propagate(acc: np.ndarray, p0: np.ndarray, p1: np.ndarray, cov: np.ndarray) -> np.ndarray:
     """Covariance of pose p1 = p0 ∘ δ (both in one frame) from p0's ``acc`` and δ's ``cov`` (p0's frame)."""
-    G = np.eye(3)
-    G[:2, 2] = (p0[1] - p1[1], p1[0] - p0[0])  # ∂(p0 ∘ δ)/∂p0
-    return G @ acc @ G.T + rotate_pose_covariance(cov, p0[2])
+    return _moved(acc, p0, p1) + rotate_pose_covariance(cov, p0[2])
 
 
 def place_table(table: dict[str, np.ndarray], origin: np.ndarray, index: int) -> dict[str, np.ndarray]:
