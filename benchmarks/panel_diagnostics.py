@@ -63,8 +63,7 @@ def scaled_rmse(est: np.ndarray, ref: np.ndarray) -> tuple[float, float]:
     """Scale of the best similarity of ``est`` (n, 3) onto ``ref`` (> 1: est is smaller) and the ATE
     RMSE after it (evaluate.align_sim2)."""
     scale, ang, t = align_sim2(est[:, :2], ref[:, :2])
-    c, s = np.cos(ang), np.sin(ang)
-    moved = scale * est[:, :2] @ np.array([[c, s], [-s, c]]) + t
+    moved = apply_se2(ang, t, np.column_stack((scale * est[:, :2], est[:, 2])))[:, :2]
     return scale, float(np.sqrt(np.mean(np.sum((moved - ref[:, :2]) ** 2, axis=1))))
 
 
