@@ -4,7 +4,8 @@
 below, which ``configs/default.yaml`` mirrors), applies ``--set key=value`` overrides and returns a
 :class:`Config`. Unknown keys, wrong types and numbers outside their range (declared beside each key
 with ``ranges.num``; NaN and inf are never allowed) raise :class:`ConfigError` naming the dotted key
-and the closest valid one or the allowed range. Each pipeline stage receives only its own section.
+and the closest valid one or the allowed range, and where the key was given: the ``--set`` that set it,
+or the config file and line. Each pipeline stage receives only its own section.
 
 A config file is UTF-8 YAML of at most 1 MiB, one document, no key given twice. Anchors and aliases
 are allowed, but a document that expands to more than ``MAX_YAML_NODES`` nodes (an alias bomb:
@@ -336,16 +337,32 @@ def _expanded_size(node: yaml.Node, sizes: dict[int, int | None], where: str) ->
     return n
 
 
-def _parse_yaml(text: str, where: str) -> Any:
+def _key_lines(node: yaml.Node, prefix: str, lines: dict[str, int]) -> None:
+    """Fill ``lines`` with the 1-based line of each key of the mapping ``node`` and of its nested
+    mappings, dotted (``ekf.alpha1``). An alias is walked once, where it is first defined (its keys'
+    lines are the anchor's: what the user would edit)."""
+    if not isinstance(node, yaml.MappingNode):
+        return
+    for key_node, value_node in node.value:
+        if isinstance(key_node, yaml.ScalarNode):
+            key = prefix + str(key_node.value)
+            lines.setdefault(key, key_node.start_mark.line + 1)
+            _key_lines(value_node, key + ".", lines)  # (bounded: _expanded_size ran first)
+
+
+def _parse_yaml(text: str, where: str, lines: dict[str, int] | None = None) -> Any:
     """``text`` as Python values (safe loader, one document), refusing a key given twice and a document
     whose aliases expand past ``MAX_YAML_NODES`` (checked on the node graph, before anything is built).
-    ``where`` names the source in errors; YAML syntax errors are raised as ``yaml.YAMLError``."""
+    ``where`` names the source in errors; YAML syntax errors are raised as ``yaml.YAMLError``.
+    ``lines``, when given, is filled with the line of every dotted key (:func:`_key_lines`)."""
     loader = _ConfigLoader(text)
     try:
         node = loader.get_single_node()
         if node is None:
             return None
         _expanded_size(node, {}, where)
+        if lines is not None:
+            _key_lines(node, "", lines)
         return loader.construct_document(node)
     except RecursionError:
         raise ConfigError(f"{where} is nested too deeply", "a config has two or three levels") from None
@@ -363,7 +380,9 @@ def _yaml_problem(e: yaml.YAMLError, text: str) -> str:
     return (f" at line {mark.line + 1}" if mark is not None else "") + (f": {what}" if what else "")
 
 
-def _empty_null_sections(data: dict, cls: type, where: str, prefix: str = "") -> dict:
+def _empty_null_sections(
+    data: dict, cls: type, where: str, prefix: str = "", lines: dict[str, int] | None = None
+) -> dict:
     """``data`` (a file's mapping for the dataclass ``cls``) with every null section — ``ekf:`` with
     all its keys commented out, which YAML reads as null — taken as an empty one (its defaults, or
     the laser preset's); a section given as a scalar or a list is refused naming the file and key.
@@ -377,13 +396,24 @@ def _empty_null_sections(data: dict, cls: type, where: str, prefix: str = "") ->
         if v is None:
             out[k] = {}
         elif isinstance(v, dict):
-            out[k] = _empty_null_sections(v, tp, where, f"{prefix}{k}.")
+            out[k] = _empty_null_sections(v, tp, where, f"{prefix}{k}.", lines)
         else:
+            at = f" line {lines[prefix + k]}" if lines and prefix + k in lines else ""
             raise ConfigError(
-                f"{where}: section '{prefix}{k}' must be a mapping of its keys, got {short_repr(v)}",
+                f"{where}{at}: section '{prefix}{k}' must be a mapping of its keys, got {short_repr(v)}",
                 f"indent its keys under '{k}:', e.g. configs/default.yaml",
             )
     return out
+
+
+class ConfigFileData(dict):
+    """A config file's mapping (:func:`read_config_file`) that remembers where it came from: ``where``
+    (``config file 'PATH'``) and the line of each dotted key, so that an invalid value found later, in
+    :func:`config_from`, is reported at its line."""
+
+    def __init__(self, data: dict, where: str, lines: dict[str, int]):
+        super().__init__(data)
+        self.where, self.lines = where, lines
 
 
 def read_config_file(path: str | Path) -> dict:
@@ -392,8 +422,9 @@ def read_config_file(path: str | Path) -> dict:
     p = Path(path)
     where = f"config file '{p}'"
     text = read_text(p, "config file", ConfigError, CONFIG_FILE, max_bytes=MAX_CONFIG_BYTES)
+    lines: dict[str, int] = {}
     try:
-        loaded = _parse_yaml(text, where)
+        loaded = _parse_yaml(text, where, lines)
     except yaml.YAMLError as e:
         raise ConfigError(f"{where} is not valid YAML{_yaml_problem(e, text)}", "fix the syntax") from None
     if loaded is None:
@@ -401,7 +432,7 @@ def read_config_file(path: str | Path) -> dict:
     if not isinstance(loaded, dict):
         raise ConfigError(f"{where} must contain a mapping of sections, not {type(loaded).__name__}")
     _refuse_sexagesimal(loaded, where=where)
-    return _empty_null_sections(loaded, Config, where)
+    return ConfigFileData(_empty_null_sections(loaded, Config, where, lines=lines), where, lines)
 
 
 def _parse_override(text: str) -> tuple[list[str], Any]:
@@ -442,11 +473,37 @@ def _merge(base: dict, path: list[str], value: Any) -> None:
 def config_from(data: dict, overrides: typing.Sequence[str] = (), base: dict | None = None) -> Config:
     """The config of a file's mapping ``data`` over the partial config ``base`` (a laser preset), with
     ``key=value`` overrides applied: defaults < base < data < overrides. ``data`` is not modified."""
-    data = _deep_merge(copy.deepcopy(base or {}), copy.deepcopy(data))  # overrides below write into it
+    merged = _deep_merge(copy.deepcopy(base or {}), copy.deepcopy(dict(data)))  # overrides write into it
+    given = []  # (dotted key, the --set text), in order
     for text in overrides:
         keys, value = _parse_override(text)
-        _merge(data, keys, value)
-    return from_dict(Config, data)
+        _merge(merged, keys, value)
+        given.append((".".join(keys), text))
+    try:
+        return from_dict(Config, merged)
+    except ConfigError as e:
+        raise _located(e, data, given) from None
+
+
+_KEY_IN_MESSAGE = re.compile(r"config (?:key|section) '([^']*)'")
+
+
+def _located(e: ConfigError, data: dict, given: list[tuple[str, str]]) -> ConfigError:
+    """``e`` (from validating the merged config) prefixed with where its key was given: the last
+    ``--set`` that set it (or a section above it, or a key inside it), else the config file and line
+    (``data`` from :func:`read_config_file`); unchanged when neither gave it (a laser preset's value, or
+    a check across keys from several places)."""
+    found = _KEY_IN_MESSAGE.search(e.msg)
+    if found is None:
+        return e
+    key = re.sub(r"\[\d+\]", "", found.group(1))
+    for dotted, text in reversed(given):
+        if key == dotted or key.startswith(dotted + ".") or dotted.startswith(key + "."):
+            return ConfigError(f"--set '{short_text(text)}': {e.msg}", e.hint)
+    lines = getattr(data, "lines", {})
+    if key in lines:
+        return ConfigError(f"{data.where} line {lines[key]}: {e.msg}", e.hint)
+    return e
 
 
 def load_config(
