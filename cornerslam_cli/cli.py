@@ -11,6 +11,7 @@ Over 400 lines because every command's click declaration lives here beside the o
 from __future__ import annotations
 
 import io
+import json
 import logging
 import os
 import signal
@@ -537,7 +538,7 @@ def config_command(log_path, config_path, overrides, preset, verbose, quiet):
     from .config import dump_config
 
     setup_logging(verbose, quiet)
-    extra = [*overrides, *([f"input.laser_preset={preset}"] if preset else [])]
+    extra = [*overrides, *([f"input.laser_preset={json.dumps(preset)}"] if preset else [])]
     cfg = command_config(config_path, extra, log_path=log_path)
     click.echo(dump_config(cfg), nl=False)
 

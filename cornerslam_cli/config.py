@@ -485,6 +485,11 @@ def config_from(data: dict, overrides: typing.Sequence[str] = (), base: dict | N
         raise _located(e, data, given) from None
 
 
+def override_place(text: str) -> str:
+    """The prefix of an error in the ``--set`` override ``text`` (:func:`config_from`)."""
+    return f"--set '{short_text(text)}': "
+
+
 _KEY_IN_MESSAGE = re.compile(r"config (?:key|section) '([^']*)'")
 
 
@@ -499,7 +504,7 @@ def _located(e: ConfigError, data: dict, given: list[tuple[str, str]]) -> Config
     key = re.sub(r"\[\d+\]", "", found.group(1))
     for dotted, text in reversed(given):
         if key == dotted or key.startswith(dotted + ".") or dotted.startswith(key + "."):
-            return ConfigError(f"--set '{short_text(text)}': {e.msg}", e.hint)
+            return ConfigError(f"{override_place(text)}{e.msg}", e.hint)
     lines = getattr(data, "lines", {})
     if key in lines:
         return ConfigError(f"{data.where} line {lines[key]}: {e.msg}", e.hint)

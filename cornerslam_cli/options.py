@@ -9,6 +9,7 @@ value is a click usage error or a ConfigError, which ``cli.py``'s error boundary
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import os
@@ -201,12 +202,15 @@ def command_config(config_path, overrides, assoc=None, scan_topic=None, odom_top
     from .lasers import resolve_config
 
     extra = list(overrides)
-    if assoc:
-        extra.append(f"association.method={assoc}")
-    if scan_topic:
-        extra.append(f"input.scan_topic={scan_topic}")
-    if odom_topic:
-        extra.append(f"input.odom_topic={odom_topic}")
+    # as overrides, each value quoted (JSON is YAML): an option's text is the name itself, which YAML
+    # would otherwise read as a number or a boolean (--scan-topic yes)
+    for key, value in (
+        ("association.method", assoc),
+        ("input.scan_topic", scan_topic),
+        ("input.odom_topic", odom_topic),
+    ):
+        if value:
+            extra.append(f"{key}={json.dumps(value)}")
     cfg = resolve_config(log_path, config_path, extra)
     from .association import associator_class
 

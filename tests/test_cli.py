@@ -540,3 +540,22 @@ def test_config_prints_the_resolved_config_that_run_uses(tmp_path):
         "hokuyo_urg04lx",
     )
     one_line_error(invoke("config", "--set", "ekf.alpha1=nan"), "ekf.alpha1")
+
+
+def test_config_errors_say_where_the_key_was_given_and_topic_options_are_names(tmp_path):
+    log = small_log(tmp_path / "a.mcap")
+    cfg = tmp_path / "mine.yaml"
+    cfg.write_text("ekf:\n  alpha1: 0.1\nscan_match:\n  window: -2\n")
+    one_line_error(
+        invoke("run", log, "--config", cfg, "--out", tmp_path / "o1"), f"'{cfg}' line 4:", "scan_match.window"
+    )
+    one_line_error(
+        invoke("run", log, "--set", "ekf.alpha1=x", "--out", tmp_path / "o2"), "--set 'ekf.alpha1=x':"
+    )
+    # a topic option's text is a name, not YAML: 'yes' is a topic (not the boolean), and it is missing
+    one_line_error(invoke("run", log, "--scan-topic", "yes", "--out", tmp_path / "o3"), "no topic 'yes'")
+    # a bad --sweep value is named once, as the --sweep it is
+    r = invoke("batch", log, "--sweep", "scan_match.window=10,ab", "--out", tmp_path / "o4")
+    one_line_error(r, "--sweep scan_match.window=ab: config key 'scan_match.window' must be an integer")
+    assert "--set" not in r.stderr
+    assert not any((tmp_path / f"o{i}").exists() for i in range(1, 5))
