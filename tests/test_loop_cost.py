@@ -59,7 +59,9 @@ def old_pair_hypotheses(a: np.ndarray, b: np.ndarray, cfg: LoopConfig) -> loops.
 
 
 def old_votes(poses: np.ndarray, length: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    cells = np.floor(poses / np.array([loops.VOTE_XY, loops.VOTE_XY, loops.VOTE_THETA]))
+    cells = np.floor(poses / np.array([loops.VOTE_XY, loops.VOTE_XY, 1.0]))
+    n = 2 * round(np.pi / loops.VOTE_THETA)  # heading cells around the circle, centred on 0 and ±π
+    cells[:, 2] = np.floor(poses[:, 2] * n / (2 * np.pi) + 0.5) % n
     cells = np.clip(cells, -(2**20), 2**20 - 1).astype(np.int64) + 2**20
     key = (cells[:, 0] << 42) | (cells[:, 1] << 21) | cells[:, 2]
     _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)

@@ -433,3 +433,22 @@ def test_a_degenerate_fit_is_not_distinct():
     a, b, truth = office_pair()
     local = points.LocalMap.build(a.points)
     assert not points.distinct(b.points, local, truth, np.full((3, 3), np.nan), 0.9, CFG)
+
+
+def test_hough_votes_of_headings_either_side_of_pi_are_one_cell():
+    # a corridor driven the other way round: the pairs' poses turn by about π, some a hair over (−π + ε)
+    from cornerslam_cli.graph.loops import THETA_CELLS, _votes, theta_cells
+
+    poses = np.array(
+        [[1.0, 2.0, np.pi - 0.01], [1.05, 2.02, -np.pi + 0.01], [1.1, 2.1, np.pi], [1.0, 2.0, 0.3]]
+    )
+    votes, rank = _votes(poses, np.array([1.0, 3.0, 2.0, 1.0]))
+    assert list(votes) == [3, 3, 3, 1]
+    assert list(rank) == [2, 0, 1, 0]  # by decreasing length inside the cell
+    # the cells tile the circle evenly: every heading a cell, neighbours 2π / THETA_CELLS apart
+    theta = np.linspace(-np.pi, np.pi, 10_001)
+    cells = theta_cells(theta)
+    assert set(np.unique(cells)) == set(range(THETA_CELLS))
+    assert cells[0] == cells[-1] == THETA_CELLS // 2 and cells[5_000] == 0  # centred on ±π and on 0
+    assert theta_cells(np.array([-0.05, 0.05])).tolist() == [0, 0]
+    assert np.all(np.bincount(cells.astype(int)[:-1]) <= 10_000 / THETA_CELLS + 2)

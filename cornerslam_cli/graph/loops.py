@@ -69,7 +69,10 @@ from .params import LoopConfig
 from .submap import CornerPairs, LoopMatch, Submap, local_map
 
 VOTE_XY = 0.5  # m: Hough cell of a hypothesis' translation, for the votes that order them
-VOTE_THETA = 0.2  # rad: ... and of its heading
+VOTE_THETA = 0.2  # rad: ... and of its heading (about: the circle is cut into THETA_CELLS equal cells)
+# an even count, cells centred on 0 and on ±π: the turns a revisit most often has (the same way round,
+# the other way round) are each inside one cell, not cut in two at a cell's edge
+THETA_CELLS = 2 * round(np.pi / VOTE_THETA)
 AMBIGUOUS_XY = 0.5  # m: two corner sets this far apart in translation are different poses
 AMBIGUOUS_THETA = 0.2  # rad: ... or in heading
 OVERLAP_DISTANCE = 1.0  # m: a point of b this close to a point of a overlaps a (counts for the fitness)
@@ -241,9 +244,10 @@ def pair_transform(p1: np.ndarray, p2: np.ndarray, q1: np.ndarray, q2: np.ndarra
 
 
 def _votes(poses: np.ndarray, length: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(h,) how many of the poses fall in each one's Hough cell (``VOTE_XY`` × ``VOTE_XY`` × ``VOTE_THETA``)
+    """(h,) how many of the poses fall in each one's Hough cell (``VOTE_XY`` × ``VOTE_XY`` × a heading cell)
     and (h,) each one's rank in its cell by decreasing length (0 = the cell's longest pair)."""
-    cells = np.floor(poses / np.array([VOTE_XY, VOTE_XY, VOTE_THETA]))
+    cells = np.floor(poses / np.array([VOTE_XY, VOTE_XY, 1.0]))
+    cells[:, 2] = theta_cells(poses[:, 2])
     cells = np.clip(cells, -(2**20), 2**20 - 1).astype(np.int64) + 2**20  # 21 bits each
     key = (cells[:, 0] << 42) | (cells[:, 1] << 21) | cells[:, 2]  # one int64 per cell
     votes, rank = np.empty(len(key), dtype=np.int64), np.empty(len(key), dtype=np.int64)
@@ -260,6 +264,14 @@ def _votes(poses: np.ndarray, length: np.ndarray) -> tuple[np.ndarray, np.ndarra
     votes[by_cell] = counts[cell]
     rank[by_cell] = np.arange(len(key)) - first[cell]
     return votes, rank
+
+
+def theta_cells(theta: np.ndarray) -> np.ndarray:
+    """(h,) the Hough cell of each heading (rad), 0 … ``THETA_CELLS`` − 1 around the circle, cell 0
+    centred on 0 and cell ``THETA_CELLS`` / 2 on ±π: headings either side of π (a corridor driven the
+    other way round) or of 0 fall in one cell, not two halves."""
+    width = 2.0 * np.pi / THETA_CELLS
+    return np.floor(np.asarray(theta) / width + 0.5) % THETA_CELLS
 
 
 def support(
