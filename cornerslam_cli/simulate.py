@@ -133,6 +133,7 @@ def simulate_log(
     fov: float = SimParams.fov,
     sigma_a: float = SimParams.sigma_a,
     sweep: float = 0.0,
+    odometry: dict[str, float] | None = None,
 ) -> dict:
     """Write the synthetic log ``out`` (.mcap), ``out.gt.tum`` and ``out.corners.csv``.
 
@@ -144,6 +145,8 @@ def simulate_log(
     ``sweep`` (s, library only): the time from a scan's first beam to its last — each beam is cast from
     the robot's true pose at its own time, the stamp is the first beam's and the messages carry
     ``time_increment`` (a laser whose scans are skewed by the motion: logs/deskew.py); 0 = all at once.
+    ``odometry`` (library only): the odometry's error terms, any of SimParams' ``odom_scale``,
+    ``odom_drift``, ``odom_sigma_trans``, ``odom_sigma_rot`` (all 0: the odometry is the truth).
     """
     if out.suffix != ".mcap":
         raise ConfigError(f"simulate writes MCAP: '{out}' must end in .mcap")
@@ -151,7 +154,11 @@ def simulate_log(
     waypoints = OFFICE_LOOP if waypoints is None else np.asarray(waypoints, dtype=float).reshape(-1, 2)
     if len(waypoints) < 2:
         raise ConfigError(f"simulate needs at least 2 waypoints, got {len(waypoints)}")
-    p = SimParams(rate=rate, beams=beams, speed=speed, fov=fov, sigma_a=sigma_a)
+    odometry = dict(odometry or {})
+    unknown = set(odometry) - {"odom_scale", "odom_drift", "odom_sigma_trans", "odom_sigma_rot"}
+    if unknown:
+        raise ValueError(f"simulate_log: not an odometry error term: {', '.join(sorted(unknown))}")
+    p = SimParams(rate=rate, beams=beams, speed=speed, fov=fov, sigma_a=sigma_a, **odometry)
     check_options(seed, laps, p, waypoints)
     if not 0.0 <= sweep <= 1.0 / rate:
         raise ConfigError(f"sweep must be in [0, 1/rate = {1.0 / rate:g}] s, got {sweep}")

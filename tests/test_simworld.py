@@ -109,3 +109,31 @@ def test_simulate_log_takes_another_lasers_field_of_view_and_noise(tmp_path):
         assert scan.n_beams == 181 and scan.angle_increment * 180 == pytest.approx(math.pi)
         first.append(np.asarray(scan.ranges, dtype=float))
     assert np.array_equal(first[0], first[1]) and not np.array_equal(first[0], first[2])
+
+
+def test_simulated_odometry_error_terms(tmp_path):
+    """simulate_log's ``odometry``: all terms 0 is the truth itself; a drift alone turns the odometry's
+    heading by odom_drift per metre travelled, a scale alone lengthens its path by odom_scale."""
+    from cornerslam_cli.logs import open_log
+    from cornerslam_cli.simulate import OFFICE_LOOP, SimParams, corrupt_odometry, drive, simulate_log
+    from cornerslam_cli.types import OdomSample
+
+    def odometry(**terms):
+        out = tmp_path / f"o{len(list(tmp_path.iterdir()))}.mcap"
+        simulate_log(out, seed=2, rate=2.0, beams=91, odometry=terms)
+        odom = np.array([[m.x, m.y, m.theta] for m in open_log(out).messages() if isinstance(m, OdomSample)])
+        return odom, out
+
+    zero = dict(odom_scale=0.0, odom_drift=0.0, odom_sigma_trans=0.0, odom_sigma_rot=0.0)
+    p = SimParams(**zero)
+    truth = drive(OFFICE_LOOP, 1, p, 1.0 / p.odom_rate)
+    np.testing.assert_allclose(corrupt_odometry(truth, p, np.random.default_rng(0)), truth, atol=1e-9)
+    exact, _ = odometry(**zero)
+    path = np.sum(np.hypot(*np.diff(exact[:, :2], axis=0).T))
+    drift, _ = odometry(**{**zero, "odom_drift": 0.01})
+    turned = np.unwrap(drift[:, 2]) - np.unwrap(exact[:, 2])
+    assert turned[-1] == pytest.approx(0.01 * path, rel=1e-3)
+    scaled, _ = odometry(**{**zero, "odom_scale": 0.02})
+    assert np.sum(np.hypot(*np.diff(scaled[:, :2], axis=0).T)) == pytest.approx(1.02 * path, rel=1e-3)
+    with pytest.raises(ValueError, match="odom_bias"):
+        odometry(odom_bias=1.0)
