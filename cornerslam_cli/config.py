@@ -490,7 +490,8 @@ def override_place(text: str) -> str:
     return f"--set '{short_text(text)}': "
 
 
-_KEY_IN_MESSAGE = re.compile(r"config (?:key|section) '([^']*)'")
+# the key ends at the quote before a space, ':' or the end (a key may hold a quote: --set "ekf'x=1")
+_KEY_IN_MESSAGE = re.compile(r"config (key|section) '(.*?)'(?=[ :]|$)")
 
 
 def _located(e: ConfigError, data: dict, given: list[tuple[str, str]]) -> ConfigError:
@@ -501,12 +502,31 @@ def _located(e: ConfigError, data: dict, given: list[tuple[str, str]]) -> Config
     found = _KEY_IN_MESSAGE.search(e.msg)
     if found is None:
         return e
-    key = re.sub(r"\[\d+\]", "", found.group(1))
+    key = re.sub(r"\[\d+\]", "", found.group(2))
+    lines = getattr(data, "lines", {})
+    if found.group(1) == "section":  # a check across the section's keys: one place, or none
+        return _section_located(e, key, data, given)
     for dotted, text in reversed(given):
         if key == dotted or key.startswith(dotted + ".") or dotted.startswith(key + "."):
             return ConfigError(f"{override_place(text)}{e.msg}", e.hint)
-    lines = getattr(data, "lines", {})
     if key in lines:
+        return ConfigError(f"{data.where} line {lines[key]}: {e.msg}", e.hint)
+    return e
+
+
+def _section_located(e: ConfigError, key: str, data: dict, given: list[tuple[str, str]]) -> ConfigError:
+    """``e``, a check across the keys of the section ``key``, prefixed with the one place its keys were
+    given: the last ``--set`` of the section (or above it) with no ``--set`` of a key inside it after,
+    one ``--set`` of a key inside it (the file giving none), or the file (no ``--set`` inside it)."""
+    replaced = max((i for i, (d, _) in enumerate(given) if key == d or key.startswith(d + ".")), default=-1)
+    places = {d: t for d, t in given[replaced + 1 :] if d.startswith(key + ".")}  # the last of each key
+    lines = getattr(data, "lines", {})
+    in_file = replaced < 0 and any(k.startswith(key + ".") for k in lines)
+    if replaced >= 0 and not places:
+        return ConfigError(f"{override_place(given[replaced][1])}{e.msg}", e.hint)
+    if len(places) == 1 and replaced < 0 and not in_file:
+        return ConfigError(f"{override_place(next(iter(places.values())))}{e.msg}", e.hint)
+    if not places and in_file and key in lines:
         return ConfigError(f"{data.where} line {lines[key]}: {e.msg}", e.hint)
     return e
 
