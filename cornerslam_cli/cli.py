@@ -11,7 +11,6 @@ Over 400 lines because every command's click declaration lives here beside the o
 from __future__ import annotations
 
 import io
-import json
 import logging
 import os
 import signal
@@ -535,10 +534,10 @@ def config_command(log_path, config_path, overrides, preset, verbose, quiet):
     Example:
       cornerslam config sample_logs/intel_cut.clf --set association.method=jcbb > my.yaml
     """
-    from .config import dump_config
+    from .config import dump_config, yaml_quoted
 
     setup_logging(verbose, quiet)
-    extra = [*overrides, *([f"input.laser_preset={json.dumps(preset)}"] if preset else [])]
+    extra = [*overrides, *([f"input.laser_preset={yaml_quoted(preset)}"] if preset else [])]
     cfg = command_config(config_path, extra, log_path=log_path)
     click.echo(dump_config(cfg), nl=False)
 

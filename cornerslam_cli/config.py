@@ -485,6 +485,15 @@ def config_from(data: dict, overrides: typing.Sequence[str] = (), base: dict | N
         raise _located(e, data, given) from None
 
 
+def yaml_quoted(text: str) -> str:
+    """``text`` as a YAML double-quoted scalar that reads back as ``text`` exactly, for an override
+    built from an option (``input.scan_topic=...``): printable ASCII kept, every other character
+    escaped as ``\\UXXXXXXXX`` (JSON's ``\\uXXXX`` would write a character past U+FFFF as a surrogate
+    pair, which YAML reads as two characters)."""
+    escaped = (c if " " <= c <= "~" and c not in '"\\' else f"\\U{ord(c):08x}" for c in text)
+    return '"' + "".join(escaped) + '"'
+
+
 def override_place(text: str) -> str:
     """The prefix of an error in the ``--set`` override ``text`` (:func:`config_from`)."""
     return f"--set '{short_text(text)}': "
