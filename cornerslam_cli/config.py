@@ -485,6 +485,13 @@ def config_from(data: dict, overrides: typing.Sequence[str] = (), base: dict | N
         raise _located(e, data, given) from None
 
 
+def located(e: ConfigError, data: dict, overrides: typing.Sequence[str]) -> ConfigError:
+    """``e``, an invalid value found after :func:`config_from` (``data``, ``overrides`` its arguments;
+    ``input.laser_preset``, checked by lasers.py), prefixed with where its key was given, as
+    :func:`config_from` does."""
+    return _located(e, data, [(".".join(_parse_override(text)[0]), text) for text in overrides])
+
+
 def yaml_quoted(text: str) -> str:
     """``text`` as a YAML double-quoted scalar that reads back as ``text`` exactly, for an override
     built from an option (``input.scan_topic=...``): printable ASCII kept, every other character

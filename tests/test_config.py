@@ -156,6 +156,19 @@ def test_yaml_quoted_reads_back_as_the_text(text):
     assert _parse_override(f"input.scan_topic={yaml_quoted(text)}") == (["input", "scan_topic"], text)
 
 
+def test_a_bad_laser_preset_is_located(tmp_path):
+    from cornerslam_cli.lasers import resolve_config
+
+    p = tmp_path / "mine.yaml"
+    p.write_text("ekf:\n  alpha1: 0.1\ninput:\n  laser_preset: nope\n")
+    with pytest.raises(ConfigError) as e:
+        resolve_config(None, p)
+    assert str(e.value).startswith(f"config file '{p}' line 4: config key 'input.laser_preset' = 'nope'")
+    with pytest.raises(ConfigError) as e:
+        resolve_config(None, p, ["input.laser_preset=foo"])
+    assert str(e.value).startswith("--set 'input.laser_preset=foo': config key 'input.laser_preset' = 'foo'")
+
+
 def test_bad_yaml_names_the_file_and_line(tmp_path):
     p = tmp_path / "bad.yaml"
     p.write_text("association:\n  alpha: [0.1\n")
