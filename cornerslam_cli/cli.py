@@ -11,7 +11,6 @@ Over 400 lines because every command's click declaration lives here beside the o
 from __future__ import annotations
 
 import io
-import json
 import logging
 import os
 import signal
@@ -535,11 +534,18 @@ def config_command(log_path, config_path, overrides, preset, verbose, quiet):
     Example:
       cornerslam config sample_logs/intel_cut.clf --set association.method=jcbb > my.yaml
     """
-    from .config import dump_config
+    from .config import ConfigError, dump_config, override_place, yaml_quoted
 
     setup_logging(verbose, quiet)
-    extra = [*overrides, *([f"input.laser_preset={json.dumps(preset)}"] if preset else [])]
-    cfg = command_config(config_path, extra, log_path=log_path)
+    by_option = f"input.laser_preset={yaml_quoted(preset)}" if preset else None
+    try:
+        cfg = command_config(
+            config_path, [*overrides, *([by_option] if by_option else [])], log_path=log_path
+        )
+    except ConfigError as e:  # a bad --preset is the option's, not a --set the user did not write
+        if by_option is None or not e.msg.startswith(override_place(by_option)):
+            raise
+        raise ConfigError(e.msg.removeprefix(override_place(by_option)), e.hint) from None
     click.echo(dump_config(cfg), nl=False)
 
 

@@ -485,12 +485,29 @@ def config_from(data: dict, overrides: typing.Sequence[str] = (), base: dict | N
         raise _located(e, data, given) from None
 
 
+def located(e: ConfigError, data: dict, overrides: typing.Sequence[str]) -> ConfigError:
+    """``e``, an invalid value found after :func:`config_from` (``data``, ``overrides`` its arguments;
+    ``input.laser_preset``, checked by lasers.py), prefixed with where its key was given, as
+    :func:`config_from` does."""
+    return _located(e, data, [(".".join(_parse_override(text)[0]), text) for text in overrides])
+
+
+def yaml_quoted(text: str) -> str:
+    """``text`` as a YAML double-quoted scalar that reads back as ``text`` exactly, for an override
+    built from an option (``input.scan_topic=...``): printable ASCII kept, every other character
+    escaped as ``\\UXXXXXXXX`` (JSON's ``\\uXXXX`` would write a character past U+FFFF as a surrogate
+    pair, which YAML reads as two characters)."""
+    escaped = (c if " " <= c <= "~" and c not in '"\\' else f"\\U{ord(c):08x}" for c in text)
+    return '"' + "".join(escaped) + '"'
+
+
 def override_place(text: str) -> str:
     """The prefix of an error in the ``--set`` override ``text`` (:func:`config_from`)."""
     return f"--set '{short_text(text)}': "
 
 
-_KEY_IN_MESSAGE = re.compile(r"config (?:key|section) '([^']*)'")
+# the key ends at the quote before a space, ':' or the end (a key may hold a quote: --set "ekf'x=1")
+_KEY_IN_MESSAGE = re.compile(r"config (key|section) '(.*?)'(?=[ :]|$)")
 
 
 def _located(e: ConfigError, data: dict, given: list[tuple[str, str]]) -> ConfigError:
@@ -501,12 +518,31 @@ def _located(e: ConfigError, data: dict, given: list[tuple[str, str]]) -> Config
     found = _KEY_IN_MESSAGE.search(e.msg)
     if found is None:
         return e
-    key = re.sub(r"\[\d+\]", "", found.group(1))
+    key = re.sub(r"\[\d+\]", "", found.group(2))
+    lines = getattr(data, "lines", {})
+    if found.group(1) == "section":  # a check across the section's keys: one place, or none
+        return _section_located(e, key, data, given)
     for dotted, text in reversed(given):
         if key == dotted or key.startswith(dotted + ".") or dotted.startswith(key + "."):
             return ConfigError(f"{override_place(text)}{e.msg}", e.hint)
-    lines = getattr(data, "lines", {})
     if key in lines:
+        return ConfigError(f"{data.where} line {lines[key]}: {e.msg}", e.hint)
+    return e
+
+
+def _section_located(e: ConfigError, key: str, data: dict, given: list[tuple[str, str]]) -> ConfigError:
+    """``e``, a check across the keys of the section ``key``, prefixed with the one place its keys were
+    given: the last ``--set`` of the section (or above it) with no ``--set`` of a key inside it after,
+    one ``--set`` of a key inside it (the file giving none), or the file (no ``--set`` inside it)."""
+    replaced = max((i for i, (d, _) in enumerate(given) if key == d or key.startswith(d + ".")), default=-1)
+    places = {d: t for d, t in given[replaced + 1 :] if d.startswith(key + ".")}  # the last of each key
+    lines = getattr(data, "lines", {})
+    in_file = replaced < 0 and any(k.startswith(key + ".") for k in lines)
+    if replaced >= 0 and not places:
+        return ConfigError(f"{override_place(given[replaced][1])}{e.msg}", e.hint)
+    if len(places) == 1 and replaced < 0 and not in_file:
+        return ConfigError(f"{override_place(next(iter(places.values())))}{e.msg}", e.hint)
+    if not places and in_file and key in lines:
         return ConfigError(f"{data.where} line {lines[key]}: {e.msg}", e.hint)
     return e
 

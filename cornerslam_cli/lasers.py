@@ -19,7 +19,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from .config import Config, config_from, read_config_file
+from .config import Config, config_from, located, read_config_file
 from .errors import ConfigError, did_you_mean
 from .logs import open_log
 from .logs.params import LaserMountConfig
@@ -147,9 +147,10 @@ def resolve_config(
         name = choice
     else:
         hint = did_you_mean(choice[:100], PRESETS, then=" ")
-        raise ConfigError(
+        e = ConfigError(
             f"config key 'input.laser_preset' = '{short_text(choice)}' is not a laser preset",
             f"{hint}choices: auto, none, {', '.join(PRESETS)}",
         )
+        raise located(e, data, overrides)
     cfg = config_from(data, overrides, base=PRESETS[name].config)
     return dataclasses.replace(cfg, input=dataclasses.replace(cfg.input, laser_preset=name))

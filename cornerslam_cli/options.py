@@ -9,7 +9,6 @@ value is a click usage error or a ConfigError, which ``cli.py``'s error boundary
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 import os
@@ -199,10 +198,11 @@ def setup_logging(verbose: int, quiet: bool) -> None:
 
 def command_config(config_path, overrides, assoc=None, scan_topic=None, odom_topic=None, log_path=None):
     """The resolved config: user layers over the laser preset chosen for ``log_path``'s scans."""
+    from .config import yaml_quoted
     from .lasers import resolve_config
 
     extra = list(overrides)
-    # as overrides, each value quoted (JSON is YAML): an option's text is the name itself, which YAML
+    # as overrides, each value quoted (config.yaml_quoted): an option's text is the name itself, which YAML
     # would otherwise read as a number or a boolean (--scan-topic yes)
     for key, value in (
         ("association.method", assoc),
@@ -210,7 +210,7 @@ def command_config(config_path, overrides, assoc=None, scan_topic=None, odom_top
         ("input.odom_topic", odom_topic),
     ):
         if value:
-            extra.append(f"{key}={json.dumps(value)}")
+            extra.append(f"{key}={yaml_quoted(value)}")
     cfg = resolve_config(log_path, config_path, extra)
     from .association import associator_class
 

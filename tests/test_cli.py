@@ -559,3 +559,15 @@ def test_config_errors_say_where_the_key_was_given_and_topic_options_are_names(t
     one_line_error(r, "--sweep scan_match.window=ab: config key 'scan_match.window' must be an integer")
     assert "--set" not in r.stderr
     assert not any((tmp_path / f"o{i}").exists() for i in range(1, 5))
+
+
+def test_a_topic_option_past_u_ffff(tmp_path):
+    # --scan-topic reaches the config as YAML: a character past U+FFFF is one character, not two halves
+    log = small_log(tmp_path / "a.mcap", scan_topic="/\U0001f600")
+    assert invoke("run", log, "--scan-topic", "/\U0001f600", "--out", tmp_path / "o", "-q").exit_code == 0
+
+
+def test_a_bad_preset_option_is_named_as_the_keys_value_not_a_set():
+    r = invoke("config", "--preset", "nope")
+    one_line_error(r, "config key 'input.laser_preset' = 'nope' is not a laser preset")
+    assert "--set" not in r.stderr

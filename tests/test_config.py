@@ -115,6 +115,60 @@ def test_a_bad_value_from_neither_a_file_nor_set_is_reported_as_it_was():
     assert str(e.value).startswith("config key 'ekf.alpha1' = -1.0 is out of range")
 
 
+def test_a_check_across_a_sections_keys_names_one_place_or_none(tmp_path):
+    # scan_match's adapt_min_samples must not exceed adapt_window: which key is wrong is not known, so
+    # the error names where the section's keys were given only when that is one place
+    p = tmp_path / "mine.yaml"
+    p.write_text("scan_match:\n  adapt_min_samples: 1000\n")
+    check = "config section 'scan_match': adapt_min_samples"
+
+    def error(path, sets):
+        with pytest.raises(ConfigError) as e:
+            load_config(path, sets)
+        return str(e.value)
+
+    assert error(p, []).startswith(f"config file '{p}' line 1: {check}")
+    assert error(None, ["scan_match.adapt_window=1"]).startswith(
+        f"--set 'scan_match.adapt_window=1': {check}"
+    )
+    assert error(None, ["scan_match={adapt_window: 1}"]).startswith(
+        f"--set 'scan_match={{adapt_window: 1}}': {check}"
+    )
+    # an unrelated --set in the section is not the place: the file's value or another --set may be
+    assert error(p, ["scan_match.window=10"]).startswith(check)
+    assert error(None, ["scan_match.adapt_window=1", "scan_match.window=3"]).startswith(check)
+
+
+def test_a_key_holding_a_quote_is_located_at_its_set(tmp_path):
+    p = tmp_path / "mine.yaml"
+    p.write_text("ekf:\n  alpha1: 0.1\n")
+    with pytest.raises(ConfigError) as e:
+        load_config(p, ["ekf'x=1"])
+    assert str(e.value).startswith("--set 'ekf'x=1': unknown config key 'ekf'x'")
+
+
+@pytest.mark.parametrize(
+    "text", ["/\U0001f600", "caf\u00e9", "a'b\"c\\d", "a\nb\tc", "a\x7fb\x85\ufeff", "\udcff", "yes", "1:30"]
+)
+def test_yaml_quoted_reads_back_as_the_text(text):
+    from cornerslam_cli.config import _parse_override, yaml_quoted
+
+    assert _parse_override(f"input.scan_topic={yaml_quoted(text)}") == (["input", "scan_topic"], text)
+
+
+def test_a_bad_laser_preset_is_located(tmp_path):
+    from cornerslam_cli.lasers import resolve_config
+
+    p = tmp_path / "mine.yaml"
+    p.write_text("ekf:\n  alpha1: 0.1\ninput:\n  laser_preset: nope\n")
+    with pytest.raises(ConfigError) as e:
+        resolve_config(None, p)
+    assert str(e.value).startswith(f"config file '{p}' line 4: config key 'input.laser_preset' = 'nope'")
+    with pytest.raises(ConfigError) as e:
+        resolve_config(None, p, ["input.laser_preset=foo"])
+    assert str(e.value).startswith("--set 'input.laser_preset=foo': config key 'input.laser_preset' = 'foo'")
+
+
 def test_bad_yaml_names_the_file_and_line(tmp_path):
     p = tmp_path / "bad.yaml"
     p.write_text("association:\n  alpha: [0.1\n")
