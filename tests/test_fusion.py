@@ -11,7 +11,7 @@ from cornerslam_cli.config import load_config
 from cornerslam_cli.frontend import odometry_noise
 from cornerslam_cli.geometry import compose, relative, transform_points
 from cornerslam_cli.motion import ScanMatchConfig
-from cornerslam_cli.motion.fusion import OdometryFusion, bias_matrix, student_fit
+from cornerslam_cli.motion.fusion import OdometryFusion, bias_matrices, bias_matrix, student_fit
 from cornerslam_cli.motion.icp import LocalMap, register
 from cornerslam_cli.simworld import office_world, raycast
 
@@ -22,7 +22,7 @@ def fusion(**kw) -> OdometryFusion:
     return OdometryFusion(ScanMatchConfig(**kw))
 
 
-def draw(rng, k, s, c, n, noise):
+def draw(rng, k, s, c, n, noise, along=False):
     """n increments with the α-model covariance, match covariances of a few mm, and matches drawn
     from m = o − B(o)·c + e, e ~ N(0, k·Σ_o + s·Σ_m) (the model the fusion assumes)."""
     for _ in range(n):
@@ -31,7 +31,7 @@ def draw(rng, k, s, c, n, noise):
         A = rng.normal(0, 1, (3, 3))
         D = np.diag([3e-3, 3e-3, 1e-3])
         Sm = D @ (A @ A.T + np.eye(3)) @ D
-        m = o - bias_matrix(o) @ c + rng.multivariate_normal(np.zeros(3), k * So + s * Sm)
+        m = o - bias_matrix(o, along) @ c + rng.multivariate_normal(np.zeros(3), k * So + s * Sm)
         yield o, So, m, Sm
 
 
@@ -43,7 +43,9 @@ def test_learnt_noise_scales_and_bias_recover_the_ones_drawn():
     for o, So, m, Sm in draw(rng, k, s, c, 100, noise):
         f.fuse(o, So, m, Sm)
     assert f.k == pytest.approx(k, rel=0.5) and f.s == pytest.approx(s, rel=0.5)
-    d, So, Sm, B = (np.array([x[i] for x in f.samples]) for i in range(4))
+    d, So, Sm, o = (np.array([x[i] for x in f.samples]) for i in range(4))
+    B = bias_matrices(o, f.along)
+    assert not f.along  # drawn with the drift at the increments' ends
     _, _, se = student_fit(d, f.k * So + f.s * Sm, B)
     assert np.all(np.abs(f.c - c) < 3 * se) and np.all(se < 0.01)
 
@@ -164,3 +166,52 @@ def test_the_compiled_student_fit_is_the_numpy_one(scales):
     S[7] = 0.0
     nll, c, se = student_fit(d, S, B)
     assert nll == np.inf and np.all(c == 0.0) and np.all(se == np.inf)
+
+
+def integrated(fwd: float, turn: float, scale: float, drift: float, steps: int = 2000) -> np.ndarray:
+    """The increment an odometry integrated along an arc (``fwd`` m, ``turn`` rad) reports when it reads
+    the distance ``scale`` long and its heading drifts ``drift`` rad per metre it reads: summed over
+    ``steps`` small steps (an independent reference for bias_matrices' first-order model)."""
+    pose = np.zeros(3)
+    for _ in range(steps):
+        ds = fwd / steps * (1 + scale)
+        pose = compose(pose, (ds, 0.0, turn / steps + drift * ds))
+    return pose
+
+
+@pytest.mark.parametrize("fwd, turn", [(1.0, 0.0), (0.8, 0.4), (0.5, -0.9), (1.2, 0.05)])
+def test_drift_along_the_path_is_the_integrated_odometry_to_first_order(fwd, turn):
+    """B(o, along)·c is the error of an odometry integrated along the arc, to first order in c; without
+    ``along``, the error of one whose drift is added at the end (its direction of travel untouched)."""
+    truth = integrated(fwd, turn, 0.0, 0.0)
+    for c in (np.array([0.02, 0.0]), np.array([0.0, 0.01]), np.array([0.02, 0.01])):
+        got = integrated(fwd, turn, *c)
+        want = truth + bias_matrix(got, along=True) @ c
+        tol = 2 * np.abs(c).max() ** 2 + 2e-5  # second order in c; the sideways step is ~c_θ·L²/2 = 5e-3
+        np.testing.assert_allclose(got, want, atol=tol)
+        ended = compose(integrated(fwd, turn, c[0], 0.0), (0.0, 0.0, c[1] * np.hypot(*got[:2])))
+        np.testing.assert_allclose(ended, truth + bias_matrix(ended) @ c, atol=tol)
+        if c[1] and fwd >= 0.8:  # and each model is wrong for the other odometry (a step of mm)
+            assert np.abs(got - (truth + bias_matrix(got) @ c)).max() > 3 * tol
+    # the along-the-path model's sideways step is the one the end model lacks: c_θ·L²/2 across
+    o = integrated(1.0, 0.0, 0.0, 0.01)
+    assert o[1] == pytest.approx(0.01 / 2, rel=1e-2) and bias_matrix(o)[1, 1] == 0.0
+
+
+def test_the_drift_model_follows_the_data_and_needs_evidence_to_change():
+    """Matches drawn with the drift acting along the path from a precise odometry: the learner takes that
+    model and recovers c; drawn with it at the increments' end, or with no bias (exact odometry), it keeps
+    the end model. (With a noisy odometry, k = 0.05, 200 samples are not evidence enough to change.)"""
+    noise = odometry_noise(load_config(None))
+    c = np.array([0.02, 0.01])
+    for along, k in ((True, 0.0), (True, 0.001), (False, 0.0), (False, 0.05)):
+        f = fusion()
+        for o, So, m, Sm in draw(np.random.default_rng(21), k, 4.0, c, 200, noise, along=along):
+            f.fuse(o, So, m, Sm)
+        assert f.along == along, (along, k)
+        if k < 0.01:  # (with the noisy odometry c is test_learnt_noise_scales_and_bias_…'s business)
+            np.testing.assert_allclose(f.c, c, atol=2e-3)
+    f = fusion()
+    for o, So, m, Sm in draw(np.random.default_rng(22), 0.0, 4.0, np.zeros(2), 200, noise, along=True):
+        f.fuse(o, So, m, Sm)
+    assert not f.along and np.all(f.c == 0.0)

@@ -280,6 +280,7 @@ class ScanMatcher:
             probe.step(points, odom)
         if len(probe.fusion.samples) >= self.cfg.adapt_min_samples:
             self.fusion.k, self.fusion.s, self.fusion.c = probe.fusion.k, probe.fusion.s, probe.fusion.c
+            self.fusion.along = probe.fusion.along
             self.fusion.samples = probe.fusion.samples
 
     def step(self, points: np.ndarray, odom: np.ndarray) -> MatchResult:
