@@ -174,12 +174,14 @@ class Counts(JsonResult):
 @dataclass(frozen=True, kw_only=True)
 class OdometryModel(JsonResult):
     """What the front end learnt by the end of the run (motion/fusion.py): the odometry's noise scale
-    and the scan match's (times their models), the odometer scale error and the heading drift (rad/m)."""
+    and the scan match's (times their models), the odometer scale error and the heading drift (rad/m);
+    appended, whether that drift acts along each increment (the odometry integrated along the path)."""
 
     odom_noise_scale: float
     match_noise_scale: float
     odom_scale_error: float
     heading_drift_per_m: float
+    heading_drift_along_path: bool | None = optional()
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -165,7 +165,11 @@ def test_summary_json_of_a_simulated_run_has_the_layout_and_values_it_always_had
     assert c["scans_skipped"] == c["keyframes_skipped"] == c["budget_hits"] == c["scans_match_fallback"] == 0
     assert c["scans_match_rejected"] == 0
     m = s["odometry_model"]
-    assert list(m) == ["odom_noise_scale", "match_noise_scale", "odom_scale_error", "heading_drift_per_m"]
+    assert list(m) == [
+        "odom_noise_scale", "match_noise_scale", "odom_scale_error", "heading_drift_per_m",
+        "heading_drift_along_path",
+    ]  # fmt: skip
+    assert m["heading_drift_along_path"] in (True, False)
     assert 0 < m["odom_noise_scale"] <= 100 and 1 <= m["match_noise_scale"] <= 1e4
     assert c["beams_total"] == 541 * c["scans_in"] > c["beams_invalid"] > 0  # the fixture's 541 beams a scan
     assert c["messages_failed"] == c["scans_size_mismatch"] == c["scans_bad_geometry"] == 0

@@ -134,6 +134,7 @@ def odometry_model(matcher) -> OdometryModel | None:
         match_noise_scale=f.s,
         odom_scale_error=float(f.c[0]),
         heading_drift_per_m=float(f.c[1]),
+        heading_drift_along_path=bool(f.along),
     )
 
 
