@@ -534,7 +534,7 @@ def config_command(log_path, config_path, overrides, preset, verbose, quiet):
     Example:
       cornerslam config sample_logs/intel_cut.clf --set association.method=jcbb > my.yaml
     """
-    from .config import ConfigError, dump_config, override_place, yaml_quoted
+    from .config import ConfigError, dump_config, override_place, replaced_place, yaml_quoted
 
     setup_logging(verbose, quiet)
     by_option = f"input.laser_preset={yaml_quoted(preset)}" if preset else None
@@ -545,7 +545,7 @@ def config_command(log_path, config_path, overrides, preset, verbose, quiet):
     except ConfigError as e:  # a bad --preset is the option's, not a --set the user did not write
         if by_option is None or not e.msg.startswith(override_place(by_option)):
             raise
-        raise ConfigError(e.msg.removeprefix(override_place(by_option)), e.hint) from None
+        raise replaced_place(e, by_option) from None
     click.echo(dump_config(cfg), nl=False)
 
 

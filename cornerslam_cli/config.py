@@ -506,6 +506,12 @@ def override_place(text: str) -> str:
     return f"--set '{short_text(text)}': "
 
 
+def replaced_place(e: ConfigError, text: str, place: str = "") -> ConfigError:
+    """``e`` with the ``--set`` place of the override ``text`` replaced by ``place``: an override the
+    user gave as another option (``--sweep``, ``--preset``), not as the ``--set`` it became."""
+    return ConfigError(place + e.msg.removeprefix(override_place(text)), e.hint)
+
+
 # the key ends at the quote before a space, ':' or the end (a key may hold a quote: --set "ekf'x=1")
 _KEY_IN_MESSAGE = re.compile(r"config (key|section) '(.*?)'(?=[ :]|$)")
 
@@ -519,12 +525,12 @@ def _located(e: ConfigError, data: dict, given: list[tuple[str, str]]) -> Config
     if found is None:
         return e
     key = re.sub(r"\[\d+\]", "", found.group(2))
-    lines = getattr(data, "lines", {})
     if found.group(1) == "section":  # a check across the section's keys: one place, or none
         return _section_located(e, key, data, given)
     for dotted, text in reversed(given):
         if key == dotted or key.startswith(dotted + ".") or dotted.startswith(key + "."):
             return ConfigError(f"{override_place(text)}{e.msg}", e.hint)
+    lines = getattr(data, "lines", {})
     if key in lines:
         return ConfigError(f"{data.where} line {lines[key]}: {e.msg}", e.hint)
     return e

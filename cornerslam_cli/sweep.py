@@ -69,7 +69,7 @@ def plan(
     (``x.mcap``, ``./x.mcap``), is run once.
     """
     from .association import associator_class
-    from .config import load_config, override_place
+    from .config import load_config, replaced_place
     from .errors import LogError
     from .lasers import resolve_config
 
@@ -83,8 +83,7 @@ def plan(
             try:
                 load_config(config_path, [*overrides, f"{key}={v}"])
             except ConfigError as e:
-                msg = e.msg.removeprefix(override_place(f"{key}={v}"))  # (it is the --sweep's)
-                raise ConfigError(f"--sweep {key}={v}: {msg}", e.hint) from None
+                raise replaced_place(e, f"{key}={v}", f"--sweep {key}={v}: ") from None
     if not assocs or len(set(assocs)) != len(assocs):
         raise ConfigError(f"associators {','.join(assocs)!r} must be distinct and non-empty")
     first: dict[str, str] = {}  # a log listed twice, however spelled (x.mcap, ./x.mcap): its first spelling

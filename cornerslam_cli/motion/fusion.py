@@ -28,7 +28,7 @@ sideways step c_θ·L/2·(−o_y, o_x) (:func:`bias_matrices`, ``along``). One w
 heading at each increment's end has none. Both models have the same two parameters; each is fitted at
 every re-estimate and the along-the-path one is taken when its likelihood is higher by
 ``ALONG_EVIDENCE`` (the evidence the 3σ rule asks of a drift term: χ²₁ = 9, ΔNLL 4.5) — left out, it
-biases c_θ (a simulated hall with a biased but noiseless odometry: 0.25 m ATE against 0.04 with it,
+biases c_θ (a simulated hall with a biased but noiseless odometry: 0.25 m ATE against 0.03 with it,
 benchmarks/odometry_regimes.py). k and s are then scaled
 together so that the median normalised disagreement is χ²₃'s (a Student-t's scale is smaller than
 the covariance of the Gaussian core it is fitted to). Until ``adapt_min_samples``
