@@ -30,6 +30,7 @@ from .options import (  # noqa: E402
     CONFIG_COPIES,
     FIGURE_PATH,
     FINITE,
+    check_time_offset,
     command_config,
     config_options,
     parse_assocs,
@@ -237,6 +238,7 @@ def run(
 
     setup_logging(verbose, quiet)
     names = parse_assocs(assoc, allow_many=False, log_path=log_path)
+    check_time_offset(relations, time_offset)
     span = parse_span(start, end, max_scans)
     cfg = command_config(
         config_path, overrides, names[0] if names else None, scan_topic, odom_topic, log_path
@@ -308,6 +310,7 @@ def compare(
 
     setup_logging(verbose, quiet)
     names = parse_assocs(assocs, allow_many=True)
+    check_time_offset(relations, time_offset)
     span = parse_span(start, end, max_scans)
     cfg = command_config(config_path, overrides, None, scan_topic, odom_topic, log_path)
     out_dir = Path(out) if out else default_out_dir(Path(log_path), "compare")
@@ -402,6 +405,7 @@ def evaluate(out_dir, ground_truth, relations, time_offset, correct_scale, verbo
         raise click.UsageError("give --ground-truth FILE.tum or --relations FILE")
     if correct_scale and not ground_truth:
         raise click.UsageError("--correct-scale scales the ATE: give --ground-truth FILE.tum too")
+    check_time_offset(relations, time_offset)
     check_one_run(out_dir)  # a compare or batch directory: names its run directories
     res = evaluate_files(out_dir, ground_truth, relations, time_offset, correct_scale)
     _echo(evaluation_lines(res))

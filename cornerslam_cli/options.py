@@ -190,6 +190,16 @@ def parse_span(start, end, max_scans):
     return span
 
 
+def check_time_offset(relations, time_offset: float) -> None:
+    """``--time-offset`` shifts the relations' times only: given without ``--relations`` it would be
+    silently ignored (a ground truth's stamps are not shifted), so that is a usage error."""
+    if time_offset and not relations:
+        raise click.UsageError(
+            "--time-offset shifts the times of --relations, which is not given (a --ground-truth must "
+            "use the log's clock): give --relations FILE, or drop --time-offset"
+        )
+
+
 def setup_logging(verbose: int, quiet: bool) -> None:
     """Log to stderr: warnings by default, ``-v`` info, ``-vv`` debug, ``-q`` errors only."""
     level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)]

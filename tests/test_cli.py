@@ -571,3 +571,20 @@ def test_a_bad_preset_option_is_named_as_the_keys_value_not_a_set():
     r = invoke("config", "--preset", "nope")
     one_line_error(r, "config key 'input.laser_preset' = 'nope' is not a laser preset")
     assert "--set" not in r.stderr
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["run", "LOG.mcap", "--out", "OUT"],
+        ["compare", "LOG.mcap", "--out", "OUT"],
+        ["evaluate", "OUT", "--ground-truth", "gt.tum"],
+    ],
+)
+def test_time_offset_without_relations_is_a_usage_error(args, tmp_path, monkeypatch):
+    """--time-offset shifts the relations' times only: with --ground-truth alone (or nothing) it was
+    silently ignored, exit 0, as if the user's clock correction had been applied."""
+    monkeypatch.chdir(tmp_path)
+    res = invoke(*args, "--time-offset", 5)
+    one_line_error(res, "--time-offset", "--relations")
+    assert list(tmp_path.iterdir()) == []  # refused before any work
