@@ -159,9 +159,14 @@ def usage_line(e: click.exceptions.UsageError) -> str:
     return f"{msg} (see '{where} --help')"
 
 
+def _signal_word(e: KeyboardInterrupt) -> tuple[str, int]:
+    """What stopped us and the exit status it gives: SIGTERM 143, Ctrl-C 130 (as a shell's 128 + N)."""
+    return ("terminated", 143) if isinstance(e, _Terminated) else ("interrupted", 130)
+
+
 def _interrupted(ctx: click.Context, e: KeyboardInterrupt) -> None:
     """Exit 130 (Ctrl-C) or 143 (SIGTERM) with one line saying whether the output was written."""
-    word, code = ("terminated", 143) if isinstance(e, _Terminated) else ("interrupted", 130)
+    word, code = _signal_word(e)
     written = getattr(e, "output_written", None)  # the signal came after the commit
     if written is not None:
         text = f"after the output was complete ('{written}' is written)"
@@ -494,14 +499,15 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
     progress = BatchProgress(not quiet)
     try:
         rows = run_batch(combos, out, jobs, scheduler, progress)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as e:
         progress.close()
+        word, code = _signal_word(e)
         click.echo(
-            f"interrupted: {Path(out) / BATCH_CSV} lists the finished combinations (the rest 'pending'); "
+            f"{word}: {Path(out) / BATCH_CSV} lists the finished combinations (the rest 'pending'); "
             "run the same command again to resume",
             err=True,
         )
-        raise click.exceptions.Exit(130) from None
+        raise click.exceptions.Exit(code) from None
     progress.close()
     if not quiet:
         _echo(batch_lines(rows, [k for k, _ in combos[0].sweep]))
