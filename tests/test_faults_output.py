@@ -578,6 +578,14 @@ def mcap_out_is_a_directory(w: World) -> Case:
     return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", w.log.parent], w.log.parent)
 
 
+@fault(2, "names a directory", "give a file name")
+def mcap_out_ends_in_a_slash(w: World) -> Case:
+    """`--mcap-out res/` (a directory that does not exist yet): refused before any work (before, a file
+    named `res` was written)"""
+    mc = f"{w.tmp / 'res'}/"
+    return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", mc], mc)
+
+
 @fault(0)
 def mcap_out_inside_out(w: World) -> Case:
     """`--mcap-out` inside `--out`: written in the staging directory, committed with it"""
