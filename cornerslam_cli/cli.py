@@ -338,12 +338,18 @@ def compare(
 @verbosity_options
 def info(log_path, scan_topic, odom_topic, verbose, quiet):
     """Show what is in LOG: format, topics, types, counts, rates, and what `run` would use."""
+    from dataclasses import replace
+
     from .lasers import detect_preset, first_scan
     from .logs import open_log
 
     setup_logging(verbose, quiet)
     reader = open_log(Path(log_path), scan_topic=scan_topic or "", odom_topic=odom_topic or "")
-    log_info, laser = reader.info(), reader.laser_to_base()
+    log_info = reader.info()
+    if log_info.problems:  # a log run refuses (no LaserScan, only odometry, …): its topics, then why
+        _echo(info_lines(log_path, replace(log_info, problems=()), None))
+        reader.check()  # the first problem as the error: exit 2, as run
+    laser = reader.laser_to_base()
     scan, unread = None, ""
     try:
         scan = first_scan(reader) if log_info.scan_topic else None

@@ -163,6 +163,22 @@ def test_info_lists_the_topics_of_a_log_whose_first_scan_cannot_be_read(tmp_path
     one_line_error(invoke("run", log, "--out", tmp_path / "out"), why)
 
 
+def test_info_lists_the_topics_of_a_log_run_refuses(tmp_path):
+    """A log with odometry and no LaserScan (or scans and no odometry): info printed nothing but the
+    error, whose hint is "`cornerslam info LOG` lists the topics". It lists them, then exits 2 with
+    the error run gives."""
+    t0 = 1_700_000_000.0
+    odoms = [OdomSample(t0 + 0.1 * i, 0.1 * i, 0.0, 0.0) for i in range(5)]
+    res = invoke("info", write_mcap(tmp_path / "odom_only.mcap", [], odoms))
+    one_line_error(res, "has no sensor_msgs/LaserScan topic")
+    assert "/odom" in res.stdout and "nav_msgs/Odometry" in res.stdout and "  scans     -" in res.stdout
+    r = np.full(181, 5.0)
+    scans = [RawScan(t0 + 0.1 * i, -math.pi / 2, math.pi / 180, r, 0.1, 30.0) for i in range(3)]
+    res = invoke("info", write_mcap(tmp_path / "scans_only.mcap", scans, []))
+    one_line_error(res, "has no odometry")
+    assert "/scan" in res.stdout and "  odometry  - (none found)" in res.stdout
+
+
 def test_extract_prints_and_plots(sim_log, tmp_path):
     png = tmp_path / "scan.png"
     res = invoke("extract", sim_log, "--step", 3, "--plot", png)
