@@ -30,6 +30,7 @@ from .options import (  # noqa: E402
     CONFIG_COPIES,
     FIGURE_PATH,
     FINITE,
+    GivenPath,
     check_time_offset,
     command_config,
     config_options,
@@ -204,14 +205,14 @@ def cli() -> None:
 
 
 @cli.command()
-@click.argument("log_path", metavar="LOG", type=click.Path())
+@click.argument("log_path", metavar="LOG", type=GivenPath())
 @config_options
 @click.option("--assoc", default=None, help="Associator: icnn, jcbb or pca (default: config, pca).")
-@click.option("--out", type=click.Path(), help="Output directory (default ./cornerslam_out/LOG_ASSOC).")
+@click.option("--out", type=GivenPath(), help="Output directory (default ./cornerslam_out/LOG_ASSOC).")
 @topic_options
 @reference_options
 @click.option("--plot", is_flag=True, help="Also draw the map, timing and corner plots and report.html.")
-@click.option("--mcap-out", type=click.Path(), help="Also write the results as MCAP for Foxglove.")
+@click.option("--mcap-out", type=GivenPath(), help="Also write the results as MCAP for Foxglove.")
 @span_options
 @verbosity_options
 def run(
@@ -275,12 +276,12 @@ def run(
 
 
 @cli.command()
-@click.argument("log_path", metavar="LOG", type=click.Path())
+@click.argument("log_path", metavar="LOG", type=GivenPath())
 @click.option(
     "--assoc", "assocs", default="icnn,jcbb,pca", show_default=True, help="Comma-separated associators."
 )
 @config_options
-@click.option("--out", type=click.Path(), help="Output directory (default ./cornerslam_out/LOG_compare).")
+@click.option("--out", type=GivenPath(), help="Output directory (default ./cornerslam_out/LOG_compare).")
 @topic_options
 @reference_options
 @click.option("--jobs", default=1, show_default=True, type=click.IntRange(1, 64), help="Parallel processes.")
@@ -333,7 +334,7 @@ def compare(
 
 
 @cli.command()
-@click.argument("log_path", metavar="LOG", type=click.Path())
+@click.argument("log_path", metavar="LOG", type=GivenPath())
 @topic_options
 @verbosity_options
 def info(log_path, scan_topic, odom_topic, verbose, quiet):
@@ -360,7 +361,7 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
 
 
 @cli.command()
-@click.argument("out_path", metavar="OUT.mcap", type=click.Path(dir_okay=False))
+@click.argument("out_path", metavar="OUT.mcap", type=GivenPath(dir_okay=False))
 @click.option("--seed", default=0, show_default=True, help="Random seed (same seed, same log).")
 @click.option("--laps", default=1, show_default=True, help="Laps of the loop trajectory.")
 @click.option("--rate", default=10.0, show_default=True, help="Scan rate, Hz.")
@@ -388,9 +389,9 @@ def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
 
 
 @cli.command()
-@click.argument("out_dir", metavar="OUTDIR", type=click.Path())
-@click.option("--ground-truth", type=click.Path(dir_okay=False), help="TUM ground truth.")
-@click.option("--relations", type=click.Path(dir_okay=False), help="Kümmerle et al. 2009 .relations file.")
+@click.argument("out_dir", metavar="OUTDIR", type=GivenPath())
+@click.option("--ground-truth", type=GivenPath(dir_okay=False), help="TUM ground truth.")
+@click.option("--relations", type=GivenPath(dir_okay=False), help="Kümmerle et al. 2009 .relations file.")
 @click.option(
     "--time-offset", default=0.0, type=FINITE, show_default=True, help="Relation time − log time, seconds."
 )
@@ -423,7 +424,7 @@ def evaluate(out_dir, ground_truth, relations, time_offset, correct_scale, verbo
 
 
 @cli.command()
-@click.argument("log_path", metavar="LOG", type=click.Path())
+@click.argument("log_path", metavar="LOG", type=GivenPath())
 @click.option(
     "--step", default=0, show_default=True, type=click.IntRange(min=0), help="Index of the scan (0 = first)."
 )
@@ -458,7 +459,7 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
 
 
 @cli.command()
-@click.argument("logs", metavar="LOGS...", nargs=-1, required=True, type=click.Path())
+@click.argument("logs", metavar="LOGS...", nargs=-1, required=True, type=GivenPath())
 @click.option(
     "--assoc", "assocs", default=None, help="Comma-separated associators (default: the config's, pca)."
 )
@@ -470,7 +471,7 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
     help="Run each value of a config key; repeat for a grid, e.g. --sweep association.pca.group_size=3,5.",
 )
 @config_options
-@click.option("--out", required=True, type=click.Path(), help="Batch directory (resumable).")
+@click.option("--out", required=True, type=GivenPath(), help="Batch directory (resumable).")
 @click.option(
     "--jobs", default=None, type=click.IntRange(1, 256), help="Local worker processes [default: CPUs]."
 )
@@ -531,7 +532,7 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
 
 
 @cli.command("config")
-@click.argument("log_path", metavar="[LOG]", required=False, type=click.Path())
+@click.argument("log_path", metavar="[LOG]", required=False, type=GivenPath())
 @config_options
 @click.option(
     "--preset",

@@ -604,3 +604,24 @@ def test_time_offset_without_relations_is_a_usage_error(args, tmp_path, monkeypa
     res = invoke(*args, "--time-offset", 5)
     one_line_error(res, "--time-offset", "--relations")
     assert list(tmp_path.iterdir()) == []  # refused before any work
+
+
+@pytest.mark.parametrize(
+    "args, name",
+    [
+        (["run", ""], "'LOG'"),
+        (["info", ""], "'LOG'"),
+        (["batch", "LOG.mcap", "", "--out", "b"], "'LOGS...'"),
+        (["evaluate", "", "--ground-truth", "gt.tum"], "'OUTDIR'"),
+        (["config", "--config", ""], "'--config'"),
+        (["run", "LOG.mcap", "--mcap-out", ""], "'--mcap-out'"),
+        (["run", "LOG.mcap", "--ground-truth", ""], "'--ground-truth'"),
+        (["simulate", ""], "'OUT.mcap'"),
+    ],
+)
+def test_an_empty_path_is_refused_by_name(args, name, tmp_path, monkeypatch):
+    """`cornerslam run "$LOG"` with LOG unset: '' was read as '.', and the error named "directory '.'"
+    (the config "file '.'"); an empty --mcap-out / --ground-truth was taken as not given, silently."""
+    monkeypatch.chdir(tmp_path)
+    one_line_error(invoke(*args), f"invalid value for {name}: '' names no file")
+    assert list(tmp_path.iterdir()) == []
