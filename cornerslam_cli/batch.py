@@ -210,6 +210,8 @@ def run_one(log: str, config: dict, out_dir: str) -> dict:
 
         summary = run(log, from_dict(Config, config), out_dir)
         return {"status": "ok", "figures": figures_from_summary(summary)}
+    except SystemExit:  # the batch was interrupted and ended us (workers.stopped_by_parent)
+        os._exit(143)  # the staging is removed: end here, not in the combination queued to us next
     except Exception as e:  # a bug in one combination must not stop the batch either
         return _failed(e)
 
@@ -243,17 +245,23 @@ def _run_local(tasks: list[tuple], jobs: int, finished: Callable[[int, dict], No
                 except Exception as e:  # the worker process died (killed, out of memory)
                     result = _failed(e)
                 finished(futures[fut], result)
+        except BaseException:  # the batch ends (Ctrl-C, SIGTERM, batch.csv unwritable): so do its workers
+            for worker in multiprocessing.active_children():
+                worker.terminate()
+            raise
         finally:
             pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _init_worker(level: int) -> None:
     """A spawned worker logs at the parent's level (-q / -v), in the CLI's format, and ends with the
-    batch (a killed ``cornerslam batch`` leaves no worker running)."""
-    from .workers import exit_with_parent
+    batch (a killed ``cornerslam batch`` leaves no worker running; an interrupted one ends its workers:
+    none goes on to the combination queued to it)."""
+    from .workers import exit_with_parent, stopped_by_parent
 
     logging.basicConfig(level=level, format="%(levelname)s: %(message)s")
     exit_with_parent()
+    stopped_by_parent()
 
 
 def _run_dask(tasks: list[tuple], scheduler: str, finished: Callable[[int, dict], None]) -> None:

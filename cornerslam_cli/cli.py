@@ -30,6 +30,8 @@ from .options import (  # noqa: E402
     CONFIG_COPIES,
     FIGURE_PATH,
     FINITE,
+    GivenPath,
+    check_time_offset,
     command_config,
     config_options,
     parse_assocs,
@@ -158,9 +160,14 @@ def usage_line(e: click.exceptions.UsageError) -> str:
     return f"{msg} (see '{where} --help')"
 
 
+def _signal_word(e: KeyboardInterrupt) -> tuple[str, int]:
+    """What stopped us and the exit status it gives: SIGTERM 143, Ctrl-C 130 (as a shell's 128 + N)."""
+    return ("terminated", 143) if isinstance(e, _Terminated) else ("interrupted", 130)
+
+
 def _interrupted(ctx: click.Context, e: KeyboardInterrupt) -> None:
     """Exit 130 (Ctrl-C) or 143 (SIGTERM) with one line saying whether the output was written."""
-    word, code = ("terminated", 143) if isinstance(e, _Terminated) else ("interrupted", 130)
+    word, code = _signal_word(e)
     written = getattr(e, "output_written", None)  # the signal came after the commit
     if written is not None:
         text = f"after the output was complete ('{written}' is written)"
@@ -198,14 +205,14 @@ def cli() -> None:
 
 
 @cli.command()
-@click.argument("log_path", metavar="LOG", type=click.Path())
+@click.argument("log_path", metavar="LOG", type=GivenPath())
 @config_options
 @click.option("--assoc", default=None, help="Associator: icnn, jcbb or pca (default: config, pca).")
-@click.option("--out", type=click.Path(), help="Output directory (default ./cornerslam_out/LOG_ASSOC).")
+@click.option("--out", type=GivenPath(), help="Output directory (default ./cornerslam_out/LOG_ASSOC).")
 @topic_options
 @reference_options
 @click.option("--plot", is_flag=True, help="Also draw the map, timing and corner plots and report.html.")
-@click.option("--mcap-out", type=click.Path(), help="Also write the results as MCAP for Foxglove.")
+@click.option("--mcap-out", type=GivenPath(), help="Also write the results as MCAP for Foxglove.")
 @span_options
 @verbosity_options
 def run(
@@ -237,6 +244,7 @@ def run(
 
     setup_logging(verbose, quiet)
     names = parse_assocs(assoc, allow_many=False, log_path=log_path)
+    check_time_offset(relations, time_offset)
     span = parse_span(start, end, max_scans)
     cfg = command_config(
         config_path, overrides, names[0] if names else None, scan_topic, odom_topic, log_path
@@ -268,12 +276,12 @@ def run(
 
 
 @cli.command()
-@click.argument("log_path", metavar="LOG", type=click.Path())
+@click.argument("log_path", metavar="LOG", type=GivenPath())
 @click.option(
     "--assoc", "assocs", default="icnn,jcbb,pca", show_default=True, help="Comma-separated associators."
 )
 @config_options
-@click.option("--out", type=click.Path(), help="Output directory (default ./cornerslam_out/LOG_compare).")
+@click.option("--out", type=GivenPath(), help="Output directory (default ./cornerslam_out/LOG_compare).")
 @topic_options
 @reference_options
 @click.option("--jobs", default=1, show_default=True, type=click.IntRange(1, 64), help="Parallel processes.")
@@ -308,6 +316,7 @@ def compare(
 
     setup_logging(verbose, quiet)
     names = parse_assocs(assocs, allow_many=True)
+    check_time_offset(relations, time_offset)
     span = parse_span(start, end, max_scans)
     cfg = command_config(config_path, overrides, None, scan_topic, odom_topic, log_path)
     out_dir = Path(out) if out else default_out_dir(Path(log_path), "compare")
@@ -325,17 +334,23 @@ def compare(
 
 
 @cli.command()
-@click.argument("log_path", metavar="LOG", type=click.Path())
+@click.argument("log_path", metavar="LOG", type=GivenPath())
 @topic_options
 @verbosity_options
 def info(log_path, scan_topic, odom_topic, verbose, quiet):
     """Show what is in LOG: format, topics, types, counts, rates, and what `run` would use."""
+    from dataclasses import replace
+
     from .lasers import detect_preset, first_scan
     from .logs import open_log
 
     setup_logging(verbose, quiet)
     reader = open_log(Path(log_path), scan_topic=scan_topic or "", odom_topic=odom_topic or "")
-    log_info, laser = reader.info(), reader.laser_to_base()
+    log_info = reader.info()
+    if log_info.problems:  # a log run refuses (no LaserScan, only odometry, …): its topics, then why
+        _echo(info_lines(log_path, replace(log_info, problems=()), None))
+        reader.check()  # the first problem as the error: exit 2, as run
+    laser = reader.laser_to_base()
     scan, unread = None, ""
     try:
         scan = first_scan(reader) if log_info.scan_topic else None
@@ -346,7 +361,7 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
 
 
 @cli.command()
-@click.argument("out_path", metavar="OUT.mcap", type=click.Path(dir_okay=False))
+@click.argument("out_path", metavar="OUT.mcap", type=GivenPath(dir_okay=False))
 @click.option("--seed", default=0, show_default=True, help="Random seed (same seed, same log).")
 @click.option("--laps", default=1, show_default=True, help="Laps of the loop trajectory.")
 @click.option("--rate", default=10.0, show_default=True, help="Scan rate, Hz.")
@@ -374,9 +389,9 @@ def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
 
 
 @cli.command()
-@click.argument("out_dir", metavar="OUTDIR", type=click.Path())
-@click.option("--ground-truth", type=click.Path(dir_okay=False), help="TUM ground truth.")
-@click.option("--relations", type=click.Path(dir_okay=False), help="Kümmerle et al. 2009 .relations file.")
+@click.argument("out_dir", metavar="OUTDIR", type=GivenPath())
+@click.option("--ground-truth", type=GivenPath(dir_okay=False), help="TUM ground truth.")
+@click.option("--relations", type=GivenPath(dir_okay=False), help="Kümmerle et al. 2009 .relations file.")
 @click.option(
     "--time-offset", default=0.0, type=FINITE, show_default=True, help="Relation time − log time, seconds."
 )
@@ -402,13 +417,14 @@ def evaluate(out_dir, ground_truth, relations, time_offset, correct_scale, verbo
         raise click.UsageError("give --ground-truth FILE.tum or --relations FILE")
     if correct_scale and not ground_truth:
         raise click.UsageError("--correct-scale scales the ATE: give --ground-truth FILE.tum too")
+    check_time_offset(relations, time_offset)
     check_one_run(out_dir)  # a compare or batch directory: names its run directories
     res = evaluate_files(out_dir, ground_truth, relations, time_offset, correct_scale)
     _echo(evaluation_lines(res))
 
 
 @cli.command()
-@click.argument("log_path", metavar="LOG", type=click.Path())
+@click.argument("log_path", metavar="LOG", type=GivenPath())
 @click.option(
     "--step", default=0, show_default=True, type=click.IntRange(min=0), help="Index of the scan (0 = first)."
 )
@@ -443,7 +459,7 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
 
 
 @cli.command()
-@click.argument("logs", metavar="LOGS...", nargs=-1, required=True, type=click.Path())
+@click.argument("logs", metavar="LOGS...", nargs=-1, required=True, type=GivenPath())
 @click.option(
     "--assoc", "assocs", default=None, help="Comma-separated associators (default: the config's, pca)."
 )
@@ -455,7 +471,7 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
     help="Run each value of a config key; repeat for a grid, e.g. --sweep association.pca.group_size=3,5.",
 )
 @config_options
-@click.option("--out", required=True, type=click.Path(), help="Batch directory (resumable).")
+@click.option("--out", required=True, type=GivenPath(), help="Batch directory (resumable).")
 @click.option(
     "--jobs", default=None, type=click.IntRange(1, 256), help="Local worker processes [default: CPUs]."
 )
@@ -490,14 +506,15 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
     progress = BatchProgress(not quiet)
     try:
         rows = run_batch(combos, out, jobs, scheduler, progress)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as e:
         progress.close()
+        word, code = _signal_word(e)
         click.echo(
-            f"interrupted: {Path(out) / BATCH_CSV} lists the finished combinations (the rest 'pending'); "
+            f"{word}: {Path(out) / BATCH_CSV} lists the finished combinations (the rest 'pending'); "
             "run the same command again to resume",
             err=True,
         )
-        raise click.exceptions.Exit(130) from None
+        raise click.exceptions.Exit(code) from None
     progress.close()
     if not quiet:
         _echo(batch_lines(rows, [k for k, _ in combos[0].sweep]))
@@ -515,7 +532,7 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
 
 
 @cli.command("config")
-@click.argument("log_path", metavar="[LOG]", required=False, type=click.Path())
+@click.argument("log_path", metavar="[LOG]", required=False, type=GivenPath())
 @config_options
 @click.option(
     "--preset",

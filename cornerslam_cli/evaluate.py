@@ -142,6 +142,8 @@ def read_relations(path: str | Path) -> np.ndarray:
 def overlap_problem(est_t: np.ndarray, gt_t: np.ndarray, gt_name: str) -> str | None:
     """Why ``gt_name`` (stamps ``gt_t``, sorted) cannot score a trajectory with stamps ``est_t``, or
     None: ATE and RPE need at least two trajectory poses within the ground truth's time span."""
+    if len(est_t) < 2:  # not a matter of overlap: "1 of its 1 poses fall within" read as a contradiction
+        return f"the trajectory has a single pose: ATE and RPE against {gt_name} need two or more"
     n = int(np.count_nonzero((est_t >= gt_t[0]) & (est_t <= gt_t[-1])))
     if n >= 2:
         return None
@@ -173,7 +175,8 @@ def evaluate_files(
         gt_t, gt = read_tum(ground_truth, "ground truth")
         problem = overlap_problem(t, gt_t, f"ground truth '{ground_truth}'")
         if problem:
-            raise LogError(problem, "is it this log's ground truth? Its stamps must use the log's clock")
+            hint = "is it this log's ground truth? Its stamps must use the log's clock"
+            raise LogError(problem, "process more scans" if len(t) < 2 else hint)
         out.update(ground_truth=display_path(ground_truth), ate=ate(t, est, gt_t, gt, correct_scale))
         out.update(vars(rpe(t, est, gt_t, gt)))
     if relations:

@@ -46,7 +46,7 @@ def config_options(f):
     f = click.option(
         "--config",
         "config_path",
-        type=click.Path(),
+        type=GivenPath(),
         callback=_config_read_once,
         help="YAML config (default: built-in).",
     )(f)
@@ -101,6 +101,17 @@ class _Finite(click.ParamType):
 FINITE = _Finite()
 
 
+class GivenPath(click.Path):
+    """A file or directory name that is not ``''`` (an unset shell variable, ``--config "$CFG"``): as a
+    path ``''`` is ``.``, the working directory, which the error then named; as an option's value it
+    was taken as not given, the option silently ignored (``--mcap-out ''`` wrote no MCAP)."""
+
+    def convert(self, value, param, ctx):
+        if value == "":
+            self.fail("'' names no file (an unset shell variable?)", param, ctx)
+        return super().convert(value, param, ctx)
+
+
 class _FigurePath(click.ParamType):
     """A figure file (``extract --plot``): a path, not a directory, ending in an extension matplotlib
     writes (it appends .png to a name without one, and refuses an unknown one after the work)."""
@@ -132,11 +143,11 @@ def reference_options(f):
     )(f)
     f = click.option(
         "--relations",
-        type=click.Path(dir_okay=False),
+        type=GivenPath(dir_okay=False),
         help="Kümmerle et al. 2009 .relations file to score against.",
     )(f)
     f = click.option(
-        "--ground-truth", type=click.Path(dir_okay=False), help="TUM ground truth (default: LOG.gt.tum)."
+        "--ground-truth", type=GivenPath(dir_okay=False), help="TUM ground truth (default: LOG.gt.tum)."
     )(f)
     return f
 
@@ -188,6 +199,16 @@ def parse_span(start, end, max_scans):
     if problem := span.order_problem():
         raise click.BadParameter(problem, param_hint="--end")
     return span
+
+
+def check_time_offset(relations, time_offset: float) -> None:
+    """``--time-offset`` shifts the relations' times only: given without ``--relations`` it would be
+    silently ignored (a ground truth's stamps are not shifted), so that is a usage error."""
+    if time_offset and not relations:
+        raise click.UsageError(
+            "--time-offset shifts the times of --relations, which is not given (a --ground-truth must "
+            "use the log's clock): give --relations FILE, or drop --time-offset"
+        )
 
 
 def setup_logging(verbose: int, quiet: bool) -> None:

@@ -163,6 +163,22 @@ def test_info_lists_the_topics_of_a_log_whose_first_scan_cannot_be_read(tmp_path
     one_line_error(invoke("run", log, "--out", tmp_path / "out"), why)
 
 
+def test_info_lists_the_topics_of_a_log_run_refuses(tmp_path):
+    """A log with odometry and no LaserScan (or scans and no odometry): info printed nothing but the
+    error, whose hint is "`cornerslam info LOG` lists the topics". It lists them, then exits 2 with
+    the error run gives."""
+    t0 = 1_700_000_000.0
+    odoms = [OdomSample(t0 + 0.1 * i, 0.1 * i, 0.0, 0.0) for i in range(5)]
+    res = invoke("info", write_mcap(tmp_path / "odom_only.mcap", [], odoms))
+    one_line_error(res, "has no sensor_msgs/LaserScan topic")
+    assert "/odom" in res.stdout and "nav_msgs/Odometry" in res.stdout and "  scans     -" in res.stdout
+    r = np.full(181, 5.0)
+    scans = [RawScan(t0 + 0.1 * i, -math.pi / 2, math.pi / 180, r, 0.1, 30.0) for i in range(3)]
+    res = invoke("info", write_mcap(tmp_path / "scans_only.mcap", scans, []))
+    one_line_error(res, "has no odometry")
+    assert "/scan" in res.stdout and "  odometry  - (none found)" in res.stdout
+
+
 def test_extract_prints_and_plots(sim_log, tmp_path):
     png = tmp_path / "scan.png"
     res = invoke("extract", sim_log, "--step", 3, "--plot", png)
@@ -571,3 +587,41 @@ def test_a_bad_preset_option_is_named_as_the_keys_value_not_a_set():
     r = invoke("config", "--preset", "nope")
     one_line_error(r, "config key 'input.laser_preset' = 'nope' is not a laser preset")
     assert "--set" not in r.stderr
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["run", "LOG.mcap", "--out", "OUT"],
+        ["compare", "LOG.mcap", "--out", "OUT"],
+        ["evaluate", "OUT", "--ground-truth", "gt.tum"],
+    ],
+)
+def test_time_offset_without_relations_is_a_usage_error(args, tmp_path, monkeypatch):
+    """--time-offset shifts the relations' times only: with --ground-truth alone (or nothing) it was
+    silently ignored, exit 0, as if the user's clock correction had been applied."""
+    monkeypatch.chdir(tmp_path)
+    res = invoke(*args, "--time-offset", 5)
+    one_line_error(res, "--time-offset", "--relations")
+    assert list(tmp_path.iterdir()) == []  # refused before any work
+
+
+@pytest.mark.parametrize(
+    "args, name",
+    [
+        (["run", ""], "'LOG'"),
+        (["info", ""], "'LOG'"),
+        (["batch", "LOG.mcap", "", "--out", "b"], "'LOGS...'"),
+        (["evaluate", "", "--ground-truth", "gt.tum"], "'OUTDIR'"),
+        (["config", "--config", ""], "'--config'"),
+        (["run", "LOG.mcap", "--mcap-out", ""], "'--mcap-out'"),
+        (["run", "LOG.mcap", "--ground-truth", ""], "'--ground-truth'"),
+        (["simulate", ""], "'OUT.mcap'"),
+    ],
+)
+def test_an_empty_path_is_refused_by_name(args, name, tmp_path, monkeypatch):
+    """`cornerslam run "$LOG"` with LOG unset: '' was read as '.', and the error named "directory '.'"
+    (the config "file '.'"); an empty --mcap-out / --ground-truth was taken as not given, silently."""
+    monkeypatch.chdir(tmp_path)
+    one_line_error(invoke(*args), f"invalid value for {name}: '' names no file")
+    assert list(tmp_path.iterdir()) == []

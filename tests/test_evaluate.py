@@ -213,6 +213,19 @@ def test_ground_truth_that_does_not_overlap_is_exit_2_not_nan(files):
     assert "does not overlap the trajectory: 0 of its 200 poses" in res.stderr
 
 
+def test_a_single_pose_trajectory_is_refused_as_such_not_as_no_overlap(files):
+    """A one-scan run (`--max-scans 1`) inside the ground truth's span: the error said the ground truth
+    "does not overlap the trajectory: 1 of its 1 poses fall within" its span, and asked whether it
+    was the log's ground truth."""
+    est, gt = files
+    rewrite(est, lambda rows: rows[5:6])
+    res = evaluate(est, "--ground-truth", gt)
+    assert res.exit_code == 2 and "\n" not in res.stderr.strip(), res.output
+    assert "the trajectory has a single pose: ATE and RPE against ground truth" in res.stderr
+    assert "need two or more (process more scans)" in res.stderr
+    assert "overlap" not in res.stderr and "this log's ground truth" not in res.stderr
+
+
 @pytest.mark.parametrize(
     "content, fragment",
     [

@@ -578,6 +578,14 @@ def mcap_out_is_a_directory(w: World) -> Case:
     return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", w.log.parent], w.log.parent)
 
 
+@fault(2, "names a directory", "give a file name")
+def mcap_out_ends_in_a_slash(w: World) -> Case:
+    """`--mcap-out res/` (a directory that does not exist yet): refused before any work (before, a file
+    named `res` was written)"""
+    mc = f"{w.tmp / 'res'}/"
+    return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", mc], mc)
+
+
 @fault(0)
 def mcap_out_inside_out(w: World) -> Case:
     """`--mcap-out` inside `--out`: written in the staging directory, committed with it"""
@@ -944,6 +952,46 @@ def test_workers_end_with_a_killed_parent(tmp_path, command):
         while any(_alive(w) for w in workers) and time.monotonic() < deadline:
             time.sleep(0.1)
         assert not [w for w in workers if _alive(w)], "workers outlived the killed parent"
+    finally:
+        proc.kill()
+        for w in workers:
+            if _alive(w):
+                os.kill(w, signal.SIGKILL)
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc")
+@pytest.mark.parametrize(
+    "sig, to_group, code, word",
+    [(signal.SIGINT, True, 130, "interrupted"), (signal.SIGTERM, False, 143, "terminated")],
+)
+def test_an_interrupted_batch_ends_its_workers(tmp_path, sig, to_group, code, word):
+    """Ctrl-C (the terminal sends it to the whole process group) or SIGTERM (to the batch alone, as
+    `timeout` sends it) while `batch --jobs 1` runs: the batch ends its workers, exits with the signal's
+    status, and batch.csv tells the truth — a combination's directory exists iff its row is 'ok'. It
+    used to wait while a worker ran the combination queued to it (Ctrl-C) or the one under way
+    (SIGTERM) to its end, committing a directory its row called 'pending'; SIGTERM exited 130."""
+    log = write_mcap(tmp_path / "long.mcap", make_scans(600), make_odoms(601))
+    out = tmp_path / "out"
+    args = ["batch", str(log), "--assoc", "icnn,jcbb,pca", "--jobs", "1", "--out", str(out), "-q"]
+    proc = subprocess.Popen(
+        [*CMD, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True
+    )
+    workers: list[int] = []
+    try:
+        wait_for(lambda: staging_anywhere(out), proc, "the first combination")
+        workers = _children(proc.pid)
+        os.killpg(proc.pid, sig) if to_group else proc.send_signal(sig)
+        _, err = proc.communicate(timeout=60)
+        assert proc.returncode == code, err
+        assert err.strip().splitlines()[-1].startswith(f"{word}: "), err
+        assert "Traceback" not in err, err
+        time.sleep(0.5)
+        assert not [w for w in workers if _alive(w)], "workers outlived the interrupted batch"
+        rows = _read_batch(out)
+        assert "pending" in {r["status"] for r in rows}
+        for r in rows:
+            assert (out / f"long__{r['assoc']}").exists() == (r["status"] == "ok"), rows
+        assert not staging_anywhere(out)
     finally:
         proc.kill()
         for w in workers:

@@ -96,6 +96,19 @@ def test_plot_compare_writes_comparison_and_each_run(outputs, compare_pngs):
     assert w > 1.5 * h
 
 
+def test_figures_leave_no_matplotlib_warning_on_stderr(outputs, tmp_path, caplog):
+    """The maps' equal aspect widens the limits _frame_the_map fixed, as asked: matplotlib's "Ignoring
+    fixed y limits to fulfill fixed data aspect" WARNING reached the user's stderr twice per `run --plot`
+    (five times per `compare`), read as a fault."""
+    import logging
+
+    run_dir = tmp_path / "run"
+    shutil.copytree(outputs[0], run_dir)
+    with caplog.at_level(logging.WARNING):
+        plot_run(run_dir)
+    assert [r.getMessage() for r in caplog.records if r.name.startswith("matplotlib")] == []
+
+
 def test_map_draws_every_landmark_ellipse_and_trajectory(outputs):
     import matplotlib
 

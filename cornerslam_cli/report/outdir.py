@@ -270,6 +270,8 @@ class StagedDir:
         the target an existing ``dest`` is replaced only when ``ours(dest)`` says cornerslam wrote it
         (``None``: any file)."""
         shown = Path(dest)
+        if str(dest).endswith(("/", os.sep)):  # Path drops the slash that says a directory was meant
+            raise OutputError(f"'{dest}' names a directory", "give a file name")
         final = shown.resolve()
         with output_errors(shown):
             if is_within(final, self.target):
