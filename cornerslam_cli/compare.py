@@ -41,7 +41,16 @@ def with_assoc(cfg: Config, assoc: str) -> Config:
 def _run_one(assoc: str, out_dir: Path, stepped: Callable[[int], None] | None = None) -> RunSummary:
     sh = _SHARED
     cfg = with_assoc(sh["cfg"], assoc)
-    return run_filter(sh["frames"], sh["src"], cfg, out_dir, sh["ref"], time.perf_counter(), stepped=stepped)
+    # the runs share the input: the warnings a run adds to it (summary.json's) are taken back after it,
+    # so the next run's summary has the extraction's and its own, as in a worker process of its own
+    warnings = sh["src"].reader.stats.warnings
+    extracted = list(warnings)
+    try:
+        return run_filter(
+            sh["frames"], sh["src"], cfg, out_dir, sh["ref"], time.perf_counter(), stepped=stepped
+        )
+    finally:
+        warnings[:] = extracted
 
 
 def _run_filters(

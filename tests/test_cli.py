@@ -368,6 +368,27 @@ def test_compare_runs_every_associator_on_the_same_frames(sim_log, tmp_path):
         assert (out / name).stat().st_size > 1000, name
 
 
+def test_compare_gives_each_associator_only_its_own_runs_warnings(sim_log, tmp_path, monkeypatch):
+    """With --jobs 1 the associators run one after another in one process, on one input: a warning one
+    run gives (a stand-in naming its associator, given where a run warns of the laser mount; a real
+    one: the occupancy grid coarsened, its size the run's own) is in that run's summary.json only, as
+    with --jobs 2, where each run has its own process; the extraction's warnings are in every one."""
+    import cornerslam_cli.pipeline as pipeline
+    from cornerslam_cli.compare import compare
+    from cornerslam_cli.config import load_config
+    from cornerslam_cli.span import Span
+
+    monkeypatch.setattr(
+        pipeline,
+        "warn_default_mount",
+        lambda src, cfg: src.reader.stats.warn(f"ran {cfg.association.method}"),
+    )
+    compare(sim_log, load_config(), ["icnn", "jcbb"], tmp_path / "cmp", span=Span(max_scans=20))
+    for a, other in (("icnn", "jcbb"), ("jcbb", "icnn")):
+        warnings = json.loads((tmp_path / "cmp" / a / "summary.json").read_text())["warnings"]
+        assert f"ran {a}" in warnings and f"ran {other}" not in warnings
+
+
 def test_compare_rejects_unknown_and_repeated_associators(sim_log, tmp_path):
     one_line_error(
         invoke("compare", sim_log, "--assoc", "icnn,jbcc", "--out", tmp_path / "c"), "jbcc", "jcbb"

@@ -1,4 +1,7 @@
-"""Output tables: write/read round trips and the atomic staged output directory."""
+"""Output tables: write/read round trips, the atomic staged output directory, README's column lists."""
+
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -6,7 +9,17 @@ import pytest
 from cornerslam_cli.errors import LogError
 from cornerslam_cli.report.outdir import StagedDir
 from cornerslam_cli.report.ownership import MARKER, mark_output
-from cornerslam_cli.report.tables import CsvTable, read_csv, read_tum, write_tum
+from cornerslam_cli.report.tables import (
+    LINES_COLUMNS,
+    LOOP_COLUMNS,
+    MAP_COLUMNS,
+    TIMING_COLUMNS,
+    TRAJECTORY_COLUMNS,
+    CsvTable,
+    read_csv,
+    read_tum,
+    write_tum,
+)
 
 
 def test_tum_round_trip_keeps_yaw(tmp_path):
@@ -112,3 +125,22 @@ def test_a_huge_binary_file_is_refused_on_its_first_bytes(tmp_path):
     finally:
         tracemalloc.stop()
     assert peak < 1 << 20, peak
+
+
+@pytest.mark.parametrize(
+    "name, columns",
+    [
+        ("trajectory.csv", TRAJECTORY_COLUMNS),
+        ("map.csv", MAP_COLUMNS),
+        ("loops.csv", LOOP_COLUMNS),
+        ("lines.csv", LINES_COLUMNS),
+        ("timing.csv", TIMING_COLUMNS),
+    ],
+)
+def test_readme_names_every_column_of_each_table_in_order(name, columns):
+    """README's file table gives each CSV's columns as backquoted comma lists (the first ones, then the
+    appended ones): by first mention, in their order, they are the columns the run writes."""
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    row = next(line for line in readme.splitlines() if line.startswith(f"| `{name}` |"))
+    named = [c for span in re.findall(r"`([^`]*)`", row) for c in span.split(",")]
+    assert list(dict.fromkeys(c for c in named if c in columns)) == columns

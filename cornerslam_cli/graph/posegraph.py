@@ -125,7 +125,8 @@ class PoseGraph:
 
     Poses and covariances going in and out are in our convention (module docstring); ``pose``,
     ``marginal``, ``relative`` and ``loop_inlier`` answer for the last :meth:`optimize` (``pose`` of a
-    node added since is its initial guess: the previous node's pose composed with its factor)."""
+    node added since is its initial guess: the one given to :meth:`add_sequential`, by default the
+    previous node's pose composed with its factor)."""
 
     def __init__(self, cfg: GraphConfig, origin=(0.0, 0.0, 0.0), relinearize: float = ISAM2_RELINEARIZE):
         self.cfg = cfg

@@ -3,7 +3,8 @@ result of matching two submaps for a loop closure.
 
 Frames: a submap's frame (its origin) is the robot's pose where the submap before it ended — its last
 step, which the filter's new map starts from with zero uncertainty (the first submap's: the first step);
-so a submap's first pose is one step's motion from its origin, not zero. A relative pose ``a→b`` is
+so a later submap's first pose is one step's motion from its origin, not zero (the first submap's first
+pose is its origin). A relative pose ``a→b`` is
 b's origin expressed in a's frame (x, y, θ); its covariance is of those three numbers, in a's frame —
 the convention of the EKF's robot block Σ_rr when a's origin is fixed (graph/posegraph.py turns it into
 GTSAM's tangent space).
