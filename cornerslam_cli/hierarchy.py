@@ -50,6 +50,7 @@ from .graph.submap import (
     Submap,
     keyframe_factors,
     keyframe_nodes,
+    landmark_frames,
     place_table,
     propagate,
 )
@@ -321,24 +322,25 @@ class HierarchicalSlam:
         return compose(nodes, np.vstack([relative(s.anchor_poses, s.poses) for s in self.closed]))
 
     def landmark_table(self) -> dict[str, np.ndarray]:
-        """map.csv's columns: every submap's landmarks at its optimised origin (global frame), their
-        covariances turned with it (the origin's own uncertainty not added), with ``submap`` and
-        ``linked_to`` (the id of the corner it was matched to across an accepted closure, or -1)."""
-        poses = self._origins()
-        parts = [place_table(t, poses[i], i) for i, t in enumerate(self.tables)]
+        """map.csv's columns: every submap's landmarks in the global frame — once the keyframe graph is
+        solved, each where the node of the step that last observed it puts it (graph/submap.py
+        landmark_frames), before that at its submap's origin — their covariances turned with it (the
+        graph's own uncertainty not added), with ``submap`` and ``linked_to`` (the id of the corner it
+        was matched to across an accepted closure, or -1)."""
+        if self.smoothed is None:
+            poses = self.graph.poses()
+            parts = [place_table(t, poses[i], i) for i, t in enumerate(self.tables)]
+        else:
+            nodes = self.smoothed.poses()
+            parts = [
+                place_table(t, landmark_frames(s, nodes, t["last_step"]), s.index)
+                for s, t in zip(self.closed, self.tables, strict=True)
+            ]
         if not parts:  # none closed yet: the open submap 0's, whose frame is the global one
             return self.slam.landmark_table()
         table = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
         table["linked_to"] = self._links(len(table["id"]))
         return table
-
-    def _origins(self) -> np.ndarray:
-        """(submaps, 3) each closed submap's origin, smoothed when solved."""
-        return (
-            self.graph.poses()
-            if self.smoothed is None
-            else self.smoothed.poses()[[s.node for s in self.closed]]
-        )
 
     def _links(self, n: int) -> np.ndarray:
         linked = np.full(n, -1, dtype=np.int64)

@@ -67,6 +67,25 @@ def test_a_submap_closes_when_it_reaches_a_limit(sim_log, limit, check):
         assert np.linalg.norm(sub.poses[0]) < 0.5  # one step from the origin
 
 
+def test_each_landmark_keeps_its_pose_relative_to_the_step_that_last_observed_it(sim_log):
+    # the smoothed graph bends a submap along its keyframe nodes: map.csv places each landmark where the
+    # node of its last observing step puts it, so the landmark seen from the smoothed trajectory is where
+    # the filter saw it from that step (one rigid origin per submap left late landmarks off the path)
+    hs = hierarchical(sim_log, "submaps.max_steps=40")
+    table, final = hs.landmark_table(), hs.final_poses()
+    bent = 0.0
+    for sub in hs.closed:
+        mine = table["submap"] == sub.index
+        local = np.column_stack((sub.landmarks[:, :2], np.zeros(len(sub.landmarks))))
+        last = table["last_step"][mine]
+        seen = relative(sub.poses[last - sub.first_step], local)  # by the filter, in the submap's frame
+        placed = np.column_stack((table["x"][mine], table["y"][mine], np.zeros(mine.sum())))
+        np.testing.assert_allclose(relative(final[last], placed)[:, :2], seen[:, :2], atol=1e-9)
+        at_origin = compose(hs.smoothed.poses()[sub.node], local)[:, :2]
+        bent = max(bent, float(np.abs(placed[:, :2] - at_origin).max()))
+    assert bent > 1e-3  # the graph did bend a submap: the test tells the two placements apart
+
+
 def test_submaps_write_the_smoothed_trajectory_loops_and_linked_map(sim_log, tmp_path):
     s = run_cli(sim_log, tmp_path / "out", "submaps.enabled=true", "submaps.max_steps=8")
     out = tmp_path / "out"

@@ -19,7 +19,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import relative, rotate_covariance, rotate_pose_covariance, transform_points, wrap_angle
+from ..geometry import (
+    compose,
+    inverse,
+    relative,
+    rotate_pose_covariance,
+    transform_points,
+    wrap_angle,
+)
 from ..motion.icp import LocalMap, voxel_thin
 
 
@@ -260,12 +267,27 @@ def propagate(acc: np.ndarray, p0: np.ndarray, p1: np.ndarray, cov: np.ndarray) 
     return _moved(acc, p0, p1) + rotate_pose_covariance(cov, p0[2])
 
 
-def place_table(table: dict[str, np.ndarray], origin: np.ndarray, index: int) -> dict[str, np.ndarray]:
-    """A submap's landmark columns moved into the global frame by its ``origin``."""
+def landmark_frames(sub: Submap, nodes: np.ndarray, last_step: np.ndarray) -> np.ndarray:
+    """(n, 3) where the solved keyframe graph puts ``sub``'s frame for each of its landmarks: as seen from
+    the node that the step which last observed it (``last_step``, log steps) hangs from — node ∘ its
+    anchor pose⁻¹. The graph bends a submap along its nodes, so one rigid frame for all its landmarks
+    (its origin's) would leave a landmark seen late in the submap where the early path puts it, off the
+    smoothed trajectory by the submap's own drift; this way each keeps the pose relative to the robot
+    that the filter gave it. ``nodes``: the graph's node poses."""
+    k = np.asarray(last_step, dtype=np.int64) - sub.first_step
+    return compose(nodes[sub.step_nodes[k]], inverse(sub.anchor_poses[k]))
+
+
+def place_table(table: dict[str, np.ndarray], frames: np.ndarray, index: int) -> dict[str, np.ndarray]:
+    """A submap's landmark columns moved into the global frame: each by its pose of the submap's frame,
+    ``frames`` (n, 3), or all by one (3,) (its origin)."""
     n = len(table["id"])
-    xy = transform_points(np.column_stack((table["x"], table["y"])), origin)
+    frames = np.broadcast_to(np.asarray(frames, dtype=float), (n, 3))
+    c, s = np.cos(frames[:, 2]), np.sin(frames[:, 2])
+    R = np.stack((np.stack((c, -s), axis=-1), np.stack((s, c), axis=-1)), axis=-2)  # (n, 2, 2)
+    xy = np.einsum("nij,nj->ni", R, np.column_stack((table["x"], table["y"]))) + frames[:, :2]
     cov = np.stack((table["var_x"], table["cov_xy"], table["cov_xy"], table["var_y"]), axis=-1)
-    cov = rotate_covariance(cov.reshape(-1, 2, 2), float(origin[2]))
+    cov = R @ cov.reshape(-1, 2, 2) @ R.transpose(0, 2, 1)
     return {
         **table,
         "x": xy[:, 0],
