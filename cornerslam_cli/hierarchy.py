@@ -122,6 +122,7 @@ class HierarchicalSlam:
         self._open = OpenSubmap(0, 0, 0)
         self._origin_cov = np.zeros((3, 3))  # the open submap origin's marginal in the graph
         self.t_loop = 0.0
+        self.unconverged = 0  # graph solves (online and the final smoothing) stopped at their step limit
         self.n_ids = 0
         self._match_scale = 1.0  # the front end's learnt scale of fit covariances (Frame.match_scale)
 
@@ -168,13 +169,30 @@ class HierarchicalSlam:
                 if r.factor >= 0
             ]
             self.smoothed = smooth(self.cfg.graph, self.chains, self.graph.poses()[: len(self.closed)], loops)
+            self.unconverged += not self.smoothed.converged
         self.t_loop += time.perf_counter() - t0
+
+    def _optimize(self, graph: PoseGraph) -> None:
+        """``graph.optimize()``, counting a solve that stopped at its step limit."""
+        graph.optimize()
+        self.unconverged += not graph.converged
+
+    def solver_warning(self) -> str | None:
+        """The warning for summary.json when a graph solve stopped at its step limit (its poses are the
+        last step's, not the optimum), else None."""
+        if not self.unconverged:
+            return None
+        return (
+            f"{self.unconverged} pose-graph solve(s) stopped at their step limit before converging: the "
+            "trajectory may be short of the optimum (a closure the robust kernel fights, or graph.kernel "
+            "none with a false one); loops.csv lists the closures"
+        )
 
     def _close(self, step: int, last: bool = False) -> None:
         """Close the open submap at ``step``: a node for the next origin, its loops, the graph optimised."""
         sub = self._close_submap()
         self.graph.add_sequential(sub.end_pose, sub.end_cov + COV_FLOOR)
-        self.graph.optimize()
+        self._optimize(self.graph)
         if self.cfg.loops.enabled:
             self._close_loops(sub, step)
         if not last:
@@ -259,17 +277,19 @@ class HierarchicalSlam:
         if not self.consistent(accepted):
             why = "closures of this submap disagree on where it is (aliasing)"
             found = [replace(r, accepted=False, reason=why) if r.accepted else r for r in found]
+        added = False
         for r in found:
             if r.accepted:
                 try:
                     r = replace(
                         r, factor=self.graph.add_loop(r.submap_from, r.submap_to, r.match.pose, r.match.cov)
                     )
+                    added = True
                 except ValueError:  # a degenerate ICP fit (a featureless corridor): no usable covariance
                     r = replace(r, accepted=False, reason="match covariance not positive definite")
             self.loops.append(r)
-        if any(r.accepted for r in found):
-            self.graph.optimize()
+        if added:
+            self._optimize(self.graph)
 
     def consistent(self, closures: list[LoopRecord]) -> bool:
         """Whether one submap's closures agree on where it is, two at a time: placed within AGREE_XY /

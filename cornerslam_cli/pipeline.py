@@ -133,6 +133,8 @@ def run_filter(
         warn_default_mount(src, cfg)
         if graph is not None:
             graph.finish()
+            if warning := graph.solver_warning():
+                src.reader.stats.warn(warning)
         summary = writer.finish(slam.landmark_table(), src, cfg, ref, wall0, graph)
     c = summary.counts
     log.info(

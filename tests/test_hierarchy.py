@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from _run_helpers import run_cli
 
+import cornerslam_cli.graph.posegraph as posegraph
 import cornerslam_cli.hierarchy as hierarchy
 from cornerslam_cli.config import config_from
 from cornerslam_cli.frontend import frames, open_input
@@ -84,6 +85,16 @@ def test_each_landmark_keeps_its_pose_relative_to_the_step_that_last_observed_it
         at_origin = compose(hs.smoothed.poses()[sub.node], local)[:, :2]
         bent = max(bent, float(np.abs(placed[:, :2] - at_origin).max()))
     assert bent > 1e-3  # the graph did bend a submap: the test tells the two placements apart
+
+
+def test_a_graph_solve_stopped_at_its_step_limit_is_a_warning(sim_log, tmp_path, monkeypatch):
+    # LM's iteration cap at 1: the final smoothing stops before converging, which summary.json must say
+    monkeypatch.setattr(posegraph, "LM_MAX_ITERATIONS", 1)
+    s = run_cli(sim_log, tmp_path / "capped", "submaps.enabled=true", "submaps.max_steps=40")
+    assert any("stopped at their step limit" in w for w in s["warnings"]), s["warnings"]
+    monkeypatch.undo()
+    s = run_cli(sim_log, tmp_path / "free", "submaps.enabled=true", "submaps.max_steps=40")
+    assert not any("step limit" in w for w in s["warnings"]), s["warnings"]
 
 
 def test_submaps_write_the_smoothed_trajectory_loops_and_linked_map(sim_log, tmp_path):
