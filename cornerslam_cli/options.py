@@ -119,6 +119,9 @@ class _FigurePath(click.ParamType):
     name = "FILE.png"
 
     def convert(self, value, param, ctx):
+        from .report.plots import agg_backend
+
+        agg_backend()  # (a bad MPLBACKEND would end the import)
         from matplotlib.backend_bases import FigureCanvasBase
 
         path = click.Path(dir_okay=False).convert(value, param, ctx)

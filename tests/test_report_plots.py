@@ -263,3 +263,17 @@ def test_the_map_is_framed_on_the_estimate_not_on_drifting_odometry():
     (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
     plt.close(fig)
     assert -12 < x0 < -10 and 12 < x1 < 14 and -12 < y0 < -10 and 10 < y1 < 12
+
+
+def test_an_unknown_mplbackend_does_not_end_a_plot(sim_log, tmp_path):
+    # matplotlib refuses a backend it does not know when it is imported; we draw files with Agg anyway
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "MPLBACKEND": "bogus", "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    png = tmp_path / "scan.png"
+    cmd = [sys.executable, "-m", "cornerslam_cli", "extract", str(sim_log), "--plot", str(png), "-q"]
+    res = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert png.stat().st_size > 0

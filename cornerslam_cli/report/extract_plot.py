@@ -60,11 +60,9 @@ def plot_extraction(scan: Scan, segments: Segments, corners: Corners, path, titl
     Sensor frame, metres, equal aspect. Type I corners are dots, type II (end points) stars, as in the
     paper's Fig 14; the ellipses are the (x, y) block of each corner's covariance (Fig 15).
     """
-    import matplotlib
+    from .plots import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(8, 8))
     pts = scan.points()
     ax.plot(pts[:, 0], pts[:, 1], ".", ms=2, color="0.6", label=f"scan ({len(pts)} beams)")

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -56,12 +57,27 @@ RUN_FIGURES = ("map.png", "segments.png", "timing.png", "corners.png")
 COMPARE_FIGURES = ("compare_matching.png", "compare_maps.png", "compare_timing.png")
 
 
-def _figure(*args, **kwargs):
+def agg_backend() -> None:
+    """matplotlib on the Agg backend (every figure here is a file). MPLBACKEND is set to it first:
+    matplotlib checks that variable when it is imported, and a value it does not know (a typo, a GUI
+    backend of another machine) ended ``run --plot`` after its work, though Agg is what we draw with
+    whatever the variable says."""
+    os.environ["MPLBACKEND"] = "agg"
     import matplotlib
 
     matplotlib.use("Agg")
+
+
+def pyplot():
+    """matplotlib.pyplot, on Agg (:func:`agg_backend`)."""
+    agg_backend()
     import matplotlib.pyplot as plt
 
+    return plt
+
+
+def _figure(*args, **kwargs):
+    plt = pyplot()
     logging.getLogger("matplotlib.axes._base").addFilter(_limits_widened)  # once: skips one it has
     return plt.subplots(*args, **kwargs)
 
