@@ -51,6 +51,7 @@ TWO_PI = 2.0 * math.pi
 MAX_CONFIG_BYTES = 1 << 20  # configs/default.yaml, every key, is 2.5 KB
 MAX_YAML_NODES = 10_000  # nodes of a config document with every alias expanded (default.yaml: ~250)
 CONFIG_FILE = "a YAML config file, e.g. configs/default.yaml"
+SUMMARY_MARK = "cornerslam_version"  # summary.json's first field (results.RunSummary): a run's summary
 
 
 @dataclass(frozen=True)
@@ -431,6 +432,11 @@ def read_config_file(path: str | Path) -> dict:
         return {}
     if not isinstance(loaded, dict):
         raise ConfigError(f"{where} must contain a mapping of sections, not {type(loaded).__name__}")
+    if SUMMARY_MARK in loaded and isinstance(loaded.get("config"), dict):  # a run's summary.json
+        loaded = loaded["config"]  # the config that run used: run again with it
+        lines = {k.removeprefix("config."): n for k, n in lines.items() if k.startswith("config.")}
+        where = f"{where} (the config section of a run's summary.json)"
+        log.info("%s: running with the config its run used", where)
     _refuse_sexagesimal(loaded, where=where)
     return ConfigFileData(_empty_null_sections(loaded, Config, where, lines=lines), where, lines)
 

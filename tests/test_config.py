@@ -288,3 +288,22 @@ def test_shipped_configs_read_exactly_as_yaml_safe_load_reads_them():
     for p in paths:
         mine, theirs = read_config_file(p), yaml.safe_load(p.read_text())
         assert mine == theirs and repr(mine) == repr(theirs), p
+
+
+def test_a_runs_summary_json_gives_the_config_that_run_used(tmp_path):
+    import json
+
+    cfg = Config().to_dict()
+    cfg["scan_match"]["window"] = 7
+    summary = {"cornerslam_version": "0", "mode": "submaps", "counts": {"steps": 3}, "config": cfg}
+    p = tmp_path / "summary.json"
+    p.write_text(json.dumps(summary, indent=1))
+    assert load_config(p).scan_match.window == 7
+    cfg["ekf"]["alpha1"] = -3.0  # a bad value in it is named at its line, as the run's summary
+    p.write_text(json.dumps(summary, indent=1))
+    with pytest.raises(
+        ConfigError,
+        match=r"summary\.json' \(the config section of a run's summary\.json\) line \d+: "
+        r"config key 'ekf.alpha1'",
+    ):
+        load_config(p)
