@@ -147,6 +147,12 @@ def overlap_problem(est_t: np.ndarray, gt_t: np.ndarray, gt_name: str) -> str | 
     n = int(np.count_nonzero((est_t >= gt_t[0]) & (est_t <= gt_t[-1])))
     if n >= 2:
         return None
+    for unit, scale in (("nanoseconds", 1e9), ("microseconds", 1e6), ("milliseconds", 1e3)):
+        if np.count_nonzero((est_t >= gt_t[0] / scale) & (est_t <= gt_t[-1] / scale)) >= 2:
+            return (  # a ROS exporter's integer stamps: TUM's are seconds
+                f"{gt_name} has its stamps in {unit}, not seconds ({gt_t[0]:.0f} to {gt_t[-1]:.0f}; "
+                f"the trajectory {est_t[0]:.3f} to {est_t[-1]:.3f} s)"
+            )
     return (
         f"{gt_name} does not overlap the trajectory: {n} of its {len(est_t)} poses fall within the "
         f"ground truth's time span ({gt_t[0]:.3f} to {gt_t[-1]:.3f} s; trajectory {est_t[0]:.3f} to "
@@ -176,7 +182,11 @@ def evaluate_files(
         problem = overlap_problem(t, gt_t, f"ground truth '{ground_truth}'")
         if problem:
             hint = "is it this log's ground truth? Its stamps must use the log's clock"
-            raise LogError(problem, "process more scans" if len(t) < 2 else hint)
+            if len(t) < 2:
+                hint = "process more scans"
+            elif "not seconds" in problem:
+                hint = "write its stamps in seconds"
+            raise LogError(problem, hint)
         out.update(ground_truth=display_path(ground_truth), ate=ate(t, est, gt_t, gt, correct_scale))
         out.update(vars(rpe(t, est, gt_t, gt)))
     if relations:
