@@ -139,25 +139,29 @@ def read_relations(path: str | Path) -> np.ndarray:
     return v[:, [0, 1, 2, 3, 7]]
 
 
-def overlap_problem(est_t: np.ndarray, gt_t: np.ndarray, gt_name: str) -> str | None:
-    """Why ``gt_name`` (stamps ``gt_t``, sorted) cannot score a trajectory with stamps ``est_t``, or
-    None: ATE and RPE need at least two trajectory poses within the ground truth's time span."""
+def overlap_problem(est_t: np.ndarray, gt_t: np.ndarray, gt_name: str) -> tuple[str, str] | None:
+    """Why ``gt_name`` (stamps ``gt_t``, sorted) cannot score a trajectory with stamps ``est_t``, and
+    what to do about it, or None: ATE and RPE need at least two trajectory poses within the ground
+    truth's time span."""
     if len(est_t) < 2:  # not a matter of overlap: "1 of its 1 poses fall within" read as a contradiction
-        return f"the trajectory has a single pose: ATE and RPE against {gt_name} need two or more"
+        why = f"the trajectory has a single pose: ATE and RPE against {gt_name} need two or more"
+        return why, "process more scans"
     n = int(np.count_nonzero((est_t >= gt_t[0]) & (est_t <= gt_t[-1])))
     if n >= 2:
         return None
     for unit, scale in (("nanoseconds", 1e9), ("microseconds", 1e6), ("milliseconds", 1e3)):
         if np.count_nonzero((est_t >= gt_t[0] / scale) & (est_t <= gt_t[-1] / scale)) >= 2:
-            return (  # a ROS exporter's integer stamps: TUM's are seconds
+            why = (  # a ROS exporter's integer stamps: TUM's are seconds
                 f"{gt_name} has its stamps in {unit}, not seconds ({gt_t[0]:.0f} to {gt_t[-1]:.0f}; "
                 f"the trajectory {est_t[0]:.3f} to {est_t[-1]:.3f} s)"
             )
-    return (
+            return why, "write its stamps in seconds"
+    why = (
         f"{gt_name} does not overlap the trajectory: {n} of its {len(est_t)} poses fall within the "
         f"ground truth's time span ({gt_t[0]:.3f} to {gt_t[-1]:.3f} s; trajectory {est_t[0]:.3f} to "
         f"{est_t[-1]:.3f} s)"
     )
+    return why, "is it this log's ground truth? Its stamps must use the log's clock"
 
 
 def evaluate_files(
@@ -181,12 +185,7 @@ def evaluate_files(
         gt_t, gt = read_tum(ground_truth, "ground truth")
         problem = overlap_problem(t, gt_t, f"ground truth '{ground_truth}'")
         if problem:
-            hint = "is it this log's ground truth? Its stamps must use the log's clock"
-            if len(t) < 2:
-                hint = "process more scans"
-            elif "not seconds" in problem:
-                hint = "write its stamps in seconds"
-            raise LogError(problem, hint)
+            raise LogError(*problem)
         out.update(ground_truth=display_path(ground_truth), ate=ate(t, est, gt_t, gt, correct_scale))
         out.update(vars(rpe(t, est, gt_t, gt)))
     if relations:

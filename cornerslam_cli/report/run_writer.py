@@ -309,7 +309,7 @@ def accuracy_of(
     notes = list(ref.notes)
     problem = ref.gt is not None and overlap_problem(stamps, ref.gt[0], f"ground truth '{ref.gt_path}'")
     if problem:
-        notes.append(f"{problem}: no ATE/RPE")
+        notes.append(f"{problem[0]}: no ATE/RPE")
     elif ref.gt is not None:
         acc.update(
             ground_truth=display_path(ref.gt_path),
