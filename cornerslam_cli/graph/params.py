@@ -17,7 +17,9 @@ class SubmapConfig:
     (configs/paper.yaml). On by default: more accurate on 6 of the 7 radish logs (README)."""
 
     enabled: bool = True
-    max_distance: float = num(10.0, gt=0.0, le=1e6)  # m travelled in one submap
+    # m travelled over one submap's steps, counted from its first step (the move from its origin, the
+    # previous submap's last step, is not counted: one step, 0.25–1 m on the radish logs)
+    max_distance: float = num(10.0, gt=0.0, le=1e6)
     max_landmarks: int = num(60, ge=1, le=1000)  # landmarks in one submap
     max_steps: int = num(300, ge=2, le=1_000_000)  # keyframes in one submap
     # m: a submap's scan points (kept for loop closing and the occupancy grid) thinned to one per cell

@@ -163,6 +163,8 @@ class OpenSubmap:
         self.travelled = 0.0
 
     def add(self, pose: np.ndarray, cov: np.ndarray, points: np.ndarray | None, voxel: float) -> None:
+        """One step: its local pose, motion noise and scan points (global frame). ``travelled`` sums the
+        moves between the submap's steps, not the one from its origin (SubmapConfig.max_distance)."""
         if self.poses:
             self.travelled += math.hypot(*(pose[:2] - self.poses[-1][:2]))
         self.poses.append(pose)
