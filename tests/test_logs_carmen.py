@@ -177,3 +177,15 @@ def test_malformed_laser_lines_do_not_count_as_moving(tmp_path):
     p = tmp_path / "m.log"
     p.write_text("".join(lines))
     assert open_log(p).info().odom_topic == "ODOM"
+
+
+def test_odometry_from_another_laser_tag_yields_no_scans_of_it(tmp_path):
+    # --odom-topic RLASER with --scan-topic FLASER: the RLASER lines give odometry only, not scans
+    lines = [
+        flaser(180, t, pose=(t, 0, 0)) + f"RLASER 3 5 5 5 0 0 0 {t} 0 0 {t + 0.01} h {t}\n" for t in (1, 2)
+    ]
+    p = tmp_path / "two.log"
+    p.write_text("".join(lines))
+    scans, odoms = split(open_log(p, scan_topic="FLASER", odom_topic="RLASER").messages())
+    assert [(s.stamp, s.n_beams) for s in scans] == [(1.0, 180), (2.0, 180)]
+    assert [(o.stamp, o.x) for o in odoms] == [(1.01, 1.0), (2.01, 2.0)]

@@ -346,6 +346,8 @@ class CarmenReader:
             if tag == odom_tag and not st.bad_odometry(f"{where}:{lineno}", las.stamp, las.robot):
                 st.odoms += 1
                 yield OdomSample(las.stamp, *las.robot)
+            if tag != scan_tag:  # odometry from another laser's lines: not scans
+                continue
             scan = make_scan(
                 st, f"{where}:{lineno}", las.stamp, las.angle_min, None, las.angle_increment, 0.0,
                 las.range_max, las.ranges,
