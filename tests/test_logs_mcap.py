@@ -284,6 +284,19 @@ def test_chunks_out_of_time_order_are_read_in_log_time_order(tmp_path):
     assert got == ordered and len(got) == 2 * N
 
 
+def test_summary_without_channel_records_reads_the_channels_from_the_data(tmp_path):
+    """A summary with statistics and chunk indexes but no channel/schema records (mcap's
+    repeat_channels=False): the topics are those of the data section, not 'no LaserScan topic'."""
+    scans, odoms = make_scans(N, beams=91), make_odoms(N)
+    full = write_mcap(tmp_path / "a.mcap", scans, odoms, chunk_size=8_000)
+    bare = write_mcap(tmp_path / "b.mcap", scans, odoms, chunk_size=8_000, repeat_channels=False)
+    with open_log(full) as a, open_log(bare) as b:
+        assert b.info().topics == a.info().topics and b.info().problems == ()
+        want, got = list(a.messages()), list(b.messages())
+        assert b.stats.warnings == []
+    assert [m.stamp for m in got] == [m.stamp for m in want] and len(got) == 2 * N
+
+
 def _zero_chunk_start_times(src, dst, keep_summary: bool):
     """Copy of an MCAP with message_start_time 0 in every chunk header and chunk index record (as some
     writers leave it); without the summary section if not ``keep_summary``."""
