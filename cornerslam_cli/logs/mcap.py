@@ -28,7 +28,7 @@ import io
 import struct
 import zlib
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from ..errors import LogError
@@ -377,13 +377,19 @@ class McapSource:
 
     # ---------------------------------------------------------------- RawSource
     def channels(self) -> list[Channel]:
-        out = []
+        """One per topic: the channels of a topic (a converted ROS 1 bag's connections, a channel
+        registered again) are counted together, with the type and encoding of the first."""
+        out: dict[str, Channel] = {}
         idx = self.index
         for cid, (topic, enc, sid) in sorted(idx.channels.items()):
             name, fmt, data = idx.schemas.get(sid, ("", "", ""))
             count = idx.counts.get(cid, 0) if idx.counts is not None else None
-            out.append(Channel(topic, name, enc, count, data, fmt))
-        return out
+            prev = out.get(topic)
+            if prev is not None:
+                out[topic] = replace(prev, count=None if count is None else prev.count + count)
+            else:
+                out[topic] = Channel(topic, name, enc, count, data, fmt)
+        return list(out.values())
 
     def time_range(self) -> tuple[int, int] | None:
         if self.index.start is None or self.index.end is None:
