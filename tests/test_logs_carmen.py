@@ -177,3 +177,35 @@ def test_malformed_laser_lines_do_not_count_as_moving(tmp_path):
     p = tmp_path / "m.log"
     p.write_text("".join(lines))
     assert open_log(p).info().odom_topic == "ODOM"
+
+
+def test_odometry_from_another_laser_tag_yields_no_scans_of_it(tmp_path):
+    # --odom-topic RLASER with --scan-topic FLASER: the RLASER lines give odometry only, not scans
+    lines = [
+        flaser(180, t, pose=(t, 0, 0)) + f"RLASER 3 5 5 5 0 0 0 {t} 0 0 {t + 0.01} h {t}\n" for t in (1, 2)
+    ]
+    p = tmp_path / "two.log"
+    p.write_text("".join(lines))
+    scans, odoms = split(open_log(p, scan_topic="FLASER", odom_topic="RLASER").messages())
+    assert [(s.stamp, s.n_beams) for s in scans] == [(1.0, 180), (2.0, 180)]
+    assert [(o.stamp, o.x) for o in odoms] == [(1.01, 1.0), (2.01, 2.0)]
+
+
+@pytest.mark.parametrize(
+    "cut",
+    [
+        "ODOM 6 0 0 0 0 0 1006.0 ho",  # its accel field (0) would be the stamp
+        "FLASER 3 1 1 1 6 0 0 6 0 0",  # a reading or pose field would be the stamp
+        _robotlaser(1006.5, 6, 6)[:-12],  # ... its turn_axis field (0)
+        "FLASER -5 1 1 1 0",  # a negative reading count: as many fields as it implies, still not whole
+    ],
+)
+def test_a_line_cut_by_the_recorder_gives_no_stamp_or_pose(tmp_path, cut):
+    # the last line of a log whose recorder stopped mid-line: no stamp 0 for the time span, no ODOM line
+    # going back in time that would switch the odometry to the laser lines' fields
+    lines = [_odom_line(1000.0 + i, i) + _flaser_odom(1000.5 + i, i, i) for i in range(1, 6)]
+    p = tmp_path / "cut.log"
+    p.write_text("".join(lines) + cut)
+    info = open_log(p).info()
+    assert (info.start, info.end) == (1001.0, 1005.5)
+    assert (info.odom_topic, info.odom_source) == ("ODOM", "ODOM lines")

@@ -69,6 +69,35 @@ def test_bad_paths(tmp_path, make, match):
     assert err.value.hint
 
 
+def test_log_in_a_directory_we_may_not_search(tmp_path, monkeypatch):
+    """stat() failing with EACCES (a directory on the path without x permission; simulated, as the
+    tests may run as root): a LogError naming the log, not a PermissionError from Path.exists()."""
+    import errno
+    import os
+    import re
+
+    p = write_log("mcap-cdr", tmp_path)
+    real_stat = os.stat
+
+    def stat(path, *args, **kwargs):
+        if str(path) == str(p):
+            raise PermissionError(errno.EACCES, "Permission denied", str(path))
+        return real_stat(path, *args, **kwargs)
+
+    monkeypatch.setattr(os, "stat", stat)
+    with pytest.raises(LogError, match=re.escape(f"cannot read log '{p}': Permission denied")) as err:
+        open_log(p)
+    assert "permissions" in err.value.hint
+
+
+def test_log_name_too_long(tmp_path):
+    """A name longer than the file system allows (a pasted command line): a LogError, not the OSError
+    ENAMETOOLONG of Path.exists()."""
+    with pytest.raises(LogError, match="cannot read log .*: File name too long") as err:
+        open_log(tmp_path / ("x" * 300 + ".mcap"))
+    assert "check the path" in err.value.hint
+
+
 def test_no_laserscan(tmp_path):
     p = write_mcap(tmp_path / "odom_only.mcap", [], make_odoms())
     log = open_log(p)

@@ -284,6 +284,48 @@ def test_chunks_out_of_time_order_are_read_in_log_time_order(tmp_path):
     assert got == ordered and len(got) == 2 * N
 
 
+def test_summary_without_channel_records_reads_the_channels_from_the_data(tmp_path):
+    """A summary with statistics and chunk indexes but no channel/schema records (mcap's
+    repeat_channels=False): the topics are those of the data section, not 'no LaserScan topic'."""
+    scans, odoms = make_scans(N, beams=91), make_odoms(N)
+    full = write_mcap(tmp_path / "a.mcap", scans, odoms, chunk_size=8_000)
+    bare = write_mcap(tmp_path / "b.mcap", scans, odoms, chunk_size=8_000, repeat_channels=False)
+    with open_log(full) as a, open_log(bare) as b:
+        assert b.info().topics == a.info().topics and b.info().problems == ()
+        want, got = list(a.messages()), list(b.messages())
+        assert b.stats.warnings == []
+    assert [m.stamp for m in got] == [m.stamp for m in want] and len(got) == 2 * N
+
+
+@pytest.mark.parametrize("summary", [True, False])
+def test_a_topic_on_several_channels_is_counted_as_one(tmp_path, summary):
+    """A topic with two channel records (a ROS 1 bag's connections converted, a channel registered again;
+    here the second after the last scan, with no messages): its count is the sum, not the last channel's
+    0, which made ``check()`` say the topic has no messages."""
+    from mcap.writer import IndexType, Writer
+
+    from cornerslam_cli.logs.writers import serializer
+    from cornerslam_cli.logs.writers.ros import RosTopics, ros_messages
+
+    ros = serializer("cdr")
+    kw = {} if summary else dict(use_statistics=False, use_summary_offsets=False, index_types=IndexType.NONE)
+    p = tmp_path / "two_channels.mcap"
+    with open(p, "wb") as f:
+        w = Writer(f, **kw)
+        w.start(profile="ros2", library="test")
+        chans = {}
+        for topic, typename, t, data in ros_messages(ros, make_scans(N), make_odoms(N), RosTopics()):
+            if topic not in chans:
+                sid = w.register_schema(typename, ros.schema_encoding, ros.msgdef(typename).encode())
+                chans[topic] = (w.register_channel(topic, ros.message_encoding, sid), sid)
+            w.add_message(chans[topic][0], t, data, t)
+        w.register_channel("/scan", ros.message_encoding, chans["/scan"][1])
+        w.finish()
+    with open_log(p) as log:
+        assert {t.name: t.count for t in log.info().topics} == {"/scan": N, "/odom": N}
+        assert len([m for m in log.messages() if hasattr(m, "ranges")]) == N
+
+
 def _zero_chunk_start_times(src, dst, keep_summary: bool):
     """Copy of an MCAP with message_start_time 0 in every chunk header and chunk index record (as some
     writers leave it); without the summary section if not ``keep_summary``."""

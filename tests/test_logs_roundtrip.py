@@ -85,6 +85,36 @@ def test_odometry_from_tf(fmt, tmp_path):
     )
 
 
+def test_laser_mount_on_tf_after_the_first_scan(tmp_path):
+    """ROS 1's tf static_transform_publisher sends the mount on /tf every 100 ms, between the odometry's
+    tf messages, and the log has no /tf_static: a mount first sent 5 ms after the first scan is found
+    (the read stopped at the first tf message after that scan, an odom→base_link one)."""
+    from _log_fixtures import odom_messages, scan_messages, write_messages_mcap
+
+    from cornerslam_cli.logs.writers import RosSerializer
+
+    ros = RosSerializer("cdr")
+    scans = scan_messages(n=12)
+    t0 = scans[0][2]
+
+    def tf(t, parent, child, x):
+        return ("/tf", "tf2_msgs/msg/TFMessage", t, ros.tf(t * 1e-9, parent, child, x, 0.0, 0.0))
+
+    odom = [tf(t0 - 200_000_000 + 20_000_000 * i, "odom", "base_link", 0.01 * i) for i in range(70)]
+    mount = [tf(t0 + 5_000_000 + 100_000_000 * i, "base_link", "laser", 0.2) for i in range(10)]
+    path = write_messages_mcap(tmp_path / "tf.mcap", sorted(scans + odom + mount, key=lambda m: m[2]))
+    with open_log(path) as log:
+        assert log.odom_topic == "/tf" and log.laser_to_base() == pytest.approx((0.2, 0.0, 0.0))
+    # nav_msgs/Odometry, the mount on /tf_static, odom→base_link on /tf only from after the first scan:
+    # the tf odometry is still seen (odom_on_tf: the results MCAP then writes no second odom→base_link)
+    static = [("/tf_static", "tf2_msgs/msg/TFMessage", t0 - 1, tf(t0 - 1, "base_link", "laser", 0.2)[3])]
+    late = [tf(t0 + 10_000_000 + 20_000_000 * i, "odom", "base_link", 0.01 * i) for i in range(20)]
+    msgs = sorted(scans + odom_messages(n=12) + static + late, key=lambda m: m[2])
+    with open_log(write_messages_mcap(tmp_path / "odom.mcap", msgs)) as log:
+        assert log.odom_topic == "/odom" and log.laser_to_base() == pytest.approx((0.2, 0.0, 0.0))
+        assert log.odom_on_tf
+
+
 def test_tf_odometry_wrong_frames_is_an_error(tmp_path):
     from cornerslam_cli.errors import LogError
 

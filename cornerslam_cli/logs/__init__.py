@@ -49,7 +49,14 @@ SUPPORTED = "a .mcap file, a ROS 1 .bag, a ROS 2 bag directory or a CARMEN log (
 def detect_format(path: str | Path) -> str:
     """Key of :data:`READERS` for ``path`` (content sniffed first, then extension); LogError if none."""
     p = Path(path)
-    if not p.exists():
+    try:
+        exists = p.exists()
+    except OSError as exc:  # EACCES (a directory on the way we may not search), ENAMETOOLONG, ...
+        raise LogError(
+            f"cannot read log '{p}': {exc.strerror or exc}",
+            "check the path and the permissions of the directories on it",
+        ) from exc
+    if not exists:
         raise LogError(f"log '{p}' does not exist", "check the path")
     check_regular(p)
     if p.is_dir():

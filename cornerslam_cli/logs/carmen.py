@@ -87,17 +87,34 @@ def _lines(path: Path, stats: ReadStats | None) -> Iterator[str]:
             stats.warn("%s ends early after %d lines (damaged or cut gzip: %s)", path.name, n, exc)
 
 
-def _odometry_fields(tag: str, rest: str) -> tuple[float, ...] | None:
-    """The robot pose of a laser line (its text after the tag): FLASER/RLASER ``odom_x odom_y
+def _whole_fields(tag: str, rest: str) -> list[str] | None:
+    """The fields of an ODOM or laser line after its tag, None when the line is not whole: ODOM has 9,
+    a laser line as many as its reading (and remission) counts imply. A line cut short (a recorder
+    that stopped mid-line) would give a velocity or a reading where its timestamp and poses should be."""
+    tok = rest.split()
+    try:
+        if tag == ODOM_TAG:
+            want = 9
+        elif tag in ("FLASER", "RLASER"):
+            n = int(tok[0])
+            want = n + 10 if n >= 0 else -1
+        else:  # ROBOTLASERx: n readings, n_rem remissions, 14 fields after them
+            n = int(tok[7])
+            want = n + int(tok[8 + n]) + 23 if n >= 0 else -1
+    except (ValueError, IndexError):
+        return None
+    return tok if len(tok) == want else None
+
+
+def _odometry_fields(tag: str, tok: list[str]) -> tuple[float, ...] | None:
+    """The robot pose of a whole laser line (its fields after the tag): FLASER/RLASER ``odom_x odom_y
     odom_theta`` 6th–4th field from the end, ROBOTLASERx ``robot_x robot_y robot_theta`` 11th–9th; None
-    when the line is too short or they are not numbers."""
-    tok = rest.rsplit(None, 11)
+    when they are not numbers."""
     fields = tok[-6:-3] if tag in ("FLASER", "RLASER") else tok[-11:-8]
     try:
-        pose = tuple(float(v) for v in fields)
+        return tuple(float(v) for v in fields)
     except ValueError:
         return None
-    return pose if len(pose) == 3 else None
 
 
 class _Laser:
@@ -170,9 +187,12 @@ class CarmenReader:
                     continue
                 self._counts[tag] = self._counts.get(tag, 0) + 1
                 if tag in LASER_TAGS or tag == ODOM_TAG:
+                    tok = _whole_fields(tag, rest)
+                    if tok is None:  # a cut or malformed line: no stamp, no pose (messages() skips it)
+                        continue
                     try:
-                        t = float(rest.rsplit(None, 3)[-3])
-                    except (ValueError, IndexError):
+                        t = float(tok[-3])
+                    except ValueError:
                         continue
                     if math.isfinite(t):
                         self._start = t if self._start is None else min(self._start, t)
@@ -180,7 +200,7 @@ class CarmenReader:
                         self._back[tag] = self._back.get(tag, 0) + (t < last.get(tag, -math.inf))
                         last[tag] = t
                     if tag != ODOM_TAG and tag not in self._moving:
-                        pose = _odometry_fields(tag, rest)
+                        pose = _odometry_fields(tag, tok)
                         if pose is not None and first_pose.setdefault(tag, pose) != pose:
                             self._moving.add(tag)
         except OSError as exc:
@@ -346,6 +366,8 @@ class CarmenReader:
             if tag == odom_tag and not st.bad_odometry(f"{where}:{lineno}", las.stamp, las.robot):
                 st.odoms += 1
                 yield OdomSample(las.stamp, *las.robot)
+            if tag != scan_tag:  # odometry from another laser's lines: not scans
+                continue
             scan = make_scan(
                 st, f"{where}:{lineno}", las.stamp, las.angle_min, None, las.angle_increment, 0.0,
                 las.range_max, las.ranges,

@@ -13,8 +13,9 @@ including the readable prefix of the cut chunk (zstd/lz4/uncompressed streams ar
 incrementally), and warns. A chunk that fails its CRC or does not decompress is skipped with a
 warning; a record whose length runs past the end of the file ends the read with a warning.
 
-Summary (statistics, channels, chunk indexes) is used when present for ``info()``; without it the
-data section is scanned once (no message decoding). Record layouts: https://mcap.dev/spec.
+Summary (statistics, channels, chunk indexes) is used when present for ``info()``; without it (or
+without the channel records it counts) the data section is scanned once (no message decoding).
+Record layouts: https://mcap.dev/spec.
 
 Over 400 lines because it is one streaming reader (:class:`McapSource`) whose record parsing, chunk
 index, reorder heap and damage handling share the position in the file.
@@ -27,7 +28,7 @@ import io
 import struct
 import zlib
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from ..errors import LogError
@@ -331,7 +332,7 @@ class McapSource:
             return None
         idx = _Index()
         stats_seen = False
-        n_chunks = 0
+        n_chunks = n_schemas = n_channels = 0
         try:
             for op, body, _, _ in self._records(summary_start, footer_pos, warn=False):
                 if op == OP_SCHEMA:
@@ -341,7 +342,7 @@ class McapSource:
                     cid, sid, topic, enc = _channel(body)
                     idx.channels[cid] = (topic, enc, sid)
                 elif op == OP_STATISTICS:
-                    n, _, _, _, _, n_chunks, t0, t1 = _STATS.unpack_from(body, 0)
+                    n, n_schemas, n_channels, _, _, n_chunks, t0, t1 = _STATS.unpack_from(body, 0)
                     counts, _ = _u16_u64_map(body, _STATS.size)
                     idx.counts, idx.n_messages, stats_seen = counts, n, True
                     if n:
@@ -354,6 +355,8 @@ class McapSource:
             return None
         if not stats_seen:
             return None  # counts unknown: scan instead
+        if len(idx.channels) < n_channels or len(idx.schemas) < n_schemas:
+            return None  # channels not repeated in the summary (a writer's option): found by the scan
         if len(idx.chunks) != n_chunks or any(not 8 <= c[1] < summary_start for c in idx.chunks):
             idx.chunks = []  # an index that does not cover the chunks: read in file order
         self._summary_start = summary_start
@@ -374,13 +377,19 @@ class McapSource:
 
     # ---------------------------------------------------------------- RawSource
     def channels(self) -> list[Channel]:
-        out = []
+        """One per topic: the channels of a topic (a converted ROS 1 bag's connections, a channel
+        registered again) are counted together, with the type and encoding of the first."""
+        out: dict[str, Channel] = {}
         idx = self.index
         for cid, (topic, enc, sid) in sorted(idx.channels.items()):
             name, fmt, data = idx.schemas.get(sid, ("", "", ""))
             count = idx.counts.get(cid, 0) if idx.counts is not None else None
-            out.append(Channel(topic, name, enc, count, data, fmt))
-        return out
+            prev = out.get(topic)
+            if prev is not None:
+                out[topic] = replace(prev, count=None if count is None else prev.count + count)
+            else:
+                out[topic] = Channel(topic, name, enc, count, data, fmt)
+        return list(out.values())
 
     def time_range(self) -> tuple[int, int] | None:
         if self.index.start is None or self.index.end is None:

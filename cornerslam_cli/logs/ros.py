@@ -343,8 +343,10 @@ class RosLogReader:
     def laser_to_base(self) -> Pose2 | None:
         """Pose (x, y, yaw) of the laser in base_frame from tf_static/tf, else None.
 
-        Reads from the start of the log until the first scan has been seen and, after it, either all
-        tf_static messages (when counts are known) or 2,000 more messages.
+        Reads from the start of the log until the first scan has been seen and, after it, all tf_static
+        messages (when counts are known) and, when the log has other tf topics, more messages until the
+        laser's frame is linked to base_frame (ROS 1's tf static_transform_publisher sends the mount on
+        /tf, now and then) and odom_frame→base_frame has been seen (``odom_on_tf``): 2,000 at most.
         """
         if self._laser2base is not False:
             return self._laser2base  # type: ignore[return-value]
@@ -362,9 +364,22 @@ class RosLogReader:
         edges: dict[tuple[str, str], np.ndarray] = {}
         static_left = sum(self._channels[t].count or 0 for t in tf_topics if t == "/tf_static")
         counts_known = all(self._channels[t].count is not None for t in tf_topics if t == "/tf_static")
-        after = 0
+        dynamic = any(t != "/tf_static" for t in tf_topics)  # tf besides /tf_static: mount, odom→base
+        after, linked_at = 0, -1  # messages since the first scan; len(edges) when the link was looked for
+        linked = False  # base_frame → the laser's frame through the edges so far
         decs = {t: self._decoder(t) for t in tf_topics | {self.scan_topic}}
         for topic, _, data in self.source.raw_messages(tf_topics | {self.scan_topic}):
+            if frame is not None:
+                after += 1
+                if after > 2000:
+                    break
+                if counts_known and static_left <= 0:
+                    if len(edges) != linked_at and dynamic:
+                        linked_at = len(edges)
+                        with np.errstate(invalid="ignore", over="ignore"):
+                            linked = chain_transform(edges, self.base_frame, frame) is not None
+                    if not dynamic or (linked and self.odom_on_tf):
+                        break
             try:
                 if topic == self.scan_topic:
                     if frame is None:
@@ -387,11 +402,6 @@ class RosLogReader:
                     edges.setdefault((parent, child), transform_matrix(t, q))
             except Exception as exc:  # noqa: BLE001 - bad bytes are counted, never raised
                 logger.debug("laser_to_base: skipping undecodable %s message: %s", topic, exc)
-            finally:
-                if frame is not None:
-                    after += 1
-            if frame is not None and ((counts_known and static_left <= 0) or after > 2000):
-                break
         if frame is None:
             self._laser2base = None
             return None

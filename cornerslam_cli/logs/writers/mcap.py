@@ -22,6 +22,7 @@ def write_mcap(
     chunk_size: int = 1024 * 1024,
     shuffle_blocks: int = 0,
     summary: bool = True,
+    repeat_channels: bool = True,
     **topics,
 ) -> Path:
     """Write an MCAP log. ``encoding``: ``cdr`` (ROS 2 profile), ``ros1`` (ROS 1 profile), ``json``
@@ -31,7 +32,8 @@ def write_mcap(
     ``shuffle_blocks`` > 0 writes the messages in blocks of that many, the blocks in a seeded random
     order, one message per chunk: a valid file whose chunks are not in log-time order (the whole log
     is held in memory to do so). ``summary=False`` writes no summary section (no chunk index, no
-    statistics), as some recorders do.
+    statistics), as some recorders do; ``repeat_channels=False`` a summary without the channel and
+    schema records (they are only in the data section: the mcap writer's option).
     """
     from mcap.writer import CompressionType, IndexType, Writer
 
@@ -48,6 +50,8 @@ def write_mcap(
             ("repeat_channels", "repeat_schemas", "use_statistics", "use_summary_offsets"), False
         )
         kw = {} if summary else dict(no_summary, index_types=IndexType.NONE)
+        if not repeat_channels:
+            kw.update(repeat_channels=False, repeat_schemas=False)
         w = Writer(f, chunk_size=chunk_size, compression=comp, **kw)
         w.start(profile=ros.profile, library=LIBRARY)
         channels: dict[str, int] = {}
