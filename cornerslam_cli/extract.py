@@ -16,9 +16,8 @@ def extract_step(log_path: str | Path, step: int, cfg: Config) -> tuple[Scan, Se
     segments and natural corners in the sensor frame, extracted with ``cfg``'s sensor, lines and
     corners sections. ConfigError when the log has no such scan, naming the valid range."""
     with open_log(Path(log_path), scan_topic=cfg.input.scan_topic, odom_topic=cfg.input.odom_topic) as reader:
-        scans = (msg for msg in reader.messages() if isinstance(msg, Scan))
         n = 0
-        for scan in scans:
+        for scan in reader.scans():  # odometry is not needed for one scan's features
             if n == step:
                 return (scan, *extract(scan, cfg.sensor, cfg.lines, cfg.corners))
             n += 1

@@ -101,7 +101,7 @@ def detect_preset(n_beams: int, angle_increment: float) -> str | None:
 
 def first_scan(reader) -> Scan | None:
     """The first scan a log reader (logs/base.py) gives, None when it has none."""
-    return next((msg for msg in reader.messages() if isinstance(msg, Scan)), None)
+    return next(iter(reader.scans()), None)
 
 
 def first_scan_geometry(log_path: str | Path, cfg: Config) -> tuple[int, float] | None:

@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 import numpy as np
 import pytest
+from _log_fixtures import write_log
 from click.testing import CliRunner
 
 from cornerslam_cli.cli import cli
@@ -208,6 +209,17 @@ def test_extract_step_is_the_steps_scan_and_its_features(tmp_path):
     assert invoke("extract", log, "--step", 9).stderr == (
         f"error: --step 9 is past the end of '{log}' (6 scans) (use 0..5)\n"
     )
+
+
+@pytest.mark.parametrize("fmt", ["mcap-cdr", "rosbag1", "rosbag2-sqlite3"])
+def test_extract_reads_a_log_without_odometry(fmt, tmp_path):
+    """One scan's features need no odometry: extract serves a log of scans alone (run refuses it)."""
+    log = write_log(fmt, tmp_path, odoms=[])
+    res = invoke("extract", log, "--step", 2)
+    assert res.exit_code == 0, res.output
+    assert res.stdout.startswith("scan 2 at ")
+    one_line_error(invoke("run", log, "--out", tmp_path / "out"), "has no odometry")
+    assert not (tmp_path / "out").exists()
 
 
 def test_simulate_is_reproducible(tmp_path):

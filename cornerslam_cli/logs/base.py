@@ -228,6 +228,8 @@ class LogReader(Protocol):
 
     def messages(self) -> Iterator[Scan | OdomSample]: ...
 
+    def scans(self) -> Iterator[Scan]: ...  # the scans alone: needs no odometry topic
+
     def close(self) -> None: ...
 
 

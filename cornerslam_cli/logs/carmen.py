@@ -335,6 +335,10 @@ class CarmenReader:
         self.check()
         return self._iter()
 
+    def scans(self) -> Iterator[Scan]:
+        """The scans alone (``extract``); a CARMEN log with laser lines always has their odometry."""
+        return (m for m in self.messages() if isinstance(m, Scan))
+
     def _iter(self) -> Iterator[Scan | OdomSample]:
         st = self.stats
         scan_tag, odom_tag = self.scan_topic, self.odom_topic

@@ -287,12 +287,13 @@ class RosLogReader:
             problems = [p for t in (self.scan_topic, self.odom_topic) if (p := self._encoding_problem(t))]
         return problems
 
-    def check(self) -> None:
-        """Raise LogError if a run could not choose its scan and odometry topics or decode them."""
-        problems = self._problems()
+    def check(self, odometry: bool = True) -> None:
+        """Raise LogError if a run could not choose its scan and odometry topics or decode them (with
+        ``odometry`` False: its scan topic alone, as ``extract`` needs)."""
+        problems = self._problems() if odometry else self._scan_problems()
         if problems:
             raise LogError(*problems[0])
-        for topic in (self.scan_topic, self.odom_topic):
+        for topic in (self.scan_topic, self.odom_topic) if odometry else (self.scan_topic,):
             if self._channels[topic].count == 0 and self.stats.truncated:
                 raise LogError(*self._cut_short(f"no message of topic '{short_text(topic)}'"))
             if self._channels[topic].count == 0:
@@ -300,6 +301,13 @@ class RosLogReader:
                     f"topic '{short_text(topic)}' of log '{self.path.name}' has no messages",
                     "it was declared but nothing was recorded on it; `cornerslam info LOG` shows the counts",
                 )
+
+    def _scan_problems(self) -> list[tuple[str, str]]:
+        """:meth:`_problems` of the scan topic alone."""
+        if self._scan_sel[1]:
+            return [(self._scan_sel[1], self._scan_sel[2])]
+        p = self._encoding_problem(self.scan_topic)
+        return [p] if p else []
 
     # ---------------------------------------------------------------- info
     def info(self) -> LogInfo:
@@ -418,14 +426,19 @@ class RosLogReader:
         self.check()
         return self._iter()
 
-    def _iter(self) -> Iterator[Scan | OdomSample]:
+    def scans(self) -> Iterator[Scan]:
+        """The scans alone, in log-time order: a log without odometry serves too (``extract``)."""
+        self.check(odometry=False)
+        return self._iter(odometry=False)  # type: ignore[return-value]
+
+    def _iter(self, odometry: bool = True) -> Iterator[Scan | OdomSample]:
         st = self.stats
-        scan_t, odom_t = self.scan_topic, self.odom_topic
-        scan_dec, odom_dec = self._decoder(scan_t), self._decoder(odom_t)
-        is_tf = self._odom_sel.kind == "tf"
+        scan_t, odom_t = self.scan_topic, self.odom_topic if odometry else ""
+        scan_dec, odom_dec = self._decoder(scan_t), self._decoder(odom_t) if odometry else None
+        is_tf = odometry and self._odom_sel.kind == "tf"
         where, odom_where = f"{self.path.name}:{scan_t}", f"{self.path.name}:{odom_t}"
         n_tf_match = 0
-        for topic, log_time, data in self.source.raw_messages({scan_t, odom_t}):
+        for topic, log_time, data in self.source.raw_messages({scan_t, odom_t} if odometry else {scan_t}):
             try:
                 if topic == scan_t:
                     m = scan_dec.laserscan(data)
