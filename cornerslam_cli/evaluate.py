@@ -146,6 +146,8 @@ def overlap_problem(est_t: np.ndarray, gt_t: np.ndarray, gt_name: str) -> tuple[
     if len(est_t) < 2:  # not a matter of overlap: "1 of its 1 poses fall within" read as a contradiction
         why = f"the trajectory has a single pose: ATE and RPE against {gt_name} need two or more"
         return why, "process more scans"
+    if len(gt_t) < 2:  # a one-line file: its "time span" is an instant, no overlap to speak of
+        return f"{gt_name} has a single pose: ATE and RPE need two or more", "give the whole ground truth"
     n = int(np.count_nonzero((est_t >= gt_t[0]) & (est_t <= gt_t[-1])))
     if n >= 2:
         return None

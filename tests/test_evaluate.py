@@ -324,3 +324,15 @@ def test_a_compare_or_batch_directory_names_the_run_directories_to_evaluate(
     )
     res = evaluate(out / runs[1], "--ground-truth", gt)
     assert res.exit_code == 0 and "ATE" in res.output, res.output
+
+
+def test_a_single_pose_ground_truth_is_refused_as_such_not_as_no_overlap(files):
+    """A ground truth of one line (a cut file, a header-only export plus one pose): the error said it
+    "does not overlap the trajectory: 1 of its 200 poses fall within" its span (x to x s) and asked
+    whether it was the log's ground truth."""
+    est, gt = files
+    rewrite(gt, lambda rows: rows[5:6])
+    res = evaluate(est, "--ground-truth", gt)
+    assert res.exit_code == 2 and "\n" not in res.stderr.strip(), res.output
+    assert "has a single pose: ATE and RPE need two or more" in res.stderr, res.stderr
+    assert "overlap" not in res.stderr and "this log's ground truth" not in res.stderr
