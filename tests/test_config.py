@@ -307,3 +307,21 @@ def test_a_runs_summary_json_gives_the_config_that_run_used(tmp_path):
         r"config key 'ekf.alpha1'",
     ):
         load_config(p)
+
+
+def test_an_unknown_associator_in_a_config_file_names_the_file_and_line(tmp_path):
+    """`association.method: jbcc` in --config FILE: the error said only "unknown associator 'jbcc'",
+    naming neither the file nor the key (as a bad input.laser_preset in it does)."""
+    from cornerslam_cli.lasers import resolve_config
+
+    p = tmp_path / "mine.yaml"
+    p.write_text("ekf:\n  alpha1: 0.1\nassociation:\n  method: jbcc\n")
+    with pytest.raises(ConfigError) as e:
+        resolve_config(None, p)
+    assert str(e.value) == (
+        f"config file '{p}' line 4: config key 'association.method' = 'jbcc' is not an associator "
+        "(did you mean 'jcbb'? (icnn, jcbb, pca))"
+    )
+    with pytest.raises(ConfigError) as e:
+        resolve_config(None, p, ["association.method=pcaa"])
+    assert str(e.value).startswith("--set 'association.method=pcaa': config key 'association.method'")
