@@ -325,3 +325,22 @@ def test_an_unknown_associator_in_a_config_file_names_the_file_and_line(tmp_path
     with pytest.raises(ConfigError) as e:
         resolve_config(None, p, ["association.method=pcaa"])
     assert str(e.value).startswith("--set 'association.method=pcaa': config key 'association.method'")
+
+
+def test_a_set_of_a_mapping_merges_into_the_section_as_the_file_does(tmp_path):
+    """`--set 'scan_match={enabled: false}'` replaced the whole section: the config file's (and the
+    laser preset's) other scan_match keys went back to the defaults, silently (`--set 'sensor={}'`
+    undid the preset's sensor model). It sets the keys it names, as the file does over the preset,
+    and an error in a key it does not name is not blamed on it."""
+    p = tmp_path / "mine.yaml"
+    p.write_text("scan_match:\n  window: 7\n")
+    cfg = load_config(p, ["scan_match={enabled: false}"])
+    assert cfg.scan_match.window == 7 and cfg.scan_match.enabled is False
+    assert load_config(None, ["sensor={}"], base={"sensor": {"model": "linear"}}).sensor.model == "linear"
+    p.write_text("scan_match:\n  window: 0\n")
+    with pytest.raises(ConfigError) as e:
+        load_config(p, ["scan_match={enabled: false}"])
+    assert str(e.value).startswith(f"config file '{p}' line 2: config key 'scan_match.window' = 0")
+    with pytest.raises(ConfigError) as e:
+        load_config(p, ["scan_match={window: 0}"])
+    assert str(e.value).startswith("--set 'scan_match={window: 0}': config key 'scan_match.window' = 0")
