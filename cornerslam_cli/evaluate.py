@@ -13,7 +13,7 @@ from .errors import LogError, display_path
 from .geometry import interpolate, relative, wrap_angle
 from .report.tables import read_tum
 from .results import Accuracy, Ate, RelationError, Rpe
-from .textfile import read_number_rows
+from .textfile import read_number_rows, refuse_far
 
 
 def inside_span(stamps: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -135,7 +135,10 @@ def read_relations(path: str | Path) -> np.ndarray:
 
     Each row stands alone, so their order does not matter; a binary file, a line that is not 8
     finite numbers (more are ignored) or a file without relations raises ``LogError``."""
-    v, _ = read_number_rows(path, "relations file", LogError, "relation", RELATIONS_LAYOUT, 8, more_ok=True)
+    v, lines = read_number_rows(
+        path, "relations file", LogError, "relation", RELATIONS_LAYOUT, 8, more_ok=True
+    )
+    refuse_far(v, lines, [2, 3, 4], f"relations file '{path}'", LogError, RELATIONS_LAYOUT)
     return v[:, [0, 1, 2, 3, 7]]
 
 
