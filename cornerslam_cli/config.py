@@ -466,6 +466,8 @@ def _deep_merge(under: dict, over: dict) -> dict:
 
 
 def _merge(base: dict, path: list[str], value: Any) -> None:
+    """Set ``path`` to ``value`` in ``base``; a mapping is merged into the mapping there, key by key, as
+    a file is over the preset (``--set 'scan_match={enabled: false}'`` keeps the file's other keys)."""
     d = base
     for p in path[:-1]:
         nxt = d.get(p)
@@ -473,7 +475,15 @@ def _merge(base: dict, path: list[str], value: Any) -> None:
             nxt = {}
             d[p] = nxt
         d = nxt
-    d[path[-1]] = value
+    old = d.get(path[-1])
+    d[path[-1]] = _deep_merge(old, value) if isinstance(value, dict) and isinstance(old, dict) else value
+
+
+def _leaves(key: str, value: Any) -> list[str]:
+    """The dotted keys a ``--set key=value`` sets: a mapping's leaves (an empty mapping sets none)."""
+    if isinstance(value, dict):
+        return [leaf for k, v in value.items() for leaf in _leaves(f"{key}.{k}", v)]
+    return [key]
 
 
 def config_from(data: dict, overrides: typing.Sequence[str] = (), base: dict | None = None) -> Config:
@@ -484,7 +494,7 @@ def config_from(data: dict, overrides: typing.Sequence[str] = (), base: dict | N
     for text in overrides:
         keys, value = _parse_override(text)
         _merge(merged, keys, value)
-        given.append((".".join(keys), text))
+        given += [(leaf, text) for leaf in _leaves(".".join(keys), value)]
     try:
         return from_dict(Config, merged)
     except ConfigError as e:
@@ -495,7 +505,11 @@ def located(e: ConfigError, data: dict, overrides: typing.Sequence[str]) -> Conf
     """``e``, an invalid value found after :func:`config_from` (``data``, ``overrides`` its arguments;
     ``input.laser_preset``, checked by lasers.py), prefixed with where its key was given, as
     :func:`config_from` does."""
-    return _located(e, data, [(".".join(_parse_override(text)[0]), text) for text in overrides])
+    given = []
+    for text in overrides:
+        keys, value = _parse_override(text)
+        given += [(leaf, text) for leaf in _leaves(".".join(keys), value)]
+    return _located(e, data, given)
 
 
 def yaml_quoted(text: str) -> str:

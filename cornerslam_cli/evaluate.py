@@ -13,7 +13,7 @@ from .errors import LogError, display_path
 from .geometry import interpolate, relative, wrap_angle
 from .report.tables import read_tum
 from .results import Accuracy, Ate, RelationError, Rpe
-from .textfile import read_number_rows
+from .textfile import read_number_rows, refuse_far
 
 
 def inside_span(stamps: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -135,7 +135,10 @@ def read_relations(path: str | Path) -> np.ndarray:
 
     Each row stands alone, so their order does not matter; a binary file, a line that is not 8
     finite numbers (more are ignored) or a file without relations raises ``LogError``."""
-    v, _ = read_number_rows(path, "relations file", LogError, "relation", RELATIONS_LAYOUT, 8, more_ok=True)
+    v, lines = read_number_rows(
+        path, "relations file", LogError, "relation", RELATIONS_LAYOUT, 8, more_ok=True
+    )
+    refuse_far(v, lines, [2, 3, 4], f"relations file '{path}'", LogError, RELATIONS_LAYOUT)
     return v[:, [0, 1, 2, 3, 7]]
 
 
@@ -146,6 +149,8 @@ def overlap_problem(est_t: np.ndarray, gt_t: np.ndarray, gt_name: str) -> tuple[
     if len(est_t) < 2:  # not a matter of overlap: "1 of its 1 poses fall within" read as a contradiction
         why = f"the trajectory has a single pose: ATE and RPE against {gt_name} need two or more"
         return why, "process more scans"
+    if len(gt_t) < 2:  # a one-line file: its "time span" is an instant, no overlap to speak of
+        return f"{gt_name} has a single pose: ATE and RPE need two or more", "give the whole ground truth"
     n = int(np.count_nonzero((est_t >= gt_t[0]) & (est_t <= gt_t[-1])))
     if n >= 2:
         return None

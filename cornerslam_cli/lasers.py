@@ -127,6 +127,20 @@ def first_scan_geometry(log_path: str | Path, cfg: Config) -> tuple[int, float] 
         reader_log.setLevel(level)
 
 
+def _check_method(method: str, data: dict, overrides: Sequence[str]) -> None:
+    """ConfigError for an ``association.method`` that names no associator, with the closest name and
+    where it was given (the config file's line, the ``--set``), as a bad ``input.laser_preset`` is."""
+    from .association import associator_class
+
+    try:
+        associator_class(method)
+    except ConfigError as e:
+        key = ConfigError(
+            f"config key 'association.method' = '{short_text(method)}' is not an associator", e.hint
+        )
+        raise located(key, data, overrides) from None
+
+
 def resolve_config(
     log_path: str | Path | None, config_path: str | Path | None, overrides: Sequence[str] = ()
 ) -> Config:
@@ -135,6 +149,7 @@ def resolve_config(
     The config file is read once (it may be a pipe) and layered twice: without, then with the preset."""
     data = read_config_file(config_path) if config_path is not None else {}
     cfg = config_from(data, overrides)
+    _check_method(cfg.association.method, data, overrides)
     choice = cfg.input.laser_preset
     if choice == "none" or (choice == "auto" and log_path is None):
         return cfg

@@ -23,6 +23,7 @@ from .errors import CornerslamError
 UTF16_BOMS = (codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)
 SNIFF_BYTES = 1 << 16  # a binary file (a multi-GB bag given as ground truth) is refused on these
 MAX_ROWS_BYTES = 256 << 20  # a table of numbers (3 million TUM poses): an endless pipe stops here
+MAX_POSITION = 1e9  # metres, as odometry (logs/base.MAX_ODOM_XY): squared, 1e308 m made an ATE of "inf m"
 
 
 def read_text(
@@ -111,3 +112,22 @@ def read_number_rows(
     if not rows:
         raise error(f"{name} has no {item}s", f"expected: {layout}")
     return np.array(rows, dtype=float), np.array(lines, dtype=np.int64)
+
+
+def refuse_far(
+    values: np.ndarray,
+    lines: np.ndarray,
+    columns: list[int],
+    name: str,
+    error: type[CornerslamError],
+    layout: str,
+) -> None:
+    """Raise ``error`` naming the first line of ``values`` (rows of :func:`read_number_rows`, their
+    ``lines``) whose position ``columns`` (metres) reach past :data:`MAX_POSITION`: no score of it is
+    a number."""
+    far = np.flatnonzero(np.any(np.abs(values[:, columns]) > MAX_POSITION, axis=1))
+    if len(far):
+        raise error(
+            f"{name} line {lines[far[0]]} has a position beyond ±{MAX_POSITION:.0e} m",
+            f"positions are metres; expected: {layout}",
+        )

@@ -499,7 +499,10 @@ def test_every_command_reports_a_bad_assoc_in_the_same_words(command, sim_log, t
             f"(see 'cornerslam {command} --help')\n"
         )
     res = invoke(command, sim_log, "--set", "association.method=pcaa", *out)
-    assert res.stderr == "error: unknown associator 'pcaa' (did you mean 'pca'? (icnn, jcbb, pca))\n"
+    assert res.stderr == (
+        "error: --set 'association.method=pcaa': config key 'association.method' = 'pcaa' is not an "
+        "associator (did you mean 'pca'? (icnn, jcbb, pca))\n"
+    )
 
 
 def test_run_given_several_associators_points_to_compare(sim_log, tmp_path):

@@ -307,3 +307,40 @@ def test_a_runs_summary_json_gives_the_config_that_run_used(tmp_path):
         r"config key 'ekf.alpha1'",
     ):
         load_config(p)
+
+
+def test_an_unknown_associator_in_a_config_file_names_the_file_and_line(tmp_path):
+    """`association.method: jbcc` in --config FILE: the error said only "unknown associator 'jbcc'",
+    naming neither the file nor the key (as a bad input.laser_preset in it does)."""
+    from cornerslam_cli.lasers import resolve_config
+
+    p = tmp_path / "mine.yaml"
+    p.write_text("ekf:\n  alpha1: 0.1\nassociation:\n  method: jbcc\n")
+    with pytest.raises(ConfigError) as e:
+        resolve_config(None, p)
+    assert str(e.value) == (
+        f"config file '{p}' line 4: config key 'association.method' = 'jbcc' is not an associator "
+        "(did you mean 'jcbb'? (icnn, jcbb, pca))"
+    )
+    with pytest.raises(ConfigError) as e:
+        resolve_config(None, p, ["association.method=pcaa"])
+    assert str(e.value).startswith("--set 'association.method=pcaa': config key 'association.method'")
+
+
+def test_a_set_of_a_mapping_merges_into_the_section_as_the_file_does(tmp_path):
+    """`--set 'scan_match={enabled: false}'` replaced the whole section: the config file's (and the
+    laser preset's) other scan_match keys went back to the defaults, silently (`--set 'sensor={}'`
+    undid the preset's sensor model). It sets the keys it names, as the file does over the preset,
+    and an error in a key it does not name is not blamed on it."""
+    p = tmp_path / "mine.yaml"
+    p.write_text("scan_match:\n  window: 7\n")
+    cfg = load_config(p, ["scan_match={enabled: false}"])
+    assert cfg.scan_match.window == 7 and cfg.scan_match.enabled is False
+    assert load_config(None, ["sensor={}"], base={"sensor": {"model": "linear"}}).sensor.model == "linear"
+    p.write_text("scan_match:\n  window: 0\n")
+    with pytest.raises(ConfigError) as e:
+        load_config(p, ["scan_match={enabled: false}"])
+    assert str(e.value).startswith(f"config file '{p}' line 2: config key 'scan_match.window' = 0")
+    with pytest.raises(ConfigError) as e:
+        load_config(p, ["scan_match={window: 0}"])
+    assert str(e.value).startswith("--set 'scan_match={window: 0}': config key 'scan_match.window' = 0")

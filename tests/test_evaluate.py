@@ -324,3 +324,41 @@ def test_a_compare_or_batch_directory_names_the_run_directories_to_evaluate(
     )
     res = evaluate(out / runs[1], "--ground-truth", gt)
     assert res.exit_code == 0 and "ATE" in res.output, res.output
+
+
+def test_a_single_pose_ground_truth_is_refused_as_such_not_as_no_overlap(files):
+    """A ground truth of one line (a cut file, a header-only export plus one pose): the error said it
+    "does not overlap the trajectory: 1 of its 200 poses fall within" its span (x to x s) and asked
+    whether it was the log's ground truth."""
+    est, gt = files
+    rewrite(gt, lambda rows: rows[5:6])
+    res = evaluate(est, "--ground-truth", gt)
+    assert res.exit_code == 2 and "\n" not in res.stderr.strip(), res.output
+    assert "has a single pose: ATE and RPE need two or more" in res.stderr, res.stderr
+    assert "overlap" not in res.stderr and "this log's ground truth" not in res.stderr
+
+
+@pytest.mark.parametrize("option", ["--ground-truth", "--relations", "trajectory"])
+def test_positions_too_large_to_score_are_refused_naming_the_line(files, tmp_path, option):
+    """A position of 1e308 m (a corrupted or mis-scaled file): evaluate printed "ATE rmse inf m" or
+    "translation inf ± nan m" under numpy's overflow warnings and exited 0."""
+    est, gt = files
+    t = [r.split()[0] for r in est.read_text().splitlines()]
+    if option == "--relations":
+        bad = tmp_path / "bad.relations"
+        bad.write_text(f"{t[1]} {t[5]} 0.1 0 0 0 0 0\n{t[2]} {t[6]} 1e308 0 0 0 0 0\n")
+        res = evaluate(est, option, bad)
+    else:
+        bad = gt if option == "--ground-truth" else est
+        rewrite(
+            bad,
+            lambda rows: [
+                *rows[:3],
+                " ".join([rows[3].split()[0], "1e308", *rows[3].split()[2:]]),
+                *rows[4:],
+            ],
+        )
+        res = evaluate(est, "--ground-truth", gt)
+    assert res.exit_code == 2, res.output
+    assert f"'{bad}' line {2 if option == '--relations' else 4} has a position beyond ±1e+09 m" in res.stderr
+    assert "inf" not in res.output and "RuntimeWarning" not in res.output

@@ -206,6 +206,15 @@ def out_is_another_kind_of_output(w: World) -> Case:
     return Case(["run", w.log, "--out", out], out)
 
 
+@fault(2, "cannot write", "a symlink loop", "check the path")
+def out_is_a_symlink_loop(w: World) -> Case:
+    """`--out` a symlink in a loop (a -> b -> a): exit 2 naming it (Python 3.11's resolve() raised
+    RuntimeError, an internal error), nothing touched"""
+    (w.tmp / "a").symlink_to(w.tmp / "b")
+    (w.tmp / "b").symlink_to(w.tmp / "a")
+    return Case(["run", w.log, "--out", w.tmp / "a"], w.tmp / "a")
+
+
 @fault(2, "is a file, not a directory")
 def out_is_a_file(w: World) -> Case:
     """`--out` an existing file: refused"""

@@ -98,6 +98,32 @@ def test_log_name_too_long(tmp_path):
     assert "check the path" in err.value.hint
 
 
+@pytest.mark.parametrize(
+    "fmt, name, compress, match, hint",
+    [
+        ("mcap-cdr", "x.mcap.gz", "gzip", "'x.mcap.gz' is a gzip-compressed MCAP", "gunzip -k"),
+        ("rosbag1", "x.bag.gz", "gzip", "'x.bag.gz' is a gzip-compressed ROS 1 bag", "gunzip -k"),
+        ("carmen", "x.clf", "bz2", "'x.clf' is compressed with bzip2", "gzip"),
+        ("carmen", "x.clf.bz2", "bz2", "'x.clf.bz2' is compressed with bzip2", "gzip"),
+    ],
+)
+def test_a_compressed_log_cornerslam_does_not_read_is_named_as_such(
+    tmp_path, fmt, name, compress, match, hint
+):
+    """A gzipped MCAP or bag was "not a CARMEN log: no FLASER/… lines" (.gz is read as a gzipped CARMEN
+    log), a bzip2'd CARMEN log "not a CARMEN log" or "unsupported log": the file is what it is,
+    compressed; the hint says to decompress it (or gzip a CARMEN log, which is read as it is)."""
+    import bz2
+    import gzip
+
+    raw = write_log(fmt, tmp_path).read_bytes()
+    p = tmp_path / name
+    p.write_bytes(gzip.compress(raw) if compress == "gzip" else bz2.compress(raw))
+    with pytest.raises(LogError, match=match) as err:
+        open_log(p)
+    assert hint in err.value.hint
+
+
 def test_no_laserscan(tmp_path):
     p = write_mcap(tmp_path / "odom_only.mcap", [], make_odoms())
     log = open_log(p)

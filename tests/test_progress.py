@@ -1,11 +1,15 @@
 """Progress and verbosity (issue 17 item 8): the ETA from recent steps, ``compare``'s progress after
 extraction, what ``-v`` and ``-vv`` add to the default output."""
 
+import io
+import logging
 import re
+import sys
 
 from click.testing import CliRunner
 
 from cornerslam_cli.cli import cli
+from cornerslam_cli.options import setup_logging
 from cornerslam_cli.report import progress as progress_module
 from cornerslam_cli.report.progress import Progress
 
@@ -78,3 +82,29 @@ def test_verbose_prints_more_than_the_default(sim_log, tmp_path):
     assert not [line for line in v if line.startswith("DEBUG")]
     steps = [line for line in vv if re.match(r"DEBUG: step \d+ \(pca\): \d+ corners", line)]
     assert len(steps) == 12  # every filter step
+
+
+def test_a_warning_on_a_terminal_clears_the_status_line_first(monkeypatch):
+    """On a terminal the status line ends without a newline: a warning logged while it was drawn was
+    written after it, on its line ("… 907/910 scans    16s eta    0sWARNING: skipped …"). The line is
+    cleared first; the next update draws it again below the warning."""
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    err = Terminal()
+    monkeypatch.setattr(sys, "stderr", err)
+    setup_logging(0, False)
+    clock = FakeClock()
+    p = Progress("log", True, clock)
+    clock.t = 3.0
+    p(5, 10)
+    logging.getLogger("cornerslam.test").warning("a warning")
+    clock.t = 4.0
+    p(6, 10)
+    p.close()
+    lines = err.getvalue().split("\n")
+    assert lines[0].endswith("\r\033[KWARNING: a warning"), lines
+    assert lines[0].split("\r\033[K")[-2].startswith("log [") and "6/10 scans" in lines[1], lines
+    assert lines[2:] == [""], lines

@@ -13,13 +13,15 @@ every problem with the input.
 
 from __future__ import annotations
 
+import gzip
+import shlex
 import stat
 from collections.abc import Callable
 from pathlib import Path
 
-from ..errors import LogError
+from ..errors import LogError, display_path
 from .base import LogInfo, LogReader, ReadStats, TopicInfo
-from .carmen import CarmenReader
+from .carmen import GZIP_MAGIC, CarmenReader
 from .mcap import MAGIC as MCAP_MAGIC
 from .mcap import open_mcap
 from .rosbag import open_rosbag1, open_rosbag2
@@ -74,6 +76,7 @@ def detect_format(path: str | Path) -> str:
         return "mcap"
     if head.startswith(ROSBAG1_MAGIC):
         return "rosbag1"
+    _refuse_compressed(p, head)
     suffix = p.suffix.lower()
     if suffix == ".db3":
         raise LogError(
@@ -89,6 +92,38 @@ def detect_format(path: str | Path) -> str:
             return "carmen"
         raise LogError(f"unsupported log '{p.name}'", f"give {SUPPORTED}")
     return fmt
+
+
+_COMPRESSED = {
+    b"BZh": ("bzip2", "bunzip2 -k"),
+    b"\xfd7zXZ\x00": ("xz", "unxz -k"),
+    b"\x28\xb5\x2f\xfd": ("zstd", "unzstd"),
+}
+
+
+def _refuse_compressed(p: Path, head: bytes) -> None:
+    """LogError for a compressed log that cornerslam cannot read as it is: an MCAP or ROS 1 bag in
+    gzip (``.gz`` is otherwise a gzipped CARMEN log, and the error said "not a CARMEN log"), and any
+    log in bzip2, xz or zstd (only CARMEN logs are read gzipped)."""
+    if head.startswith(GZIP_MAGIC):
+        try:
+            with gzip.open(p, "rb") as f:
+                inner = f.read(len(ROSBAG1_MAGIC))
+        except (OSError, EOFError):  # a damaged gzip: the CARMEN reader says so
+            return
+        for magic, what in ((MCAP_MAGIC, "MCAP"), (ROSBAG1_MAGIC, "ROS 1 bag")):
+            if inner.startswith(magic):
+                raise LogError(
+                    f"'{p.name}' is a gzip-compressed {what}",
+                    f"decompress it first: gunzip -k {shlex.quote(display_path(p))}",
+                )
+    for magic, (name, command) in _COMPRESSED.items():
+        if head.startswith(magic):
+            raise LogError(
+                f"'{p.name}' is compressed with {name}",
+                f"decompress it first: {command} {shlex.quote(display_path(p))} "
+                "(a CARMEN log may be given gzip-compressed)",
+            )
 
 
 _STREAM_HINT = "cornerslam reads a log several times: save it to a file first, e.g. `cat … > log.mcap`"

@@ -18,6 +18,7 @@ from ..errors import OutputError
 
 _DISK = "free some space, or write to another disk"
 _MOUNT = "give a new directory inside it"
+_LOOP = ("a symlink loop", "check the path")
 _REASONS = {
     errno.EROFS: ("read-only file system", "write to a writable file system"),
     errno.EACCES: ("permission denied", "write where you have permission, or fix the permissions"),
@@ -30,6 +31,7 @@ _REASONS = {
     errno.ENOTDIR: ("a part of the path is a file, not a directory", "check the path"),
     errno.EEXIST: ("a part of the path is a file, not a directory", "check the path"),
     errno.EISDIR: ("it is a directory", "give a file name"),
+    errno.ELOOP: (_LOOP[0], _LOOP[1]),
 }
 # ENOENT where a file was to be created in a directory that exists but creates none (procfs)
 _NO_NEW_FILES = ("its directory accepts no new files, as in /proc", "write to a directory on a disk")
@@ -60,6 +62,15 @@ def _creates_no_files(filename: str | bytes) -> bool:
         return e.errno == errno.ENOENT
     os.unlink(probe)
     return False
+
+
+def resolved(path: Path) -> Path:
+    """``path.resolve()``; a symlink loop on it (``out -> b -> out``) is the OutputError naming
+    ``path`` (Python < 3.13 raises RuntimeError there; 3.13 returns the path and writing it gives ELOOP)."""
+    try:
+        return path.resolve()
+    except RuntimeError:
+        raise OutputError(f"cannot write '{path}': {_LOOP[0]}", _LOOP[1]) from None
 
 
 @contextmanager

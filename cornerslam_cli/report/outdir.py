@@ -35,7 +35,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from ..errors import OutputError
-from .oserrors import output_error, output_errors
+from .oserrors import output_error, output_errors, resolved
 from .ownership import check_replaceable, check_same_log, is_within, mark_output, refuse_special_file
 
 _NAME_KEEP = 200  # bytes of a name kept in its sibling names (+ at most 45 of suffix: within 255)
@@ -202,7 +202,7 @@ class StagedDir:
         own_log_only: bool = False,
     ):
         self.shown = Path(target)
-        self.target = self.shown.resolve()
+        self.target = resolved(self.shown)
         self.kind = kind
         self.inputs = [Path(p) for p in inputs]
         self.log = None if log is None else Path(log)  # recorded in the marker
@@ -272,7 +272,7 @@ class StagedDir:
         shown = Path(dest)
         if str(dest).endswith(("/", os.sep)):  # Path drops the slash that says a directory was meant
             raise OutputError(f"'{dest}' names a directory", "give a file name")
-        final = shown.resolve()
+        final = resolved(shown)
         with output_errors(shown):
             if is_within(final, self.target):
                 staged = self.path / final.relative_to(self.target)

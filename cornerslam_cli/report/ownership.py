@@ -26,7 +26,7 @@ from pathlib import Path
 from .. import __version__
 from ..errors import OutputError
 from ..logs.mcap import header_library
-from .oserrors import output_errors
+from .oserrors import output_errors, resolved
 
 MARKER = ".cornerslam-output"
 KINDS = ("run", "compare", "batch")
@@ -241,7 +241,7 @@ def check_claimable(path: str | Path, kind: str) -> Path:
     returns it resolved."""
     shown = Path(path)
     with output_errors(shown):
-        target = shown.resolve()
+        target = resolved(shown)
         _refuse_foreign(target, kind, shown)
     return target
 

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import logging
 import sys
 import time
 from collections import deque
@@ -23,6 +24,10 @@ class StatusLine:
         self.last = 0.0
         self.tty = sys.stderr.isatty()
         self.drawn = False
+        # on a terminal the line has no newline: a log message (a warning) would be written after it
+        self.clearer = _ClearFirst(self) if enabled and self.tty else None
+        for handler in logging.getLogger().handlers if self.clearer else ():
+            handler.addFilter(self.clearer)
 
     def _due(self, now: float) -> bool:
         return now - self.last >= (EVERY_TTY if self.tty else EVERY_LOG)
@@ -41,9 +46,30 @@ class StatusLine:
         else:
             self._write(text + "\n")
 
+    def clear(self) -> None:
+        """Erase the line (a terminal's), so that what is written next starts a clean line: whether it
+        is drawn or not (a worker process of ``compare --jobs`` cannot know its parent's line)."""
+        self._write("\r\033[K")
+        self.drawn = False
+
     def close(self) -> None:
         if self.drawn:
             self._write("\n")
+            self.drawn = False
+        for handler in logging.getLogger().handlers if self.clearer else ():
+            handler.removeFilter(self.clearer)
+
+
+class _ClearFirst(logging.Filter):
+    """A log handler's filter clearing a status line before the handler writes a record below it."""
+
+    def __init__(self, line: StatusLine):
+        super().__init__()
+        self.line = line
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        self.line.clear()
+        return True
 
 
 class Progress(StatusLine):

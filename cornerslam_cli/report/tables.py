@@ -147,10 +147,11 @@ def read_tum(
     through ``warn``; two different poses at one stamp cannot be ordered and raise ``LogError``, as do
     binary files and lines that are not 8 finite numbers. ``what`` names the file in messages."""
     from ..errors import LogError
-    from ..textfile import read_number_rows
+    from ..textfile import read_number_rows, refuse_far
 
     a, lines = read_number_rows(path, what, LogError, "TUM pose", TUM_LAYOUT, 8)
     name = f"{what} '{path}'"
+    refuse_far(a, lines, [1, 2, 3], name, LogError, TUM_LAYOUT)
     back = np.flatnonzero(np.diff(a[:, 0]) < 0)
     if len(back):
         i = int(back[0])
