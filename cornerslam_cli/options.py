@@ -226,6 +226,10 @@ def command_config(config_path, overrides, assoc=None, scan_topic=None, odom_top
     from .lasers import resolve_config
 
     extra = list(overrides)
+    check_option_agrees(
+        overrides,
+        {"association.method": assoc, "input.scan_topic": scan_topic, "input.odom_topic": odom_topic},
+    )
     # as overrides, each value quoted (config.yaml_quoted): an option's text is the name itself, which YAML
     # would otherwise read as a number or a boolean (--scan-topic yes)
     for key, value in (
@@ -240,6 +244,34 @@ def command_config(config_path, overrides, assoc=None, scan_topic=None, odom_top
 
     associator_class(cfg.association.method)  # a --set name: the ConfigError with the closest one
     return cfg
+
+
+OPTION_OF = {
+    "association.method": "--assoc",
+    "input.scan_topic": "--scan-topic",
+    "input.odom_topic": "--odom-topic",
+}
+
+
+def check_option_agrees(overrides, options: dict[str, str | None]) -> None:
+    """A usage error when an option (``--assoc``, ``--scan-topic``, ``--odom-topic``) and a ``--set`` of
+    its config key name different values: which one the user meant cannot be told, and the option used
+    to win without a word."""
+    import yaml
+
+    for text in overrides:
+        key, sep, value = text.partition("=")
+        given = options.get(key.strip())
+        if not sep or not given:
+            continue
+        try:
+            value = yaml.safe_load(value)
+        except yaml.YAMLError:
+            continue  # the --set's own error comes from the config
+        if str(value).strip() != given.strip():
+            raise click.UsageError(
+                f"{OPTION_OF[key.strip()]} {given} and --set '{text}' disagree: give one of them"
+            )
 
 
 def parse_assocs(text: str | None, allow_many: bool, log_path: str | None = None) -> list[str]:

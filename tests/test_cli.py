@@ -222,6 +222,22 @@ def test_extract_reads_a_log_without_odometry(fmt, tmp_path):
     assert not (tmp_path / "out").exists()
 
 
+def test_an_option_and_a_set_of_its_key_must_agree(sim_log, tmp_path):
+    """--assoc icnn with --set association.method=jcbb ran icnn without a word (likewise the topics):
+    a usage error naming both; the same value given twice is no conflict."""
+    res = invoke(
+        "run", sim_log, "--assoc", "icnn", "--set", "association.method=jcbb", "--out", tmp_path / "a"
+    )
+    assert res.exit_code == 2 and "--assoc icnn and --set 'association.method=jcbb' disagree" in res.stderr
+    assert not (tmp_path / "a").exists()
+    res = invoke("extract", sim_log, "--scan-topic", "/scan", "--set", "input.scan_topic=/other")
+    assert (
+        res.exit_code == 2 and "--scan-topic /scan and --set 'input.scan_topic=/other' disagree" in res.stderr
+    )
+    res = invoke("extract", sim_log, "--odom-topic", "/odom", "--set", "input.odom_topic=/odom")
+    assert res.exit_code == 0, res.output
+
+
 def test_simulate_is_reproducible(tmp_path):
     a, b = tmp_path / "a.mcap", tmp_path / "b.mcap"
     for p in (a, b):
