@@ -265,10 +265,10 @@ def check_option_agrees(overrides, options: dict[str, str | None]) -> None:
         if not sep or not given:
             continue
         try:
-            value = yaml.safe_load(value)
+            loaded = yaml.safe_load(value)
         except yaml.YAMLError:
             continue  # the --set's own error comes from the config
-        if str(value).strip() != given.strip():
+        if given.strip() not in (str(loaded).strip(), value.strip().strip("'\"")):  # yes: True
             raise click.UsageError(
                 f"{OPTION_OF[key.strip()]} {given} and --set '{text}' disagree: give one of them"
             )
