@@ -66,7 +66,8 @@ def plan(
     config is resolved as ``cornerslam run`` resolves it (:func:`lasers.resolve_config`: the laser
     preset matching the log's first scan under the user's layers); a log that cannot be opened is not
     an error here but failed rows in :func:`run_batch`. A log listed twice, however its path is spelled
-    (``x.mcap``, ``./x.mcap``), is run once.
+    (``x.mcap``, ``./x.mcap``), is run once; so is a swept value however it is spelled (``0.1,0.10``,
+    ``yes,true``: its first spelling names the directory).
     """
     from .association import associator_class
     from .config import load_config, replaced_place
@@ -79,11 +80,14 @@ def plan(
             raise ConfigError("--sweep association.method is not allowed", "list associators with --assoc")
         if not values:
             raise ConfigError(f"--sweep {key} has no values", f"e.g. --sweep {key}=V1,V2")
+        seen: dict[str, str] = {}  # the value the config reads → its first spelling
         for v in values:
             try:
-                load_config(config_path, [*overrides, f"{key}={v}"])
+                cfg = load_config(config_path, [*overrides, f"{key}={v}"])
             except ConfigError as e:
                 raise replaced_place(e, f"{key}={v}", f"--sweep {key}={v}: ") from None
+            seen.setdefault(repr(_lookup(cfg.to_dict(), key)), v)
+        sweeps[key] = list(seen.values())  # 0.1,0.10 or yes,true: one value, run once
     if not assocs or len(set(assocs)) != len(assocs):
         raise ConfigError(f"associators {','.join(assocs)!r} must be distinct and non-empty")
     first: dict[str, str] = {}  # a log listed twice, however spelled (x.mcap, ./x.mcap): its first spelling
@@ -111,6 +115,13 @@ def plan(
             f"two combinations map to the directory name '{dup}'", "sweep values differing only in symbols"
         )
     return combos
+
+
+def _lookup(tree: dict, key: str) -> Any:
+    """The value at dotted ``key`` of a nested config dict."""
+    for part in key.split("."):
+        tree = tree[part]
+    return tree
 
 
 def _safe(text: str) -> str:
