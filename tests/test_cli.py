@@ -238,6 +238,17 @@ def test_an_option_and_a_set_of_its_key_must_agree(sim_log, tmp_path):
     assert res.exit_code == 0, res.output
 
 
+def test_an_option_and_a_set_of_a_mapping_with_its_key_must_agree(sim_log):
+    """--set 'input={scan_topic: /other}' (a mapping, merged key by key) sets the same key as
+    --set input.scan_topic=/other: with --scan-topic /scan it is the same conflict, not a silent win."""
+    res = invoke("extract", sim_log, "--scan-topic", "/scan", "--set", "input={scan_topic: /other}")
+    assert res.exit_code == 2 and "--scan-topic /scan and --set 'input={scan_topic: /other}' disagree" in (
+        res.stderr
+    )
+    res = invoke("extract", sim_log, "--scan-topic", "/scan", "--set", "input={scan_topic: /scan}")
+    assert res.exit_code == 0, res.output
+
+
 def test_simulate_is_reproducible(tmp_path):
     a, b = tmp_path / "a.mcap", tmp_path / "b.mcap"
     for p in (a, b):
