@@ -124,6 +124,31 @@ def test_a_compressed_log_cornerslam_does_not_read_is_named_as_such(
     assert hint in err.value.hint
 
 
+@pytest.mark.parametrize(
+    "name, compress, command",
+    [
+        ("x.mcap", "gzip", "gunzip -c {p} > {d}/x-decompressed.mcap"),
+        ("x.clf", "bz2", "bunzip2 -c {p} > {d}/x-decompressed.clf"),
+        ("x.clf.bz2", "bz2", "bunzip2 -k {p}"),
+        ("x.clf", "xz", "unxz -c {p} > {d}/x-decompressed.clf"),
+    ],
+)
+def test_the_decompress_command_works_whatever_the_name(tmp_path, name, compress, command):
+    """The hint's command must work as given: gunzip -k / unxz -k / unzstd on a name without their
+    suffix (a gzipped MCAP named x.mcap, a bzip2'd x.clf) refuse it ("unknown suffix -- ignored")
+    or, bunzip2, write 'x.clf.out': such a file is decompressed to stdout, into a named file."""
+    import bz2
+    import gzip
+    import lzma
+
+    raw = write_log("mcap-cdr" if name.endswith("mcap") else "carmen", tmp_path).read_bytes()
+    p = tmp_path / name
+    p.write_bytes({"gzip": gzip.compress, "bz2": bz2.compress, "xz": lzma.compress}[compress](raw))
+    with pytest.raises(LogError) as err:
+        open_log(p)
+    assert f"decompress it first: {command.format(p=p, d=tmp_path)}" in err.value.hint, err.value.hint
+
+
 def test_no_laserscan(tmp_path):
     p = write_mcap(tmp_path / "odom_only.mcap", [], make_odoms())
     log = open_log(p)
