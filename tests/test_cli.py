@@ -178,6 +178,8 @@ def test_info_lists_the_topics_of_a_log_run_refuses(tmp_path):
     res = invoke("info", write_mcap(tmp_path / "scans_only.mcap", scans, []))
     one_line_error(res, "has no odometry")
     assert "/scan" in res.stdout and "  odometry  - (none found)" in res.stdout
+    # its first scan is read all the same, as extract reads it (dd82047: "info also shows the first scan")
+    assert "  beams     181 over 180.0° (1.000° apart)" in res.stdout, res.stdout
 
 
 def test_extract_prints_and_plots(sim_log, tmp_path):
