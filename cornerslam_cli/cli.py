@@ -31,6 +31,7 @@ from .options import (  # noqa: E402
     FIGURE_PATH,
     FINITE,
     GivenPath,
+    check_option_agrees,
     check_time_offset,
     command_config,
     config_options,
@@ -503,6 +504,7 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
     from .sweep import plan
 
     setup_logging(verbose, quiet)
+    check_option_agrees(overrides, {"association.method": assocs})  # --assoc is set after each --set
     names = parse_assocs(assocs, allow_many=True) or [
         command_config(config_path, overrides).association.method
     ]
