@@ -90,6 +90,22 @@ def test_log_in_a_directory_we_may_not_search(tmp_path, monkeypatch):
     assert "permissions" in err.value.hint
 
 
+def test_log_that_is_a_symlink_loop(tmp_path):
+    """A log path that is a symlink loop (a -> b -> a): Path.exists() is False on ELOOP, so the error
+    said "log 'a.mcap' does not exist", of a name ls shows; a dangling symlink still does not exist."""
+    (tmp_path / "a.mcap").symlink_to(tmp_path / "b.mcap")
+    (tmp_path / "b.mcap").symlink_to(tmp_path / "a.mcap")
+    with pytest.raises(LogError, match="cannot read log '.*a.mcap': a symlink loop"):
+        open_log(tmp_path / "a.mcap")
+    (tmp_path / "d").symlink_to(tmp_path / "e")  # a loop on the way to it
+    (tmp_path / "e").symlink_to(tmp_path / "d")
+    with pytest.raises(LogError, match="cannot read log '.*d/x.mcap': a symlink loop"):
+        open_log(tmp_path / "d" / "x.mcap")
+    (tmp_path / "c.mcap").symlink_to(tmp_path / "missing.mcap")
+    with pytest.raises(LogError, match="log '.*c.mcap' does not exist"):
+        open_log(tmp_path / "c.mcap")
+
+
 def test_log_name_too_long(tmp_path):
     """A name longer than the file system allows (a pasted command line): a LogError, not the OSError
     ENAMETOOLONG of Path.exists()."""
