@@ -31,6 +31,7 @@ from .options import (  # noqa: E402
     FIGURE_PATH,
     FINITE,
     GivenPath,
+    check_option_agrees,
     check_time_offset,
     command_config,
     config_options,
@@ -348,7 +349,14 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
     reader = open_log(Path(log_path), scan_topic=scan_topic or "", odom_topic=odom_topic or "")
     log_info = reader.info()
     if log_info.problems:  # a log run refuses (no LaserScan, only odometry, …): its topics, then why
-        _echo(info_lines(log_path, replace(log_info, problems=()), None))
+        scan = None
+        if log_info.scan_topic:  # scans without odometry: their first is read all the same (scans())
+            try:
+                scan = first_scan(reader)
+            except LogError:
+                pass  # the error below says what run would refuse
+        preset = None if scan is None else detect_preset(scan.n_beams, scan.angle_increment)
+        _echo(info_lines(log_path, replace(log_info, problems=()), None, scan, preset))
         reader.check()  # the first problem as the error: exit 2, as run
     laser = reader.laser_to_base()
     scan, unread = None, ""
@@ -496,6 +504,7 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
     from .sweep import plan
 
     setup_logging(verbose, quiet)
+    check_option_agrees(overrides, {"association.method": assocs})  # --assoc is set after each --set
     names = parse_assocs(assocs, allow_many=True) or [
         command_config(config_path, overrides).association.method
     ]

@@ -566,7 +566,7 @@ def _section_located(e: ConfigError, key: str, data: dict, given: list[tuple[str
     in_file = replaced < 0 and any(k.startswith(key + ".") for k in lines)
     if replaced >= 0 and not places:
         return ConfigError(f"{override_place(given[replaced][1])}{e.msg}", e.hint)
-    if len(places) == 1 and replaced < 0 and not in_file:
+    if len(set(places.values())) == 1 and replaced < 0 and not in_file:  # one --set (of a mapping: its keys)
         return ConfigError(f"{override_place(next(iter(places.values())))}{e.msg}", e.hint)
     if not places and in_file and key in lines:
         return ConfigError(f"{data.where} line {lines[key]}: {e.msg}", e.hint)

@@ -259,19 +259,31 @@ def check_option_agrees(overrides, options: dict[str, str | None]) -> None:
     to win without a word."""
     import yaml
 
+    from .config import ConfigError, _parse_override
+
+    def leaves(key: str, value) -> list:  # a mapping's (--set 'input={scan_topic: /b}') keys too
+        if isinstance(value, dict):
+            return [leaf for k, v in value.items() for leaf in leaves(f"{key}.{k}", v)]
+        return [(key, value)]
+
     for text in overrides:
         key, sep, value = text.partition("=")
-        given = options.get(key.strip())
-        if not sep or not given:
-            continue
         try:
-            loaded = yaml.safe_load(value)
-        except yaml.YAMLError:
+            keys, parsed = _parse_override(text)
+        except ConfigError:
             continue  # the --set's own error comes from the config
-        if given.strip() not in (str(loaded).strip(), value.strip().strip("'\"")):  # yes: True
-            raise click.UsageError(
-                f"{OPTION_OF[key.strip()]} {given} and --set '{text}' disagree: give one of them"
-            )
+        for leaf, loaded in leaves(".".join(keys), parsed):
+            given = options.get(leaf)
+            if not sep or not given:
+                continue
+            try:
+                same = yaml.safe_load(given) == loaded
+            except yaml.YAMLError:
+                same = False
+            if not same and given.strip() not in (str(loaded).strip(), value.strip().strip("'\"")):  # yes
+                raise click.UsageError(
+                    f"{OPTION_OF[leaf]} {given} and --set '{text}' disagree: give one of them"
+                )
 
 
 def parse_assocs(text: str | None, allow_many: bool, log_path: str | None = None) -> list[str]:

@@ -137,6 +137,16 @@ def test_unknown_associator_and_malformed_sweep_exit_2(tmp_path):
     assert res.exit_code == 2 and "KEY=V1,V2" in res.output
 
 
+def test_assoc_and_a_set_of_association_method_must_agree(tmp_path):
+    """batch --assoc icnn --set association.method=jcbb ran icnn without a word, as run did before
+    4aaa3cf (reliability.md: "--assoc ... with a --set of its config key naming another value" exit 2)."""
+    out = tmp_path / "o"
+    args = ["batch", "x.mcap", "--assoc", "icnn", "--set", "association.method=jcbb", "--out", str(out)]
+    res = CliRunner().invoke(cli, args)
+    assert res.exit_code == 2 and "--assoc icnn and --set 'association.method=jcbb' disagree" in res.output
+    assert not out.exists()
+
+
 def test_bad_log_fails_its_rows_and_the_rest_succeed(first, logs):
     out, rows, res = first
     output = res.stdout

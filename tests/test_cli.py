@@ -178,6 +178,8 @@ def test_info_lists_the_topics_of_a_log_run_refuses(tmp_path):
     res = invoke("info", write_mcap(tmp_path / "scans_only.mcap", scans, []))
     one_line_error(res, "has no odometry")
     assert "/scan" in res.stdout and "  odometry  - (none found)" in res.stdout
+    # its first scan is read all the same, as extract reads it (dd82047: "info also shows the first scan")
+    assert "  beams     181 over 180.0° (1.000° apart)" in res.stdout, res.stdout
 
 
 def test_extract_prints_and_plots(sim_log, tmp_path):
@@ -235,6 +237,17 @@ def test_an_option_and_a_set_of_its_key_must_agree(sim_log, tmp_path):
         res.exit_code == 2 and "--scan-topic /scan and --set 'input.scan_topic=/other' disagree" in res.stderr
     )
     res = invoke("extract", sim_log, "--odom-topic", "/odom", "--set", "input.odom_topic=/odom")
+    assert res.exit_code == 0, res.output
+
+
+def test_an_option_and_a_set_of_a_mapping_with_its_key_must_agree(sim_log):
+    """--set 'input={scan_topic: /other}' (a mapping, merged key by key) sets the same key as
+    --set input.scan_topic=/other: with --scan-topic /scan it is the same conflict, not a silent win."""
+    res = invoke("extract", sim_log, "--scan-topic", "/scan", "--set", "input={scan_topic: /other}")
+    assert res.exit_code == 2 and "--scan-topic /scan and --set 'input={scan_topic: /other}' disagree" in (
+        res.stderr
+    )
+    res = invoke("extract", sim_log, "--scan-topic", "/scan", "--set", "input={scan_topic: /scan}")
     assert res.exit_code == 0, res.output
 
 

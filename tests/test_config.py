@@ -344,3 +344,16 @@ def test_a_set_of_a_mapping_merges_into_the_section_as_the_file_does(tmp_path):
     with pytest.raises(ConfigError) as e:
         load_config(p, ["scan_match={window: 0}"])
     assert str(e.value).startswith("--set 'scan_match={window: 0}': config key 'scan_match.window' = 0")
+
+
+def test_a_check_across_the_keys_a_set_of_a_mapping_names_is_located_at_it():
+    """--set 'scan_match={adapt_min_samples: 50, adapt_window: 10}' breaks a check across the two keys it
+    sets: the error names that --set, as before 14090b8 (which split a mapping into its keys, each
+    counted as a place of its own, so two keys of one --set were "several places": no place named)."""
+    text = "scan_match={adapt_min_samples: 50, adapt_window: 10}"
+    with pytest.raises(ConfigError) as e:
+        load_config(None, [text])
+    assert str(e.value).startswith(f"--set '{text}': config section 'scan_match': adapt_min_samples = 50")
+    with pytest.raises(ConfigError) as e:  # two --sets: either may be the mistake, neither is named
+        load_config(None, ["scan_match.adapt_min_samples=50", "scan_match.adapt_window=10"])
+    assert str(e.value).startswith("config section 'scan_match'")

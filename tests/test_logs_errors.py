@@ -90,6 +90,22 @@ def test_log_in_a_directory_we_may_not_search(tmp_path, monkeypatch):
     assert "permissions" in err.value.hint
 
 
+def test_log_that_is_a_symlink_loop(tmp_path):
+    """A log path that is a symlink loop (a -> b -> a): Path.exists() is False on ELOOP, so the error
+    said "log 'a.mcap' does not exist", of a name ls shows; a dangling symlink still does not exist."""
+    (tmp_path / "a.mcap").symlink_to(tmp_path / "b.mcap")
+    (tmp_path / "b.mcap").symlink_to(tmp_path / "a.mcap")
+    with pytest.raises(LogError, match="cannot read log '.*a.mcap': a symlink loop"):
+        open_log(tmp_path / "a.mcap")
+    (tmp_path / "d").symlink_to(tmp_path / "e")  # a loop on the way to it
+    (tmp_path / "e").symlink_to(tmp_path / "d")
+    with pytest.raises(LogError, match="cannot read log '.*d/x.mcap': a symlink loop"):
+        open_log(tmp_path / "d" / "x.mcap")
+    (tmp_path / "c.mcap").symlink_to(tmp_path / "missing.mcap")
+    with pytest.raises(LogError, match="log '.*c.mcap' does not exist"):
+        open_log(tmp_path / "c.mcap")
+
+
 def test_log_name_too_long(tmp_path):
     """A name longer than the file system allows (a pasted command line): a LogError, not the OSError
     ENAMETOOLONG of Path.exists()."""
@@ -122,6 +138,31 @@ def test_a_compressed_log_cornerslam_does_not_read_is_named_as_such(
     with pytest.raises(LogError, match=match) as err:
         open_log(p)
     assert hint in err.value.hint
+
+
+@pytest.mark.parametrize(
+    "name, compress, command",
+    [
+        ("x.mcap", "gzip", "gunzip -c {p} > {d}/x-decompressed.mcap"),
+        ("x.clf", "bz2", "bunzip2 -c {p} > {d}/x-decompressed.clf"),
+        ("x.clf.bz2", "bz2", "bunzip2 -k {p}"),
+        ("x.clf", "xz", "unxz -c {p} > {d}/x-decompressed.clf"),
+    ],
+)
+def test_the_decompress_command_works_whatever_the_name(tmp_path, name, compress, command):
+    """The hint's command must work as given: gunzip -k / unxz -k / unzstd on a name without their
+    suffix (a gzipped MCAP named x.mcap, a bzip2'd x.clf) refuse it ("unknown suffix -- ignored")
+    or, bunzip2, write 'x.clf.out': such a file is decompressed to stdout, into a named file."""
+    import bz2
+    import gzip
+    import lzma
+
+    raw = write_log("mcap-cdr" if name.endswith("mcap") else "carmen", tmp_path).read_bytes()
+    p = tmp_path / name
+    p.write_bytes({"gzip": gzip.compress, "bz2": bz2.compress, "xz": lzma.compress}[compress](raw))
+    with pytest.raises(LogError) as err:
+        open_log(p)
+    assert f"decompress it first: {command.format(p=p, d=tmp_path)}" in err.value.hint, err.value.hint
 
 
 def test_no_laserscan(tmp_path):

@@ -108,3 +108,23 @@ def test_a_warning_on_a_terminal_clears_the_status_line_first(monkeypatch):
     assert lines[0].endswith("\r\033[KWARNING: a warning"), lines
     assert lines[0].split("\r\033[K")[-2].startswith("log [") and "6/10 scans" in lines[1], lines
     assert lines[2:] == [""], lines
+
+
+def test_a_batch_workers_warning_on_a_terminal_clears_the_status_line_first(monkeypatch):
+    """batch --jobs runs its combinations in spawned workers, which have no status line of their own:
+    their warnings were written after the parent's line ('… 2 remaining     0s eta    ?WARNING: ground
+    truth …'), as run's were before 73415fb."""
+    from cornerslam_cli import batch, workers
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    err = Terminal()
+    monkeypatch.setattr(sys, "stderr", err)
+    monkeypatch.setattr(workers, "exit_with_parent", lambda: None)
+    monkeypatch.setattr(workers, "stopped_by_parent", lambda: None)
+    setup_logging(0, False)  # a spawned worker's basicConfig: the same handler and format
+    batch._init_worker(logging.WARNING)
+    logging.getLogger("cornerslam.test").warning("a warning")
+    assert err.getvalue() == "\r\033[KWARNING: a warning\n"

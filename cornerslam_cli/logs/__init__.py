@@ -13,7 +13,9 @@ every problem with the input.
 
 from __future__ import annotations
 
+import errno
 import gzip
+import os
 import shlex
 import stat
 from collections.abc import Callable
@@ -59,6 +61,8 @@ def detect_format(path: str | Path) -> str:
             "check the path and the permissions of the directories on it",
         ) from exc
     if not exists:
+        if _symlink_loop(p):  # exists() is False on ELOOP too (a loop on the path, or the log itself)
+            raise LogError(f"cannot read log '{p}': a symlink loop", "check the path")
         raise LogError(f"log '{p}' does not exist", "check the path")
     check_regular(p)
     if p.is_dir():
@@ -94,11 +98,30 @@ def detect_format(path: str | Path) -> str:
     return fmt
 
 
-_COMPRESSED = {
-    b"BZh": ("bzip2", "bunzip2 -k"),
-    b"\xfd7zXZ\x00": ("xz", "unxz -k"),
-    b"\x28\xb5\x2f\xfd": ("zstd", "unzstd"),
+def _symlink_loop(p: Path) -> bool:
+    """Whether following ``p`` runs into a symlink loop (``a -> b -> a``)."""
+    try:
+        os.stat(p)
+    except OSError as exc:
+        return exc.errno == errno.ELOOP
+    return False
+
+
+_COMPRESSED = {  # magic -> (name, decompressor, the suffix it needs to name its output)
+    b"BZh": ("bzip2", "bunzip2", ".bz2"),
+    b"\xfd7zXZ\x00": ("xz", "unxz", ".xz"),
+    b"\x28\xb5\x2f\xfd": ("zstd", "unzstd", ".zst"),
 }
+
+
+def _decompress_command(p: Path, tool: str, suffix: str) -> str:
+    """How to decompress ``p``: ``tool -k FILE`` when its name ends in ``suffix``; otherwise the tool
+    cannot name its output (gunzip -k x.mcap: "unknown suffix -- ignored"), so to stdout, to a file."""
+    shown = display_path(p)
+    if p.suffix.lower() == suffix:
+        return f"{tool} -k {shlex.quote(shown)}"
+    out = str(Path(shown).with_name(f"{p.stem}-decompressed{p.suffix}"))
+    return f"{tool} -c {shlex.quote(shown)} > {shlex.quote(out)}"
 
 
 def _refuse_compressed(p: Path, head: bytes) -> None:
@@ -115,13 +138,13 @@ def _refuse_compressed(p: Path, head: bytes) -> None:
             if inner.startswith(magic):
                 raise LogError(
                     f"'{p.name}' is a gzip-compressed {what}",
-                    f"decompress it first: gunzip -k {shlex.quote(display_path(p))}",
+                    f"decompress it first: {_decompress_command(p, 'gunzip', '.gz')}",
                 )
-    for magic, (name, command) in _COMPRESSED.items():
+    for magic, (name, tool, suffix) in _COMPRESSED.items():
         if head.startswith(magic):
             raise LogError(
                 f"'{p.name}' is compressed with {name}",
-                f"decompress it first: {command} {shlex.quote(display_path(p))} "
+                f"decompress it first: {_decompress_command(p, tool, suffix)} "
                 "(a CARMEN log may be given gzip-compressed)",
             )
 
