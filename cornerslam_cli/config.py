@@ -441,7 +441,7 @@ def read_config_file(path: str | Path) -> dict:
     return ConfigFileData(_empty_null_sections(loaded, Config, where, lines=lines), where, lines)
 
 
-def _parse_override(text: str) -> tuple[list[str], Any]:
+def parse_override(text: str) -> tuple[list[str], Any]:
     shown = short_text(text)
     if "=" not in text:
         raise ConfigError(f"--set '{shown}' is not key=value", "e.g. --set association.alpha=0.01")
@@ -492,7 +492,7 @@ def config_from(data: dict, overrides: typing.Sequence[str] = (), base: dict | N
     merged = _deep_merge(copy.deepcopy(base or {}), copy.deepcopy(dict(data)))  # overrides write into it
     given = []  # (dotted key, the --set text), in order
     for text in overrides:
-        keys, value = _parse_override(text)
+        keys, value = parse_override(text)
         _merge(merged, keys, value)
         given += [(leaf, text) for leaf in _leaves(".".join(keys), value)]
     try:
@@ -507,7 +507,7 @@ def located(e: ConfigError, data: dict, overrides: typing.Sequence[str]) -> Conf
     :func:`config_from` does."""
     given = []
     for text in overrides:
-        keys, value = _parse_override(text)
+        keys, value = parse_override(text)
         given += [(leaf, text) for leaf in _leaves(".".join(keys), value)]
     return _located(e, data, given)
 

@@ -259,7 +259,7 @@ def check_option_agrees(overrides, options: dict[str, str | None]) -> None:
     to win without a word."""
     import yaml
 
-    from .config import ConfigError, _parse_override
+    from .config import ConfigError, parse_override
 
     def leaves(key: str, value) -> list:  # a mapping's (--set 'input={scan_topic: /b}') keys too
         if isinstance(value, dict):
@@ -269,7 +269,7 @@ def check_option_agrees(overrides, options: dict[str, str | None]) -> None:
     for text in overrides:
         key, sep, value = text.partition("=")
         try:
-            keys, parsed = _parse_override(text)
+            keys, parsed = parse_override(text)
         except ConfigError:
             continue  # the --set's own error comes from the config
         for leaf, loaded in leaves(".".join(keys), parsed):

@@ -151,9 +151,9 @@ def test_a_key_holding_a_quote_is_located_at_its_set(tmp_path):
     "text", ["/\U0001f600", "caf\u00e9", "a'b\"c\\d", "a\nb\tc", "a\x7fb\x85\ufeff", "\udcff", "yes", "1:30"]
 )
 def test_yaml_quoted_reads_back_as_the_text(text):
-    from cornerslam_cli.config import _parse_override, yaml_quoted
+    from cornerslam_cli.config import parse_override, yaml_quoted
 
-    assert _parse_override(f"input.scan_topic={yaml_quoted(text)}") == (["input", "scan_topic"], text)
+    assert parse_override(f"input.scan_topic={yaml_quoted(text)}") == (["input", "scan_topic"], text)
 
 
 def test_a_bad_laser_preset_is_located(tmp_path):

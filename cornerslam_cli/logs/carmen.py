@@ -18,8 +18,7 @@ Conventions (as CARMEN's own ``carmen_string_to_laser_laser_message_orig``):
 * Max range: ROBOTLASER1 maximum_range; FLASER/RLASER the ``robot_front_laser_max`` /
   ``robot_rear_laser_max`` PARAM if the log has one, else 81.83 m (the SICK "no return" value of the
   classic Radish logs). Readings >= max range are no-return and dropped.
-* Stamps: the message timestamp field (sensor time), not the logger timestamp. Lines are yielded in
-  file order.
+* Stamps: the message timestamp field (sensor time), not the logger timestamp; lines in file order.
 * Odometry: ODOM lines when the log has any; otherwise the odometry pose fields of the laser lines (FLASER
   odom_x/y/theta, ROBOTLASER1 robot_x/y/theta), yielded just before their scan. Also those fields when ODOM
   lines go back in time more often than the laser lines do (a merged or re-stamped log: intel.gfs.log's 1,498
@@ -68,9 +67,8 @@ def flaser_increment(n: int) -> float:
 
 def _open_text(path: Path) -> io.TextIOBase:
     with open(path, "rb") as f:
-        gz = f.read(2) == GZIP_MAGIC
-    if gz:
-        return io.TextIOWrapper(gzip.open(path, "rb"), encoding="latin-1")
+        if f.read(2) == GZIP_MAGIC:
+            return io.TextIOWrapper(gzip.open(path, "rb"), encoding="latin-1")
     return open(path, encoding="latin-1")  # noqa: SIM115 - caller closes
 
 
@@ -336,7 +334,7 @@ class CarmenReader:
         return self._iter()
 
     def scans(self) -> Iterator[Scan]:
-        """The scans alone (``extract``); a CARMEN log with laser lines always has their odometry."""
+        """The scans alone (``extract``): CARMEN laser lines carry their own odometry."""
         return (m for m in self.messages() if isinstance(m, Scan))
 
     def _iter(self) -> Iterator[Scan | OdomSample]:
