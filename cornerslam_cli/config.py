@@ -479,11 +479,13 @@ def _merge(base: dict, path: list[str], value: Any) -> None:
     d[path[-1]] = _deep_merge(old, value) if isinstance(value, dict) and isinstance(old, dict) else value
 
 
-def _leaves(key: str, value: Any) -> list[str]:
-    """The dotted keys a ``--set key=value`` sets: a mapping's leaves (an empty mapping sets none)."""
+def override_leaves(keys: list[str], value: Any) -> list[tuple[str, Any]]:
+    """(dotted key, value) of each key a ``--set`` (:func:`parse_override`'s ``keys``, ``value``) sets:
+    a mapping's leaves (``--set 'input={scan_topic: /b}'``; an empty mapping sets none)."""
+    key = ".".join(keys)
     if isinstance(value, dict):
-        return [leaf for k, v in value.items() for leaf in _leaves(f"{key}.{k}", v)]
-    return [key]
+        return [leaf for k, v in value.items() for leaf in override_leaves([key, k], v)]
+    return [(key, value)]
 
 
 def config_from(data: dict, overrides: typing.Sequence[str] = (), base: dict | None = None) -> Config:
@@ -494,7 +496,7 @@ def config_from(data: dict, overrides: typing.Sequence[str] = (), base: dict | N
     for text in overrides:
         keys, value = parse_override(text)
         _merge(merged, keys, value)
-        given += [(leaf, text) for leaf in _leaves(".".join(keys), value)]
+        given += [(leaf, text) for leaf, _ in override_leaves(keys, value)]
     try:
         return from_dict(Config, merged)
     except ConfigError as e:
@@ -508,7 +510,7 @@ def located(e: ConfigError, data: dict, overrides: typing.Sequence[str]) -> Conf
     given = []
     for text in overrides:
         keys, value = parse_override(text)
-        given += [(leaf, text) for leaf in _leaves(".".join(keys), value)]
+        given += [(leaf, text) for leaf, _ in override_leaves(keys, value)]
     return _located(e, data, given)
 
 

@@ -239,11 +239,7 @@ def command_config(config_path, overrides, assoc=None, scan_topic=None, odom_top
     ):
         if value:
             extra.append(f"{key}={yaml_quoted(value)}")
-    cfg = resolve_config(log_path, config_path, extra)
-    from .association import associator_class
-
-    associator_class(cfg.association.method)  # a --set name: the ConfigError with the closest one
-    return cfg
+    return resolve_config(log_path, config_path, extra)  # (an unknown associator named where it was given)
 
 
 OPTION_OF = {
@@ -259,12 +255,7 @@ def check_option_agrees(overrides, options: dict[str, str | None]) -> None:
     to win without a word."""
     import yaml
 
-    from .config import ConfigError, parse_override
-
-    def leaves(key: str, value) -> list:  # a mapping's (--set 'input={scan_topic: /b}') keys too
-        if isinstance(value, dict):
-            return [leaf for k, v in value.items() for leaf in leaves(f"{key}.{k}", v)]
-        return [(key, value)]
+    from .config import ConfigError, override_leaves, parse_override
 
     for text in overrides:
         key, sep, value = text.partition("=")
@@ -272,7 +263,7 @@ def check_option_agrees(overrides, options: dict[str, str | None]) -> None:
             keys, parsed = parse_override(text)
         except ConfigError:
             continue  # the --set's own error comes from the config
-        for leaf, loaded in leaves(".".join(keys), parsed):
+        for leaf, loaded in override_leaves(keys, parsed):  # a mapping's keys too
             given = options.get(leaf)
             if not sep or not given:
                 continue

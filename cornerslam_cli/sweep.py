@@ -69,7 +69,6 @@ def plan(
     (``x.mcap``, ``./x.mcap``), is run once; so is a swept value however it is spelled (``0.1,0.10``,
     ``yes,true``: its first spelling names the directory).
     """
-    from .association import associator_class
     from .config import load_config, replaced_place
     from .errors import LogError
     from .lasers import resolve_config
@@ -105,7 +104,6 @@ def plan(
                 cfg = resolve_config(log, config_path, sets)
             except LogError as e:  # the log's rows fail; the batch goes on
                 cfg, error = load_config(config_path, sets), one_line(e)
-            associator_class(cfg.association.method)  # an unknown name: ConfigError with the closest one
             name = _dir_name(labels[log], assoc, sweep)
             combos.append(Combo(log, assoc, sweep, name, cfg.to_dict(), error))
     names = [c.name for c in combos]
