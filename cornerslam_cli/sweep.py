@@ -69,7 +69,7 @@ def plan(
     (``x.mcap``, ``./x.mcap``), is run once; so is a swept value however it is spelled (``0.1,0.10``,
     ``yes,true``: its first spelling names the directory).
     """
-    from .config import load_config, replaced_place
+    from .config import load_config, parse_override, replaced_place
     from .errors import LogError
     from .lasers import resolve_config
 
@@ -85,7 +85,7 @@ def plan(
                 cfg = load_config(config_path, [*overrides, f"{key}={v}"])
             except ConfigError as e:
                 raise replaced_place(e, f"{key}={v}", f"--sweep {key}={v}: ") from None
-            seen.setdefault(repr(_lookup(cfg.to_dict(), key)), v)
+            seen.setdefault(repr(_lookup(cfg.to_dict(), parse_override(f"{key}={v}")[0])), v)
         sweeps[key] = list(seen.values())  # 0.1,0.10 or yes,true: one value, run once
     if not assocs or len(set(assocs)) != len(assocs):
         raise ConfigError(f"associators {','.join(assocs)!r} must be distinct and non-empty")
@@ -115,9 +115,9 @@ def plan(
     return combos
 
 
-def _lookup(tree: dict, key: str) -> Any:
-    """The value at dotted ``key`` of a nested config dict."""
-    for part in key.split("."):
+def _lookup(tree: dict, keys: list[str]) -> Any:
+    """The value at ``keys`` (config.parse_override's: a dotted key's parts) of a nested config dict."""
+    for part in keys:
         tree = tree[part]
     return tree
 

@@ -96,6 +96,7 @@ def test_plan_runs_a_sweep_value_once_however_it_is_spelled():
     """`--sweep k=0.1,0.10` or `yes,true` ran the same config twice, in two directories."""
     combos = plan(["x.mcap"], ["pca"], {"association.alpha": ["0.1", "0.10", "1e-1", "0.05"]})
     assert [c.sweep for c in combos] == [(("association.alpha", "0.1"),), (("association.alpha", "0.05"),)]
+    assert len(plan(["x.mcap"], ["pca"], {"association. alpha": ["0.1", "0.10"]})) == 1  # as --set reads it
     combos = plan(["x.mcap"], ["pca"], {"scan_match.enabled": ["yes", "true", "false"]})
     assert [c.config["scan_match"]["enabled"] for c in combos] == [True, False]
 
