@@ -108,6 +108,7 @@ class Input:
     info: object
     laser2base: tuple[float, float, float]
     laser_source: str  # where laser2base came from: tf, config, preset or default (lasers.mount_source)
+    laser_upside_down: bool  # mounted z axis down: each scan is mirrored (Scan.mirrored) as it is read
     total_scans: int
     stats: SyncStats
     matcher: ScanMatcher | None = None  # scan matching of the motion input (scan_match.enabled)
@@ -134,7 +135,7 @@ def open_input(log_path: str | Path, cfg: Config, span: Span | None = None) -> I
     )
     reader.check()
     info = reader.info()
-    laser2base, source = _laser_mount(reader, cfg)
+    laser2base, source, upside_down = _laser_mount(reader, cfg)
     matcher = ScanMatcher(cfg.scan_match, odometry_noise(cfg)) if cfg.scan_match.enabled else None
     load_kernels(cfg.sensor, cfg.lines)
     with signals_deferred():
@@ -147,16 +148,17 @@ def open_input(log_path: str | Path, cfg: Config, span: Span | None = None) -> I
     span = span or Span()
     total = _scan_count(info)
     log.info(
-        "log %s (%s): %d scans on %s, odometry from %s; laser mount x=%.3f y=%.3f yaw=%.3f (%s), preset %s",
+        "log %s (%s): %d scans on %s, odometry from %s; laser mount x=%.3f y=%.3f yaw=%.3f%s (%s), preset %s",
         Path(log_path).name, info.format, total, short_text(info.scan_topic), info.odom_source or "-",
-        *laser2base, source, cfg.input.laser_preset,
+        *laser2base, " upside down" if upside_down else "", source, cfg.input.laser_preset,
     )  # fmt: skip
     if span.given:
         total = span.expected_scans(total, info.duration)
         log.info("processing %s: about %d scans", span.describe(), total)
     return Input(
-        Path(log_path), reader, info, laser2base, source, total, SyncStats(), matcher, odom_on_tf, span
-    )
+        Path(log_path), reader, info, laser2base, source, upside_down, total, SyncStats(), matcher,
+        odom_on_tf, span,
+    )  # fmt: skip
 
 
 def odometry_noise(cfg: Config) -> Callable[[np.ndarray], np.ndarray]:
@@ -176,7 +178,7 @@ def odometry_noise(cfg: Config) -> Callable[[np.ndarray], np.ndarray]:
 def keyframe_pairs(src: Input, cfg: Config) -> Iterator[Synced]:
     """The log's keyframes (streaming): scans prepared (logs/sync.py's synchroniser, keyframe selection)
     with the odometry at their stamps, deskewed."""
-    msgs = scans_prepared(src.reader, cfg)
+    msgs = scans_prepared(src.reader, cfg, src.laser_upside_down)
     if src.span.given:
         msgs = select(msgs, src.span, src.span_used, src.path.name)
     msgs = reanchor_odometry(msgs, cfg.input.odom_jump, src.stats, src.reader.stats.warn)
@@ -266,19 +268,22 @@ def _scan_matched(
     )
 
 
-def scans_prepared(reader, cfg: Config):
-    """The reader's messages with each scan prepared as configured: beams at the ends removed (robot
-    body), beams at or beyond ``input.max_range`` dropped, ``input.scan_time_offset`` added to the
+def scans_prepared(reader, cfg: Config, upside_down: bool = False):
+    """The reader's messages with each scan prepared as configured: mirrored when the laser is
+    ``upside_down`` (:meth:`Scan.mirrored`), beams at the ends removed (robot body; the ends of the
+    message), beams at or beyond ``input.max_range`` dropped, ``input.scan_time_offset`` added to the
     stamp (a laser whose stamps lag or lead the odometry clock). Skipping every beam of the first
     scan is a ConfigError naming the keys; of a later, shorter scan, counted and warned at the end."""
     inp = cfg.input
     lo, hi, max_range, dt = inp.skip_beams_start, inp.skip_beams_end, inp.max_range, inp.scan_time_offset
     if lo == 0 and hi == 0 and max_range <= 0.0 and dt == 0.0:
-        yield from reader.messages()
+        for msg in reader.messages():
+            yield msg.mirrored() if upside_down and isinstance(msg, Scan) else msg
         return
     first, emptied = True, 0
     for msg in reader.messages():
         if isinstance(msg, Scan):
+            msg = msg.mirrored() if upside_down else msg
             emptied += not first and lo + hi >= msg.n_beams
             if first and lo + hi >= msg.n_beams:
                 raise ConfigError(
@@ -307,15 +312,15 @@ def scans_prepared(reader, cfg: Config):
         )  # fmt: skip
 
 
-def _laser_mount(reader, cfg: Config) -> tuple[tuple[float, float, float], str]:
-    """The laser's pose on the robot and where it came from: tf when the log has it, else the
-    config's ``input.laser`` (:func:`lasers.mount_source`)."""
+def _laser_mount(reader, cfg: Config) -> tuple[tuple[float, float, float], str, bool]:
+    """The laser's pose on the robot, where it came from and whether it is upside down: tf when the
+    log has it, else the config's ``input.laser`` (:func:`lasers.mount_source`)."""
     mount = cfg.input.laser
     if mount.from_tf:
         tf = reader.laser_to_base()
         if tf is not None:
-            return (float(tf[0]), float(tf[1]), float(tf[2])), "tf"
-    return (mount.x, mount.y, mount.yaw), mount_source(cfg)
+            return (float(tf[0]), float(tf[1]), float(tf[2])), "tf", reader.laser_upside_down()
+    return (mount.x, mount.y, mount.yaw), mount_source(cfg), mount.upside_down
 
 
 def warn_default_mount(src: Input, cfg: Config) -> None:

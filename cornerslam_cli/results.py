@@ -134,6 +134,7 @@ class RunInput(JsonResult):
     # first keyframe's time between beams, s
     beam_times: str | None = optional()
     beam_time: float | None = optional()
+    laser_upside_down: bool | None = optional()  # appended: the laser's z axis down, its scans mirrored
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -6,7 +6,7 @@ Frames: *sensor* is the laser frame of one scan, *base* the robot frame (odometr
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -17,7 +17,9 @@ class Scan:
 
     ranges : (k,) float64, metres, valid beams only (finite and within [range_min, range_max])
     angles : (k,) float64, radians, sensor frame, bearing of each valid beam
-    beam_index : (k,) int64, index of each valid beam in the original message (gaps = dropped beams)
+    beam_index : (k,) int64, index of each valid beam in the original message (gaps = dropped beams):
+        increasing, or decreasing where the message's beams run clockwise (a negative angle_increment,
+        a laser mounted upside down: :meth:`mirrored`), so that it still gives each beam's time
     n_beams : beams in the original message; n_invalid = n_beams - k were dropped.
     time_increment : seconds between two beams of the message (its own field; 0 = not given), beam i
     at ``stamp + i · time_increment`` (logs/deskew.py)
@@ -41,6 +43,20 @@ class Scan:
     def points(self) -> np.ndarray:
         """(k, 2) Cartesian points in the sensor frame."""
         return np.column_stack((self.ranges * np.cos(self.angles), self.ranges * np.sin(self.angles)))
+
+    def reversed(self) -> Scan:
+        """The same beams in the opposite order (``angles`` as they are): a scan whose bearings were
+        decreasing made increasing. ``beam_index`` goes with the beams, so their times stay."""
+        return replace(
+            self, ranges=self.ranges[::-1].copy(), angles=self.angles[::-1].copy(),
+            beam_index=self.beam_index[::-1].copy(),
+        )  # fmt: skip
+
+    def mirrored(self) -> Scan:
+        """The scan as an upright laser at the same place would see it, of a laser mounted upside down
+        (its z axis down, roll π: a beam at bearing φ looks at −φ of the base's plane); bearings
+        still increasing."""
+        return replace(self, angles=-self.angles).reversed()
 
 
 @dataclass(frozen=True)

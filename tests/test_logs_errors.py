@@ -239,7 +239,7 @@ def test_size_mismatch_and_bad_increment(tmp_path, caplog):
     good = _scan(np.ones(10))
     T = ros._T
     msgs = []
-    for i, (a_max, inc) in enumerate([(5.0, 0.01), (-1.0 + 9 * 0.01, 0.0), (0.0, math.nan), (-0.91, -0.01)]):
+    for i, (a_max, inc) in enumerate([(5.0, 0.01), (-1.0 + 9 * 0.01, 0.0), (0.0, math.nan), (-1.09, -0.01)]):
         m = T["sensor_msgs/msg/LaserScan"](
             header=ros.header(100.0 + i, "laser"), angle_min=-1.0, angle_max=a_max, angle_increment=inc,
             time_increment=0.0, scan_time=0.0, range_min=0.1, range_max=10.0,
@@ -258,9 +258,12 @@ def test_size_mismatch_and_bad_increment(tmp_path, caplog):
     log = open_log(write_messages_mcap(tmp_path / "m.mcap", msgs))
     with caplog.at_level(logging.WARNING, logger="cornerslam.logs"):
         scans, _ = split(log.messages())
-    assert len(scans) == 2  # the mismatched one (10 beams from angle_min) and the good one
+    assert len(scans) == 3  # the mismatched one (10 beams from angle_min), the clockwise one, the good one
     np.testing.assert_allclose(scans[0].angles, -1.0 + 0.01 * np.arange(10), atol=1e-6)
-    assert log.stats.size_mismatch == 1 and log.stats.scans_skipped == 3
+    # beams clockwise (a negative increment): read in increasing bearing order, beam_index decreasing
+    np.testing.assert_allclose(scans[1].angles, -1.0 - 0.01 * np.arange(10)[::-1], atol=1e-6)
+    assert scans[1].beam_index.tolist() == list(range(9, -1, -1)) and scans[1].angle_increment > 0
+    assert log.stats.size_mismatch == 1 and log.stats.scans_skipped == 2
     assert "imply" in caplog.text and "angle_increment" in caplog.text
 
 

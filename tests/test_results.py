@@ -120,6 +120,7 @@ INPUT_KEYS = [
     "odom_on_tf",  # appended (issue 17): the log's tf carries odom → base
     "beam_times",  # appended: where the deskewing's beam times came from
     "beam_time",
+    "laser_upside_down",  # appended: the laser's z axis down, its scans mirrored
 ]
 COUNT_KEYS = [
     "steps", "landmarks", "matched_total", "beams_total", "beams_invalid", "scans_bad_geometry",

@@ -240,7 +240,7 @@ def breakpoint_starts(x, y, rho, theta, cfg: LinesConfig, beam_index=None) -> np
     d_max = rho_near * np.sin(dphi) / np.sin(np.maximum(lam - dphi, 1e-12)) + cfg.breakpoint_sigma
     brk = (dphi >= lam) | ~(gap <= d_max)
     if beam_index is not None and cfg.max_missing_beams > 0:
-        brk |= np.diff(beam_index) - 1 > cfg.max_missing_beams
+        brk |= np.abs(np.diff(beam_index)) - 1 > cfg.max_missing_beams  # (beams may run clockwise)
     return np.concatenate(([0], np.flatnonzero(brk) + 1))
 
 

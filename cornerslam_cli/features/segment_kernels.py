@@ -59,7 +59,7 @@ def breakpoints(x, y, rho, theta, beam_index, lam, sigma, max_missing):
         gap = math.hypot(x[i + 1] - x[i], y[i + 1] - y[i])
         d_max = min(rho[i], rho[i + 1]) * sin_dphi / sin_rest + sigma
         brk = dphi >= lam or not gap <= d_max
-        if max_missing > 0 and beam_index[i + 1] - beam_index[i] - 1 > max_missing:
+        if max_missing > 0 and abs(beam_index[i + 1] - beam_index[i]) - 1 > max_missing:
             brk = True
         is_start[i + 1] = brk
     return _starts_of(is_start)

@@ -22,7 +22,9 @@ Conventions (all formats)
   is the driver's "no return"). Invalid beams are dropped and counted.
 * A scan whose ranges count differs from ``(angle_max - angle_min) / angle_increment + 1`` is kept:
   ``len(ranges)`` beams from angle_min with angle_increment (counted in ``stats.size_mismatch``).
-  A scan with angle_increment <= 0 or non-finite is skipped (``stats.scans_skipped``), and so is one
+  A scan with a negative angle_increment (beams clockwise) is read in increasing bearing order, its
+  ``beam_index`` decreasing (:meth:`Scan.reversed`). A scan with angle_increment 0 or non-finite is
+  skipped (``stats.scans_skipped``), and so is one
   whose beams span more than a full turn (angles in degrees: 1081 beams of 0.25 "rad").
 """
 
@@ -206,7 +208,7 @@ class ReadStats:
         if self.scans == 0 and self.scans_skipped > 0:
             raise LogError(
                 f"log '{name}': all {self.scans_skipped} scans on '{short_text(topic)}' were skipped "
-                "(angle_increment <= 0 or not finite, beams over more than a full turn, no beams, "
+                "(angle_increment 0 or not finite, beams over more than a full turn, no beams, "
                 "or no valid stamp)",
                 "check the LaserScan messages' angle_min/angle_increment; `cornerslam extract` shows one",
             )
@@ -225,6 +227,8 @@ class LogReader(Protocol):
     def info(self) -> LogInfo: ...
 
     def laser_to_base(self) -> Pose2 | None: ...
+
+    def laser_upside_down(self) -> bool: ...
 
     def messages(self) -> Iterator[Scan | OdomSample]: ...
 
@@ -257,7 +261,7 @@ def make_scan(
     """
     n = len(ranges)
     last_angle = angle_min + max(n - 1, 0) * angle_increment  # inf for absurd increments (1e308)
-    if not (math.isfinite(angle_increment) and angle_increment > 0 and math.isfinite(last_angle)):
+    if not (math.isfinite(angle_increment) and angle_increment != 0 and math.isfinite(last_angle)):
         stats.scans_skipped += 1
         if stats.scans_skipped <= 3:
             stats.warn(
@@ -265,12 +269,13 @@ def make_scan(
                 where, stamp, angle_min, angle_increment,
             )  # fmt: skip
         return None
-    if (n - 1) * angle_increment > 2.0 * math.pi + angle_increment:  # (one more: a 360° scan's repeated beam)
+    step = abs(angle_increment)
+    if (n - 1) * step > 2.0 * math.pi + step:  # (one more: a 360° scan's repeated beam)
         stats.scans_skipped += 1
         if stats.scans_skipped <= 3:
             stats.warn(
                 "%s: scan at %.3f has %d beams of angle_increment %r, %.1f turns (degrees?): skipped",
-                where, stamp, n, angle_increment, (n - 1) * angle_increment / (2.0 * math.pi),
+                where, stamp, n, angle_increment, (n - 1) * step / (2.0 * math.pi),
             )  # fmt: skip
         return None
     if not math.isfinite(stamp):
@@ -313,7 +318,7 @@ def make_scan(
     stats.scans += 1
     stats.beams += n
     stats.beams_dropped += n - len(idx)
-    return Scan(
+    scan = Scan(
         stamp=stamp,
         ranges=r[idx],
         angles=angle_min + idx * angle_increment,
@@ -321,10 +326,11 @@ def make_scan(
         n_beams=n,
         range_min=float(lo),
         range_max=float(hi),
-        angle_increment=float(angle_increment),
+        angle_increment=step,
         frame_id=frame_id,
         time_increment=float(time_increment),
     )
+    return scan if angle_increment > 0 else scan.reversed()  # beams clockwise: bearings made increasing
 
 
 def strip_frame(frame: str) -> str:

@@ -28,6 +28,9 @@ Conventions (as CARMEN's own ``carmen_string_to_laser_laser_message_orig``):
 * The laser offset is not in FLASER lines: ``laser_to_base()`` returns the mean laser-minus-robot
   offset of ROBOTLASER1 lines, None for FLASER logs (configure it).
 
+Over 400 lines because it is one reader of four line formats whose choices (which laser, which
+odometry source, the pre-read's stamps) each depend on the others.
+
 "Topics" are the line tags (``FLASER``, ``ODOM``, ...): ``scan_topic`` selects the laser tag
 (default ROBOTLASER1, else FLASER, else RLASER), ``odom_topic`` ``ODOM`` or a laser tag.
 """
@@ -297,6 +300,9 @@ class CarmenReader:
             return DEFAULT_MAX_RANGE
 
     odom_on_tf = False  # CARMEN has no tf
+
+    def laser_upside_down(self) -> bool:  # a CARMEN laser pose is planar (input.laser.upside_down)
+        return False
 
     def laser_to_base(self) -> Pose2 | None:
         """Laser pose in the robot frame from ROBOTLASER1 laser/robot poses (first 50 lines), else None."""

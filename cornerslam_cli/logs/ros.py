@@ -36,6 +36,7 @@ from .base import (
 LASERSCAN = "sensor_msgs/LaserScan"
 ODOMETRY = "nav_msgs/Odometry"
 TF_TYPES = ("tf2_msgs/TFMessage", "tf/tfMessage")
+MAX_TILT = 5.0  # degrees: a laser tilted more than this from level (upright or upside down) is warned about
 
 
 # --------------------------------------------------------------------------- tf
@@ -85,6 +86,12 @@ def chain_transform(edges: dict[tuple[str, str], np.ndarray], source: str, targe
 def pose2_from_matrix(T: np.ndarray) -> Pose2:
     """2D projection (x, y, yaw) of a 4x4 transform."""
     return float(T[0, 3]), float(T[1, 3]), math.atan2(T[1, 0], T[0, 0])
+
+
+def tilt_from_level(T: np.ndarray) -> float:
+    """Degrees between the z axis of a 4x4 transform's child frame and the parent's z axis or its
+    opposite: 0 for a level laser, upright or upside down."""
+    return math.degrees(math.acos(min(1.0, abs(float(T[2, 2])))))
 
 
 def listing(names: list[str], most: int = 10) -> str:
@@ -156,6 +163,7 @@ class RosLogReader:
         self.scan_topic = self._scan_sel[0]
         self.odom_topic = self._odom_sel.topic
         self._laser2base: Pose2 | None | bool = False  # False = not computed yet
+        self._laser_upside_down = False  # the tf's laser z axis points down (set with _laser2base)
         self.odom_on_tf = False  # laser_to_base() saw tf odom_frame→base_frame (a results MCAP need not)
 
     # ---------------------------------------------------------------- selection
@@ -419,7 +427,20 @@ class RosLogReader:
         if self._laser2base is not None and not all(math.isfinite(v) for v in self._laser2base):
             self.stats.warn("%s: the tf %s→%s is not finite: ignored", self.path.name, self.base_frame, frame)
             self._laser2base = None
+        if self._laser2base is not None:
+            self._laser_upside_down = bool(T[2, 2] < 0.0)
+            if (tilt := tilt_from_level(T)) > MAX_TILT:
+                self.stats.warn(
+                    "%s: the tf %s→%s tilts the laser %.0f° from level: its scans are used as if level",
+                    self.path.name, self.base_frame, frame, tilt,
+                )  # fmt: skip
         return self._laser2base  # type: ignore[return-value]
+
+    def laser_upside_down(self) -> bool:
+        """Whether the tf mounts the laser upside down (its z axis down: its scans are mirrored,
+        :meth:`Scan.mirrored`); False without a tf for it."""
+        self.laser_to_base()
+        return self._laser_upside_down
 
     def messages(self) -> Iterator[Scan | OdomSample]:
         """Scans and odometry samples in log-time order (raises LogError now if topics are missing)."""

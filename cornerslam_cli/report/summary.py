@@ -81,6 +81,7 @@ def build_summary(
             span=src.span_used.record(src.span),
             beam_times=src.beam_times,
             beam_time=src.beam_time,
+            laser_upside_down=src.laser_upside_down,
         ),
         assoc=cfg.association.method,
         counts=run_counts(src, totals, n_landmarks, graph),

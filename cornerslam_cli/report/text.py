@@ -81,7 +81,8 @@ def mount_line(inp: RunInput) -> str:
     """Where the run's laser mount came from (summary.json's ``input``)."""
     x, y, yaw = inp.laser_to_base
     source = MOUNT_SOURCES.get(inp.laser_to_base_source, inp.laser_to_base_source)
-    return f"laser mount: x={x:.3f} m y={y:.3f} m yaw={yaw:.3f} rad ({source})"
+    flip = ", upside down" if inp.laser_upside_down else ""
+    return f"laser mount: x={x:.3f} m y={y:.3f} m yaw={yaw:.3f} rad{flip} ({source})"
 
 
 def preset_lines(config: dict) -> list[str]:
@@ -213,11 +214,12 @@ def info_lines(
     scan: Scan | None = None,
     preset: str | None = None,
     unread: str = "",
+    upside_down: bool = False,
 ) -> list[str]:
     """``cornerslam info``: the log's format, topics with counts and rates, what a run would use
-    (``laser``: the laser's (x, y, yaw) in the base frame from tf, or None; ``scan``: the first scan, its
-    geometry and beam times, with the laser ``preset`` it matches; ``unread``: why it could not be read),
-    problems and notes."""
+    (``laser``: the laser's (x, y, yaw) in the base frame from tf, or None, and ``upside_down`` there;
+    ``scan``: the first scan, its geometry and beam times, with the laser ``preset`` it matches;
+    ``unread``: why it could not be read), problems and notes."""
     lines = [f"file:      {display_path(log_path)}", f"format:    {i.format}", f"messages:  {i.n_messages}"]
     if i.start is not None:
         lines.append(f"start:     {i.start:.3f} s")
@@ -232,7 +234,9 @@ def info_lines(
     lines.append(f"  scans     {i.scan_topic or '-'}")
     lines.append(f"  odometry  {i.odom_topic or '-'} ({i.odom_source or 'none found'})")
     if laser is not None:
-        lines.append(f"  laser     x={laser[0]:.3f} m y={laser[1]:.3f} m yaw={laser[2]:.3f} rad (from tf)")
+        flip = ", upside down: scans mirrored" if upside_down else ""
+        x, y, yaw = laser
+        lines.append(f"  laser     x={x:.3f} m y={y:.3f} m yaw={yaw:.3f} rad{flip} (from tf)")
     else:
         lines.append("  laser     not on tf: from the config's input.laser (built-in default x=0 y=0 yaw=0)")
     if scan is not None:

@@ -1,0 +1,188 @@
+"""Lasers as ROS robots mount them: beams running clockwise (a negative angle_increment) and a laser
+mounted upside down (its tf z axis down). Checked against the same scans of an upright,
+counter-clockwise laser: the run must not tell them apart."""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+
+import numpy as np
+import pytest
+from _log_fixtures import split, write_messages_mcap
+from _run_helpers import run_cli
+
+from cornerslam_cli.logs import open_log
+from cornerslam_cli.logs.base import ReadStats, make_scan
+from cornerslam_cli.logs.deskew import beam_times
+from cornerslam_cli.logs.writers import RawScan
+from cornerslam_cli.logs.writers.ros import JsonSerializer
+from cornerslam_cli.types import Scan
+
+SAMPLE = "sample_logs/sim_office.mcap"
+
+
+def _ranges(n: int = 31, seed: int = 0) -> np.ndarray:
+    r = np.random.default_rng(seed).uniform(0.5, 8.0, n)
+    r[[3, 17]] = np.inf  # no return: dropped, so the beam indices have gaps
+    return r
+
+
+def _sorted_points(scan: Scan) -> np.ndarray:
+    p = scan.points()
+    return p[np.lexsort((p[:, 1], p[:, 0]))]
+
+
+def test_clockwise_beams_read_as_the_same_points_in_increasing_bearing_order():
+    """A message from +0.5 rad in steps of −0.01 rad is the counter-clockwise message of the same beams
+    reversed: the same points, bearings increasing, each beam keeping its index in its own message
+    (so its time, stamp + index · time_increment)."""
+    r = _ranges()
+    n = len(r)
+    cw = make_scan(ReadStats(), "t", 1.0, 0.5, None, -0.01, 0.1, 30.0, r, time_increment=1e-3)
+    ccw = make_scan(ReadStats(), "t", 1.0, 0.5 - 0.01 * (n - 1), None, 0.01, 0.1, 30.0, r[::-1])
+    assert cw is not None and ccw is not None
+    assert np.all(np.diff(cw.angles) > 0) and cw.angle_increment == pytest.approx(0.01)
+    np.testing.assert_allclose(cw.angles, ccw.angles, atol=1e-12)
+    np.testing.assert_array_equal(cw.ranges, ccw.ranges)
+    np.testing.assert_array_equal(cw.beam_index, n - 1 - ccw.beam_index)
+    # the beam at bearing 0.5 − 0.01 i is the i-th of the clockwise message: fired at i ms
+    i = np.rint((0.5 - cw.angles) / 0.01)
+    np.testing.assert_allclose(beam_times(cw, cw.time_increment), i * 1e-3, atol=1e-12)
+
+
+def test_mirrored_scan_is_the_upright_laser_s_view():
+    """Upside down, a beam at bearing φ of the laser looks at −φ in the base's plane: every point's y
+    changes sign, bearings stay increasing and every range keeps its beam's index."""
+    r = _ranges()
+    scan = make_scan(ReadStats(), "t", 1.0, -0.3, None, 0.02, 0.1, 30.0, r)
+    m = scan.mirrored()
+    assert np.all(np.diff(m.angles) > 0)
+    want = scan.points() * [1.0, -1.0]
+    np.testing.assert_allclose(_sorted_points(m), want[np.lexsort((want[:, 1], want[:, 0]))], atol=1e-12)
+    np.testing.assert_array_equal(m.ranges, r[m.beam_index])
+    np.testing.assert_allclose(m.mirrored().angles, scan.angles, atol=1e-15)
+
+
+def _sample_log() -> tuple[list[RawScan], list]:
+    """Every beam of the first 80 scans of the shipped simulated log, and its odometry up to them."""
+    with open_log(SAMPLE) as log:
+        scans, odoms = split(log.messages())
+        mount = log.laser_to_base()
+    scans = scans[:80]
+    raw = []
+    for s in scans:
+        r = np.full(s.n_beams, np.inf)
+        r[s.beam_index] = s.ranges
+        # its 0.25° and −135°, made exactly symmetric in the messages' float32 (within 0.002 % of them):
+        # a run moves by 0.2 mm when the mirrored bearings are off by float32's 5e-8 rad
+        inc = round(s.angle_increment * 2**21) / 2**21
+        raw.append(RawScan(s.stamp, -0.5 * (s.n_beams - 1) * inc, inc, r, s.range_min, s.range_max, "laser"))
+    odoms = [o for o in odoms if o.stamp <= scans[-1].stamp + 0.5]
+    return raw, odoms, mount
+
+
+def _tf(ser: JsonSerializer, stamp: float, mount, q) -> bytes:
+    ts = {
+        "header": ser.header(stamp, "base_link"),
+        "child_frame_id": "laser",
+        "transform": {
+            "translation": {"x": mount[0], "y": mount[1], "z": 0.3},
+            "rotation": dict(zip("xyzw", q, strict=True)),
+        },
+    }
+    return json.dumps({"transforms": [ts]}).encode()
+
+
+def _write(path, raw, odoms, mount, q):
+    ser = JsonSerializer()
+    t0 = int(min(raw[0].stamp, odoms[0].stamp) * 1e9) - 1
+    msgs = [("/tf_static", "tf2_msgs/msg/TFMessage", t0, _tf(ser, t0 * 1e-9, mount, q))]
+    msgs += [("/scan", "sensor_msgs/msg/LaserScan", int(s.stamp * 1e9), ser.laserscan(s)) for s in raw]
+    msgs += [
+        ("/odom", "nav_msgs/msg/Odometry", int(o.stamp * 1e9), ser.odometry(o, "odom", "base_link"))
+        for o in odoms
+    ]
+    return write_messages_mcap(path, sorted(msgs, key=lambda m: m[2]), encoding="json")
+
+
+def _flipped(s: RawScan) -> RawScan:
+    """The scan an upside-down laser at the same place records: a symmetric field of view, so its beam
+    i looks where the upright laser's beam n − 1 − i did."""
+    assert s.angle_min == pytest.approx(-(s.angle_min + (len(s.ranges) - 1) * s.angle_increment), abs=1e-9)
+    return RawScan(
+        s.stamp, s.angle_min, s.angle_increment, s.ranges[::-1].copy(), s.range_min, s.range_max, "laser"
+    )
+
+
+def _yaw_q(yaw: float) -> tuple[float, float, float, float]:
+    return (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+
+
+def _upside_down_q(yaw: float) -> tuple[float, float, float, float]:
+    """Rz(yaw)·Rx(π): the laser's x axis at yaw in the plane, its z axis down."""
+    c, s = math.cos(yaw / 2), math.sin(yaw / 2)
+    return (c, s, 0.0, 0.0)
+
+
+def test_upside_down_laser_gives_the_upright_run(tmp_path):
+    """The simulated office recorded by an upside-down laser (tf roll π, ranges mirrored) and by the
+    upright one: trajectory and map agree; summary.json and info say which is which."""
+    raw, odoms, mount = _sample_log()
+    up = _write(tmp_path / "up.mcap", raw, odoms, mount, _yaw_q(mount[2]))
+    down = _write(tmp_path / "down.mcap", [_flipped(s) for s in raw], odoms, mount, _upside_down_q(mount[2]))
+    with open_log(down) as log:
+        assert log.laser_to_base() == pytest.approx(mount, abs=1e-9) and log.laser_upside_down()
+        assert not any("tilts" in w for w in log.stats.warnings)
+    with open_log(up) as log:
+        assert not log.laser_upside_down()
+    a = run_cli(up, tmp_path / "a", "submaps.enabled=false")
+    b = run_cli(down, tmp_path / "b", "submaps.enabled=false")
+    assert b["input"]["laser_upside_down"] and not a["input"]["laser_upside_down"]
+    ta = np.genfromtxt(tmp_path / "a" / "trajectory.csv", delimiter=",", names=True)
+    tb = np.genfromtxt(tmp_path / "b" / "trajectory.csv", delimiter=",", names=True)
+    assert len(ta) == len(tb) > 20
+    for k in ("x", "y", "theta"):
+        np.testing.assert_allclose(tb[k], ta[k], atol=1e-6)
+    # read as upright (the tf ignored), the mirrored scans give another run: the test can fail
+    c = run_cli(down, tmp_path / "c", "submaps.enabled=false", "input.laser.from_tf=false")
+    tc = np.genfromtxt(tmp_path / "c" / "trajectory.csv", delimiter=",", names=True)
+    assert not c["input"]["laser_upside_down"]
+    assert np.max(np.hypot(tc["x"] - ta["x"][: len(tc)], tc["y"] - ta["y"][: len(tc)])) > 1e-3  # ≫ 1e-6
+
+
+def test_config_upside_down_mirrors_a_log_without_tf(tmp_path):
+    """A log without tf: ``input.laser.upside_down`` says so, as input.laser.x/y/yaw give the rest."""
+    raw, odoms, mount = _sample_log()
+    raw, odoms = raw[:30], [o for o in odoms if o.stamp <= raw[29].stamp + 0.5]
+    up = _write(tmp_path / "up.mcap", raw, odoms, mount, _yaw_q(mount[2]))
+    flipped = [_flipped(s) for s in raw]
+    down = tmp_path / "down.mcap"
+    ser = JsonSerializer()
+    msgs = [("/scan", "sensor_msgs/msg/LaserScan", int(s.stamp * 1e9), ser.laserscan(s)) for s in flipped]
+    msgs += [
+        ("/odom", "nav_msgs/msg/Odometry", int(o.stamp * 1e9), ser.odometry(o, "odom", "base_link"))
+        for o in odoms
+    ]
+    write_messages_mcap(down, sorted(msgs, key=lambda m: m[2]), encoding="json")
+    sets = [f"input.laser.x={mount[0]!r}", f"input.laser.y={mount[1]!r}", f"input.laser.yaw={mount[2]!r}"]
+    run_cli(up, tmp_path / "a", "submaps.enabled=false")
+    b = run_cli(down, tmp_path / "b", "submaps.enabled=false", "input.laser.upside_down=true", *sets)
+    assert b["input"]["laser_upside_down"] and b["input"]["laser_to_base_source"] == "config"
+    ta = np.genfromtxt(tmp_path / "a" / "trajectory.csv", delimiter=",", names=True)
+    tb = np.genfromtxt(tmp_path / "b" / "trajectory.csv", delimiter=",", names=True)
+    np.testing.assert_allclose(
+        np.c_[tb["x"], tb["y"], tb["theta"]], np.c_[ta["x"], ta["y"], ta["theta"]], atol=1e-6
+    )
+
+
+def test_tilted_laser_is_warned_about(tmp_path, caplog):
+    """A tf that tilts the laser 30° (pitch) is used as if level, with one warning naming the angle."""
+    raw, odoms, mount = _sample_log()
+    pitch = math.radians(30.0)
+    q = (0.0, math.sin(pitch / 2), 0.0, math.cos(pitch / 2))
+    path = _write(tmp_path / "tilt.mcap", raw[:5], odoms[:20], mount, q)
+    with caplog.at_level(logging.WARNING, logger="cornerslam.logs"), open_log(path) as log:
+        assert log.laser_to_base() is not None and not log.laser_upside_down()
+    assert "tilts the laser 30° from level" in caplog.text
