@@ -31,6 +31,7 @@ from .options import (  # noqa: E402
     FIGURE_PATH,
     FINITE,
     GivenPath,
+    check_method_not_set,
     check_option_agrees,
     check_time_offset,
     command_config,
@@ -320,6 +321,7 @@ def compare(
     check_time_offset(relations, time_offset)
     span = parse_span(start, end, max_scans)
     cfg = command_config(config_path, overrides, None, scan_topic, odom_topic, log_path)
+    check_method_not_set(overrides, assocs)  # (after the config: an unknown name is named as such)
     out_dir = Path(out) if out else default_out_dir(Path(log_path), "compare")
     progress = Progress(f"{display_path(Path(log_path).name)} (compare)", not quiet)
     try:

@@ -20,7 +20,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 from .config import Config
-from .frontend import Frame, Input, frames, open_input
+from .frontend import Frame, Input, frames, open_input, warn_default_mount
 from .pipeline import run_filter
 from .report.comparison import write_comparison
 from .report.outdir import StagedDir
@@ -105,6 +105,8 @@ def compare(
         t0 = time.perf_counter()
         src: Input = open_input(log_path, cfg, span)
         frame_list: list[Frame] = list(frames(src, cfg, progress))
+        if frame_list:  # the input's: warned once here, not once per associator (its runs skip a repeat)
+            warn_default_mount(src, cfg)
         dirs = [stage.path / a for a in assocs]
         for d in dirs:
             d.mkdir()

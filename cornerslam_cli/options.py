@@ -277,6 +277,24 @@ def check_option_agrees(overrides, options: dict[str, str | None]) -> None:
                 )
 
 
+def check_method_not_set(overrides, assocs: str) -> None:
+    """A usage error for ``compare`` given a ``--set`` of ``association.method``: compare runs each
+    associator of ``--assoc``, so the ``--set`` would be ignored without a word."""
+    from .config import ConfigError, override_leaves, parse_override
+
+    for text in overrides:
+        try:
+            keys, parsed = parse_override(text)
+        except ConfigError:
+            continue  # the --set's own error comes from the config
+        for leaf, loaded in override_leaves(keys, parsed):
+            if leaf == "association.method":
+                raise click.UsageError(
+                    f"compare runs each associator of --assoc ({assocs}): --set '{text}' would be "
+                    f"ignored; give --assoc {loaded} instead"
+                )
+
+
 def parse_assocs(text: str | None, allow_many: bool, log_path: str | None = None) -> list[str]:
     """The associators an ``--assoc`` value names, each checked against ``association.ASSOCIATORS``
     (an unknown one: ConfigError with the closest name). ``None`` (and ``""`` for a single name) is

@@ -430,6 +430,31 @@ def test_compare_gives_each_associator_only_its_own_runs_warnings(sim_log, tmp_p
         assert f"ran {a}" in warnings and f"ran {other}" not in warnings
 
 
+def test_compare_refuses_a_set_of_association_method(sim_log, tmp_path):
+    """compare runs each associator of --assoc: a --set of association.method (alone or in a mapping)
+    would be ignored without a word, so it is a usage error naming --assoc, before any work."""
+    for given in ("association.method=jcbb", "association={method: jcbb}"):
+        res = invoke("compare", sim_log, "--set", given, "--out", tmp_path / "c")
+        assert res.exit_code == 2 and "--assoc" in res.output and given in res.output, res.output
+        assert "give --assoc jcbb instead" in res.output
+        assert not (tmp_path / "c").exists()
+
+
+@pytest.mark.parametrize("jobs", ["1", "2"])
+def test_compare_warns_of_the_default_laser_mount_once(tmp_path, jobs):
+    """A log without tf for the laser: the built-in mount is the input's warning, printed once however
+    many associators run (it was once per associator) and in each one's summary.json."""
+    from fault_corpus import make_odoms, make_scans
+
+    log = write_mcap(tmp_path / "notf.mcap", make_scans(), make_odoms())
+    res = invoke("compare", log, "--assoc", "icnn,pca", "--out", tmp_path / "c", "--jobs", jobs)
+    assert res.exit_code == 0, res.output
+    assert res.stderr.count("has no tf base_link→laser") == 1, res.stderr
+    for a in ("icnn", "pca"):
+        warnings = json.loads((tmp_path / "c" / a / "summary.json").read_text())["warnings"]
+        assert sum("has no tf base_link→laser" in w for w in warnings) == 1, warnings
+
+
 def test_compare_rejects_unknown_and_repeated_associators(sim_log, tmp_path):
     one_line_error(
         invoke("compare", sim_log, "--assoc", "icnn,jbcc", "--out", tmp_path / "c"), "jbcc", "jcbb"
