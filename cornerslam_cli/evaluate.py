@@ -22,10 +22,33 @@ def inside_span(stamps: np.ndarray, t: np.ndarray) -> np.ndarray:
     return (t >= stamps[0]) & (t <= stamps[-1])
 
 
+GT_NEAR = 0.01  # s: a time this close to a ground-truth pose is scored whatever the gaps (evo's max_diff)
+GAP_FACTOR = 10.0  # a ground-truth gap longer than this many times its median spacing ...
+GAP_MIN = 1.0  # s: ... and than this is a hole, not interpolated across
+
+
+def in_holes(stamps: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Mask of the times ``t`` inside a hole of a ground truth with poses at ``stamps`` (sorted): a gap
+    longer than ``GAP_FACTOR`` × its median spacing and ``GAP_MIN`` (a motion capture that lost the
+    robot, a recorder stopped), more than ``GT_NEAR`` from both its ends. Interpolating there scores
+    against a straight line the robot did not drive. A reference with poses only where the robot moved
+    (radish: one per scan) has long gaps too, but a trajectory of those scans has its stamps on its
+    poses, and those are scored."""
+    t = np.asarray(t, dtype=float)
+    if len(stamps) < 2:
+        return np.zeros(len(t), dtype=bool)
+    longest = max(GAP_MIN, GAP_FACTOR * float(np.median(np.diff(stamps))))
+    j = np.clip(np.searchsorted(stamps, t), 1, len(stamps) - 1)
+    before, after = stamps[j - 1], stamps[j]
+    near = (np.abs(t - before) <= GT_NEAR) | (np.abs(after - t) <= GT_NEAR)
+    return (after - before > longest) & ~near
+
+
 def interpolate_inside(stamps: np.ndarray, poses: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The trajectory (``stamps``, ``poses``) at the times ``t`` within its span: (mask of those t,
-    their poses (k, 3), interpolated by :func:`~cornerslam_cli.geometry.interpolate`)."""
-    inside = inside_span(stamps, t)
+    """The trajectory (``stamps``, ``poses``) at the times ``t`` within its span and not in a hole
+    (:func:`in_holes`): (mask of those t, their poses (k, 3), interpolated by
+    :func:`~cornerslam_cli.geometry.interpolate`)."""
+    inside = inside_span(stamps, t) & ~in_holes(stamps, t)
     return inside, interpolate(stamps, poses, np.asarray(t, dtype=float)[inside])
 
 
@@ -76,14 +99,16 @@ def apply_se2(ang: float, t: np.ndarray, poses: np.ndarray) -> np.ndarray:
 def ate(
     est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray, correct_scale: bool = False
 ) -> Ate:
-    """Absolute trajectory error of ``est`` against ``gt`` (interpolated at est's stamps), after SE(2)
-    alignment: RMSE, mean, max of the position error (m) and RMSE of the heading error (rad). With
-    ``correct_scale`` after the best similarity instead (:func:`align_sim2`, evo's ``--correct_scale``),
-    its scale given: a diagnostic of the ranges' scale against the reference's, not a 2-D laser's ATE."""
+    """Absolute trajectory error of ``est`` against ``gt`` (interpolated at est's stamps, except in
+    its holes: :func:`in_holes`, counted), after SE(2) alignment: RMSE, mean, max of the position
+    error (m) and RMSE of the heading error (rad). With ``correct_scale`` after the best similarity
+    instead (:func:`align_sim2`, evo's ``--correct_scale``), its scale given: a diagnostic of the
+    ranges' scale against the reference's, not a 2-D laser's ATE."""
     inside, g = interpolate_inside(gt_t, gt, est_t)
     e = est[inside]
+    holes = int(np.count_nonzero(inside_span(gt_t, est_t) & ~inside)) or None  # (absent when none)
     if len(e) < 2:
-        return Ate(n=int(len(e)), rmse=float("nan"), mean=float("nan"), max=float("nan"))
+        return Ate(n=int(len(e)), rmse=float("nan"), mean=float("nan"), max=float("nan"), in_holes=holes)
     scale = None
     if correct_scale:
         scale, ang, t = align_sim2(e[:, :2], g[:, :2])
@@ -100,6 +125,7 @@ def ate(
         max=float(np.max(d)),
         rot_rmse=float(np.sqrt(np.mean(dth**2))),
         scale=scale,
+        in_holes=holes,
     )
 
 
@@ -152,8 +178,16 @@ def overlap_problem(est_t: np.ndarray, gt_t: np.ndarray, gt_name: str) -> tuple[
     if len(gt_t) < 2:  # a one-line file: its "time span" is an instant, no overlap to speak of
         return f"{gt_name} has a single pose: ATE and RPE need two or more", "give the whole ground truth"
     n = int(np.count_nonzero((est_t >= gt_t[0]) & (est_t <= gt_t[-1])))
-    if n >= 2:
+    holes = int(np.count_nonzero(in_holes(gt_t, est_t)))
+    if n - holes >= 2:
         return None
+    if n >= 2:
+        why = (
+            f"{gt_name} has no pose near the trajectory's: {holes} of the {n} poses within its time span "
+            f"fall in its gaps (longer than {GAP_FACTOR:g} times its median spacing and {GAP_MIN:g} s), "
+            "where it is not interpolated"
+        )
+        return why, "give a ground truth with poses throughout the trajectory"
     for unit, scale in (("nanoseconds", 1e9), ("microseconds", 1e6), ("milliseconds", 1e3)):
         if np.count_nonzero((est_t >= gt_t[0] / scale) & (est_t <= gt_t[-1] / scale)) >= 2:
             why = (  # a ROS exporter's integer stamps: TUM's are seconds

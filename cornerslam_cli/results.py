@@ -48,7 +48,8 @@ def optional() -> Any:
 class Ate(JsonResult):
     """Absolute trajectory error after SE(2) alignment (``evaluate.ate``): position error RMSE, mean,
     max [m] over ``n`` poses, heading error RMSE [rad] (absent with fewer than two poses); ``scale``:
-    present when aligned by a similarity instead (``evaluate --correct-scale``), its scale."""
+    present when aligned by a similarity instead (``evaluate --correct-scale``), its scale; ``in_holes``:
+    poses not scored for a hole in the ground truth (absent when none)."""
 
     n: int
     rmse: float
@@ -56,6 +57,9 @@ class Ate(JsonResult):
     max: float
     rot_rmse: float | None = optional()
     scale: float | None = optional()
+    # appended: poses inside the ground truth's span but in a hole of it (evaluate.in_holes), not
+    # scored; absent when none
+    in_holes: int | None = optional()
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -362,3 +362,57 @@ def test_positions_too_large_to_score_are_refused_naming_the_line(files, tmp_pat
     assert res.exit_code == 2, res.output
     assert f"'{bad}' line {2 if option == '--relations' else 4} has a position beyond ±1e+09 m" in res.stderr
     assert "inf" not in res.output and "RuntimeWarning" not in res.output
+
+
+def detour(t: np.ndarray) -> np.ndarray:
+    """A path along x at 1 m/s that leaves the line for a 2 m bump between 10 and 15 s."""
+    y = np.where((t > 10) & (t < 15), 2.0 * np.sin(np.pi * (t - 10) / 5) ** 2, 0.0)
+    return np.column_stack((t, y, np.zeros_like(t)))
+
+
+def test_ground_truth_is_not_interpolated_across_a_hole():
+    """A motion capture at 100 Hz loses the robot for the 5 s of its detour: estimates there (exact
+    ones) were scored against the straight line between the hole's ends (0.47 m RMSE); they are now
+    left out and counted, and the rest scores 0. A pose within 10 ms of either end is still scored."""
+    gt_t = np.round(np.arange(0.0, 30.0, 0.01), 6)
+    gt_t = gt_t[(gt_t <= 10.0) | (gt_t >= 15.0)]
+    t = np.arange(0.0, 30.0, 0.1)
+    r = ate(t, detour(t), gt_t, detour(gt_t))
+    inside = (t > 10.0 + 0.01) & (t < 15.0 - 0.01)
+    assert r.rmse == pytest.approx(0.0, abs=1e-9) and r.in_holes == int(inside.sum()) == 49
+    assert r.n == len(t) - 49
+    assert rpe(t, detour(t), gt_t, detour(gt_t)).rpe_step_rmse < 0.02  # the pair across the hole: 0.01 m
+
+
+def test_a_reference_with_poses_only_where_the_robot_moved_is_scored_at_them():
+    """radish's references hold one pose per scan, with gaps of up to minutes where the robot stood
+    still: a trajectory of those scans has its stamps on them, and every pose is scored."""
+    rng = np.random.default_rng(0)
+    t = np.cumsum(rng.choice([0.5, 0.5, 2.0, 40.0], size=60))
+    gt = np.column_stack((np.cumsum(np.ones(60)), np.zeros(60), np.zeros(60)))
+    est = gt + [0.1, 0.0, 0.0] * (np.arange(60)[:, None] % 2)
+    r = ate(t, est, t, gt)
+    assert r.n == 60 and r.in_holes is None and r.rmse > 0.04
+
+
+def test_a_trajectory_wholly_in_a_hole_of_the_ground_truth_is_exit_2(tmp_path):
+    """Every pose inside the ground truth's span but in one of its gaps: nothing to score, and said so
+    (it used to score them against a straight line)."""
+    from cornerslam_cli.report.tables import write_tum
+
+    gt_t = np.concatenate((np.arange(0.0, 10.0, 0.01), np.arange(20.0, 30.0, 0.01)))
+    t = np.arange(12.0, 18.0, 0.1)
+    write_tum(tmp_path / "gt.tum", gt_t, detour(gt_t))
+    write_tum(tmp_path / "est.tum", t, detour(t))
+    res = evaluate(tmp_path / "est.tum", "--ground-truth", tmp_path / "gt.tum")
+    assert res.exit_code == 2 and "nan" not in res.output.lower(), res.output
+    assert "60 of the 60 poses within its time span fall in its gaps" in res.stderr
+    # one pose out of the hole: still nothing to score (two are needed), the same error
+    t2 = np.concatenate(([5.0], t))
+    write_tum(tmp_path / "est.tum", t2, detour(t2))
+    res = evaluate(tmp_path / "est.tum", "--ground-truth", tmp_path / "gt.tum")
+    assert res.exit_code == 2 and "60 of the 61 poses" in res.stderr, res.output
+    t3 = np.concatenate(([5.0, 6.0], t))
+    write_tum(tmp_path / "est.tum", t3, detour(t3))
+    res = evaluate(tmp_path / "est.tum", "--ground-truth", tmp_path / "gt.tum")
+    assert res.exit_code == 0 and "(n=2; 60 in gaps of the ground truth not scored)" in res.output, res.output

@@ -59,6 +59,7 @@ def summary_lines(s: RunSummary) -> list[str]:
             f"ATE RMSE {acc.ate.rmse:.3f} m (odometry {acc.odom_ate.rmse:.3f} m"
             + (f", scan-matched {acc.scan_odom_ate.rmse:.3f} m" if acc.scan_odom_ate else "")
             + f") against {acc.ground_truth}"
+            + (f" ({acc.ate.in_holes} poses in its gaps not scored)" if acc.ate.in_holes else "")
         )
     if acc is not None and acc.relations is not None:
         lines.append(f"relations: {relation_text(acc.relations)}")
@@ -275,7 +276,10 @@ def evaluation_lines(res: Accuracy) -> list[str]:
         a = res.ate
         per_m = "-" if math.isnan(res.rpe_per_m) else f"{res.rpe_per_m:.4f}"  # path shorter than 1 m
         scaled = "" if a.scale is None else f", scale corrected ×{a.scale:.5f}"
-        lines.append(f"ATE  rmse {a.rmse:.4f} m  mean {a.mean:.4f} m  max {a.max:.4f} m  (n={a.n}{scaled})")
+        holes = f"; {a.in_holes} in gaps of the ground truth not scored" if a.in_holes else ""
+        lines.append(
+            f"ATE  rmse {a.rmse:.4f} m  mean {a.mean:.4f} m  max {a.max:.4f} m  (n={a.n}{scaled}{holes})"
+        )
         lines.append(f"RPE  per step {res.rpe_step_rmse:.4f} m  per metre {per_m} m/m")
     if res.relations is not None:
         lines.append(f"relations: {relation_text(res.relations)}")
