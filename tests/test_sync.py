@@ -39,6 +39,21 @@ def test_scans_outside_the_odometry_span_are_skipped_and_counted():
     assert (st.before_first_odom, st.after_last_odom, st.scans_in, st.scans_out) == (1, 1, 4, 2)
 
 
+def test_scan_logged_before_the_first_odometry_but_stamped_after_it_is_kept():
+    """A bag's log order is its arrival order: a scan that arrived before the first odometry message
+    but is stamped after that message's stamp lies inside the odometry and is synchronised (it was
+    dropped as 'before the first odometry sample'); one stamped before it still is dropped."""
+    msgs = [scan(0.5), scan(1.2), OdomSample(1.0, 0.0, 0.0, 0.0), OdomSample(2.0, 1.0, 0.0, 0.0), scan(1.5)]
+    st = SyncStats()
+    out = list(synchronise(msgs, st))
+    assert [s.scan.stamp for s in out] == [1.2, 1.5]
+    assert out[0].odom == pytest.approx([0.2, 0.0, 0.0])
+    assert (st.before_first_odom, st.after_last_odom, st.scans_out) == (1, 0, 2)
+    # no odometry at all: every scan is counted as before it, as they were
+    st = SyncStats()
+    assert list(synchronise([scan(0.5), scan(1.0)], st)) == [] and st.before_first_odom == 2
+
+
 def test_scan_stamped_before_odometry_that_arrived_earlier_still_interpolates():
     # log order differs from stamp order: the scan's header lags its arrival
     msgs = [OdomSample(0.0, 0.0, 0.0, 0.0), OdomSample(1.0, 1.0, 0.0, 0.0), OdomSample(2.0, 2.0, 0.0, 0.0)]
@@ -161,7 +176,9 @@ def test_memory_does_not_grow_with_unpaired_messages(case):
 
     def run(n):
         st = SyncStats()
-        assert list(synchronise(messages(n), st, lambda *a: None)) == []
+        out = list(synchronise(messages(n), st, lambda *a: None))
+        # (the scan at 0.05 s, logged before the odometry from 0 s, lies inside it)
+        assert len(out) == (0 if case == "scans_after_odometry" else 1)
         assert st.after_last_odom == (n if case == "scans_after_odometry" else 0)
 
     small, large = peak_bytes(lambda: run(3000)), peak_bytes(lambda: run(9000))

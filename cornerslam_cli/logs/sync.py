@@ -140,8 +140,12 @@ def synchronise(
             if msg.stamp <= last_scan_stamp:
                 st.scan_time_backwards += 1
                 continue
-            if not odom:
-                st.before_first_odom += 1
+            if last_odom_stamp == -np.inf:  # no odometry yet: a bag's log order is not its stamps' order,
+                last_scan_stamp = msg.stamp  # so it waits for the first sample (its stamp decides)
+                pending.append(msg)
+                while len(pending) > MAX_PENDING or msg.stamp - pending[0].stamp > MAX_GAP:
+                    pending.popleft()
+                    st.before_first_odom += 1
                 continue
             if msg.stamp - last_odom_stamp > MAX_GAP:  # no odometry near it: dropped now, counted later
                 waited_out += 1  # and not the reference for "backwards": one far-future stamp
@@ -173,7 +177,10 @@ def synchronise(
                 odom.popleft()
         yield from emit_ready()
     yield from emit_ready(last=True)
-    st.after_last_odom += len(pending) + waited_out
+    if last_odom_stamp == -np.inf:  # no odometry at all: every scan was before it
+        st.before_first_odom += len(pending)
+    else:
+        st.after_last_odom += len(pending) + waited_out
     _warn_skipped(st, warn)
 
 
