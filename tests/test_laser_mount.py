@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 import pytest
-from _log_fixtures import split, write_messages_mcap
+from _log_fixtures import split, write_log, write_messages_mcap
 from _run_helpers import run_cli
 
 from cornerslam_cli.logs import open_log
@@ -204,3 +204,12 @@ def test_config_upside_down_mirrors_a_carmen_robotlaser_log(tmp_path):
     np.testing.assert_allclose(
         np.c_[tb["x"], tb["y"], tb["theta"]], np.c_[ta["x"], ta["y"], ta["theta"]], atol=1e-6
     )
+
+
+def test_upside_down_alone_still_warns_of_the_default_position(tmp_path):
+    """``input.laser.upside_down`` says how the laser is turned, not where it is: a log without tf
+    whose config sets nothing else is still at the built-in x = y = yaw = 0, and warned about."""
+    log = write_log("mcap-cdr", tmp_path)
+    s = run_cli(log, tmp_path / "a", "input.laser.upside_down=true")
+    assert s["input"]["laser_upside_down"] and s["input"]["laser_to_base_source"] == "default"
+    assert any("built-in default" in w for w in s["warnings"])
