@@ -367,7 +367,7 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
     except LogError as e:  # info lists what it can: the topics, and why no scan could be read
         unread = f"the first scan could not be read: {one_line(e)}"
     preset = None if scan is None else detect_preset(scan.n_beams, scan.angle_increment)
-    _echo(info_lines(log_path, log_info, laser, scan, preset, unread, reader.laser_upside_down()))
+    _echo(info_lines(log_path, log_info, laser, scan, preset, unread, bool(reader.laser_upside_down())))
 
 
 @cli.command()

@@ -314,12 +314,15 @@ def scans_prepared(reader, cfg: Config, upside_down: bool = False):
 
 def _laser_mount(reader, cfg: Config) -> tuple[tuple[float, float, float], str, bool]:
     """The laser's pose on the robot, where it came from and whether it is upside down: tf when the
-    log has it, else the config's ``input.laser`` (:func:`lasers.mount_source`)."""
+    log has it, else the config's ``input.laser`` (:func:`lasers.mount_source`); upside down from the
+    config too when the log's mount cannot say (a CARMEN ROBOTLASER1 offset is planar)."""
     mount = cfg.input.laser
     if mount.from_tf:
         tf = reader.laser_to_base()
         if tf is not None:
-            return (float(tf[0]), float(tf[1]), float(tf[2])), "tf", reader.laser_upside_down()
+            flip = reader.laser_upside_down()
+            upside_down = mount.upside_down if flip is None else flip
+            return (float(tf[0]), float(tf[1]), float(tf[2])), "tf", upside_down
     return (mount.x, mount.y, mount.yaw), mount_source(cfg), mount.upside_down
 
 

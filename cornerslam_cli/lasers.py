@@ -81,13 +81,14 @@ PRESETS: dict[str, LaserPreset] = {
 def mount_source(cfg: Config) -> str:
     """Where the config's laser mount (``input.laser``) came from, for a log without one on tf:
     ``preset`` (the laser preset's), ``default`` (the built-in one: nobody chose it; turning
-    ``input.laser.from_tf`` off says the config's mount is meant), else ``config``."""
+    ``input.laser.from_tf`` off says the config's mount is meant; ``upside_down`` alone does not: it
+    says how the laser is turned, not where it is), else ``config``."""
     mount = cfg.input.laser
     preset = PRESETS.get(cfg.input.laser_preset)
     preset_mount = preset.config.get("input", {}).get("laser") if preset else None
     if preset_mount and all(getattr(mount, k) == v for k, v in preset_mount.items()):
         return "preset"
-    return "default" if mount == LaserMountConfig() else "config"
+    return "default" if dataclasses.replace(mount, upside_down=False) == LaserMountConfig() else "config"
 
 
 def detect_preset(n_beams: int, angle_increment: float) -> str | None:

@@ -10,13 +10,13 @@ import math
 
 import numpy as np
 import pytest
-from _log_fixtures import split, write_messages_mcap
+from _log_fixtures import split, write_log, write_messages_mcap
 from _run_helpers import run_cli
 
 from cornerslam_cli.logs import open_log
 from cornerslam_cli.logs.base import ReadStats, make_scan
 from cornerslam_cli.logs.deskew import beam_times
-from cornerslam_cli.logs.writers import RawScan
+from cornerslam_cli.logs.writers import RawScan, write_carmen
 from cornerslam_cli.logs.writers.ros import JsonSerializer
 from cornerslam_cli.types import Scan
 
@@ -186,3 +186,30 @@ def test_tilted_laser_is_warned_about(tmp_path, caplog):
     with caplog.at_level(logging.WARNING, logger="cornerslam.logs"), open_log(path) as log:
         assert log.laser_to_base() is not None and not log.laser_upside_down()
     assert "tilts the laser 30° from level" in caplog.text
+
+
+def test_config_upside_down_mirrors_a_carmen_robotlaser_log(tmp_path):
+    """A CARMEN ROBOTLASER1 log gives the laser's planar offset, which cannot say the laser is upside
+    down: ``input.laser.upside_down`` does (its offset still from the log)."""
+    raw, odoms, _ = _sample_log()
+    raw, odoms = raw[:30], [o for o in odoms if o.stamp <= raw[29].stamp + 0.5]
+    up = write_carmen(tmp_path / "up.clf", raw, odoms, laser="ROBOTLASER1")
+    down = write_carmen(tmp_path / "down.clf", [_flipped(s) for s in raw], odoms, laser="ROBOTLASER1")
+    a = run_cli(up, tmp_path / "a", "submaps.enabled=false")
+    b = run_cli(down, tmp_path / "b", "submaps.enabled=false", "input.laser.upside_down=true")
+    assert b["input"]["laser_upside_down"] and b["input"]["laser_to_base_source"] == "tf"
+    assert not a["input"]["laser_upside_down"]
+    ta = np.genfromtxt(tmp_path / "a" / "trajectory.csv", delimiter=",", names=True)
+    tb = np.genfromtxt(tmp_path / "b" / "trajectory.csv", delimiter=",", names=True)
+    np.testing.assert_allclose(
+        np.c_[tb["x"], tb["y"], tb["theta"]], np.c_[ta["x"], ta["y"], ta["theta"]], atol=1e-6
+    )
+
+
+def test_upside_down_alone_still_warns_of_the_default_position(tmp_path):
+    """``input.laser.upside_down`` says how the laser is turned, not where it is: a log without tf
+    whose config sets nothing else is still at the built-in x = y = yaw = 0, and warned about."""
+    log = write_log("mcap-cdr", tmp_path)
+    s = run_cli(log, tmp_path / "a", "input.laser.upside_down=true")
+    assert s["input"]["laser_upside_down"] and s["input"]["laser_to_base_source"] == "default"
+    assert any("built-in default" in w for w in s["warnings"])

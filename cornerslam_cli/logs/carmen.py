@@ -301,8 +301,8 @@ class CarmenReader:
 
     odom_on_tf = False  # CARMEN has no tf
 
-    def laser_upside_down(self) -> bool:  # a CARMEN laser pose is planar (input.laser.upside_down)
-        return False
+    def laser_upside_down(self) -> bool | None:  # a CARMEN laser pose is planar: input.laser.upside_down
+        return None
 
     def laser_to_base(self) -> Pose2 | None:
         """Laser pose in the robot frame from ROBOTLASER1 laser/robot poses (first 50 lines), else None."""

@@ -53,7 +53,8 @@ class LaserMountConfig:
     y: float = num(0.0, ge=-100.0, le=100.0)  # metres
     yaw: float = num(0.0, ge=-TWO_PI, le=TWO_PI)  # radians
     from_tf: bool = True  # prefer a static transform base→laser found in the log
-    # mounted upside down (z axis down, roll π: its scans are mirrored); from the tf when it is used
+    # mounted upside down (z axis down, roll π: its scans are mirrored); from a ROS tf when it is used
+    # (a CARMEN ROBOTLASER1 laser pose is planar: this key says it there too)
     upside_down: bool = False
 
     def __post_init__(self) -> None:
