@@ -33,7 +33,7 @@ def in_holes(stamps: np.ndarray, t: np.ndarray) -> np.ndarray:
     robot, a recorder stopped), more than ``GT_NEAR`` from both its ends. Interpolating there scores
     against a straight line the robot did not drive. A reference with poses only where the robot moved
     (radish: one per scan) has long gaps too, but a trajectory of those scans has its stamps on its
-    poses, and those are scored."""
+    poses, and those are scored. A time outside the ground truth's span is in no hole (it is outside)."""
     t = np.asarray(t, dtype=float)
     if len(stamps) < 2:
         return np.zeros(len(t), dtype=bool)
@@ -41,7 +41,7 @@ def in_holes(stamps: np.ndarray, t: np.ndarray) -> np.ndarray:
     j = np.clip(np.searchsorted(stamps, t), 1, len(stamps) - 1)
     before, after = stamps[j - 1], stamps[j]
     near = (np.abs(t - before) <= GT_NEAR) | (np.abs(after - t) <= GT_NEAR)
-    return (after - before > longest) & ~near
+    return (after - before > longest) & ~near & inside_span(stamps, t)
 
 
 def interpolate_inside(stamps: np.ndarray, poses: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

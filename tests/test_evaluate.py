@@ -10,6 +10,8 @@ from cornerslam_cli.evaluate import (
     align_sim2,
     apply_se2,
     ate,
+    in_holes,
+    inside_span,
     relation_error,
     relation_errors,
     rpe,
@@ -416,3 +418,24 @@ def test_a_trajectory_wholly_in_a_hole_of_the_ground_truth_is_exit_2(tmp_path):
     write_tum(tmp_path / "est.tum", t3, detour(t3))
     res = evaluate(tmp_path / "est.tum", "--ground-truth", tmp_path / "gt.tum")
     assert res.exit_code == 0 and "(n=2; 60 in gaps of the ground truth not scored)" in res.output, res.output
+
+
+@pytest.mark.parametrize("where", ["start", "end"])
+def test_a_hole_at_an_end_of_the_ground_truth_counts_only_poses_within_its_span(tmp_path, where):
+    """A ground truth whose first (or last) gap is a hole, and a trajectory running on beyond that end
+    of it: the poses outside its span are outside, not in the hole. They were counted as in it, so the
+    102 poses the ground truth does cover were refused with exit 2 ("599 of the 201 poses within its
+    time span fall in its gaps")."""
+    from cornerslam_cli.report.tables import write_tum
+
+    t = np.round(np.arange(50.0, 120.0001, 0.1), 6)
+    dense = np.round(np.arange(110.0, 120.0001, 0.1), 6) if where == "start" else np.round(t[t <= 60.0], 6)
+    gt_t = np.concatenate(([100.0], dense)) if where == "start" else np.concatenate((dense, [70.0]))
+    write_tum(tmp_path / "gt.tum", gt_t, detour(gt_t))
+    write_tum(tmp_path / "est.tum", t, detour(t))
+    res = evaluate(tmp_path / "est.tum", "--ground-truth", tmp_path / "gt.tum")
+    assert res.exit_code == 0, res.output
+    assert "(n=102; 99 in gaps of the ground truth not scored)" in res.output, res.output
+    r = ate(t, detour(t), gt_t, detour(gt_t))
+    assert r.n == 102 and r.in_holes == 99
+    assert not np.any(in_holes(gt_t, t) & ~inside_span(gt_t, t))
