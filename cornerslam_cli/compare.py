@@ -105,7 +105,9 @@ def compare(
         t0 = time.perf_counter()
         src: Input = open_input(log_path, cfg, span)
         frame_list: list[Frame] = list(frames(src, cfg, progress))
-        if frame_list:  # the input's: warned once here, not once per associator (its runs skip a repeat)
+        # the input's: warned once here, not once per associator (its runs skip a repeat); as a run
+        # warns it, only when the frames have valid beams (else their error comes alone: check_processed)
+        if any(f.n_points for f in frame_list):
             warn_default_mount(src, cfg)
         dirs = [stage.path / a for a in assocs]
         for d in dirs:

@@ -455,6 +455,19 @@ def test_compare_warns_of_the_default_laser_mount_once(tmp_path, jobs):
         assert sum("has no tf base_link→laser" in w for w in warnings) == 1, warnings
 
 
+@pytest.mark.parametrize("command", ["run", "compare"])
+def test_a_log_whose_every_beam_is_invalid_gives_its_error_without_the_mount_warning(tmp_path, command):
+    """A log without tf whose every beam is NaN: its one error, not the default laser mount's warning
+    first (a run warns of the mount after check_processed; compare warned once it had frames, whatever
+    their beams)."""
+    from fault_corpus import make_odoms, make_scans
+
+    scans = make_scans(ranges=lambda i, r: np.full_like(r, np.nan))
+    log = write_mcap(tmp_path / "nan.mcap", scans, make_odoms())
+    res = invoke(command, log, "--out", tmp_path / "o")
+    one_line_error(res, "every beam of every scan is invalid")
+
+
 def test_compare_rejects_unknown_and_repeated_associators(sim_log, tmp_path):
     one_line_error(
         invoke("compare", sim_log, "--assoc", "icnn,jbcc", "--out", tmp_path / "c"), "jbcc", "jcbb"

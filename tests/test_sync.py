@@ -86,6 +86,19 @@ def test_one_far_future_scan_does_not_make_the_later_scans_late(far):
     assert (st.scan_time_backwards, st.scans_skipped) == (0, 1)
 
 
+@pytest.mark.parametrize("before", [[], [0.2]])
+def test_a_far_future_scan_logged_before_the_first_odometry_does_not_make_the_later_scans_late(before):
+    """A scan stamped 1e18 that arrives before any odometry waits for it (c3f145c) and became the
+    reference for "backwards": every later scan of the log was skipped as going backwards (none
+    synchronised, exit 2). Checked against the first sample's stamp, it is skipped alone."""
+    msgs = [scan(t) for t in before] + [scan(1e18)]
+    msgs += [m for t in range(6) for m in (OdomSample(t, t, 0.0, 0.0), scan(t + 0.5))]
+    st = SyncStats()
+    out = [s.scan.stamp for s in synchronise(msgs, st)]
+    assert out == [0.5, 1.5, 2.5, 3.5, 4.5]
+    assert st.scan_time_backwards == 0 and st.scans_in == st.scans_out + st.scans_skipped
+
+
 def test_keyframes_by_distance_and_rotation():
     poses = [np.array([0.1 * i, 0.0, 0.0]) for i in range(11)] + [np.array([1.0, 0.0, 0.6])]
     pairs = [Synced(scan(float(i)), p) for i, p in enumerate(poses)]

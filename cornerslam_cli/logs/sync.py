@@ -13,8 +13,9 @@ shorter arc in θ (:func:`~cornerslam_cli.geometry.interpolate`).
 Scans that cannot be interpolated are skipped and counted in :class:`SyncStats`: before the first or
 after the last odometry sample, in a gap of the odometry (samples more than MAX_GAP apart around it),
 stamps that go backwards or repeat. "Backwards" is relative to the last scan that could still be
-paired: a scan before all odometry, or more than MAX_GAP after the newest sample (one far-future
-stamp, 1e18), is skipped without becoming the reference, so it cannot make the later scans look late.
+paired: a scan more than MAX_GAP after the newest sample (one far-future stamp, 1e18; also one logged
+before the first sample, checked when that sample comes) is skipped without becoming the reference, so
+it cannot make the later scans look late.
 Odometry samples that go back in time are dropped and counted too. One warning sums them up.
 """
 
@@ -169,6 +170,11 @@ def synchronise(
             first_odom_stamp = min(first_odom_stamp, msg.stamp)
             st.odom_gap += waited_out  # odometry resumed after them
             waited_out = 0
+            if first_odom_stamp == msg.stamp:  # the first sample: scans logged before it and stamped far
+                while pending and pending[-1].stamp - msg.stamp > MAX_GAP:  # after it (1e18) are no
+                    pending.pop()  # reference for "backwards" (they would make every later scan late)
+                    waited_out += 1
+                last_scan_stamp = pending[-1].stamp if pending else -np.inf
             odom.append(msg)
             if not pending:  # later scans come after last_scan_stamp: keep the last sample before it
                 while len(odom) >= 2 and odom[1].stamp <= last_scan_stamp:
