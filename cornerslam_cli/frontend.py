@@ -276,14 +276,15 @@ def scans_prepared(reader, cfg: Config, upside_down: bool = False):
     scan is a ConfigError naming the keys; of a later, shorter scan, counted and warned at the end."""
     inp = cfg.input
     lo, hi, max_range, dt = inp.skip_beams_start, inp.skip_beams_end, inp.max_range, inp.scan_time_offset
+    msgs = reader.messages()
+    if upside_down:
+        msgs = (msg.mirrored() if isinstance(msg, Scan) else msg for msg in msgs)
     if lo == 0 and hi == 0 and max_range <= 0.0 and dt == 0.0:
-        for msg in reader.messages():
-            yield msg.mirrored() if upside_down and isinstance(msg, Scan) else msg
+        yield from msgs
         return
     first, emptied = True, 0
-    for msg in reader.messages():
+    for msg in msgs:
         if isinstance(msg, Scan):
-            msg = msg.mirrored() if upside_down else msg
             emptied += not first and lo + hi >= msg.n_beams
             if first and lo + hi >= msg.n_beams:
                 raise ConfigError(
