@@ -16,6 +16,7 @@ from _run_helpers import run_cli
 from cornerslam_cli.logs import open_log
 from cornerslam_cli.logs.base import ReadStats, make_scan
 from cornerslam_cli.logs.deskew import beam_times
+from cornerslam_cli.logs.ros import transform_matrix
 from cornerslam_cli.logs.writers import RawScan, write_carmen
 from cornerslam_cli.logs.writers.ros import JsonSerializer
 from cornerslam_cli.types import Scan
@@ -186,6 +187,24 @@ def test_tilted_laser_is_warned_about(tmp_path, caplog):
     with caplog.at_level(logging.WARNING, logger="cornerslam.logs"), open_log(path) as log:
         assert log.laser_to_base() is not None and not log.laser_upside_down()
     assert "tilts the laser 30° from level" in caplog.text
+
+
+def test_tf_quaternion_with_a_huge_component_keeps_its_rotation(tmp_path):
+    """A tf rotation (1e200, 0, 0, 1), from corrupt data, is roll π: the laser upside down. Its squared
+    length overflows to inf, which must not normalise it to no rotation (read as upright)."""
+    np.testing.assert_allclose(
+        transform_matrix((0.0, 0.0, 0.0), (1e200, 0.0, 0.0, 1.0)), np.diag([1, -1, -1, 1]), atol=1e-15
+    )
+    np.testing.assert_allclose(  # π about (1, 1, 0)/√2: x and y swap, z turns down
+        transform_matrix((0.0, 0.0, 0.0), (1e200, 1e200, 0.0, 0.0))[:3, :3],
+        [[0, 1, 0], [1, 0, 0], [0, 0, -1]],
+        atol=1e-15,
+    )
+    raw, odoms, mount = _sample_log()
+    m = (mount[0], mount[1], 0.0)
+    path = _write(tmp_path / "huge.mcap", raw[:5], odoms[:20], m, (1e200, 0.0, 0.0, 1.0))
+    with open_log(path) as log:
+        assert log.laser_to_base() == pytest.approx(m, abs=1e-9) and log.laser_upside_down()
 
 
 def test_config_upside_down_mirrors_a_carmen_robotlaser_log(tmp_path):
