@@ -19,6 +19,8 @@ from cornerslam_cli.logs.deskew import beam_times
 from cornerslam_cli.logs.ros import transform_matrix
 from cornerslam_cli.logs.writers import RawScan, write_carmen
 from cornerslam_cli.logs.writers.ros import JsonSerializer
+from cornerslam_cli.report.text import mount_line
+from cornerslam_cli.results import RunSummary
 from cornerslam_cli.types import Scan
 
 SAMPLE = "sample_logs/sim_office.mcap"
@@ -141,6 +143,7 @@ def test_upside_down_laser_gives_the_upright_run(tmp_path):
     a = run_cli(up, tmp_path / "a", "submaps.enabled=false")
     b = run_cli(down, tmp_path / "b", "submaps.enabled=false")
     assert b["input"]["laser_upside_down"] and not a["input"]["laser_upside_down"]
+    assert b["input"]["laser_upside_down_source"] == a["input"]["laser_upside_down_source"] == "tf"
     ta = np.genfromtxt(tmp_path / "a" / "trajectory.csv", delimiter=",", names=True)
     tb = np.genfromtxt(tmp_path / "b" / "trajectory.csv", delimiter=",", names=True)
     assert len(ta) == len(tb) > 20
@@ -217,6 +220,10 @@ def test_config_upside_down_mirrors_a_carmen_robotlaser_log(tmp_path):
     a = run_cli(up, tmp_path / "a", "submaps.enabled=false")
     b = run_cli(down, tmp_path / "b", "submaps.enabled=false", "input.laser.upside_down=true")
     assert b["input"]["laser_upside_down"] and b["input"]["laser_to_base_source"] == "tf"
+    assert b["input"]["laser_upside_down_source"] == "config"  # the offset from the log, the flag not
+    assert mount_line(RunSummary.read(tmp_path / "b").input).endswith(
+        "rad (from the log's ROBOTLASER1 laser pose), upside down (from the config's input.laser.upside_down)"
+    )
     assert not a["input"]["laser_upside_down"]
     ta = np.genfromtxt(tmp_path / "a" / "trajectory.csv", delimiter=",", names=True)
     tb = np.genfromtxt(tmp_path / "b" / "trajectory.csv", delimiter=",", names=True)
@@ -231,6 +238,11 @@ def test_upside_down_alone_still_warns_of_the_default_position(tmp_path):
     log = write_log("mcap-cdr", tmp_path)
     s = run_cli(log, tmp_path / "a", "input.laser.upside_down=true")
     assert s["input"]["laser_upside_down"] and s["input"]["laser_to_base_source"] == "default"
+    assert s["input"]["laser_upside_down_source"] == "config"
+    assert mount_line(RunSummary.read(tmp_path / "a").input).endswith(
+        "rad (the built-in default: not on the log's tf, not in the config), "
+        "upside down (from the config's input.laser.upside_down)"
+    )
     assert any("built-in default" in w for w in s["warnings"])
 
 
