@@ -320,7 +320,10 @@ def compare(
     names = parse_assocs(assocs, allow_many=True)
     check_time_offset(relations, time_offset)
     span = parse_span(start, end, max_scans)
-    cfg = command_config(config_path, overrides, None, scan_topic, odom_topic, log_path)
+    why = f"compare runs each associator of --assoc ({','.join(names)})"
+    cfg = command_config(
+        config_path, overrides, None, scan_topic, odom_topic, log_path, {"association.method": why}
+    )
     check_method_not_set(overrides, assocs)  # (after the config: an unknown name is named as such)
     out_dir = Path(out) if out else default_out_dir(Path(log_path), "compare")
     progress = Progress(f"{display_path(Path(log_path).name)} (compare)", not quiet)

@@ -514,6 +514,23 @@ def located(e: ConfigError, data: dict, overrides: typing.Sequence[str]) -> Conf
     return _located(e, data, given)
 
 
+def warn_ignored(data: dict, overrides: typing.Sequence[str], ignored: typing.Mapping[str, str]) -> None:
+    """A warning (logged) for each dotted key of ``ignored`` (key → why the command leaves it unused)
+    that the config file's ``data`` (:func:`read_config_file`) sets and no ``--set`` of ``overrides``
+    does: said, not refused, since one file may serve several commands. A ``--set`` of such a key is
+    the command's own to refuse (``options.check_method_not_set``)."""
+    given = {leaf for text in overrides for leaf, _ in override_leaves(*parse_override(text))}
+    lines = getattr(data, "lines", {})
+    for key, why in ignored.items():
+        node: Any = data
+        for part in key.split("."):
+            node = node.get(part, ...) if isinstance(node, dict) else ...
+        if node is ... or key in given:
+            continue
+        where = getattr(data, "where", "config file") + (f" line {lines[key]}" if key in lines else "")
+        log.warning("%s: config key '%s' = %s is ignored: %s", where, key, short_repr(node), why)
+
+
 def yaml_quoted(text: str) -> str:
     """``text`` as a YAML double-quoted scalar that reads back as ``text`` exactly, for an override
     built from an option (``input.scan_topic=...``): printable ASCII kept, every other character

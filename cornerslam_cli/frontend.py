@@ -119,6 +119,9 @@ class Input:
     # input.beam_time, none known (scans as they are) or off (input.deskew false); and the first one's value
     beam_times: str = "none"
     beam_time: float = 0.0
+    # where laser_upside_down came from, which need not be where laser2base did: tf (the log's tf) or
+    # config (input.laser.upside_down: a log without tf, input.laser.from_tf off, or a planar CARMEN mount)
+    laser_upside_down_source: str = "config"
 
 
 def open_input(log_path: str | Path, cfg: Config, span: Span | None = None) -> Input:
@@ -135,7 +138,7 @@ def open_input(log_path: str | Path, cfg: Config, span: Span | None = None) -> I
     )
     reader.check()
     info = reader.info()
-    laser2base, source, upside_down = _laser_mount(reader, cfg)
+    laser2base, source, upside_down, upside_down_source = _laser_mount(reader, cfg)
     matcher = ScanMatcher(cfg.scan_match, odometry_noise(cfg)) if cfg.scan_match.enabled else None
     load_kernels(cfg.sensor, cfg.lines)
     with signals_deferred():
@@ -148,16 +151,17 @@ def open_input(log_path: str | Path, cfg: Config, span: Span | None = None) -> I
     span = span or Span()
     total = _scan_count(info)
     log.info(
-        "log %s (%s): %d scans on %s, odometry from %s; laser mount x=%.3f y=%.3f yaw=%.3f%s (%s), preset %s",
+        "log %s (%s): %d scans on %s, odometry from %s; laser mount x=%.3f y=%.3f yaw=%.3f (%s)%s, preset %s",
         Path(log_path).name, info.format, total, short_text(info.scan_topic), info.odom_source or "-",
-        *laser2base, " upside down" if upside_down else "", source, cfg.input.laser_preset,
+        *laser2base, source, f" upside down ({upside_down_source})" if upside_down else "",
+        cfg.input.laser_preset,
     )  # fmt: skip
     if span.given:
         total = span.expected_scans(total, info.duration)
         log.info("processing %s: about %d scans", span.describe(), total)
     return Input(
         Path(log_path), reader, info, laser2base, source, upside_down, total, SyncStats(), matcher,
-        odom_on_tf, span,
+        odom_on_tf, span, laser_upside_down_source=upside_down_source,
     )  # fmt: skip
 
 
@@ -313,18 +317,19 @@ def scans_prepared(reader, cfg: Config, upside_down: bool = False):
         )  # fmt: skip
 
 
-def _laser_mount(reader, cfg: Config) -> tuple[tuple[float, float, float], str, bool]:
-    """The laser's pose on the robot, where it came from and whether it is upside down: tf when the
-    log has it, else the config's ``input.laser`` (:func:`lasers.mount_source`); upside down from the
-    config too when the log's mount cannot say (a CARMEN ROBOTLASER1 offset is planar)."""
+def _laser_mount(reader, cfg: Config) -> tuple[tuple[float, float, float], str, bool, str]:
+    """The laser's pose on the robot and where it came from, whether it is upside down and where that
+    came from: tf when the log has it, else the config's ``input.laser`` (:func:`lasers.mount_source`);
+    upside down from the config (``config``) when the log's mount cannot say (a CARMEN ROBOTLASER1
+    offset is planar), so the two sources can differ."""
     mount = cfg.input.laser
     if mount.from_tf:
         tf = reader.laser_to_base()
         if tf is not None:
             flip = reader.laser_upside_down()
-            upside_down = mount.upside_down if flip is None else flip
-            return (float(tf[0]), float(tf[1]), float(tf[2])), "tf", upside_down
-    return (mount.x, mount.y, mount.yaw), mount_source(cfg), mount.upside_down
+            upside_down, flip_source = (mount.upside_down, "config") if flip is None else (flip, "tf")
+            return (float(tf[0]), float(tf[1]), float(tf[2])), "tf", upside_down, flip_source
+    return (mount.x, mount.y, mount.yaw), mount_source(cfg), mount.upside_down, "config"
 
 
 def warn_default_mount(src: Input, cfg: Config) -> None:

@@ -15,11 +15,11 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from .config import Config, config_from, located, read_config_file
+from .config import Config, config_from, located, read_config_file, warn_ignored
 from .errors import ConfigError, did_you_mean
 from .logs import open_log
 from .logs.params import LaserMountConfig
@@ -143,14 +143,21 @@ def _check_method(method: str, data: dict, overrides: Sequence[str]) -> None:
 
 
 def resolve_config(
-    log_path: str | Path | None, config_path: str | Path | None, overrides: Sequence[str] = ()
+    log_path: str | Path | None,
+    config_path: str | Path | None,
+    overrides: Sequence[str] = (),
+    ignored: Mapping[str, str] | None = None,
 ) -> Config:
     """The run's config: the user's layers over the laser preset that ``input.laser_preset`` selects.
 
-    The config file is read once (it may be a pipe) and layered twice: without, then with the preset."""
+    The config file is read once (it may be a pipe) and layered twice: without, then with the preset.
+    ``ignored``: dotted keys the command leaves unused, each with why; the file setting one is warned
+    about (:func:`config.warn_ignored`)."""
     data = read_config_file(config_path) if config_path is not None else {}
     cfg = config_from(data, overrides)
     _check_method(cfg.association.method, data, overrides)
+    if ignored and config_path is not None:
+        warn_ignored(data, overrides, ignored)
     choice = cfg.input.laser_preset
     if choice == "none" or (choice == "auto" and log_path is None):
         return cfg

@@ -220,8 +220,11 @@ def setup_logging(verbose: int, quiet: bool) -> None:
     logging.basicConfig(level=level, format="%(levelname)s: %(message)s", stream=sys.stderr, force=True)
 
 
-def command_config(config_path, overrides, assoc=None, scan_topic=None, odom_topic=None, log_path=None):
-    """The resolved config: user layers over the laser preset chosen for ``log_path``'s scans."""
+def command_config(
+    config_path, overrides, assoc=None, scan_topic=None, odom_topic=None, log_path=None, ignored=None
+):
+    """The resolved config: user layers over the laser preset chosen for ``log_path``'s scans;
+    ``ignored``: config keys the command leaves unused, each with why (the file setting one: warned)."""
     from .config import yaml_quoted
     from .lasers import resolve_config
 
@@ -239,7 +242,7 @@ def command_config(config_path, overrides, assoc=None, scan_topic=None, odom_top
     ):
         if value:
             extra.append(f"{key}={yaml_quoted(value)}")
-    return resolve_config(log_path, config_path, extra)  # (an unknown associator named where it was given)
+    return resolve_config(log_path, config_path, extra, ignored)  # (an unknown associator named where given)
 
 
 OPTION_OF = {

@@ -139,6 +139,9 @@ class RunInput(JsonResult):
     beam_times: str | None = optional()
     beam_time: float | None = optional()
     laser_upside_down: bool | None = optional()  # appended: the laser's z axis down, its scans mirrored
+    # appended: where laser_upside_down came from — tf (the log's tf) or config (input.laser.upside_down)
+    # — not always laser_to_base_source's (a CARMEN ROBOTLASER1 mount is planar: its flag is the config's)
+    laser_upside_down_source: str | None = optional()
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -440,6 +440,29 @@ def test_compare_refuses_a_set_of_association_method(sim_log, tmp_path):
         assert not (tmp_path / "c").exists()
 
 
+def test_compare_warns_that_a_config_file_s_association_method_is_ignored(sim_log, tmp_path):
+    """A --config file that sets association.method (a shared one may) is no error for compare, which
+    runs each associator of --assoc: one warning line says the file's method is ignored; a file that
+    does not set it gives no such line."""
+    team, other = tmp_path / "team.yaml", tmp_path / "other.yaml"
+    team.write_text("association:\n  alpha: 0.05\n  method: jcbb\n")
+    other.write_text("association:\n  alpha: 0.05\n")
+    res = invoke(
+        "compare", sim_log, "--config", team, "--assoc", "icnn,pca", "--max-scans", 6, "--out", tmp_path / "a"
+    )
+    assert res.exit_code == 0, res.output
+    assert [line for line in res.stderr.splitlines() if "association.method" in line] == [
+        f"WARNING: config file '{team}' line 3: config key 'association.method' = 'jcbb' is ignored: "
+        "compare runs each associator of --assoc (icnn,pca)"
+    ]
+    for a in ("icnn", "pca"):
+        assert json.loads((tmp_path / "a" / a / "summary.json").read_text())["assoc"] == a
+    res = invoke(
+        "compare", sim_log, "--config", other, "--assoc", "pca", "--max-scans", 6, "--out", tmp_path / "b"
+    )
+    assert res.exit_code == 0 and "association.method" not in res.stderr, res.output
+
+
 @pytest.mark.parametrize("jobs", ["1", "2"])
 def test_compare_warns_of_the_default_laser_mount_once(tmp_path, jobs):
     """A log without tf for the laser: the built-in mount is the input's warning, printed once however

@@ -16,8 +16,11 @@ from _run_helpers import run_cli
 from cornerslam_cli.logs import open_log
 from cornerslam_cli.logs.base import ReadStats, make_scan
 from cornerslam_cli.logs.deskew import beam_times
+from cornerslam_cli.logs.ros import transform_matrix
 from cornerslam_cli.logs.writers import RawScan, write_carmen
 from cornerslam_cli.logs.writers.ros import JsonSerializer
+from cornerslam_cli.report.text import mount_line
+from cornerslam_cli.results import RunSummary
 from cornerslam_cli.types import Scan
 
 SAMPLE = "sample_logs/sim_office.mcap"
@@ -140,6 +143,7 @@ def test_upside_down_laser_gives_the_upright_run(tmp_path):
     a = run_cli(up, tmp_path / "a", "submaps.enabled=false")
     b = run_cli(down, tmp_path / "b", "submaps.enabled=false")
     assert b["input"]["laser_upside_down"] and not a["input"]["laser_upside_down"]
+    assert b["input"]["laser_upside_down_source"] == a["input"]["laser_upside_down_source"] == "tf"
     ta = np.genfromtxt(tmp_path / "a" / "trajectory.csv", delimiter=",", names=True)
     tb = np.genfromtxt(tmp_path / "b" / "trajectory.csv", delimiter=",", names=True)
     assert len(ta) == len(tb) > 20
@@ -188,6 +192,24 @@ def test_tilted_laser_is_warned_about(tmp_path, caplog):
     assert "tilts the laser 30° from level" in caplog.text
 
 
+def test_tf_quaternion_with_a_huge_component_keeps_its_rotation(tmp_path):
+    """A tf rotation (1e200, 0, 0, 1), from corrupt data, is roll π: the laser upside down. Its squared
+    length overflows to inf, which must not normalise it to no rotation (read as upright)."""
+    np.testing.assert_allclose(
+        transform_matrix((0.0, 0.0, 0.0), (1e200, 0.0, 0.0, 1.0)), np.diag([1, -1, -1, 1]), atol=1e-15
+    )
+    np.testing.assert_allclose(  # π about (1, 1, 0)/√2: x and y swap, z turns down
+        transform_matrix((0.0, 0.0, 0.0), (1e200, 1e200, 0.0, 0.0))[:3, :3],
+        [[0, 1, 0], [1, 0, 0], [0, 0, -1]],
+        atol=1e-15,
+    )
+    raw, odoms, mount = _sample_log()
+    m = (mount[0], mount[1], 0.0)
+    path = _write(tmp_path / "huge.mcap", raw[:5], odoms[:20], m, (1e200, 0.0, 0.0, 1.0))
+    with open_log(path) as log:
+        assert log.laser_to_base() == pytest.approx(m, abs=1e-9) and log.laser_upside_down()
+
+
 def test_config_upside_down_mirrors_a_carmen_robotlaser_log(tmp_path):
     """A CARMEN ROBOTLASER1 log gives the laser's planar offset, which cannot say the laser is upside
     down: ``input.laser.upside_down`` does (its offset still from the log)."""
@@ -198,6 +220,10 @@ def test_config_upside_down_mirrors_a_carmen_robotlaser_log(tmp_path):
     a = run_cli(up, tmp_path / "a", "submaps.enabled=false")
     b = run_cli(down, tmp_path / "b", "submaps.enabled=false", "input.laser.upside_down=true")
     assert b["input"]["laser_upside_down"] and b["input"]["laser_to_base_source"] == "tf"
+    assert b["input"]["laser_upside_down_source"] == "config"  # the offset from the log, the flag not
+    assert mount_line(RunSummary.read(tmp_path / "b").input).endswith(
+        "rad (from the log's ROBOTLASER1 laser pose), upside down (from the config's input.laser.upside_down)"
+    )
     assert not a["input"]["laser_upside_down"]
     ta = np.genfromtxt(tmp_path / "a" / "trajectory.csv", delimiter=",", names=True)
     tb = np.genfromtxt(tmp_path / "b" / "trajectory.csv", delimiter=",", names=True)
@@ -212,6 +238,11 @@ def test_upside_down_alone_still_warns_of_the_default_position(tmp_path):
     log = write_log("mcap-cdr", tmp_path)
     s = run_cli(log, tmp_path / "a", "input.laser.upside_down=true")
     assert s["input"]["laser_upside_down"] and s["input"]["laser_to_base_source"] == "default"
+    assert s["input"]["laser_upside_down_source"] == "config"
+    assert mount_line(RunSummary.read(tmp_path / "a").input).endswith(
+        "rad (the built-in default: not on the log's tf, not in the config), "
+        "upside down (from the config's input.laser.upside_down)"
+    )
     assert any("built-in default" in w for w in s["warnings"])
 
 

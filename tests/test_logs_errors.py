@@ -19,6 +19,7 @@ from _log_fixtures import (
 
 from cornerslam_cli.errors import LogError
 from cornerslam_cli.logs import READERS, detect_format, open_log
+from cornerslam_cli.logs.base import ReadStats, make_scan
 from cornerslam_cli.logs.writers import RawScan, RosSerializer, write_mcap
 
 
@@ -265,6 +266,41 @@ def test_size_mismatch_and_bad_increment(tmp_path, caplog):
     assert scans[1].beam_index.tolist() == list(range(9, -1, -1)) and scans[1].angle_increment > 0
     assert log.stats.size_mismatch == 1 and log.stats.scans_skipped == 2
     assert "imply" in caplog.text and "angle_increment" in caplog.text
+
+
+def test_size_mismatch_of_clockwise_beams_counts_the_beams_the_angles_imply():
+    """A clockwise scan (a negative angle_increment) whose angle_max disagrees with its ranges is
+    warned with the number of beams its angles imply, as its counter-clockwise twin is, never a
+    negative count ('imply -146'); an angle_max on the other side of angle_min from where the beams
+    turn says so; a NaN angle_max is named, not counted as -1 beams; a denormal increment is warned
+    about, not an OverflowError."""
+
+    def warned(angle_min, angle_max, increment):
+        stats = ReadStats()
+        scan = make_scan(stats, "t", 1.0, angle_min, angle_max, increment, 0.1, 30.0, np.ones(10))
+        assert scan is not None and scan.n_beams == 10
+        assert stats.size_mismatch == len(stats.warnings)
+        return [w.removeprefix("t: scan at 1.000 has 10 ranges but ") for w in stats.warnings]
+
+    using = ": using 10 beams from angle_min"
+    assert warned(0.5, 0.5 - 9 * 0.01, -0.01) == warned(0.41, 0.5, 0.01) == []  # 10 beams either way
+    assert (
+        warned(0.5, -0.96, -0.01)
+        == warned(-0.96, 0.5, 0.01)
+        == [  # 146 steps of 0.01 rad
+            f"angle_min/max/increment imply 147{using}"
+        ]
+    )
+    assert warned(-1.0, 0.47, -0.01) == [  # from -1 up to 0.47, but the beams turn clockwise
+        "angle_min/max/increment imply 148 (angle_max is counter-clockwise of angle_min, angle_increment "
+        f"clockwise){using}"
+    ]
+    assert warned(0.5, -0.5, 0.01) == [
+        "angle_min/max/increment imply 101 (angle_max is clockwise of angle_min, angle_increment "
+        f"counter-clockwise){using}"
+    ]
+    assert warned(-1.0, math.nan, -0.01) == [f"angle_max is nan{using}"]
+    assert warned(0.0, 1.0, 1e-320) == [f"angle_min/max/increment imply inf{using}"]
 
 
 def test_undecodable_message_skipped_and_counted(tmp_path, caplog):

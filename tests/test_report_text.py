@@ -77,6 +77,36 @@ def test_summary_lines_without_reference():
         assert summary_lines(replace(s, config=config))[2] == f"laser preset: {line}"
 
 
+def test_mount_line_names_the_upside_down_flag_s_own_source():
+    """The position and the upside-down flag each say where they came from: the flag set by
+    input.laser.upside_down is not the built-in default's, nor the log's on a CARMEN log whose
+    ROBOTLASER1 laser pose gave the position; one source is named once."""
+    s = make_summary()
+    at = "laser mount: x=0.100 m y=0.000 m yaw=0.000 rad"
+    by_config = "upside down (from the config's input.laser.upside_down)"
+
+    def line(position: str, flag: str | None, fmt: str = "mcap", down: bool = True) -> str:
+        inp = replace(
+            s.input,
+            format=fmt,
+            laser_to_base=(0.1, 0.0, 0.0),
+            laser_to_base_source=position,
+            laser_upside_down=down,
+            laser_upside_down_source=flag,
+        )
+        return summary_lines(replace(s, input=inp))[1]
+
+    assert line("default", "config") == (
+        f"{at} (the built-in default: not on the log's tf, not in the config), {by_config}"
+    )
+    assert line("tf", "config", "carmen") == f"{at} (from the log's ROBOTLASER1 laser pose), {by_config}"
+    assert line("preset", "config") == f"{at} (from the laser preset), {by_config}"
+    assert line("tf", "tf") == f"{at}, upside down (from the log's tf)"
+    assert line("config", "config") == f"{at}, upside down (from the config's input.laser)"
+    assert line("tf", "config", down=False) == f"{at} (from the log's tf)"
+    assert line("tf", None) == f"{at} (from the log's tf), upside down"  # a summary without the flag's source
+
+
 def test_summary_lines_with_ground_truth_and_relations():
     acc = accuracy(scan_odom_relations=REL)
     lines = summary_lines(summary(accuracy=acc))

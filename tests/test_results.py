@@ -121,6 +121,7 @@ INPUT_KEYS = [
     "beam_times",  # appended: where the deskewing's beam times came from
     "beam_time",
     "laser_upside_down",  # appended: the laser's z axis down, its scans mirrored
+    "laser_upside_down_source",  # appended: where laser_upside_down came from (tf or config)
 ]
 COUNT_KEYS = [
     "steps", "landmarks", "matched_total", "beams_total", "beams_invalid", "scans_bad_geometry",

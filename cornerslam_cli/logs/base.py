@@ -240,6 +240,24 @@ class LogReader(Protocol):
 # --------------------------------------------------------------------------- shared helpers
 
 
+def _size_disagreement(n: int, angle_min: float, angle_max: float, angle_increment: float) -> str:
+    """What a message's angle_min/max/increment (the increment finite, not 0) imply against its ``n``
+    ranges, for a warning; "" when they agree. The count is the span's magnitude over the step's, so
+    clockwise beams (a negative increment) count as many as counter-clockwise ones; an angle_max on
+    the other side of angle_min from where the beams turn disagrees whatever the count."""
+    if not math.isfinite(angle_max):
+        return f"angle_max is {angle_max!r}"
+    span = angle_max - angle_min
+    steps = abs(span / angle_increment)  # inf for a denormal increment: round() would raise
+    implied = round(steps) + 1 if steps < 1e15 else None
+    text = f"angle_min/max/increment imply {f'{steps:.3g}' if implied is None else implied}"
+    if span * angle_increment < 0:
+        ccw, cw = "counter-clockwise", "clockwise"
+        max_at, beams = (ccw, cw) if angle_increment < 0 else (cw, ccw)
+        return f"{text} (angle_max is {max_at} of angle_min, angle_increment {beams})"
+    return "" if implied == n else text
+
+
 def make_scan(
     stats: ReadStats,
     where: str,
@@ -283,20 +301,17 @@ def make_scan(
         if stats.scans_skipped <= 3:
             stats.warn("%s: scan with stamp %r: skipped", where, stamp)
         return None
-    if angle_max is not None:
-        expected = round((angle_max - angle_min) / angle_increment) + 1 if math.isfinite(angle_max) else -1
-        if expected != n:
-            stats.size_mismatch += 1
-            if stats.size_mismatch <= 3:
-                stats.warn(
-                    "%s: scan at %.3f has %d ranges but angle_min/max/increment imply %d: "
-                    "using %d beams from angle_min",
-                    where,
-                    stamp,
-                    n,
-                    expected,
-                    n,
-                )
+    if angle_max is not None and (implied := _size_disagreement(n, angle_min, angle_max, angle_increment)):
+        stats.size_mismatch += 1
+        if stats.size_mismatch <= 3:
+            stats.warn(
+                "%s: scan at %.3f has %d ranges but %s: using %d beams from angle_min",
+                where,
+                stamp,
+                n,
+                implied,
+                n,
+            )
     if n == 0:
         stats.scans_skipped += 1
         return None

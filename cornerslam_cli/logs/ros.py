@@ -43,9 +43,13 @@ MAX_TILT = 5.0  # degrees: a laser tilted more than this from level (upright or 
 
 
 def transform_matrix(t: tuple[float, float, float], q: tuple[float, float, float, float]) -> np.ndarray:
-    """4x4 homogeneous matrix of translation t and quaternion q = (x, y, z, w) (normalised; not 0)."""
+    """4x4 homogeneous matrix of translation t and quaternion q = (x, y, z, w) (normalised; not 0).
+
+    The length is ``math.hypot``'s, which scales before squaring: a component of 1e200 (corrupt data)
+    still gives its rotation, where x² + y² + z² + w² would overflow to inf and the rotation to none.
+    A non-finite q gives a non-finite matrix (the caller checks the result); a zero q raises."""
     x, y, z, w = q
-    nrm = math.sqrt(x * x + y * y + z * z + w * w)
+    nrm = math.hypot(x, y, z, w)
     x, y, z, w = x / nrm, y / nrm, z / nrm, w / nrm
     T = np.eye(4)
     T[:3, :3] = [

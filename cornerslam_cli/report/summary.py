@@ -82,6 +82,7 @@ def build_summary(
             beam_times=src.beam_times,
             beam_time=src.beam_time,
             laser_upside_down=src.laser_upside_down,
+            laser_upside_down_source=src.laser_upside_down_source,
         ),
         assoc=cfg.association.method,
         counts=run_counts(src, totals, n_landmarks, graph),

@@ -78,12 +78,25 @@ MOUNT_SOURCES = {
 }
 
 
+UPSIDE_DOWN_SOURCES = {"tf": "from the log's tf", "config": "from the config's input.laser.upside_down"}
+
+
 def mount_line(inp: RunInput) -> str:
-    """Where the run's laser mount came from (summary.json's ``input``)."""
+    """Where the run's laser mount came from (summary.json's ``input``): its position, and whether it is
+    upside down, each with its own source — one when they share it."""
     x, y, yaw = inp.laser_to_base
     source = MOUNT_SOURCES.get(inp.laser_to_base_source, inp.laser_to_base_source)
-    flip = ", upside down" if inp.laser_upside_down else ""
-    return f"laser mount: x={x:.3f} m y={y:.3f} m yaw={yaw:.3f} rad{flip} ({source})"
+    if inp.laser_to_base_source == "tf" and inp.format == "carmen":  # a ROBOTLASER1 line's laser pose
+        source = "from the log's ROBOTLASER1 laser pose"
+    at = f"laser mount: x={x:.3f} m y={y:.3f} m yaw={yaw:.3f} rad"
+    flip_source = inp.laser_upside_down_source
+    if not inp.laser_upside_down:
+        return f"{at} ({source})"
+    if flip_source is None:  # a summary written before the flag's source was: not known
+        return f"{at} ({source}), upside down"
+    if flip_source == inp.laser_to_base_source:
+        return f"{at}, upside down ({source})"
+    return f"{at} ({source}), upside down ({UPSIDE_DOWN_SOURCES.get(flip_source, flip_source)})"
 
 
 def preset_lines(config: dict) -> list[str]:
