@@ -210,6 +210,30 @@ def test_tf_quaternion_with_a_huge_component_keeps_its_rotation(tmp_path):
         assert log.laser_to_base() == pytest.approx(m, abs=1e-9) and log.laser_upside_down()
 
 
+def test_tf_quaternion_whose_length_overflows_hypot_keeps_its_rotation(tmp_path):
+    """Two components of 1.5e308 (corrupt data): math.hypot's length is inf too (past 1.8e308), which
+    must not divide every component to 0, read as no rotation (upright, level). (1, 1, 0, 0)/√2 is π
+    about (1, 1, 0)/√2: x and y swap, z turns down, the laser upside down."""
+    np.testing.assert_allclose(
+        transform_matrix((0.0, 0.0, 0.0), (1.5e308, 1.5e308, 0.0, 0.0))[:3, :3],
+        [[0, 1, 0], [1, 0, 0], [0, 0, -1]],
+        atol=1e-15,
+    )
+    np.testing.assert_allclose(  # all four of 1.7e308: 120° about (1, 1, 1), x → y → z → x
+        transform_matrix((0.0, 0.0, 0.0), (1.7e308,) * 4)[:3, :3],
+        [[0, 0, 1], [1, 0, 0], [0, 1, 0]],
+        atol=1e-15,
+    )
+    assert not np.isfinite(transform_matrix((0.0, 0.0, 0.0), (math.inf, 0.0, 0.0, 1.0))).all()
+    assert not np.isfinite(transform_matrix((0.0, 0.0, 0.0), (math.nan, 0.0, 0.0, 1.0))).all()
+    raw, odoms, mount = _sample_log()
+    path = _write(
+        tmp_path / "huge.mcap", raw[:5], odoms[:20], (mount[0], mount[1], 0.0), (1.5e308, 1.5e308, 0, 0)
+    )
+    with open_log(path) as log:
+        assert log.laser_to_base() is not None and log.laser_upside_down()
+
+
 def test_config_upside_down_mirrors_a_carmen_robotlaser_log(tmp_path):
     """A CARMEN ROBOTLASER1 log gives the laser's planar offset, which cannot say the laser is upside
     down: ``input.laser.upside_down`` does (its offset still from the log)."""

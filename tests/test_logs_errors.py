@@ -299,6 +299,9 @@ def test_size_mismatch_of_clockwise_beams_counts_the_beams_the_angles_imply():
         "angle_min/max/increment imply 101 (angle_max is clockwise of angle_min, angle_increment "
         f"counter-clockwise){using}"
     ]
+    assert warned(0.5, 0.41, 0.01) == [  # the count agrees, the direction not: no "10 ranges but imply 10"
+        f"angle_max is clockwise of angle_min, angle_increment counter-clockwise{using}"
+    ]
     assert warned(-1.0, math.nan, -0.01) == [f"angle_max is nan{using}"]
     assert warned(0.0, 1.0, 1e-320) == [f"angle_min/max/increment imply inf{using}"]
 

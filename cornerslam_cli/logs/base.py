@@ -254,7 +254,8 @@ def _size_disagreement(n: int, angle_min: float, angle_max: float, angle_increme
     if span * angle_increment < 0:
         ccw, cw = "counter-clockwise", "clockwise"
         max_at, beams = (ccw, cw) if angle_increment < 0 else (cw, ccw)
-        return f"{text} (angle_max is {max_at} of angle_min, angle_increment {beams})"
+        turn = f"angle_max is {max_at} of angle_min, angle_increment {beams}"
+        return turn if implied == n else f"{text} ({turn})"  # (not "has 10 ranges but ... imply 10")
     return "" if implied == n else text
 
 

@@ -45,10 +45,14 @@ MAX_TILT = 5.0  # degrees: a laser tilted more than this from level (upright or 
 def transform_matrix(t: tuple[float, float, float], q: tuple[float, float, float, float]) -> np.ndarray:
     """4x4 homogeneous matrix of translation t and quaternion q = (x, y, z, w) (normalised; not 0).
 
-    The length is ``math.hypot``'s, which scales before squaring: a component of 1e200 (corrupt data)
-    still gives its rotation, where x² + y² + z² + w² would overflow to inf and the rotation to none.
-    A non-finite q gives a non-finite matrix (the caller checks the result); a zero q raises."""
+    A finite q is first divided by its largest component, then by ``math.hypot``'s length: a
+    component of 1e200, or two of 1.5e308 (corrupt data), still gives its rotation, where the length
+    would overflow to inf (x² + y² + z² + w² from 1e155 on; hypot itself past 1.8e308) and every
+    component divided by it to 0, no rotation. A non-finite q gives a non-finite matrix (the caller
+    checks the result); a zero q raises."""
     x, y, z, w = q
+    if all(math.isfinite(v) for v in q) and (big := max(abs(x), abs(y), abs(z), abs(w))) > 0:
+        x, y, z, w = x / big, y / big, z / big, w / big
     nrm = math.hypot(x, y, z, w)
     x, y, z, w = x / nrm, y / nrm, z / nrm, w / nrm
     T = np.eye(4)
