@@ -256,6 +256,22 @@ def test_config_upside_down_mirrors_a_carmen_robotlaser_log(tmp_path):
     )
 
 
+def test_info_names_a_carmen_robotlaser_mount_as_run_does(tmp_path):
+    """``info`` on a CARMEN ROBOTLASER1 log says the mount comes from the log's laser pose, as run's
+    mount line does (there is no tf in a CARMEN log)."""
+    from click.testing import CliRunner
+
+    from cornerslam_cli.cli import cli
+
+    raw, odoms, _ = _sample_log()
+    raw, odoms = raw[:5], [o for o in odoms if o.stamp <= raw[4].stamp + 0.5]
+    log = write_carmen(tmp_path / "r.clf", raw, odoms, laser="ROBOTLASER1")
+    res = CliRunner().invoke(cli, ["info", str(log)])
+    assert res.exit_code == 0, res.output
+    (line,) = [t for t in res.output.splitlines() if t.startswith("  laser ")]
+    assert line.endswith(" rad (from the log's ROBOTLASER1 laser pose)") and "tf" not in line, line
+
+
 def test_upside_down_alone_still_warns_of_the_default_position(tmp_path):
     """``input.laser.upside_down`` says how the laser is turned, not where it is: a log without tf
     whose config sets nothing else is still at the built-in x = y = yaw = 0, and warned about."""
