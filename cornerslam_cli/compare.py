@@ -20,7 +20,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 from .config import Config
-from .frontend import Frame, Input, frames, open_input, warn_default_mount
+from .frontend import Frame, Input, frames, open_input, warn_mount
 from .pipeline import run_filter
 from .report.comparison import write_comparison
 from .report.outdir import StagedDir
@@ -108,7 +108,7 @@ def compare(
         # the input's: warned once here, not once per associator (its runs skip a repeat); as a run
         # warns it, only when the frames have valid beams (else their error comes alone: check_processed)
         if any(f.n_points for f in frame_list):
-            warn_default_mount(src, cfg)
+            warn_mount(src, cfg)
         dirs = [stage.path / a for a in assocs]
         for d in dirs:
             d.mkdir()

@@ -332,14 +332,23 @@ def _laser_mount(reader, cfg: Config) -> tuple[tuple[float, float, float], str, 
     return (mount.x, mount.y, mount.yaw), mount_source(cfg), mount.upside_down, "config"
 
 
-def warn_default_mount(src: Input, cfg: Config) -> None:
+def warn_mount(src: Input, cfg: Config) -> None:
     """Warn (into summary.json too) when the laser mount is the built-in default: the log has no tf
-    for it and the config does not set it. Called once the run has its frames, so that a log that
-    fails gives its one-line error alone."""
+    for it and the config does not set it; and when the config's ``input.laser.upside_down: true`` is
+    overruled by a tf that mounts the laser upright (the key's default is false and no laser preset
+    sets it, so true was the user's). Called once the run has its frames, so that a log that fails
+    gives its one-line error alone."""
     if src.laser_source == "default":
         src.reader.stats.warn(
             "log '%s' has no tf %s→laser: the laser is taken at the built-in default x=0 y=0 yaw=0 on "
             "the robot (set input.laser.x/y/yaw to its mount, or input.laser.from_tf=false to keep it)",
+            src.path.name, short_text(cfg.input.base_frame),
+        )  # fmt: skip
+    if cfg.input.laser.upside_down and src.laser_upside_down_source == "tf" and not src.laser_upside_down:
+        src.reader.stats.warn(
+            "log '%s': its tf %s→laser mounts the laser upright, and the tf's orientation is used: "
+            "input.laser.upside_down=true is ignored (set input.laser.from_tf=false to use the config's "
+            "mount instead, with input.laser.x/y/yaw)",
             src.path.name, short_text(cfg.input.base_frame),
         )  # fmt: skip
 

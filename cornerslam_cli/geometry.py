@@ -17,6 +17,7 @@ from it in the last bit).
 from __future__ import annotations
 
 import math
+import sys
 
 import numpy as np
 
@@ -149,10 +150,20 @@ def interpolate(stamps: np.ndarray, poses: np.ndarray, t):
 
 def normalize_quaternion(x: float, y: float, z: float, w: float, tol: float = 1e-9) -> tuple:
     """Quaternion (x, y, z, w) scaled to unit length; returned as given when its squared length is
-    within ``tol`` of 1 or not finite. It must not be zero (callers check: it has no direction)."""
+    within ``tol`` of 1 or a component is not finite. It must not be zero (callers check: it has no
+    direction; it raises ZeroDivisionError).
+
+    A q whose squared length overflows (components from about 1.3e154: corrupt data) or falls below
+    float's smallest normal number (all under about 1.5e-154) is first divided by its largest
+    component, as logs/ros.py's ``transform_matrix`` does, so it keeps its rotation (the squared
+    length inf was returned as given: yaw 3π/4 for (1e200, 1e200, 0, 0), π about (1, 1, 0), not
+    π/2); any other q is scaled as it always was (bit for bit)."""
     n2 = x * x + y * y + z * z + w * w
-    if not math.isfinite(n2) or abs(n2 - 1.0) <= tol:
+    if abs(n2 - 1.0) <= tol or not all(math.isfinite(v) for v in (x, y, z, w)):
         return x, y, z, w
+    if not sys.float_info.min <= n2 < math.inf and (big := max(abs(x), abs(y), abs(z), abs(w))) > 0:
+        x, y, z, w = x / big, y / big, z / big, w / big
+        n2 = x * x + y * y + z * z + w * w
     s = 1.0 / math.sqrt(n2)
     return x * s, y * s, z * s, w * s
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from .config import Config
 from .errors import OutputError, display_path
-from .frontend import Frame, Input, check_processed, frames, open_input, warn_default_mount
+from .frontend import Frame, Input, check_processed, frames, open_input, warn_mount
 from .hierarchy import HierarchicalSlam
 from .report.occupancy import ScanStore
 from .report.oserrors import output_errors
@@ -130,7 +130,7 @@ def run_filter(
                 stepped(slam.n_steps)
         writer.close_steps()
         check_processed(src, slam.n_steps, writer.totals.points)
-        warn_default_mount(src, cfg)
+        warn_mount(src, cfg)
         if graph is not None:
             graph.finish()
             if warning := graph.solver_warning():

@@ -421,7 +421,7 @@ def test_compare_gives_each_associator_only_its_own_runs_warnings(sim_log, tmp_p
 
     monkeypatch.setattr(
         pipeline,
-        "warn_default_mount",
+        "warn_mount",
         lambda src, cfg: src.reader.stats.warn(f"ran {cfg.association.method}"),
     )
     compare(sim_log, load_config(), ["icnn", "jcbb"], tmp_path / "cmp", span=Span(max_scans=20))

@@ -118,6 +118,29 @@ def test_a_scaled_quaternion_needs_normalising():
     assert normalize_quaternion(*unit) == unit  # within 1e-9 of unit length: returned as it is
 
 
+def test_a_quaternion_whose_length_overflows_or_underflows_keeps_its_yaw():
+    """Corrupt data: components of 1e200 (x² overflows to inf), 1.5e308 (past even math.hypot) or
+    1e-170 (x² underflows to 0) are still the rotation of their direction, where the squared length
+    inf was returned as given (yaw 3π/4 for π about (1, 1, 0), not π/2) and 0 divided by zero. As
+    logs/ros.py's transform_matrix, a finite q is divided by its largest component first; a
+    non-finite q is still returned as given and a zero q still raises."""
+    for k in (1e200, 1.5e308, 1e-170):
+        q = normalize_quaternion(k, k, 0.0, 0.0)  # π about (1, 1, 0)/√2: x turns onto y
+        assert q == pytest.approx((math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0), abs=1e-15), k
+        assert yaw_from_quaternion(*q) == pytest.approx(math.pi / 2), k
+        q = normalize_quaternion(0.0, 0.0, k, k)  # a quarter turn about z
+        assert yaw_from_quaternion(*q) == pytest.approx(math.pi / 2), k
+    h = math.sqrt(0.5)
+    assert yaw_from_quaternion(*normalize_quaternion(0.0, 0.0, 1.7e308, -1.7e308)) == pytest.approx(
+        -math.pi / 2
+    )
+    assert normalize_quaternion(math.inf, 0.0, 0.0, 1.0) == (math.inf, 0.0, 0.0, 1.0)
+    assert all(map(math.isnan, normalize_quaternion(math.nan, math.nan, math.nan, math.nan)))
+    assert normalize_quaternion(0.0, 0.0, h, h) == (0.0, 0.0, h, h)
+    with pytest.raises(ZeroDivisionError):
+        normalize_quaternion(0.0, 0.0, 0.0, 0.0)
+
+
 # -- invariants ----------------------------------------------------------------------------------
 
 

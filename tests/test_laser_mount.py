@@ -181,6 +181,28 @@ def test_config_upside_down_mirrors_a_log_without_tf(tmp_path):
     )
 
 
+def test_config_upside_down_overruled_by_an_upright_tf_is_warned_about(tmp_path):
+    """``input.laser.upside_down=true`` on a log whose tf mounts the laser upright: the tf decides (the
+    scans are not mirrored), and the key the user set is said to be ignored, once, with the remedy.
+    Not when the tf says upside down too (they agree), nor when the key is not set."""
+    raw, odoms, mount = _sample_log()
+    raw, odoms = raw[:20], [o for o in odoms if o.stamp <= raw[19].stamp + 0.5]
+    up = _write(tmp_path / "up.mcap", raw, odoms, mount, _yaw_q(mount[2]))
+    down = _write(tmp_path / "down.mcap", [_flipped(s) for s in raw], odoms, mount, _upside_down_q(mount[2]))
+    sets = ("submaps.enabled=false", "input.laser.upside_down=true")
+
+    def ignored(summary: dict) -> list[str]:
+        return [w for w in summary["warnings"] if "input.laser.upside_down" in w]
+
+    a = run_cli(up, tmp_path / "a", *sets)
+    assert not a["input"]["laser_upside_down"] and a["input"]["laser_upside_down_source"] == "tf"
+    (warning,) = ignored(a)
+    assert "upright" in warning and "ignored" in warning and "input.laser.from_tf=false" in warning
+    b = run_cli(down, tmp_path / "b", *sets)
+    assert b["input"]["laser_upside_down"] and not ignored(b)
+    assert not ignored(run_cli(up, tmp_path / "c", "submaps.enabled=false"))
+
+
 def test_tilted_laser_is_warned_about(tmp_path, caplog):
     """A tf that tilts the laser 30° (pitch) is used as if level, with one warning naming the angle."""
     raw, odoms, mount = _sample_log()
@@ -254,6 +276,22 @@ def test_config_upside_down_mirrors_a_carmen_robotlaser_log(tmp_path):
     np.testing.assert_allclose(
         np.c_[tb["x"], tb["y"], tb["theta"]], np.c_[ta["x"], ta["y"], ta["theta"]], atol=1e-6
     )
+
+
+def test_info_names_a_carmen_robotlaser_mount_as_run_does(tmp_path):
+    """``info`` on a CARMEN ROBOTLASER1 log says the mount comes from the log's laser pose, as run's
+    mount line does (there is no tf in a CARMEN log)."""
+    from click.testing import CliRunner
+
+    from cornerslam_cli.cli import cli
+
+    raw, odoms, _ = _sample_log()
+    raw, odoms = raw[:5], [o for o in odoms if o.stamp <= raw[4].stamp + 0.5]
+    log = write_carmen(tmp_path / "r.clf", raw, odoms, laser="ROBOTLASER1")
+    res = CliRunner().invoke(cli, ["info", str(log)])
+    assert res.exit_code == 0, res.output
+    (line,) = [t for t in res.output.splitlines() if t.startswith("  laser ")]
+    assert line.endswith(" rad (from the log's ROBOTLASER1 laser pose)") and "tf" not in line, line
 
 
 def test_upside_down_alone_still_warns_of_the_default_position(tmp_path):

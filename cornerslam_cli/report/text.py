@@ -76,6 +76,8 @@ MOUNT_SOURCES = {
     "preset": "from the laser preset",
     "default": "the built-in default: not on the log's tf, not in the config",
 }
+# a CARMEN log's "tf" mount: a ROBOTLASER1 line's laser pose (logs/carmen.py laser_to_base)
+ROBOTLASER_SOURCE = "from the log's ROBOTLASER1 laser pose"
 
 
 UPSIDE_DOWN_SOURCES = {"tf": "from the log's tf", "config": "from the config's input.laser.upside_down"}
@@ -86,8 +88,8 @@ def mount_line(inp: RunInput) -> str:
     upside down, each with its own source — one when they share it."""
     x, y, yaw = inp.laser_to_base
     source = MOUNT_SOURCES.get(inp.laser_to_base_source, inp.laser_to_base_source)
-    if inp.laser_to_base_source == "tf" and inp.format == "carmen":  # a ROBOTLASER1 line's laser pose
-        source = "from the log's ROBOTLASER1 laser pose"
+    if inp.laser_to_base_source == "tf" and inp.format == "carmen":
+        source = ROBOTLASER_SOURCE
     at = f"laser mount: x={x:.3f} m y={y:.3f} m yaw={yaw:.3f} rad"
     flip_source = inp.laser_upside_down_source
     if not inp.laser_upside_down:
@@ -231,9 +233,9 @@ def info_lines(
     upside_down: bool = False,
 ) -> list[str]:
     """``cornerslam info``: the log's format, topics with counts and rates, what a run would use
-    (``laser``: the laser's (x, y, yaw) in the base frame from tf, or None, and ``upside_down`` there;
-    ``scan``: the first scan, its geometry and beam times, with the laser ``preset`` it matches;
-    ``unread``: why it could not be read), problems and notes."""
+    (``laser``: the laser's (x, y, yaw) in the base frame from tf — a CARMEN log's ROBOTLASER1 laser
+    pose — or None, and ``upside_down`` there; ``scan``: the first scan, its geometry and beam times,
+    with the laser ``preset`` it matches; ``unread``: why it could not be read), problems and notes."""
     lines = [f"file:      {display_path(log_path)}", f"format:    {i.format}", f"messages:  {i.n_messages}"]
     if i.start is not None:
         lines.append(f"start:     {i.start:.3f} s")
@@ -250,7 +252,8 @@ def info_lines(
     if laser is not None:
         flip = ", upside down: scans mirrored" if upside_down else ""
         x, y, yaw = laser
-        lines.append(f"  laser     x={x:.3f} m y={y:.3f} m yaw={yaw:.3f} rad{flip} (from tf)")
+        source = ROBOTLASER_SOURCE if i.format == "carmen" else "from tf"
+        lines.append(f"  laser     x={x:.3f} m y={y:.3f} m yaw={yaw:.3f} rad{flip} ({source})")
     else:
         lines.append("  laser     not on tf: from the config's input.laser (built-in default x=0 y=0 yaw=0)")
     if scan is not None:
