@@ -47,8 +47,8 @@ def origins_truth(run: Path, gt: Path) -> tuple[dict[int, np.ndarray], int]:
 def is_right(origin: dict[int, np.ndarray], row: dict) -> bool:
     """Whether a loops.csv ``row``'s pose is within RIGHT_XY / RIGHT_THETA of the true relative pose of
     its two submap origins (``origin``: :func:`origins_truth`)."""
-    true = relative(origin[int(row["submap_from"])], origin[int(row["submap_to"])])
-    got = np.array([float(row[k]) for k in ("x", "y", "theta")])
+    true = relative(origin[int(row["other_submap"])], origin[int(row["submap"])])
+    got = np.array([float(row[k]) for k in ("dx", "dy", "dtheta")])
     return bool(
         np.hypot(*(true[:2] - got[:2])) < RIGHT_XY and abs(wrap_angle(true[2] - got[2])) < RIGHT_THETA
     )
@@ -61,7 +61,7 @@ def score(run: Path, gt: Path) -> dict:
     out = {"submaps": n_sub, "verified": len(loops), "accepted": 0, "wrong": 0, "refused_right": 0}
     tried = set()
     for r in loops:
-        a, b = int(r["submap_from"]), int(r["submap_to"])
+        a, b = int(r["other_submap"]), int(r["submap"])
         tried.add((a, b))
         right = is_right(origin, r)
         if r["accepted"] == "1":

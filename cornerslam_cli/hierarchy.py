@@ -85,12 +85,12 @@ class LoopRecord:
         x, y, th = self.match.pose.tolist()
         return {
             "step": self.step,
-            "submap_from": self.submap_from,
-            "submap_to": self.submap_to,
-            "x": x,
-            "y": y,
-            "theta": th,
-            "corners": self.match.n_corners,
+            "submap": self.submap_to,
+            "other_submap": self.submap_from,
+            "dx": x,
+            "dy": y,
+            "dtheta": th,
+            "n_corners": self.match.n_corners,
             "fitness": self.match.fitness,
             "accepted": self.accepted,
             "inlier": "" if inlier is None else inlier,

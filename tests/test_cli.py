@@ -641,16 +641,27 @@ def test_relations_are_scored_in_run_and_compare(sim_log, tmp_path):
 
 
 def test_output_columns_extend_the_interface_and_never_change_it():
-    """INTERFACE.md's columns come first and in order; ours are appended after them."""
-    from cornerslam_cli.report.tables import TIMING_COLUMNS, TRAJECTORY_COLUMNS
+    """INTERFACE.md's columns come first and in order; ours are appended after them (every CSV it
+    names: loops.csv's were once written under names of our own)."""
+    from cornerslam_cli.report.tables import (
+        LINES_COLUMNS,
+        LOOP_COLUMNS,
+        MAP_COLUMNS,
+        TIMING_COLUMNS,
+        TRAJECTORY_COLUMNS,
+    )
 
-    traj = "step,stamp,x,y,theta,odom_x,odom_y,odom_theta,var_x,var_y,var_theta".split(",")
-    timing = (
+    interface = {
+        "step,stamp,x,y,theta,odom_x,odom_y,odom_theta,var_x,var_y,var_theta": TRAJECTORY_COLUMNS,
+        "id,x,y,phi,var_x,var_y,cov_xy,var_phi,first_step,last_step,n_obs": MAP_COLUMNS,
+        "step,x1,y1,x2,y2": LINES_COLUMNS,
         "step,stamp,n_points,n_lines,n_corners,n_candidates,n_matched,n_new,n_landmarks,"
-        "t_extract,t_predict,t_match,t_update,t_total"
-    ).split(",")
-    assert list(TRAJECTORY_COLUMNS[: len(traj)]) == traj
-    assert list(TIMING_COLUMNS[: len(timing)]) == timing
+        "t_extract,t_predict,t_match,t_update,t_total": TIMING_COLUMNS,
+        "step,submap,other_submap,dx,dy,dtheta,n_corners,fitness,accepted": LOOP_COLUMNS,
+    }
+    for given, ours in interface.items():
+        names = given.split(",")
+        assert list(ours[: len(names)]) == names, given
 
 
 # ---------------------------------------------------------------------------- config

@@ -55,8 +55,8 @@ def raycast_free(world, p: np.ndarray, heading: float) -> float:
 
 
 def closure_errors(log: Path, out: Path) -> list[dict]:
-    """Every row of ``out``/loops.csv with ``err_xy`` (m) and ``err_theta`` (rad): how far its (x, y,
-    theta) is from the true a→b of the two submap origins (module docstring)."""
+    """Every row of ``out``/loops.csv with ``err_xy`` (m) and ``err_theta`` (rad): how far its (dx, dy,
+    dtheta) is from the true a→b of the two submap origins (module docstring)."""
     traj, loops = read_csv(out / "trajectory.csv"), read_csv(out / "loops.csv")
     t_gt, gt = read_tum(log.with_suffix(".gt.tum"))
     stamps = np.asarray(traj["stamp"], dtype=float)
@@ -67,8 +67,8 @@ def closure_errors(log: Path, out: Path) -> list[dict]:
     origin = [truth[0]] + [truth[np.flatnonzero(submap == k - 1)[-1]] for k in range(1, submap.max() + 1)]
     rows = []
     for i in range(len(loops["step"])):
-        a, b = int(loops["submap_from"][i]), int(loops["submap_to"][i])
-        est = np.array([float(loops[c][i]) for c in ("x", "y", "theta")])
+        a, b = int(loops["other_submap"][i]), int(loops["submap"][i])
+        est = np.array([float(loops[c][i]) for c in ("dx", "dy", "dtheta")])
         err = est - relative(origin[a], origin[b])
         row = {k: loops[k][i] for k in loops}
         rows.append(row | {"err_xy": float(np.hypot(*err[:2])), "err_theta": abs(float(wrap_angle(err[2])))})

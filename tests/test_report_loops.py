@@ -165,7 +165,7 @@ def expected_closures(run_dir: Path) -> np.ndarray:
         if after["submap"] != row["submap"]:
             origin[int(after["submap"])] = (float(row["x"]), float(row["y"]))
     loops = [r for r in raw_rows(run_dir / "loops.csv") if r["accepted"] == "1"]
-    return np.array([[origin[int(r["submap_from"])], origin[int(r["submap_to"])]] for r in loops])
+    return np.array([[origin[int(r["other_submap"])], origin[int(r["submap"])]] for r in loops])
 
 
 def closure_line(ax):
@@ -239,6 +239,23 @@ def test_closures_naming_an_unknown_submap_are_left_out_with_a_warning(compared,
         got = load_run(run_dir).loop_closures()
     np.testing.assert_allclose(got, want.reshape(-1, 2, 2), atol=1e-9)
     assert "1 accepted loop closure(s) name a submap that trajectory.csv does not have" in caplog.text
+
+
+def test_closures_of_a_directory_written_before_the_interface_names_are_drawn(compared, tmp_path):
+    """loops.csv was written as step,submap_from,submap_to,x,y,theta,corners,... before it took
+    INTERFACE.md's names (submap = the closed one = submap_to): such a directory still draws its
+    closures."""
+    run_dir = tmp_path / "pca"
+    shutil.copytree(compared[0] / "pca", run_dir)
+    want = expected_closures(run_dir)
+    rows = (run_dir / "loops.csv").read_text().splitlines()
+    old = ["step,submap_from,submap_to,x,y,theta,corners,fitness,accepted,inlier,chi2,reason"]
+    for line in rows[1:]:
+        c = line.split(",")
+        old.append(",".join([c[0], c[2], c[1], *c[3:]]))
+    (run_dir / "loops.csv").write_text("\n".join(old) + "\n")
+    assert len(want) > 0
+    np.testing.assert_allclose(load_run(run_dir).loop_closures(), want.reshape(-1, 2, 2), atol=1e-9)
 
 
 def test_compare_maps_count_each_associators_closures(compared, tmp_path, monkeypatch):

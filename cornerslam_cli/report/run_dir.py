@@ -64,7 +64,9 @@ class RunData:
             return np.zeros((0, 2, 2))
         origins = submap_origins(self.submap, self.corrected)
         accepted = self.loops["accepted"] == 1
-        ab = np.column_stack((self.loops["submap_from"], self.loops["submap_to"]))[accepted]
+        # (a directory written before 2026-12-03 names them submap_from, submap_to)
+        a, b = ("other_submap", "submap") if "submap" in self.loops else ("submap_from", "submap_to")
+        ab = np.column_stack((self.loops[a], self.loops[b]))[accepted]
         known = np.all((ab >= 0) & (ab < len(origins)), axis=1)
         if not known.all():  # an edited or mismatched directory: draw what can be placed
             log.warning(

@@ -30,7 +30,10 @@ TRAJECTORY_COLUMNS = (
 ).split(",")
 # (appended, issue 16) the landmark's submap and the id of the corner it was matched to across a loop closure
 MAP_COLUMNS = "id,x,y,phi,var_x,var_y,cov_xy,var_phi,first_step,last_step,n_obs,submap,linked_to".split(",")
-LOOP_COLUMNS = "step,submap_from,submap_to,x,y,theta,corners,fitness,accepted,inlier,chi2,reason".split(",")
+# INTERFACE.md's: ``submap`` the one that closed, ``other_submap`` the earlier one, (dx, dy, dtheta) the
+# first's origin in the other's frame; then (appended) inlier, chi2, reason
+LOOP_COLUMNS = "step,submap,other_submap,dx,dy,dtheta,n_corners,fitness,accepted".split(",")
+LOOP_COLUMNS += ["inlier", "chi2", "reason"]
 LINES_COLUMNS = ["step", "x1", "y1", "x2", "y2"]
 TIMING_COLUMNS = (
     "step,stamp,n_points,n_lines,n_corners,n_candidates,n_matched,n_new,n_landmarks,"
