@@ -340,17 +340,24 @@ def warn_mount(src: Input, cfg: Config) -> None:
     gives its one-line error alone."""
     if src.laser_source == "default":
         src.reader.stats.warn(
-            "log '%s' has no tf %s→laser: the laser is taken at the built-in default x=0 y=0 yaw=0 on "
+            "log '%s' has no tf %s: the laser is taken at the built-in default x=0 y=0 yaw=0 on "
             "the robot (set input.laser.x/y/yaw to its mount, or input.laser.from_tf=false to keep it)",
-            src.path.name, short_text(cfg.input.base_frame),
+            src.path.name, _tf_text(src, cfg),
         )  # fmt: skip
     if cfg.input.laser.upside_down and src.laser_upside_down_source == "tf" and not src.laser_upside_down:
         src.reader.stats.warn(
-            "log '%s': its tf %s→laser mounts the laser upright, and the tf's orientation is used: "
+            "log '%s': its tf %s mounts the laser upright, and the tf's orientation is used: "
             "input.laser.upside_down=true is ignored (set input.laser.from_tf=false to use the config's "
             "mount instead, with input.laser.x/y/yaw)",
-            src.path.name, short_text(cfg.input.base_frame),
+            src.path.name, _tf_text(src, cfg),
         )  # fmt: skip
+
+
+def _tf_text(src: Input, cfg: Config) -> str:
+    """``base→laser`` as the log names them: the reader's base frame (``/`` stripped) and the frame
+    of its scans (``laser`` when the reader has none: no scan read, an empty frame_id)."""
+    base = getattr(src.reader, "base_frame", None) or cfg.input.base_frame
+    return f"{short_text(base)}→{short_text(getattr(src.reader, 'laser_frame', None) or 'laser')}"
 
 
 def _scan_count(info) -> int:

@@ -4,6 +4,7 @@ counter-clockwise laser: the run must not tell them apart."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import math
@@ -86,10 +87,10 @@ def _sample_log() -> tuple[list[RawScan], list]:
     return raw, odoms, mount
 
 
-def _tf(ser: JsonSerializer, stamp: float, mount, q) -> bytes:
+def _tf(ser: JsonSerializer, stamp: float, mount, q, frame: str = "laser") -> bytes:
     ts = {
         "header": ser.header(stamp, "base_link"),
-        "child_frame_id": "laser",
+        "child_frame_id": frame,
         "transform": {
             "translation": {"x": mount[0], "y": mount[1], "z": 0.3},
             "rotation": dict(zip("xyzw", q, strict=True)),
@@ -98,10 +99,12 @@ def _tf(ser: JsonSerializer, stamp: float, mount, q) -> bytes:
     return json.dumps({"transforms": [ts]}).encode()
 
 
-def _write(path, raw, odoms, mount, q):
+def _write(path, raw, odoms, mount, q, frame: str = "laser"):
+    """An MCAP of the scans, the odometry and a /tf_static base_link→``frame`` (none when q is None)."""
     ser = JsonSerializer()
     t0 = int(min(raw[0].stamp, odoms[0].stamp) * 1e9) - 1
-    msgs = [("/tf_static", "tf2_msgs/msg/TFMessage", t0, _tf(ser, t0 * 1e-9, mount, q))]
+    tf = [] if q is None else [_tf(ser, t0 * 1e-9, mount, q, frame)]
+    msgs = [("/tf_static", "tf2_msgs/msg/TFMessage", t0, m) for m in tf]
     msgs += [("/scan", "sensor_msgs/msg/LaserScan", int(s.stamp * 1e9), ser.laserscan(s)) for s in raw]
     msgs += [
         ("/odom", "nav_msgs/msg/Odometry", int(o.stamp * 1e9), ser.odometry(o, "odom", "base_link"))
@@ -201,6 +204,21 @@ def test_config_upside_down_overruled_by_an_upright_tf_is_warned_about(tmp_path)
     b = run_cli(down, tmp_path / "b", *sets)
     assert b["input"]["laser_upside_down"] and not ignored(b)
     assert not ignored(run_cli(up, tmp_path / "c", "submaps.enabled=false"))
+
+
+def test_mount_warnings_name_the_log_s_laser_frame(tmp_path):
+    """The warnings about the mount name the tf as the log does: base_link→hokuyo_link for scans in
+    frame hokuyo_link, not a frame "laser" the log does not have."""
+    raw, odoms, mount = _sample_log()
+    raw = [dataclasses.replace(s, frame_id="hokuyo_link") for s in raw[:10]]
+    odoms = [o for o in odoms if o.stamp <= raw[-1].stamp + 0.5]
+    up = _write(tmp_path / "up.mcap", raw, odoms, mount, _yaw_q(mount[2]), frame="hokuyo_link")
+    a = run_cli(up, tmp_path / "a", "submaps.enabled=false", "input.laser.upside_down=true")
+    (warning,) = [w for w in a["warnings"] if "input.laser.upside_down" in w]
+    assert "its tf base_link→hokuyo_link mounts the laser upright" in warning, warning
+    bare = _write(tmp_path / "bare.mcap", raw, odoms, mount, None)
+    warnings = run_cli(bare, tmp_path / "b", "submaps.enabled=false")["warnings"]
+    assert any("has no tf base_link→hokuyo_link:" in w for w in warnings), warnings
 
 
 def test_tilted_laser_is_warned_about(tmp_path, caplog):

@@ -172,6 +172,7 @@ class RosLogReader:
         self.odom_topic = self._odom_sel.topic
         self._laser2base: Pose2 | None | bool = False  # False = not computed yet
         self._laser_upside_down = False  # the tf's laser z axis points down (set with _laser2base)
+        self.laser_frame: str | None = None  # the first scan's frame_id (set by laser_to_base()), None unread
         self.odom_on_tf = False  # laser_to_base() saw tf odom_frame→base_frame (a results MCAP need not)
 
     # ---------------------------------------------------------------- selection
@@ -426,6 +427,7 @@ class RosLogReader:
                     edges.setdefault((parent, child), transform_matrix(t, q))
             except Exception as exc:  # noqa: BLE001 - bad bytes are counted, never raised
                 logger.debug("laser_to_base: skipping undecodable %s message: %s", topic, exc)
+        self.laser_frame = frame
         if frame is None:
             self._laser2base = None
             return None
