@@ -488,6 +488,19 @@ def override_leaves(keys: list[str], value: Any) -> list[tuple[str, Any]]:
     return [(key, value)]
 
 
+def set_leaves(overrides: typing.Sequence[str]) -> typing.Iterator[tuple[str, str, Any]]:
+    """(the --set's text, dotted key, value) of each key the ``overrides`` set (:func:`override_leaves`:
+    a mapping's keys too); a --set that :func:`parse_override` refuses is left out (its own error comes
+    from :func:`config_from`)."""
+    for text in overrides:
+        try:
+            keys, parsed = parse_override(text)
+        except ConfigError:
+            continue
+        for leaf, loaded in override_leaves(keys, parsed):
+            yield text, leaf, loaded
+
+
 def config_from(data: dict, overrides: typing.Sequence[str] = (), base: dict | None = None) -> Config:
     """The config of a file's mapping ``data`` over the partial config ``base`` (a laser preset), with
     ``key=value`` overrides applied: defaults < base < data < overrides. ``data`` is not modified."""
@@ -519,7 +532,7 @@ def warn_ignored(data: dict, overrides: typing.Sequence[str], ignored: typing.Ma
     that the config file's ``data`` (:func:`read_config_file`) sets and no ``--set`` of ``overrides``
     does: said, not refused, since one file may serve several commands. A ``--set`` of such a key is
     the command's own to refuse (``options.check_method_not_set``)."""
-    given = {leaf for text in overrides for leaf, _ in override_leaves(*parse_override(text))}
+    given = {leaf for _, leaf, _ in set_leaves(overrides)}
     lines = getattr(data, "lines", {})
     for key, why in ignored.items():
         node: Any = data

@@ -258,7 +258,9 @@ def check_option_agrees(overrides, options: dict[str, str | None]) -> None:
     to win without a word."""
     import yaml
 
-    for text, leaf, loaded in _set_leaves(overrides):
+    from .config import set_leaves
+
+    for text, leaf, loaded in set_leaves(overrides):
         value = text.partition("=")[2]  # (parse_override refuses a --set without one)
         given = options.get(leaf)
         if not given:
@@ -274,27 +276,14 @@ def check_option_agrees(overrides, options: dict[str, str | None]) -> None:
 def check_method_not_set(overrides, assocs: str) -> None:
     """A usage error for ``compare`` given a ``--set`` of ``association.method``: compare runs each
     associator of ``--assoc``, so the ``--set`` would be ignored without a word."""
-    for text, leaf, loaded in _set_leaves(overrides):
+    from .config import set_leaves
+
+    for text, leaf, loaded in set_leaves(overrides):
         if leaf == "association.method":
             raise click.UsageError(
                 f"compare runs each associator of --assoc ({assocs}): --set '{text}' would be "
                 f"ignored; give --assoc {loaded} instead"
             )
-
-
-def _set_leaves(overrides):
-    """(the --set's text, dotted key, value) of each key the ``--set`` overrides set (a mapping's keys
-    too: config.override_leaves); a --set the config cannot parse is left out (its own error comes
-    from the config)."""
-    from .config import ConfigError, override_leaves, parse_override
-
-    for text in overrides:
-        try:
-            keys, parsed = parse_override(text)
-        except ConfigError:
-            continue
-        for leaf, loaded in override_leaves(keys, parsed):
-            yield text, leaf, loaded
 
 
 def parse_assocs(text: str | None, allow_many: bool, log_path: str | None = None) -> list[str]:
