@@ -23,7 +23,14 @@ so keyframes as sparse as the panel's; ``CONTROLS``: the simulator's 270° laser
 the radish lasers with 1 and 3 cm of range noise, in the office and in a loop of corridors) against
 their exact ground truth. Where a reference moves much more than the controls, and its scans fit
 clearly better where ICP puts them, the reference itself is off — a floor under any relative-pose
-error measured against it. Writes ``docs/results/reference_check.md``; deterministic.
+error measured against it.
+
+A third table signs ICP's move along the direction of travel (negative: ICP shortens the reference's
+step), split by how many of the scan's points lie on map lines facing the travel (``FACING``): where
+fewer than ``FEW_FACING`` do (a corridor), little holds the pose along it, and a reference made where its
+own scans could not hold it either may have followed its odometry there. The corridor-loop control
+(``RING_LAPS`` laps, so the comparison has the precision) says what ICP does there against the truth.
+Writes ``docs/results/reference_check.md``; deterministic.
 """
 
 from __future__ import annotations
@@ -52,6 +59,8 @@ SEARCH_XY, SEARCH_THETA = 0.3, 0.3  # m, rad: the search around the reference po
 REFUTE_FIT = 0.2  # the best pose fits this much better (share of points) ...
 REFUTE_XY, REFUTE_THETA = 0.1, np.radians(3.0)  # ... and lies this far away: the reference is refuted
 P2L_CAP = 0.15  # m: a scan point counts for the point-to-line residual when a map point is this near
+FACING = np.radians(45.0)  # a map line faces the direction of travel when its normal is this near it
+FEW_FACING = 10  # keyframes with fewer scan points on such lines: little to hold the pose along the travel
 SIM_SEED, SIM_RATE = 1, 1.0  # the controls: a scan a second (0.5 m at the simulator's speed)
 # (name, field of view °, beams: 1° apart, σ of the range noise's constant part m, world: the office, or
 # RING — a corridor loop like infinite-corridor's, where ICP knows little along the axis)
@@ -59,9 +68,11 @@ CONTROLS = (
     ("270°, 1 cm", 270, 271, 0.01, "office"),
     ("180°, 1 cm", 180, 181, 0.01, "office"),
     ("180°, 3 cm", 180, 181, 0.03, "office"),
-    ("180°, 1 cm, corridor loop", 180, 181, 0.01, "ring"),
+    ("180°, 1 cm, corridor loop ×3", 180, 181, 0.01, "ring"),
 )
-# the corridor loop: 2.4 m wide around a 57.6 × 17.6 m block, the outer walls' doors (0.9 m) every 7.3 m
+# the corridor loop: 2.4 m wide around a 57.6 × 17.6 m block, the outer walls' doors (0.9 m) every 7.3 m;
+# driven RING_LAPS times (~950 keyframes), so its move along the travel is known to ±0.25 %
+RING_LAPS = 3
 RING_DOORS = [(float(d), 0.9) for d in np.arange(3.0, 60.0, 7.3)]
 RING_LOOP = np.array([(0.0, 0.0), (60.0, 0.0), (60.0, 20.0), (0.0, 20.0)])
 
@@ -73,6 +84,14 @@ def point_to_line(local: LocalMap, tree: cKDTree, placed: np.ndarray) -> float:
     ok = (d < P2L_CAP) & local.has_normal[np.minimum(i, len(local.points) - 1)]
     r = np.einsum("ij,ij->i", placed[ok] - local.points[i[ok]], local.normals[i[ok]])
     return float(np.median(np.abs(r))) if ok.any() else float("nan")
+
+
+def facing(local: LocalMap, tree: cKDTree, placed: np.ndarray, u: np.ndarray) -> int:
+    """How many of the ``placed`` points lie (within P2L_CAP) on map lines facing the direction of
+    travel ``u`` (normal within FACING of it): what tells ICP where the robot is along its travel."""
+    d, i = tree.query(placed)
+    ok = (d < P2L_CAP) & local.has_normal[np.minimum(i, len(local.points) - 1)]
+    return int(np.sum(np.abs(local.normals[i[ok]] @ u) > np.cos(FACING)))
 
 
 def check(args: tuple[Path, list[str]]) -> dict:
@@ -97,12 +116,17 @@ def scored(name: str, cfg: ScanMatchConfig, laser2base, pairs, ref: np.ndarray) 
         tree = cKDTree(local.points)
         near = register(q, local, ref[k], cfg).pose  # ICP from the reference pose
         d = relative(ref[k], near)
+        travel = np.asarray(ref[k][:2]) - ref[k - 1][:2]
+        u = travel / max(float(np.hypot(*travel)), 1e-9)  # the direction of travel
         small.append(
             (
                 float(np.hypot(d[0], d[1])),
                 abs(float(wrap_angle(d[2]))),
                 point_to_line(local, tree, transform_points(q, ref[k])),
                 point_to_line(local, tree, transform_points(q, near)),
+                float((np.asarray(near[:2]) - ref[k][:2]) @ u),  # ICP's move along the travel
+                float(np.hypot(*travel)),
+                facing(local, tree, transform_points(q, ref[k]), u),
             )
         )
         found = search(
@@ -139,7 +163,7 @@ def controls(data_dir: Path) -> list[Path]:
     logs = []
     for i, (_, fov, beams, sigma, world) in enumerate(CONTROLS):
         log = data_dir / f"control{i}.mcap"
-        ring = {"world": ring_world(), "waypoints": RING_LOOP} if world == "ring" else {}
+        ring = {"world": ring_world(), "waypoints": RING_LOOP, "laps": RING_LAPS} if world == "ring" else {}
         simulate_log(
             log, seed=SIM_SEED, rate=SIM_RATE, beams=beams, speed=0.5, fov=np.radians(fov), sigma_a=sigma,
             **ring,
@@ -157,6 +181,23 @@ def small_row(r: dict) -> str:
         f"| {np.mean(turned):.2f} | {1000 * np.mean(at_ref[ok]):.1f} | {1000 * np.mean(at_icp[ok]):.1f} "
         f"| {100 * np.mean(at_icp[ok] < at_ref[ok]):.0f} % |"
     )
+
+
+def along_row(r: dict) -> str:
+    """ICP's signed move along the travel, per metre travelled (%), and its mean (cm) with its standard
+    error, for keyframes with few and with many scan points on lines facing the travel."""
+    s = r["small"]
+    cells = []
+    for sel in (s[:, 6] < FEW_FACING, s[:, 6] >= FEW_FACING):
+        a = s[sel, 4]
+        if len(a) < 2:
+            cells.append(f"{len(a)} | – | –")
+            continue
+        cells.append(
+            f"{len(a)} | {100 * a.sum() / s[sel, 5].sum():+.2f} % "
+            f"| {100 * a.mean():+.2f} ± {100 * a.std(ddof=1) / np.sqrt(len(a)):.2f}"
+        )
+    return f"| {r['log']} | " + " | ".join(cells) + " |"
 
 
 def main() -> None:
@@ -215,6 +256,25 @@ def main() -> None:
         *(small_row(r) for r in rows),
         *(
             small_row({**r, "log": f"control: simulated, exact, {c[0]}"})
+            for r, c in zip(sims, CONTROLS, strict=True)
+        ),
+        "",
+        "## Along the direction of travel",
+        "",
+        "The same ICP runs, signed: how far ICP moves the pose *along the direction of travel* (from the "
+        "previous keyframe's reference pose to this one's; negative: back, a shorter step), as a share "
+        "of the distance travelled and as a mean per keyframe (cm, ± its standard error). Split by what "
+        "can hold the pose along the travel: keyframes with fewer than "
+        f"{FEW_FACING} scan points on map lines facing it (normal within {np.degrees(FACING):.0f}°: a "
+        "corridor's end, door jambs, furniture) and those with more. The controls say what ICP does "
+        "where the reference is the truth.",
+        "",
+        f"| log | keyframes, < {FEW_FACING} facing | ICP's move along the travel | mean (cm) "
+        f"| keyframes, ≥ {FEW_FACING} facing | ICP's move along the travel | mean (cm) |",
+        "|---|---:|---:|---|---:|---:|---|",
+        *(along_row(r) for r in rows),
+        *(
+            along_row({**r, "log": f"control: simulated, exact, {c[0]}"})
             for r, c in zip(sims, CONTROLS, strict=True)
         ),
     ]
