@@ -322,7 +322,7 @@ def compare(
     span = parse_span(start, end, max_scans)
     why = f"compare runs each associator of --assoc ({','.join(names)})"
     cfg = command_config(
-        config_path, overrides, None, scan_topic, odom_topic, log_path, {"association.method": why}
+        config_path, overrides, None, scan_topic, odom_topic, log_path, {"association.method": (why, names)}
     )
     check_method_not_set(overrides, assocs)  # (after the config: an unknown name is named as such)
     out_dir = Path(out) if out else default_out_dir(Path(log_path), "compare")

@@ -527,18 +527,24 @@ def located(e: ConfigError, data: dict, overrides: typing.Sequence[str]) -> Conf
     return _located(e, data, given)
 
 
-def warn_ignored(data: dict, overrides: typing.Sequence[str], ignored: typing.Mapping[str, str]) -> None:
-    """A warning (logged) for each dotted key of ``ignored`` (key → why the command leaves it unused)
-    that the config file's ``data`` (:func:`read_config_file`) sets and no ``--set`` of ``overrides``
-    does: said, not refused, since one file may serve several commands. A ``--set`` of such a key is
-    the command's own to refuse (``options.check_method_not_set``)."""
+def warn_ignored(
+    data: dict,
+    overrides: typing.Sequence[str],
+    ignored: typing.Mapping[str, tuple[str, typing.Collection[Any]]],
+) -> None:
+    """A warning (logged) for each dotted key of ``ignored`` (key → why the command leaves it unused,
+    and the values it runs anyway) that the config file's ``data`` (:func:`read_config_file`) sets, to
+    a value the command does not run, and no ``--set`` of ``overrides`` does: said, not refused, since
+    one file may serve several commands (compare runs each associator of --assoc: a file's
+    ``association.method: pca`` is no news when pca is one of them). A ``--set`` of such a key is the
+    command's own to refuse (``options.check_method_not_set``)."""
     given = {leaf for _, leaf, _ in set_leaves(overrides)}
     lines = getattr(data, "lines", {})
-    for key, why in ignored.items():
+    for key, (why, runs) in ignored.items():
         node: Any = data
         for part in key.split("."):
             node = node.get(part, ...) if isinstance(node, dict) else ...
-        if node is ... or key in given:
+        if node is ... or key in given or (isinstance(node, str) and node in runs):
             continue
         where = getattr(data, "where", "config file") + (f" line {lines[key]}" if key in lines else "")
         log.warning("%s: config key '%s' = %s is ignored: %s", where, key, short_repr(node), why)

@@ -15,9 +15,10 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from .config import Config, config_from, located, read_config_file, warn_ignored
 from .errors import ConfigError, did_you_mean
@@ -146,13 +147,13 @@ def resolve_config(
     log_path: str | Path | None,
     config_path: str | Path | None,
     overrides: Sequence[str] = (),
-    ignored: Mapping[str, str] | None = None,
+    ignored: Mapping[str, tuple[str, Collection[Any]]] | None = None,
 ) -> Config:
     """The run's config: the user's layers over the laser preset that ``input.laser_preset`` selects.
 
     The config file is read once (it may be a pipe) and layered twice: without, then with the preset.
-    ``ignored``: dotted keys the command leaves unused, each with why; the file setting one is warned
-    about (:func:`config.warn_ignored`)."""
+    ``ignored``: dotted keys the command leaves unused, each with why and the values it runs anyway;
+    the file setting one to another value is warned about (:func:`config.warn_ignored`)."""
     data = read_config_file(config_path) if config_path is not None else {}
     cfg = config_from(data, overrides)
     _check_method(cfg.association.method, data, overrides)

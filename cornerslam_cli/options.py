@@ -224,7 +224,8 @@ def command_config(
     config_path, overrides, assoc=None, scan_topic=None, odom_topic=None, log_path=None, ignored=None
 ):
     """The resolved config: user layers over the laser preset chosen for ``log_path``'s scans;
-    ``ignored``: config keys the command leaves unused, each with why (the file setting one: warned)."""
+    ``ignored``: config keys the command leaves unused, each with why and the values it runs anyway (the
+    file setting one to another value: warned)."""
     from .config import yaml_quoted
     from .lasers import resolve_config
 
