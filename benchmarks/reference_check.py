@@ -71,7 +71,7 @@ CONTROLS = (
     ("180°, 1 cm, corridor loop ×3", 180, 181, 0.01, "ring"),
 )
 # the corridor loop: 2.4 m wide around a 57.6 × 17.6 m block, the outer walls' doors (0.9 m) every 7.3 m;
-# driven RING_LAPS times (~950 keyframes), so its move along the travel is known to ±0.25 %
+# driven RING_LAPS times (~970 keyframes), so its move along the travel is known to ±0.26 %
 RING_LAPS = 3
 RING_DOORS = [(float(d), 0.9) for d in np.arange(3.0, 60.0, 7.3)]
 RING_LOOP = np.array([(0.0, 0.0), (60.0, 0.0), (60.0, 20.0), (0.0, 20.0)])
