@@ -33,6 +33,7 @@ from .options import (  # noqa: E402
     GivenPath,
     check_method_not_set,
     check_option_agrees,
+    check_sweep_not_set,
     check_time_offset,
     command_config,
     config_options,
@@ -516,7 +517,9 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
     if scheduler and jobs:
         log.warning("--jobs is ignored with --scheduler (the cluster's workers run the batch)")
     check_claimable(out, "batch")  # a directory that is not a batch's: refused before any work
-    combos = plan(logs, names, parse_sweeps(sweeps), overrides, config_path)
+    swept = parse_sweeps(sweeps)
+    check_sweep_not_set(overrides, swept)  # the sweep is set after each --set: one would be ignored
+    combos = plan(logs, names, swept, overrides, config_path)
     progress = BatchProgress(not quiet)
     try:
         rows = run_batch(combos, out, jobs, scheduler, progress)

@@ -312,3 +312,16 @@ def test_resume_reruns_a_combination_whose_ground_truth_changed(tmp_path):
     summary = json.loads((out / combos[0].name / "summary.json").read_text())
     assert summary["accuracy"]["ate"]["rmse"] == pytest.approx(float(again["ate_rmse"]))
     assert [r["status"] for r in run_batch(combos, out, jobs=1)] == ["skipped"]  # unchanged since: reused
+
+
+@pytest.mark.parametrize(
+    "given", ["association.pca.group_size=4", "association.pca={group_size: 4, max_nodes: 900}"]
+)
+def test_a_set_of_a_swept_key_is_a_usage_error(logs, tmp_path, given):
+    """``--set K=v`` beside ``--sweep K=...``: every combination used the swept value and the --set was
+    ignored without a word (exit 0); now refused before any work, naming both."""
+    args = ["batch", str(logs[0]), *SWEEP, "--set", given, "--out", str(tmp_path / "out"), "-q"]
+    res = CliRunner().invoke(cli, args)
+    assert res.exit_code == 2, res.output
+    assert f"--sweep {KEY} and --set '{given}' set the same key" in res.output
+    assert "Traceback" not in res.output and not (tmp_path / "out").exists()
