@@ -456,11 +456,15 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
       cornerslam extract sample_logs/sim_office.mcap --step 40 --plot scan40.png
     """
     from .extract import extract_step
+    from .frontend import scans_prepared
     from .report.extract_plot import format_extraction, plot_extraction
 
     setup_logging(verbose, quiet)
     cfg = command_config(config_path, overrides, None, scan_topic, odom_topic, log_path)
-    scan, segments, corners = extract_step(log_path, step, cfg)
+    # the beams a run keeps (input.skip_beams_*, input.max_range), in the sensor frame (not mirrored)
+    scan, segments, corners = extract_step(
+        log_path, step, cfg, lambda r: scans_prepared(r, cfg, msgs=r.scans())
+    )
     click.echo(scan_heading(step, scan))
     click.echo(format_extraction(segments, corners))
     if plot_path:
