@@ -99,7 +99,6 @@ def run_batch(
     or the Dask cluster at ``scheduler``. Rows come in the order of ``combos``.
     """
     from .config import Config, from_dict
-    from .report.run_writer import find_ground_truth
     from .report.summary import config_hash, input_hash
 
     out = Path(out_dir)
@@ -109,6 +108,7 @@ def run_batch(
     rows = [_row(c, "pending") for c in combos]
     state = BatchState(len(combos))
     log_hashes: dict[str, str | None] = {}
+    gt_hashes: dict[str, str | None | bool] = {}  # False: a ground truth the run cannot read
     todo: list[int] = []
     for i, c in enumerate(combos):
         if c.error:
@@ -120,11 +120,13 @@ def run_batch(
                 log_hashes[c.log] = input_hash(Path(c.log))
             except (OSError, CornerslamError):
                 log_hashes[c.log] = None  # the run reports the unreadable log (or pipe)
+            gt_hashes[c.log] = _ground_truth_hash(c.log)
         figures = None
-        if log_hashes[c.log] is not None:
+        gt_hash = gt_hashes[c.log]
+        if log_hashes[c.log] is not None and gt_hash is not False:
             expect = Hashes(input=log_hashes[c.log], config=config_hash(from_dict(Config, c.config)),
-                            version=__version__)  # fmt: skip
-            figures = _resumable(out / c.name, expect, find_ground_truth(Path(c.log)) is not None)
+                            version=__version__, ground_truth=gt_hash or None)  # fmt: skip
+            figures = _resumable(out / c.name, expect, gt_hash is not None)
         if figures is not None:
             rows[i] = _row(c, "skipped", figures=figures)
             state.skipped += 1
@@ -184,6 +186,22 @@ def figures_from_summary(s: RunSummary) -> dict:
         "ate_rmse": acc.ate.rmse if acc and acc.ate else nan,
         "odom_ate_rmse": acc.odom_ate.rmse if acc and acc.odom_ate else nan,
     }
+
+
+def _ground_truth_hash(log: str) -> str | None | bool:
+    """The :func:`~report.summary.reference_hash` of the ground truth ``run`` finds beside ``log``
+    (LOG.gt.tum), None without one, False when it cannot be read (the run reports why)."""
+    from .report.run_writer import find_ground_truth
+    from .report.summary import reference_hash
+    from .report.tables import read_tum
+
+    gt = find_ground_truth(Path(log))
+    if gt is None:
+        return None
+    try:
+        return reference_hash(*read_tum(gt, "ground truth", lambda _: None))
+    except (OSError, CornerslamError):
+        return False
 
 
 def _resumable(run_dir: Path, expect: Hashes, has_gt: bool) -> dict | None:

@@ -33,6 +33,7 @@ from .options import (  # noqa: E402
     GivenPath,
     check_method_not_set,
     check_option_agrees,
+    check_sweep_not_set,
     check_time_offset,
     command_config,
     config_options,
@@ -455,11 +456,15 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
       cornerslam extract sample_logs/sim_office.mcap --step 40 --plot scan40.png
     """
     from .extract import extract_step
+    from .frontend import scans_prepared
     from .report.extract_plot import format_extraction, plot_extraction
 
     setup_logging(verbose, quiet)
     cfg = command_config(config_path, overrides, None, scan_topic, odom_topic, log_path)
-    scan, segments, corners = extract_step(log_path, step, cfg)
+    # the beams a run keeps (input.skip_beams_*, input.max_range), in the sensor frame (not mirrored)
+    scan, segments, corners = extract_step(
+        log_path, step, cfg, lambda r: scans_prepared(r, cfg, msgs=r.scans())
+    )
     click.echo(scan_heading(step, scan))
     click.echo(format_extraction(segments, corners))
     if plot_path:
@@ -516,7 +521,9 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
     if scheduler and jobs:
         log.warning("--jobs is ignored with --scheduler (the cluster's workers run the batch)")
     check_claimable(out, "batch")  # a directory that is not a batch's: refused before any work
-    combos = plan(logs, names, parse_sweeps(sweeps), overrides, config_path)
+    swept = parse_sweeps(sweeps)
+    check_sweep_not_set(overrides, swept)  # the sweep is set after each --set: one would be ignored
+    combos = plan(logs, names, swept, overrides, config_path)
     progress = BatchProgress(not quiet)
     try:
         rows = run_batch(combos, out, jobs, scheduler, progress)

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 from pathlib import Path
+from typing import Any
 
 from .config import Config
 from .errors import ConfigError
@@ -11,13 +13,18 @@ from .logs import open_log
 from .types import Corners, Scan, Segments
 
 
-def extract_step(log_path: str | Path, step: int, cfg: Config) -> tuple[Scan, Segments, Corners]:
+def extract_step(
+    log_path: str | Path, step: int, cfg: Config, prepare: Callable[[Any], Iterable[Scan]] | None = None
+) -> tuple[Scan, Segments, Corners]:
     """The log's scan number ``step`` (0 = first, counting the scans the reader yields) with its line
     segments and natural corners in the sensor frame, extracted with ``cfg``'s sensor, lines and
-    corners sections. ConfigError when the log has no such scan, naming the valid range."""
+    corners sections. ``prepare``: the reader's scans as a run prepares them (``input.skip_beams_*``,
+    ``input.max_range``: ``cornerslam extract`` passes the front end's), else as read. ConfigError
+    when the log has no such scan, naming the valid range."""
     with open_log(Path(log_path), scan_topic=cfg.input.scan_topic, odom_topic=cfg.input.odom_topic) as reader:
         n = 0
-        for scan in reader.scans():  # odometry is not needed for one scan's features
+        scans = reader.scans() if prepare is None else prepare(reader)
+        for scan in scans:  # odometry is not needed for one scan's features
             if n == step:
                 return (scan, *extract(scan, cfg.sensor, cfg.lines, cfg.corners))
             n += 1

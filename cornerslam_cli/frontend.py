@@ -272,15 +272,16 @@ def _scan_matched(
     )
 
 
-def scans_prepared(reader, cfg: Config, upside_down: bool = False):
+def scans_prepared(reader, cfg: Config, upside_down: bool = False, msgs=None):
     """The reader's messages with each scan prepared as configured: mirrored when the laser is
     ``upside_down`` (:meth:`Scan.mirrored`), beams at the ends removed (robot body; the ends of the
     message), beams at or beyond ``input.max_range`` dropped, ``input.scan_time_offset`` added to the
     stamp (a laser whose stamps lag or lead the odometry clock). Skipping every beam of the first
-    scan is a ConfigError naming the keys; of a later, shorter scan, counted and warned at the end."""
+    scan is a ConfigError naming the keys; of a later, shorter scan, counted and warned at the end.
+    ``msgs``: the messages to prepare instead of all the reader's (``reader.scans()`` for extract)."""
     inp = cfg.input
     lo, hi, max_range, dt = inp.skip_beams_start, inp.skip_beams_end, inp.max_range, inp.scan_time_offset
-    msgs = reader.messages()
+    msgs = reader.messages() if msgs is None else msgs
     if upside_down:
         msgs = (msg.mirrored() if isinstance(msg, Scan) else msg for msg in msgs)
     if lo == 0 and hi == 0 and max_range <= 0.0 and dt == 0.0:

@@ -287,6 +287,22 @@ def check_method_not_set(overrides, assocs: str) -> None:
             )
 
 
+def check_sweep_not_set(overrides, sweeps) -> None:
+    """A usage error for ``batch`` given a ``--set`` of a key it also sweeps (or of a key inside a
+    swept section): each combination sets the swept value after the ``--set``, so the ``--set`` would
+    be ignored without a word."""
+    from .config import set_leaves
+
+    swept = {".".join(part.strip() for part in key.split(".")): key for key in sweeps}
+    for text, leaf, _ in set_leaves(overrides):
+        for key, given in swept.items():
+            if leaf == key or leaf.startswith(key + "."):
+                raise click.UsageError(
+                    f"--sweep {given} and --set '{text}' set the same key: each combination would "
+                    f"use the swept value and ignore the --set; give the values in --sweep {given}=... only"
+                )
+
+
 def parse_assocs(text: str | None, allow_many: bool, log_path: str | None = None) -> list[str]:
     """The associators an ``--assoc`` value names, each checked against ``association.ASSOCIATORS``
     (an unknown one: ConfigError with the closest name). ``None`` (and ``""`` for a single name) is

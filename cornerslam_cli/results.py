@@ -230,11 +230,14 @@ class Timing(JsonResult):
 
 @dataclass(frozen=True, kw_only=True)
 class Hashes(JsonResult):
-    """sha256 of the log's bytes and of the resolved config, and the version: what batch resumes by."""
+    """sha256 of the log's bytes and of the resolved config, and the version: what batch resumes by;
+    ``ground_truth``: sha256 of the ground truth's poses the run was scored against (absent without
+    one), so a ground truth replaced or edited beside the log is not reported with the old ATE."""
 
     input: str
     config: str
     version: str
+    ground_truth: str | None = optional()  # appended (2026-12-03)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -290,3 +290,38 @@ def test_exit_code_says_whether_every_combination_succeeded(monkeypatch, tmp_pat
             assert res.stderr == ""
         else:
             assert res.stderr.splitlines() == [line + str(out / "batch.csv")]
+
+
+def test_resume_reruns_a_combination_whose_ground_truth_changed(tmp_path):
+    """A ground truth replaced or corrected beside the log (same log, config, version) is scored
+    again, not reported as "skipped" with the ATE against the old one (before: the stale ATE, exit 0)."""
+    import numpy as np
+
+    log = tmp_path / "sim.mcap"
+    simulate_log(log, seed=3, rate=1.0, beams=181)
+    gt = tmp_path / "sim.gt.tum"
+    combos, out = plan([log], ["pca"]), tmp_path / "out"
+    (row,) = run_batch(combos, out, jobs=1)
+    assert row["status"] == "ok"
+    assert [r["status"] for r in run_batch(combos, out, jobs=1)] == ["skipped"]
+    g = np.loadtxt(gt)
+    g[:, 1] *= 1.2  # another ground truth: x stretched by 20 %
+    np.savetxt(gt, g, fmt="%.9f")
+    (again,) = run_batch(combos, out, jobs=1)
+    assert again["status"] == "ok" and float(again["ate_rmse"]) > 5 * float(row["ate_rmse"])
+    summary = json.loads((out / combos[0].name / "summary.json").read_text())
+    assert summary["accuracy"]["ate"]["rmse"] == pytest.approx(float(again["ate_rmse"]))
+    assert [r["status"] for r in run_batch(combos, out, jobs=1)] == ["skipped"]  # unchanged since: reused
+
+
+@pytest.mark.parametrize(
+    "given", ["association.pca.group_size=4", "association.pca={group_size: 4, max_nodes: 900}"]
+)
+def test_a_set_of_a_swept_key_is_a_usage_error(logs, tmp_path, given):
+    """``--set K=v`` beside ``--sweep K=...``: every combination used the swept value and the --set was
+    ignored without a word (exit 0); now refused before any work, naming both."""
+    args = ["batch", str(logs[0]), *SWEEP, "--set", given, "--out", str(tmp_path / "out"), "-q"]
+    res = CliRunner().invoke(cli, args)
+    assert res.exit_code == 2, res.output
+    assert f"--sweep {KEY} and --set '{given}' set the same key" in res.output
+    assert "Traceback" not in res.output and not (tmp_path / "out").exists()

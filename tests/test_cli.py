@@ -213,6 +213,21 @@ def test_extract_step_is_the_steps_scan_and_its_features(tmp_path):
     )
 
 
+def test_extract_keeps_the_beams_a_run_keeps(tmp_path):
+    """input.skip_beams_* and input.max_range (in --set or --config) apply to extract's scan as to a
+    run's (before: ignored, exit 0 with the features of beams the run never sees); skipping every beam
+    is the run's exit 2 naming both keys."""
+    room = np.concatenate([np.full(91, 3.0), np.linspace(3.0, 1.5, 90)])
+    log = small_log(tmp_path / "s.mcap", n=3, ranges=room)
+    res = invoke("extract", log, "--step", 1, "--set", "input.skip_beams_start=100")
+    assert res.exit_code == 0, res.output
+    assert res.stdout.startswith("scan 1 at 1700000000.150 s: 81 valid of 181 beams\n"), res.stdout
+    res = invoke("extract", log, "--step", 1, "--set", "input.max_range=2.5")
+    assert res.stdout.startswith("scan 1 at 1700000000.150 s: 60 valid of 181 beams\n"), res.stdout
+    res = invoke("extract", log, "--set", "input.skip_beams_start=100", "--set", "input.skip_beams_end=81")
+    one_line_error(res, "input.skip_beams_start=100 and input.skip_beams_end=81 skip all 181 beams")
+
+
 @pytest.mark.parametrize("fmt", ["mcap-cdr", "rosbag1", "rosbag2-sqlite3"])
 def test_extract_reads_a_log_without_odometry(fmt, tmp_path):
     """One scan's features need no odometry: extract serves a log of scans alone (run refuses it)."""

@@ -32,7 +32,7 @@ from ..results import Accuracy, RunSummary
 from .consistency import store_consistency
 from .occupancy import ScanStore, build_grid, draw_grid, write_grid
 from .odom_frame import in_odom_frame, landmarks_in_odom_frame
-from .summary import Totals, build_summary
+from .summary import Totals, build_summary, reference_hash
 from .tables import (
     LINES_COLUMNS,
     LOOP_COLUMNS,
@@ -212,6 +212,7 @@ class RunWriter:
             t_grid,
             consistency,
             graph,
+            None if ref.gt is None else reference_hash(*ref.gt),
         )
         write_json(self.dest / "summary.json", summary.to_json())
         return summary

@@ -61,6 +61,7 @@ def build_summary(
     t_grid: float | None = None,
     consistency: MapConsistency | None = None,
     graph: HierarchicalSlam | None = None,
+    gt_hash: str | None = None,
 ) -> RunSummary:
     """The summary of a run (summary.json, INTERFACE.md): input, counts, timing totals (``t_grid``:
     the occupancy grid's), accuracy, hashes, versions, map ``consistency``; with the two-level SLAM
@@ -92,7 +93,9 @@ def build_summary(
         consistency=consistency,
         warnings=tuple(src.reader.stats.warnings),
         accuracy=accuracy,
-        hashes=Hashes(input=input_hash(src.path), config=config_hash(cfg), version=__version__),
+        hashes=Hashes(
+            input=input_hash(src.path), config=config_hash(cfg), version=__version__, ground_truth=gt_hash
+        ),
         config=cfg.to_dict(),
         versions=_versions(),
     )
@@ -167,6 +170,15 @@ def config_hash(cfg: Config) -> str:
     """sha256 of the resolved config (canonical JSON): equal configs, equal hashes."""
     text = json.dumps(cfg.to_dict(), sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()
+
+
+def reference_hash(stamps: np.ndarray, poses: np.ndarray) -> str:
+    """sha256 of a ground truth as read (stamps and 2D poses, float64): the same poses, the same
+    hash, however the file spells them; read once, so a ground truth given as a pipe is not read again."""
+    h = hashlib.sha256()
+    for a in (stamps, poses):
+        h.update(np.ascontiguousarray(a, dtype="<f8").tobytes())
+    return h.hexdigest()
 
 
 def input_hash(path: Path) -> str:
