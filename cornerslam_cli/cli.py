@@ -573,6 +573,7 @@ def config_command(log_path, config_path, overrides, preset, verbose, quiet):
     from .config import ConfigError, dump_config, override_place, replaced_place, yaml_quoted
 
     setup_logging(verbose, quiet)
+    check_option_agrees(overrides, {"input.laser_preset": preset})  # (it silently won)
     by_option = f"input.laser_preset={yaml_quoted(preset)}" if preset else None
     try:
         cfg = command_config(
