@@ -372,6 +372,11 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
         unread = f"the first scan could not be read: {one_line(e)}"
     preset = None if scan is None else detect_preset(scan.n_beams, scan.angle_increment)
     _echo(info_lines(log_path, log_info, laser, scan, preset, unread, bool(reader.laser_upside_down())))
+    odom_tf = getattr(reader, "odom_tf_problem", lambda: None)()  # ROS logs: tf odometry not on tf
+    if odom_tf and odom_tf[1]:  # every tf message read: run would fail at the end of the log
+        raise LogError(*odom_tf[0])
+    if odom_tf:  # the first 2,000 messages after the first scan only: likely, not certain
+        reader.stats.warn("%s in the first 2,000 messages after the first scan (%s)", *odom_tf[0])
 
 
 @cli.command()
@@ -575,6 +580,7 @@ def config_command(log_path, config_path, overrides, preset, verbose, quiet):
     from .config import ConfigError, dump_config, override_place, replaced_place, yaml_quoted
 
     setup_logging(verbose, quiet)
+    check_option_agrees(overrides, {"input.laser_preset": preset})  # (it silently won)
     by_option = f"input.laser_preset={yaml_quoted(preset)}" if preset else None
     try:
         cfg = command_config(

@@ -250,13 +250,14 @@ OPTION_OF = {
     "association.method": "--assoc",
     "input.scan_topic": "--scan-topic",
     "input.odom_topic": "--odom-topic",
+    "input.laser_preset": "--preset",  # (config)
 }
 
 
 def check_option_agrees(overrides, options: dict[str, str | None]) -> None:
-    """A usage error when an option (``--assoc``, ``--scan-topic``, ``--odom-topic``) and a ``--set`` of
-    its config key name different values: which one the user meant cannot be told, and the option used
-    to win without a word."""
+    """A usage error when an option (``--assoc``, ``--scan-topic``, ``--odom-topic``, config's
+    ``--preset``) and a ``--set`` of its config key name different values: which one the user meant
+    cannot be told, and the option used to win without a word."""
     import yaml
 
     from .config import set_leaves

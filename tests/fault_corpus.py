@@ -584,6 +584,8 @@ def _ground_truth_faults(d: Path, add: Callable[[str, Path, Expected], None]) ->
         (gt, "gt_repeated", "\n".join(repeated), ok, "repeats dropped, warned", ("repeats 2 line(s)",)),
         (gt, "gt_no_overlap", "\n".join(shifted), ok, "no ATE/RPE (accuracy null), warned",
          ("does not overlap the trajectory", "no ATE/RPE")),
+        (gt, "gt_first_half", "\n".join(rows[: len(rows) // 2]), ok, "ATE/RPE over what it covers, warned",
+         ("covers", "of the run's", "ATE/RPE are over those")),
         (gt, "gt_two_poses_one_stamp", "\n".join(conflict), 2, no, ("two different poses", "lines 6 and 7")),
         (gt, "gt_nan", "\n".join(with_nan), 2, no, ("line 8", "not finite")),
         (gt, "gt_random_bytes", np.random.default_rng(1).bytes(4000), 2, no, ("binary file",)),

@@ -266,6 +266,18 @@ def test_an_option_and_a_set_of_a_mapping_with_its_key_must_agree(sim_log):
     assert res.exit_code == 0, res.output
 
 
+def test_config_preset_and_a_set_of_the_preset_key_must_agree(sim_log):
+    """`config --preset none --set input.laser_preset=hokuyo_270deg` printed `laser_preset: none`, the
+    --set dropped without a word (found by a hostile-user probe): a usage error naming both, as for
+    --assoc; the same preset given twice is no conflict."""
+    res = invoke("config", sim_log, "--preset", "none", "--set", "input.laser_preset=hokuyo_270deg")
+    assert res.exit_code == 2 and "--preset none and --set 'input.laser_preset=hokuyo_270deg' disagree" in (
+        res.stderr
+    )
+    res = invoke("config", sim_log, "--preset", "none", "--set", "input={laser_preset: none}")
+    assert res.exit_code == 0 and "laser_preset: none" in res.stdout, res.output
+
+
 def test_simulate_is_reproducible(tmp_path):
     a, b = tmp_path / "a.mcap", tmp_path / "b.mcap"
     for p in (a, b):

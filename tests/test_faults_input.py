@@ -240,6 +240,26 @@ def test_a_100000_character_topic_or_frame_is_quoted_shortened(command, args, tf
     assert len(res.stderr.strip().splitlines()[-1]) < 400
 
 
+def test_tf_odometry_to_base_footprint_names_the_frames_and_the_key_to_set(tmp_path):
+    """nav2's odom→base_footprint on /tf, base_link the default: run's error names the transforms the
+    topic has and the --set that fixes it, which then runs, and info ends with that error (before: run
+    said only "set the frames (odom_frame/base_frame)" after reading the whole log, and info exited 0
+    saying run would use /tf; found by a hostile-user probe)."""
+    log = write_mcap(
+        tmp_path / "fp.mcap", make_scans(), make_odoms(), odom_as_tf=True, base_frame="base_footprint"
+    )
+    res = invoke("run", log, "--out", tmp_path / "out", "-q")
+    check_error_line(res, ("fp.mcap", "odom→base_footprint", "--set input.base_frame=base_footprint"))
+    assert not (tmp_path / "out").exists()
+    res = invoke("run", log, "--out", tmp_path / "out", "-q", "--set", "input.base_frame=base_footprint")
+    assert res.exit_code == 0, res.output
+    res = invoke(
+        "info", log
+    )  # info read every tf message: it says so, as run would (it said run would use /tf)
+    check_error_line(res, ("fp.mcap", "odom→base_footprint", "--set input.base_frame=base_footprint"))
+    assert "odometry  /tf (tf odom→base_link)" in res.stdout
+
+
 def test_a_100000_character_topic_in_the_log_is_listed_shortened(tmp_path):
     """The log's LaserScan topic is named with 100,000 characters: the error listing it shortens it."""
     log = write_mcap(tmp_path / "long.mcap", make_scans(), make_odoms(), scan_topic=LONG)

@@ -102,6 +102,32 @@ def tilt_from_level(T: np.ndarray) -> float:
     return math.degrees(math.acos(min(1.0, abs(float(T[2, 2])))))
 
 
+def missing_odom_tf(
+    log: str, topic: str, odom_frame: str, base_frame: str, seen: set[tuple[str, str]]
+) -> tuple[str, str]:
+    """(problem, hint) of a tf odometry topic without odom_frame→base_frame: the transforms it has,
+    and the key to set when one of them starts at odom_frame (nav2's odom→base_footprint) or ends at
+    base_frame (another odometry frame's name)."""
+    pairs = sorted(seen)
+    has = ", ".join(f"{short_text(p)}→{short_text(c)}" for p, c in pairs[:10]) or "none"
+    problem = (
+        f"log '{log}': topic '{short_text(topic)}' has no {short_text(odom_frame)}→{short_text(base_frame)} "
+        f"transform (its transforms: {has}{', …' if len(pairs) > 10 else ''})"
+    )
+    children = [c for p, c in pairs if p == odom_frame]
+    parents = [p for p, c in pairs if c == base_frame]
+    if len(children) == 1:
+        hint = f"give run the robot's frame: --set input.base_frame={short_text(children[0])}"
+    elif len(parents) == 1:
+        hint = f"give run the odometry frame: --set input.odom_frame={short_text(parents[0])}"
+    else:
+        hint = (
+            "set input.odom_frame / input.base_frame to the log's frames, "
+            "or choose an Odometry topic with --odom-topic"
+        )
+    return problem, hint
+
+
 def listing(names: list[str], most: int = 10) -> str:
     """``"/a, /b"`` or ``"none"``, for error messages: long names shortened, at most ``most`` of them."""
     shown = ", ".join(short_text(n) for n in sorted(names)[:most])
@@ -174,6 +200,8 @@ class RosLogReader:
         self._laser_upside_down = False  # the tf's laser z axis points down (set with _laser2base)
         self.laser_frame: str | None = None  # the first scan's frame_id (set by laser_to_base()), None unread
         self.odom_on_tf = False  # laser_to_base() saw tf odom_frame→base_frame (a results MCAP need not)
+        self._tf_pairs: set[tuple[str, str]] = set()  # (parent, child) laser_to_base() saw on odom_topic
+        self._tf_read_all = False  # laser_to_base() read every tf message (not stopped at 2,000)
 
     # ---------------------------------------------------------------- selection
     def _topics_of(self, *types: str) -> list[str]:
@@ -393,10 +421,12 @@ class RosLogReader:
         after, linked_at = 0, -1  # messages since the first scan; len(edges) when the link was looked for
         linked = False  # base_frame → the laser's frame through the edges so far
         decs = {t: self._decoder(t) for t in tf_topics | {self.scan_topic}}
+        read_all = True
         for topic, _, data in self.source.raw_messages(tf_topics | {self.scan_topic}):
             if frame is not None:
                 after += 1
                 if after > 2000:
+                    read_all = False
                     break
                 if counts_known and static_left <= 0:
                     if len(edges) != linked_at and dynamic:
@@ -413,6 +443,8 @@ class RosLogReader:
                 static = topic == "/tf_static"
                 static_left -= static
                 for parent, child, _, t, q in decs[topic].transforms(data):
+                    if topic == self.odom_topic and len(self._tf_pairs) < 50:
+                        self._tf_pairs.add((parent, child))
                     if (parent, child) == (self.odom_frame, self.base_frame):
                         self.odom_on_tf = True
                         continue
@@ -428,6 +460,7 @@ class RosLogReader:
             except Exception as exc:  # noqa: BLE001 - bad bytes are counted, never raised
                 logger.debug("laser_to_base: skipping undecodable %s message: %s", topic, exc)
         self.laser_frame = frame
+        self._tf_read_all = read_all
         if frame is None:
             self._laser2base = None
             return None
@@ -445,6 +478,18 @@ class RosLogReader:
                     self.path.name, self.base_frame, frame, tilt,
                 )  # fmt: skip
         return self._laser2base  # type: ignore[return-value]
+
+    def odom_tf_problem(self) -> tuple[tuple[str, str], bool] | None:
+        """When odometry is read from tf and :meth:`laser_to_base` saw no odom_frame→base_frame
+        transform: ((problem, hint) as ``messages()`` would raise them at the end of the log, whether
+        every tf message was read, so a run must fail); else None."""
+        self.laser_to_base()
+        if self._odom_sel.kind != "tf" or self.odom_on_tf:
+            return None
+        problem = missing_odom_tf(
+            self.path.name, self.odom_topic, self.odom_frame, self.base_frame, self._tf_pairs
+        )
+        return problem, self._tf_read_all
 
     def laser_upside_down(self) -> bool:
         """Whether the tf mounts the laser upside down (its z axis down: its scans are mirrored,
@@ -469,6 +514,7 @@ class RosLogReader:
         is_tf = odometry and self._odom_sel.kind == "tf"
         where, odom_where = f"{self.path.name}:{scan_t}", f"{self.path.name}:{odom_t}"
         n_tf_match = 0
+        tf_seen: set[tuple[str, str]] = set()  # (parent, child) on the odometry tf topic
         for topic, log_time, data in self.source.raw_messages({scan_t, odom_t} if odometry else {scan_t}):
             try:
                 if topic == scan_t:
@@ -482,12 +528,15 @@ class RosLogReader:
                         yield scan
                     continue
                 if is_tf:
+                    transforms = odom_dec.transforms(data)
                     poses = [
                         (stamp, t[0], t[1], q)
-                        for parent, child, stamp, t, q in odom_dec.transforms(data)
+                        for parent, child, stamp, t, q in transforms
                         if parent == self.odom_frame and child == self.base_frame
                     ]
                     n_tf_match += len(poses)
+                    if not n_tf_match and len(tf_seen) < 50:  # for the error if none ever matches
+                        tf_seen.update((parent, child) for parent, child, *_ in transforms)
                 else:
                     poses = [odom_dec.odometry(data)]
                 for (sec, nsec), x, y, q in poses:
@@ -500,9 +549,7 @@ class RosLogReader:
                 st.failed("%s: cannot decode a %s message at %d ns: %s", self.path.name, topic, log_time, exc)
         if is_tf and n_tf_match == 0:
             raise LogError(
-                f"log '{self.path.name}': topic '{short_text(odom_t)}' has no "
-                f"{short_text(self.odom_frame)}→{short_text(self.base_frame)} transform",
-                "set the frames (odom_frame/base_frame) or choose an Odometry topic with --odom-topic",
+                *missing_odom_tf(self.path.name, odom_t, self.odom_frame, self.base_frame, tf_seen)
             )
         if st.decode_failed > 5:
             st.warn("%s: %d messages could not be decoded in total", self.path.name, st.decode_failed)

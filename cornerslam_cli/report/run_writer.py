@@ -320,6 +320,16 @@ def accuracy_of(
             scan_odom_ate=None if scan_odoms is None else ate(stamps, scan_odoms, *ref.gt),
             online_ate=None if online is None else ate(stamps, online, *ref.gt),
         )
+        if (scored := acc["ate"].n) < len(stamps):  # a number over part of the run, said so
+            gt_t = ref.gt[0]
+            holes = acc["ate"].in_holes or 0
+            gaps = f", {holes} in its gaps" if holes else ""
+            notes.append(
+                f"ground truth '{ref.gt_path}' covers {scored} of the run's {len(stamps)} poses "
+                f"({len(stamps) - scored - holes} outside its time span {gt_t[0]:.3f} to {gt_t[-1]:.3f} s"
+                f"{gaps}): ATE/RPE are over those {scored} only (give a ground truth of the whole run, "
+                "or --start/--end inside it)"
+            )
     if ref.relations is not None:
         rel, offset = ref.relations, ref.time_offset
         relations = relation_error(stamps, poses, rel, offset)
