@@ -73,7 +73,8 @@ def align_sim2(src: np.ndarray, dst: np.ndarray) -> tuple[float, float, np.ndarr
     trajectory has its scale from the ranges, so a scale off 1 says the ranges and the reference disagree.
 
     Raises ``LogError`` when ``src`` is all one point (Σ‖a_i‖² = 0): no scale fits it, and a NaN is not
-    a score.
+    a score; likewise when ``dst`` is (a reference that does not move): s would be 0, every pose
+    shrunk onto its point, and the ATE a perfect 0.
     """
     ang, _ = align_se2(src, dst)
     ms, md = src.mean(axis=0), dst.mean(axis=0)
@@ -82,6 +83,12 @@ def align_sim2(src: np.ndarray, dst: np.ndarray) -> tuple[float, float, np.ndarr
     if not spread > 0.0:
         raise LogError(
             "the trajectory's positions are all one point (it does not move): no scale fits it",
+            "evaluate it without --correct-scale",
+        )
+    if not float(np.sum(b * b)) > 0.0:
+        raise LogError(
+            "the ground truth's positions at the trajectory's stamps are all one point (it does not "
+            "move): no scale fits the trajectory to it",
             "evaluate it without --correct-scale",
         )
     c, s = np.cos(ang), np.sin(ang)

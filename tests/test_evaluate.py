@@ -98,6 +98,17 @@ def test_correct_scale_of_a_trajectory_that_does_not_move_is_refused_not_nan():
         ate(t, est, t, gt, correct_scale=True)
 
 
+def test_correct_scale_against_a_ground_truth_that_does_not_move_is_refused_not_zero():
+    """A reference whose positions are all one point: the best scale is 0, which shrank the whole
+    trajectory onto that point and printed a perfect ATE 0.0000 m (×0.00000), exit 0; refused now."""
+    t = np.arange(20.0)
+    est = np.column_stack((t * 0.1, np.zeros(20), np.zeros(20)))
+    gt = np.tile([5.0, 5.0, 0.0], (20, 1))
+    assert ate(t, est, t, gt).rmse == pytest.approx(np.std(est[:, 0]))  # the plain ATE stays
+    with pytest.raises(LogError, match="ground truth's positions .* all one point"):
+        ate(t, est, t, gt, correct_scale=True)
+
+
 def test_rpe_per_step_of_a_scaled_trajectory():
     t = np.arange(11.0)
     gt = np.column_stack((t, np.zeros(11), np.zeros(11)))
