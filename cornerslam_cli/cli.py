@@ -570,7 +570,8 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
 def config_command(log_path, config_path, overrides, preset, verbose, quiet):
     """Print the fully resolved config as YAML: built-in defaults < laser preset < --config < --set.
 
-    With LOG, the laser preset is chosen from its first scan, as `run` would; the output is a valid
+    With LOG, the laser preset is chosen from its first scan, as `run` would; --preset picks it instead,
+    as `--set input.laser_preset=NAME` would (over a --config file's choice). The output is a valid
     --config file.
 
     \b

@@ -5,6 +5,7 @@ All functions take 2D trajectories as ``stamps (n,)`` and ``poses (n, 3)`` = (x,
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,8 @@ from .geometry import interpolate, relative, wrap_angle
 from .report.tables import read_tum
 from .results import Accuracy, Ate, RelationError, Rpe
 from .textfile import read_number_rows, refuse_far
+
+log = logging.getLogger("cornerslam.evaluate")
 
 
 def inside_span(stamps: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -233,6 +236,8 @@ def evaluate_files(
         if problem:
             raise LogError(*problem)
         out.update(ground_truth=display_path(ground_truth), ate=ate(t, est, gt_t, gt, correct_scale))
+        if note := coverage_note(f"ground truth '{ground_truth}'", gt_t, out["ate"], len(t), "trajectory"):
+            log.warning("%s", note)
         out.update(vars(rpe(t, est, gt_t, gt)))
     if relations:
         e = relation_error(t, est, read_relations(relations), time_offset)
@@ -243,6 +248,20 @@ def evaluate_files(
             )
         out.update(relations_file=display_path(relations), relations=e)
     return Accuracy(**out)
+
+
+def coverage_note(what: str, gt_t: np.ndarray, a: Ate, total: int, whose: str = "run") -> str | None:
+    """What to say when the ATE ``a`` scored fewer than the ``total`` poses: how many fell outside the
+    ground truth's time span ``gt_t`` and in its gaps; None when it scored them all."""
+    if a.n >= total:
+        return None
+    holes = a.in_holes or 0
+    gaps = f", {holes} in its gaps" if holes else ""
+    return (
+        f"{what} covers {a.n} of the {whose}'s {total} poses ({total - a.n - holes} outside its time span "
+        f"{gt_t[0]:.3f} to {gt_t[-1]:.3f} s{gaps}): ATE/RPE are over those {a.n} only (give a ground "
+        f"truth of the whole {whose}, or --start/--end inside it)"
+    )
 
 
 def relation_errors(

@@ -140,6 +140,7 @@ def select(messages: Iterable, span: Span, used: SpanUsed, log_name: str) -> Ite
     sample at or after the last scan kept. A span that holds no scan of the log is a CornerslamError
     naming the options and the log's extent."""
     t0 = stop_at = None
+    ended_at: tuple[int, float] | None = None  # the scan where the end came before any was kept
     i = -1
     for msg in messages:
         if not isinstance(msg, Scan):
@@ -155,9 +156,16 @@ def select(messages: Iterable, span: Span, used: SpanUsed, log_name: str) -> Ite
             continue
         if (span.end is not None and span.end.reached(i, t)) or used.scans == span.max_scans:
             stop_at = used.last_time + t0 if used.last_time is not None else -math.inf
+            ended_at = (i, t) if used.scans == 0 else None
             continue
         used.keep(i, t)
         yield msg
+    if used.scans == 0 and ended_at is not None:  # the log was not read to its end: no extent to give
+        raise CornerslamError(
+            f"{span.describe()} selects no scan of log '{log_name}': the first scan its start lets in "
+            f"(#{ended_at[0]}, {ended_at[1]:.1f} s from the first) is already past its end",
+            "give an end after the start",
+        )
     if used.scans == 0:
         extent = f"{i + 1} scans over {t:.1f} s" if t0 is not None else "no scans"
         raise CornerslamError(

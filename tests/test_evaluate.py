@@ -450,3 +450,17 @@ def test_a_hole_at_an_end_of_the_ground_truth_counts_only_poses_within_its_span(
     r = ate(t, detour(t), gt_t, detour(gt_t))
     assert r.n == 102 and r.in_holes == 99
     assert not np.any(in_holes(gt_t, t) & ~inside_span(gt_t, t))
+
+
+def test_a_ground_truth_covering_part_of_the_trajectory_is_warned_about(files):
+    """evaluate says what run says (its summary's warning) when the ground truth covers only part of the
+    trajectory: how many poses were scored of how many, and why the rest were not; a whole one: silent."""
+    est, gt = files
+    whole = evaluate(est, "--ground-truth", gt)
+    assert whole.exit_code == 0 and "covers" not in whole.stderr
+    n = len(gt.read_text().splitlines())
+    rewrite(gt, lambda rows: rows[: len(rows) // 2])
+    res = evaluate(est, "--ground-truth", gt)
+    assert res.exit_code == 0, res.output
+    assert f"covers {n // 2} of the trajectory's {n} poses ({n - n // 2} outside its time span" in res.stderr
+    assert f"ATE/RPE are over those {n // 2} only" in res.stderr

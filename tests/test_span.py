@@ -116,3 +116,16 @@ def test_span_past_the_end_of_the_log_is_one_line_error(sim_log, tmp_path):
     err = res.stderr.strip()
     assert err.startswith("error: --start #100000 selects no scan of log 'sim.mcap'") and "\n" not in err
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("span", [("--start", "2", "--end", "#3"), ("--start", "#6", "--end", "1")])
+def test_an_end_before_the_start_in_other_units_says_so(sim_log, tmp_path, span):
+    """A start in seconds and an end as an index (or the other way round) that ends before the start:
+    the error says where the start let the first scan in, not the scans read before stopping as if they
+    were the log's extent ('21 scans over 5.0 s' for a 501-scan log)."""
+    res = invoke("run", sim_log, "--out", tmp_path / "o", *span)
+    assert res.exit_code == 2, res.output
+    err = res.stderr.strip()
+    assert "selects no scan of log 'sim.mcap': the first scan its start lets in (#" in err, err
+    assert "is already past its end (give an end after the start)" in err and "\n" not in err
+    assert not (tmp_path / "o").exists()

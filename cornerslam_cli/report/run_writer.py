@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import display_path
-from ..evaluate import ate, overlap_problem, read_relations, relation_error, rpe
+from ..evaluate import ate, coverage_note, overlap_problem, read_relations, relation_error, rpe
 from ..geometry import compose, compose_inverse
 from ..results import Accuracy, RunSummary
 from .consistency import store_consistency
@@ -320,16 +320,8 @@ def accuracy_of(
             scan_odom_ate=None if scan_odoms is None else ate(stamps, scan_odoms, *ref.gt),
             online_ate=None if online is None else ate(stamps, online, *ref.gt),
         )
-        if (scored := acc["ate"].n) < len(stamps):  # a number over part of the run, said so
-            gt_t = ref.gt[0]
-            holes = acc["ate"].in_holes or 0
-            gaps = f", {holes} in its gaps" if holes else ""
-            notes.append(
-                f"ground truth '{ref.gt_path}' covers {scored} of the run's {len(stamps)} poses "
-                f"({len(stamps) - scored - holes} outside its time span {gt_t[0]:.3f} to {gt_t[-1]:.3f} s"
-                f"{gaps}): ATE/RPE are over those {scored} only (give a ground truth of the whole run, "
-                "or --start/--end inside it)"
-            )
+        if note := coverage_note(f"ground truth '{ref.gt_path}'", ref.gt[0], acc["ate"], len(stamps)):
+            notes.append(note)  # a number over part of the run, said so
     if ref.relations is not None:
         rel, offset = ref.relations, ref.time_offset
         relations = relation_error(stamps, poses, rel, offset)
