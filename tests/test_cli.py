@@ -492,6 +492,23 @@ def test_compare_warns_that_a_config_file_s_association_method_is_ignored(sim_lo
         assert res.exit_code == 0 and "association.method" not in res.stderr, res.output
 
 
+def test_compare_says_a_ground_truth_note_once_and_keeps_it_in_every_summary(sim_log, tmp_path):
+    """A ground truth covering part of the run: compare's runs share one input, so the note was printed
+    once per associator; it is printed once and still in each associator's summary.json."""
+    gt = tmp_path / "half.tum"
+    rows = sim_log.with_suffix(".gt.tum").read_text().splitlines()
+    gt.write_text("\n".join(rows[: len(rows) // 8]) + "\n")
+    res = invoke(
+        "compare", sim_log, "--assoc", "icnn,jcbb,pca", "--ground-truth", gt, "--max-scans", 40,
+        "--out", tmp_path / "c",
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert res.stderr.count("ATE/RPE are over those") == 1, res.stderr
+    for a in ("icnn", "jcbb", "pca"):
+        warnings = json.loads((tmp_path / "c" / a / "summary.json").read_text())["warnings"]
+        assert sum("ATE/RPE are over those" in w for w in warnings) == 1, (a, warnings)
+
+
 @pytest.mark.parametrize("jobs", ["1", "2"])
 def test_compare_warns_of_the_default_laser_mount_once(tmp_path, jobs):
     """A log without tf for the laser: the built-in mount is the input's warning, printed once however

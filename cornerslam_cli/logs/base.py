@@ -133,17 +133,19 @@ class ReadStats:
     first_failure: str = ""  # what the first of them was (the error names it when nothing was usable)
     truncated: bool = False  # the file ends early (a recorder stopped): what came after the cut is lost
     warnings: list[str] = field(default_factory=list)
+    said: set[str] = field(default_factory=set)  # every text logged: a summary's list may be reset, not this
 
     def warn(self, msg: str, *args: object) -> None:
         """Log a warning and keep it (first 100) so summaries can report it.
 
         A text already warned is not repeated (``laser_to_base()`` and ``messages()`` read the same
-        damaged bytes)."""
+        damaged bytes), on the console even when ``warnings`` was reset since: compare's runs share
+        one input and each summary gets its own warnings, but a ground truth's note is said once."""
         text = printable(msg % args if args else msg)
-        if text in self.warnings:
-            return
-        logger.warning(text)
-        if len(self.warnings) < 100:
+        if text not in self.said:
+            logger.warning(text)
+            self.said.add(text)
+        if text not in self.warnings and len(self.warnings) < 100:
             self.warnings.append(text)
 
     def failed(self, msg: str, *args: object) -> None:
