@@ -38,9 +38,12 @@ def with_assoc(cfg: Config, assoc: str) -> Config:
     return dataclasses.replace(cfg, association=dataclasses.replace(cfg.association, method=assoc))
 
 
-def _run_one(assoc: str, out_dir: Path, stepped: Callable[[int], None] | None = None) -> RunSummary:
+def _run_one(
+    assoc: str, out_dir: Path, stepped: Callable[[int], None] | None = None, in_worker: bool = False
+) -> RunSummary:
     sh = _SHARED
     cfg = with_assoc(sh["cfg"], assoc)
+    sh["src"].reader.stats.quiet = in_worker  # a worker keeps its warnings; the parent says each once
     # the runs share the input: the warnings a run adds to it (summary.json's) are taken back after it,
     # so the next run's summary has the extraction's and its own, as in a worker process of its own
     warnings = sh["src"].reader.stats.warnings
@@ -71,10 +74,17 @@ def _run_filters(
         with ProcessPoolExecutor(
             max_workers=min(jobs, len(assocs)), mp_context=ctx, initializer=exit_with_parent
         ) as pool:
-            futures = [pool.submit(_run_one, a, d) for a, d in zip(assocs, dirs, strict=True)]
+            futures = [pool.submit(_run_one, a, d, None, True) for a, d in zip(assocs, dirs, strict=True)]
             for k, _ in enumerate(as_completed(futures), 1):
                 report(k * n)
-            return [f.result() for f in futures]
+            summaries = [f.result() for f in futures]
+        stats = _SHARED["src"].reader.stats
+        kept = list(stats.warnings)
+        for s in summaries:  # the runs' warnings, each said once (the extraction's were already)
+            for text in s.warnings:
+                stats.warn(text)
+        stats.warnings[:] = kept
+        return summaries
     summaries = []
     for k, (a, d) in enumerate(zip(assocs, dirs, strict=True)):
         summaries.append(_run_one(a, d, lambda i, k=k: report(k * n + i)))

@@ -492,17 +492,23 @@ def test_compare_warns_that_a_config_file_s_association_method_is_ignored(sim_lo
         assert res.exit_code == 0 and "association.method" not in res.stderr, res.output
 
 
-def test_compare_says_a_ground_truth_note_once_and_keeps_it_in_every_summary(sim_log, tmp_path):
+@pytest.mark.parametrize("jobs", ["1", "2"])
+def test_compare_says_a_ground_truth_note_once_and_keeps_it_in_every_summary(sim_log, tmp_path, jobs):
     """A ground truth covering part of the run: compare's runs share one input, so the note was printed
-    once per associator; it is printed once and still in each associator's summary.json."""
+    once per associator (once per worker process with --jobs); it is printed once and still in each
+    associator's summary.json. A real process: the workers' stderr is the terminal's, not CliRunner's."""
+    import subprocess
+    import sys
+
     gt = tmp_path / "half.tum"
     rows = sim_log.with_suffix(".gt.tum").read_text().splitlines()
     gt.write_text("\n".join(rows[: len(rows) // 8]) + "\n")
-    res = invoke(
-        "compare", sim_log, "--assoc", "icnn,jcbb,pca", "--ground-truth", gt, "--max-scans", 40,
-        "--out", tmp_path / "c",
+    res = subprocess.run(
+        [sys.executable, "-m", "cornerslam_cli", "compare", str(sim_log), "--assoc", "icnn,jcbb,pca",
+         "--ground-truth", str(gt), "--max-scans", "40", "--out", str(tmp_path / "c"), "--jobs", jobs],
+        capture_output=True, text=True, timeout=300,
     )  # fmt: skip
-    assert res.exit_code == 0, res.output
+    assert res.returncode == 0, res.stderr
     assert res.stderr.count("ATE/RPE are over those") == 1, res.stderr
     for a in ("icnn", "jcbb", "pca"):
         warnings = json.loads((tmp_path / "c" / a / "summary.json").read_text())["warnings"]

@@ -134,6 +134,7 @@ class ReadStats:
     truncated: bool = False  # the file ends early (a recorder stopped): what came after the cut is lost
     warnings: list[str] = field(default_factory=list)
     said: set[str] = field(default_factory=set)  # every text logged: a summary's list may be reset, not this
+    quiet: bool = False  # keep warnings, do not log them (compare's workers: the parent says them)
 
     def warn(self, msg: str, *args: object) -> None:
         """Log a warning and keep it (first 100) so summaries can report it.
@@ -142,7 +143,7 @@ class ReadStats:
         damaged bytes), on the console even when ``warnings`` was reset since: compare's runs share
         one input and each summary gets its own warnings, but a ground truth's note is said once."""
         text = printable(msg % args if args else msg)
-        if text not in self.said:
+        if text not in self.said and not self.quiet:
             logger.warning(text)
             self.said.add(text)
         if text not in self.warnings and len(self.warnings) < 100:
