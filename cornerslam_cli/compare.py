@@ -78,12 +78,9 @@ def _run_filters(
             for k, _ in enumerate(as_completed(futures), 1):
                 report(k * n)
             summaries = [f.result() for f in futures]
-        stats = _SHARED["src"].reader.stats
-        kept = list(stats.warnings)
         for s in summaries:  # the runs' warnings, each said once (the extraction's were already)
             for text in s.warnings:
-                stats.warn(text)
-        stats.warnings[:] = kept
+                _SHARED["src"].reader.stats.say(text)
         return summaries
     summaries = []
     for k, (a, d) in enumerate(zip(assocs, dirs, strict=True)):

@@ -143,11 +143,16 @@ class ReadStats:
         damaged bytes), on the console even when ``warnings`` was reset since: compare's runs share
         one input and each summary gets its own warnings, but a ground truth's note is said once."""
         text = printable(msg % args if args else msg)
-        if text not in self.said and not self.quiet:
-            logger.warning(text)
-            self.said.add(text)
+        if not self.quiet:
+            self.say(text)
         if text not in self.warnings and len(self.warnings) < 100:
             self.warnings.append(text)
+
+    def say(self, text: str) -> None:
+        """Log the warning ``text`` unless it was already (not kept: :meth:`warn` keeps)."""
+        if text not in self.said:
+            logger.warning(text)
+            self.said.add(text)
 
     def failed(self, msg: str, *args: object) -> None:
         """Count one message / line that could not be decoded (skipped); warn about the first five and
