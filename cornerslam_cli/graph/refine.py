@@ -20,8 +20,6 @@ every radish log, and the ATE against the published references moves both ways.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from ..geometry import inverse, relative, transform_points, wrap_angle
@@ -34,18 +32,21 @@ MIN_POINTS = 20  # a node with fewer scan points is neither registered nor a tar
 TARGET_NEIGHBOURS = (-1, 0, 1)  # the earlier node's map: its points and its neighbours' (denser normals)
 
 
-class NodeClouds:
-    """Each keyframe node's scan points in its own frame, thinned: the points of the steps that hang
-    from it (graph/submap.py ``step_nodes``), gathered as submaps close."""
+class Refinement:
+    """The keyframe nodes' scan points in their own frames, thinned — the points of the steps that hang
+    from each (graph/submap.py ``step_nodes``), gathered as submaps close — and, once :meth:`run` has
+    used them, how many pairs it registered and how many became factors."""
 
     def __init__(self, voxel: float):
         self.voxel = voxel
         self._parts: dict[int, list[np.ndarray]] = {}
+        self.tried = 0  # node pairs registered
+        self.added = 0  # factors added (fit and move within their limits)
 
-    def add_submap(self, points: list[np.ndarray | None], step_nodes: np.ndarray, anchors: np.ndarray) -> None:
-        """A closed submap's steps: their ``points`` (submap frame; None: no scan), the node each hangs
-        from and that node's pose in the submap's frame (``anchors``)."""
-        for pts, node, anchor in zip(points, step_nodes, anchors, strict=True):
+    def add_submap(self, points: list | None, step_nodes: np.ndarray, anchors: np.ndarray) -> None:
+        """A closed submap's steps: their ``points`` (submap frame; None: no scan; the list None: not
+        kept, nothing to add), the node each hangs from and that node's pose in the submap (``anchors``)."""
+        for pts, node, anchor in zip(points or (), step_nodes, anchors, strict=False):
             if pts is not None and len(pts):
                 placed = transform_points(pts, inverse(anchor))
                 self._parts.setdefault(int(node), []).append(placed[voxel_thin(placed, self.voxel)])
@@ -57,11 +58,10 @@ class NodeClouds:
             out[node] = p[voxel_thin(p, self.voxel)]
         return out
 
-
-@dataclass(frozen=True)
-class RefineStats:
-    tried: int  # node pairs registered
-    added: int  # factors added (fit and move within their limits)
+    def run(self, g: PoseGraph, cfg: GraphConfig, match: ScanMatchConfig, scale: float) -> None:
+        """:func:`refine` the solved graph ``g`` with the points gathered (then let go of them)."""
+        clouds, self._parts = self.clouds(), {}
+        self.tried, self.added = refine(g, clouds, cfg, match, scale)
 
 
 def pairs(poses: np.ndarray, cfg: GraphConfig) -> list[tuple[int, int]]:
@@ -80,10 +80,10 @@ def pairs(poses: np.ndarray, cfg: GraphConfig) -> list[tuple[int, int]]:
 
 def refine(
     g: PoseGraph, clouds: dict[int, np.ndarray], cfg: GraphConfig, match: ScanMatchConfig, scale: float
-) -> RefineStats:
+) -> tuple[int, int]:
     """Add the registrations of :func:`pairs` to the solved graph ``g`` and solve it again; ``clouds``
-    per node (:class:`NodeClouds`), ``match`` the ICP settings, ``scale`` the front end's learnt scale of
-    match covariances."""
+    per node (:class:`Refinement`), ``match`` the ICP settings, ``scale`` the front end's learnt scale of
+    match covariances. Returns (pairs registered, factors added)."""
     poses = g.poses()
     maps: dict[int, LocalMap | None] = {}
 
@@ -115,4 +115,4 @@ def refine(
         added += 1
     if added:
         g.optimize()
-    return RefineStats(tried, added)
+    return tried, added
