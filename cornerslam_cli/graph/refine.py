@@ -85,21 +85,28 @@ def refine(
     per node (:class:`Refinement`), ``match`` the ICP settings, ``scale`` the front end's learnt scale of
     match covariances. Returns (pairs registered, factors added)."""
     poses = g.poses()
-    maps: dict[int, LocalMap | None] = {}
+    maps: dict[tuple[int, int], LocalMap | None] = {}
 
-    def target(j: int) -> LocalMap | None:
-        if j not in maps:
-            parts = [transform_points(clouds[k], relative(poses[j], poses[k])) for k in
-                     (j + o for o in TARGET_NEIGHBOURS) if k in clouds]  # fmt: skip
+    def target(j: int, i: int) -> LocalMap | None:
+        """Node j's map: its points and its neighbours' but node i's (j + 1 = i when one step between
+        them is refine_min_path long), placed with the solved graph."""
+        key = (j, min(i, j + 2))
+        if key not in maps:
+            near = [j + o for o in TARGET_NEIGHBOURS]
+            parts = [
+                transform_points(clouds[k], relative(poses[j], poses[k]))
+                for k in near
+                if k in clouds and k != i
+            ]
             pts = np.concatenate(parts) if parts else np.zeros((0, 2))
             pts = pts[voxel_thin(pts, match.voxel)]
-            maps[j] = LocalMap.build(pts) if len(pts) >= MIN_POINTS else None
-        return maps[j]
+            maps[key] = LocalMap.build(pts) if len(pts) >= MIN_POINTS else None
+        return maps[key]
 
     tried = added = 0
     for j, i in pairs(poses, cfg):
         points = clouds.get(i)
-        if points is None or len(points) < MIN_POINTS or (m := target(j)) is None:
+        if points is None or len(points) < MIN_POINTS or (m := target(j, i)) is None:
             continue
         guess = relative(poses[j], poses[i])
         reg = register(points, m, guess, match)
