@@ -107,6 +107,7 @@ def revisit_table(rows: list[dict]) -> list[str]:
     for r in rows:
         b, v = 100 * np.array(r["baseline"])[:, 2], 100 * np.array(r["variant"])[:, 2]
         if np.isnan(b).any() or np.isnan(v).any():
+            out.append(f"| {r['log']} | — | — | — | a run that never revisits |")
             continue
         out.append(
             f"| {r['log']} | {b.mean():.2f} ({b.min():.2f}–{b.max():.2f}) | {v.mean():.2f} ({v.min():.2f}–"

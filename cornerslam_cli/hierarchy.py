@@ -166,9 +166,9 @@ class HierarchicalSlam:
                 if r.factor >= 0
             ]
             self.smoothed = smooth(self.cfg.graph, self.chains, self.graph.poses()[: len(self.closed)], loops)
-            if self.cfg.graph.refine:
-                self.refinement.run(self.smoothed, self.cfg.graph, self.cfg.scan_match, self._match_scale)
             self.unconverged += not self.smoothed.converged
+            if self.cfg.graph.refine and self.refinement.run(self.smoothed, self.cfg, self._match_scale):
+                self.unconverged += not self.smoothed.converged  # solved again with the scan pairs
         self.t_loop += time.perf_counter() - t0
 
     def _optimize(self, graph: PoseGraph) -> None:

@@ -14,11 +14,13 @@ its fit reaches ``refine_min_fitness`` and ICP moved it at most ``refine_max_xy`
 (the solved graph is already right locally: a larger move is another basin). Its covariance is ICP's
 times the front end's learnt scale of match covariances (motion/fusion.py), as for loop closures.
 
-What it does on the panel (README "Dense refinement"): the map agrees better with itself at revisits on
-every radish log, and the ATE against the published references moves both ways.
+What it does on the panel (README "Dense refinement"): most maps agree better with themselves at their
+revisits (every noisy radish log's), and the ATE against the published references moves both ways.
 """
 
 from __future__ import annotations
+
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -27,6 +29,9 @@ from ..motion.icp import LocalMap, register, voxel_thin
 from ..motion.params import ScanMatchConfig
 from .params import GraphConfig
 from .posegraph import PoseGraph
+
+if TYPE_CHECKING:
+    from ..config import Config
 
 MIN_POINTS = 20  # a node with fewer scan points is neither registered nor a target
 TARGET_NEIGHBOURS = (-1, 0, 1)  # the earlier node's map: its points and its neighbours' (denser normals)
@@ -45,8 +50,10 @@ class Refinement:
 
     def add_submap(self, points: list | None, step_nodes: np.ndarray, anchors: np.ndarray) -> None:
         """A closed submap's steps: their ``points`` (submap frame; None: no scan; the list None: not
-        kept, nothing to add), the node each hangs from and that node's pose in the submap (``anchors``)."""
-        for pts, node, anchor in zip(points or (), step_nodes, anchors, strict=False):
+        kept, graph.refine off), the node each hangs from and that node's pose in the submap (``anchors``)."""
+        if points is None:
+            return
+        for pts, node, anchor in zip(points, step_nodes, anchors, strict=True):
             if pts is not None and len(pts):
                 placed = transform_points(pts, inverse(anchor))
                 self._parts.setdefault(int(node), []).append(placed[voxel_thin(placed, self.voxel)])
@@ -58,17 +65,23 @@ class Refinement:
             out[node] = p[voxel_thin(p, self.voxel)]
         return out
 
-    def run(self, g: PoseGraph, cfg: GraphConfig, match: ScanMatchConfig, scale: float) -> None:
-        """:func:`refine` the solved graph ``g`` with the points gathered (then let go of them)."""
+    def run(self, g: PoseGraph, cfg: Config, scale: float) -> int:
+        """:func:`refine` the solved graph ``g`` with the points gathered (then let go of them), by the
+        run's ``graph`` and ``scan_match`` settings; returns the factors added (0: ``g`` not solved again)."""
         clouds, self._parts = self.clouds(), {}
-        self.tried, self.added = refine(g, clouds, cfg, match, scale)
+        self.tried, self.added = refine(g, clouds, cfg.graph, cfg.scan_match, scale)
+        return self.added
+
+
+def path_lengths(poses: np.ndarray) -> np.ndarray:
+    """(n,) metres of path from node 0 to each node along the chain of ``poses``."""
+    return np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(poses[:, :2], axis=0).T))))
 
 
 def pairs(poses: np.ndarray, cfg: GraphConfig) -> list[tuple[int, int]]:
     """(j, i), j < i: for each node i the ``refine_neighbours`` nearest earlier nodes within
     ``refine_radius`` m whose path to i is at least ``refine_min_path`` m (ties: the earlier)."""
-    step = np.hypot(*np.diff(poses[:, :2], axis=0).T)
-    path = np.concatenate(([0.0], np.cumsum(step)))
+    path = path_lengths(poses)
     out = []
     for i in range(1, len(poses)):
         d = np.hypot(poses[:i, 0] - poses[i, 0], poses[:i, 1] - poses[i, 1])
@@ -85,23 +98,23 @@ def refine(
     per node (:class:`Refinement`), ``match`` the ICP settings, ``scale`` the front end's learnt scale of
     match covariances. Returns (pairs registered, factors added)."""
     poses = g.poses()
-    maps: dict[tuple[int, int], LocalMap | None] = {}
+    path = path_lengths(poses)
+    maps: dict[tuple[int, tuple[int, ...]], LocalMap | None] = {}
 
     def target(j: int, i: int) -> LocalMap | None:
-        """Node j's map: its points and its neighbours' but node i's (j + 1 = i when one step between
-        them is refine_min_path long), placed with the solved graph."""
-        key = (j, min(i, j + 2))
-        if key not in maps:
-            near = [j + o for o in TARGET_NEIGHBOURS]
-            parts = [
-                transform_points(clouds[k], relative(poses[j], poses[k]))
-                for k in near
-                if k in clouds and k != i
-            ]
+        """Node j's map: its points and its chain neighbours', placed with the solved graph — those
+        before i by at least ``refine_min_path`` m of path (j + 1 may be i itself, or just behind it)."""
+        near = tuple(
+            k
+            for k in (j + o for o in TARGET_NEIGHBOURS)
+            if k in clouds and k < i and path[i] - path[k] >= cfg.refine_min_path
+        )
+        if (j, near) not in maps:
+            parts = [transform_points(clouds[k], relative(poses[j], poses[k])) for k in near]
             pts = np.concatenate(parts) if parts else np.zeros((0, 2))
             pts = pts[voxel_thin(pts, match.voxel)]
-            maps[key] = LocalMap.build(pts) if len(pts) >= MIN_POINTS else None
-        return maps[key]
+            maps[(j, near)] = LocalMap.build(pts) if len(pts) >= MIN_POINTS else None
+        return maps[(j, near)]
 
     tried = added = 0
     for j, i in pairs(poses, cfg):

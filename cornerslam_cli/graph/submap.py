@@ -159,7 +159,8 @@ class OpenSubmap:
         self.poses: list[np.ndarray] = []
         self.covs: list[np.ndarray] = []  # each step's motion noise (Slam.step_noise)
         self.points: list[np.ndarray] = []
-        # each step's points too, for graph.refine (graph/refine.py NodeClouds); None: not kept
+        # each step's points too, for graph.refine (graph/refine.py Refinement; None: not kept): raw
+        # until the submap closes, so bounded by submaps.max_steps
         self.step_points: list[np.ndarray | None] | None = [] if keep_steps else None
         self.n_points = 0
         self.travelled = 0.0
