@@ -15,7 +15,8 @@ its fit reaches ``refine_min_fitness`` and ICP moved it at most ``refine_max_xy`
 times the front end's learnt scale of match covariances (motion/fusion.py), as for loop closures.
 
 What it does on the panel (README "Dense refinement"): most maps agree better with themselves at their
-revisits (every noisy radish log's), and the ATE against the published references moves both ways.
+revisits (every noisy radish log's, orebro's within its spread), and the ATE against the published
+references moves both ways.
 """
 
 from __future__ import annotations
