@@ -39,16 +39,19 @@ from panel_spread import odom_lines, panel  # noqa: E402
 from real_logs import ROOT, default_data  # noqa: E402
 
 
-def run(log: Path, out: Path, extra: list[str], env: dict[str, str]) -> tuple[float, float]:
-    """``cornerslam run LOG`` with the build of ``env``: (figure, the scan-matched chain's figure)."""
+def run(log: Path, out: Path, extra: list[str], env: dict[str, str]) -> tuple[float, float, float]:
+    """``cornerslam run LOG`` with the build of ``env``: (figure, the scan-matched chain's figure, the
+    map's revisit misalignment in m — summary.json ``consistency``, nan when the run never revisits)."""
     cmd = [sys.executable, "-m", "cornerslam_cli", "run", str(log), "--out", str(out), "-q", *extra]
     res = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=out.parent)
     if res.returncode != 0:
         raise SystemExit(f"{' '.join(cmd)} failed: {res.stderr.strip()}")
-    a = json.loads((out / "summary.json").read_text())["accuracy"]
+    summary = json.loads((out / "summary.json").read_text())
+    a, revisit = summary["accuracy"], (summary.get("consistency") or {}).get("revisit_mean")
+    revisit = float("nan") if revisit is None else revisit
     if "relations" in a:
-        return a["relations"]["trans_mean"], a["scan_odom_relations"]["trans_mean"]
-    return a["ate"]["rmse"], a["scan_odom_ate"]["rmse"]
+        return a["relations"]["trans_mean"], a["scan_odom_relations"]["trans_mean"], revisit
+    return a["ate"]["rmse"], a["scan_odom_ate"]["rmse"], revisit
 
 
 def measure(logs, builds, k: int, jobs: int, tmp: Path) -> list[dict]:
@@ -94,6 +97,25 @@ def table(rows: list[dict]) -> list[str]:
     return out
 
 
+def revisit_table(rows: list[dict]) -> list[str]:
+    """The maps' revisit misalignment (cm) per log: how well each map agrees with itself where the robot
+    came back (report/consistency.py), a figure without the reference."""
+    out = [
+        "| log | baseline (cm) | variant (cm) | Δ mean (cm) | verdict |",
+        "|---|---:|---:|---:|---|",
+    ]
+    for r in rows:
+        b, v = 100 * np.array(r["baseline"])[:, 2], 100 * np.array(r["variant"])[:, 2]
+        if np.isnan(b).any() or np.isnan(v).any():
+            out.append(f"| {r['log']} | — | — | — | a run that never revisits |")
+            continue
+        out.append(
+            f"| {r['log']} | {b.mean():.2f} ({b.min():.2f}–{b.max():.2f}) | {v.mean():.2f} ({v.min():.2f}–"
+            f"{v.max():.2f}) | {v.mean() - b.mean():+.2f} | {verdict(b, v)} |"
+        )
+    return out
+
+
 def summary(rows: list[dict]) -> list[str]:
     """Per group of logs (noisy radish, exact radish): median and worst of the per-log means."""
     out = []
@@ -103,7 +125,7 @@ def summary(rows: list[dict]) -> list[str]:
         if not sel:
             continue
         for b in ("baseline", "variant"):
-            means = {r["log"]: np.mean([f for f, _ in r[b]]) for r in sel}
+            means = {r["log"]: np.mean([f for f, *_ in r[b]]) for r in sel}
             worst = max(means, key=means.get)
             out.append(
                 f"- {group}, {b}: median of the means {np.median(list(means.values())):.3f} m, worst "
@@ -137,6 +159,12 @@ def report(rows: list[dict], sets: list[str], base_rev: str, k: int) -> list[str
         *table(rows),
         "",
         *summary(rows),
+        "",
+        "Revisit misalignment (summary.json `consistency`): for each scan point placed with the trajectory, "
+        "the distance to the nearest point of scans ≥ 100 scans away, capped at 0.3 m, averaged over the "
+        "points that have one (revisit_floor.md) — the map's agreement with itself, not with the reference.",
+        "",
+        *revisit_table(rows),
         "",
     ]
 

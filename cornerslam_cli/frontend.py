@@ -144,7 +144,8 @@ def open_input(log_path: str | Path, cfg: Config, span: Span | None = None) -> I
     with signals_deferred():
         load_association_kernels()
         load_filter_kernels()
-    if matcher is not None or (cfg.submaps.enabled and cfg.loops.enabled):  # loop closing runs ICP too
+    # loop closing and the keyframe graph's refinement run ICP too
+    if matcher is not None or (cfg.submaps.enabled and (cfg.loops.enabled or cfg.graph.refine)):
         with signals_deferred():
             load_motion_kernels()
     odom_on_tf = info.odom_source.startswith("tf") or reader.odom_on_tf

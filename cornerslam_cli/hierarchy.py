@@ -32,16 +32,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .geometry import (
-    compose,
-    compose_inverse_cov,
-    relative,
-    transform_points,
-)
+from .geometry import compose, compose_inverse_cov, relative, transform_points
 from .graph.loops import FEW_CORNERS, LOW_FITNESS, NO_HYPOTHESIS, agree, chi2, loop_associator, match_submaps
 from .graph.paths import Paths
 from .graph.points import POINTS, match_points, searchable
 from .graph.posegraph import ONLINE_RELINEARIZE, PoseGraph
+from .graph.refine import Refinement
 from .graph.smooth import smooth
 from .graph.submap import (
     LocalMaps,
@@ -119,7 +115,8 @@ class HierarchicalSlam:
         self.chains: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # per closed submap (smooth)
         self.n_nodes = 1  # keyframe nodes so far (node 0: the first origin)
         self.smoothed: PoseGraph | None = None  # the keyframe graph, solved by finish()
-        self._open = OpenSubmap(0, 0, 0)
+        self.refinement = Refinement(cfg.scan_match.voxel)  # graph.refine (graph/refine.py)
+        self._open = OpenSubmap(0, 0, 0, cfg.graph.refine)
         self._origin_cov = np.zeros((3, 3))  # the open submap origin's marginal in the graph
         self.t_loop = 0.0
         self.unconverged = 0  # graph solves (online and the final smoothing) stopped at their step limit
@@ -170,6 +167,8 @@ class HierarchicalSlam:
             ]
             self.smoothed = smooth(self.cfg.graph, self.chains, self.graph.poses()[: len(self.closed)], loops)
             self.unconverged += not self.smoothed.converged
+            if self.cfg.graph.refine and self.refinement.run(self.smoothed, self.cfg, self._match_scale):
+                self.unconverged += not self.smoothed.converged  # solved again with the scan pairs
         self.t_loop += time.perf_counter() - t0
 
     def _optimize(self, graph: PoseGraph) -> None:
@@ -197,7 +196,7 @@ class HierarchicalSlam:
             self._close_loops(sub, step)
         if not last:
             self.slam.new_map()
-            self._open = OpenSubmap(sub.index + 1, step + 1, self.n_nodes - 1)
+            self._open = OpenSubmap(sub.index + 1, step + 1, self.n_nodes - 1, self.cfg.graph.refine)
             self._origin_cov = self.graph.marginal(sub.index + 1)
 
     def _close_submap(self) -> Submap:
@@ -210,6 +209,7 @@ class HierarchicalSlam:
         step_nodes = np.where(before >= 0, self.n_nodes + before, sub.node)
         self.n_nodes += len(nodes)
         anchor_poses = np.where((before >= 0)[:, None], poses[nodes[before.clip(0)]], 0.0)
+        self.refinement.add_submap(sub.step_points, step_nodes, anchor_poses)
         table = self.slam.landmark_table()
         n = len(table["id"])
         state = (3 + 3 * table["id"][:, None] + np.arange(3)).reshape(-1)

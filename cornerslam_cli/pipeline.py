@@ -117,6 +117,11 @@ def run_filter(
         else Slam.from_config(cfg, src.laser2base)
     )
     graph = slam if isinstance(slam, HierarchicalSlam) else None
+    if cfg.graph.refine and graph is None:
+        src.reader.stats.warn(
+            "graph.refine=true is ignored: it refines the two levels' keyframe graph, and "
+            "submaps.enabled=false runs the single map"
+        )
     with RunWriter(dest, src.laser2base, cfg.grid, scans) as writer:
         for frame in frame_iter:
             record = slam.step(frame)

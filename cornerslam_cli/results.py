@@ -177,6 +177,8 @@ class Counts(JsonResult):
     submaps: int | None = optional()
     loops_accepted: int | None = optional()
     loops_rejected: int | None = optional()
+    # appended, present with graph.refine: scan pairs the dense refinement added to the keyframe graph
+    refine_factors: int | None = optional()
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -102,6 +102,18 @@ class GraphConfig:
     kernel_scale: float = num(2.8, gt=0.0, le=1e6)
     node_spacing: float = num(1.0, ge=0.0, le=1e6)  # m between keyframe nodes (0: every keyframe)
     node_angle: float = num(0.5, ge=0.0, le=math.pi)  # rad: a turn this large makes a node too
+    # dense refinement (graph/refine.py; off: README "Dense refinement"): after the keyframe graph is
+    # solved, each node's scan registered against its refine_neighbours nearest earlier nodes within
+    # refine_radius m that lie refine_min_path m of path back (each with its chain neighbours' points,
+    # those as far back), kept when the fit reaches
+    # refine_min_fitness and ICP moved the pair at most refine_max_xy m / refine_max_theta rad; solved again
+    refine: bool = False
+    refine_radius: float = num(5.0, gt=0.0, le=1e6)
+    refine_min_path: float = num(5.0, ge=0.0, le=1e9)
+    refine_neighbours: int = num(2, ge=1, le=1000)
+    refine_min_fitness: float = num(0.5, ge=0.0, le=1.0)
+    refine_max_xy: float = num(0.3, gt=0.0, le=100.0)
+    refine_max_theta: float = num(0.05, gt=0.0, le=math.pi)
 
     def __post_init__(self) -> None:
         check_ranges(self)

@@ -152,13 +152,16 @@ class LoopMatch:
 class OpenSubmap:
     """The submap being built: its steps' local poses, its scans' points, how far the robot went."""
 
-    def __init__(self, index: int, first_step: int, node: int):
+    def __init__(self, index: int, first_step: int, node: int, keep_steps: bool = False):
         self.index = index
         self.first_step = first_step
         self.node = node  # its origin's node in the keyframe graph (graph/smooth.py)
         self.poses: list[np.ndarray] = []
         self.covs: list[np.ndarray] = []  # each step's motion noise (Slam.step_noise)
         self.points: list[np.ndarray] = []
+        # each step's points too, for graph.refine (graph/refine.py Refinement; None: not kept): raw
+        # until the submap closes, so bounded by submaps.max_steps
+        self.step_points: list[np.ndarray | None] | None = [] if keep_steps else None
         self.n_points = 0
         self.travelled = 0.0
 
@@ -169,6 +172,8 @@ class OpenSubmap:
             self.travelled += math.hypot(*(pose[:2] - self.poses[-1][:2]))
         self.poses.append(pose)
         self.covs.append(cov)
+        if self.step_points is not None:
+            self.step_points.append(points)
         if points is not None and len(points):
             self.points.append(points)
             self.n_points += len(points)

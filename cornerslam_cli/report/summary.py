@@ -126,6 +126,7 @@ def run_counts(src: Input, totals: Totals, n_landmarks: int, graph: Hierarchical
         submaps=None if graph is None else len(graph.closed),
         loops_accepted=None if graph is None else sum(r.accepted for r in loops),
         loops_rejected=None if graph is None else sum(not r.accepted for r in loops),
+        refine_factors=graph.refinement.added if graph is not None and graph.cfg.graph.refine else None,
     )
 
 

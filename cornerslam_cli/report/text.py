@@ -51,7 +51,8 @@ def summary_lines(s: RunSummary) -> list[str]:
     if c.submaps is not None:
         lines.append(
             f"submaps: {c.submaps}, loop closures {c.loops_accepted} accepted, {c.loops_rejected} refused, "
-            f"loop time {t.t_loop or 0.0:.2f}s"
+            + ("" if c.refine_factors is None else f"refinement {c.refine_factors} scan pairs, ")
+            + f"loop time {t.t_loop or 0.0:.2f}s"
         )
     acc = s.accuracy
     if acc is not None and acc.ate is not None:
