@@ -9,6 +9,7 @@ and to write to UTF-8 files and JSON (error lines are made so by ``CornerslamErr
 from __future__ import annotations
 
 import difflib
+import errno
 import os
 import tempfile
 import traceback
@@ -78,6 +79,16 @@ def printable(text: str) -> str:
 def display_path(path: str | Path) -> str:
     """A path as text for messages and summaries (:func:`printable`)."""
     return printable(os.fsdecode(path))
+
+
+def symlink_loop(p: str | Path) -> bool:
+    """Whether following ``p`` runs into a symlink loop (``a -> b -> a``): ``Path.exists()`` is False
+    then too, so "does not exist" would be the wrong thing to say."""
+    try:
+        os.stat(p)
+    except OSError as exc:
+        return exc.errno == errno.ELOOP
+    return False
 
 
 def did_you_mean(word: str, choices: Iterable[str], cutoff: float = 0.6, then: str = "") -> str:

@@ -164,17 +164,29 @@ def rpe(est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray, de
 
 
 RELATIONS_LAYOUT = "t1 t2 x y z roll pitch yaw"
+TUM_LIKE_NORM = (
+    1e-3  # |q|² − 1 of every line within this: a TUM trajectory (4 decimals or more) given as relations
+)
 
 
 def read_relations(path: str | Path) -> np.ndarray:
     """Kümmerle relations file: rows ``t1 t2 x y z roll pitch yaw`` → (k, 5) [t1, t2, x, y, yaw].
 
     Each row stands alone, so their order does not matter; a binary file, a line that is not 8
-    finite numbers (more are ignored) or a file without relations raises ``LogError``."""
+    finite numbers (more are ignored), a file without relations or a TUM trajectory (every line's last
+    four numbers a unit quaternion) raises ``LogError``."""
     v, lines = read_number_rows(
         path, "relations file", LogError, "relation", RELATIONS_LAYOUT, 8, more_ok=True
     )
     refuse_far(v, lines, [2, 3, 4], f"relations file '{path}'", LogError, RELATIONS_LAYOUT)
+    q = v[:, 4:8]
+    if len(v) >= 2 and np.all(np.abs(np.einsum("ij,ij->i", q, q) - 1.0) < TUM_LIKE_NORM):
+        # every row's last four numbers a unit quaternion: z roll pitch yaw would need |yaw| = 1 on each
+        raise LogError(
+            f"relations file '{path}' looks like a TUM trajectory (stamp x y z qx qy qz qw: the last four "
+            f"numbers of each line are a unit quaternion, not z roll pitch yaw)",
+            f"give it as --ground-truth; a relations file has lines {RELATIONS_LAYOUT}",
+        )
     return v[:, [0, 1, 2, 3, 7]]
 
 

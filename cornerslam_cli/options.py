@@ -351,5 +351,10 @@ def parse_sweeps(texts) -> dict[str, list[str]]:
             raise click.BadParameter(
                 f"'{key}' is swept twice; give all its values at once", param_hint="--sweep"
             )
-        sweeps[key] = [v.strip() for v in values.split(",") if v.strip()]
+        sweeps[key] = [v.strip() for v in values.split(",")]
+        if "" in sweeps[key]:  # '3,,5' or '3,5,': a value lost in typing, not one to drop silently
+            raise click.BadParameter(
+                f"'{text}' has an empty value; list the values as KEY=V1,V2,... without empty ones",
+                param_hint="--sweep",
+            )
     return sweeps

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import CornerslamError
+from .errors import CornerslamError, symlink_loop
 
 UTF16_BOMS = (codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)
 SNIFF_BYTES = 1 << 16  # a binary file (a multi-GB bag given as ground truth) is refused on these
@@ -39,6 +39,8 @@ def read_text(
     if p.is_dir():
         raise error(f"{what} '{p}' is a directory", f"give {expected}")
     if not p.exists():
+        if symlink_loop(p):
+            raise error(f"{what} '{p}': a symlink loop", "check the path")
         raise error(f"{what} '{p}' does not exist", f"give {expected}")
     name = f"{what} '{p}'"
     try:

@@ -138,6 +138,17 @@ def test_unknown_associator_and_malformed_sweep_exit_2(tmp_path):
     assert res.exit_code == 2 and "KEY=V1,V2" in res.output
 
 
+@pytest.mark.parametrize("values", ["3,,5", "3,5,", ",3"])
+def test_a_sweep_with_an_empty_value_exits_2(tmp_path, values):
+    """``--sweep K=3,,5`` ran 3 and 5 without a word about the value between the commas."""
+    out = tmp_path / "o"
+    res = CliRunner().invoke(
+        cli, ["batch", "x.mcap", "--sweep", f"association.pca.group_size={values}", "--out", str(out)]
+    )
+    assert res.exit_code == 2 and "has an empty value" in res.output and "--sweep" in res.output
+    assert not out.exists()
+
+
 def test_assoc_and_a_set_of_association_method_must_agree(tmp_path):
     """batch --assoc icnn --set association.method=jcbb ran icnn without a word, as run did before
     4aaa3cf (reliability.md: "--assoc ... with a --set of its config key naming another value" exit 2)."""

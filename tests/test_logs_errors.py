@@ -16,11 +16,14 @@ from _log_fixtures import (
     write_log,
     write_messages_mcap,
 )
+from click.testing import CliRunner
 
-from cornerslam_cli.errors import LogError
+from cornerslam_cli.cli import cli
+from cornerslam_cli.errors import ConfigError, LogError
 from cornerslam_cli.logs import READERS, detect_format, open_log
 from cornerslam_cli.logs.base import ReadStats, make_scan
 from cornerslam_cli.logs.writers import RawScan, RosSerializer, write_mcap
+from cornerslam_cli.textfile import read_text
 
 
 def test_readers_table_covers_formats(tmp_path):
@@ -330,3 +333,17 @@ def test_info_fields(tmp_path):
     assert topics["/tf_static"].count == 1
     assert (info.scan_topic, info.odom_topic, info.odom_source) == ("/scan", "/odom", "nav_msgs/Odometry")
     assert info.n_messages == 25 and info.problems == ()
+
+
+def test_a_text_file_that_is_a_symlink_loop_is_named_so(tmp_path):
+    """A config, ground truth or trajectory path that is a symlink loop said "… does not exist" (the
+    name is right there in ls); logs already said "a symlink loop"."""
+    (tmp_path / "a").symlink_to(tmp_path / "b")
+    (tmp_path / "b").symlink_to(tmp_path / "a")
+    with pytest.raises(ConfigError, match="config file '.*a': a symlink loop"):
+        read_text(tmp_path / "a", "config file", ConfigError, "a YAML file")
+    res = CliRunner().invoke(cli, ["evaluate", str(tmp_path / "a"), "--ground-truth", str(tmp_path / "b")])
+    assert res.exit_code == 2 and "a symlink loop" in res.output and "does not exist" not in res.output
+    (tmp_path / "c").symlink_to(tmp_path / "missing")  # a dangling link still does not exist
+    with pytest.raises(ConfigError, match="does not exist"):
+        read_text(tmp_path / "c", "config file", ConfigError, "a YAML file")

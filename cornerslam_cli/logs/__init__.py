@@ -13,15 +13,13 @@ every problem with the input.
 
 from __future__ import annotations
 
-import errno
 import gzip
-import os
 import shlex
 import stat
 from collections.abc import Callable
 from pathlib import Path
 
-from ..errors import LogError, display_path
+from ..errors import LogError, display_path, symlink_loop
 from .base import LogInfo, LogReader, ReadStats, TopicInfo
 from .carmen import GZIP_MAGIC, CarmenReader
 from .mcap import MAGIC as MCAP_MAGIC
@@ -61,7 +59,7 @@ def detect_format(path: str | Path) -> str:
             "check the path and the permissions of the directories on it",
         ) from exc
     if not exists:
-        if _symlink_loop(p):  # exists() is False on ELOOP too (a loop on the path, or the log itself)
+        if symlink_loop(p):  # exists() is False on ELOOP too (a loop on the path, or the log itself)
             raise LogError(f"cannot read log '{p}': a symlink loop", "check the path")
         raise LogError(f"log '{p}' does not exist", "check the path")
     check_regular(p)
@@ -96,15 +94,6 @@ def detect_format(path: str | Path) -> str:
             return "carmen"
         raise LogError(f"unsupported log '{p.name}'", f"give {SUPPORTED}")
     return fmt
-
-
-def _symlink_loop(p: Path) -> bool:
-    """Whether following ``p`` runs into a symlink loop (``a -> b -> a``)."""
-    try:
-        os.stat(p)
-    except OSError as exc:
-        return exc.errno == errno.ELOOP
-    return False
 
 
 _COMPRESSED = {  # magic -> (name, decompressor, the suffix it needs to name its output)
