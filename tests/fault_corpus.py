@@ -595,7 +595,7 @@ def _ground_truth_faults(d: Path, add: Callable[[str, Path, Expected], None]) ->
         (rel, "relations_binary", log[:3000], 2, no, ("relations file", "binary")),
         (rel, "relations_header", "t1 t2 x y z roll pitch yaw\n", 2, no, ("line 1 is not a relation",)),
         (rel, "relations_outside", "1 2 0 0 0 0 0 0", ok, warned, ("no relation", "falls inside the run")),
-        (rel, "relations_is_a_tum", "\n".join(rows), 2, no, ("looks like a TUM trajectory", "--ground-truth")),
+        (rel, "relations_is_a_tum", "\n".join(rows), 2, no, ("looks like a TUM traj", "--ground-truth")),
     ]  # fmt: skip
     for option, name, content, code, behaviour, message in entries:
         path = _write(d, name, content)
