@@ -164,9 +164,8 @@ def rpe(est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray, de
 
 
 RELATIONS_LAYOUT = "t1 t2 x y z roll pitch yaw"
-TUM_LIKE_NORM = (
-    1e-3  # |q|² − 1 of every line within this: a TUM trajectory (4 decimals or more) given as relations
-)
+# |q|² − 1 of every line within this: a TUM trajectory (4 decimals or more) given as relations
+TUM_LIKE_NORM = 1e-3
 
 
 def read_relations(path: str | Path) -> np.ndarray:
