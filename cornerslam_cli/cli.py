@@ -473,11 +473,13 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
     click.echo(scan_heading(step, scan))
     click.echo(format_extraction(segments, corners))
     if plot_path:
-        from .report.oserrors import output_errors
+        from .report.oserrors import output_errors, resolved
 
         with output_errors(plot_path):
-            Path(plot_path).parent.mkdir(parents=True, exist_ok=True)  # as --out and --mcap-out do
-            plot_extraction(scan, segments, corners, plot_path)
+            # a symlink's target (a dangling one's too), its directory made, as --out and --mcap-out do
+            target = resolved(Path(plot_path))
+            target.parent.mkdir(parents=True, exist_ok=True)
+            plot_extraction(scan, segments, corners, target)
         click.echo(f"wrote {plot_path}")
 
 

@@ -453,7 +453,10 @@ def parse_override(text: str) -> tuple[list[str], Any]:
         value = _parse_yaml(raw, f"--set '{shown}'") if raw.strip() else ""
     except yaml.YAMLError:
         value = raw
-    _refuse_sexagesimal(value, ".".join(keys))  # as a value error of --set: naming the key
+    try:
+        _refuse_sexagesimal(value, ".".join(keys))  # as a value error of --set: naming the key
+    except ConfigError as e:  # and the --set it came from, as every other value error of a --set does
+        raise ConfigError(override_place(text) + e.msg, e.hint) from None
     return keys, value
 
 

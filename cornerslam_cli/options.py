@@ -290,14 +290,23 @@ def check_method_not_set(overrides, assocs: str) -> None:
 
 def check_sweep_not_set(overrides, sweeps) -> None:
     """A usage error for ``batch`` given a ``--set`` of a key it also sweeps (or of a key inside a
-    swept section): each combination sets the swept value after the ``--set``, so the ``--set`` would
-    be ignored without a word."""
-    from .config import set_leaves
+    swept section that a swept value sets): each combination sets the swept value after the ``--set``,
+    so the ``--set`` would be ignored without a word. A swept mapping sets only the keys it names, as a
+    ``--set`` of one does (``--sweep 'graph={refine: true},{refine: false}'`` keeps a ``--set
+    graph.refine_radius=3``)."""
+    from .config import ConfigError, override_leaves, parse_override, set_leaves
 
-    swept = {".".join(part.strip() for part in key.split(".")): key for key in sweeps}
+    swept: dict[str, set[str]] = {}  # the --sweep key as given → the dotted keys its values set
+    for key, values in sweeps.items():
+        leaves = swept.setdefault(key, set())
+        for v in values:
+            try:
+                leaves.update(leaf for leaf, _ in override_leaves(*parse_override(f"{key}={v}")))
+            except ConfigError:  # its own error comes when the sweep is planned
+                leaves.add(".".join(part.strip() for part in key.split(".")))
     for text, leaf, _ in set_leaves(overrides):
-        for key, given in swept.items():
-            if leaf == key or leaf.startswith(key + "."):
+        for given, leaves in swept.items():
+            if any(leaf == k or leaf.startswith(k + ".") for k in leaves):
                 raise click.UsageError(
                     f"--sweep {given} and --set '{text}' set the same key: each combination would "
                     f"use the swept value and ignore the --set; give the values in --sweep {given}=... only"

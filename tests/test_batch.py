@@ -326,6 +326,36 @@ def test_resume_reruns_a_combination_whose_ground_truth_changed(tmp_path):
 
 
 @pytest.mark.parametrize(
+    ("given", "refused"),
+    [
+        ("graph.refine_radius=3", False),  # the swept mappings name refine only: the --set is kept
+        ("graph={refine_radius: 3}", False),
+        ("graph.refine=false", True),
+        ("graph={refine: false}", True),
+    ],
+)
+def test_a_set_beside_a_swept_mapping_is_refused_only_for_the_keys_the_mapping_sets(given, refused):
+    """``--sweep 'graph={refine: true},{refine: false}'`` sets graph.refine, as a --set of that mapping
+    does, and leaves the section's other keys: a ``--set graph.refine_radius=3`` beside it is used by
+    every combination (it was refused as "ignored")."""
+    import click
+
+    from cornerslam_cli.config import load_config
+    from cornerslam_cli.options import check_sweep_not_set
+
+    sweeps = {"graph": ["{refine: true}", "{refine: false}"]}
+    if refused:
+        with pytest.raises(
+            click.UsageError, match=rf"--sweep graph and --set '{re.escape(given)}' set the same"
+        ):
+            check_sweep_not_set([given], sweeps)
+    else:
+        check_sweep_not_set([given], sweeps)
+        for v in sweeps["graph"]:  # as each combination's config has it
+            assert load_config(None, [given, f"graph={v}"]).graph.refine_radius == 3.0
+
+
+@pytest.mark.parametrize(
     "given", ["association.pca.group_size=4", "association.pca={group_size: 4, max_nodes: 900}"]
 )
 def test_a_set_of_a_swept_key_is_a_usage_error(logs, tmp_path, given):

@@ -710,6 +710,20 @@ def extract_plot_into_a_new_directory(w: World) -> Case:
 
 
 @fault(0)
+def extract_plot_through_a_dangling_symlink(w: World) -> Case:
+    """`extract --plot link.png`, link.png a symlink to a file in a directory not yet made: the figure
+    written at the link's target, its directory made, as `--mcap-out` does (it was an internal error:
+    the directory made was the link's own, and writing through the link found no directory)"""
+    link, figure = w.tmp / "link.png", w.tmp / "gone" / "scan.png"
+    link.symlink_to(figure)
+
+    def after():
+        assert link.is_symlink() and figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+    return Case(["extract", w.log, "--plot", link], after=after)
+
+
+@fault(0)
 def simulate_into_a_new_directory(w: World) -> Case:
     """`simulate new/s.mcap`: the directory made (it was an internal error)"""
     out = w.tmp / "new" / "sub" / "s.mcap"
