@@ -17,7 +17,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..motion.correlative import Exclusion, Search, Window
+from ..geometry import relative
+from ..motion.correlative import Exclusion, Search, SearchResult, Window
 from ..motion.icp import NORMAL_NEIGHBOURS, LocalMap, register, voxel_thin
 from ..motion.params import ScanMatchConfig
 from .loops import (
@@ -42,6 +43,7 @@ POINT_MAX_CELLS = 25  # the window's half-width in grid cells at most (memory: a
 # ICP's basin, and a submap's points reach far (the angular step shrinks with their range), so at the
 # front end's 0.1 m a search cost ~25 ms and loop closing dominated infinite-corridor's last 10 %
 POINT_RES = 2.0
+AWAY_STEPS = (1.0, 2.0, 4.0)  # the ambiguity check's exclusions, in AMBIGUOUS_XY / AMBIGUOUS_THETA
 
 
 def match_points(
@@ -84,11 +86,34 @@ def match_points(
         return LoopMatch(reg.pose, reg.cov, 0, fitness, False, LOW_FITNESS)
     if not distinct(b.points, local, reg.pose, reg.cov, fitness, cfg):
         return LoopMatch(reg.pose, reg.cov, 0, fitness, False, NOT_DISTINCT)
-    away = Exclusion(found.pose, AMBIGUOUS_XY, AMBIGUOUS_THETA)
-    other = field.best(exclude=away)
-    if np.isfinite(other.score) and other.score >= cfg.point_distinct * found.score:
+    if elsewhere(field, found, b.points, local, reg.pose, cfg, icp):
         return LoopMatch(reg.pose, reg.cov, 0, fitness, False, AMBIGUOUS)
     return LoopMatch(reg.pose, reg.cov, 0, fitness, True, "")
+
+
+def elsewhere(
+    field: Search,
+    found: SearchResult,
+    points: np.ndarray,
+    local: LocalMap,
+    pose: np.ndarray,
+    cfg: LoopConfig,
+    icp: ScanMatchConfig,
+) -> bool:
+    """Whether another place scores ``point_distinct`` × as well as the search's best pose ``found``
+    (ICP took it to ``pose``): the best pose of the window away from it (``AMBIGUOUS_XY`` /
+    ``AMBIGUOUS_THETA``, then twice and four times that) that scores so, unless ICP from it comes back
+    to ``pose`` — the slope of the same fit (on a 0.2 m grid, a wall seen end-on holds the score past
+    0.5 m), not another place; then the next, farther away."""
+    for grow in AWAY_STEPS:
+        away = Exclusion(found.pose, grow * AMBIGUOUS_XY, grow * AMBIGUOUS_THETA)
+        other = field.best(exclude=away)
+        if not (np.isfinite(other.score) and other.score >= cfg.point_distinct * found.score):
+            return False
+        back = relative(pose, register(points, local, other.pose, icp).pose)
+        if math.hypot(back[0], back[1]) > AMBIGUOUS_XY or abs(back[2]) > AMBIGUOUS_THETA:
+            return True
+    return False
 
 
 def searchable(a: Submap, b: Submap) -> bool:
