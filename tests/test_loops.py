@@ -30,6 +30,7 @@ from cornerslam_cli.association.params import JcbbConfig, PcaConfig
 from cornerslam_cli.geometry import compose, relative, rotate_pose_covariance, transform_points, wrap_angle
 from cornerslam_cli.graph import loops, points
 from cornerslam_cli.graph.params import LoopConfig
+from cornerslam_cli.motion.correlative import SearchResult
 from cornerslam_cli.motion.params import ScanMatchConfig
 from cornerslam_cli.types import Prediction
 
@@ -427,6 +428,39 @@ def test_a_repeated_structure_inside_the_window_is_ambiguous_on_points(monkeypat
     assert points.match_points(
         room_a, room_b, compose(room_truth, PRIOR_OFF), PRIOR_COV * 9.0, CFG, ICP
     ).accepted
+
+
+class _Field:
+    """A stand-in for a correlative search's field: its best pose outside each exclusion, in order."""
+
+    def __init__(self, runners_up):
+        self.runners_up, self.excluded = list(runners_up), []
+
+    def best(self, exclude=None):
+        self.excluded.append(exclude.xy)
+        return self.runners_up.pop(0)
+
+
+@pytest.mark.parametrize(
+    "pair, offset, ambiguous",
+    [
+        # just past the exclusion, in a furnished room: ICP comes back, it is the slope of the same fit
+        (room_pair, (0.55, 0.2, 0.05), False),
+        (pillared_corridor_pair, (1.2, 0.0, 0.0), True),  # the next pillar along: ICP stays, another place
+    ],
+)
+def test_a_runner_up_is_another_place_only_when_icp_does_not_come_back_from_it(pair, offset, ambiguous):
+    a, b, truth = pair()
+    local = points.LocalMap.build(a.points)
+    pose = points.register(b.points, local, truth, ICP).pose
+    found = SearchResult(np.asarray(truth, dtype=float), 0.5, 0)
+    runner_up = SearchResult(compose(truth, offset), 0.45, 0)  # scores as well (≥ point_distinct ×)
+    farther = SearchResult(compose(truth, (3.0, 0.0, 0.0)), 0.1, 0)  # past the next exclusion: nothing
+    field = _Field([runner_up, farther])
+    assert points.elsewhere(field, found, b.points, local, pose, CFG, ICP) is ambiguous
+    # a runner-up that came back makes the exclusion grow, and the next one out is looked at
+    grown = [points.AMBIGUOUS_XY] if ambiguous else [points.AMBIGUOUS_XY, 2 * points.AMBIGUOUS_XY]
+    assert field.excluded == grown
 
 
 def test_a_degenerate_fit_is_not_distinct():
