@@ -516,11 +516,18 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
       cornerslam batch sample_logs/*.mcap --assoc icnn,pca --sweep association.pca.group_size=3,5 \\
           --out sweep/ --jobs 2
     """
+    from .workers import warnings_once
+
+    setup_logging(verbose, quiet)
+    with warnings_once():  # a warning of every combination's config, or of every run: said once
+        _batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, quiet)
+
+
+def _batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, quiet):
     from .batch import BATCH_CSV, run_batch
     from .report.ownership import check_claimable
     from .sweep import plan
 
-    setup_logging(verbose, quiet)
     check_option_agrees(overrides, {"association.method": assocs})  # --assoc is set after each --set
     names = parse_assocs(assocs, allow_many=True) or [
         command_config(config_path, overrides).association.method
