@@ -40,7 +40,7 @@ from pathlib import Path
 
 from . import __version__
 from .blas import single_threaded_blas, single_threaded_blas_env
-from .errors import CornerslamError, ResultsError, display_path, one_line, save_traceback
+from .errors import CornerslamError, ResultsError, display_path, for_command, one_line, save_traceback
 from .report.oserrors import output_errors
 from .report.outdir import clear_stale, staged_file
 from .report.ownership import claim_dir
@@ -63,6 +63,7 @@ FIGURES = [
 ]
 TIMING_FIGURES = ("t_match", "t_total", "wall_time")  # differ between runs of the same combination
 STATUSES = ("ok", "failed", "skipped", "pending")
+BATCH_OPTIONS = ("--assoc",)  # of errors.OPTION_OF, the options cornerslam batch takes (the rest by --set)
 
 
 def batch_columns(sweep_keys: Sequence[str]) -> list[str]:
@@ -182,6 +183,7 @@ def _size(path: str) -> int:
 
 def _row(c: Combo, status: str, error: str = "", figures: dict | None = None, internal: bool = False) -> dict:
     """A row of batch.csv (its columns), and ``internal``: whether the failure was a bug."""
+    error = for_command(error, BATCH_OPTIONS)  # a hint naming --scan-topic: the --set batch takes
     row = {"log": display_path(c.log), "assoc": c.assoc, **dict(c.sweep), "status": status, "error": error}
     row.update({k: (figures or {}).get(k) for k in FIGURES})
     row["out_dir"] = c.name if status in ("ok", "skipped") else ""

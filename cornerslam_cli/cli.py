@@ -25,7 +25,7 @@ single_threaded_blas()  # before numpy is first imported (blas.py says why)
 import click  # noqa: E402
 
 from . import __version__  # noqa: E402
-from .errors import CornerslamError, LogError, display_path, one_line, save_traceback  # noqa: E402
+from .errors import CornerslamError, LogError, display_path, for_command, one_line, save_traceback  # noqa: E402
 from .options import (  # noqa: E402
     CONFIG_COPIES,
     FIGURE_PATH,
@@ -119,6 +119,8 @@ class _Cli(click.Group):
             text = one_line(e)  # a message quoting a library's error may span lines (rosbags' YAML errors)
             for copy, given in ctx.meta.get(CONFIG_COPIES, {}).items():
                 text = text.replace(copy, given)  # a --config pipe read into a temporary copy
+            command = self.get_command(ctx, ctx.invoked_subcommand) if ctx.invoked_subcommand else None
+            text = for_command(text, [o for p in (command.params if command else []) for o in p.opts])
             click.echo(f"error: {text}", err=True)
             ctx.exit(2)
         except click.exceptions.UsageError as e:  # a subcommand's arguments: one line, as our own errors

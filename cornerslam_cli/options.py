@@ -246,14 +246,6 @@ def command_config(
     return resolve_config(log_path, config_path, extra, ignored)  # (an unknown associator named where given)
 
 
-OPTION_OF = {
-    "association.method": "--assoc",
-    "input.scan_topic": "--scan-topic",
-    "input.odom_topic": "--odom-topic",
-    "input.laser_preset": "--preset",  # (config)
-}
-
-
 def check_option_agrees(overrides, options: dict[str, str | None]) -> None:
     """A usage error when an option (``--assoc``, ``--scan-topic``, ``--odom-topic``, config's
     ``--preset``) and a ``--set`` of its config key name different values: which one the user meant
@@ -261,6 +253,7 @@ def check_option_agrees(overrides, options: dict[str, str | None]) -> None:
     import yaml
 
     from .config import set_leaves
+    from .errors import OPTION_OF
 
     for text, leaf, loaded in set_leaves(overrides):
         value = text.partition("=")[2]  # (parse_override refuses a --set without one)
