@@ -30,6 +30,7 @@ from .options import (  # noqa: E402
     CONFIG_COPIES,
     FIGURE_PATH,
     FINITE,
+    PRESET,
     GivenPath,
     check_method_not_set,
     check_option_agrees,
@@ -574,7 +575,7 @@ def _batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, q
 @click.option(
     "--preset",
     default=None,
-    metavar="NAME",
+    type=PRESET,
     help="Laser preset under the config: auto (chosen from LOG's scans), none, or a preset's name.",
 )
 @verbosity_options

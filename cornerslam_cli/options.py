@@ -112,6 +112,24 @@ class GivenPath(click.Path):
         return super().convert(value, param, ctx)
 
 
+class _PresetName(click.ParamType):
+    """``config --preset``: ``auto``, ``none`` or a laser preset's name. ``''`` (an unset shell variable,
+    ``--preset "$P"``) is refused naming the choices: it was taken as not given, the automatic choice,
+    without a word. Another unknown name is the config's to refuse, as the key's value."""
+
+    name = "NAME"
+
+    def convert(self, value, param, ctx):
+        if value == "":
+            from .lasers import PRESETS
+
+            self.fail(f"'' names no laser preset (choices: auto, none, {', '.join(PRESETS)})", param, ctx)
+        return value
+
+
+PRESET = _PresetName()
+
+
 class _FigurePath(click.ParamType):
     """A figure file (``extract --plot``): a path, not a directory, ending in an extension matplotlib
     writes (it appends .png to a name without one, and refuses an unknown one after the work)."""

@@ -795,6 +795,15 @@ def test_a_topic_hint_names_what_the_command_takes(tmp_path, log, key, hint):
     assert "--set" not in r.stderr
 
 
+def test_an_empty_preset_option_is_a_usage_error_naming_the_choices():
+    """`config --preset ''` (an unset shell variable) printed the automatic preset's config, exit 0."""
+    r = invoke("config", "--preset", "")
+    one_line_error(
+        r, "invalid value for '--preset': '' names no laser preset (choices: auto, none, sick_lms_1deg"
+    )
+    assert r.stdout == ""
+
+
 def test_a_bad_preset_option_is_named_as_the_keys_value_not_a_set():
     r = invoke("config", "--preset", "nope")
     one_line_error(r, "config key 'input.laser_preset' = 'nope' is not a laser preset")
