@@ -174,6 +174,8 @@ def _coerce(value: Any, tp: Any, key: str, allowed: Range | None = None) -> Any:
         args = typing.get_args(tp)
         if value is None and type(None) in args:
             return None
+        if len(args) == 2 and type(None) in args:  # X | None given a value: an X, with X's errors
+            return _coerce(value, next(a for a in args if a is not type(None)), key, allowed)
         for a in args:
             if a is type(None):
                 continue
