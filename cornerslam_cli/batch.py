@@ -40,12 +40,15 @@ from pathlib import Path
 
 from . import __version__
 from .blas import single_threaded_blas, single_threaded_blas_env
-from .errors import CornerslamError, ResultsError, display_path, one_line, save_traceback
+from .errors import CornerslamError, ResultsError, display_path, for_command, one_line, save_traceback
 from .report.oserrors import output_errors
 from .report.outdir import clear_stale, staged_file
 from .report.ownership import claim_dir
 from .results import Hashes, RunSummary
 from .sweep import Combo
+from .workers import warnings_kept, warnings_once
+
+log = logging.getLogger("cornerslam.batch")
 
 BATCH_CSV = "batch.csv"
 FIGURES = [
@@ -60,6 +63,7 @@ FIGURES = [
 ]
 TIMING_FIGURES = ("t_match", "t_total", "wall_time")  # differ between runs of the same combination
 STATUSES = ("ok", "failed", "skipped", "pending")
+BATCH_OPTIONS = ("--assoc",)  # of errors.OPTION_OF, the options cornerslam batch takes (the rest by --set)
 
 
 def batch_columns(sweep_keys: Sequence[str]) -> list[str]:
@@ -96,8 +100,20 @@ def run_batch(
 
     One failing combination (bad log, numerical failure, a bug) never stops the others: its row has
     status ``failed`` and the error line. ``jobs`` local worker processes (default ``os.cpu_count()``),
-    or the Dask cluster at ``scheduler``. Rows come in the order of ``combos``.
+    or the Dask cluster at ``scheduler``. Rows come in the order of ``combos``. The workers' warnings
+    are said as each combination finishes, each distinct text once.
     """
+    with warnings_once():
+        return _run_batch(combos, out_dir, jobs, scheduler, progress)
+
+
+def _run_batch(
+    combos: Sequence[Combo],
+    out_dir: str | Path,
+    jobs: int | None,
+    scheduler: str | None,
+    progress: Callable[[BatchState], None] | None,
+) -> list[dict]:
     from .config import Config, from_dict
     from .report.summary import config_hash, input_hash
 
@@ -138,6 +154,8 @@ def run_batch(
         progress(state)
 
     def finished(i: int, result: dict) -> None:
+        for text in result.pop("warnings", ()):
+            log.warning("%s", text)  # (said once: warnings_once)
         rows[i] = _row(combos[i], **result)
         setattr(state, result["status"], getattr(state, result["status"]) + 1)
         writer.write(rows, throttle=True)
@@ -165,6 +183,7 @@ def _size(path: str) -> int:
 
 def _row(c: Combo, status: str, error: str = "", figures: dict | None = None, internal: bool = False) -> dict:
     """A row of batch.csv (its columns), and ``internal``: whether the failure was a bug."""
+    error = for_command(error, BATCH_OPTIONS)  # a hint naming --scan-topic: the --set batch takes
     row = {"log": display_path(c.log), "assoc": c.assoc, **dict(c.sweep), "status": status, "error": error}
     row.update({k: (figures or {}).get(k) for k in FIGURES})
     row["out_dir"] = c.name if status in ("ok", "skipped") else ""
@@ -219,19 +238,22 @@ def run_one(log: str, config: dict, out_dir: str) -> dict:
     """Run one combination (in a worker): ``{"status": "ok", "figures": ...}`` or the failure line.
 
     Module-level and importing the package lazily, so spawn and Dask workers can unpickle it by name
-    and set the BLAS thread count before numpy is first imported.
+    and set the BLAS thread count before numpy is first imported. The run's warnings are not printed
+    but returned (``"warnings"``): the batch says each once, not once per combination.
     """
     single_threaded_blas()
-    try:
-        from .config import Config, from_dict
-        from .pipeline import run
+    with warnings_kept() as warnings:
+        try:
+            from .config import Config, from_dict
+            from .pipeline import run
 
-        summary = run(log, from_dict(Config, config), out_dir)
-        return {"status": "ok", "figures": figures_from_summary(summary)}
-    except SystemExit:  # the batch was interrupted and ended us (workers.stopped_by_parent)
-        os._exit(143)  # the staging is removed: end here, not in the combination queued to us next
-    except Exception as e:  # a bug in one combination must not stop the batch either
-        return _failed(e)
+            summary = run(log, from_dict(Config, config), out_dir)
+            result = {"status": "ok", "figures": figures_from_summary(summary)}
+        except SystemExit:  # the batch was interrupted and ended us (workers.stopped_by_parent)
+            os._exit(143)  # the staging is removed: end here, not in the combination queued to us next
+        except Exception as e:  # a bug in one combination must not stop the batch either
+            result = _failed(e)
+    return {**result, "warnings": warnings}
 
 
 def _failed(e: BaseException) -> dict:

@@ -25,11 +25,12 @@ single_threaded_blas()  # before numpy is first imported (blas.py says why)
 import click  # noqa: E402
 
 from . import __version__  # noqa: E402
-from .errors import CornerslamError, LogError, display_path, one_line, save_traceback  # noqa: E402
+from .errors import CornerslamError, LogError, display_path, for_command, one_line, save_traceback  # noqa: E402
 from .options import (  # noqa: E402
     CONFIG_COPIES,
     FIGURE_PATH,
     FINITE,
+    PRESET,
     GivenPath,
     check_method_not_set,
     check_option_agrees,
@@ -119,6 +120,8 @@ class _Cli(click.Group):
             text = one_line(e)  # a message quoting a library's error may span lines (rosbags' YAML errors)
             for copy, given in ctx.meta.get(CONFIG_COPIES, {}).items():
                 text = text.replace(copy, given)  # a --config pipe read into a temporary copy
+            command = self.get_command(ctx, ctx.invoked_subcommand) if ctx.invoked_subcommand else None
+            text = for_command(text, [o for p in (command.params if command else []) for o in p.opts])
             click.echo(f"error: {text}", err=True)
             ctx.exit(2)
         except click.exceptions.UsageError as e:  # a subcommand's arguments: one line, as our own errors
@@ -516,11 +519,18 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
       cornerslam batch sample_logs/*.mcap --assoc icnn,pca --sweep association.pca.group_size=3,5 \\
           --out sweep/ --jobs 2
     """
+    from .workers import warnings_once
+
+    setup_logging(verbose, quiet)
+    with warnings_once():  # a warning of every combination's config, or of every run: said once
+        _batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, quiet)
+
+
+def _batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, quiet):
     from .batch import BATCH_CSV, run_batch
     from .report.ownership import check_claimable
     from .sweep import plan
 
-    setup_logging(verbose, quiet)
     check_option_agrees(overrides, {"association.method": assocs})  # --assoc is set after each --set
     names = parse_assocs(assocs, allow_many=True) or [
         command_config(config_path, overrides).association.method
@@ -565,7 +575,7 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
 @click.option(
     "--preset",
     default=None,
-    metavar="NAME",
+    type=PRESET,
     help="Laser preset under the config: auto (chosen from LOG's scans), none, or a preset's name.",
 )
 @verbosity_options

@@ -93,8 +93,27 @@ def _to_plain(v: Any) -> Any:
     return v
 
 
-def _closest(key: str, valid: list[str]) -> str:
+def _closest(key: str, cls: type, prefix: str) -> str:
+    """The hint for an unknown key ``key`` of the section ``cls`` (at ``prefix``): the keys further down
+    whose last part is ``key`` (``refine`` → ``graph.refine``), else the closest of the section's own
+    keys, else them all."""
+    valid = [f.name for f in dataclasses.fields(cls)]
+    deeper = [k for k in _dotted_keys(cls) if "." in k and k.rpartition(".")[2] == key]
+    if deeper:
+        named = " or ".join(f"'{prefix}{k}'" for k in deeper)
+        return f"did you mean {named}?"
     return did_you_mean(key, valid, cutoff=0.5) or f"valid keys: {', '.join(sorted(valid))}"
+
+
+def _dotted_keys(cls: type) -> list[str]:
+    """Every key of the dataclass ``cls`` and of its sections, dotted (``graph``, ``graph.refine``, …)."""
+    hints = typing.get_type_hints(cls)
+    keys = []
+    for f in dataclasses.fields(cls):
+        keys.append(f.name)
+        if dataclasses.is_dataclass(hints[f.name]):
+            keys += [f"{f.name}.{k}" for k in _dotted_keys(hints[f.name])]
+    return keys
 
 
 _YAML11_EXPONENT = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)[eE][+-]?\d+$")
@@ -155,6 +174,8 @@ def _coerce(value: Any, tp: Any, key: str, allowed: Range | None = None) -> Any:
         args = typing.get_args(tp)
         if value is None and type(None) in args:
             return None
+        if len(args) == 2 and type(None) in args:  # X | None given a value: an X, with X's errors
+            return _coerce(value, next(a for a in args if a is not type(None)), key, allowed)
         for a in args:
             if a is type(None):
                 continue
@@ -204,7 +225,7 @@ def from_dict(cls: type, data: dict, prefix: str = "") -> Any:
             continue
         if key not in names:
             name = short_text(key) if isinstance(key, str) else short_repr(key)
-            raise ConfigError(f"unknown config key '{prefix}{name}'", _closest(str(key)[:100], names))
+            raise ConfigError(f"unknown config key '{prefix}{name}'", _closest(str(key)[:100], cls, prefix))
         kwargs[key] = _coerce(value, hints[key], prefix + key, field_range(fields[key]))
     try:
         return cls(**kwargs)

@@ -11,9 +11,10 @@ from __future__ import annotations
 import difflib
 import errno
 import os
+import re
 import tempfile
 import traceback
-from collections.abc import Iterable
+from collections.abc import Collection, Iterable
 from pathlib import Path
 
 
@@ -49,6 +50,26 @@ class ResultsError(CornerslamError):
 
 class NumericalError(CornerslamError):
     """The filter state became invalid (non-finite or non-symmetric covariance)."""
+
+
+# the config key behind each option a hint may name: any command takes a --set of it instead
+OPTION_OF = {
+    "association.method": "--assoc",
+    "input.scan_topic": "--scan-topic",
+    "input.odom_topic": "--odom-topic",
+    "input.laser_preset": "--preset",  # (config)
+}
+
+
+def for_command(text: str, options: Collection[str]) -> str:
+    """An error's line as said to a command taking ``options``: an option of :data:`OPTION_OF` that the
+    command does not take (``config`` and ``batch`` have no ``--scan-topic``) named as the ``--set``
+    of its key (``--set input.scan_topic=TOPIC``). Library hints name the options of ``run``."""
+    for key, option in OPTION_OF.items():
+        if option not in options:
+            placeholder = option.rsplit("-", 1)[-1].upper()
+            text = re.sub(rf"{re.escape(option)}(?![\w-])", f"--set {key}={placeholder}", text)
+    return text
 
 
 def one_line(e: BaseException) -> str:

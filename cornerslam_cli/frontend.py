@@ -331,7 +331,8 @@ def _laser_mount(reader, cfg: Config) -> tuple[tuple[float, float, float], str, 
             flip = reader.laser_upside_down()
             upside_down, flip_source = (mount.upside_down, "config") if flip is None else (flip, "tf")
             return (float(tf[0]), float(tf[1]), float(tf[2])), "tf", upside_down, flip_source
-    return (mount.x, mount.y, mount.yaw), mount_source(cfg), mount.upside_down, "config"
+    x, y, yaw = (0.0 if v is None else v for v in (mount.x, mount.y, mount.yaw))  # None: not set
+    return (x, y, yaw), mount_source(cfg), mount.upside_down, "config"
 
 
 def warn_mount(src: Input, cfg: Config) -> None:

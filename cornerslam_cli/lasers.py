@@ -81,9 +81,9 @@ PRESETS: dict[str, LaserPreset] = {
 
 def mount_source(cfg: Config) -> str:
     """Where the config's laser mount (``input.laser``) came from, for a log without one on tf:
-    ``preset`` (the laser preset's), ``default`` (the built-in one: nobody chose it; turning
-    ``input.laser.from_tf`` off says the config's mount is meant; ``upside_down`` alone does not: it
-    says how the laser is turned, not where it is), else ``config``."""
+    ``preset`` (the laser preset's), ``default`` (the built-in one: none of x, y, yaw set — a 0 set is
+    the config's — and ``input.laser.from_tf`` not turned off, which says the config's mount is meant;
+    ``upside_down`` alone does not: it says how the laser is turned, not where it is), else ``config``."""
     mount = cfg.input.laser
     preset = PRESETS.get(cfg.input.laser_preset)
     preset_mount = preset.config.get("input", {}).get("laser") if preset else None

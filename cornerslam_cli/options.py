@@ -112,6 +112,24 @@ class GivenPath(click.Path):
         return super().convert(value, param, ctx)
 
 
+class _PresetName(click.ParamType):
+    """``config --preset``: ``auto``, ``none`` or a laser preset's name. ``''`` (an unset shell variable,
+    ``--preset "$P"``) is refused naming the choices: it was taken as not given, the automatic choice,
+    without a word. Another unknown name is the config's to refuse, as the key's value."""
+
+    name = "NAME"
+
+    def convert(self, value, param, ctx):
+        if value == "":
+            from .lasers import PRESETS
+
+            self.fail(f"'' names no laser preset (choices: auto, none, {', '.join(PRESETS)})", param, ctx)
+        return value
+
+
+PRESET = _PresetName()
+
+
 class _FigurePath(click.ParamType):
     """A figure file (``extract --plot``): a path, not a directory, ending in an extension matplotlib
     writes (it appends .png to a name without one, and refuses an unknown one after the work)."""
@@ -246,14 +264,6 @@ def command_config(
     return resolve_config(log_path, config_path, extra, ignored)  # (an unknown associator named where given)
 
 
-OPTION_OF = {
-    "association.method": "--assoc",
-    "input.scan_topic": "--scan-topic",
-    "input.odom_topic": "--odom-topic",
-    "input.laser_preset": "--preset",  # (config)
-}
-
-
 def check_option_agrees(overrides, options: dict[str, str | None]) -> None:
     """A usage error when an option (``--assoc``, ``--scan-topic``, ``--odom-topic``, config's
     ``--preset``) and a ``--set`` of its config key name different values: which one the user meant
@@ -261,6 +271,7 @@ def check_option_agrees(overrides, options: dict[str, str | None]) -> None:
     import yaml
 
     from .config import set_leaves
+    from .errors import OPTION_OF
 
     for text, leaf, loaded in set_leaves(overrides):
         value = text.partition("=")[2]  # (parse_override refuses a --set without one)

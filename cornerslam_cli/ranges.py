@@ -73,7 +73,7 @@ def _non_finite(v: Any) -> bool:
 
 
 def num(
-    default: float,
+    default: float | None,
     *,
     ge: float | None = None,
     gt: float | None = None,
@@ -81,12 +81,13 @@ def num(
     lt: float | None = None,
 ) -> Any:
     """A numeric dataclass field with its allowed range: one of ``ge``/``gt`` (lower bound, included /
-    excluded) and one of ``le``/``lt`` (upper bound)."""
+    excluded) and one of ``le``/``lt`` (upper bound). A ``None`` default (a ``float | None`` field)
+    means not set: None is then allowed besides the range."""
     if (ge is None) == (gt is None) or (le is None) == (lt is None):
         raise TypeError("num() needs one lower bound (ge or gt) and one upper bound (le or lt)")
     lo, hi = (ge if gt is None else gt), (le if lt is None else lt)
     allowed = Range(float(lo), float(hi), lo_open=gt is not None, hi_open=lt is not None)
-    if default not in allowed:
+    if default is not None and default not in allowed:
         raise ValueError(f"default {default} outside {allowed}")  # a bug in a section class
     return dataclasses.field(default=default, metadata={"range": allowed})
 
@@ -104,5 +105,7 @@ def check_ranges(section: Any) -> None:
         if allowed is None:
             continue
         v = getattr(section, f.name)
+        if v is None and f.default is None:  # not set (num(None, ...))
+            continue
         if isinstance(v, bool) or not isinstance(v, (int, float)) or _non_finite(v) or v not in allowed:
             raise RangeError(f.name, v, allowed)

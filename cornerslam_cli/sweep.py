@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import ConfigError, one_line
+from .workers import warnings_once
 
 _UNSAFE = re.compile(r"[^A-Za-z0-9._=+-]")
 _MAX_NAME = 180  # well under the 255-byte file name limit, leaving room for the staging prefix
@@ -67,8 +68,20 @@ def plan(
     preset matching the log's first scan under the user's layers); a log that cannot be opened is not
     an error here but failed rows in :func:`run_batch`. A log listed twice, however its path is spelled
     (``x.mcap``, ``./x.mcap``), is run once; so is a swept value however it is spelled (``0.1,0.10``,
-    ``yes,true``: its first spelling names the directory).
+    ``yes,true``: its first spelling names the directory). A warning loading the configs gives (a
+    retired key) is said once, not once per value and combination.
     """
+    with warnings_once():
+        return _plan(logs, assocs, sweeps, overrides, config_path)
+
+
+def _plan(
+    logs: Sequence[str | Path],
+    assocs: Sequence[str],
+    sweeps: Mapping[str, Sequence[Any]] | None,
+    overrides: Sequence[str],
+    config_path: str | Path | None,
+) -> list[Combo]:
     from .config import load_config, parse_override, replaced_place
     from .errors import LogError
     from .lasers import resolve_config

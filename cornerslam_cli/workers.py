@@ -9,14 +9,21 @@ leftover, which the next run into the same place removes.
 A ``batch`` worker also leaves Ctrl-C to the batch (:func:`stopped_by_parent`): interrupted, the batch
 ends its workers with SIGTERM, on which each unwinds as a Python exit (a run under way removes its
 staging) and then exits instead of starting the combination queued to it next.
+
+A ``batch`` says each distinct warning once (:func:`warnings_once`): every combination loads the same
+keys and runs the same log, and would say the same thing again; its workers keep their warnings
+(:func:`warnings_kept`) and the batch says them as each combination finishes.
 """
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import threading
 import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 
 
 def exit_with_parent(interval: float = 0.5) -> None:
@@ -42,3 +49,66 @@ def stopped_by_parent() -> None:
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, on_sigterm)
+
+
+_said: set[str] | None = None  # the warnings said within the outermost warnings_once()
+
+
+@contextmanager
+def warnings_once() -> Iterator[None]:
+    """Within it, a warning whose text was already logged is not logged again (the root logger's
+    handlers drop the repeat); other levels pass. A use inside another shares what the outer one said."""
+    global _said
+    if _said is not None:
+        yield
+        return
+    said = _said = set()
+
+    def first_time(record: logging.LogRecord) -> bool:
+        text = record.getMessage()
+        first = text not in said
+        said.add(text)
+        return first
+
+    try:
+        with _warnings_to(first_time):
+            yield
+    finally:
+        _said = None
+
+
+@contextmanager
+def warnings_kept() -> Iterator[list[str]]:
+    """Within it, warnings are kept, in the order logged, in the list it gives instead of being
+    printed (a worker's run returns them for the batch to say once); other levels pass."""
+    kept: list[str] = []
+
+    def keep(record: logging.LogRecord) -> bool:
+        kept.append(record.getMessage())
+        return False
+
+    with _warnings_to(keep):
+        yield kept
+
+
+@contextmanager
+def _warnings_to(decide: Callable[[logging.LogRecord], bool]) -> Iterator[None]:
+    """Each warning record reaching the root logger's handlers is passed to ``decide`` once (not once
+    per handler); every handler prints it only if ``decide`` returned True."""
+    mark = f"cornerslam_verdict_{id(decide)}"  # the record's verdict, for the handlers after the first
+
+    def only_if(record: logging.LogRecord) -> bool:
+        if record.levelno != logging.WARNING:
+            return True
+        if not hasattr(record, mark):
+            setattr(record, mark, decide(record))
+        return getattr(record, mark)
+
+    handlers = list(logging.getLogger().handlers) or [logging.lastResort]
+    for h in handlers:
+        h.addFilter(only_if)
+    try:
+        yield
+    finally:
+        for h in handlers:
+            h.removeFilter(only_if)

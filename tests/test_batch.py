@@ -101,6 +101,29 @@ def test_plan_runs_a_sweep_value_once_however_it_is_spelled():
     assert [c.config["scan_match"]["enabled"] for c in combos] == [True, False]
 
 
+def test_plan_says_a_warning_of_every_combinations_config_once(caplog):
+    """A retired key was warned about once per swept value and once per combination (15 times here);
+    distinct warnings are each said."""
+    sets = ["scan_match.retry_fit=0.3", "scan_match.retry_angle=0.1"]
+    with caplog.at_level("WARNING"):
+        combos = plan(["x.mcap"], ["icnn", "pca"], {KEY: [3, 4, 5]}, overrides=sets)
+    assert len(combos) == 6
+    said = [r.getMessage() for r in caplog.records if "no longer used" in r.getMessage()]
+    assert len(said) == 2 and {"retry_fit" in t for t in said} == {True, False}, said
+
+
+def test_a_warning_of_every_run_is_said_once(logs, tmp_path, caplog):
+    """Each worker printed its run's warnings: graph.refine ignored with the single map, once per
+    combination. The workers return them; the batch says each text once, as they finish."""
+    sets = ["submaps.enabled=false", "graph.refine=true"]
+    with caplog.at_level("WARNING"):
+        rows = run_batch(plan(logs[:1], ["pca"], {KEY: [3, 5]}, overrides=sets), tmp_path, jobs=1)
+    assert [r["status"] for r in rows] == ["ok", "ok"]
+    said = [r.getMessage() for r in caplog.records]
+    assert sum("graph.refine=true is ignored" in t for t in said) == 1, said
+    assert len(said) == len(set(said))
+
+
 def test_plan_resolves_each_config_as_run_does():
     from cornerslam_cli.lasers import resolve_config
 

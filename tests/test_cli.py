@@ -772,6 +772,38 @@ def test_a_topic_option_past_u_ffff(tmp_path):
     assert invoke("run", log, "--scan-topic", "/\U0001f600", "--out", tmp_path / "o", "-q").exit_code == 0
 
 
+@pytest.mark.parametrize(
+    ("log", "key", "hint"),
+    [
+        ("sim_office.mcap", "input.scan_topic", "check --set input.scan_topic=TOPIC; `cornerslam info LOG`"),
+        ("intel_cut.clf", "input.scan_topic", "choose one of them with --set input.scan_topic=TOPIC)"),
+        ("intel_cut.clf", "input.odom_topic", "choose one with --set input.odom_topic=TOPIC: ODOM or"),
+    ],
+)
+def test_a_topic_hint_names_what_the_command_takes(tmp_path, log, key, hint):
+    """`config --set input.scan_topic=/nope` said "check --scan-topic", an option config does not have
+    (nor batch): a command without it is told the --set of its key; run keeps its option."""
+    sample = Path(__file__).resolve().parents[1] / "sample_logs" / log
+    r = invoke("config", sample, "--set", f"{key}=/nope")
+    one_line_error(r, "no '/nope' lines" if log.endswith(".clf") else "no topic '/nope'", hint)
+    assert "-topic" not in r.stderr
+    r = invoke("batch", sample, "--set", f"{key}=/nope", "--out", tmp_path / "b", "-q")
+    assert r.exit_code == 2 and hint in (tmp_path / "b" / "batch.csv").read_text()
+    option = "--" + key.split(".")[1].replace("_", "-")
+    r = invoke("run", sample, option, "/nope", "--out", tmp_path / "r")
+    one_line_error(r, f"with {option}" if "choose" in hint else f"check {option};")
+    assert "--set" not in r.stderr
+
+
+def test_an_empty_preset_option_is_a_usage_error_naming_the_choices():
+    """`config --preset ''` (an unset shell variable) printed the automatic preset's config, exit 0."""
+    r = invoke("config", "--preset", "")
+    one_line_error(
+        r, "invalid value for '--preset': '' names no laser preset (choices: auto, none, sick_lms_1deg"
+    )
+    assert r.stdout == ""
+
+
 def test_a_bad_preset_option_is_named_as_the_keys_value_not_a_set():
     r = invoke("config", "--preset", "nope")
     one_line_error(r, "config key 'input.laser_preset' = 'nope' is not a laser preset")

@@ -71,6 +71,24 @@ def test_bad_keys_and_types_name_the_key(override, fragment):
 
 
 @pytest.mark.parametrize(
+    "override, hint",
+    [
+        ("refine=true", "(did you mean 'graph.refine'?)"),  # was 'lines', the closest top-level name
+        ("association.group_size=5", "(did you mean 'association.pca.group_size'?)"),  # inside the section
+        ("enabled=false", "(did you mean 'scan_match.enabled' or 'submaps.enabled' or 'loops.enabled'?)"),
+        ("lnes.min_points=3", "(did you mean 'lines'?)"),  # no key further down is named so: the closest
+        ("graph.group_size=3", "(valid keys: kernel, "),  # (one in another section is not looked for)
+    ],
+)
+def test_an_unknown_key_suggests_a_key_further_down_of_that_name(override, hint):
+    """`--set refine=true` suggested 'lines' (difflib over the top-level names): a key further down
+    whose last part is the name given is the likelier meaning."""
+    with pytest.raises(ConfigError) as e:
+        load_config(None, [override])
+    assert hint in str(e.value), str(e.value)
+
+
+@pytest.mark.parametrize(
     "text, line, fragment",
     [
         ("ekf:\n  alpha1: -3\n", 2, "config key 'ekf.alpha1' = -3.0 is out of range"),

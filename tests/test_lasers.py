@@ -96,7 +96,7 @@ def test_mines_config_through_the_cli(tmp_path, monkeypatch):
     assert (sensor_only["skip_beams_start"], sensor_only["skip_beams_end"], sensor_only["laser"]["x"]) == (
         0,
         0,
-        0,
+        None,  # not set: the built-in 0, warned by a run
     )
     mines = yaml.safe_load(runner.invoke(cli, ["config", log, "--config", "configs/mines.yaml"]).stdout)[
         "input"

@@ -401,15 +401,22 @@ def test_a_log_without_tf_says_the_mount_is_the_default_and_warns(far_log, far_r
 
 @pytest.mark.parametrize(
     ("args", "source"),
-    [(["--set", "input.laser.x=0.1"], "config"), (["--set", "input.laser.from_tf=false"], "config")],
+    [
+        (["--set", "input.laser.x=0.1"], "config"),
+        (["--set", "input.laser.from_tf=false"], "config"),
+        # zeros set are the config's too: they were "the built-in default: … not in the config", warned
+        (["--set", "input.laser.x=0", "--set", "input.laser.y=0", "--set", "input.laser.yaw=0"], "config"),
+        (["--set", "input.laser={yaw: 0.0}"], "config"),
+    ],
 )
 def test_a_mount_given_in_the_config_is_not_warned(far_log, tmp_path, args, source):
     out = tmp_path / "o"
-    res = CliRunner().invoke(cli, ["run", str(far_log["log"]), "--out", str(out), "-q", *args])
+    res = CliRunner().invoke(cli, ["run", str(far_log["log"]), "--out", str(out), *args])
     assert res.exit_code == 0, res.output
     summary = json.loads((out / "summary.json").read_text())
     assert summary["input"]["laser_to_base_source"] == source
     assert not any("→laser" in w for w in summary["warnings"])
+    assert "(from the config's input.laser)" in res.stdout and "not in the config" not in res.stdout
 
 
 def test_mount_from_tf_and_from_a_preset(tmp_path, monkeypatch):

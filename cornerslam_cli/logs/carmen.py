@@ -244,7 +244,7 @@ class CarmenReader:
                 problems.append(
                     (
                         f"CARMEN log '{name}' has no '{short_text(self._want_odom)}' lines",
-                        f"choose --odom-topic ODOM or a laser tag ({', '.join(lasers) or 'none'})",
+                        f"choose one with --odom-topic: ODOM or a laser tag ({', '.join(lasers) or 'none'})",
                     )
                 )
         elif self._counts.get(ODOM_TAG) and not self._odom_lines_worse(scan):

@@ -47,11 +47,13 @@ class KeyframeConfig:
 
 @dataclass(frozen=True)
 class LaserMountConfig:
-    """Pose of the laser in the robot base frame (used when the log has no tf for it)."""
+    """Pose of the laser in the robot base frame (used when the log has no tf for it). ``x``, ``y``,
+    ``yaw`` None (null): not set, the built-in 0 (a run warns, lasers.mount_source); 0 set is the
+    config's."""
 
-    x: float = num(0.0, ge=-100.0, le=100.0)  # metres
-    y: float = num(0.0, ge=-100.0, le=100.0)  # metres
-    yaw: float = num(0.0, ge=-TWO_PI, le=TWO_PI)  # radians
+    x: float | None = num(None, ge=-100.0, le=100.0)  # metres
+    y: float | None = num(None, ge=-100.0, le=100.0)  # metres
+    yaw: float | None = num(None, ge=-TWO_PI, le=TWO_PI)  # radians
     from_tf: bool = True  # prefer a static transform base→laser found in the log
     # mounted upside down (z axis down, roll π: its scans are mirrored); from a ROS tf when it is used
     # (a CARMEN ROBOTLASER1 laser pose is planar: this key says it there too)
