@@ -479,10 +479,10 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
         from .report.oserrors import output_errors, resolved
 
         with output_errors(plot_path):
-            # a symlink's target (a dangling one's too), its directory made, as --out and --mcap-out do
-            target = resolved(Path(plot_path))
-            target.parent.mkdir(parents=True, exist_ok=True)
-            plot_extraction(scan, segments, corners, target)
+            # the directory of a symlink's target (a dangling one's too) made, as --out and --mcap-out do;
+            # written through the path as given, whose suffix names the format (the target's may not)
+            resolved(Path(plot_path)).parent.mkdir(parents=True, exist_ok=True)
+            plot_extraction(scan, segments, corners, Path(plot_path))
         click.echo(f"wrote {plot_path}")
 
 

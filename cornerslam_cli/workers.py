@@ -105,8 +105,8 @@ def _warnings_to(decide: Callable[[logging.LogRecord], bool]) -> Iterator[None]:
         return getattr(record, mark)
 
     handlers = list(logging.getLogger().handlers) or [logging.lastResort]
-    for h in handlers:
-        h.addFilter(only_if)
+    for h in handlers:  # first: a filter that writes (the status line's clearing) must not see a dropped one
+        h.filters.insert(0, only_if)
     try:
         yield
     finally:

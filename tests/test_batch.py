@@ -4,6 +4,7 @@ equal results whatever the parallelism (1 or 2 processes, a Dask cluster), and r
 from __future__ import annotations
 
 import json
+import os
 import re
 import sys
 from pathlib import Path
@@ -122,6 +123,27 @@ def test_a_warning_of_every_run_is_said_once(logs, tmp_path, caplog):
     said = [r.getMessage() for r in caplog.records]
     assert sum("graph.refine=true is ignored" in t for t in said) == 1, said
     assert len(said) == len(set(said))
+
+
+def test_a_kept_warning_does_not_reach_a_handlers_earlier_filters():
+    """A worker's status line clears the terminal's line from a filter on the handlers (report/progress.py);
+    a warning the worker keeps for the batch must not clear the batch's line from there."""
+    import logging
+
+    from cornerslam_cli.workers import warnings_kept
+
+    seen = []
+    handler = logging.StreamHandler(open(os.devnull, "w"))  # noqa: SIM115 (closed below)
+    handler.addFilter(lambda record: seen.append(record.getMessage()) or True)  # as _ClearFirst: writes
+    root = logging.getLogger()
+    root.addHandler(handler)
+    try:
+        with warnings_kept() as kept:
+            logging.getLogger("cornerslam_cli.test").warning("kept for the batch")
+    finally:
+        root.removeHandler(handler)
+        handler.stream.close()
+    assert kept == ["kept for the batch"] and seen == []
 
 
 def test_plan_resolves_each_config_as_run_does():

@@ -724,6 +724,35 @@ def extract_plot_through_a_dangling_symlink(w: World) -> Case:
 
 
 @fault(0)
+def extract_plot_through_a_symlink_to_another_suffix(w: World) -> Case:
+    """`extract --plot link.png`, link.png a symlink to an existing `data` (no suffix) and another to
+    `fig.txt`: a PNG written through each link (the name given chooses the format; the target's made
+    it write data.png beside the untouched `data`, and fig.txt an internal error)"""
+    link, data = w.tmp / "link.png", w.tmp / "data"
+    data.write_text("OLD")
+    link.symlink_to(data)
+
+    def after():
+        assert link.is_symlink() and data.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        assert not (w.tmp / "data.png").exists()
+
+    return Case(["extract", w.log, "--plot", link], after=after)
+
+
+@fault(0)
+def extract_plot_through_a_symlink_to_a_txt(w: World) -> Case:
+    """`extract --plot link.png` → fig.txt: a PNG written at fig.txt (it was an internal error: matplotlib
+    took the format from the target's suffix)"""
+    link, figure = w.tmp / "link.png", w.tmp / "fig.txt"
+    link.symlink_to(figure)
+
+    def after():
+        assert figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+    return Case(["extract", w.log, "--plot", link], after=after)
+
+
+@fault(0)
 def simulate_into_a_new_directory(w: World) -> Case:
     """`simulate new/s.mcap`: the directory made (it was an internal error)"""
     out = w.tmp / "new" / "sub" / "s.mcap"
