@@ -441,26 +441,32 @@ class _Field:
         return self.runners_up.pop(0)
 
 
+BACK, STAYS, FAR = (0.3, 0.05, 0.02), (1.2, 0.0, 0.0), (3.0, 0.0, 0.0)  # from the match: ICP comes back, ...
+AS_WELL, NOT_AS_WELL = 0.45, 0.1  # a runner-up's score against the match's 0.5 (point_distinct 0.7)
+
+
 @pytest.mark.parametrize(
-    "pair, offset, ambiguous",
+    "pair, runners_up, ambiguous",
     [
         # just past the exclusion, in a furnished room: ICP comes back, it is the slope of the same fit
-        (room_pair, (0.55, 0.2, 0.05), False),
-        (pillared_corridor_pair, (1.2, 0.0, 0.0), True),  # the next pillar along: ICP stays, another place
+        (room_pair, [((0.55, 0.2, 0.05), AS_WELL), (FAR, NOT_AS_WELL)], False),
+        (pillared_corridor_pair, [(STAYS, AS_WELL)], True),  # the next pillar along: ICP stays there
+        (pillared_corridor_pair, [(BACK, AS_WELL), (STAYS, AS_WELL)], True),  # back, then another place
+        (pillared_corridor_pair, [(BACK, AS_WELL)] * 3 + [(FAR, NOT_AS_WELL)], False),
+        # past the last exclusion one that scores as well is another place, wherever ICP takes it
+        (pillared_corridor_pair, [(BACK, AS_WELL)] * 4, True),
     ],
 )
-def test_a_runner_up_is_another_place_only_when_icp_does_not_come_back_from_it(pair, offset, ambiguous):
+def test_a_runner_up_is_another_place_only_when_icp_does_not_come_back_from_it(pair, runners_up, ambiguous):
     a, b, truth = pair()
     local = points.LocalMap.build(a.points)
     pose = points.register(b.points, local, truth, ICP).pose
     found = SearchResult(np.asarray(truth, dtype=float), 0.5, 0)
-    runner_up = SearchResult(compose(truth, offset), 0.45, 0)  # scores as well (≥ point_distinct ×)
-    farther = SearchResult(compose(truth, (3.0, 0.0, 0.0)), 0.1, 0)  # past the next exclusion: nothing
-    field = _Field([runner_up, farther])
+    field = _Field([SearchResult(compose(truth, offset), score, 0) for offset, score in runners_up])
     assert points.elsewhere(field, found, b.points, local, pose, CFG, ICP) is ambiguous
-    # a runner-up that came back makes the exclusion grow, and the next one out is looked at
-    grown = [points.AMBIGUOUS_XY] if ambiguous else [points.AMBIGUOUS_XY, 2 * points.AMBIGUOUS_XY]
-    assert field.excluded == grown
+    # each runner-up that came back made the exclusion grow, and the next one out was looked at
+    assert field.excluded == [g * points.AMBIGUOUS_XY for g in points.AWAY_STEPS[: len(runners_up)]]
+    assert not field.runners_up
 
 
 def test_a_degenerate_fit_is_not_distinct():

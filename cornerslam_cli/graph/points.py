@@ -43,7 +43,9 @@ POINT_MAX_CELLS = 25  # the window's half-width in grid cells at most (memory: a
 # ICP's basin, and a submap's points reach far (the angular step shrinks with their range), so at the
 # front end's 0.1 m a search cost ~25 ms and loop closing dominated infinite-corridor's last 10 %
 POINT_RES = 2.0
-AWAY_STEPS = (1.0, 2.0, 4.0)  # the ambiguity check's exclusions, in AMBIGUOUS_XY / AMBIGUOUS_THETA
+# the ambiguity check's exclusions, in AMBIGUOUS_XY / AMBIGUOUS_THETA: the last (4 m, 1.6 rad) leaves
+# only the far corners of the widest window (POINT_MAX_CELLS cells either way)
+AWAY_STEPS = (1.0, 2.0, 4.0, 8.0)
 
 
 def match_points(
@@ -102,14 +104,17 @@ def elsewhere(
 ) -> bool:
     """Whether another place scores ``point_distinct`` × as well as the search's best pose ``found``
     (ICP took it to ``pose``): the best pose of the window away from it (``AMBIGUOUS_XY`` /
-    ``AMBIGUOUS_THETA``, then twice and four times that) that scores so, unless ICP from it comes back
-    to ``pose`` — the slope of the same fit (on a 0.2 m grid, a wall seen end-on holds the score past
-    0.5 m), not another place; then the next, farther away."""
+    ``AMBIGUOUS_THETA``, then twice, four and eight times that) that scores so, unless ICP from it comes
+    back to ``pose`` — the slope of the same fit (on a 0.2 m grid, a wall seen end-on holds the score past
+    0.5 m), not another place; then the next, farther away. Past the last exclusion nothing is let off:
+    one that scores so there is another place, wherever ICP takes it."""
     for grow in AWAY_STEPS:
         away = Exclusion(found.pose, grow * AMBIGUOUS_XY, grow * AMBIGUOUS_THETA)
         other = field.best(exclude=away)
         if not (np.isfinite(other.score) and other.score >= cfg.point_distinct * found.score):
             return False
+        if grow == AWAY_STEPS[-1]:
+            return True
         back = relative(pose, register(points, local, other.pose, icp).pose)
         if math.hypot(back[0], back[1]) > AMBIGUOUS_XY or abs(back[2]) > AMBIGUOUS_THETA:
             return True
