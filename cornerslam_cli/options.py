@@ -77,12 +77,32 @@ def _config_read_once(ctx: click.Context, param, value: str | None) -> str | Non
     return copy
 
 
+class _TopicName(click.ParamType):
+    """``--scan-topic`` / ``--odom-topic``: a topic's name, not ``''`` (an unset shell variable,
+    ``--scan-topic "$TOPIC"``), which was taken as not given: the topic found by message type was run
+    without a word."""
+
+    name = "TOPIC"
+
+    def convert(self, value, param, ctx):
+        if value == "":
+            self.fail(
+                "'' names no topic (an unset shell variable?): give one or leave the option out", param, ctx
+            )
+        return value
+
+
 def topic_options(f):
     """``--scan-topic`` and ``--odom-topic``."""
     f = click.option(
-        "--odom-topic", default=None, help="Odometry topic (default: by message type, else tf)."
+        "--odom-topic",
+        type=_TopicName(),
+        default=None,
+        help="Odometry topic (default: by message type, else tf).",
     )(f)
-    f = click.option("--scan-topic", default=None, help="LaserScan topic (default: the only one).")(f)
+    f = click.option(
+        "--scan-topic", type=_TopicName(), default=None, help="LaserScan topic (default: the only one)."
+    )(f)
     return f
 
 

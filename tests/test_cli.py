@@ -804,6 +804,23 @@ def test_an_empty_preset_option_is_a_usage_error_naming_the_choices():
     assert r.stdout == ""
 
 
+@pytest.mark.parametrize(
+    "args, option",
+    [
+        (["run", "LOG.mcap", "--scan-topic", ""], "--scan-topic"),
+        (["compare", "LOG.mcap", "--odom-topic", ""], "--odom-topic"),
+        (["info", "LOG.mcap", "--scan-topic="], "--scan-topic"),
+        (["extract", "LOG.mcap", "--step", "0", "--odom-topic", ""], "--odom-topic"),
+    ],
+)
+def test_an_empty_topic_option_is_a_usage_error(args, option, tmp_path, monkeypatch):
+    """`--scan-topic "$TOPIC"` with TOPIC unset was taken as not given: the topic found by message
+    type was run, exit 0, without a word."""
+    monkeypatch.chdir(tmp_path)
+    one_line_error(invoke(*args), f"invalid value for '{option}': '' names no topic")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_bad_preset_option_is_named_as_the_keys_value_not_a_set():
     r = invoke("config", "--preset", "nope")
     one_line_error(r, "config key 'input.laser_preset' = 'nope' is not a laser preset")
