@@ -557,7 +557,8 @@ def test_parse_assocs_good_names():
     assert parse_assocs(" pca , icnn,,", allow_many=True) == ["pca", "icnn"]  # blanks and spaces dropped
     assert parse_assocs(" jcbb", allow_many=False) == ["jcbb"]
     assert parse_assocs(None, allow_many=True) == parse_assocs(None, allow_many=False) == []
-    assert parse_assocs("", allow_many=False) == []  # run's default: the config's associator
+    with pytest.raises(click.BadParameter):  # run's default is None, the config's; '' names none
+        parse_assocs("", allow_many=False)
 
 
 @pytest.mark.parametrize("text", ["pca,pca", " icnn,icnn "])
@@ -611,7 +612,6 @@ def test_a_usage_error_is_one_line_naming_the_help(args, line, tmp_path, monkeyp
         ("icnn,qqqq", True, "unknown associator 'qqqq' (choose one of: icnn, jcbb, pca)"),
         ("jbcc", False, "unknown associator 'jbcc' (did you mean 'jcbb'? (icnn, jcbb, pca))"),
         ("pca,", False, "unknown associator 'pca,' (did you mean 'pca'? (icnn, jcbb, pca))"),  # one name
-        ("  ", False, "unknown associator '' (choose one of: icnn, jcbb, pca)"),
         ("PCA", False, "unknown associator 'PCA' (choose one of: icnn, jcbb, pca)"),
     ],
 )
@@ -626,6 +626,15 @@ def test_parse_assocs_unknown_name_names_the_closest(text, allow_many, line, mon
     with pytest.raises(ConfigError) as e:
         parse_assocs(text, allow_many)
     assert str(e.value) == line
+
+
+@pytest.mark.parametrize("text", ["", "  "])
+def test_run_assoc_naming_none_is_a_usage_error(text, sim_log, tmp_path):
+    """`run --assoc "$A"` with A unset ran the config's associator, exit 0, without a word (and
+    `--assoc ' '` said "unknown associator ''")."""
+    res = invoke("run", sim_log, "--assoc", text, "--out", tmp_path / "o")
+    one_line_error(res, "invalid value for --assoc: '", "' names no associator: give e.g. pca")
+    assert not (tmp_path / "o").exists()
 
 
 @pytest.mark.parametrize("command", ["run", "compare", "batch"])
