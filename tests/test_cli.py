@@ -213,6 +213,18 @@ def test_extract_step_is_the_steps_scan_and_its_features(tmp_path):
     )
 
 
+def test_extract_from_a_log_with_no_readable_scan_names_no_range(tmp_path):
+    """Every chunk corrupt: extract said "--step 0 is past the end of 'LOG' (0 scans) (use 0..0)",
+    offering a step the log does not have."""
+    from fault_corpus import corrupt_chunk
+
+    log = small_log(tmp_path / "s.mcap", n=3)
+    corrupt_chunk(log, log, which=0)
+    res = invoke("extract", log, "--step", 0, "-q")
+    one_line_error(res, f"log '{log}' has no scan that could be read, so none to extract", "info LOG")
+    assert "0..0" not in res.stderr
+
+
 def test_extract_keeps_the_beams_a_run_keeps(tmp_path):
     """input.skip_beams_* and input.max_range (in --set or --config) apply to extract's scan as to a
     run's (before: ignored, exit 0 with the features of beams the run never sees); skipping every beam
