@@ -143,8 +143,7 @@ class _Cli(click.Group):
                     f"error: cannot write to standard output: {reason} (redirect it elsewhere)", err=True
                 )
                 ctx.exit(2)
-            path = save_traceback(exc)
-            click.echo(f"internal error: {one_line(exc)} (traceback saved to {path})", err=True)
+            click.echo(f"internal error: {one_line(exc)} ({save_traceback(exc)})", err=True)
             ctx.exit(1)
         finally:
             if main_thread and previous is not None:

@@ -424,6 +424,37 @@ def test_an_internal_error_exits_1_with_the_traceback_saved(tmp_path, sim_log, m
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.parametrize("where", ["no temporary directory", "a full disk"])
+def test_an_internal_error_whose_traceback_cannot_be_saved_is_still_one_line(
+    where, tmp_path, sim_log, monkeypatch
+):
+    """No writable temporary directory (TMPDIR and /tmp read-only) or a full disk: the OSError of
+    saving the traceback escaped, a Python traceback printed after the bug's."""
+    import errno
+    import os
+    import tempfile
+
+    from cornerslam_cli.slam import Slam
+
+    def boom(*a, **k):
+        raise ZeroDivisionError("synthetic bug")
+
+    def no_dir(*a, **k):
+        raise FileNotFoundError(errno.ENOENT, "No usable temporary directory found")
+
+    def full(*a, **k):
+        return os.open("/dev/full", os.O_WRONLY), str(tmp_path / "crash.txt")
+
+    monkeypatch.setattr(Slam, "step", boom)
+    monkeypatch.setattr(tempfile, "mkstemp", no_dir if where.startswith("no") else full)
+    res = invoke("run", sim_log, "--out", tmp_path / "o")
+    assert res.exit_code == 1 and "Traceback" not in res.output
+    reason = "No usable temporary directory found" if where.startswith("no") else "No space left on device"
+    assert res.stderr.startswith("internal error: ZeroDivisionError: synthetic bug (traceback not saved")
+    assert res.stderr.endswith(f"{reason}; set TMPDIR to a writable directory to keep it)\n")
+    assert not (tmp_path / "o").exists()
+
+
 def test_compare_runs_every_associator_on_the_same_frames(sim_log, tmp_path):
     out = tmp_path / "cmp"
     res = invoke("compare", sim_log, "--assoc", "icnn,pca", "--out", out, "--jobs", 2)
