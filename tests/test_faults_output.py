@@ -723,6 +723,16 @@ def extract_plot_through_a_dangling_symlink(w: World) -> Case:
     return Case(["extract", w.log, "--plot", link], after=after)
 
 
+@fault(2, "exists and is not a figure cornerslam extract wrote", "give a new file name")
+def extract_plot_over_a_users_file(w: World) -> Case:
+    """`extract --plot photo.png` where photo.png is a file extract did not write (its metadata does not
+    name cornerslam extract): refused before any work, the file kept (before, it was overwritten);
+    a figure an earlier `extract --plot` wrote is replaced"""
+    photo = w.tmp / "photo.png"
+    photo.write_bytes(b"\x89PNG\r\n\x1a\n a user's picture")
+    return Case(["extract", w.log, "--plot", photo], photo)
+
+
 @fault(0)
 def simulate_into_a_new_directory(w: World) -> Case:
     """`simulate new/s.mcap`: the directory made (it was an internal error)"""
@@ -1079,6 +1089,17 @@ def test_simulate_writes_over_its_own_earlier_log(tmp_path):
         res = CliRunner().invoke(cli, ["simulate", str(out), "--beams", "11", "--rate", "1", "--seed", seed])
         assert res.exit_code == 0, res.output
     assert out.with_suffix(".gt.tum").exists() and out.with_suffix(".corners.csv").exists()
+
+
+@pytest.mark.parametrize("name", ["scan.png", "scan.pdf", "scan.svg", "scan.jpg", "scan.TIFF"])
+def test_extract_plot_writes_over_its_own_earlier_figure(name, tmp_path, valid_log):
+    """`extract --plot` again to the same name replaces the figure it wrote (a re-run is the usual case),
+    in each format whose file can name its creator."""
+    figure = tmp_path / name
+    for step in ("1", "2"):
+        res = CliRunner().invoke(cli, ["extract", str(valid_log), "--step", step, "--plot", str(figure)])
+        assert res.exit_code == 0, res.output
+    assert figure.stat().st_size > 1000
 
 
 def test_enoent_is_a_user_error_only_where_the_directory_creates_no_files(tmp_path, monkeypatch):
