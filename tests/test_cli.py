@@ -225,6 +225,25 @@ def test_extract_from_a_log_with_no_readable_scan_names_no_range(tmp_path):
     assert "0..0" not in res.stderr
 
 
+@pytest.mark.parametrize("command", ["run", "compare"])
+def test_a_damaged_ground_truth_beside_the_log_says_why_it_was_read(command, tmp_path):
+    """LOG.gt.tum beside the log, not readable: the error named a file the user had not given, without
+    saying why it was read or how to run without it."""
+    log = small_log(tmp_path / "s.mcap", n=6)
+    gt = tmp_path / "s.gt.tum"
+    gt.write_text("garbage line\n")
+    res = invoke(command, log, "--out", tmp_path / "o")
+    one_line_error(
+        res,
+        f"ground truth '{gt}' line 1 is not a TUM pose (expected: stamp x y z qx qy qz qw; read as the "
+        "log's ground truth for lying beside it: fix it, or rename it to run without it)",
+    )
+    res = invoke(command, log, "--out", tmp_path / "o", "--ground-truth", gt)  # given: no such note
+    one_line_error(res, "line 1 is not a TUM pose")
+    assert res.stderr.endswith("(expected: stamp x y z qx qy qz qw)\n")
+    assert not (tmp_path / "o").exists()
+
+
 def test_extract_keeps_the_beams_a_run_keeps(tmp_path):
     """input.skip_beams_* and input.max_range (in --set or --config) apply to extract's scan as to a
     run's (before: ignored, exit 0 with the features of beams the run never sees); skipping every beam
