@@ -931,6 +931,21 @@ def test_a_closed_stderr_is_no_internal_error(valid_log, tmp_path):
     complete(out)
 
 
+def test_an_unwritable_home_is_no_noise_under_quiet(valid_log, tmp_path):
+    """HOME not a writable directory (a service user's, a read-only container): matplotlib could not
+    make ~/.config/matplotlib and said so on two lines, with -q too, before drawing as asked."""
+    home = tmp_path / "home"
+    home.write_text("a file, not a directory\n")
+    env = {
+        k: v for k, v in os.environ.items() if k not in ("MPLCONFIGDIR", "XDG_CONFIG_HOME", "XDG_CACHE_HOME")
+    }
+    figure = tmp_path / "scan.png"
+    args = [*CMD, "extract", str(valid_log), "--step", "1", "--plot", str(figure), "-q"]
+    res = subprocess.run(args, env={**env, "HOME": str(home)}, capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0 and res.stderr == "", res.stderr
+    assert figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
 @pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs /dev/full")
 def test_stdout_on_a_full_disk_is_exit_2(valid_log, tmp_path):
     """`cornerslam info LOG > /dev/full`: writing stdout fails with ENOSPC. Exit 2 with one line
