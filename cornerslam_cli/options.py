@@ -94,15 +94,11 @@ class _TopicName(click.ParamType):
 
 def topic_options(f):
     """``--scan-topic`` and ``--odom-topic``."""
-    f = click.option(
-        "--odom-topic",
-        type=_TopicName(),
-        default=None,
-        help="Odometry topic (default: by message type, else tf).",
-    )(f)
-    f = click.option(
-        "--scan-topic", type=_TopicName(), default=None, help="LaserScan topic (default: the only one)."
-    )(f)
+    for name, text in (
+        ("--odom-topic", "Odometry topic (default: by message type, else tf)."),
+        ("--scan-topic", "LaserScan topic (default: the only one)."),
+    ):
+        f = click.option(name, type=_TopicName(), default=None, help=text)(f)
     return f
 
 
