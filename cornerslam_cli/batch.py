@@ -262,7 +262,7 @@ def _failed(e: BaseException) -> dict:
     reports one)."""
     if isinstance(e, CornerslamError):
         return {"status": "failed", "error": one_line(e)}
-    error = f"internal error: {one_line(e)} (traceback saved to {save_traceback(e)})"
+    error = f"internal error: {one_line(e)} ({save_traceback(e)})"
     return {"status": "failed", "error": error, "internal": True}
 
 

@@ -143,8 +143,7 @@ class _Cli(click.Group):
                     f"error: cannot write to standard output: {reason} (redirect it elsewhere)", err=True
                 )
                 ctx.exit(2)
-            path = save_traceback(exc)
-            click.echo(f"internal error: {one_line(exc)} (traceback saved to {path})", err=True)
+            click.echo(f"internal error: {one_line(exc)} ({save_traceback(exc)})", err=True)
             ctx.exit(1)
         finally:
             if main_thread and previous is not None:
@@ -469,21 +468,41 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
 
     setup_logging(verbose, quiet)
     cfg = command_config(config_path, overrides, None, scan_topic, odom_topic, log_path)
+    target = _figure_target(plot_path) if plot_path else None  # refused before any work
     # the beams a run keeps (input.skip_beams_*, input.max_range), in the sensor frame (not mirrored)
     scan, segments, corners = extract_step(
         log_path, step, cfg, lambda r: scans_prepared(r, cfg, msgs=r.scans())
     )
     click.echo(scan_heading(step, scan))
     click.echo(format_extraction(segments, corners))
-    if plot_path:
-        from .report.oserrors import output_errors, resolved
+    if target is not None:
+        from .report.oserrors import output_errors
 
         with output_errors(plot_path):
-            # the directory of a symlink's target (a dangling one's too) made, as --out and --mcap-out do;
-            # written through the path as given, whose suffix names the format (the target's may not)
-            resolved(Path(plot_path)).parent.mkdir(parents=True, exist_ok=True)
+            # the target's directory made; written through the path as given, whose suffix names the
+            # format (the target's may not: link.png -> fig.txt)
+            target.parent.mkdir(parents=True, exist_ok=True)
             plot_extraction(scan, segments, corners, Path(plot_path))
         click.echo(f"wrote {plot_path}")
+
+
+def _figure_target(plot_path: str) -> Path:
+    """Where ``extract --plot`` writes: a symlink's target (a dangling one's too), as --out and
+    --mcap-out do. An existing file there is replaced only when an earlier ``extract --plot`` wrote
+    it (a user's photo.png was overwritten without a word); a device or pipe is refused."""
+    from .errors import OutputError
+    from .report.oserrors import output_errors, resolved
+    from .report.ownership import is_extract_figure, refuse_special_file
+
+    with output_errors(plot_path):
+        target = resolved(Path(plot_path))
+        refuse_special_file(target, plot_path)
+        if target.is_file() and not is_extract_figure(target, Path(plot_path).suffix):
+            raise OutputError(
+                f"'{display_path(plot_path)}' exists and is not a figure cornerslam extract wrote",
+                "give a new file name, or move that file away",
+            )
+    return target
 
 
 @cli.command()

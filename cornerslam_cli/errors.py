@@ -8,6 +8,7 @@ and to write to UTF-8 files and JSON (error lines are made so by ``CornerslamErr
 
 from __future__ import annotations
 
+import contextlib
 import difflib
 import errno
 import os
@@ -79,12 +80,23 @@ def one_line(e: BaseException) -> str:
 
 
 def save_traceback(exc: BaseException) -> str:
-    """Write the traceback of ``exc`` (a bug) to a new temporary file and return its path: an internal
-    error is reported as one line naming that file."""
-    fd, path = tempfile.mkstemp(prefix="cornerslam-crash-", suffix=".txt")
-    with os.fdopen(fd, "w") as f:
-        traceback.print_exception(type(exc), exc, exc.__traceback__, file=f)
-    return path
+    """Write the traceback of ``exc`` (a bug) to a new temporary file and say where, for the one line
+    an internal error is reported as: "traceback saved to PATH". When no file can be written (no
+    writable temporary directory, a full disk) it says so instead: the report stays one line (the
+    OSError escaped as a second traceback, the bug's own printed above it)."""
+    path = None
+    try:
+        fd, path = tempfile.mkstemp(prefix="cornerslam-crash-", suffix=".txt")
+        with os.fdopen(fd, "w") as f:
+            traceback.print_exception(type(exc), exc, exc.__traceback__, file=f)
+    except OSError as e:
+        if path is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(path)
+        where = "" if path is None else f" to {display_path(path)}"
+        reason = e.strerror or str(e)
+        return f"traceback not saved{where}: {reason}; set TMPDIR to a writable directory to keep it"
+    return f"traceback saved to {display_path(path)}"
 
 
 def printable(text: str) -> str:

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from .config import Config
-from .errors import ConfigError
+from .errors import ConfigError, LogError
 from .features import extract
 from .logs import open_log
 from .types import Corners, Scan, Segments
@@ -20,7 +20,8 @@ def extract_step(
     segments and natural corners in the sensor frame, extracted with ``cfg``'s sensor, lines and
     corners sections. ``prepare``: the reader's scans as a run prepares them (``input.skip_beams_*``,
     ``input.max_range``: ``cornerslam extract`` passes the front end's), else as read. ConfigError
-    when the log has no such scan, naming the valid range."""
+    when the log has no such scan, naming the valid range; LogError when it yields no scan at all
+    (every chunk corrupt, every scan undecodable: there is no range to name)."""
     with open_log(Path(log_path), scan_topic=cfg.input.scan_topic, odom_topic=cfg.input.odom_topic) as reader:
         n = 0
         scans = reader.scans() if prepare is None else prepare(reader)
@@ -28,4 +29,9 @@ def extract_step(
             if n == step:
                 return (scan, *extract(scan, cfg.sensor, cfg.lines, cfg.corners))
             n += 1
-    raise ConfigError(f"--step {step} is past the end of '{log_path}' ({n} scans)", f"use 0..{max(n - 1, 0)}")
+    if n == 0:
+        raise LogError(
+            f"log '{log_path}' has no scan that could be read, so none to extract",
+            "its warnings (not shown with -q) say why; `cornerslam info LOG` lists its topics",
+        )
+    raise ConfigError(f"--step {step} is past the end of '{log_path}' ({n} scans)", f"use 0..{n - 1}")

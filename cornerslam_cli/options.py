@@ -77,12 +77,28 @@ def _config_read_once(ctx: click.Context, param, value: str | None) -> str | Non
     return copy
 
 
+class _TopicName(click.ParamType):
+    """``--scan-topic`` / ``--odom-topic``: a topic's name, not ``''`` (an unset shell variable,
+    ``--scan-topic "$TOPIC"``), which was taken as not given: the topic found by message type was run
+    without a word."""
+
+    name = "TOPIC"
+
+    def convert(self, value, param, ctx):
+        if value == "":
+            self.fail(
+                "'' names no topic (an unset shell variable?): give one or leave the option out", param, ctx
+            )
+        return value
+
+
 def topic_options(f):
     """``--scan-topic`` and ``--odom-topic``."""
-    f = click.option(
-        "--odom-topic", default=None, help="Odometry topic (default: by message type, else tf)."
-    )(f)
-    f = click.option("--scan-topic", default=None, help="LaserScan topic (default: the only one).")(f)
+    for name, text in (
+        ("--odom-topic", "Odometry topic (default: by message type, else tf)."),
+        ("--scan-topic", "LaserScan topic (default: the only one)."),
+    ):
+        f = click.option(name, type=_TopicName(), default=None, help=text)(f)
     return f
 
 
@@ -326,14 +342,15 @@ def check_sweep_not_set(overrides, sweeps) -> None:
 
 def parse_assocs(text: str | None, allow_many: bool, log_path: str | None = None) -> list[str]:
     """The associators an ``--assoc`` value names, each checked against ``association.ASSOCIATORS``
-    (an unknown one: ConfigError with the closest name). ``None`` (and ``""`` for a single name) is
-    ``[]``: the config's. A list is comma-separated, blanks ignored, and must name distinct
-    associators (a usage error otherwise); a single name is taken whole, spaces around it ignored,
-    and a list given where one is taken (``run``) is a usage error pointing to ``compare`` (on
-    ``log_path``, when given)."""
+    (an unknown one: ConfigError with the closest name). ``None`` (not given) is ``[]``: the config's;
+    a value naming none (``''``, an unset shell variable) is a usage error (``run --assoc ''`` ran the
+    config's associator without a word). A list is comma-separated, blanks ignored, and must name
+    distinct associators (a usage error otherwise); a single name is taken whole, spaces around it
+    ignored, and a list given where one is taken (``run``) is a usage error pointing to ``compare``
+    (on ``log_path``, when given)."""
     from .association import associator_class
 
-    if text is None or (not allow_many and not text):
+    if text is None:
         return []
     listed = [a.strip() for a in text.split(",") if a.strip()]
     if not allow_many and len(listed) > 1:
@@ -345,10 +362,11 @@ def parse_assocs(text: str | None, allow_many: bool, log_path: str | None = None
             f"cornerslam compare {log} --assoc {','.join(listed)}",
             param_hint="--assoc",
         )
-    names = listed if allow_many else [text.strip()]
+    names = listed if allow_many else [text.strip()] if text.strip() else []
     if not names:
         raise click.BadParameter(
-            f"'{text}' names no associator: give e.g. icnn,jcbb,pca", param_hint="--assoc"
+            f"'{text}' names no associator: give e.g. {'icnn,jcbb,pca' if allow_many else 'pca'}",
+            param_hint="--assoc",
         )
     if len(set(names)) != len(names):
         raise click.BadParameter(

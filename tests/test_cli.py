@@ -213,6 +213,37 @@ def test_extract_step_is_the_steps_scan_and_its_features(tmp_path):
     )
 
 
+def test_extract_from_a_log_with_no_readable_scan_names_no_range(tmp_path):
+    """Every chunk corrupt: extract said "--step 0 is past the end of 'LOG' (0 scans) (use 0..0)",
+    offering a step the log does not have."""
+    from fault_corpus import corrupt_chunk
+
+    log = small_log(tmp_path / "s.mcap", n=3)
+    corrupt_chunk(log, log, which=0)
+    res = invoke("extract", log, "--step", 0, "-q")
+    one_line_error(res, f"log '{log}' has no scan that could be read, so none to extract", "info LOG")
+    assert "0..0" not in res.stderr
+
+
+@pytest.mark.parametrize("command", ["run", "compare"])
+def test_a_damaged_ground_truth_beside_the_log_says_why_it_was_read(command, tmp_path):
+    """LOG.gt.tum beside the log, not readable: the error named a file the user had not given, without
+    saying why it was read or how to run without it."""
+    log = small_log(tmp_path / "s.mcap", n=6)
+    gt = tmp_path / "s.gt.tum"
+    gt.write_text("garbage line\n")
+    res = invoke(command, log, "--out", tmp_path / "o")
+    one_line_error(
+        res,
+        f"ground truth '{gt}' line 1 is not a TUM pose (expected: stamp x y z qx qy qz qw; read as the "
+        "log's ground truth for lying beside it: fix it, or rename it to run without it)",
+    )
+    res = invoke(command, log, "--out", tmp_path / "o", "--ground-truth", gt)  # given: no such note
+    one_line_error(res, "line 1 is not a TUM pose")
+    assert res.stderr.endswith("(expected: stamp x y z qx qy qz qw)\n")
+    assert not (tmp_path / "o").exists()
+
+
 def test_extract_keeps_the_beams_a_run_keeps(tmp_path):
     """input.skip_beams_* and input.max_range (in --set or --config) apply to extract's scan as to a
     run's (before: ignored, exit 0 with the features of beams the run never sees); skipping every beam
@@ -412,6 +443,37 @@ def test_an_internal_error_exits_1_with_the_traceback_saved(tmp_path, sim_log, m
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.parametrize("where", ["no temporary directory", "a full disk"])
+def test_an_internal_error_whose_traceback_cannot_be_saved_is_still_one_line(
+    where, tmp_path, sim_log, monkeypatch
+):
+    """No writable temporary directory (TMPDIR and /tmp read-only) or a full disk: the OSError of
+    saving the traceback escaped, a Python traceback printed after the bug's."""
+    import errno
+    import os
+    import tempfile
+
+    from cornerslam_cli.slam import Slam
+
+    def boom(*a, **k):
+        raise ZeroDivisionError("synthetic bug")
+
+    def no_dir(*a, **k):
+        raise FileNotFoundError(errno.ENOENT, "No usable temporary directory found")
+
+    def full(*a, **k):
+        return os.open("/dev/full", os.O_WRONLY), str(tmp_path / "crash.txt")
+
+    monkeypatch.setattr(Slam, "step", boom)
+    monkeypatch.setattr(tempfile, "mkstemp", no_dir if where.startswith("no") else full)
+    res = invoke("run", sim_log, "--out", tmp_path / "o")
+    assert res.exit_code == 1 and "Traceback" not in res.output
+    reason = "No usable temporary directory found" if where.startswith("no") else "No space left on device"
+    assert res.stderr.startswith("internal error: ZeroDivisionError: synthetic bug (traceback not saved")
+    assert res.stderr.endswith(f"{reason}; set TMPDIR to a writable directory to keep it)\n")
+    assert not (tmp_path / "o").exists()
+
+
 def test_compare_runs_every_associator_on_the_same_frames(sim_log, tmp_path):
     out = tmp_path / "cmp"
     res = invoke("compare", sim_log, "--assoc", "icnn,pca", "--out", out, "--jobs", 2)
@@ -557,7 +619,8 @@ def test_parse_assocs_good_names():
     assert parse_assocs(" pca , icnn,,", allow_many=True) == ["pca", "icnn"]  # blanks and spaces dropped
     assert parse_assocs(" jcbb", allow_many=False) == ["jcbb"]
     assert parse_assocs(None, allow_many=True) == parse_assocs(None, allow_many=False) == []
-    assert parse_assocs("", allow_many=False) == []  # run's default: the config's associator
+    with pytest.raises(click.BadParameter):  # run's default is None, the config's; '' names none
+        parse_assocs("", allow_many=False)
 
 
 @pytest.mark.parametrize("text", ["pca,pca", " icnn,icnn "])
@@ -611,7 +674,6 @@ def test_a_usage_error_is_one_line_naming_the_help(args, line, tmp_path, monkeyp
         ("icnn,qqqq", True, "unknown associator 'qqqq' (choose one of: icnn, jcbb, pca)"),
         ("jbcc", False, "unknown associator 'jbcc' (did you mean 'jcbb'? (icnn, jcbb, pca))"),
         ("pca,", False, "unknown associator 'pca,' (did you mean 'pca'? (icnn, jcbb, pca))"),  # one name
-        ("  ", False, "unknown associator '' (choose one of: icnn, jcbb, pca)"),
         ("PCA", False, "unknown associator 'PCA' (choose one of: icnn, jcbb, pca)"),
     ],
 )
@@ -626,6 +688,15 @@ def test_parse_assocs_unknown_name_names_the_closest(text, allow_many, line, mon
     with pytest.raises(ConfigError) as e:
         parse_assocs(text, allow_many)
     assert str(e.value) == line
+
+
+@pytest.mark.parametrize("text", ["", "  "])
+def test_run_assoc_naming_none_is_a_usage_error(text, sim_log, tmp_path):
+    """`run --assoc "$A"` with A unset ran the config's associator, exit 0, without a word (and
+    `--assoc ' '` said "unknown associator ''")."""
+    res = invoke("run", sim_log, "--assoc", text, "--out", tmp_path / "o")
+    one_line_error(res, "invalid value for --assoc: '", "' names no associator: give e.g. pca")
+    assert not (tmp_path / "o").exists()
 
 
 @pytest.mark.parametrize("command", ["run", "compare", "batch"])
@@ -802,6 +873,23 @@ def test_an_empty_preset_option_is_a_usage_error_naming_the_choices():
         r, "invalid value for '--preset': '' names no laser preset (choices: auto, none, sick_lms_1deg"
     )
     assert r.stdout == ""
+
+
+@pytest.mark.parametrize(
+    "args, option",
+    [
+        (["run", "LOG.mcap", "--scan-topic", ""], "--scan-topic"),
+        (["compare", "LOG.mcap", "--odom-topic", ""], "--odom-topic"),
+        (["info", "LOG.mcap", "--scan-topic="], "--scan-topic"),
+        (["extract", "LOG.mcap", "--step", "0", "--odom-topic", ""], "--odom-topic"),
+    ],
+)
+def test_an_empty_topic_option_is_a_usage_error(args, option, tmp_path, monkeypatch):
+    """`--scan-topic "$TOPIC"` with TOPIC unset was taken as not given: the topic found by message
+    type was run, exit 0, without a word."""
+    monkeypatch.chdir(tmp_path)
+    one_line_error(invoke(*args), f"invalid value for '{option}': '' names no topic")
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_a_bad_preset_option_is_named_as_the_keys_value_not_a_set():

@@ -65,6 +65,16 @@ def test_a_fifo_named_like_a_log_is_refused_without_hanging(command, tmp_path):
 
 
 @pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_a_dash_for_standard_input_says_so(command, tmp_path, monkeypatch):
+    """`cat x.mcap | cornerslam run -`: "log '-' does not exist (check the path)", as if a file named
+    '-' had been meant; standard input is read as a pipe would be: not at all."""
+    monkeypatch.chdir(tmp_path)
+    res = invoke(*(a.format(log="-", tmp=tmp_path) for a in COMMANDS[command]))
+    check_error_line(res, ("log '-' (standard input) cannot be read", "save it to a file first"))
+    assert not (tmp_path / "out").exists() and not (tmp_path / "cmp").exists()
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
 def test_process_substitution_is_refused_not_read_as_empty(command, tmp_path, good):
     """``cornerslam run <(cat good.mcap)``: the log is read several times (laser preset, index, laser
     mount, messages), a pipe only once; it used to say 'is empty'."""

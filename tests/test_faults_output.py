@@ -723,28 +723,38 @@ def extract_plot_through_a_dangling_symlink(w: World) -> Case:
     return Case(["extract", w.log, "--plot", link], after=after)
 
 
-@fault(0)
-def extract_plot_through_a_symlink_to_another_suffix(w: World) -> Case:
-    """`extract --plot link.png`, link.png a symlink to an existing `data` (no suffix) and another to
-    `fig.txt`: a PNG written through each link (the name given chooses the format; the target's made
-    it write data.png beside the untouched `data`, and fig.txt an internal error)"""
+@fault(2, "exists and is not a figure cornerslam extract wrote", "give a new file name")
+def extract_plot_over_a_users_file(w: World) -> Case:
+    """`extract --plot photo.png` where photo.png is a file extract did not write (its metadata does not
+    name cornerslam extract): refused before any work, the file kept (before, it was overwritten);
+    a figure an earlier `extract --plot` wrote is replaced"""
+    photo = w.tmp / "photo.png"
+    photo.write_bytes(b"\x89PNG\r\n\x1a\n a user's picture")
+    return Case(["extract", w.log, "--plot", photo], photo)
+
+
+@fault(2, "not a figure cornerslam extract wrote")
+def extract_plot_through_a_symlink_to_a_users_file(w: World) -> Case:
+    """`extract --plot link.png`, link.png a symlink to a user's existing `data`: refused, `data` kept
+    (the figure was written at data.png beside it, the target's suffix choosing the name)"""
     link, data = w.tmp / "link.png", w.tmp / "data"
     data.write_text("OLD")
     link.symlink_to(data)
 
     def after():
-        assert link.is_symlink() and data.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-        assert not (w.tmp / "data.png").exists()
+        assert link.is_symlink() and data.read_text() == "OLD" and not (w.tmp / "data.png").exists()
 
-    return Case(["extract", w.log, "--plot", link], after=after)
+    return Case(["extract", w.log, "--plot", link], link, after=after)
 
 
 @fault(0)
 def extract_plot_through_a_symlink_to_a_txt(w: World) -> Case:
-    """`extract --plot link.png` → fig.txt: a PNG written at fig.txt (it was an internal error: matplotlib
-    took the format from the target's suffix)"""
+    """`extract --plot link.png` → fig.txt, twice: a PNG written at fig.txt, and replaced the second time
+    (it was an internal error: matplotlib took the format from the target's suffix)"""
     link, figure = w.tmp / "link.png", w.tmp / "fig.txt"
     link.symlink_to(figure)
+    first = CliRunner().invoke(cli, ["extract", str(w.log), "--plot", str(link), "-q"])
+    assert first.exit_code == 0, first.output
 
     def after():
         assert figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -950,6 +960,21 @@ def test_a_closed_stderr_is_no_internal_error(valid_log, tmp_path):
     complete(out)
 
 
+def test_an_unwritable_home_is_no_noise_under_quiet(valid_log, tmp_path):
+    """HOME not a writable directory (a service user's, a read-only container): matplotlib could not
+    make ~/.config/matplotlib and said so on two lines, with -q too, before drawing as asked."""
+    home = tmp_path / "home"
+    home.write_text("a file, not a directory\n")
+    env = {
+        k: v for k, v in os.environ.items() if k not in ("MPLCONFIGDIR", "XDG_CONFIG_HOME", "XDG_CACHE_HOME")
+    }
+    figure = tmp_path / "scan.png"
+    args = [*CMD, "extract", str(valid_log), "--step", "1", "--plot", str(figure), "-q"]
+    res = subprocess.run(args, env={**env, "HOME": str(home)}, capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0 and res.stderr == "", res.stderr
+    assert figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
 @pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs /dev/full")
 def test_stdout_on_a_full_disk_is_exit_2(valid_log, tmp_path):
     """`cornerslam info LOG > /dev/full`: writing stdout fails with ENOSPC. Exit 2 with one line
@@ -1108,6 +1133,17 @@ def test_simulate_writes_over_its_own_earlier_log(tmp_path):
         res = CliRunner().invoke(cli, ["simulate", str(out), "--beams", "11", "--rate", "1", "--seed", seed])
         assert res.exit_code == 0, res.output
     assert out.with_suffix(".gt.tum").exists() and out.with_suffix(".corners.csv").exists()
+
+
+@pytest.mark.parametrize("name", ["scan.png", "scan.pdf", "scan.svg", "scan.jpg", "scan.TIFF"])
+def test_extract_plot_writes_over_its_own_earlier_figure(name, tmp_path, valid_log):
+    """`extract --plot` again to the same name replaces the figure it wrote (a re-run is the usual case),
+    in each format whose file can name its creator."""
+    figure = tmp_path / name
+    for step in ("1", "2"):
+        res = CliRunner().invoke(cli, ["extract", str(valid_log), "--step", step, "--plot", str(figure)])
+        assert res.exit_code == 0, res.output
+    assert figure.stat().st_size > 1000
 
 
 def test_enoent_is_a_user_error_only_where_the_directory_creates_no_files(tmp_path, monkeypatch):

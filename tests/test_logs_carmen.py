@@ -179,6 +179,22 @@ def test_malformed_laser_lines_do_not_count_as_moving(tmp_path):
     assert open_log(p).info().odom_topic == "ODOM"
 
 
+def test_a_damaged_line_of_a_preferred_tag_does_not_choose_it(tmp_path):
+    """One damaged ROBOTLASER1 / ODOM line among whole FLASER lines: the tag was chosen for its name
+    (ROBOTLASER1 before FLASER, ODOM lines before the lasers' odometry fields), and the log could not
+    be run ("has no complete laser line", exit 2; a damaged ODOM line: "no scan could be processed")."""
+    lines = [_flaser_odom(t, laser_x=t, odom_x=t) for t in (1.0, 2.0, 3.0)]
+    p = tmp_path / "d.log"
+    p.write_text("".join(lines[:2] + ["ROBOTLASER1 1 2\n", "ODOM 1 2\n"] + lines[2:]))
+    log = open_log(p)
+    info = log.info()
+    assert (info.scan_topic, info.odom_topic) == ("FLASER", "FLASER")
+    assert info.odom_source == "FLASER odometry fields; no ODOM line is whole: 1 skipped"
+    scans, odoms = split(log.messages())
+    assert len(scans) == len(odoms) == 3
+    assert open_log(p, scan_topic="ROBOTLASER1").info().scan_topic == "ROBOTLASER1"  # asked for: kept
+
+
 def test_odometry_from_another_laser_tag_yields_no_scans_of_it(tmp_path):
     # --odom-topic RLASER with --scan-topic FLASER: the RLASER lines give odometry only, not scans
     lines = [

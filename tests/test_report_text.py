@@ -220,6 +220,17 @@ def test_info_lines():
     ]
 
 
+def test_info_lines_escape_control_characters_of_names_from_the_log():
+    """A topic (a CARMEN tag, an MCAP channel) named with control characters (garbage bytes, a terminal
+    escape sequence): info printed them raw to the terminal."""
+    odd = "\x1b]0;owned\x07/scan\x00"
+    info = LogInfo("mcap", "x.mcap", None, None, 0.0, 1, (TopicInfo(odd, odd, 1, None, "cdr"),), odd, "", "")
+    lines = info_lines("x.mcap", info, None)
+    assert not any(c in line for line in lines for c in "\x00\x07\x1b")
+    assert lines[4].split() == ["\\x1b]0;owned\\x07/scan\\x00"] * 2 + ["1", "msgs"]
+    assert lines[6] == "  scans     \\x1b]0;owned\\x07/scan\\x00"
+
+
 def test_evaluation_lines():
     res = Accuracy(
         ate=Ate(rmse=0.01234, mean=0.01, max=0.05, n=501),

@@ -61,6 +61,8 @@ def detect_format(path: str | Path) -> str:
     if not exists:
         if symlink_loop(p):  # exists() is False on ELOOP too (a loop on the path, or the log itself)
             raise LogError(f"cannot read log '{p}': a symlink loop", "check the path")
+        if str(path) == "-":  # the usual name of standard input: it is a pipe here too
+            raise LogError("log '-' (standard input) cannot be read", _STREAM_HINT)
         raise LogError(f"log '{p}' does not exist", "check the path")
     check_regular(p)
     if p.is_dir():

@@ -162,6 +162,7 @@ class CarmenReader:
         self.path = Path(path)
         self.stats = ReadStats()
         self._counts: dict[str, int] = {}
+        self._whole: dict[str, int] = {}  # per laser / ODOM tag: whole lines with a stamp (the rest skipped)
         self._params: dict[str, str] = {}
         self._start: float | None = None
         self._end: float | None = None
@@ -195,6 +196,7 @@ class CarmenReader:
                         t = float(tok[-3])
                     except ValueError:
                         continue
+                    self._whole[tag] = self._whole.get(tag, 0) + 1
                     if math.isfinite(t):
                         self._start = t if self._start is None else min(self._start, t)
                         self._end = t if self._end is None else max(self._end, t)
@@ -230,8 +232,9 @@ class CarmenReader:
                         "choose one of them with --scan-topic",
                     )
                 )
-        elif lasers:
-            scan = next(t for t in ("ROBOTLASER1", "FLASER", "RLASER", "ROBOTLASER2") if t in lasers)
+        elif lasers:  # the first in order of preference with a whole line: one damaged line is no laser
+            usable = [t for t in lasers if self._whole.get(t)] or lasers
+            scan = next(t for t in ("ROBOTLASER1", "FLASER", "RLASER", "ROBOTLASER2") if t in usable)
         else:
             problems.append(
                 (f"CARMEN log '{name}' has no laser lines (FLASER/ROBOTLASER1)", "give a log with scans")
@@ -247,7 +250,7 @@ class CarmenReader:
                         f"choose one with --odom-topic: ODOM or a laser tag ({', '.join(lasers) or 'none'})",
                     )
                 )
-        elif self._counts.get(ODOM_TAG) and not self._odom_lines_worse(scan):
+        elif self._whole.get(ODOM_TAG) and not self._odom_lines_worse(scan):
             odom = ODOM_TAG
         elif scan:
             odom = scan
@@ -275,7 +278,9 @@ class CarmenReader:
             src = "ODOM lines"
         elif self.odom_topic:
             src = f"{self.odom_topic} odometry fields"
-            if not self._want_odom and self._counts.get(ODOM_TAG):
+            if not self._want_odom and not self._whole.get(ODOM_TAG, 0) and self._counts.get(ODOM_TAG):
+                src += f"; no ODOM line is whole: {self._counts[ODOM_TAG]} skipped"
+            elif not self._want_odom and self._counts.get(ODOM_TAG):
                 src += f"; ODOM lines go back in time: {self._back[ODOM_TAG]} of {self._counts[ODOM_TAG]}"
         return LogInfo(
             format=self.format,

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..types import Corners, Scan, Segments
+from .ownership import figure_mark
 
 KIND_NAMES = {1: "I  intersection", 2: "II end point"}
 
@@ -84,5 +85,6 @@ def plot_extraction(scan: Scan, segments: Segments, corners: Corners, path, titl
     ax.grid(True, lw=0.3)
     ax.legend(loc="best", fontsize=8)
     fig.tight_layout()
-    fig.savefig(Path(path), dpi=120)
+    # marked as ours where the format can say so: a later extract --plot may replace it (ownership.py)
+    fig.savefig(Path(path), dpi=120, **figure_mark(Path(path).suffix[1:].lower()))
     plt.close(fig)

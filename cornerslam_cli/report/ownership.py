@@ -262,6 +262,37 @@ def claim_dir(path: str | Path, kind: str) -> Path:
 RESULTS_MCAP_LIBRARY = "cornerslam results"
 
 
+FIGURE_CREATOR = "cornerslam extract"  # extract --plot's figures name it in their metadata
+
+
+def figure_mark(fmt: str) -> dict:
+    """``savefig``'s arguments that name ``FIGURE_CREATOR`` in a figure of format ``fmt`` where its file
+    holds the text as is (png, pdf, svg, ps, eps, jpg, tif; none for the others: avif, gif, webp, …)."""
+    if fmt in ("png",):
+        return {"metadata": {"Software": FIGURE_CREATOR}}
+    if fmt in ("pdf", "svg", "ps", "eps"):
+        return {"metadata": {"Creator": FIGURE_CREATOR}}
+    if fmt in ("jpg", "jpeg"):
+        return {"pil_kwargs": {"comment": FIGURE_CREATOR.encode()}}
+    if fmt in ("tif", "tiff"):
+        return {"pil_kwargs": {"description": FIGURE_CREATOR}}
+    return {}
+
+
+def is_extract_figure(path: Path, suffix: str | None = None) -> bool:
+    """Whether ``path`` is a figure ``extract --plot`` wrote (its metadata names ``FIGURE_CREATOR``):
+    what a later ``extract --plot`` may replace. ``suffix``: of the name it was written by, which chose
+    its format (a symlink's, when ``path`` is its target); by default its own. A format without that
+    metadata (gif, webp, …) never is."""
+    if not figure_mark((path.suffix if suffix is None else suffix)[1:].lower()):
+        return False
+    try:
+        with open(path, "rb") as f:  # a figure of one scan: a few hundred KiB (read at most 16 MiB)
+            return FIGURE_CREATOR.encode() in f.read(16 << 20)
+    except OSError:
+        return False
+
+
 def is_results_mcap(path: Path) -> bool:
     """Whether ``path`` is a results MCAP cornerslam wrote (its Header names ``RESULTS_MCAP_LIBRARY``):
     what ``--mcap-out`` may replace."""

@@ -63,9 +63,24 @@ def agg_backend() -> None:
     backend of another machine) ended ``run --plot`` after its work, though Agg is what we draw with
     whatever the variable says."""
     os.environ["MPLBACKEND"] = "agg"
+    logging.getLogger("matplotlib").addFilter(_config_dir_unwritable)  # once: skips one it has
     import matplotlib
 
     matplotlib.use("Agg")
+
+
+_CONFIG_DIR_NOTES = (
+    "mkdir -p failed for path ",
+    " is not a writable directory",
+    "Matplotlib created a temporary",
+)
+
+
+def _config_dir_unwritable(record: logging.LogRecord) -> bool:
+    """False for matplotlib's notes, as it is imported, that its config directory (``~/.config/
+    matplotlib``: a read-only or missing HOME, a service user's) cannot be written and that it uses a
+    temporary one instead: two lines printed even with ``-q``, on what the figures do not need."""
+    return not any(note in record.getMessage() for note in _CONFIG_DIR_NOTES)
 
 
 def pyplot():

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..errors import display_path
+from ..errors import CornerslamError, display_path
 from ..evaluate import ate, coverage_note, overlap_problem, read_relations, relation_error, rpe
 from ..geometry import compose, compose_inverse
 from ..results import Accuracy, RunSummary
@@ -279,13 +279,22 @@ def load_reference(
     relations: str | Path | None = None,
     time_offset: float = 0.0,
 ) -> Reference:
-    """The given ground truth, else LOG.gt.tum if present; the given relations file, if any."""
+    """The given ground truth, else LOG.gt.tum if present; the given relations file, if any. A
+    LOG.gt.tum that cannot be read says in its error that it was read for lying beside the log (the
+    user gave no ground truth, and the error named a file they had not asked for)."""
     gt_path = Path(ground_truth) if ground_truth else find_ground_truth(log_path)
     rel_path = Path(relations) if relations else None
     notes: list[str] = []
+    try:
+        gt = read_tum(gt_path, "ground truth", notes.append) if gt_path else None
+    except CornerslamError as e:
+        if ground_truth:
+            raise
+        why = "read as the log's ground truth for lying beside it: fix it, or rename it to run without it"
+        raise type(e)(e.msg, f"{e.hint}; {why}" if e.hint else why) from None
     return Reference(
         gt_path,
-        read_tum(gt_path, "ground truth", notes.append) if gt_path else None,
+        gt,
         rel_path,
         read_relations(rel_path) if rel_path else None,
         time_offset,

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..errors import display_path
+from ..ranges import short_text
 
 if TYPE_CHECKING:
     from ..logs.base import LogInfo
@@ -242,14 +243,15 @@ def info_lines(
         lines.append(f"start:     {i.start:.3f} s")
         lines.append(f"duration:  {i.duration:.2f} s")
     lines.append("topics:")
-    for t in i.topics:
+    for t in i.topics:  # names and types as the log has them, control characters escaped (short_text)
         count = "?" if t.count is None else str(t.count)
         rate = f"{t.rate_hz:8.2f} Hz" if t.rate_hz else ""
         note = f" [{t.encoding_note}]" if t.encoding_note else ""
-        lines.append(f"  {t.name:<28} {t.msgtype:<30} {count:>8} msgs {rate}{note}")
+        name, msgtype = short_text(t.name, 200), short_text(t.msgtype, 200)
+        lines.append(f"  {name:<28} {msgtype:<30} {count:>8} msgs {rate}{note}")
     lines.append("run would use:")
-    lines.append(f"  scans     {i.scan_topic or '-'}")
-    lines.append(f"  odometry  {i.odom_topic or '-'} ({i.odom_source or 'none found'})")
+    lines.append(f"  scans     {short_text(i.scan_topic, 200) or '-'}")
+    lines.append(f"  odometry  {short_text(i.odom_topic, 200) or '-'} ({i.odom_source or 'none found'})")
     if laser is not None:
         flip = ", upside down: scans mirrored" if upside_down else ""
         x, y, yaw = laser
