@@ -352,6 +352,7 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
 
     from .lasers import detect_preset, first_scan
     from .logs import open_log
+    from .logs.base import no_scan_read
 
     setup_logging(verbose, quiet)
     reader = open_log(Path(log_path), scan_topic=scan_topic or "", odom_topic=odom_topic or "")
@@ -367,13 +368,17 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
         _echo(info_lines(log_path, replace(log_info, problems=()), None, scan, preset))
         reader.check()  # the first problem as the error: exit 2, as run
     laser = reader.laser_to_base()
-    scan, unread = None, ""
+    scan, unread = None, None
     try:
         scan = first_scan(reader) if log_info.scan_topic else None
-    except LogError as e:  # info lists what it can: the topics, and why no scan could be read
-        unread = f"the first scan could not be read: {one_line(e)}"
+    except LogError as e:  # info lists what it can: the topics, then why run would refuse the log
+        unread = e
+    if log_info.scan_topic and scan is None and unread is None:  # every chunk corrupt: no scan at all
+        unread = no_scan_read(log_path, "run has none to process", topics_hint=False)
     preset = None if scan is None else detect_preset(scan.n_beams, scan.angle_increment)
-    _echo(info_lines(log_path, log_info, laser, scan, preset, unread, bool(reader.laser_upside_down())))
+    _echo(info_lines(log_path, log_info, laser, scan, preset, bool(reader.laser_upside_down())))
+    if unread is not None:  # exit 2, as run
+        raise unread
     odom_tf = getattr(reader, "odom_tf_problem", lambda: None)()  # ROS logs: tf odometry not on tf
     if odom_tf and odom_tf[1]:  # every tf message read: run would fail at the end of the log
         raise LogError(*odom_tf[0])

@@ -7,9 +7,10 @@ from pathlib import Path
 from typing import Any
 
 from .config import Config
-from .errors import ConfigError, LogError
+from .errors import ConfigError
 from .features import extract
 from .logs import open_log
+from .logs.base import no_scan_read
 from .types import Corners, Scan, Segments
 
 
@@ -30,8 +31,5 @@ def extract_step(
                 return (scan, *extract(scan, cfg.sensor, cfg.lines, cfg.corners))
             n += 1
     if n == 0:
-        raise LogError(
-            f"log '{log_path}' has no scan that could be read, so none to extract",
-            "its warnings (not shown with -q) say why; `cornerslam info LOG` lists its topics",
-        )
+        raise no_scan_read(log_path, "none to extract")
     raise ConfigError(f"--step {step} is past the end of '{log_path}' ({n} scans)", f"use 0..{n - 1}")

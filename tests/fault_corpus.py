@@ -893,7 +893,7 @@ def _probe2_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
             2,
             (
                 "its only FLASER line cannot be read (line 42:",
-                "could not convert string to float: 'xxxxxxxxxxx...",
+                "its reading 1 'xxxxxxxxxxxxxxxxx...xxxxxxxxxxxxxxxxxx' is not a number)",
             ),
         ),
     )

@@ -152,16 +152,28 @@ def test_info_shows_the_first_scans_beams_preset_and_beam_times(sim_log, tmp_pat
 
 
 def test_info_lists_the_topics_of_a_log_whose_first_scan_cannot_be_read(tmp_path):
-    """A CARMEN log whose only laser line is cut: info still lists the topics (exit 0) and says why it
-    shows no beams, in the words run refuses the log with."""
+    """A CARMEN log whose only laser line is cut: info still lists the topics, then refuses the log as
+    run does (it exited 0 with the reason as a problem line, while run exits 2)."""
     log = tmp_path / "cut.clf"
     log.write_text("ODOM 0 0 0 0 0 0 1.0 host 1.0\nFLASER 180 1.0 1.0 1.0\n")
-    res = invoke("info", log)
-    assert res.exit_code == 0, res.output
-    assert "FLASER" in res.output and "  beams " not in res.output
+    res = invoke("info", log, "-q")
     why = "CARMEN log 'cut.clf' has no complete laser line: its only FLASER line cannot be read"
-    assert f"problem:   the first scan could not be read: {why}" in res.output
+    one_line_error(res, why)
+    assert "FLASER" in res.stdout and "  beams " not in res.stdout and "problem:" not in res.stdout
     one_line_error(invoke("run", log, "--out", tmp_path / "out"), why)
+
+
+def test_info_refuses_a_log_with_no_readable_scan_as_run_does(tmp_path):
+    """Every chunk corrupt: info listed /scan with the summary's count and exited 0, only its warnings
+    saying that nothing was read, while run exits 2. It lists the topics, then exits 2."""
+    from fault_corpus import corrupt_chunk
+
+    log = small_log(tmp_path / "s.mcap", n=3)
+    corrupt_chunk(log, log, which=0)
+    res = invoke("info", log, "-q")
+    one_line_error(res, f"log '{log}' has no scan that could be read, so run has none to process")
+    assert "/scan" in res.stdout and "  scans     /scan" in res.stdout and "  beams " not in res.stdout
+    assert invoke("run", log, "--out", tmp_path / "out", "-q").exit_code == 2
 
 
 def test_info_lists_the_topics_of_a_log_run_refuses(tmp_path):

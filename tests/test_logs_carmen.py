@@ -225,3 +225,81 @@ def test_a_line_cut_by_the_recorder_gives_no_stamp_or_pose(tmp_path, cut):
     info = open_log(p).info()
     assert (info.start, info.end) == (1001.0, 1005.5)
     assert (info.odom_topic, info.odom_source) == ("ODOM", "ODOM lines")
+
+
+_PYTHON_WORDS = ("index", "unpack", "convert", "literal", "expected")  # IndexError, ValueError texts
+
+
+@pytest.mark.parametrize(
+    ("line", "why"),
+    [
+        ("FLASER", "a FLASER line needs at least 10 fields after its tag, has 0"),
+        ("FLASER 3 1 2", "a FLASER line of 3 readings needs 13 fields after its tag, has 3"),
+        (
+            "FLASER 1 1 0 0 0 0 0 0 0 5 h 5 6",
+            "a FLASER line of 1 reading needs 11 fields after its tag, has 13",
+        ),
+        ("FLASER x 1 2", "its reading count 'x' is not a whole number >= 0"),
+        ("FLASER -2 1", "its reading count '-2' is not a whole number >= 0"),
+        ("FLASER 2 1 y 0 0 0 0 0 0 5 h 5", "its reading 2 'y' is not a number"),
+        ("FLASER 1 1 0 0 0 z 0 0 5 h 5", "its odom_x 'z' is not a number"),
+        ("FLASER 1 1 0 0 0 0 0 0 t h 5", "its timestamp 't' is not a number"),
+        ("ROBOTLASER1 1 2", "a ROBOTLASER1 line needs at least 23 fields after its tag, has 2"),
+        (
+            "ROBOTLASER1 0 a b c d e f 2 1 1",
+            "a ROBOTLASER1 line of 2 readings needs at least 25 fields after",
+        ),
+        (
+            _robotlaser(5, 0, 0).replace(" 3 1 1 1 0 ", " 3 1 1 1 2 "),
+            "a ROBOTLASER1 line of 3 readings and 2 remissions needs 28 fields after its tag, has 26",
+        ),
+        (_robotlaser(5, 0, 0).replace("-0.5", "a"), "its start_angle 'a' is not a number"),
+        (_robotlaser(5, 0, "r"), "its robot_x 'r' is not a number"),
+    ],
+)
+def test_a_malformed_laser_line_is_named_in_the_words_of_its_format(tmp_path, caplog, line, why):
+    """The warning and the error said what Python's parsing raised ("list index out of range", "not
+    enough values to unpack (expected 4, got 1)"): they say what the line lacks, counting the fields
+    after its tag, or which field is not a number."""
+    p = tmp_path / "bad.clf"
+    p.write_text(f"{line.strip()}\n")
+    with caplog.at_level(logging.WARNING, logger="cornerslam.logs"), pytest.raises(LogError) as e:
+        split(open_log(p).messages())
+    assert f"(line 1: {why}" in str(e.value)
+    assert f"bad.clf:1: malformed {line.split()[0]} line skipped ({why}" in caplog.text
+    assert not any(w in str(e.value) + caplog.text for w in _PYTHON_WORDS), caplog.text
+
+
+@pytest.mark.parametrize(
+    ("line", "why"),
+    [
+        ("ODOM", "an ODOM line needs 9 fields after its tag, has 0"),
+        ("ODOM 1 2 3 4 5 6 7 h 8 9", "an ODOM line needs 9 fields after its tag, has 10"),
+        ("ODOM x 0 0 0 0 0 7 h 7", "its x 'x' is not a number"),
+        ("ODOM 0 0 0 0 0 0 t h 7", "its timestamp 't' is not a number"),
+    ],
+)
+def test_a_malformed_odom_line_is_named_in_the_words_of_its_format(tmp_path, caplog, line, why):
+    p = tmp_path / "bad.clf"
+    p.write_text(flaser(3, 1.0) + _odom_line(0.5, 0) + f"{line}\n" + _odom_line(1.5, 0))
+    with caplog.at_level(logging.WARNING, logger="cornerslam.logs"):
+        split(open_log(p, odom_topic="ODOM").messages())
+    assert f"bad.clf:3: malformed ODOM line skipped ({why})" in caplog.text
+    assert not any(w in caplog.text for w in _PYTHON_WORDS), caplog.text
+
+
+@pytest.mark.parametrize("command", ["run", "info"])
+def test_the_probes_damaged_lines_are_refused_in_the_words_of_the_format(tmp_path, command):
+    """`printf 'FLASER\\nODOM\\n' > t.clf; cornerslam run t.clf` ended its one line with "(line 1: list
+    index out of range)"; info's error is run's."""
+    from click.testing import CliRunner
+    from fault_corpus import check_error_line
+
+    from cornerslam_cli.cli import cli
+
+    p = tmp_path / "t.clf"
+    p.write_text("FLASER\nODOM\n")
+    args = [command, str(p), "-q"] + (["--out", str(tmp_path / "out")] if command == "run" else [])
+    res = CliRunner().invoke(cli, args, catch_exceptions=False)
+    check_error_line(res, ("its only FLASER line cannot be read (line 1: a FLASER line needs at least 10",))
+    assert "index" not in res.stderr

@@ -248,6 +248,17 @@ class LogReader(Protocol):
 # --------------------------------------------------------------------------- shared helpers
 
 
+def no_scan_read(log: str | Path, so: str, topics_hint: bool = True) -> LogError:
+    """The error of a log whose scan topic yields no scan at all though it lists messages (every
+    MCAP chunk corrupt, every message undecodable: its warnings say which), ``so`` saying what the
+    command cannot do; ``topics_hint``: point at ``cornerslam info`` for the topics."""
+    hint = "its warnings (not shown with -q) say why"
+    return LogError(
+        f"log '{log}' has no scan that could be read, so {so}",
+        hint + ("; `cornerslam info LOG` lists its topics" if topics_hint else ""),
+    )
+
+
 def _size_disagreement(n: int, angle_min: float, angle_max: float, angle_increment: float) -> str:
     """What a message's angle_min/max/increment (the increment finite, not 0) imply against its ``n``
     ranges, for a warning; "" when they agree. The count is the span's magnitude over the step's, so

@@ -54,6 +54,9 @@ from .base import LogInfo, Pose2, ReadStats, TopicInfo, make_scan
 LASER_TAGS = ("ROBOTLASER1", "FLASER", "RLASER", "ROBOTLASER2")
 ODOM_TAG = "ODOM"
 DEFAULT_MAX_RANGE = 81.83
+POSE_NAMES = ("x", "y", "theta", "odom_x", "odom_y", "odom_theta")  # FLASER's after its readings
+ROBOTLASER_NAMES = ("start_angle", "fov", "angular_resolution", "maximum_range")  # its 2nd–5th fields
+ROBOTLASER_POSES = tuple((w, n) for w in ("laser", "robot") for n in ("x", "y", "theta"))  # after remissions
 GZIP_MAGIC = b"\x1f\x8b"
 
 
@@ -85,7 +88,8 @@ def _lines(path: Path, stats: ReadStats | None) -> Iterator[str]:
                 yield line
     except (EOFError, gzip.BadGzipFile, zlib.error) as exc:
         if stats is not None:
-            stats.warn("%s ends early after %d lines (damaged or cut gzip: %s)", path.name, n, exc)
+            why = "cut short" if isinstance(exc, EOFError) else "damaged"
+            stats.warn("%s ends early after %d lines: its gzip data is %s", path.name, n, why)
 
 
 def _whole_fields(tag: str, rest: str) -> list[str] | None:
@@ -128,29 +132,85 @@ class _Laser:
         self.range_max, self.ranges, self.laser, self.robot = range_max, ranges, laser, robot
 
 
+class BadLine(ValueError):
+    """What makes a line unreadable, in the words of its format (the warning and the error quote it):
+    its field count against the one its tag and counts need, or the field that is not a number."""
+
+
+def _fields(tok: list[str], want: int, of: str = "", at_least: bool = False) -> None:
+    """BadLine unless the fields after the tag are ``want`` (or more, ``at_least``), as a line of its
+    tag (``of`` its counts: " of N readings") needs."""
+    has = len(tok) - 1
+    if has < want if at_least else has != want:
+        raise BadLine(
+            f"{'an' if tok[0][0] in 'AEIOU' else 'a'} {tok[0]} line{of} needs {'at least ' * at_least}{want} "
+            f"fields after its tag, has {has}"
+        )
+
+
+def _many(n: int, what: str) -> str:
+    """``"1 reading"``, ``"3 readings"``."""
+    return f"{n} {what}{'s' * (n != 1)}"
+
+
+def _number(tok: list[str], i: int, name: str) -> float:
+    """Field ``i`` (the format's ``name`` for it) as a float; BadLine when it is not a number."""
+    try:
+        return float(tok[i])
+    except ValueError:
+        raise BadLine(f"its {name} '{short_text(tok[i], 40)}' is not a number") from None
+
+
+def _count(tok: list[str], i: int, name: str, least: int, of: str = "") -> int:
+    """Field ``i``, a count (of readings, remissions); BadLine when the line ends before it (a line
+    with it needs ``least`` fields), or it is not a whole number >= 0."""
+    if len(tok) <= i:
+        _fields(tok, least, of, at_least=True)
+    try:
+        n = int(tok[i])
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise BadLine(f"its {name} '{short_text(tok[i], 40)}' is not a whole number >= 0")
+    return n
+
+
+def _readings(tok: list[str], i: int, n: int) -> np.ndarray:
+    """The ``n`` range readings from field ``i``; BadLine naming the first that is not a number."""
+    try:
+        return np.array(tok[i : i + n], dtype=np.float64)
+    except ValueError:
+        for k in range(n):
+            _number(tok, i + k, f"reading {k + 1}")
+        raise BadLine("its readings are not all numbers") from None
+
+
 def parse_laser(tok: list[str], max_range: float) -> _Laser:
-    """Fields of a FLASER/RLASER/ROBOTLASERx line split into tokens (raises ValueError/IndexError)."""
-    if tok[0] in ("FLASER", "RLASER"):
-        n = int(tok[1])
-        if n < 0 or len(tok) != n + 11:
-            raise ValueError(f"{tok[0]} with {n} readings has {len(tok)} fields, expected {n + 11}")
-        ranges = np.array(tok[2 : 2 + n], dtype=np.float64)
-        p = [float(v) for v in tok[2 + n : 8 + n]]
-        stamp = float(tok[8 + n])
+    """Fields of a FLASER/RLASER/ROBOTLASERx line split into tokens (raises BadLine)."""
+    if tok[0] in ("FLASER", "RLASER"):  # n, n readings, laser x y theta, odom x y theta, 3 after them
+        n = _count(tok, 1, "reading count", 10)
+        _fields(tok, n + 10, f" of {_many(n, 'reading')}")
+        ranges = _readings(tok, 2, n)
+        p = [_number(tok, 2 + n + k, name) for k, name in enumerate(POSE_NAMES)]
+        stamp = _number(tok, 8 + n, "timestamp")
         return _Laser(stamp, -math.pi / 2, flaser_increment(n), max_range, ranges, tuple(p[:3]), tuple(p[3:]))
-    # ROBOTLASER1 / ROBOTLASER2
-    start, _fov, res, rmax = (float(v) for v in tok[2:6])
-    n = int(tok[8])
-    if n < 0 or len(tok) < n + 10:
-        raise ValueError(f"{tok[0]} with {n} readings is too short")
-    ranges = np.array(tok[9 : 9 + n], dtype=np.float64)
-    n_rem = int(tok[9 + n])
+    # ROBOTLASER1 / ROBOTLASER2: 7 laser fields, n, n readings, n_rem, n_rem remissions, 14 after them
+    n = _count(tok, 8, "reading count", 23)
+    n_rem = _count(tok, 9 + n, "remission count", n + 23, f" of {_many(n, 'reading')}")
+    _fields(tok, n + n_rem + 23, f" of {_many(n, 'reading')} and {_many(n_rem, 'remission')}")
+    start, _fov, res, rmax = (_number(tok, i, name) for i, name in enumerate(ROBOTLASER_NAMES, 2))
+    ranges = _readings(tok, 9, n)
     rest = 10 + n + n_rem
-    if n_rem < 0 or len(tok) != rest + 14:
-        raise ValueError(f"{tok[0]} with {n} readings and {n_rem} remissions has {len(tok)} fields")
-    p = [float(v) for v in tok[rest : rest + 6]]
-    stamp = float(tok[rest + 11])
+    p = [_number(tok, rest + k, f"{which}_{name}") for k, (which, name) in enumerate(ROBOTLASER_POSES)]
+    stamp = _number(tok, rest + 11, "timestamp")
     return _Laser(stamp, start, res, rmax, ranges, tuple(p[:3]), tuple(p[3:]))
+
+
+def parse_odom(tok: list[str]) -> tuple[float, float, float, float]:
+    """(timestamp, x, y, theta) of an ODOM line split into tokens (raises BadLine)."""
+    _fields(tok, 9)
+    x, y, th = (_number(tok, i, name) for i, name in enumerate(("x", "y", "theta"), 1))
+    return _number(tok, 7, "timestamp"), x, y, th
 
 
 class CarmenReader:
@@ -208,7 +268,7 @@ class CarmenReader:
                             self._moving.add(tag)
         except OSError as exc:
             raise LogError(
-                f"cannot read CARMEN log '{name}': {exc}", "check the file (gzip damaged?)"
+                f"cannot read CARMEN log '{name}': {exc.strerror or exc}", "check the file (gzip damaged?)"
             ) from exc
         if not any(t in self._counts for t in LASER_TAGS + (ODOM_TAG,)):
             raise LogError(
@@ -321,7 +381,7 @@ class CarmenReader:
                 continue
             try:
                 las = parse_laser(tok, 0.0)
-            except (ValueError, IndexError):
+            except BadLine:
                 continue
             (lx, ly, lt), (rx, ry, rt) = las.laser, las.robot
             if not all(math.isfinite(v) for v in (lx, ly, lt, rx, ry, rt)):
@@ -361,16 +421,14 @@ class CarmenReader:
                 continue
             try:
                 if tag == ODOM_TAG:
-                    if len(tok) != 10:
-                        raise ValueError(f"ODOM has {len(tok)} fields, expected 10")
-                    x, y, th = (float(v) for v in tok[1:4])
-                    if st.bad_odometry(f"{where}:{lineno}", float(tok[7]), (x, y, th)):
+                    stamp, x, y, th = parse_odom(tok)
+                    if st.bad_odometry(f"{where}:{lineno}", stamp, (x, y, th)):
                         continue
                     st.odoms += 1
-                    yield OdomSample(float(tok[7]), x, y, th)
+                    yield OdomSample(stamp, x, y, th)
                     continue
                 las = parse_laser(tok, max_range)
-            except (ValueError, IndexError) as exc:
+            except BadLine as exc:
                 st.failed("%s:%d: malformed %s line skipped (%s)", where, lineno, tag, exc)
                 if tag == scan_tag:
                     unread += 1

@@ -231,13 +231,12 @@ def info_lines(
     laser: tuple[float, float, float] | None,
     scan: Scan | None = None,
     preset: str | None = None,
-    unread: str = "",
     upside_down: bool = False,
 ) -> list[str]:
     """``cornerslam info``: the log's format, topics with counts and rates, what a run would use
     (``laser``: the laser's (x, y, yaw) in the base frame from tf — a CARMEN log's ROBOTLASER1 laser
     pose — or None, and ``upside_down`` there; ``scan``: the first scan, its geometry and beam times,
-    with the laser ``preset`` it matches; ``unread``: why it could not be read), problems and notes."""
+    with the laser ``preset`` it matches), problems and notes."""
     lines = [f"file:      {display_path(log_path)}", f"format:    {i.format}", f"messages:  {i.n_messages}"]
     if i.start is not None:
         lines.append(f"start:     {i.start:.3f} s")
@@ -261,7 +260,7 @@ def info_lines(
         lines.append("  laser     not on tf: from the config's input.laser (built-in default x=0 y=0 yaw=0)")
     if scan is not None:
         lines += scan_lines(scan, preset)
-    lines += [f"problem:   {text}" for text in (*i.problems, *([unread] if unread else []))]
+    lines += [f"problem:   {text}" for text in i.problems]
     lines += [f"note:      {text}" for text in i.notes]
     return lines
 
