@@ -25,7 +25,15 @@ single_threaded_blas()  # before numpy is first imported (blas.py says why)
 import click  # noqa: E402
 
 from . import __version__  # noqa: E402
-from .errors import CornerslamError, LogError, display_path, for_command, one_line, save_traceback  # noqa: E402
+from .errors import (  # noqa: E402
+    CornerslamError,
+    LogError,
+    display_path,
+    for_command,
+    one_line,
+    save_traceback,
+    terminal_safe,
+)
 from .options import (  # noqa: E402
     CONFIG_COPIES,
     FIGURE_PATH,
@@ -196,8 +204,10 @@ def _interrupt_in_chain(exc: BaseException) -> KeyboardInterrupt | None:
 
 # ---------------------------------------------------------------------------- commands
 def _echo(lines: list[str]) -> None:
+    """A command's report, a line at a time, each with its control characters escaped (a log's file
+    name or topic may hold a newline or an escape sequence)."""
     for line in lines:
-        click.echo(line)
+        click.echo(terminal_safe(line))
 
 
 @click.group(cls=_Cli, context_settings={"help_option_names": ["-h", "--help"]})

@@ -109,6 +109,16 @@ def printable(text: str) -> str:
     return raw.decode("utf-8", "replace")
 
 
+_CONTROL = re.compile(r"[\x00-\x08\x0a-\x1f\x7f-\x9f]")
+
+
+def terminal_safe(text: str) -> str:
+    """``text`` with its control characters (a newline, an escape sequence's ESC, C1 codes; not a tab)
+    escaped as ``repr`` does: a line for a terminal, whatever a file name or a log's topic held (a log
+    named ``$'a\\nb.clf'`` split a warning in two, ``\\x1b[31m`` in one coloured the terminal)."""
+    return _CONTROL.sub(lambda m: repr(m.group())[1:-1], text)
+
+
 def display_path(path: str | Path) -> str:
     """A path as text for messages and summaries (:func:`printable`)."""
     return printable(os.fsdecode(path))

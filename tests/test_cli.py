@@ -946,3 +946,19 @@ def test_an_empty_path_is_refused_by_name(args, name, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     one_line_error(invoke(*args), f"invalid value for {name}: '' names no file")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_log_name_with_control_characters_reaches_the_terminal_escaped(tmp_path):
+    """A file name holding a newline and an escape sequence split a warning in two and coloured the
+    terminal: the warnings and the run's report print it escaped, as repr does."""
+    sample = Path(__file__).resolve().parents[1] / "sample_logs" / "intel_cut.clf"
+    log = tmp_path / "new\nline\x1b[31m.clf"
+    log.write_bytes(sample.read_bytes())
+    res = CliRunner().invoke(cli, ["run", str(log), "--max-scans", "5", "--out", str(tmp_path / "o")])
+    assert res.exit_code == 0, res.output
+    printed = res.stdout + res.stderr
+    assert "\x1b" not in printed and "line\\x1b[31m.clf" in printed
+    warning = next(line for line in res.stderr.splitlines() if line.startswith("WARNING"))
+    assert "new\\nline" in warning  # one line, the newline shown as \n
+    report = next(line for line in res.stdout.splitlines() if "5 steps" in line)
+    assert report.startswith(str(tmp_path)) and "new\\nline" in report
