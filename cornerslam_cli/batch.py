@@ -297,10 +297,10 @@ def _init_worker(level: int) -> None:
     """A spawned worker logs at the parent's level (-q / -v), in the CLI's format, and ends with the
     batch (a killed ``cornerslam batch`` leaves no worker running; an interrupted one ends its workers:
     none goes on to the combination queued to it)."""
-    from .report.progress import StatusLine
+    from .report.progress import StatusLine, log_to_stderr
     from .workers import exit_with_parent, stopped_by_parent
 
-    logging.basicConfig(level=level, format="%(levelname)s: %(message)s")
+    log_to_stderr(level)
     # the parent's status line on this terminal has no newline: a worker's warning clears it first
     # (a line of its own, never drawn, puts that filter on the handlers; a forked worker inherits it)
     StatusLine(enabled=True)

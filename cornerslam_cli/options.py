@@ -14,7 +14,6 @@ import math
 import os
 import shlex
 import stat
-import sys
 import tempfile
 
 import click
@@ -250,20 +249,9 @@ def check_time_offset(relations, time_offset: float) -> None:
 
 def setup_logging(verbose: int, quiet: bool) -> None:
     """Log to stderr: warnings by default, ``-v`` info, ``-vv`` debug, ``-q`` errors only."""
-    level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)]
-    logging.basicConfig(level=level, format="%(levelname)s: %(message)s", stream=sys.stderr, force=True)
-    for handler in logging.getLogger().handlers:
-        handler.setFormatter(_TerminalFormatter("%(levelname)s: %(message)s"))
+    from .report.progress import log_to_stderr
 
-
-class _TerminalFormatter(logging.Formatter):
-    """Each record one line, its control characters escaped (errors.terminal_safe: a log's file name
-    may hold a newline or an escape sequence)."""
-
-    def format(self, record: logging.LogRecord) -> str:
-        from .errors import terminal_safe
-
-        return terminal_safe(super().format(record))
+    log_to_stderr(logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)])
 
 
 def command_config(

@@ -1,5 +1,6 @@
 """Progress on stderr while a command works: a run's scans (``Progress``) and a batch's combinations
-(``BatchProgress``). Library code reports progress through a callback; these are the CLI's callbacks."""
+(``BatchProgress``). Library code reports progress through a callback; these are the CLI's callbacks.
+And the log records written below them (:func:`log_to_stderr`)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,8 @@ import logging
 import sys
 import time
 from collections import deque
+
+from ..errors import terminal_safe
 
 SHOW_AFTER = 2.0  # seconds: shorter commands show no status line
 EVERY_TTY, EVERY_LOG = 0.1, 10.0  # seconds between redraws on a terminal, lines otherwise (CI logs)
@@ -136,3 +139,19 @@ class BatchProgress(StatusLine):
             f"{s.remaining} remaining {el:5.0f}s {eta if s.remaining else ''}"
         ).rstrip()
         self._draw(text)
+
+
+def log_to_stderr(level: int) -> None:
+    """Records at ``level`` and above to stderr as "LEVEL: message", one line each (a worker process
+    of ``batch`` too, at its parent's level)."""
+    logging.basicConfig(level=level, format="%(levelname)s: %(message)s", stream=sys.stderr, force=True)
+    for handler in logging.getLogger().handlers:
+        handler.setFormatter(_TerminalFormatter("%(levelname)s: %(message)s"))
+
+
+class _TerminalFormatter(logging.Formatter):
+    """Each record one line, its control characters escaped (errors.terminal_safe: a log's file name
+    may hold a newline or an escape sequence)."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        return terminal_safe(super().format(record))
