@@ -183,7 +183,8 @@ def _size(path: str) -> int:
 
 def _row(c: Combo, status: str, error: str = "", figures: dict | None = None, internal: bool = False) -> dict:
     """A row of batch.csv (its columns), and ``internal``: whether the failure was a bug."""
-    error = for_command(error, BATCH_OPTIONS)  # a hint naming --scan-topic: the --set batch takes
+    # a hint naming --scan-topic: the --set batch takes, or the --sweep of the key when it is swept
+    error = for_command(error, BATCH_OPTIONS, [key for key, _ in c.sweep])
     row = {"log": display_path(c.log), "assoc": c.assoc, **dict(c.sweep), "status": status, "error": error}
     row.update({k: (figures or {}).get(k) for k in FIGURES})
     row["out_dir"] = c.name if status in ("ok", "skipped") else ""

@@ -62,14 +62,16 @@ OPTION_OF = {
 }
 
 
-def for_command(text: str, options: Collection[str]) -> str:
+def for_command(text: str, options: Collection[str], swept: Collection[str] = ()) -> str:
     """An error's line as said to a command taking ``options``: an option of :data:`OPTION_OF` that the
     command does not take (``config`` and ``batch`` have no ``--scan-topic``) named as the ``--set``
-    of its key (``--set input.scan_topic=TOPIC``). Library hints name the options of ``run``."""
+    of its key (``--set input.scan_topic=TOPIC``), or as its ``--sweep`` when the key is one of
+    ``swept`` (batch refuses a ``--set`` of a swept key). Library hints name the options of ``run``."""
     for key, option in OPTION_OF.items():
         if option not in options:
             placeholder = option.rsplit("-", 1)[-1].upper()
-            text = re.sub(rf"{re.escape(option)}(?![\w-])", f"--set {key}={placeholder}", text)
+            given = f"--sweep {key}={placeholder},..." if key in swept else f"--set {key}={placeholder}"
+            text = re.sub(rf"{re.escape(option)}(?![\w-])", given, text)
     return text
 
 

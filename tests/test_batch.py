@@ -413,3 +413,17 @@ def test_a_set_of_a_swept_key_is_a_usage_error(logs, tmp_path, given):
     assert res.exit_code == 2, res.output
     assert f"--sweep {KEY} and --set '{given}' set the same key" in res.output
     assert "Traceback" not in res.output and not (tmp_path / "out").exists()
+
+
+def test_a_failed_rows_hint_names_the_sweep_of_a_swept_topic(tmp_path):
+    """`--sweep input.odom_topic=ODOM,/nope`: the failed row said "check --set input.odom_topic=TOPIC",
+    a --set batch refuses beside that sweep; it names the --sweep (unswept: the --set)."""
+    sample = Path(__file__).resolve().parents[1] / "sample_logs" / "intel_cut.clf"
+    combos = plan([sample], ["pca"], {"input.odom_topic": ["/nope"]})
+    (row,) = run_batch(combos, tmp_path / "swept", jobs=1)
+    assert row["status"] == "failed" and "--sweep input.odom_topic=TOPIC,..." in row["error"], row["error"]
+    assert "--set input" not in row["error"]
+    (row,) = run_batch(
+        plan([sample], ["pca"], overrides=["input.odom_topic=/nope"]), tmp_path / "set", jobs=1
+    )
+    assert row["status"] == "failed" and "--set input.odom_topic=TOPIC" in row["error"], row["error"]
