@@ -144,9 +144,9 @@ class BatchProgress(StatusLine):
 def log_to_stderr(level: int) -> None:
     """Records at ``level`` and above to stderr as "LEVEL: message", one line each (a worker process
     of ``batch`` too, at its parent's level)."""
-    logging.basicConfig(level=level, format="%(levelname)s: %(message)s", stream=sys.stderr, force=True)
-    for handler in logging.getLogger().handlers:
-        handler.setFormatter(_TerminalFormatter("%(levelname)s: %(message)s"))
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(_TerminalFormatter("%(levelname)s: %(message)s"))
+    logging.basicConfig(level=level, handlers=[handler], force=True)
 
 
 class _TerminalFormatter(logging.Formatter):
