@@ -2,7 +2,7 @@
 side in one run, each log in K + 1 copies.
 
     python benchmarks/panel_variant.py --set scan_match.window=20 [--set ...] [--baseline REV] [--k 2]
-        [--jobs 2] [--logs aces,csail-exact,...] [--out FILE]
+        [--perturb odom|submaps] [--jobs 2] [--logs aces,csail-exact,...] [--out FILE]
 
 The variant is this checkout with the ``--set`` overrides; the baseline is this checkout with the
 defaults, or git revision ``--baseline`` (a code change) with its defaults. Some logs' figures are chaotic
@@ -14,8 +14,15 @@ Per log: the mean and range of the K + 1 figures (ATE RMSE; Intel: relation erro
 of the scan-matched chain's; the verdict is **better** or **worse** only when the two ranges do not
 overlap. The 1 µm copies sample only the input's chaos, not every decision a change of the algorithm moves
 (a log stable under them may still move by centimetres under any change): read a verdict as "this change
-moved this log", and judge a change by the whole table. Writes a markdown report (default
-docs/results/variant_<settings>.md, or variant_vs_<REV>.md).
+moved this log", and judge a change by the whole table.
+
+``--perturb submaps`` samples that larger spread instead: the K copies are the log itself run with
+``submaps.max_distance`` moved by ±5 %, ±10 %, … of its default (K = 2: 9.5 and 10.5 m beside 10), in both
+builds. Where a submap ends decides which closures pass and how the submaps' errors add up between them
+(README: infinite-corridor 0.659 / 0.383 / 0.361 m at 9.5 / 10 / 10.5 with identical chains), so a
+change's verdict on such a log under the 1 µm copies is mostly which side of that spread it lands on.
+Writes a markdown report (default docs/results/variant_<settings>.md, or variant_vs_<REV>.md; with
+``--perturb submaps`` the name ends in ``_submaps``).
 """
 
 from __future__ import annotations
@@ -38,6 +45,10 @@ from intel_spread import perturbed_log  # noqa: E402
 from panel_spread import odom_lines, panel  # noqa: E402
 from real_logs import ROOT, default_data  # noqa: E402
 
+from cornerslam_cli.graph.params import SubmapConfig  # noqa: E402
+
+STEP = 0.05  # --perturb submaps: each copy moves submaps.max_distance by this share of its default more
+
 
 def run(log: Path, out: Path, extra: list[str], env: dict[str, str]) -> tuple[float, float, float]:
     """``cornerslam run LOG`` with the build of ``env``: (figure, the scan-matched chain's figure, the
@@ -54,14 +65,33 @@ def run(log: Path, out: Path, extra: list[str], env: dict[str, str]) -> tuple[fl
     return a["ate"]["rmse"], a["scan_odom_ate"]["rmse"], revisit
 
 
-def measure(logs, builds, k: int, jobs: int, tmp: Path) -> list[dict]:
-    """Every log in K + 1 copies through both builds (``builds``: name → (environment, extra options))."""
+def submap_lengths(k: int) -> list[float]:
+    """``--perturb submaps``: the K values of ``submaps.max_distance`` beside the default, nearest first
+    (−5 %, +5 %, −10 %, +10 %, …)."""
+    base = SubmapConfig().max_distance
+    return [round(base * (1 + (-1) ** (i + 1) * STEP * (1 + i // 2)), 6) for i in range(k)]
+
+
+def copies(name: str, log: Path, k: int, perturb: str, tmp: Path) -> list[tuple[Path, list[str]]]:
+    """The K + 1 runs of one log: (log file, extra options) — the log itself, then K copies with one ODOM
+    line moved by 1 µm (``odom``) or the log itself with ``submaps.max_distance`` moved (``submaps``)."""
+    if perturb == "submaps":
+        return [(log, []), *((log, ["--set", f"submaps.max_distance={d}"]) for d in submap_lengths(k))]
+    moved = (perturbed_log(log, n, tmp / f"{name}-odom{n}.log") for n in odom_lines(log, k))
+    return [(log, []), *((p, []) for p in moved)]
+
+
+def measure(logs, builds, k: int, jobs: int, tmp: Path, perturb: str = "odom") -> list[dict]:
+    """Every log in K + 1 copies (:func:`copies`) through both builds (``builds``: name → (environment,
+    extra options))."""
     with ThreadPoolExecutor(jobs) as pool:
         plan = []
         for name, log, score in logs:
-            copies = [log, *(perturbed_log(log, n, tmp / f"{name}-odom{n}.log") for n in odom_lines(log, k))]
             runs = {
-                b: [pool.submit(run, p, tmp / f"out-{b}-{p.stem}", [*score, *extra], env) for p in copies]
+                b: [
+                    pool.submit(run, p, tmp / f"out-{b}-{name}-{i}", [*score, *extra, *more], env)
+                    for i, (p, more) in enumerate(copies(name, log, k, perturb, tmp))
+                ]
                 for b, (env, extra) in builds.items()
             }
             plan.append((name, runs))
@@ -139,10 +169,15 @@ def summary(rows: list[dict]) -> list[str]:
     return out
 
 
-def report(rows: list[dict], sets: list[str], base_rev: str, k: int) -> list[str]:
+def report(rows: list[dict], sets: list[str], base_rev: str, k: int, perturb: str = "odom") -> list[str]:
     cmd = " ".join(["python benchmarks/panel_variant.py", *(f"--set {s}" for s in sets), f"--k {k}"])
     if base_rev != "HEAD":
         cmd += f" --baseline {base_rev}"
+    copies_are = f"in {k} copies with one ODOM line moved by 1 µm (panel_spread.py)"
+    if perturb == "submaps":
+        cmd += " --perturb submaps"
+        lengths = ", ".join(f"{d:g}" for d in submap_lengths(k))
+        copies_are = f"with `submaps.max_distance` at {lengths} m beside its default"
     base = "the defaults" if base_rev == "HEAD" else f"revision {revision(base_rev)}, its defaults"
     variant = ", ".join(f"`{s}`" for s in sets) or "its defaults"
     title = ", ".join(f"`{s}`" for s in sets) or f"this build ({revision()})"
@@ -150,7 +185,7 @@ def report(rows: list[dict], sets: list[str], base_rev: str, k: int) -> list[str
         f"# Panel: {title} against {base}",
         "",
         f"`{cmd}` at {revision()}. Variant: this build with {variant}; baseline: {base}. Each log runs "
-        f"as it is and in {k} copies with one ODOM line moved by 1 µm (panel_spread.py), in both builds; "
+        f"as it is and {copies_are}, in both builds; "
         "cells give the mean of the figures and their range. Verdict **better** / **worse** only when the "
         "ranges do not overlap. Figures: ATE RMSE against the corrected poses beside each radish log; "
         "Intel: relation error, translation mean. Chain: the scan-matched odometry alone (the front end's "
@@ -183,10 +218,20 @@ def main() -> None:
     ap.add_argument("--k", type=int, default=2, help="perturbed copies per log")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--logs", default="", help="comma-separated log names (default: the whole panel)")
+    ap.add_argument(
+        "--perturb",
+        choices=("odom", "submaps"),
+        default="odom",
+        help="what the K copies move: an ODOM line by 1 µm, or submaps.max_distance ±5 %%, ...",
+    )
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     if not args.sets and args.baseline == "HEAD":
         ap.error("nothing to compare: give --set KEY=VALUE and/or --baseline REV")
+    keys = [s.split("=")[0].strip() for s in args.sets]
+    if args.perturb == "submaps" and "submaps.max_distance" in keys:
+        # a variant of the perturbed key would be overridden by the copies' own --set
+        ap.error("--perturb submaps moves submaps.max_distance itself: compare it with --perturb odom")
     logs = panel(args.data)
     if args.logs:
         wanted = args.logs.split(",")
@@ -195,13 +240,14 @@ def main() -> None:
         logs = [x for x in logs if x[0] in wanted]
     if missing := [str(p) for _, p, _ in logs if not p.exists()]:
         ap.error(f"{', '.join(missing)} not found (pass --data DIR)")
-    out = args.out or ROOT / "docs" / "results" / f"variant_{slug(args.sets, args.baseline)}.md"
+    suffix = "_submaps" if args.perturb == "submaps" else ""
+    out = args.out or ROOT / "docs" / "results" / f"variant_{slug(args.sets, args.baseline)}{suffix}.md"
     sets = [x for s in args.sets for x in ("--set", s)]
     with tempfile.TemporaryDirectory(prefix="panel-variant-") as tmp, contextlib.ExitStack() as stack:
         src = ROOT if args.baseline == "HEAD" else stack.enter_context(source_tree(args.baseline))
         builds = {"baseline": (build_env(src), []), "variant": (build_env(ROOT), sets)}
-        rows = measure(logs, builds, args.k, args.jobs, Path(tmp))
-    text = "\n".join(report(rows, args.sets, args.baseline, args.k))
+        rows = measure(logs, builds, args.k, args.jobs, Path(tmp), args.perturb)
+    text = "\n".join(report(rows, args.sets, args.baseline, args.k, args.perturb))
     out.write_text(text)
     print(text)
 
