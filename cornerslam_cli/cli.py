@@ -384,7 +384,7 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
     except LogError as e:  # info lists what it can: the topics, then why run would refuse the log
         unread = e
     if log_info.scan_topic and scan is None and unread is None:  # every chunk corrupt: no scan at all
-        unread = no_scan_read(log_path, "run has none to process", topics_hint=False)
+        unread = no_scan_read(log_path, "run has none to process", topics_hint=False, stats=reader.stats)
     preset = None if scan is None else detect_preset(scan.n_beams, scan.angle_increment)
     _echo(info_lines(log_path, log_info, laser, scan, preset, bool(reader.laser_upside_down())))
     if unread is not None:  # exit 2, as run

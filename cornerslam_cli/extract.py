@@ -31,5 +31,5 @@ def extract_step(
                 return (scan, *extract(scan, cfg.sensor, cfg.lines, cfg.corners))
             n += 1
     if n == 0:
-        raise no_scan_read(log_path, "none to extract")
+        raise no_scan_read(log_path, "none to extract", stats=reader.stats)
     raise ConfigError(f"--step {step} is past the end of '{log_path}' ({n} scans)", f"use 0..{n - 1}")

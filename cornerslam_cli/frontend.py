@@ -28,6 +28,7 @@ from .filter.models import increment_noise
 from .geometry import matrix_from_pose, transform_points
 from .lasers import mount_source
 from .logs import ReadStats, open_log
+from .logs.base import damaged_error
 from .logs.deskew import deskew
 from .logs.sync import Synced, SyncStats, reanchor_odometry, select_keyframes, synchronise
 from .motion import ScanMatcher
@@ -234,7 +235,10 @@ def check_processed(src: Input, n_frames: int, n_points: int) -> None:
             "check the scan topic, range_min/range_max and input.max_range",
         )
     if n_frames == 0:
-        _undecoded_error(src.path, src.reader.stats)
+        rs = src.reader.stats
+        if rs.damaged and not (rs.scans and rs.odoms):  # the damage, not the stamps, is why
+            raise damaged_error(src.path, rs, "no scan could be processed")
+        _undecoded_error(src.path, rs)
         raise LogError(
             f"log '{src.path}': no scan could be processed ({stats.scans_in} scans read, "
             f"{stats.before_first_odom} before the first and {stats.after_last_odom} "

@@ -25,6 +25,9 @@ def invoke(*args):
     return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False, prog_name="cornerslam")
 
 
+DAMAGED = "the file is damaged: copy it again from its source, or salvage its intact parts"
+
+
 def one_line_error(result, *fragments):
     """Exit 2, one line on stderr starting with 'error:', no traceback, naming what it must."""
     assert result.exit_code == 2, result.output
@@ -171,9 +174,23 @@ def test_info_refuses_a_log_with_no_readable_scan_as_run_does(tmp_path):
     log = small_log(tmp_path / "s.mcap", n=3)
     corrupt_chunk(log, log, which=0)
     res = invoke("info", log, "-q")
-    one_line_error(res, f"log '{log}' has no scan that could be read, so run has none to process")
+    damaged = "1 damaged part of the file skipped, 0 scans and 0 odometry samples usable; the first: "
+    one_line_error(res, f"log '{log}': no scan could be read, so run has none to process ({damaged}", DAMAGED)
     assert "/scan" in res.stdout and "  scans     /scan" in res.stdout and "  beams " not in res.stdout
     assert invoke("run", log, "--out", tmp_path / "out", "-q").exit_code == 2
+
+
+def test_run_on_a_log_with_every_chunk_damaged_names_the_damage(tmp_path):
+    """Every chunk corrupt: run said "no scan could be processed (0 scans read, 0 before the first …)"
+    and told the user to check that the topics overlap in time; it names the damage and what to do."""
+    from fault_corpus import corrupt_chunk
+
+    log = small_log(tmp_path / "s.mcap", n=3)
+    corrupt_chunk(log, log, which=0)
+    res = invoke("run", log, "--out", tmp_path / "out", "-q")
+    why = f"log '{log}': no scan could be processed (1 damaged part of the file skipped"
+    one_line_error(res, why, DAMAGED)
+    assert "overlap in time" not in res.stderr and not (tmp_path / "out").exists()
 
 
 def test_info_lists_the_topics_of_a_log_run_refuses(tmp_path):
@@ -233,7 +250,7 @@ def test_extract_from_a_log_with_no_readable_scan_names_no_range(tmp_path):
     log = small_log(tmp_path / "s.mcap", n=3)
     corrupt_chunk(log, log, which=0)
     res = invoke("extract", log, "--step", 0, "-q")
-    one_line_error(res, f"log '{log}' has no scan that could be read, so none to extract", "info LOG")
+    one_line_error(res, f"log '{log}': no scan could be read, so none to extract", DAMAGED)
     assert "0..0" not in res.stderr
 
 

@@ -131,6 +131,9 @@ class ReadStats:
     bad_time_increment: int = 0  # scans whose time_increment was unusable (taken as not given)
     decode_failed: int = 0  # messages / lines that could not be decoded (skipped)
     first_failure: str = ""  # what the first of them was (the error names it when nothing was usable)
+    damaged: int = 0  # parts of the file skipped as unreadable (an MCAP chunk that fails its CRC, …)
+    first_damage: str = ""  # what the first of them was (the error names it when nothing was usable)
+    damage_seen: set[str] = field(default_factory=set)  # their texts: a part read twice counts once
     truncated: bool = False  # the file ends early (a recorder stopped): what came after the cut is lost
     warnings: list[str] = field(default_factory=list)
     said: set[str] = field(default_factory=set)  # every text logged: a summary's list may be reset, not this
@@ -163,6 +166,19 @@ class ReadStats:
             self.first_failure = text if len(text) <= 200 else text[:197] + "..."
         if self.decode_failed <= 5:
             self.warn(msg, *args)
+
+    def skip_damaged(self, msg: str, *args: object) -> None:
+        """Count one part of the file skipped as unreadable (damaged bytes), keep the first's text (its
+        first 200 characters) in ``first_damage`` and warn. A part met again (``laser_to_base()`` and
+        ``messages()`` read the same bytes) is counted once."""
+        text = printable(msg % args if args else msg)
+        if text in self.damage_seen:
+            return
+        self.damage_seen.add(text)
+        self.damaged += 1
+        if self.damaged == 1:
+            self.first_damage = text if len(text) <= 200 else text[:197] + "..."
+        self.warn(text)
 
     def bad_odometry(self, where: str, stamp: float, pose: tuple[float, float, float]) -> bool:
         """True (counted in ``decode_failed``, warned) if an odometry sample has a non-finite field or
@@ -248,14 +264,32 @@ class LogReader(Protocol):
 # --------------------------------------------------------------------------- shared helpers
 
 
-def no_scan_read(log: str | Path, so: str, topics_hint: bool = True) -> LogError:
+def no_scan_read(
+    log: str | Path, so: str, topics_hint: bool = True, stats: ReadStats | None = None
+) -> LogError:
     """The error of a log whose scan topic yields no scan at all though it lists messages (every
     MCAP chunk corrupt, every message undecodable: its warnings say which), ``so`` saying what the
-    command cannot do; ``topics_hint``: point at ``cornerslam info`` for the topics."""
+    command cannot do; ``topics_hint``: point at ``cornerslam info`` for the topics. With the reader's
+    ``stats`` showing damaged parts skipped, the error is :func:`damaged_error`'s."""
+    if stats is not None and stats.damaged:
+        return damaged_error(log, stats, f"no scan could be read, so {so}")
     hint = "its warnings (not shown with -q) say why"
     return LogError(
         f"log '{log}' has no scan that could be read, so {so}",
         hint + ("; `cornerslam info LOG` lists its topics" if topics_hint else ""),
+    )
+
+
+def damaged_error(log: str | Path, stats: ReadStats, what: str) -> LogError:
+    """The error of a log ``what`` happened to (no scan could be read / processed) when parts of the
+    file were skipped as damaged: how many, what the first was, and that the file needs replacing —
+    not the topics or stamps, which is what the error would otherwise point at."""
+    parts = f"{stats.damaged} damaged part{'s' if stats.damaged != 1 else ''} of the file skipped"
+    return LogError(
+        f"log '{log}': {what} ({parts}, {stats.scans} scans and {stats.odoms} odometry samples usable; "
+        f"the first: {stats.first_damage})",
+        "the file is damaged: copy it again from its source, or salvage its intact parts (for MCAP, "
+        "`mcap recover IN.mcap -o OUT.mcap`)",
     )
 
 

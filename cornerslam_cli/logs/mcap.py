@@ -229,13 +229,13 @@ class McapSource:
                 else:
                     out = memoryview(lz4.frame.LZ4FrameDecompressor().decompress(bytes(data)))
             else:
-                self.stats.warn("%s: %s uses unknown compression %r: skipped", self.name, what, comp)
+                self.stats.skip_damaged("%s: %s uses unknown compression %r: skipped", self.name, what, comp)
                 return None
         except Exception as exc:  # noqa: BLE001 - corrupt compressed data
-            self.stats.warn("%s: %s does not decompress (%s): skipped", self.name, what, exc)
+            self.stats.skip_damaged("%s: %s does not decompress (%s): skipped", self.name, what, exc)
             return None
         if complete and crc and zlib.crc32(out) != crc:
-            self.stats.warn("%s: %s fails its CRC (corrupt bytes): skipped", self.name, what)
+            self.stats.skip_damaged("%s: %s fails its CRC (corrupt bytes): skipped", self.name, what)
             return None
         if not complete:
             self.stats.warn("%s: %s is cut: keeping its first %d bytes of records", self.name, what, len(out))
@@ -257,7 +257,7 @@ class McapSource:
                     self._note_definition(op, body)
             except (struct.error, McapFormatError) as exc:
                 if warn:
-                    self.stats.warn("%s: bad record at byte %d (%s): skipped", self.name, pos, exc)
+                    self.stats.skip_damaged("%s: bad record at byte %d (%s): skipped", self.name, pos, exc)
 
     def _index_order(self, wanted: set[int]) -> Iterator[list[Message]]:
         """The messages of each chunk holding a ``wanted`` channel, chunks in the order of their start
@@ -271,7 +271,7 @@ class McapSource:
             op, n = _REC.unpack(hdr) if len(hdr) == 9 else (0, 0)
             body = memoryview(f.read(n)) if op == OP_CHUNK and 9 + n == length else memoryview(b"")
             if len(body) != length - 9:
-                self.stats.warn(
+                self.stats.skip_damaged(
                     "%s: the chunk index points at byte %d, where no chunk is: skipped", self.name, pos
                 )
                 continue
@@ -300,7 +300,7 @@ class McapSource:
                     self._note_definition(op, body)
         except (struct.error, McapFormatError) as exc:
             if warn:
-                self.stats.warn(
+                self.stats.skip_damaged(
                     "%s: chunk at byte %d has a bad record (%s): rest skipped", self.name, pos, exc
                 )
         return out
