@@ -48,6 +48,7 @@ from real_logs import ROOT, default_data  # noqa: E402
 from cornerslam_cli.graph.params import SubmapConfig  # noqa: E402
 
 STEP = 0.05  # --perturb submaps: each copy moves submaps.max_distance by this share of its default more
+MAX_K = 18  # ... so at most ±45 % (10 × STEP would reach 0, which the config refuses)
 
 
 def run(log: Path, out: Path, extra: list[str], env: dict[str, str]) -> tuple[float, float, float]:
@@ -177,7 +178,10 @@ def report(rows: list[dict], sets: list[str], base_rev: str, k: int, perturb: st
     if perturb == "submaps":
         cmd += " --perturb submaps"
         lengths = ", ".join(f"{d:g}" for d in submap_lengths(k))
-        copies_are = f"with `submaps.max_distance` at {lengths} m beside its default"
+        copies_are = (
+            f"with `submaps.max_distance` at {lengths} m beside this checkout's default "
+            f"({SubmapConfig().max_distance:g} m; the baseline's copies too)"
+        )
     base = "the defaults" if base_rev == "HEAD" else f"revision {revision(base_rev)}, its defaults"
     variant = ", ".join(f"`{s}`" for s in sets) or "its defaults"
     title = ", ".join(f"`{s}`" for s in sets) or f"this build ({revision()})"
@@ -189,7 +193,13 @@ def report(rows: list[dict], sets: list[str], base_rev: str, k: int, perturb: st
         "cells give the mean of the figures and their range. Verdict **better** / **worse** only when the "
         "ranges do not overlap. Figures: ATE RMSE against the corrected poses beside each radish log; "
         "Intel: relation error, translation mean. Chain: the scan-matched odometry alone (the front end's "
-        "output before the filter) scored the same way.",
+        "output before the filter) scored the same way"
+        + (
+            " (it does not depend on where submaps end: its range is one value, and any difference is a "
+            "chain verdict)."
+            if perturb == "submaps"
+            else "."
+        ),
         "",
         *table(rows),
         "",
@@ -228,8 +238,12 @@ def main() -> None:
     args = ap.parse_args()
     if not args.sets and args.baseline == "HEAD":
         ap.error("nothing to compare: give --set KEY=VALUE and/or --baseline REV")
-    keys = [s.split("=")[0].strip() for s in args.sets]
-    if args.perturb == "submaps" and "submaps.max_distance" in keys:
+    keys = ["".join(s.split("=")[0].split()) for s in args.sets]  # "submaps . max_distance" too
+    sets_it = any(k == "submaps.max_distance" or (k == "submaps" and "max_distance" in s)
+                  for k, s in zip(keys, args.sets, strict=True))  # fmt: skip
+    if args.perturb == "submaps" and args.k > MAX_K:
+        ap.error(f"--perturb submaps: --k at most {MAX_K} (the copies move submaps.max_distance by 5 % each)")
+    if args.perturb == "submaps" and sets_it:
         # a variant of the perturbed key would be overridden by the copies' own --set
         ap.error("--perturb submaps moves submaps.max_distance itself: compare it with --perturb odom")
     logs = panel(args.data)

@@ -236,7 +236,7 @@ def check_processed(src: Input, n_frames: int, n_points: int) -> None:
         )
     if n_frames == 0:
         rs = src.reader.stats
-        if rs.damaged and not (rs.scans and rs.odoms):  # the damage, not the stamps, is why
+        if rs.damaged:  # the damage, more likely than the stamps, is why
             raise damaged_error(src.path, rs, "no scan could be processed")
         _undecoded_error(src.path, rs)
         raise LogError(

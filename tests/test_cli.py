@@ -174,8 +174,8 @@ def test_info_refuses_a_log_with_no_readable_scan_as_run_does(tmp_path):
     log = small_log(tmp_path / "s.mcap", n=3)
     corrupt_chunk(log, log, which=0)
     res = invoke("info", log, "-q")
-    damaged = "1 damaged part of the file skipped, 0 scans and 0 odometry samples usable; the first: "
-    one_line_error(res, f"log '{log}': no scan could be read, so run has none to process ({damaged}", DAMAGED)
+    why = f"log '{log}': no scan could be read, so run has none to process (0 scans usable); 1 damaged part"
+    one_line_error(res, why, DAMAGED)
     assert "/scan" in res.stdout and "  scans     /scan" in res.stdout and "  beams " not in res.stdout
     assert invoke("run", log, "--out", tmp_path / "out", "-q").exit_code == 2
 
@@ -188,9 +188,45 @@ def test_run_on_a_log_with_every_chunk_damaged_names_the_damage(tmp_path):
     log = small_log(tmp_path / "s.mcap", n=3)
     corrupt_chunk(log, log, which=0)
     res = invoke("run", log, "--out", tmp_path / "out", "-q")
-    why = f"log '{log}': no scan could be processed (1 damaged part of the file skipped"
+    why = f"log '{log}': no scan could be processed (0 scans and 0 odometry samples usable); 1 damaged part"
     one_line_error(res, why, DAMAGED)
     assert "overlap in time" not in res.stderr and not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("command", ["run", "info", "extract"])
+@pytest.mark.parametrize("damaged", ["first", "every"])
+def test_a_log_without_summary_whose_chunks_are_damaged_names_the_damage(tmp_path, command, damaged):
+    """Without a summary an MCAP's channel definitions sit in its chunks: with its first chunk damaged
+    (or every one) a topic was missing, and the error said to record the laser as LaserScan (or that
+    there was no odometry topic). It names the damage instead."""
+    from fault_corpus import mcap_records
+
+    log = small_log(tmp_path / "s.mcap", n=10, chunk_size=1, summary=False)
+    data = bytearray(log.read_bytes())
+    chunks = [(start, n) for op, start, n in mcap_records(bytes(data)) if op == 0x06]
+    for start, n in chunks[:1] if damaged == "first" else chunks:
+        data[start + n // 2 : start + n // 2 + 8] = bytes(8)  # inside the compressed records
+    log.write_bytes(bytes(data))
+    extra = {"run": ["--out", tmp_path / "out"], "extract": ["--step", 0], "info": []}[command]
+    res = invoke(command, log, *extra, "-q")
+    if damaged == "first" and command == "extract":  # the odometry's chunk: extract needs none
+        assert res.exit_code == 0 and res.stdout.startswith("scan 0 at "), res.output
+        return
+    n_damaged = 1 if damaged == "first" else len(chunks)
+    why = f"topic in its readable parts; {n_damaged} damaged part"
+    one_line_error(res, f"log '{log.name}': no ", why, DAMAGED)
+    assert "record the laser" not in res.stderr and not (tmp_path / "out").exists()
+
+
+def test_a_log_in_an_unsupported_compression_says_so(tmp_path):
+    """A chunk compression this reader lacks is not damage: re-copying the file would not help."""
+    data = bytearray(small_log(tmp_path / "s.mcap", n=3, compression="lz4").read_bytes())
+    data = data.replace(b"\x03\x00\x00\x00lz4", b"\x03\x00\x00\x00bz3")
+    log = tmp_path / "b.mcap"
+    log.write_bytes(bytes(data))
+    res = invoke("run", log, "--out", tmp_path / "out", "-q")
+    one_line_error(res, "in a compression this reader does not support", "write the log with zstd, lz4")
+    assert "damaged" not in res.stderr
 
 
 def test_info_lists_the_topics_of_a_log_run_refuses(tmp_path):

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -134,6 +135,7 @@ class ReadStats:
     damaged: int = 0  # parts of the file skipped as unreadable (an MCAP chunk that fails its CRC, …)
     first_damage: str = ""  # what the first of them was (the error names it when nothing was usable)
     damage_seen: set[str] = field(default_factory=set)  # their texts: a part read twice counts once
+    unsupported: int = 0  # of the damaged parts, those compressed with a codec this reader lacks
     truncated: bool = False  # the file ends early (a recorder stopped): what came after the cut is lost
     warnings: list[str] = field(default_factory=list)
     said: set[str] = field(default_factory=set)  # every text logged: a summary's list may be reset, not this
@@ -167,15 +169,17 @@ class ReadStats:
         if self.decode_failed <= 5:
             self.warn(msg, *args)
 
-    def skip_damaged(self, msg: str, *args: object) -> None:
-        """Count one part of the file skipped as unreadable (damaged bytes), keep the first's text (its
-        first 200 characters) in ``first_damage`` and warn. A part met again (``laser_to_base()`` and
-        ``messages()`` read the same bytes) is counted once."""
+    def skip_damaged(self, msg: str, *args: object, unsupported: bool = False) -> None:
+        """Count one part of the file skipped as unreadable (damaged bytes; ``unsupported``: compressed
+        with a codec this reader lacks), keep the first's text (its first 200 characters) in
+        ``first_damage`` and warn. A part met again (``laser_to_base()`` and ``messages()`` read the
+        same bytes) is counted once."""
         text = printable(msg % args if args else msg)
         if text in self.damage_seen:
             return
         self.damage_seen.add(text)
         self.damaged += 1
+        self.unsupported += unsupported
         if self.damaged == 1:
             self.first_damage = text if len(text) <= 200 else text[:197] + "..."
         self.warn(text)
@@ -271,8 +275,8 @@ def no_scan_read(
     MCAP chunk corrupt, every message undecodable: its warnings say which), ``so`` saying what the
     command cannot do; ``topics_hint``: point at ``cornerslam info`` for the topics. With the reader's
     ``stats`` showing damaged parts skipped, the error is :func:`damaged_error`'s."""
-    if stats is not None and stats.damaged:
-        return damaged_error(log, stats, f"no scan could be read, so {so}")
+    if stats is not None and stats.damaged:  # the scans' messages were not read: no odometry count
+        return damaged_error(log, stats, f"no scan could be read, so {so}", odometry=False)
     hint = "its warnings (not shown with -q) say why"
     return LogError(
         f"log '{log}' has no scan that could be read, so {so}",
@@ -280,16 +284,38 @@ def no_scan_read(
     )
 
 
-def damaged_error(log: str | Path, stats: ReadStats, what: str) -> LogError:
+def damaged_error(log: str | Path, stats: ReadStats, what: str, odometry: bool = True) -> LogError:
     """The error of a log ``what`` happened to (no scan could be read / processed) when parts of the
-    file were skipped as damaged: how many, what the first was, and that the file needs replacing —
-    not the topics or stamps, which is what the error would otherwise point at."""
-    parts = f"{stats.damaged} damaged part{'s' if stats.damaged != 1 else ''} of the file skipped"
-    return LogError(
-        f"log '{log}': {what} ({parts}, {stats.scans} scans and {stats.odoms} odometry samples usable; "
-        f"the first: {stats.first_damage})",
-        "the file is damaged: copy it again from its source, or salvage its intact parts (for MCAP, "
-        "`mcap recover IN.mcap -o OUT.mcap`)",
+    file were skipped as damaged: :func:`damage_problem` with the scans (and, ``odometry``, the odometry
+    samples) that were usable."""
+    usable = _count(stats.scans, "scan")
+    if odometry:
+        usable += f" and {_count(stats.odoms, 'odometry sample')}"
+    return LogError(*damage_problem(log, stats, f"{what} ({usable} usable)"))
+
+
+def _count(n: int, what: str) -> str:
+    return f"{n} {what}{'s' if n != 1 else ''}"
+
+
+def damage_problem(log: str | Path, stats: ReadStats, what: str) -> tuple[str, str]:
+    """(problem, hint) of a log ``what`` happened to when parts of the file were skipped as damaged:
+    how many, what the first was, and that the file needs replacing — not the topics or stamps, which
+    is what the error would otherwise point at; or, when every skipped part is compressed with a codec
+    this reader lacks, that."""
+    n, name = stats.damaged, Path(log).name
+    first = stats.first_damage.removeprefix(f"{name}: ")
+    first = re.sub(r": (?:rest skipped|skipped|its messages are lost|stopped reading)$", "", first)
+    if stats.unsupported == n:
+        return (
+            f"log '{log}': {what}; {_count(n, 'chunk')} in a compression this reader does not support, "
+            f"the first: {first}",
+            "write the log with zstd, lz4 or no chunk compression",
+        )
+    return (
+        f"log '{log}': {what}; {_count(n, 'damaged part')} of the file skipped, the first: {first}",
+        f"the file is damaged: copy it again from its source, or salvage its intact parts with "
+        f"`mcap recover {log} -o FIXED.mcap`",
     )
 
 

@@ -169,7 +169,7 @@ class McapSource:
             op, length = _REC.unpack(hdr)
             if op == 0:
                 if warn:
-                    self.stats.warn(
+                    self.stats.skip_damaged(
                         "%s: invalid record (opcode 0) at byte %d: stopped reading", self.name, pos
                     )
                 return
@@ -205,7 +205,7 @@ class McapSource:
             (rlen,) = _U64.unpack_from(body, off)
             off += 8
         except (struct.error, McapFormatError):
-            self.stats.warn(
+            self.stats.skip_damaged(
                 "%s: chunk at byte %d is cut in its header: its messages are lost", self.name, pos
             )
             return None
@@ -229,7 +229,9 @@ class McapSource:
                 else:
                     out = memoryview(lz4.frame.LZ4FrameDecompressor().decompress(bytes(data)))
             else:
-                self.stats.skip_damaged("%s: %s uses unknown compression %r: skipped", self.name, what, comp)
+                self.stats.skip_damaged(
+                    "%s: %s uses unknown compression %r: skipped", self.name, what, comp, unsupported=True
+                )
                 return None
         except Exception as exc:  # noqa: BLE001 - corrupt compressed data
             self.stats.skip_damaged("%s: %s does not decompress (%s): skipped", self.name, what, exc)

@@ -27,6 +27,7 @@ from .base import (
     Pose2,
     ReadStats,
     TopicInfo,
+    damage_problem,
     logger,
     make_scan,
     normalize_msgtype,
@@ -215,9 +216,23 @@ class RosLogReader:
             "the recorder stopped early and what came after is lost; record again, or give the complete file",
         )
 
+    def _lost(self, missing: str) -> tuple[str, str]:
+        """(problem, hint) when what a run needs is ``missing`` from a file that ends early
+        (:meth:`_cut_short`) or whose damaged parts were skipped (an MCAP without a summary keeps its
+        topics' definitions in its chunks): the file, not the recording's topics, is the problem."""
+        if self.stats.truncated:
+            return self._cut_short(missing)
+        return damage_problem(self.path.name, self.stats, f"{missing} in its readable parts")
+
+    def _lossy(self) -> bool:
+        """Whether part of the file could not be read (cut short, or damaged parts skipped)."""
+        return self.stats.truncated or self.stats.damaged > 0
+
     def _cut_note(self) -> str:
-        """Said of a topic that is not there, when the file ends early."""
-        return " before the cut (the file is truncated)" if self.stats.truncated else ""
+        """Said of a topic that is not there, when the file ends early or has damaged parts."""
+        if self.stats.truncated:
+            return " before the cut (the file is truncated)"
+        return " in its readable parts (some of the file is damaged)" if self.stats.damaged else ""
 
     def _select_scan(self) -> tuple[str, str, str]:
         """(topic, problem, hint)."""
@@ -241,8 +256,8 @@ class RosLogReader:
                     f"choose a LaserScan topic with --scan-topic ({listing(scans)})",
                 )
             return self._want_scan, "", ""
-        if not scans and self.stats.truncated:
-            return "", *self._cut_short("no sensor_msgs/LaserScan topic")
+        if not scans and self._lossy():
+            return "", *self._lost("no sensor_msgs/LaserScan topic")
         if not scans:
             return (
                 "",
@@ -296,8 +311,8 @@ class RosLogReader:
             )
         if tfs:
             return _OdomSel("/tf" if "/tf" in tfs else tfs[0], "tf")
-        if self.stats.truncated:
-            return _OdomSel("", "", *self._cut_short("no nav_msgs/Odometry topic and no tf topic"))
+        if self._lossy():
+            return _OdomSel("", "", *self._lost("no nav_msgs/Odometry topic and no tf topic"))
         return _OdomSel(
             "",
             "",
@@ -339,8 +354,8 @@ class RosLogReader:
         if problems:
             raise LogError(*problems[0])
         for topic in (self.scan_topic, self.odom_topic) if odometry else (self.scan_topic,):
-            if self._channels[topic].count == 0 and self.stats.truncated:
-                raise LogError(*self._cut_short(f"no message of topic '{short_text(topic)}'"))
+            if self._channels[topic].count == 0 and self._lossy():
+                raise LogError(*self._lost(f"no message of topic '{short_text(topic)}'"))
             if self._channels[topic].count == 0:
                 raise LogError(
                     f"topic '{short_text(topic)}' of log '{self.path.name}' has no messages",
