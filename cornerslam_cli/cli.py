@@ -362,7 +362,7 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
 
     from .lasers import detect_preset, first_scan
     from .logs import open_log
-    from .logs.base import no_scan_read
+    from .logs.unreadable import no_scan_read
 
     setup_logging(verbose, quiet)
     reader = open_log(Path(log_path), scan_topic=scan_topic or "", odom_topic=odom_topic or "")

@@ -10,7 +10,7 @@ from .config import Config
 from .errors import ConfigError
 from .features import extract
 from .logs import open_log
-from .logs.base import no_scan_read
+from .logs.unreadable import no_scan_read
 from .types import Corners, Scan, Segments
 
 

@@ -28,9 +28,9 @@ from .filter.models import increment_noise
 from .geometry import matrix_from_pose, transform_points
 from .lasers import mount_source
 from .logs import ReadStats, open_log
-from .logs.base import damaged_error
 from .logs.deskew import deskew
 from .logs.sync import Synced, SyncStats, reanchor_odometry, select_keyframes, synchronise
+from .logs.unreadable import damaged_error
 from .motion import ScanMatcher
 from .motion.icp import load_kernels as load_motion_kernels
 from .ranges import short_text

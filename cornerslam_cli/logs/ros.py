@@ -27,12 +27,12 @@ from .base import (
     Pose2,
     ReadStats,
     TopicInfo,
-    damage_problem,
     logger,
     make_scan,
     normalize_msgtype,
     strip_frame,
 )
+from .unreadable import damage_problem
 
 LASERSCAN = "sensor_msgs/LaserScan"
 ODOMETRY = "nav_msgs/Odometry"
