@@ -377,16 +377,17 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
         preset = None if scan is None else detect_preset(scan.n_beams, scan.angle_increment)
         _echo(info_lines(log_path, replace(log_info, problems=()), None, scan, preset))
         reader.check()  # the first problem as the error: exit 2, as run
-    laser = reader.laser_to_base()
-    scan, unread = None, None
-    try:
+    scan, unread, laser = None, None, None
+    try:  # (a topic declared with no message: run refuses it here, info lists the counts first)
+        laser = reader.laser_to_base()
         scan = first_scan(reader) if log_info.scan_topic else None
     except LogError as e:  # info lists what it can: the topics, then why run would refuse the log
         unread = e
     if log_info.scan_topic and scan is None and unread is None:  # every chunk corrupt: no scan at all
         unread = no_scan_read(log_path, "run has none to process", topics_hint=False, stats=reader.stats)
     preset = None if scan is None else detect_preset(scan.n_beams, scan.angle_increment)
-    _echo(info_lines(log_path, log_info, laser, scan, preset, bool(reader.laser_upside_down())))
+    upside_down = laser is not None and bool(reader.laser_upside_down())
+    _echo(info_lines(log_path, log_info, laser, scan, preset, upside_down))
     if unread is not None:  # exit 2, as run
         raise unread
     odom_tf = getattr(reader, "odom_tf_problem", lambda: None)()  # ROS logs: tf odometry not on tf

@@ -186,7 +186,24 @@ def read_relations(path: str | Path) -> np.ndarray:
             f"numbers of each line are a unit quaternion, not z roll pitch yaw)",
             f"give it as --ground-truth; a relations file has lines {RELATIONS_LAYOUT}",
         )
+    for note in relations_notes(v[:, [0, 1, 2, 3, 7]]):
+        log.warning("relations file '%s': %s", path, note)
     return v[:, [0, 1, 2, 3, 7]]
+
+
+def relations_notes(r: np.ndarray) -> list[str]:
+    """What looks wrong in relations ``r`` (k, 5) [t1, t2, x, y, yaw] without making them unusable:
+    pairs of one instant (t1 = t2: a zero motion that scores the estimate's noise, not its drift), and
+    yaws beyond ±π (degrees, or not wrapped: the rotation error is taken as given)."""
+    notes = []
+    if n := int(np.count_nonzero(r[:, 0] == r[:, 1])):
+        notes.append(f"{n} of its {len(r)} relations join an instant to itself (t1 = t2): scored as they are")
+    if n := int(np.count_nonzero(np.abs(r[:, 4]) > np.pi + 1e-6)):
+        notes.append(
+            f"{n} of its {len(r)} relations have a yaw beyond ±π rad (degrees? the layout is "
+            f"{RELATIONS_LAYOUT}, angles in radians): their rotation errors are taken as given"
+        )
+    return notes
 
 
 def overlap_problem(est_t: np.ndarray, gt_t: np.ndarray, gt_name: str) -> tuple[str, str] | None:

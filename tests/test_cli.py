@@ -247,6 +247,31 @@ def test_info_lists_the_topics_of_a_log_run_refuses(tmp_path):
     assert "  beams     181 over 180.0° (1.000° apart)" in res.stdout, res.stdout
 
 
+def test_info_lists_the_topics_of_a_log_whose_scan_topic_has_no_message(tmp_path):
+    """/scan declared, nothing recorded on it: info printed only the error, whose hint is "`cornerslam
+    info LOG` shows the counts". It shows them (0 on /scan), then exits 2 as run does (found by a
+    hostile-user probe)."""
+    from fault_corpus import _empty_topics_mcap
+
+    log = _empty_topics_mcap(tmp_path / "e.mcap", True)
+    res = invoke("info", log)
+    one_line_error(res, "topic '/scan' of log 'e.mcap' has no messages")
+    assert "  /scan " in res.stdout and " 0 msgs" in res.stdout and "run would use:" in res.stdout
+
+
+def test_run_line_counts_the_scans_the_reader_could_not_use(tmp_path):
+    """Half the scans with angle_increment 0: the run line said "30 steps (30 scans, 0 skipped, …)",
+    the 30 others only in capped warnings and summary.json (found by a hostile-user probe)."""
+    t0, r = 1_700_000_000.0, np.full(181, 5.0)
+    inc = [math.pi / 180 * (i % 2) for i in range(40)]  # every other scan's angle_increment 0
+    scans = [RawScan(t0 + 0.1 * i + 0.05, -math.pi / 2, inc[i], r, 0.1, 30.0) for i in range(40)]
+    odoms = [OdomSample(t0 + 0.1 * i, 0.05 * i, 0.0, 0.0) for i in range(41)]
+    res = invoke("run", write_mcap(tmp_path / "h.mcap", scans, odoms), "--out", tmp_path / "o")
+    assert res.exit_code == 0, res.output
+    assert "(20 scans, 0 skipped, " in res.stdout
+    assert "; 20 more scans unusable, not read: see the warnings)" in res.stdout
+
+
 def test_extract_prints_and_plots(sim_log, tmp_path):
     png = tmp_path / "scan.png"
     res = invoke("extract", sim_log, "--step", 3, "--plot", png)

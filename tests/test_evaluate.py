@@ -464,3 +464,24 @@ def test_a_ground_truth_covering_part_of_the_trajectory_is_warned_about(files):
     assert res.exit_code == 0, res.output
     assert f"covers {n // 2} of the trajectory's {n} poses ({n - n // 2} outside its time span" in res.stderr
     assert f"ATE/RPE are over those {n // 2} only" in res.stderr
+
+
+def test_relations_of_one_instant_or_a_yaw_beyond_pi_are_warned_about(tmp_path, caplog):
+    """t1 = t2 on every line, or yaws in degrees: scored silently (0.323 m, 94.5°; found by a
+    hostile-user probe). Still scored as given, now warned about."""
+    import logging
+
+    from cornerslam_cli.evaluate import read_relations
+
+    rel = tmp_path / "r.relations"
+    rel.write_text("1.0 1.0 0.1 0 0 0 0 0.01\n2.0 3.0 0.5 0 0 0 0 90.0\n4.0 5.0 0.5 0 0 0 0 -0.2\n")
+    with caplog.at_level(logging.WARNING, logger="cornerslam.evaluate"):
+        r = read_relations(rel)
+    assert r.shape == (3, 5)
+    assert "1 of its 3 relations join an instant to itself (t1 = t2)" in caplog.text
+    assert "1 of its 3 relations have a yaw beyond ±π rad (degrees?" in caplog.text
+    caplog.clear()
+    rel.write_text("1.0 2.0 0.1 0 0 0 0 3.1\n2.0 3.0 0.5 0 0 0 0 -3.14\n")
+    with caplog.at_level(logging.WARNING, logger="cornerslam.evaluate"):
+        read_relations(rel)
+    assert caplog.text == ""

@@ -237,7 +237,7 @@ class ReadStats:
                 f"log '{name}': all {self.scans_skipped} scans on '{short_text(topic)}' were skipped "
                 "(angle_increment 0 or not finite, beams over more than a full turn, no beams, "
                 "or no valid stamp)",
-                "check the LaserScan messages' angle_min/angle_increment; `cornerslam extract` shows one",
+                "check the LaserScans' angle_min/angle_increment: the warnings give the first ones' values",
             )
 
 

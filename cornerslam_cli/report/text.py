@@ -35,12 +35,19 @@ def relation_text(e: RelationError) -> str:
     )
 
 
+def unusable_scans(c) -> str:
+    """The run line's note of the scans the reader could not use (beam angles or count unusable:
+    ``counts.scans_bad_geometry``), which the scans and skipped counts do not hold; "" when none."""
+    n = c.scans_bad_geometry or 0
+    return f"; {n} more scan{'s' if n != 1 else ''} unusable, not read: see the warnings" if n else ""
+
+
 def summary_lines(s: RunSummary) -> list[str]:
     """``cornerslam run``: counts, stage times, accuracy when there is a reference, the output."""
     c, t = s.counts, s.timing
     lines = [
         f"{s.input.log}: {c.steps} steps ({c.scans_in} scans, {c.scans_skipped} skipped, "
-        f"{c.keyframes_skipped} between keyframes), {c.landmarks} landmarks, "
+        f"{c.keyframes_skipped} between keyframes{unusable_scans(c)}), {c.landmarks} landmarks, "
         f"{c.matched_total} matches with {s.assoc}",
         mount_line(s.input),
         *preset_lines(s.config),
