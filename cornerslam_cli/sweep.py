@@ -123,7 +123,8 @@ def _plan(
     if len(set(names)) != len(names):
         dup = next(n for n in names if names.count(n) > 1)
         raise ConfigError(
-            f"two combinations map to the directory name '{dup}'", "sweep values differing only in symbols"
+            f"two combinations map to the directory name '{dup}' (sweep values differing only in symbols)",
+            "make the values differ in letters or digits, or run them in two batches",
         )
     return combos
 

@@ -102,6 +102,15 @@ def test_plan_runs_a_sweep_value_once_however_it_is_spelled():
     assert [c.config["scan_match"]["enabled"] for c in combos] == [True, False]
 
 
+def test_sweep_values_that_name_one_directory_are_refused_saying_what_to_do():
+    """`--sweep input.odom_frame=a/b,a_b`: two directories of one name; the error gave the cause as its
+    hint and no way out (found by a hostile-user probe)."""
+    with pytest.raises(ConfigError) as e:
+        plan(["x.mcap"], ["pca"], {"input.odom_frame": ["a/b", "a_b"]})
+    assert "(sweep values differing only in symbols)" in str(e.value)
+    assert e.value.hint == "make the values differ in letters or digits, or run them in two batches"
+
+
 def test_plan_says_a_warning_of_every_combinations_config_once(caplog):
     """A retired key was warned about once per swept value and once per combination (15 times here);
     distinct warnings are each said."""

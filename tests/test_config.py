@@ -54,7 +54,7 @@ def test_int_is_accepted_for_float():
 @pytest.mark.parametrize(
     "override, fragment",
     [
-        ("association.pca.grup_size=5", "did you mean 'group_size'"),
+        ("association.pca.grup_size=5", "did you mean 'association.pca.group_size'"),
         ("asociation.alpha=0.1", "did you mean 'association'"),
         ("association.alpha=abc", "'association.alpha' must be a number"),
         ("lines.min_points=2.5", "'lines.min_points' must be an integer"),
