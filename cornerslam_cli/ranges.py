@@ -109,3 +109,12 @@ def check_ranges(section: Any) -> None:
             continue
         if isinstance(v, bool) or not isinstance(v, (int, float)) or _non_finite(v) or v not in allowed:
             raise RangeError(f.name, v, allowed)
+
+
+def plain_float(text: str) -> float:
+    """``float(text)`` for a number as written in a file or on a command line: ASCII, no ``_`` —
+    Python's float also takes ``1_0`` (10) and other scripts' digits (``'٣'``: 3), which a user's
+    text never means, and an error echoing the value back would show it altered. ValueError else."""
+    if not text.isascii() or "_" in text:
+        raise ValueError(f"not a plain number: {text!r}")
+    return float(text)

@@ -16,7 +16,7 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 
 from .errors import CornerslamError
-from .ranges import short_text
+from .ranges import plain_float, short_text
 from .results import ScanSpan
 from .types import Scan
 
@@ -49,7 +49,7 @@ def parse_bound(text: str) -> Bound:
             raise ValueError(f"'#{digits[:10]}...' ({len(digits):,} digits) is past any scan of a log")
         return Bound(int(digits), True)
     try:
-        v = float(s)
+        v = plain_float(s)
     except ValueError:
         raise ValueError(
             f"'{text}' is not seconds from the first scan or #INDEX (e.g. 12.5 or #100)"

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import CornerslamError, symlink_loop
+from .ranges import plain_float
 
 UTF16_BOMS = (codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)
 SNIFF_BYTES = 1 << 16  # a binary file (a multi-GB bag given as ground truth) is refused on these
@@ -102,7 +103,7 @@ def read_number_rows(
             continue
         parts = s.replace(",", " ").split()
         try:
-            v = [float(x) for x in parts]
+            v = [plain_float(x) for x in parts]
         except ValueError:
             raise error(f"{name} line {lineno} is not a {item}", f"expected: {layout}") from None
         if len(v) < n or (len(v) > n and not more_ok):

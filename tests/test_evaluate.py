@@ -485,3 +485,16 @@ def test_relations_of_one_instant_or_a_yaw_beyond_pi_are_warned_about(tmp_path, 
     with caplog.at_level(logging.WARNING, logger="cornerslam.evaluate"):
         read_relations(rel)
     assert caplog.text == ""
+
+
+def test_a_ground_truth_stamp_with_underscores_or_other_digits_is_refused(tmp_path):
+    """'1_700_000_002.5' was read as 1700000002.5 (Python's float takes underscores), moving that pose;
+    a number in a text file is plain ASCII (found by a hostile-user probe)."""
+    from cornerslam_cli.errors import LogError
+    from cornerslam_cli.evaluate import read_tum
+
+    for stamp in ("1_700_000_002.5", "١٧"):
+        gt = tmp_path / "g.tum"
+        gt.write_text(f"{stamp} 0 0 0 0 0 0 1\n1700000003 0 0 0 0 0 0 1\n")
+        with pytest.raises(LogError, match="line 1 is not a TUM pose"):
+            read_tum(gt, "ground truth")

@@ -25,7 +25,8 @@ def stamps(out):
 def test_parse_bound_seconds_and_index():
     assert parse_bound("12.5") == Bound(12.5, False)
     assert parse_bound(" #40 ") == Bound(40.0, True)
-    for bad in ("#", "#1.5", "#-3", "-1", "nan", "inf", "ten", "#²", "#٣"):  # (non-ASCII digits too)
+    # (non-ASCII digits too; '1_0' and '٣' are 10 and 3 to Python's float: refused, found by a probe)
+    for bad in ("#", "#1.5", "#-3", "-1", "nan", "inf", "ten", "#²", "#٣", "1_0", "٣", "1٣.5"):
         with pytest.raises(ValueError):
             parse_bound(bad)
 
