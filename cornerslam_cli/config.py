@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import difflib
 import logging
 import math
 import re
@@ -103,8 +102,8 @@ def _closest(key: str, cls: type, prefix: str) -> str:
     if deeper:
         named = " or ".join(f"'{prefix}{k}'" for k in deeper)
         return f"did you mean {named}?"
-    close = difflib.get_close_matches(key, valid, n=1, cutoff=0.5)  # named in full: 'input.max_range'
-    return f"did you mean '{prefix}{close[0]}'?" if close else f"valid keys: {', '.join(sorted(valid))}"
+    close = did_you_mean(key, valid, cutoff=0.5, prefix=prefix)  # named in full: 'input.max_range'
+    return close or f"valid keys: {', '.join(sorted(valid))}"
 
 
 def _dotted_keys(cls: type) -> list[str]:

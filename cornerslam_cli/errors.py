@@ -136,8 +136,11 @@ def symlink_loop(p: str | Path) -> bool:
     return False
 
 
-def did_you_mean(word: str, choices: Iterable[str], cutoff: float = 0.6, then: str = "") -> str:
+def did_you_mean(
+    word: str, choices: Iterable[str], cutoff: float = 0.6, then: str = "", prefix: str = ""
+) -> str:
     """``"did you mean 'jcbb'?"`` + ``then`` naming the choice closest to ``word`` (difflib ratio at
-    least ``cutoff``), or ``""`` when none is that close: the start of a hint."""
+    least ``cutoff``), or ``""`` when none is that close: the start of a hint. The choice is named
+    after ``prefix`` (a config section's ``input.``), which takes no part in the match."""
     close = difflib.get_close_matches(word, list(choices), n=1, cutoff=cutoff)
-    return f"did you mean '{close[0]}'?{then}" if close else ""
+    return f"did you mean '{prefix}{close[0]}'?{then}" if close else ""

@@ -186,9 +186,10 @@ def read_relations(path: str | Path) -> np.ndarray:
             f"numbers of each line are a unit quaternion, not z roll pitch yaw)",
             f"give it as --ground-truth; a relations file has lines {RELATIONS_LAYOUT}",
         )
-    for note in relations_notes(v[:, [0, 1, 2, 3, 7]]):
+    r = v[:, [0, 1, 2, 3, 7]]
+    for note in relations_notes(r):
         log.warning("relations file '%s': %s", path, note)
-    return v[:, [0, 1, 2, 3, 7]]
+    return r
 
 
 def relations_notes(r: np.ndarray) -> list[str]:

@@ -41,6 +41,12 @@ def short_text(text: str, limit: int = 60) -> str:
     return r.repr(text)[1:-1]
 
 
+def cut_text(text: str, limit: int = 200) -> str:
+    """``text`` as it is when at most ``limit`` characters, else its start and ``...`` (``limit`` in all):
+    a message kept to be quoted in an error."""
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 @dataclass(frozen=True)
 class Range:
     """An interval of allowed values: ``lo`` and ``hi`` included unless ``lo_open`` / ``hi_open``."""

@@ -41,7 +41,7 @@ import numpy as np
 
 from ..errors import LogError, printable
 from ..geometry import normalize_quaternion, yaw_from_quaternion
-from ..ranges import short_text
+from ..ranges import cut_text, short_text
 from ..types import OdomSample, Scan
 from .deskew import MAX_SWEEP
 
@@ -164,7 +164,7 @@ class ReadStats:
         self.decode_failed += 1
         if self.decode_failed == 1:
             text = printable(msg % args if args else msg)
-            self.first_failure = text if len(text) <= 200 else text[:197] + "..."
+            self.first_failure = cut_text(text)
         if self.decode_failed <= 5:
             self.warn(msg, *args)
 
@@ -180,7 +180,7 @@ class ReadStats:
         self.damaged += 1
         self.unsupported += unsupported
         if self.damaged == 1:
-            self.first_damage = text if len(text) <= 200 else text[:197] + "..."
+            self.first_damage = cut_text(text)
         self.warn(text)
 
     def bad_odometry(self, where: str, stamp: float, pose: tuple[float, float, float]) -> bool:
