@@ -115,7 +115,7 @@ class HierarchicalSlam:
         self.chains: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # per closed submap (smooth)
         self.n_nodes = 1  # keyframe nodes so far (node 0: the first origin)
         self.smoothed: PoseGraph | None = None  # the keyframe graph, solved by finish()
-        self.refinement = Refinement(cfg.scan_match.voxel)  # graph.refine (graph/refine.py)
+        self.refinement = Refinement(cfg.graph, cfg.scan_match)  # graph.refine (graph/refine.py)
         self._open = OpenSubmap(0, 0, 0, cfg.graph.refine)
         self._origin_cov = np.zeros((3, 3))  # the open submap origin's marginal in the graph
         self.t_loop = 0.0
@@ -167,8 +167,10 @@ class HierarchicalSlam:
             ]
             self.smoothed = smooth(self.cfg.graph, self.chains, self.graph.poses()[: len(self.closed)], loops)
             self.unconverged += not self.smoothed.converged
-            if self.cfg.graph.refine and self.refinement.run(self.smoothed, self.cfg, self._match_scale):
-                self.unconverged += not self.smoothed.converged  # solved again with the scan pairs
+            if self.cfg.graph.refine:
+                self.refinement.complete(self.graph.poses())
+                if self.refinement.apply(self.smoothed, self._match_scale):
+                    self.unconverged += not self.smoothed.converged  # solved again with the scan pairs
         self.t_loop += time.perf_counter() - t0
 
     def _optimize(self, graph: PoseGraph) -> None:
@@ -189,17 +191,19 @@ class HierarchicalSlam:
 
     def _close(self, step: int, last: bool = False) -> None:
         """Close the open submap at ``step``: a node for the next origin, its loops, the graph optimised."""
-        sub = self._close_submap()
+        sub = self._close_submap(last)
         self.graph.add_sequential(sub.end_pose, sub.end_cov + COV_FLOOR)
         self._optimize(self.graph)
         if self.cfg.loops.enabled:
             self._close_loops(sub, step)
+        if self.cfg.graph.refine:
+            self.refinement.register(self.graph.poses())
         if not last:
             self.slam.new_map()
             self._open = OpenSubmap(sub.index + 1, step + 1, self.n_nodes - 1, self.cfg.graph.refine)
             self._origin_cov = self.graph.marginal(sub.index + 1)
 
-    def _close_submap(self) -> Submap:
+    def _close_submap(self, last: bool) -> Submap:
         ekf, sub, g = self.slam.ekf, self._open, self.cfg.graph
         poses = np.array(sub.poses).reshape(-1, 3)
         nodes = keyframe_nodes(poses, g.node_spacing, g.node_angle)
@@ -209,7 +213,10 @@ class HierarchicalSlam:
         step_nodes = np.where(before >= 0, self.n_nodes + before, sub.node)
         self.n_nodes += len(nodes)
         anchor_poses = np.where((before >= 0)[:, None], poses[nodes[before.clip(0)]], 0.0)
-        self.refinement.add_submap(sub.step_points, step_nodes, anchor_poses)
+        first = self.n_nodes - len(nodes)
+        self.refinement.add_submap(
+            sub.index, sub.node, first, poses[nodes], sub.step_points, step_nodes, anchor_poses, last
+        )
         table = self.slam.landmark_table()
         n = len(table["id"])
         state = (3 + 3 * table["id"][:, None] + np.arange(3)).reshape(-1)
