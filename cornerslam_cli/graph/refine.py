@@ -77,6 +77,7 @@ class Refinement:
         self.cfg, self.match = graph, match
         self.nodes: dict[int, Node] = {}  # node id → Node: those kept as targets and those not yet registered
         self.kept: list[int] = []  # the targets' ids, ascending
+        self._row: dict[int, int] = {}  # a target's id → its index in kept
         self.waiting: list[int] = []  # complete, not yet registered (ascending)
         self.found: list[Scanpair] = []
         self.cells: dict[tuple[int, int], int] = {}  # nodes kept per CELL square
@@ -130,42 +131,52 @@ class Refinement:
         """Register each complete node against its :func:`nearest` earlier nodes kept, placed with
         ``origins`` (the online graph's submap origins, after the closing submap's loops); keep the
         registrations that fit, then the node's points where its square has room."""
+        kept = [self.nodes[n] for n in self.kept]
+        subs = np.array([v.submap for v in kept], dtype=np.int64)
+        poses = compose(origins[subs], np.array([v.pose for v in kept]).reshape(-1, 3)).reshape(-1, 3)
+        paths = np.array([v.path for v in kept])
+        maps: dict[tuple[int, ...], LocalMap | None] = {}  # targets built in this call (same origins)
         for i in self.waiting:
-            node, kept = self.nodes[i], np.array(self.kept, dtype=np.int64)
-            poses = self._place(kept, origins)
+            node = self.nodes[i]
             pose_i = compose(origins[node.submap], node.pose)
             if len(node.points) >= MIN_POINTS:
-                paths = np.array([self.nodes[n].path for n in kept])
                 for j in nearest(pose_i, node.path, poses, paths, self.cfg):
-                    self._pair(int(kept[j]), i, kept, poses, pose_i)
+                    self._pair(self.kept[j], i, poses, pose_i, maps)
             cell = (int(np.floor(pose_i[0] / CELL)), int(np.floor(pose_i[1] / CELL)))
             if self.cells.get(cell, 0) < KEEP:
                 self.cells[cell] = self.cells.get(cell, 0) + 1
+                self._row[i] = len(self.kept)
                 self.kept.append(i)
+                poses, paths = np.vstack((poses, pose_i)), np.append(paths, node.path)
             else:
                 del self.nodes[i]  # the first KEEP nodes here stand for this square: this one goes
         self.waiting = []
 
-    def _place(self, ids: np.ndarray, origins: np.ndarray) -> np.ndarray:
-        if not len(ids):
-            return np.zeros((0, 3))
-        nodes = [self.nodes[n] for n in ids]
-        return compose(origins[[v.submap for v in nodes]], np.array([v.pose for v in nodes]))
-
-    def _pair(self, j: int, i: int, kept: np.ndarray, poses: np.ndarray, pose_i: np.ndarray) -> None:
-        """Register node i against node j's map (j and its kept chain neighbours far enough back)."""
-        path_i, at = self.nodes[i].path, {int(n): k for k, n in enumerate(kept)}
-        near = [
+    def _pair(
+        self,
+        j: int,
+        i: int,
+        poses: np.ndarray,
+        pose_i: np.ndarray,
+        maps: dict[tuple[int, ...], LocalMap | None],
+    ) -> None:
+        """Register node i against node j's map (j and its kept chain neighbours far enough back), its
+        nodes placed at ``poses`` (rows: :attr:`kept`'s)."""
+        path_i, row = self.nodes[i].path, self._row
+        near = tuple(
             n
             for n in (j + o for o in TARGET_NEIGHBOURS)
-            if n in at and path_i - self.nodes[n].path >= self.cfg.refine_min_path
-        ]
-        parts = [transform_points(self.nodes[n].points, relative(poses[at[j]], poses[at[n]])) for n in near]
-        pts = np.concatenate(parts) if parts else np.zeros((0, 2))
-        pts = pts[voxel_thin(pts, self.match.voxel)]
-        if len(pts) < MIN_POINTS:
+            if n in row and path_i - self.nodes[n].path >= self.cfg.refine_min_path
+        )
+        at = poses[row[j]]
+        if (j, *near) not in maps:
+            parts = [transform_points(self.nodes[n].points, relative(at, poses[row[n]])) for n in near]
+            pts = np.concatenate(parts) if parts else np.zeros((0, 2))
+            pts = pts[voxel_thin(pts, self.match.voxel)]
+            maps[(j, *near)] = LocalMap.build(pts) if len(pts) >= MIN_POINTS else None
+        if (target := maps[(j, *near)]) is None:
             return
-        reg = register(self.nodes[i].points, LocalMap.build(pts), relative(poses[at[j]], pose_i), self.match)
+        reg = register(self.nodes[i].points, target, relative(at, pose_i), self.match)
         self.tried += 1
         if reg.fit >= self.cfg.refine_min_fitness:
             self.found.append(Scanpair(j, i, reg.pose, reg.cov, reg.fit))
