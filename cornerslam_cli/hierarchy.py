@@ -191,7 +191,7 @@ class HierarchicalSlam:
 
     def _close(self, step: int, last: bool = False) -> None:
         """Close the open submap at ``step``: a node for the next origin, its loops, the graph optimised."""
-        sub = self._close_submap(last)
+        sub = self._close_submap()
         self.graph.add_sequential(sub.end_pose, sub.end_cov + COV_FLOOR)
         self._optimize(self.graph)
         if self.cfg.loops.enabled:
@@ -203,7 +203,7 @@ class HierarchicalSlam:
             self._open = OpenSubmap(sub.index + 1, step + 1, self.n_nodes - 1, self.cfg.graph.refine)
             self._origin_cov = self.graph.marginal(sub.index + 1)
 
-    def _close_submap(self, last: bool) -> Submap:
+    def _close_submap(self) -> Submap:
         ekf, sub, g = self.slam.ekf, self._open, self.cfg.graph
         poses = np.array(sub.poses).reshape(-1, 3)
         nodes = keyframe_nodes(poses, g.node_spacing, g.node_angle)
@@ -215,7 +215,7 @@ class HierarchicalSlam:
         anchor_poses = np.where((before >= 0)[:, None], poses[nodes[before.clip(0)]], 0.0)
         first = self.n_nodes - len(nodes)
         self.refinement.add_submap(
-            sub.index, sub.node, first, poses[nodes], sub.step_points, step_nodes, anchor_poses, last
+            sub.index, sub.node, first, poses[nodes], sub.step_points, step_nodes, anchor_poses
         )
         table = self.slam.landmark_table()
         n = len(table["id"])

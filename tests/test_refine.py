@@ -11,16 +11,18 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from scipy.spatial import cKDTree
 
 from cornerslam_cli import simworld as sw
 from cornerslam_cli.cli import cli
 from cornerslam_cli.config import config_from
 from cornerslam_cli.evaluate import ate
 from cornerslam_cli.frontend import frames, open_input
-from cornerslam_cli.geometry import relative, transform_points, wrap_angle
+from cornerslam_cli.geometry import compose, relative, transform_points, wrap_angle
 from cornerslam_cli.graph.params import GraphConfig
 from cornerslam_cli.graph.posegraph import PoseGraph
 from cornerslam_cli.graph.refine import KEEP, MIN_POINTS, Refinement, nearest
+from cornerslam_cli.graph.submap import keyframe_nodes
 from cornerslam_cli.hierarchy import HierarchicalSlam
 from cornerslam_cli.motion.params import ScanMatchConfig
 from cornerslam_cli.simulate import simulate_log
@@ -70,16 +72,19 @@ ERROR = np.array([0.12, -0.08, 0.03])  # the chain's error between A and B (B's 
 
 
 def registered(
-    scans: list[np.ndarray], guesses: np.ndarray, cfg: GraphConfig, last: bool = True
+    scans: list[np.ndarray], guesses: np.ndarray, cfg: GraphConfig, end: bool = True
 ) -> Refinement:
     """One closed submap whose origin is node 0 and whose steps are nodes 0, 1, … at ``guesses`` (the
-    estimate, global) with ``scans`` (robot frame, cast from elsewhere), registered (``last``: the run's
-    end; else the last node waits for the next submap)."""
+    estimate, global) with ``scans`` (robot frame, cast from elsewhere), registered (``end``: the run
+    ends there; else the last node waits for a next submap)."""
     r = Refinement(cfg, ScanMatchConfig())
     local = relative(guesses[0], guesses)
     points = [transform_points(s, p) for s, p in zip(scans, local, strict=True)]
-    r.add_submap(0, 0, 1, local[1:], points, np.arange(len(scans)), local, last)
-    r.register(guesses[:1])
+    r.add_submap(0, 0, 1, local[1:], points, np.arange(len(scans)), local)
+    if end:
+        r.complete(guesses[:1])
+    else:
+        r.register(guesses[:1])
     return r
 
 
@@ -152,12 +157,53 @@ def test_a_place_passed_again_and_again_keeps_the_first_nodes_points_and_registe
     P, Q = np.array([3.0, 2.5, 0.2]), np.array([9.0, 2.0, 0.5])
     guesses = np.array([P if k % 2 == 0 else Q for k in range(12)])
     scans = [room_scan(p) for p in guesses]
-    r = registered(scans, guesses, GraphConfig(), last=False)
+    r = registered(scans, guesses, GraphConfig(), end=False)
     assert r.kept == list(range(2 * KEEP)) and 11 not in r.kept
     r.complete(guesses[:1])
     assert {s.i for s in r.found} == set(range(2, 12))  # nodes 0 and 1 have no earlier node at their place
     assert all(s.j in r.kept for s in r.found) and len(r.nodes) == 2 * KEEP
     assert all(np.abs(s.pose).max() < 0.02 for s in r.found)  # each at its own place again
+
+
+def test_each_node_holds_the_points_of_the_steps_that_hang_from_it_across_submap_boundaries():
+    """A walk cut into three submaps as hierarchy.py cuts them (each origin the previous submap's last
+    step, a node per metre or half radian): every node's points, placed by its submap's origin ∘ its pose,
+    cover every scan of the steps that hang from it — the node that ends a submap has the next one's
+    first steps too — and nothing else; each node's path is the chain's length to it."""
+    t = np.linspace(0.0, 1.0, 40)
+    walk = np.column_stack((2 + 6 * t, 2 + 3 * np.sin(3 * t), 0.3 + 2 * t))
+    scans = [room_scan(p) for p in walk]
+    r = Refinement(GraphConfig(refine=True), ScanMatchConfig())
+    origins, origin_node, n_nodes = [walk[0]], 0, 1
+    holds: dict[int, list[np.ndarray]] = {}  # node → the global points of the steps hanging from it
+    for a, b in [(0, 13), (13, 27), (27, 40)]:
+        poses = relative(origins[-1], walk[a:b])
+        nodes = keyframe_nodes(poses, 1.0, 0.5)
+        before = np.searchsorted(nodes, np.arange(len(poses)), side="right") - 1
+        step_nodes = np.where(before >= 0, n_nodes + before, origin_node)
+        anchors = np.where((before >= 0)[:, None], poses[nodes[before.clip(0)]], 0.0)
+        points = [transform_points(s, p) for s, p in zip(scans[a:b], poses, strict=True)]
+        r.add_submap(len(origins) - 1, origin_node, n_nodes, poses[nodes], points, step_nodes, anchors)
+        for n, s, p in zip(step_nodes, scans[a:b], walk[a:b], strict=True):
+            holds.setdefault(int(n), []).append(transform_points(s, p))
+        n_nodes += len(nodes)
+        origin_node = n_nodes - 1
+        origins.append(compose(origins[-1], poses[-1]))
+    assert r.waiting == list(range(n_nodes - 1)) and isinstance(r.nodes[n_nodes - 1].points, list)
+    r._complete([n_nodes - 1])  # (complete() would register too)
+    everything = cKDTree(np.vstack([transform_points(s, p) for s, p in zip(scans, walk, strict=True)]))
+    placed = {n: compose(origins[v.submap], v.pose) for n, v in r.nodes.items()}
+    assert sorted(holds) == sorted(r.nodes) == list(range(n_nodes))
+    for n, v in r.nodes.items():
+        cloud = transform_points(v.points, placed[n])
+        assert everything.query(cloud)[0].max() < 1e-9  # only scan points
+        own = np.vstack(holds[n])
+        assert cKDTree(cloud).query(own)[0].max() <= 0.05 * math.sqrt(2) + 1e-9  # all of its steps'
+        assert len(cloud) < len(own)  # thinned
+    path = np.concatenate(
+        ([0.0], np.cumsum(np.hypot(*np.diff(np.array([placed[n] for n in range(n_nodes)])[:, :2], axis=0).T)))
+    )
+    np.testing.assert_allclose([r.nodes[n].path for n in range(n_nodes)], path, atol=1e-9)
 
 
 def test_a_run_counts_its_scan_pairs_and_says_so(sim_log, tmp_path):

@@ -11,17 +11,22 @@ closing joins whole submaps only where corners or points verify. A node sees wha
 the chain never compares them.
 
 As the run goes, bounded (:class:`Refinement`): a node is registered once its points are all in — when
-the submap after the one it ends closes —, from the online graph's estimate (its submap origins ∘ the
-nodes' poses in their submaps), after that submap's loop closures; ICP (motion/icp.py) of the node's
-points against the earlier node's and its two chain neighbours' (those as far back along the path).
+its submap closes; a submap's last node, the next one's origin, when that one closes —, from the online
+graph's estimate (its submap origins ∘ the nodes' poses in their submaps), after the closing submap's
+loop closures; ICP (motion/icp.py) of the node's points against the earlier node's and its two chain
+neighbours' (those still kept and as far back along the path). ICP's weak prior (``scan_match``'s
+``prior_sigma_*``) is towards that online estimate, so along a featureless corridor the registration
+says little more than it did, with that prior's large variance.
 A registration that fits below ``refine_min_fitness`` is dropped then; the others are kept (two poses
 and a covariance) until :meth:`Refinement.apply`, after the keyframe graph is solved: each becomes a
 factor when it moves its pair at most ``refine_max_xy`` / ``refine_max_theta`` from the solved graph's
 estimate (which is already right locally: a larger move is another basin), with ICP's covariance times
 the front end's learnt scale of match covariances (motion/fusion.py), as for loop closures; then the
-graph is solved again. Points are kept only for targets: at most ``KEEP`` nodes per ``CELL`` m square of
-the map (the first to reach it), so memory is bounded by the area mapped, not the log's length — on a
-robot's tenth lap its nodes register against the first laps' and are dropped.
+graph is solved again. Points are kept only for targets: at most ``KEEP`` nodes with points per ``CELL``
+m square of the map (the first to reach it), so the points held are bounded by the area mapped, not the
+log's length — on a robot's tenth lap its nodes register against the first laps' and are dropped; what
+grows with the log is the registrations kept for the end (two poses and a covariance each, at most
+``refine_neighbours`` per node), as the keyframe graph's own factors do.
 
 What it does on the panel: README "Dense refinement".
 """
@@ -93,13 +98,12 @@ class Refinement:
         points: list | None,
         step_nodes: np.ndarray,
         anchors: np.ndarray,
-        last: bool = False,
     ) -> None:
         """Closed submap ``index``: its nodes ``first_node``, … at ``node_poses`` (its frame; the last is
         the next submap's origin), its origin ``origin_node``; each step's ``points`` (submap frame; None:
         no scan; the list None: not kept, graph.refine off), the node it hangs from (``step_nodes``) and
         that node's pose in the submap (``anchors``). Its origin and every node but the last are then
-        complete (all of them when ``last``: the run's end), queued for :meth:`register`."""
+        complete, queued for :meth:`register` (the last: when the next submap closes, or :meth:`complete`)."""
         if points is None:
             return
         if origin_node not in self.nodes:  # node 0, the first submap's origin
@@ -112,7 +116,7 @@ class Refinement:
             if pts is not None and len(pts):
                 placed = transform_points(pts, inverse(anchor))
                 self.nodes[int(node)].points.append(placed[voxel_thin(placed, self.match.voxel)])
-        self._complete([origin_node, *range(first_node, first_node + len(node_poses) - (0 if last else 1))])
+        self._complete([origin_node, *range(first_node, first_node + len(node_poses) - 1)])
 
     def _complete(self, ids: list[int]) -> None:
         for n in ids:
@@ -122,8 +126,7 @@ class Refinement:
         self.waiting.extend(ids)
 
     def complete(self, origins: np.ndarray) -> None:
-        """The run has ended: register the nodes still waiting for points (a log that ended as a submap
-        closed leaves its last node so)."""
+        """The run has ended: register the nodes still waiting for points (the last submap's last node)."""
         self._complete([n for n, v in self.nodes.items() if isinstance(v.points, list)])
         self.register(origins)
 
@@ -143,13 +146,13 @@ class Refinement:
                 for j in nearest(pose_i, node.path, poses, paths, self.cfg):
                     self._pair(self.kept[j], i, poses, pose_i, maps)
             cell = (int(np.floor(pose_i[0] / CELL)), int(np.floor(pose_i[1] / CELL)))
-            if self.cells.get(cell, 0) < KEEP:
+            if len(node.points) and self.cells.get(cell, 0) < KEEP:
                 self.cells[cell] = self.cells.get(cell, 0) + 1
                 self._row[i] = len(self.kept)
                 self.kept.append(i)
                 poses, paths = np.vstack((poses, pose_i)), np.append(paths, node.path)
             else:
-                del self.nodes[i]  # the first KEEP nodes here stand for this square: this one goes
+                del self.nodes[i]  # no points, or the first KEEP nodes here stand for this square: it goes
         self.waiting = []
 
     def _pair(
