@@ -167,10 +167,8 @@ class HierarchicalSlam:
             ]
             self.smoothed = smooth(self.cfg.graph, self.chains, self.graph.poses()[: len(self.closed)], loops)
             self.unconverged += not self.smoothed.converged
-            if self.cfg.graph.refine:
-                self.refinement.complete(self.graph.poses())
-                if self.refinement.apply(self.smoothed, self._match_scale):
-                    self.unconverged += not self.smoothed.converged  # solved again with the scan pairs
+            if self.cfg.graph.refine and self.refinement.finish(self.graph, self.smoothed, self._match_scale):
+                self.unconverged += not self.smoothed.converged  # solved again with the scan pairs
         self.t_loop += time.perf_counter() - t0
 
     def _optimize(self, graph: PoseGraph) -> None:
@@ -196,8 +194,7 @@ class HierarchicalSlam:
         self._optimize(self.graph)
         if self.cfg.loops.enabled:
             self._close_loops(sub, step)
-        if self.cfg.graph.refine:
-            self.refinement.register(self.graph.poses())
+        self.refinement.register(self.graph.poses())  # (graph.refine off: nothing waits)
         if not last:
             self.slam.new_map()
             self._open = OpenSubmap(sub.index + 1, step + 1, self.n_nodes - 1, self.cfg.graph.refine)
@@ -213,10 +210,7 @@ class HierarchicalSlam:
         step_nodes = np.where(before >= 0, self.n_nodes + before, sub.node)
         self.n_nodes += len(nodes)
         anchor_poses = np.where((before >= 0)[:, None], poses[nodes[before.clip(0)]], 0.0)
-        first = self.n_nodes - len(nodes)
-        self.refinement.add_submap(
-            sub.index, sub.node, first, poses[nodes], sub.step_points, step_nodes, anchor_poses
-        )
+        self.refinement.add_submap(sub, poses[nodes], step_nodes, anchor_poses)
         table = self.slam.landmark_table()
         n = len(table["id"])
         state = (3 + 3 * table["id"][:, None] + np.arange(3)).reshape(-1)

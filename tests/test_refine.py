@@ -22,7 +22,7 @@ from cornerslam_cli.geometry import compose, relative, transform_points, wrap_an
 from cornerslam_cli.graph.params import GraphConfig
 from cornerslam_cli.graph.posegraph import PoseGraph
 from cornerslam_cli.graph.refine import KEEP, MIN_POINTS, Refinement, nearest
-from cornerslam_cli.graph.submap import keyframe_nodes
+from cornerslam_cli.graph.submap import OpenSubmap, keyframe_nodes
 from cornerslam_cli.hierarchy import HierarchicalSlam
 from cornerslam_cli.motion.params import ScanMatchConfig
 from cornerslam_cli.simulate import simulate_log
@@ -71,6 +71,13 @@ TRUE_A, TRUE_B = np.array([3.0, 2.5, 0.2]), np.array([5.5, 3.0, 0.5])
 ERROR = np.array([0.12, -0.08, 0.03])  # the chain's error between A and B (B's frame)
 
 
+def closing(index: int, node: int, points: list[np.ndarray]) -> OpenSubmap:
+    """Submap ``index`` from node ``node`` with its steps' ``points`` (its frame), as it closes."""
+    sub = OpenSubmap(index, 0, node, keep_steps=True)
+    sub.step_points = points
+    return sub
+
+
 def registered(
     scans: list[np.ndarray], guesses: np.ndarray, cfg: GraphConfig, end: bool = True
 ) -> Refinement:
@@ -80,7 +87,7 @@ def registered(
     r = Refinement(cfg, ScanMatchConfig())
     local = relative(guesses[0], guesses)
     points = [transform_points(s, p) for s, p in zip(scans, local, strict=True)]
-    r.add_submap(0, 0, 1, local[1:], points, np.arange(len(scans)), local)
+    r.add_submap(closing(0, 0, points), local[1:], np.arange(len(scans)), local)
     if end:
         r.complete(guesses[:1])
     else:
@@ -183,7 +190,7 @@ def test_each_node_holds_the_points_of_the_steps_that_hang_from_it_across_submap
         step_nodes = np.where(before >= 0, n_nodes + before, origin_node)
         anchors = np.where((before >= 0)[:, None], poses[nodes[before.clip(0)]], 0.0)
         points = [transform_points(s, p) for s, p in zip(scans[a:b], poses, strict=True)]
-        r.add_submap(len(origins) - 1, origin_node, n_nodes, poses[nodes], points, step_nodes, anchors)
+        r.add_submap(closing(len(origins) - 1, origin_node, points), poses[nodes], step_nodes, anchors)
         for n, s, p in zip(step_nodes, scans[a:b], walk[a:b], strict=True):
             holds.setdefault(int(n), []).append(transform_points(s, p))
         n_nodes += len(nodes)

@@ -42,6 +42,7 @@ from ..motion.icp import LocalMap, register, voxel_thin
 from ..motion.params import ScanMatchConfig
 from .params import GraphConfig
 from .posegraph import PoseGraph
+from .submap import OpenSubmap
 
 MIN_POINTS = 20  # a node with fewer scan points is neither registered nor a target
 TARGET_NEIGHBOURS = (-1, 0, 1)  # the earlier node's map: its points and its neighbours' (denser normals)
@@ -90,22 +91,18 @@ class Refinement:
         self.added = 0
 
     def add_submap(
-        self,
-        index: int,
-        origin_node: int,
-        first_node: int,
-        node_poses: np.ndarray,
-        points: list | None,
-        step_nodes: np.ndarray,
-        anchors: np.ndarray,
+        self, sub: OpenSubmap, node_poses: np.ndarray, step_nodes: np.ndarray, anchors: np.ndarray
     ) -> None:
-        """Closed submap ``index``: its nodes ``first_node``, … at ``node_poses`` (its frame; the last is
-        the next submap's origin), its origin ``origin_node``; each step's ``points`` (submap frame; None:
-        no scan; the list None: not kept, graph.refine off), the node it hangs from (``step_nodes``) and
-        that node's pose in the submap (``anchors``). Its origin and every node but the last are then
+        """Submap ``sub``, closing: its nodes at ``node_poses`` (its frame; the last, its last step, is the
+        next submap's origin), its origin's node ``sub.node``; each step's points (``sub.step_points``,
+        submap frame; None: no scan; the list None: not kept, graph.refine off), the node it hangs from
+        (``step_nodes``: the last step's is the last node, so the ids are known) and that node's pose in
+        the submap (``anchors``). Its origin and every node but the last are then
         complete, queued for :meth:`register` (the last: when the next submap closes, or :meth:`complete`)."""
+        index, origin_node, points = sub.index, sub.node, sub.step_points
         if points is None:
             return
+        first_node = int(step_nodes[-1]) - len(node_poses) + 1
         if origin_node not in self.nodes:  # node 0, the first submap's origin
             self.nodes[origin_node] = Node(index, np.zeros(3), 0.0, [])
         start = self.nodes[origin_node].path
@@ -125,8 +122,14 @@ class Refinement:
             self.nodes[n].points = p[voxel_thin(p, self.match.voxel)]
         self.waiting.extend(ids)
 
+    def finish(self, online: PoseGraph, g: PoseGraph, scale: float) -> int:
+        """The run has ended: :meth:`complete` with the ``online`` graph's origins, then :meth:`apply` to
+        the solved keyframe graph ``g``; returns the factors added."""
+        self.complete(online.poses())
+        return self.apply(g, scale)
+
     def complete(self, origins: np.ndarray) -> None:
-        """The run has ended: register the nodes still waiting for points (the last submap's last node)."""
+        """Register the nodes still waiting for points (at the run's end, the last submap's last node)."""
         self._complete([n for n, v in self.nodes.items() if isinstance(v.points, list)])
         self.register(origins)
 
@@ -134,6 +137,8 @@ class Refinement:
         """Register each complete node against its :func:`nearest` earlier nodes kept, placed with
         ``origins`` (the online graph's submap origins, after the closing submap's loops); keep the
         registrations that fit, then the node's points where its square has room."""
+        if not self.waiting:  # (graph.refine off, or nothing complete)
+            return
         kept = [self.nodes[n] for n in self.kept]
         subs = np.array([v.submap for v in kept], dtype=np.int64)
         poses = compose(origins[subs], np.array([v.pose for v in kept]).reshape(-1, 3)).reshape(-1, 3)
