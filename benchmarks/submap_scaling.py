@@ -1,6 +1,7 @@
 """Cost against log length, two-level SLAM (submaps + pose graph) beside the paper's single map.
 
     python benchmarks/submap_scaling.py [--data DIR] [--scans 20000] [--short 2000] [--repeat 3]
+                                        [--set KEY=VALUE ...]
 
 For each log and mode (``submaps.enabled`` true / false), one ``cornerslam run`` (a subprocess; its
 peak RSS is the kernel's ``ru_maxrss`` of that process, from ``wait4``): the per-step time (timing.csv
@@ -16,7 +17,9 @@ A short run before them compiles the kernels of a fresh checkout. The real log's
 repeated ``--repeat`` times (its outputs are the same each time, its
 times are not): the table shows the run of median last/first, a line below the range of all, and
 that run's per-step time, loop closing's share and loop candidates verified by tenth of the log
-(on infinite-corridor the robot revisits little in its first tenth).
+(on infinite-corridor the robot revisits little in its first tenth). With ``--set`` (repeatable), a
+third mode runs submaps with those settings too (e.g. ``graph.refine=true``: is an option's cost flat?),
+written to ``docs/results/submap_scaling_<settings>.md`` unless ``--out`` says where.
 """
 
 from __future__ import annotations
@@ -144,11 +147,11 @@ def tenths_line(name: str, mode: str, r: dict) -> str:
     )
 
 
-def memory_lines(rows: list[tuple[str, str, dict]]) -> list[str]:
+def memory_lines(rows: list[tuple[str, str, dict]], modes: dict[str, list[str]]) -> list[str]:
     """Peak memory of the long simulated run against the short one, per mode."""
     sim = [(mode, r) for log, mode, r in rows if log.startswith("simulated")]
     lines = []
-    for mode in MODES:
+    for mode in modes:
         short, long = [r for m, r in sim if m == mode]
         lines.append(
             f"Peak memory, {mode}, {long['steps']:,} vs {short['steps']:,} simulated scans: "
@@ -163,8 +166,21 @@ def main() -> None:
     ap.add_argument("--scans", type=int, default=20_000)
     ap.add_argument("--short", type=int, default=2_000)
     ap.add_argument("--repeat", type=int, default=3, help="runs of the real log with submaps (timing spread)")
-    ap.add_argument("--out", type=Path, default=ROOT / "docs" / "results" / "submap_scaling.md")
+    ap.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE", help="a third mode: submaps with these"
+    )
+    ap.add_argument("--out", type=Path)
     args = ap.parse_args()
+    modes = dict(MODES)
+    if args.set:
+        variant = " ".join(args.set)
+        modes = {
+            "submaps": MODES["submaps"],
+            f"submaps, {variant}": [*MODES["submaps"], *(a for s in args.set for a in ("--set", s))],
+            "single map": MODES["single map"],
+        }
+    slug = "_" + "_".join(s.replace("=", "-") for s in args.set) if args.set else ""
+    out = args.out or ROOT / "docs" / "results" / f"submap_scaling{slug}.md"
     rows = []
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
@@ -179,8 +195,8 @@ def main() -> None:
         run(corridor, tmp / "warm-up", ["--max-scans", "50"])
         repeats = []
         for name, log, limit in logs:
-            for mode, extra in MODES.items():
-                n = args.repeat if (name, mode) == ("infinite-corridor", "submaps") else 1
+            for mode, extra in modes.items():
+                n = args.repeat if name == "infinite-corridor" and mode.startswith("submaps") else 1
                 runs = [run(log, tmp / f"{len(rows)}_{k}", [*limit, *extra]) for k in range(n)]
                 for r in runs:
                     print(name, mode, json.dumps({k: v for k, v in r.items()}), flush=True)
@@ -191,7 +207,8 @@ def main() -> None:
     text = [
         "# Cost against log length: submaps + pose graph vs the single map",
         "",
-        "From `python benchmarks/submap_scaling.py` (one run, this 2-core machine). Per-step time is",
+        f"From `python benchmarks/submap_scaling.py{' ' if args.set else ''}"
+        f"{' '.join('--set ' + s for s in args.set)}` (one run, this 2-core machine). Per-step time is",
         "timing.csv's `t_total` (loop closing and the graph's optimisation included on the steps that",
         "close a submap), averaged over the first and the last 10 % of the steps; 'of which loops': the",
         "last 10 %'s `t_loop` (loop closing and optimisation) per step. Filter scans/s: steps /",
@@ -201,10 +218,10 @@ def main() -> None:
         *table(rows),
         "",
         *repeats,
-        *memory_lines(rows),
+        *memory_lines(rows, modes),
     ]
-    args.out.write_text("\n".join(text) + "\n")
-    print(f"wrote {args.out}")
+    out.write_text("\n".join(text) + "\n")
+    print(f"wrote {out}")
 
 
 if __name__ == "__main__":

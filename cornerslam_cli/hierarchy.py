@@ -115,7 +115,7 @@ class HierarchicalSlam:
         self.chains: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # per closed submap (smooth)
         self.n_nodes = 1  # keyframe nodes so far (node 0: the first origin)
         self.smoothed: PoseGraph | None = None  # the keyframe graph, solved by finish()
-        self.refinement = Refinement(cfg.scan_match.voxel)  # graph.refine (graph/refine.py)
+        self.refinement = Refinement(cfg.graph, cfg.scan_match)  # graph.refine (graph/refine.py)
         self._open = OpenSubmap(0, 0, 0, cfg.graph.refine)
         self._origin_cov = np.zeros((3, 3))  # the open submap origin's marginal in the graph
         self.t_loop = 0.0
@@ -167,7 +167,7 @@ class HierarchicalSlam:
             ]
             self.smoothed = smooth(self.cfg.graph, self.chains, self.graph.poses()[: len(self.closed)], loops)
             self.unconverged += not self.smoothed.converged
-            if self.cfg.graph.refine and self.refinement.run(self.smoothed, self.cfg, self._match_scale):
+            if self.cfg.graph.refine and self.refinement.finish(self.graph, self.smoothed, self._match_scale):
                 self.unconverged += not self.smoothed.converged  # solved again with the scan pairs
         self.t_loop += time.perf_counter() - t0
 
@@ -194,6 +194,7 @@ class HierarchicalSlam:
         self._optimize(self.graph)
         if self.cfg.loops.enabled:
             self._close_loops(sub, step)
+        self.refinement.register(self.graph.poses())  # (graph.refine off: nothing waits)
         if not last:
             self.slam.new_map()
             self._open = OpenSubmap(sub.index + 1, step + 1, self.n_nodes - 1, self.cfg.graph.refine)
@@ -209,7 +210,7 @@ class HierarchicalSlam:
         step_nodes = np.where(before >= 0, self.n_nodes + before, sub.node)
         self.n_nodes += len(nodes)
         anchor_poses = np.where((before >= 0)[:, None], poses[nodes[before.clip(0)]], 0.0)
-        self.refinement.add_submap(sub.step_points, step_nodes, anchor_poses)
+        self.refinement.add_submap(sub, poses[nodes], step_nodes, anchor_poses)
         table = self.slam.landmark_table()
         n = len(table["id"])
         state = (3 + 3 * table["id"][:, None] + np.arange(3)).reshape(-1)

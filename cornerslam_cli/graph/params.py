@@ -102,11 +102,11 @@ class GraphConfig:
     kernel_scale: float = num(2.8, gt=0.0, le=1e6)
     node_spacing: float = num(1.0, ge=0.0, le=1e6)  # m between keyframe nodes (0: every keyframe)
     node_angle: float = num(0.5, ge=0.0, le=math.pi)  # rad: a turn this large makes a node too
-    # dense refinement (graph/refine.py; off: README "Dense refinement"): after the keyframe graph is
-    # solved, each node's scan registered against its refine_neighbours nearest earlier nodes within
-    # refine_radius m that lie refine_min_path m of path back (each with its chain neighbours' points,
-    # those as far back), kept when the fit reaches
-    # refine_min_fitness and ICP moved the pair at most refine_max_xy m / refine_max_theta rad; solved again
+    # dense refinement (graph/refine.py; off: README "Dense refinement"): as the run goes, each node's
+    # scan registered against its refine_neighbours nearest earlier nodes within refine_radius m that lie
+    # refine_min_path m of path back (each with its chain neighbours' points, those as far back), kept
+    # when the fit reaches refine_min_fitness; after the keyframe graph is solved, those that move their
+    # pair at most refine_max_xy m / refine_max_theta rad from it become factors, and it is solved again
     refine: bool = False
     refine_radius: float = num(5.0, gt=0.0, le=1e6)
     refine_min_path: float = num(5.0, ge=0.0, le=1e9)
