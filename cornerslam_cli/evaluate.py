@@ -267,6 +267,8 @@ def evaluate_files(
         out.update(ground_truth=display_path(ground_truth), ate=ate(t, est, gt_t, gt, correct_scale))
         if note := coverage_note(f"ground truth '{ground_truth}'", gt_t, out["ate"], len(t), "trajectory"):
             log.warning("%s", note)
+        if note := sparse_note(f"ground truth '{ground_truth}'", gt_t, t, "trajectory"):
+            log.warning("%s", note)
         out.update(vars(rpe(t, est, gt_t, gt)))
     if relations:
         e = relation_error(t, est, read_relations(relations), time_offset)
@@ -290,6 +292,26 @@ def coverage_note(what: str, gt_t: np.ndarray, a: Ate, total: int, whose: str = 
         f"{what} covers {a.n} of the {whose}'s {total} poses ({total - a.n - holes} outside its time span "
         f"{gt_t[0]:.3f} to {gt_t[-1]:.3f} s{gaps}): ATE/RPE are over those {a.n} only (give a ground "
         f"truth of the whole {whose}, or --start/--end inside it)"
+    )
+
+
+def sparse_note(what: str, gt_t: np.ndarray, est_t: np.ndarray, whose: str = "run") -> str | None:
+    """What to say when most of the ``whose``'s poses (stamps ``est_t``) that a ground truth with poses at
+    ``gt_t`` scores lie more than ``GAP_MIN`` from every pose of it: they are scored against straight
+    lines between its poses (a ground truth of two poses, or one per minute, has no hole by its own
+    median spacing); None otherwise."""
+    scored = np.asarray(est_t, dtype=float)
+    scored = scored[inside_span(gt_t, scored) & ~in_holes(gt_t, scored)]
+    if len(gt_t) < 2 or not len(scored):
+        return None
+    j = np.clip(np.searchsorted(gt_t, scored), 1, len(gt_t) - 1)
+    far = int(np.count_nonzero(np.minimum(scored - gt_t[j - 1], gt_t[j] - scored) > GAP_MIN))
+    if 2 * far <= len(scored):
+        return None
+    return (
+        f"{what} is sparse: {far} of the {len(scored)} {whose} poses it scores lie more than {GAP_MIN:g} s "
+        f"from every one of its {len(gt_t)} poses, and are scored against straight lines between them "
+        "(give a ground truth with poses throughout the trajectory)"
     )
 
 

@@ -15,6 +15,7 @@ from cornerslam_cli.evaluate import (
     relation_error,
     relation_errors,
     rpe,
+    sparse_note,
 )
 from cornerslam_cli.geometry import relative
 
@@ -450,6 +451,30 @@ def test_a_hole_at_an_end_of_the_ground_truth_counts_only_poses_within_its_span(
     r = ate(t, detour(t), gt_t, detour(gt_t))
     assert r.n == 102 and r.in_holes == 99
     assert not np.any(in_holes(gt_t, t) & ~inside_span(gt_t, t))
+
+
+def test_a_ground_truth_of_few_poses_far_from_the_trajectorys_is_warned_about(tmp_path):
+    """Two ground-truth poses 20 s apart (or one every 5 s): no gap is a hole by the median spacing, so
+    the poses between are scored against the straight line between them — said so, with how many; a
+    ground truth every 2 s (no scored pose over 1 s from one of it) and radish's one per scan: silent."""
+    from cornerslam_cli.report.tables import write_tum
+
+    t = np.round(np.arange(0.0, 20.0001, 0.1), 6)
+    write_tum(tmp_path / "est.tum", t, detour(t))
+    for gt_t, far in (
+        ([0.0, 20.0], 179),
+        (np.arange(0.0, 20.0001, 5.0), 116),
+        (np.arange(0.0, 20.0001, 2.0), 0),
+    ):
+        gt_t = np.asarray(gt_t, dtype=float)
+        write_tum(tmp_path / "gt.tum", gt_t, detour(gt_t))
+        res = evaluate(tmp_path / "est.tum", "--ground-truth", tmp_path / "gt.tum")
+        assert res.exit_code == 0, res.output
+        said = (
+            f"is sparse: {far} of the 201 trajectory poses it scores lie more than 1 s from every one of its"
+        )
+        assert (said in res.stderr) == (far > 0), res.stderr
+    assert sparse_note("gt", t, t) is None
 
 
 def test_a_ground_truth_covering_part_of_the_trajectory_is_warned_about(files):

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import CornerslamError, display_path
-from ..evaluate import ate, coverage_note, overlap_problem, read_relations, relation_error, rpe
+from ..evaluate import ate, coverage_note, overlap_problem, read_relations, relation_error, rpe, sparse_note
 from ..geometry import compose, compose_inverse
 from ..results import Accuracy, RunSummary
 from .consistency import store_consistency
@@ -331,6 +331,8 @@ def accuracy_of(
         )
         if note := coverage_note(f"ground truth '{ref.gt_path}'", ref.gt[0], acc["ate"], len(stamps)):
             notes.append(note)  # a number over part of the run, said so
+        if note := sparse_note(f"ground truth '{ref.gt_path}'", ref.gt[0], stamps):
+            notes.append(note)  # a number against straight lines, said so
     if ref.relations is not None:
         rel, offset = ref.relations, ref.time_offset
         relations = relation_error(stamps, poses, rel, offset)
