@@ -29,6 +29,7 @@ import csv
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -39,6 +40,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from real_logs import CLI, ROOT, default_data  # noqa: E402
 
+from cornerslam_cli.config import config_from  # noqa: E402
+from cornerslam_cli.errors import CornerslamError  # noqa: E402
 from cornerslam_cli.simulate import SimParams  # noqa: E402
 from cornerslam_cli.simworld import OFFICE_LOOP  # noqa: E402
 
@@ -171,6 +174,12 @@ def main() -> None:
     )
     ap.add_argument("--out", type=Path)
     args = ap.parse_args()
+    if min(args.scans, args.short, args.repeat) < 1:
+        ap.error("--scans, --short and --repeat must be at least 1")
+    try:  # a mistyped setting fails now, not after minutes of the other modes' runs
+        config_from({}, args.set)
+    except CornerslamError as e:
+        ap.error(str(e))
     modes = dict(MODES)
     if args.set:
         variant = " ".join(args.set)
@@ -179,8 +188,14 @@ def main() -> None:
             f"submaps, {variant}": [*MODES["submaps"], *(a for s in args.set for a in ("--set", s))],
             "single map": MODES["single map"],
         }
-    slug = "_" + "_".join(s.replace("=", "-") for s in args.set) if args.set else ""
+    slug = (
+        re.sub(r"[^A-Za-z0-9._-]+", "-", "_" + "_".join(s.replace("=", "-") for s in args.set))
+        if args.set
+        else ""
+    )
     out = args.out or ROOT / "docs" / "results" / f"submap_scaling{slug}.md"
+    if not out.parent.is_dir():
+        ap.error(f"--out: no folder {out.parent}")
     rows = []
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)

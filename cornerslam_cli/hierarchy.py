@@ -167,8 +167,8 @@ class HierarchicalSlam:
             ]
             self.smoothed = smooth(self.cfg.graph, self.chains, self.graph.poses()[: len(self.closed)], loops)
             self.unconverged += not self.smoothed.converged
-            if self.cfg.graph.refine and self.refinement.finish(self.graph, self.smoothed, self._match_scale):
-                self.unconverged += not self.smoothed.converged  # solved again with the scan pairs
+            if self.cfg.graph.refine:  # (its own solve's warning: Refinement.solver_warning)
+                self.refinement.finish(self.graph, self.smoothed, self._match_scale)
         self.t_loop += time.perf_counter() - t0
 
     def _optimize(self, graph: PoseGraph) -> None:

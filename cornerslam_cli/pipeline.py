@@ -138,8 +138,9 @@ def run_filter(
         warn_mount(src, cfg)
         if graph is not None:
             graph.finish()
-            if warning := graph.solver_warning():
-                src.reader.stats.warn(warning)
+            for warning in (graph.solver_warning(), graph.refinement.solver_warning()):
+                if warning:
+                    src.reader.stats.warn(warning)
         summary = writer.finish(slam.landmark_table(), src, cfg, ref, wall0, graph)
     c = summary.counts
     log.info(

@@ -179,6 +179,10 @@ class Counts(JsonResult):
     loops_rejected: int | None = optional()
     # appended, present with graph.refine: scan pairs the dense refinement added to the keyframe graph
     refine_factors: int | None = optional()
+    # appended after it: node pairs registered, and those whose fit reached refine_min_fitness (of which
+    # refine_factors moved their pair within refine_max_xy / refine_max_theta of the solved graph)
+    refine_registered: int | None = optional()
+    refine_fit: int | None = optional()
 
 
 @dataclass(frozen=True, kw_only=True)

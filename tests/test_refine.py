@@ -220,9 +220,16 @@ def test_a_run_counts_its_scan_pairs_and_says_so(sim_log, tmp_path):
     )
     assert res.exit_code == 0, res.output
     counts = json.loads((tmp_path / "on" / "summary.json").read_text())["counts"]
-    assert counts["refine_factors"] > 0 and f"refinement {counts['refine_factors']} scan pairs" in res.output
+    assert counts["refine_factors"] > 0
+    assert counts["refine_registered"] >= counts["refine_fit"] >= counts["refine_factors"]
+    said = (
+        f"refinement {counts['refine_factors']} scan pairs (of {counts['refine_registered']} registered, "
+        f"{counts['refine_fit']} fit)"
+    )
+    assert said in res.output, res.output
     res = runner.invoke(cli, ["run", str(sim_log), "--out", str(tmp_path / "off")])
-    assert "refine_factors" not in json.loads((tmp_path / "off" / "summary.json").read_text())["counts"]
+    off = json.loads((tmp_path / "off" / "summary.json").read_text())["counts"]
+    assert not {"refine_factors", "refine_registered", "refine_fit"} & set(off)
     assert "refinement" not in res.output
     args = ["run", str(sim_log), "--out", str(tmp_path / "single"), "--set", "graph.refine=true"]
     res = runner.invoke(cli, [*args, "--set", "submaps.enabled=false"])

@@ -37,7 +37,7 @@ BEFORE = (
     "rpe_trans_per_m,wall_time,budget_hits,rel_trans_mean,rel_trans_std,rel_rot_mean_deg,"
     "odom_rel_trans_mean,scan_odom_ate_rmse,scan_odom_rel_trans_mean"
 ).split(",")
-LOOPS = ["submaps", "loops_accepted", "loops_rejected", "online_ate_rmse"]
+LOOPS = ["submaps", "loops_accepted", "loops_rejected", "online_ate_rmse", "refine_factors"]
 
 
 def invoke(*args: str) -> str:
@@ -91,6 +91,7 @@ def test_comparison_csv_appends_each_associators_loop_closing(compared):
         assert int(r["loops_accepted"]) == c["loops_accepted"] == int(loops["accepted"].sum())
         assert int(r["loops_rejected"]) == c["loops_rejected"] == int((loops["accepted"] == 0).sum())
         assert float(r["online_ate_rmse"]) == pytest.approx(s["accuracy"]["online_ate"]["rmse"], abs=1e-9)
+        assert r["refine_factors"] == "" and "refine_factors" not in c  # graph.refine off
     assert sum(int(r["loops_accepted"]) for r in rows) > 0  # something to compare
     assert all(int(r["loops_rejected"]) > 0 for r in rows)
 
@@ -363,7 +364,8 @@ def test_report_compares_the_associators_on_loop_closing_in_a_table_of_its_own(c
     out, _ = compared
     page = Page((out / "report.html").read_text(encoding="utf-8"))
     main, loops = [t for t in page.tables if t and t[0] and t[0][0][0] == "assoc"]
-    assert [c[0] for c in main[0]] == BEFORE and [c[0] for c in loops[0]] == ["assoc", *LOOPS]
+    assert [c[0] for c in main[0]] == BEFORE
+    assert [c[0] for c in loops[0]] == ["assoc", *LOOPS[:4]]  # refine_factors: empty without graph.refine
     cells = raw_rows(out / "comparison.csv")
     for row, r in zip(loops[1:], cells, strict=True):
         assert [c[0] for c in row[:4]] == [r["assoc"], r["submaps"], r["loops_accepted"], r["loops_rejected"]]

@@ -89,6 +89,7 @@ class Refinement:
         self.cells: dict[tuple[int, int], int] = {}  # nodes kept per CELL square
         self.tried = 0
         self.added = 0
+        self.converged = True  # the solve with the factors added reached its optimum (or there was none)
 
     def add_submap(
         self, sub: OpenSubmap, node_poses: np.ndarray, step_nodes: np.ndarray, anchors: np.ndarray
@@ -205,7 +206,20 @@ class Refinement:
                 self.added += 1
         if self.added:
             g.optimize()
+            self.converged = g.converged
         return self.added
+
+    def solver_warning(self) -> str | None:
+        """The warning for summary.json when the solve with the scan pairs stopped at its step limit,
+        else None."""
+        if self.converged:
+            return None
+        return (
+            f"the keyframe graph's solve with the dense refinement's {self.added} scan pairs stopped at its "
+            "step limit before converging: the trajectory is its last step (no worse than the solve "
+            "without them by the graph's cost, maybe short of the optimum); run without graph.refine "
+            "to compare"
+        )
 
 
 def nearest(

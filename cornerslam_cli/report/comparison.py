@@ -40,11 +40,13 @@ def comparison_row(s: RunSummary) -> list:
 
 def loop_cells(s: RunSummary) -> list:
     """comparison.csv's loop-closing cells: submaps, closures accepted and refused, the online
-    (causal) estimate's ATE RMSE (NaN without ground truth); empty cells when the run had no submaps."""
+    (causal) estimate's ATE RMSE (NaN without ground truth), the dense refinement's factors (empty
+    without graph.refine); empty cells when the run had no submaps."""
     c, acc = s.counts, s.accuracy or Accuracy()
     if c.submaps is None:
-        return [""] * 4
-    return [c.submaps, c.loops_accepted, c.loops_rejected, _or_nan(acc.online_ate, "rmse")]
+        return [""] * 5
+    refine = "" if c.refine_factors is None else c.refine_factors
+    return [c.submaps, c.loops_accepted, c.loops_rejected, _or_nan(acc.online_ate, "rmse"), refine]
 
 
 def _or_nan(result: Ate | RelationError | None, name: str) -> float:

@@ -344,10 +344,11 @@ def _comparison_table(columns: dict, n: int, names: list[str], wide: bool = Fals
 def _loop_comparison(columns: dict, n: int) -> list[str]:
     """The associators on loop closing (comparison.csv's appended columns) as a table of their own —
     the main one is as wide as a page — when the runs had submaps."""
-    loops = [columns.get(c) for c in COMPARISON_LOOP_COLUMNS]
-    if any(col is None or col.dtype == object for col in loops):  # no submaps (empty cells), or older
+    numeric = [c for c in COMPARISON_LOOP_COLUMNS if c in columns and columns[c].dtype != object]
+    if any(c not in numeric for c in COMPARISON_LOOP_COLUMNS[:4]):  # no submaps (empty cells), or older
         return []
-    return ["<h3>Loop closing</h3>", _comparison_table(columns, n, ["assoc", *COMPARISON_LOOP_COLUMNS])]
+    # (refine_factors: empty without graph.refine, then left out)
+    return ["<h3>Loop closing</h3>", _comparison_table(columns, n, ["assoc", *numeric])]
 
 
 def _compare_report(out_dir: Path) -> str:

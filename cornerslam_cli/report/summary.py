@@ -107,6 +107,7 @@ def run_counts(src: Input, totals: Totals, n_landmarks: int, graph: Hierarchical
     the submaps and loop closures of the two-level SLAM ``graph``."""
     loops = [] if graph is None else graph.loops
     stats, matcher = src.reader.stats, src.matcher
+    refine = graph is not None and graph.cfg.graph.refine
     return Counts(
         steps=totals.steps,
         landmarks=n_landmarks,
@@ -126,7 +127,9 @@ def run_counts(src: Input, totals: Totals, n_landmarks: int, graph: Hierarchical
         submaps=None if graph is None else len(graph.closed),
         loops_accepted=None if graph is None else sum(r.accepted for r in loops),
         loops_rejected=None if graph is None else sum(not r.accepted for r in loops),
-        refine_factors=graph.refinement.added if graph is not None and graph.cfg.graph.refine else None,
+        refine_factors=graph.refinement.added if refine else None,
+        refine_registered=graph.refinement.tried if refine else None,
+        refine_fit=len(graph.refinement.found) if refine else None,
     )
 
 

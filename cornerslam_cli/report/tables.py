@@ -40,7 +40,7 @@ TIMING_COLUMNS = (
     "t_extract,t_predict,t_match,t_update,t_total,t_scan_match,scan_fit,t_loop"
 ).split(",")
 # (appended, issue 16) the associators on loop closing: empty cells when the runs had no submaps
-COMPARISON_LOOP_COLUMNS = ["submaps", "loops_accepted", "loops_rejected", "online_ate_rmse"]
+COMPARISON_LOOP_COLUMNS = ["submaps", "loops_accepted", "loops_rejected", "online_ate_rmse", "refine_factors"]
 COMPARISON_COLUMNS = (
     "assoc,steps,landmarks,matched_total,t_match_total,t_match_max,t_total,ate_rmse,"
     "odom_ate_rmse,rpe_trans_per_m,wall_time,budget_hits,rel_trans_mean,rel_trans_std,rel_rot_mean_deg,"

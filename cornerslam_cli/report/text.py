@@ -59,7 +59,12 @@ def summary_lines(s: RunSummary) -> list[str]:
     if c.submaps is not None:
         lines.append(
             f"submaps: {c.submaps}, loop closures {c.loops_accepted} accepted, {c.loops_rejected} refused, "
-            + ("" if c.refine_factors is None else f"refinement {c.refine_factors} scan pairs, ")
+            + (
+                ""
+                if c.refine_factors is None
+                else f"refinement {c.refine_factors} scan pairs (of {c.refine_registered} registered, "
+                f"{c.refine_fit} fit), "
+            )
             + f"loop time {t.t_loop or 0.0:.2f}s"
         )
     acc = s.accuracy
