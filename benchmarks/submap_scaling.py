@@ -194,8 +194,8 @@ def main() -> None:
         else ""
     )
     out = args.out or ROOT / "docs" / "results" / f"submap_scaling{slug}.md"
-    if not out.parent.is_dir():
-        ap.error(f"--out: no folder {out.parent}")
+    if not out.parent.is_dir() or out.is_dir():
+        ap.error(f"--out: {out} is a folder" if out.is_dir() else f"--out: no folder {out.parent}")
     rows = []
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)

@@ -144,6 +144,24 @@ def test_the_earlier_nodes_map_takes_its_chain_neighbours_points_placed_with_the
     assert np.hypot(e[0], e[1]) < 0.01 and abs(wrap_angle(e[2])) < math.radians(0.2)
 
 
+def test_a_solve_with_the_pairs_stopped_at_its_step_limit_is_warned_about_as_the_refinements(monkeypatch):
+    from cornerslam_cli.graph import posegraph
+
+    r = registered(
+        [room_scan(TRUE_A), room_scan(TRUE_B)],
+        two_node_graph(ERROR).poses(),
+        GraphConfig(refine_min_path=0.0),
+    )
+    assert r.solver_warning() is None  # nothing solved yet
+    g = two_node_graph(ERROR)
+    monkeypatch.setattr(posegraph, "LM_MAX_ITERATIONS", 1)  # the pair moves B by 0.1 m: more than 1 step
+    assert r.apply(g, 1.0) == 1 and not g.converged
+    assert "the dense refinement's 1 scan pairs stopped at its step limit" in r.solver_warning()
+    monkeypatch.setattr(posegraph, "LM_MAX_ITERATIONS", 100)
+    r.added = 0
+    assert r.apply(two_node_graph(ERROR), 1.0) == 1 and r.solver_warning() is None
+
+
 def test_a_pair_whose_scans_do_not_fit_is_not_kept():
     """Node 1's scan is of another room: whatever ICP makes of it, it fits below refine_min_fitness."""
     other = sw.make_world([sw.room(0.0, 0.0, 4.0, 12.0), sw.rectangle(2.0, 8.0, 0.5, 0.5)])
