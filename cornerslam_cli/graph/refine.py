@@ -17,15 +17,15 @@ loop closures; ICP (motion/icp.py) of the node's points against the earlier node
 neighbours' (those still kept and as far back along the path). ICP's weak prior (``scan_match``'s
 ``prior_sigma_*``) is towards that online estimate, so along a featureless corridor the registration
 says little more than it did, with that prior's large variance.
-A registration that fits below ``refine_min_fitness`` is dropped then; the others are kept (two poses
-and a covariance) until :meth:`Refinement.apply`, after the keyframe graph is solved: each becomes a
+A registration that fits below ``refine_min_fitness`` is dropped then; the others are kept (a relative
+pose and its covariance) until :meth:`Refinement.apply`, after the keyframe graph is solved: each becomes a
 factor when it moves its pair at most ``refine_max_xy`` / ``refine_max_theta`` from the solved graph's
 estimate (which is already right locally: a larger move is another basin), with ICP's covariance times
 the front end's learnt scale of match covariances (motion/fusion.py), as for loop closures; then the
 graph is solved again. Points are kept only for targets: at most ``KEEP`` nodes with points per ``CELL``
 m square of the map (the first to reach it), so the points held are bounded by the area mapped, not the
 log's length — on a robot's tenth lap its nodes register against the first laps' and are dropped; what
-grows with the log is the registrations kept for the end (two poses and a covariance each, at most
+grows with the log is the registrations kept for the end (a relative pose and its covariance each, at most
 ``refine_neighbours`` per node), as the keyframe graph's own factors do.
 
 What it does on the panel: README "Dense refinement".
