@@ -20,10 +20,13 @@ from __future__ import annotations
 import logging
 import os
 import signal
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+
+RETRY_SIGTERM = 0.01  # s: a SIGTERM that landed in a callback from C is sent again this much later
 
 
 def exit_with_parent(interval: float = 0.5) -> None:
@@ -47,6 +50,19 @@ def stopped_by_parent() -> None:
         signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a second one must not interrupt the clean-up
         raise SystemExit(143)
 
+    def unraisable(args) -> None:
+        """The SystemExit landed in Python code called back from C (llvmlite's, while Numba compiles),
+        where it cannot unwind: C drops it and Python would print it as a traceback. Send SIGTERM again
+        in a moment instead, to land after the callback (a sender thread: a signal is handled in the
+        main thread, at its next bytecode)."""
+        if not isinstance(args.exc_value, SystemExit):
+            default(args)
+            return
+        signal.signal(signal.SIGTERM, on_sigterm)
+        threading.Timer(RETRY_SIGTERM, os.kill, (os.getpid(), signal.SIGTERM)).start()
+
+    default = sys.unraisablehook
+    sys.unraisablehook = unraisable
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, on_sigterm)
 

@@ -4,7 +4,10 @@ extraction, what ``-v`` and ``-vv`` add to the default output."""
 import io
 import logging
 import re
+import signal
+import subprocess
 import sys
+import time
 
 from click.testing import CliRunner
 
@@ -128,3 +131,39 @@ def test_a_batch_workers_warning_on_a_terminal_clears_the_status_line_first(monk
     batch._init_worker(logging.WARNING)
     logging.getLogger("cornerslam.test").warning("a warning")
     assert err.getvalue() == "\r\033[KWARNING: a warning\n"
+
+
+CALLBACK_WORKER = """
+import ctypes, sys, time
+from cornerslam_cli import workers
+workers.stopped_by_parent()
+libc = ctypes.CDLL(None)
+CMP = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p)
+def slow(a, b):  # Python called back from C, as llvmlite calls Numba's object cache
+    time.sleep(0.05)
+    return 0
+items = (ctypes.c_int * 20)()
+try:
+    print("ready", flush=True)
+    libc.qsort(items, 20, ctypes.sizeof(ctypes.c_int), CMP(slow))
+    time.sleep(30)
+except SystemExit:
+    print("unwound", flush=True)
+    raise
+"""
+
+
+def test_a_sigterm_that_lands_in_a_callback_from_c_still_ends_the_worker_quietly():
+    """A batch worker's SIGTERM raised SystemExit inside llvmlite's callback (Numba compiling on a fresh
+    checkout): C dropped it with a printed traceback, and the worker ran on. It is sent again after
+    the callback: the worker unwinds, exits 143, and prints no traceback."""
+    proc = subprocess.Popen(
+        [sys.executable, "-c", CALLBACK_WORKER], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    assert proc.stdout.readline().strip() == "ready"
+    time.sleep(0.5)  # inside qsort's callbacks (20 items: some 60 comparisons of 50 ms)
+    proc.send_signal(signal.SIGTERM)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, err
+    assert "Traceback" not in err and "Exception ignored" not in err, err
+    assert "unwound" in out
