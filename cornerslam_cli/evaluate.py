@@ -30,6 +30,13 @@ GAP_FACTOR = 10.0  # a ground-truth gap longer than this many times its median s
 GAP_MIN = 1.0  # s: ... and than this is a hole, not interpolated across
 
 
+def bracket(stamps: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The poses' ``stamps`` (sorted, two or more) either side of each time ``t``: (before, after) — the
+    first two or the last two for a time outside their span."""
+    j = np.clip(np.searchsorted(stamps, t), 1, len(stamps) - 1)
+    return stamps[j - 1], stamps[j]
+
+
 def in_holes(stamps: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Mask of the times ``t`` inside a hole of a ground truth with poses at ``stamps`` (sorted): a gap
     longer than ``GAP_FACTOR`` × its median spacing and ``GAP_MIN`` (a motion capture that lost the
@@ -41,8 +48,7 @@ def in_holes(stamps: np.ndarray, t: np.ndarray) -> np.ndarray:
     if len(stamps) < 2:
         return np.zeros(len(t), dtype=bool)
     longest = max(GAP_MIN, GAP_FACTOR * float(np.median(np.diff(stamps))))
-    j = np.clip(np.searchsorted(stamps, t), 1, len(stamps) - 1)
-    before, after = stamps[j - 1], stamps[j]
+    before, after = bracket(stamps, t)
     near = (np.abs(t - before) <= GT_NEAR) | (np.abs(after - t) <= GT_NEAR)
     return (after - before > longest) & ~near & inside_span(stamps, t)
 
@@ -304,8 +310,8 @@ def sparse_note(what: str, gt_t: np.ndarray, est_t: np.ndarray, whose: str = "ru
     scored = scored[inside_span(gt_t, scored) & ~in_holes(gt_t, scored)]
     if len(gt_t) < 2 or not len(scored):
         return None
-    j = np.clip(np.searchsorted(gt_t, scored), 1, len(gt_t) - 1)
-    far = int(np.count_nonzero(np.minimum(scored - gt_t[j - 1], gt_t[j] - scored) > GAP_MIN))
+    before, after = bracket(gt_t, scored)
+    far = int(np.count_nonzero(np.minimum(scored - before, after - scored) > GAP_MIN))
     if 2 * far <= len(scored):
         return None
     return (

@@ -64,14 +64,13 @@ class Node:
 
 @dataclass(frozen=True)
 class Scanpair:
-    """A registration of node ``i``'s points against node ``j``'s map: i's pose in j's frame, its
-    covariance (ICP's, unscaled) and the share of i's points it put on the map."""
+    """A registration of node ``i``'s points against node ``j``'s map that fit: i's pose in j's frame
+    and its covariance (ICP's, unscaled)."""
 
     j: int
     i: int
     pose: np.ndarray
     cov: np.ndarray
-    fit: float
 
 
 class Refinement:
@@ -188,7 +187,7 @@ class Refinement:
         reg = register(self.nodes[i].points, target, relative(at, pose_i), self.match)
         self.tried += 1
         if reg.fit >= self.cfg.refine_min_fitness:
-            self.found.append(Scanpair(j, i, reg.pose, reg.cov, reg.fit))
+            self.found.append(Scanpair(j, i, reg.pose, reg.cov))
 
     def apply(self, g: PoseGraph, scale: float) -> int:
         """Add the registrations found to the solved keyframe graph ``g`` — those that move their pair at
