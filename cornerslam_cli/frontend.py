@@ -32,6 +32,7 @@ from .logs.deskew import deskew
 from .logs.sync import Synced, SyncStats, reanchor_odometry, select_keyframes, synchronise
 from .logs.unreadable import damaged_error
 from .motion import ScanMatcher
+from .motion.fusion import BiasTaken
 from .motion.icp import load_kernels as load_motion_kernels
 from .ranges import short_text
 from .span import Span, SpanUsed, select
@@ -86,6 +87,7 @@ class Frame:
     # how much too small the scan matcher has found its fits' covariances (motion/fusion.py's learnt s,
     # 1 without scan matching): a fit's covariance misses what makes real matches wrong
     match_scale: float = 1.0
+    bias_taken: BiasTaken | None = None  # the odometry bias the fused increment took out (motion/fusion.py)
     points: np.ndarray | None = None  # (k, 2) float32 valid beam end points, sensor frame (occupancy grid)
 
 
@@ -273,6 +275,7 @@ def _scan_matched(
         scan_matched=m.matched,
         scan_fit=m.fit,
         match_scale=matcher.fusion.s,
+        bias_taken=m.taken,
         t_scan_match=time.perf_counter() - t0,
     )
 

@@ -137,7 +137,8 @@ def run_filter(
         check_processed(src, slam.n_steps, writer.totals.points)
         warn_mount(src, cfg)
         if graph is not None:
-            graph.finish()
+            learnt = src.matcher is not None and cfg.graph.recalibrate
+            graph.finish(src.matcher.fusion.bias if learnt else None)
             for warning in (graph.solver_warning(), graph.refinement.solver_warning()):
                 if warning:
                     src.reader.stats.warn(warning)

@@ -210,6 +210,13 @@ def keyframe_nodes(poses: np.ndarray, spacing: float, angle: float) -> np.ndarra
     return np.array(nodes)
 
 
+def hanging(poses: np.ndarray, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per step of a closed submap (its local ``poses``), the index into ``nodes`` of the last node at or
+    before it (−1: none, it hangs from the submap's origin) and that node's pose (the origin's: 0)."""
+    before = np.searchsorted(nodes, np.arange(len(poses)), side="right") - 1
+    return before, np.where((before >= 0)[:, None], poses[nodes[before.clip(0)]], 0.0)
+
+
 def keyframe_factors(
     poses: np.ndarray, covs: np.ndarray, end_cov: np.ndarray, nodes: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:

@@ -75,6 +75,20 @@ class Fused:
     gain: np.ndarray  # (3, 3) the weight the match got: inc = corrected odometry + gain·(m − it)
 
 
+@dataclass(frozen=True)
+class BiasTaken:
+    """What one increment took of the odometry's bias as learnt by then: the smoothed trajectory moves it
+    by ``keep``·(``bias`` − the bias learnt by the end of the run) (graph/smooth.py ``recalibrated``)."""
+
+    odom: np.ndarray  # (3,) the odometry increment
+    bias: np.ndarray  # (3,) B(o)·c taken out of it (OdometryFusion.corrected)
+    keep: np.ndarray  # (3, 3) I − gain: the share of the corrected odometry in the increment
+
+    def row(self) -> list[float]:
+        """Its 15 numbers, flat (the hierarchy keeps one row per step)."""
+        return [*self.odom, *self.bias, *self.keep.ravel()]
+
+
 def nis(d: np.ndarray, S: np.ndarray) -> np.ndarray:
     """dᵢᵀ Sᵢ⁻¹ dᵢ for stacks d (n, 3), S (n, 3, 3)."""
     return np.einsum("ni,ni->n", d, np.linalg.solve(S, d[..., None])[..., 0])
@@ -98,6 +112,16 @@ class OdometryFusion:
     def corrected(self, o: np.ndarray) -> np.ndarray:
         """The odometry increment with the learnt scale error and drift taken out."""
         return o - bias_matrix(o, self.along) @ self.c
+
+    def bias(self, o: np.ndarray) -> np.ndarray:
+        """(n, 3) the bias B(o)·c that :meth:`corrected` takes out of each increment of ``o`` (n, 3), as
+        learnt so far."""
+        return bias_matrices(np.asarray(o, dtype=float), self.along) @ self.c
+
+    def taken(self, o: np.ndarray, gain: np.ndarray) -> BiasTaken:
+        """The bias the increment ``o``, fused with ``gain`` (Fused.gain), took out (learnt so far)."""
+        o = np.array(o, dtype=float)
+        return BiasTaken(o, bias_matrix(o, self.along) @ self.c, np.eye(3) - gain)
 
     def fuse(
         self,
@@ -179,6 +203,14 @@ class OdometryFusion:
         g = float(np.median(q)) / CHI2_3_MEDIAN
         self.k = float(np.clip(k * g, self.k_min, self.k_max))
         self.s = float(np.clip(s * g, 1.0, S_MAX))
+
+
+def shifts(taken: np.ndarray, bias: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """(n, 3) how far each increment moves with the bias learnt by the end of the run instead of the one
+    it took: ``taken`` (n, 15) its BiasTaken rows (zeros: it took none), ``bias`` that of the
+    fusion at the end (OdometryFusion.bias). keep·(bias then − bias now)."""
+    keep = taken[:, 6:].reshape(-1, 3, 3)
+    return np.einsum("nij,nj->ni", keep, taken[:, 3:6] - bias(taken[:, :3]))
 
 
 def bias_matrix(o: np.ndarray, along: bool = False) -> np.ndarray:
