@@ -211,3 +211,30 @@ def test_recalibrated_landmarks_keep_their_place_relative_to_the_robot_that_last
         rows = np.isin(table["id"], t["id"])
         placed = np.column_stack((table["x"][rows], table["y"][rows], np.zeros(rows.sum())))
         np.testing.assert_allclose(relative(poses[k], placed)[:, :2], want, atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    "overrides, learnt",
+    [([], True), (["graph.recalibrate=false"], False), (["scan_match.enabled=false"], False)],
+)
+def test_a_run_recalibrates_with_its_front_ends_bias_only_when_it_matched_scans_and_is_asked_to(
+    sim_log, tmp_path, monkeypatch, overrides, learnt
+):
+    """pipeline.run_filter's wiring of graph.recalibrate: finish gets the scan matcher's final bias
+    (OdometryFusion.bias) by default, None with graph.recalibrate=false or without scan matching."""
+    from cornerslam_cli.motion.fusion import OdometryFusion
+    from cornerslam_cli.pipeline import run
+    from cornerslam_cli.span import Span
+
+    got = []
+    finish = HierarchicalSlam.finish
+    monkeypatch.setattr(
+        HierarchicalSlam, "finish", lambda self, bias=None: (got.append(bias), finish(self, bias))
+    )
+    cfg = config_from({}, ["submaps.max_steps=20", "loops.enabled=false", *overrides])
+    run(sim_log, cfg, tmp_path / "out", span=Span(max_scans=60))
+    assert len(got) == 1
+    if learnt:
+        assert isinstance(got[0].__self__, OdometryFusion) and got[0].__func__ is OdometryFusion.bias
+    else:
+        assert got[0] is None
