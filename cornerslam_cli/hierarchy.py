@@ -365,7 +365,7 @@ class HierarchicalSlam:
 
     def landmark_table(self) -> dict[str, np.ndarray]:
         """map.csv's columns: every submap's landmarks in the global frame — once the keyframe graph is
-        solved, each where the node of the step that last observed it puts it (graph/submap.py
+        solved, each where the step that last observed it puts it, smoothed (graph/submap.py
         landmark_frames), before that at its submap's origin — their covariances turned with it (the
         graph's own uncertainty not added), with ``submap`` and ``linked_to`` (the id of the corner it
         was matched to across an accepted closure, or -1)."""
@@ -373,10 +373,10 @@ class HierarchicalSlam:
             poses = self.graph.poses()
             parts = [place_table(t, poses[i], i) for i, t in enumerate(self.tables)]
         else:
-            nodes = self.smoothed.poses()
+            nodes, offsets = self.smoothed.poses(), self.offsets or [None] * len(self.closed)
             parts = [
-                place_table(t, landmark_frames(s, nodes, t["last_step"]), s.index)
-                for s, t in zip(self.closed, self.tables, strict=True)
+                place_table(t, landmark_frames(s, nodes, t["last_step"], o), s.index)
+                for s, t, o in zip(self.closed, self.tables, offsets, strict=True)
             ]
         if not parts:  # none closed yet: the open submap 0's, whose frame is the global one
             return self.slam.landmark_table()

@@ -190,3 +190,51 @@ def test_a_runs_recalibrated_poses_are_its_steps_moved_by_the_final_bias(sim_log
     hs.finish(bias)
     moved = compose(online[0], chain(relative(online[:-1], online[1:]) + shift[1:]))
     np.testing.assert_allclose(hs.final_poses()[1:], moved, atol=1e-6)
+
+
+def test_recalibrated_landmarks_keep_their_place_relative_to_the_robot_that_last_saw_them(sim_log):
+    """map.csv once recalibrated (finish with a bias): each landmark where the smoothed pose of the step
+    that last observed it puts it — relative to that pose, where the filter had it relative to its own
+    pose then (landmark_frames), as lines.csv's segments move with the smoothed poses."""
+    cfg = config_from({}, ["submaps.max_steps=6", "loops.enabled=false"])
+    src = open_input(sim_log, cfg)
+    hs = HierarchicalSlam(cfg, src.laser2base)
+    for f in frames(src, cfg):
+        hs.step(f)
+    hs.finish(lambda o: bias_matrices(o, False) @ np.array([0.02, 0.02]))
+    table, poses = hs.landmark_table(), hs.final_poses()
+    assert len(table["id"]) > 0
+    for s, t in zip(hs.closed, hs.tables, strict=True):
+        k = t["last_step"]
+        seen = np.column_stack((t["x"], t["y"], np.zeros(len(k))))
+        want = relative(s.poses[k - s.first_step], seen)[:, :2]
+        rows = np.isin(table["id"], t["id"])
+        placed = np.column_stack((table["x"][rows], table["y"][rows], np.zeros(rows.sum())))
+        np.testing.assert_allclose(relative(poses[k], placed)[:, :2], want, atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    "overrides, learnt",
+    [([], True), (["graph.recalibrate=false"], False), (["scan_match.enabled=false"], False)],
+)
+def test_a_run_recalibrates_with_its_front_ends_bias_only_when_it_matched_scans_and_is_asked_to(
+    sim_log, tmp_path, monkeypatch, overrides, learnt
+):
+    """pipeline.run_filter's wiring of graph.recalibrate: finish gets the scan matcher's final bias
+    (OdometryFusion.bias) by default, None with graph.recalibrate=false or without scan matching."""
+    from cornerslam_cli.motion.fusion import OdometryFusion
+    from cornerslam_cli.pipeline import run
+    from cornerslam_cli.span import Span
+
+    got = []
+    finish = HierarchicalSlam.finish
+    monkeypatch.setattr(
+        HierarchicalSlam, "finish", lambda self, bias=None: (got.append(bias), finish(self, bias))
+    )
+    cfg = config_from({}, ["submaps.max_steps=20", "loops.enabled=false", *overrides])
+    run(sim_log, cfg, tmp_path / "out", span=Span(max_scans=60))
+    assert len(got) == 1
+    if learnt:
+        assert isinstance(got[0].__self__, OdometryFusion) and got[0].__func__ is OdometryFusion.bias
+    else:
+        assert got[0] is None

@@ -102,17 +102,17 @@ class GraphConfig:
     kernel_scale: float = num(2.8, gt=0.0, le=1e6)
     node_spacing: float = num(1.0, ge=0.0, le=1e6)  # m between keyframe nodes (0: every keyframe)
     node_angle: float = num(0.5, ge=0.0, le=math.pi)  # rad: a turn this large makes a node too
+    # the smoothed trajectory's keyframe chain takes the odometry bias the front end learnt by the end of
+    # the run (motion/fusion.py), not the one it had learnt by each step: every increment moved by the
+    # share of the odometry in it (graph/smooth.py recalibrated); the online estimate and the closures
+    # found stay as they were
+    recalibrate: bool = True
     # dense refinement (graph/refine.py; off: README "Dense refinement"): as the run goes, each node's
     # scan registered against its refine_neighbours nearest earlier nodes within refine_radius m that lie
     # refine_min_path m of path back (each with its chain neighbours' points, those as far back), kept
     # when the fit reaches refine_min_fitness; after the keyframe graph is solved, those that move their
     # pair at most refine_max_xy m / refine_max_theta rad from it become factors, and it is solved again
     refine: bool = False
-    # the smoothed trajectory's keyframe chain takes the odometry bias the front end learnt by the end of
-    # the run (motion/fusion.py), not the one it had learnt by each step: every increment moved by the
-    # share of the odometry in it (graph/smooth.py recalibrated); the online estimate and the closures
-    # found stay as they were
-    recalibrate: bool = True
     refine_radius: float = num(5.0, gt=0.0, le=1e6)
     refine_min_path: float = num(5.0, ge=0.0, le=1e9)
     refine_neighbours: int = num(2, ge=1, le=1000)
