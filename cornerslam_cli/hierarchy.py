@@ -181,10 +181,12 @@ class HierarchicalSlam:
         self.t_loop += time.perf_counter() - t0
 
     def _recalibrated(self, bias: Callable[[np.ndarray], np.ndarray]) -> list:
-        """The closed submaps' chains with the increments moved to the bias learnt by the end (their
-        steps' offsets from their nodes kept for final_poses); closures stay as measured."""
+        """The closed submaps' chains with the increments moved to the bias learnt by the end (the steps'
+        offsets kept for final_poses; closures as measured); untouched, bit for bit, when no step moves."""
         spacing = (self.cfg.graph.node_spacing, self.cfg.graph.node_angle)
         shift = shifts(np.frombuffer(self.taken).reshape(-1, len(NO_BIAS)), bias)
+        if not shift.any():
+            return self.chains
         out = [
             recalibrated(s, shift[s.first_step : s.last_step + 1], keyframe_nodes(s.poses, *spacing))
             for s in self.closed
