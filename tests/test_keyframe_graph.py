@@ -215,13 +215,18 @@ def test_recalibrated_landmarks_keep_their_place_relative_to_the_robot_that_last
 
 @pytest.mark.parametrize(
     "overrides, learnt",
-    [([], True), (["graph.recalibrate=false"], False), (["scan_match.enabled=false"], False)],
+    [
+        (["graph.recalibrate=true"], True),
+        ([], False),
+        (["graph.recalibrate=true", "scan_match.enabled=false"], False),
+    ],
 )
 def test_a_run_recalibrates_with_its_front_ends_bias_only_when_it_matched_scans_and_is_asked_to(
     sim_log, tmp_path, monkeypatch, overrides, learnt
 ):
-    """pipeline.run_filter's wiring of graph.recalibrate: finish gets the scan matcher's final bias
-    (OdometryFusion.bias) by default, None with graph.recalibrate=false or without scan matching."""
+    """pipeline.run_filter's wiring of graph.recalibrate: finish gets the bias the scan matcher fits on the
+    whole run (OdometryFusion.bias of a fitted copy) with graph.recalibrate=true, None by default (off)
+    or without scan matching."""
     from cornerslam_cli.motion.fusion import OdometryFusion
     from cornerslam_cli.pipeline import run
     from cornerslam_cli.span import Span
@@ -236,5 +241,7 @@ def test_a_run_recalibrates_with_its_front_ends_bias_only_when_it_matched_scans_
     assert len(got) == 1
     if learnt:
         assert isinstance(got[0].__self__, OdometryFusion) and got[0].__func__ is OdometryFusion.bias
+        fitted = got[0].__self__  # (a copy sharing the run's samples: all of them, under the window)
+        assert len(fitted.every_sample) == 24 * len(fitted.samples) > 0
     else:
         assert got[0] is None

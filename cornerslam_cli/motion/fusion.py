@@ -47,7 +47,9 @@ such a turn.
 
 from __future__ import annotations
 
+import copy
 import math
+from array import array
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -65,6 +67,7 @@ CHI2_3_MEDIAN = 2.365974  # median of χ² with 3 degrees of freedom
 S_MAX = 1e4  # the match's covariance is inflated at most this much
 BIAS_SIGMAS = 3.0  # a drift term is kept when it is this many standard errors from zero
 ALONG_EVIDENCE = BIAS_SIGMAS**2 / 2  # the drift along the path is taken when likelier by this (NLL)
+SAMPLE = 24  # numbers a sample is kept as for the whole run: d (3), Σ_o (9), Σ_m (9), o (3)
 
 
 @dataclass(frozen=True)
@@ -108,6 +111,9 @@ class OdometryFusion:
         )
         self.n_rejected = 0
         self._since = 0
+        # every sample of the run, SAMPLE numbers each (d, Σ_o, Σ_m, o): the bias fitted on all of them
+        # (:meth:`whole_run_bias`, the smoothed trajectory's) — 192 bytes a keyframe
+        self.every_sample = array("d")
 
     def corrected(self, o: np.ndarray) -> np.ndarray:
         """The odometry increment with the learnt scale error and drift taken out."""
@@ -141,6 +147,7 @@ class OdometryFusion:
         d = m - o
         d[2] = wrap_angle(d[2])
         self.samples.append((d, cov_o, cov_m, np.array(o, dtype=float)))
+        self.every_sample.extend((*d, *np.ravel(cov_o), *np.ravel(cov_m), *o))
         self._since += 1
         if len(self.samples) >= self.min_samples and (
             self._since >= self.every or len(self.samples) < 2 * self.every
@@ -171,11 +178,25 @@ class OdometryFusion:
         """Covariance of an odometry increment used without a match: the configured model at least."""
         return max(self.k, 1.0) * cov_o
 
+    def whole_run_bias(self) -> Callable[[np.ndarray], np.ndarray]:
+        """The bias as :meth:`bias` gives it, but with the scales and bias fitted once on every sample of
+        the run instead of the last ``adapt_window``: one robot's odometry bias is taken as constant, and
+        a window's estimate is noisy (a term that fails its 3σ test in the last window would be dropped
+        from every step). This fusion's own state is left as it was."""
+        rows = np.frombuffer(self.every_sample).reshape(-1, SAMPLE)
+        fit = copy.copy(self)
+        if len(rows) >= self.min_samples:
+            So, Sm = rows[:, 3:12].reshape(-1, 3, 3), rows[:, 12:21].reshape(-1, 3, 3)
+            fit._fit(rows[:, :3], So, Sm, rows[:, 21:])
+        return fit.bias
+
     def _learn(self) -> None:
-        d = np.array([x[0] for x in self.samples])
-        So = np.array([x[1] for x in self.samples])
-        Sm = np.array([x[2] for x in self.samples])
-        o = np.array([x[3] for x in self.samples])
+        """Re-estimate the scales and bias on the window's samples."""
+        self._fit(*(np.array([x[i] for x in self.samples]) for i in range(4)))
+
+    def _fit(self, d: np.ndarray, So: np.ndarray, Sm: np.ndarray, o: np.ndarray) -> None:
+        """Set k, s, c and the drift model from disagreements d (n, 3), the odometry's and the matches'
+        covariances So, Sm (n, 3, 3) and the odometry increments o (n, 3) (module docstring)."""
         lo = np.array([np.log(self.k_min), 0.0])
         hi = np.array([np.log(self.k_max), np.log(S_MAX)])
         x0 = np.clip(np.log([self.k, self.s]), lo, hi)
