@@ -106,7 +106,7 @@ class GraphConfig:
     # (motion/fusion.py whole_run_bias), not the one it had learnt by each step: every increment moved by
     # the share of the odometry in it (graph/smooth.py recalibrated); the online estimate and the closures
     # found stay as they were. Off by default: it moves increments the filter's corners had already
-    # corrected (README "The smoothed chain, recalibrated": the simulated office 0.017 → 0.027 m)
+    # corrected (README "The smoothed chain, recalibrated": infinite-corridor, the 3-lap simulated office)
     recalibrate: bool = False
     # dense refinement (graph/refine.py; off: README "Dense refinement"): as the run goes, each node's
     # scan registered against its refine_neighbours nearest earlier nodes within refine_radius m that lie
