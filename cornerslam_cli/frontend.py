@@ -142,7 +142,8 @@ def open_input(log_path: str | Path, cfg: Config, span: Span | None = None) -> I
     reader.check()
     info = reader.info()
     laser2base, source, upside_down, upside_down_source = _laser_mount(reader, cfg)
-    matcher = ScanMatcher(cfg.scan_match, odometry_noise(cfg)) if cfg.scan_match.enabled else None
+    whole_run = cfg.submaps.enabled and cfg.graph.recalibrate  # (its fusion keeps every sample)
+    matcher = ScanMatcher(cfg.scan_match, odometry_noise(cfg), whole_run) if cfg.scan_match.enabled else None
     load_kernels(cfg.sensor, cfg.lines)
     with signals_deferred():
         load_association_kernels()

@@ -116,7 +116,7 @@ class HierarchicalSlam:
         self.step_submap = array("l")
         self.local_poses = array("d")
         self.chains: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # per closed submap (smooth)
-        self.taken = array("d")  # per step, the odometry bias its increment took (BiasTaken.row; 0: none)
+        self.taken = array("d") if cfg.graph.recalibrate else None  # per step: BiasTaken.row, or 0s
         self.offsets: list[np.ndarray] | None = None  # per closed submap, steps from their nodes (finish)
         self.n_nodes = 1  # keyframe nodes so far (node 0: the first origin)
         self.smoothed: PoseGraph | None = None  # the keyframe graph, solved by finish()
@@ -137,7 +137,8 @@ class HierarchicalSlam:
         graph's optimisation timed as the step's ``t_loop``). Returns the step in the global frame."""
         r = self.slam.step(frame)
         self._match_scale = frame.match_scale
-        self.taken.extend(NO_BIAS if frame.bias_taken is None else frame.bias_taken.row())
+        if self.taken is not None:
+            self.taken.extend(NO_BIAS if frame.bias_taken is None else frame.bias_taken.row())
         sub = self._open
         sensor = compose(r.pose, self.laser2base)
         pts = None if frame.points is None else transform_points(frame.points.astype(float), sensor)
@@ -161,9 +162,8 @@ class HierarchicalSlam:
         )
 
     def finish(self, bias: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
-        """Close the last submap (its loops too) when it has steps; solve the keyframe graph — with
-        ``bias``, the odometry bias learnt by the end of the run (OdometryFusion.bias), each step's
-        increment moved to it (graph/smooth.py ``recalibrated``)."""
+        """Close the last submap (its loops too) when it has steps; solve the keyframe graph — with ``bias``
+        (OdometryFusion.whole_run_bias), each step's increment moved to it (graph.recalibrate)."""
         t0 = time.perf_counter()
         if self._open.poses:
             self._close(self.n_steps - 1, last=True)
@@ -173,7 +173,7 @@ class HierarchicalSlam:
                 for r in self.loops
                 if r.factor >= 0
             ]
-            chains = self.chains if bias is None else self._recalibrated(bias)
+            chains = self.chains if bias is None or self.taken is None else self._recalibrated(bias)
             self.smoothed = smooth(self.cfg.graph, chains, self.graph.poses()[: len(self.closed)], loops)
             self.unconverged += not self.smoothed.converged
             if self.cfg.graph.refine:  # (its own solve's warning: Refinement.solver_warning)

@@ -3,6 +3,8 @@ Monte Carlo references: data drawn from known noise scales, bias and poses."""
 
 from __future__ import annotations
 
+from array import array
+
 import numpy as np
 import pytest
 from scipy.stats import chi2
@@ -242,3 +244,27 @@ def test_the_shift_is_what_the_increment_becomes_fused_with_the_final_bias(along
     assert np.abs(shift).max() > 1e-3  # (a case that moves)
     np.testing.assert_allclose(inc_then + shift, inc_end, atol=1e-12)
     assert shifts(np.zeros((2, 15)), f_end.bias).tolist() == [[0.0] * 3] * 2  # no bias taken: no shift
+
+
+def test_the_whole_run_bias_is_fitted_on_every_sample_and_leaves_the_fusion_as_it_was():
+    """whole_run_bias against a fit by hand on all the samples drawn (the same learner on a fusion whose
+    window holds them all), while the fusion keeps its last window's state; without whole_run it refuses."""
+    rng = np.random.default_rng(21)
+    noise = odometry_noise(load_config(None))
+    c = np.array([0.02, 0.01])
+    drawn = list(draw(rng, 0.05, 6.0, c, 300, noise))
+    f, everything = fusion(adapt_window=60, adapt_min_samples=5), fusion(adapt_window=300)
+    f.every_sample = array("d")  # (as whole_run=True makes it)
+    for o, So, m, Sm in drawn:
+        f.fuse(o, So, m, Sm)
+        everything.samples.append((m - o, So, Sm, o))
+    state = (f.k, f.s, f.c.copy(), f.along)
+    bias = f.whole_run_bias()
+    assert (f.k, f.s, f.along) == (state[0], state[1], state[3]) and np.array_equal(f.c, state[2])
+    everything.k, everything.s = state[0], state[1]  # (the same starting point as the copy's fit)
+    everything._learn()
+    o = np.array([x[0] for x in drawn])
+    np.testing.assert_allclose(bias(o), everything.bias(o), rtol=1e-9, atol=1e-12)
+    assert np.all(np.abs(everything.c - c) < 0.005)  # (the drawn bias, found)
+    with pytest.raises(ValueError, match="whole_run"):
+        fusion().whole_run_bias()

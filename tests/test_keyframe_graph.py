@@ -174,7 +174,7 @@ def test_a_runs_recalibrated_poses_are_its_steps_moved_by_the_final_bias(sim_log
     """Without loop closing the keyframe graph is a chain: finished with the bias learnt by the end (here
     a stand-in: 1 % scale, 0.01 rad/m), the smoothed trajectory is the filter's step increments each moved
     by its shift (what its frame's BiasTaken says), composed from the first pose; across submaps too."""
-    cfg = config_from({}, ["submaps.max_steps=6", "loops.enabled=false"])
+    cfg = config_from({}, ["submaps.max_steps=6", "loops.enabled=false", "graph.recalibrate=true"])
     src = open_input(sim_log, cfg)
     hs = HierarchicalSlam(cfg, src.laser2base)
     fs = list(frames(src, cfg))

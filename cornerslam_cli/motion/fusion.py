@@ -100,7 +100,7 @@ def nis(d: np.ndarray, S: np.ndarray) -> np.ndarray:
 class OdometryFusion:
     """Combines odometry and scan-match increments; learns the noise scales k, s and the bias c."""
 
-    def __init__(self, cfg: ScanMatchConfig):
+    def __init__(self, cfg: ScanMatchConfig, whole_run: bool = False):
         self.gate, self.min_samples, self.every = cfg.gate, cfg.adapt_min_samples, cfg.adapt_every
         self.k_min, self.k_max = cfg.adapt_min, cfg.adapt_max
         self.k, self.s = 1.0, 1.0
@@ -111,9 +111,9 @@ class OdometryFusion:
         )
         self.n_rejected = 0
         self._since = 0
-        # every sample of the run, SAMPLE numbers each (d, Σ_o, Σ_m, o): the bias fitted on all of them
-        # (:meth:`whole_run_bias`, the smoothed trajectory's) — 192 bytes a keyframe
-        self.every_sample = array("d")
+        # with ``whole_run``, every sample of the run, SAMPLE numbers each (d, Σ_o, Σ_m, o): the bias
+        # fitted on all of them (:meth:`whole_run_bias`, graph.recalibrate's) — 192 bytes a keyframe
+        self.every_sample = array("d") if whole_run else None
 
     def corrected(self, o: np.ndarray) -> np.ndarray:
         """The odometry increment with the learnt scale error and drift taken out."""
@@ -147,7 +147,8 @@ class OdometryFusion:
         d = m - o
         d[2] = wrap_angle(d[2])
         self.samples.append((d, cov_o, cov_m, np.array(o, dtype=float)))
-        self.every_sample.extend((*d, *np.ravel(cov_o), *np.ravel(cov_m), *o))
+        if self.every_sample is not None:
+            self.every_sample.extend((*d, *np.ravel(cov_o), *np.ravel(cov_m), *o))
         self._since += 1
         if len(self.samples) >= self.min_samples and (
             self._since >= self.every or len(self.samples) < 2 * self.every
@@ -182,7 +183,9 @@ class OdometryFusion:
         """The bias as :meth:`bias` gives it, but with the scales and bias fitted once on every sample of
         the run instead of the last ``adapt_window``: one robot's odometry bias is taken as constant, and
         a window's estimate is noisy (a term that fails its 3σ test in the last window would be dropped
-        from every step). This fusion's own state is left as it was."""
+        from every step). This fusion's own state is left as it was. Needs ``whole_run`` (ValueError)."""
+        if self.every_sample is None:
+            raise ValueError("whole_run_bias: this fusion was made without whole_run, it kept no samples")
         rows = np.frombuffer(self.every_sample).reshape(-1, SAMPLE)
         fit = copy.copy(self)
         if len(rows) >= self.min_samples:
