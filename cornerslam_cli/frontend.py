@@ -32,7 +32,7 @@ from .logs.deskew import deskew
 from .logs.sync import Synced, SyncStats, reanchor_odometry, select_keyframes, synchronise
 from .logs.unreadable import damaged_error
 from .motion import ScanMatcher
-from .motion.fusion import BiasTaken
+from .motion.fusion import BiasTaken, OdometryFusion
 from .motion.icp import load_kernels as load_motion_kernels
 from .ranges import short_text
 from .span import Span, SpanUsed, select
@@ -142,8 +142,9 @@ def open_input(log_path: str | Path, cfg: Config, span: Span | None = None) -> I
     reader.check()
     info = reader.info()
     laser2base, source, upside_down, upside_down_source = _laser_mount(reader, cfg)
-    whole_run = cfg.submaps.enabled and cfg.graph.recalibrate  # (its fusion keeps every sample)
-    matcher = ScanMatcher(cfg.scan_match, odometry_noise(cfg), whole_run) if cfg.scan_match.enabled else None
+    matcher = ScanMatcher(cfg.scan_match, odometry_noise(cfg)) if cfg.scan_match.enabled else None
+    if matcher is not None and cfg.submaps.enabled and cfg.graph.recalibrate:  # (before any use)
+        matcher.fusion = OdometryFusion(cfg.scan_match, whole_run=True)  # keeps every sample
     load_kernels(cfg.sensor, cfg.lines)
     with signals_deferred():
         load_association_kernels()

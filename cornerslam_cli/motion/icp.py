@@ -249,16 +249,10 @@ class MatchResult:
 class ScanMatcher:
     """Fuses a stream of (points, wheel odometry pose) with scan matches into a motion-frame pose chain."""
 
-    def __init__(
-        self,
-        cfg: ScanMatchConfig,
-        odometry_noise: Callable[[np.ndarray], np.ndarray],
-        whole_run: bool = False,
-    ):
-        """``whole_run``: the fusion keeps every sample (OdometryFusion.whole_run_bias)."""
+    def __init__(self, cfg: ScanMatchConfig, odometry_noise: Callable[[np.ndarray], np.ndarray]):
         self.cfg = cfg
         self.odometry_noise = odometry_noise  # covariance of an odometry increment (the filter's model)
-        self.fusion = OdometryFusion(cfg, whole_run)
+        self.fusion = OdometryFusion(cfg)
         self.scans: deque[MapScan] = deque(maxlen=cfg.window)  # the last map scans
         self.history: deque[MapScan] = deque(maxlen=cfg.near_history)  # older ones (near_scans)
         self.local: LocalMap | None = None
