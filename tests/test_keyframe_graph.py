@@ -245,3 +245,23 @@ def test_a_run_recalibrates_with_its_front_ends_bias_only_when_it_matched_scans_
         assert len(fitted.every_sample) == 24 * len(fitted.samples) > 0
     else:
         assert got[0] is None
+
+
+@pytest.mark.parametrize(
+    "overrides, ignored",
+    [
+        ([], None),
+        (["submaps.enabled=false"], "submaps.enabled=false"),
+        (["scan_match.enabled=false"], "scan_match.enabled=false"),
+    ],
+)
+def test_graph_recalibrate_says_when_it_has_nothing_to_do(sim_log, tmp_path, overrides, ignored):
+    """graph.recalibrate=true on a run without the keyframe graph or without scan matching warns that it is
+    ignored and why (as graph.refine does), and not otherwise."""
+    from cornerslam_cli.pipeline import run
+    from cornerslam_cli.span import Span
+
+    cfg = config_from({}, ["graph.recalibrate=true", "loops.enabled=false", *overrides])
+    summary = run(sim_log, cfg, tmp_path / "out", span=Span(max_scans=30))
+    said = [w for w in summary.warnings if "graph.recalibrate=true is ignored" in w]
+    assert len(said) == (ignored is not None) and all(ignored in w for w in said)
