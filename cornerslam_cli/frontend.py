@@ -32,6 +32,7 @@ from .logs.deskew import deskew
 from .logs.sync import Synced, SyncStats, reanchor_odometry, select_keyframes, synchronise
 from .logs.unreadable import damaged_error
 from .motion import ScanMatcher
+from .motion.fusion import BiasTaken, OdometryFusion
 from .motion.icp import load_kernels as load_motion_kernels
 from .ranges import short_text
 from .span import Span, SpanUsed, select
@@ -86,6 +87,7 @@ class Frame:
     # how much too small the scan matcher has found its fits' covariances (motion/fusion.py's learnt s,
     # 1 without scan matching): a fit's covariance misses what makes real matches wrong
     match_scale: float = 1.0
+    bias_taken: BiasTaken | None = None  # the odometry bias the fused increment took out (motion/fusion.py)
     points: np.ndarray | None = None  # (k, 2) float32 valid beam end points, sensor frame (occupancy grid)
 
 
@@ -141,6 +143,8 @@ def open_input(log_path: str | Path, cfg: Config, span: Span | None = None) -> I
     info = reader.info()
     laser2base, source, upside_down, upside_down_source = _laser_mount(reader, cfg)
     matcher = ScanMatcher(cfg.scan_match, odometry_noise(cfg)) if cfg.scan_match.enabled else None
+    if matcher is not None and cfg.submaps.enabled and cfg.graph.recalibrate:  # (before any use)
+        matcher.fusion = OdometryFusion(cfg.scan_match, whole_run=True)  # keeps every sample
     load_kernels(cfg.sensor, cfg.lines)
     with signals_deferred():
         load_association_kernels()
@@ -273,6 +277,7 @@ def _scan_matched(
         scan_matched=m.matched,
         scan_fit=m.fit,
         match_scale=matcher.fusion.s,
+        bias_taken=m.taken,
         t_scan_match=time.perf_counter() - t0,
     )
 

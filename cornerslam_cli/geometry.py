@@ -84,6 +84,18 @@ def relative(a, b) -> np.ndarray:
     return np.stack((c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[..., 2] - a[..., 2])), axis=-1)
 
 
+def chain(increments: np.ndarray) -> np.ndarray:
+    """(n, 3) the poses p₀ ∘ … ∘ pₖ of consecutive ``increments`` (n, 3) from the origin: each pose the
+    one before composed with its increment."""
+    inc = np.asarray(increments, dtype=float)
+    heading = np.cumsum(inc[:, 2])
+    before = np.concatenate(([0.0], heading[:-1]))
+    c, s = np.cos(before), np.sin(before)
+    x = np.cumsum(c * inc[:, 0] - s * inc[:, 1])
+    y = np.cumsum(s * inc[:, 0] + c * inc[:, 1])
+    return np.column_stack((x, y, wrap_angle(heading)))
+
+
 def compose_inverse(a, b) -> np.ndarray:
     """a ∘ b⁻¹: with a = ``base2map`` and b = ``base2odom``, ``odom2map``. Row-wise for (n, 3).
 

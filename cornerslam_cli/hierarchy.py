@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 import time
 from array import array
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
@@ -38,24 +39,26 @@ from .graph.paths import Paths
 from .graph.points import POINTS, match_points, searchable
 from .graph.posegraph import ONLINE_RELINEARIZE, PoseGraph
 from .graph.refine import Refinement
-from .graph.smooth import smooth
+from .graph.smooth import recalibrated, smooth
 from .graph.submap import (
     LocalMaps,
     LoopMatch,
     OpenSubmap,
     Submap,
+    hanging,
     keyframe_factors,
     keyframe_nodes,
     landmark_frames,
     place_table,
-    propagate,
 )
-from .slam import Slam, StepRecord
+from .motion.fusion import shifts
+from .slam import Slam, StepRecord, globalise
 
 if TYPE_CHECKING:
     from .config import Config
     from .frontend import Frame
 
+NO_BIAS = (0.0,) * 15  # a step whose increment took no odometry bias (BiasTaken.row's length)
 COV_FLOOR = np.diag([1e-8, 1e-8, 1e-10])  # added to a submap's end covariance: a still robot gives Σ = 0
 # the corners gave no verdict (too few in common, no hypothesis) or a pose the points refute (low fitness:
 # usually a corner constellation repeated elsewhere): the points decide, around the graph's prediction
@@ -113,6 +116,8 @@ class HierarchicalSlam:
         self.step_submap = array("l")
         self.local_poses = array("d")
         self.chains: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # per closed submap (smooth)
+        self.taken = array("d") if cfg.graph.recalibrate else None  # per step: BiasTaken.row, or 0s
+        self.offsets: list[np.ndarray] | None = None  # per closed submap, steps from their nodes (finish)
         self.n_nodes = 1  # keyframe nodes so far (node 0: the first origin)
         self.smoothed: PoseGraph | None = None  # the keyframe graph, solved by finish()
         self.refinement = Refinement(cfg.graph, cfg.scan_match)  # graph.refine (graph/refine.py)
@@ -132,6 +137,8 @@ class HierarchicalSlam:
         graph's optimisation timed as the step's ``t_loop``). Returns the step in the global frame."""
         r = self.slam.step(frame)
         self._match_scale = frame.match_scale
+        if self.taken is not None:
+            self.taken.extend(NO_BIAS if frame.bias_taken is None else frame.bias_taken.row())
         sub = self._open
         sensor = compose(r.pose, self.laser2base)
         pts = None if frame.points is None else transform_points(frame.points.astype(float), sensor)
@@ -154,8 +161,9 @@ class HierarchicalSlam:
             or self.slam.ekf.n_landmarks >= lim.max_landmarks
         )
 
-    def finish(self) -> None:
-        """Close the last submap (its loops too) when it has steps; solve the keyframe graph."""
+    def finish(self, bias: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
+        """Close the last submap (its loops too) when it has steps; solve the keyframe graph — with ``bias``
+        (OdometryFusion.whole_run_bias), each step's increment moved to it (graph.recalibrate)."""
         t0 = time.perf_counter()
         if self._open.poses:
             self._close(self.n_steps - 1, last=True)
@@ -165,11 +173,26 @@ class HierarchicalSlam:
                 for r in self.loops
                 if r.factor >= 0
             ]
-            self.smoothed = smooth(self.cfg.graph, self.chains, self.graph.poses()[: len(self.closed)], loops)
+            chains = self.chains if bias is None or self.taken is None else self._recalibrated(bias)
+            self.smoothed = smooth(self.cfg.graph, chains, self.graph.poses()[: len(self.closed)], loops)
             self.unconverged += not self.smoothed.converged
             if self.cfg.graph.refine:  # (its own solve's warning: Refinement.solver_warning)
                 self.refinement.finish(self.graph, self.smoothed, self._match_scale)
         self.t_loop += time.perf_counter() - t0
+
+    def _recalibrated(self, bias: Callable[[np.ndarray], np.ndarray]) -> list:
+        """The closed submaps' chains with the increments moved to the bias learnt by the end (the steps'
+        offsets kept for final_poses; closures as measured); untouched, bit for bit, when no step moves."""
+        spacing = (self.cfg.graph.node_spacing, self.cfg.graph.node_angle)
+        shift = shifts(np.frombuffer(self.taken).reshape(-1, len(NO_BIAS)), bias)
+        if not shift.any():
+            return self.chains
+        out = [
+            recalibrated(s, shift[s.first_step : s.last_step + 1], keyframe_nodes(s.poses, *spacing))
+            for s in self.closed
+        ]
+        self.offsets = [o for *_, o in out]
+        return [(rel, c[1], at) for (rel, at, _), c in zip(out, self.chains, strict=True)]
 
     def _optimize(self, graph: PoseGraph) -> None:
         """``graph.optimize()``, counting a solve that stopped at its step limit."""
@@ -206,10 +229,9 @@ class HierarchicalSlam:
         nodes = keyframe_nodes(poses, g.node_spacing, g.node_angle)
         rel, cov = keyframe_factors(poses, np.array(sub.covs), ekf.P[:3, :3], nodes)
         self.chains.append((rel, cov + COV_FLOOR, poses[nodes]))
-        before = np.searchsorted(nodes, np.arange(len(poses)), side="right") - 1  # last node at or before
+        before, anchor_poses = hanging(poses, nodes)
         step_nodes = np.where(before >= 0, self.n_nodes + before, sub.node)
         self.n_nodes += len(nodes)
-        anchor_poses = np.where((before >= 0)[:, None], poses[nodes[before.clip(0)]], 0.0)
         self.refinement.add_submap(sub, poses[nodes], step_nodes, anchor_poses)
         table = self.slam.landmark_table()
         n = len(table["id"])
@@ -340,11 +362,12 @@ class HierarchicalSlam:
             local = np.frombuffer(self.local_poses).reshape(-1, 3)
             return compose(self.graph.poses()[np.frombuffer(self.step_submap, dtype=np.int64)], local)
         nodes = self.smoothed.poses()[np.concatenate([s.step_nodes for s in self.closed])]
-        return compose(nodes, np.vstack([relative(s.anchor_poses, s.poses) for s in self.closed]))
+        offsets = self.offsets or [relative(s.anchor_poses, s.poses) for s in self.closed]
+        return compose(nodes, np.vstack(offsets))
 
     def landmark_table(self) -> dict[str, np.ndarray]:
         """map.csv's columns: every submap's landmarks in the global frame — once the keyframe graph is
-        solved, each where the node of the step that last observed it puts it (graph/submap.py
+        solved, each where the step that last observed it puts it, smoothed (graph/submap.py
         landmark_frames), before that at its submap's origin — their covariances turned with it (the
         graph's own uncertainty not added), with ``submap`` and ``linked_to`` (the id of the corner it
         was matched to across an accepted closure, or -1)."""
@@ -352,10 +375,10 @@ class HierarchicalSlam:
             poses = self.graph.poses()
             parts = [place_table(t, poses[i], i) for i, t in enumerate(self.tables)]
         else:
-            nodes = self.smoothed.poses()
+            nodes, offsets = self.smoothed.poses(), self.offsets or [None] * len(self.closed)
             parts = [
-                place_table(t, landmark_frames(s, nodes, t["last_step"]), s.index)
-                for s, t in zip(self.closed, self.tables, strict=True)
+                place_table(t, landmark_frames(s, nodes, t["last_step"], o), s.index)
+                for s, t, o in zip(self.closed, self.tables, offsets, strict=True)
             ]
         if not parts:  # none closed yet: the open submap 0's, whose frame is the global one
             return self.slam.landmark_table()
@@ -375,26 +398,3 @@ class HierarchicalSlam:
         """loops.csv's rows; ``inlier``: whether the graph kept an accepted closure inside its kernel."""
         g = self.graph if self.smoothed is None else self.smoothed  # the keyframe graph once solved
         return [r.row(g.loop_inlier(r.factor) if r.factor >= 0 else None) for r in self.loops]
-
-
-def globalise(
-    r: StepRecord, origin: np.ndarray, origin_cov: np.ndarray, index: int, t_loop: float
-) -> StepRecord:
-    """A local step record in the global frame: its submap's ``origin`` ∘ the local pose; the pose's
-    covariance to first order from the origin's marginal ``origin_cov`` (with the lever arm of its
-    heading error over the local pose) and the local one turned by the origin (its x–θ and y–θ
-    covariances are not in the record: taken as 0); segments moved with it."""
-    local = np.array(
-        [[r.pose_var[0], r.cov_xy, 0.0], [r.cov_xy, r.pose_var[1], 0.0], [0.0, 0.0, r.pose_var[2]]]
-    )
-    pose = compose(origin, r.pose)
-    cov = propagate(origin_cov, origin, pose, local)
-    return replace(
-        r,
-        pose=pose,
-        pose_var=np.diag(cov).copy(),
-        cov_xy=float(cov[0, 1]),
-        segments_map=transform_points(r.segments_map.reshape(-1, 2), origin).reshape(-1, 4),
-        t_loop=t_loop,
-        submap=index,
-    )

@@ -122,6 +122,12 @@ def run_filter(
             "graph.refine=true is ignored: it refines the two levels' keyframe graph, and "
             "submaps.enabled=false runs the single map"
         )
+    if cfg.graph.recalibrate and (graph is None or src.matcher is None):
+        why = "submaps.enabled=false runs the single map" if graph is None else "scan_match.enabled=false"
+        src.reader.stats.warn(
+            f"graph.recalibrate=true is ignored: it moves the keyframe graph's steps to the odometry bias "
+            f"the scan matcher learnt, and {why}"
+        )
     with RunWriter(dest, src.laser2base, cfg.grid, scans) as writer:
         for frame in frame_iter:
             record = slam.step(frame)
@@ -137,7 +143,8 @@ def run_filter(
         check_processed(src, slam.n_steps, writer.totals.points)
         warn_mount(src, cfg)
         if graph is not None:
-            graph.finish()
+            learnt = src.matcher is not None and cfg.graph.recalibrate
+            graph.finish(src.matcher.fusion.whole_run_bias() if learnt else None)
             for warning in (graph.solver_warning(), graph.refinement.solver_warning()):
                 if warning:
                     src.reader.stats.warn(warning)

@@ -9,7 +9,7 @@ it uses (:meth:`Slam.from_config` picks them out of a run's config).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -20,7 +20,8 @@ from .filter import Ekf
 from .filter.models import increment_noise
 from .filter.params import EkfConfig
 from .frontend import Frame
-from .geometry import matrix_from_pose, relative
+from .geometry import compose, matrix_from_pose, relative, transform_points
+from .graph.submap import propagate
 from .logs.params import OdomJumpConfig
 from .types import Segments
 
@@ -239,3 +240,26 @@ class Slam:
             "submap": np.zeros(len(ids), dtype=np.int64),
             "linked_to": np.full(len(ids), -1, dtype=np.int64),
         }
+
+
+def globalise(
+    r: StepRecord, origin: np.ndarray, origin_cov: np.ndarray, index: int, t_loop: float
+) -> StepRecord:
+    """A local step record in the global frame: its submap's ``origin`` ∘ the local pose; the pose's
+    covariance to first order from the origin's marginal ``origin_cov`` (with the lever arm of its
+    heading error over the local pose) and the local one turned by the origin (its x–θ and y–θ
+    covariances are not in the record: taken as 0); segments moved with it."""
+    local = np.array(
+        [[r.pose_var[0], r.cov_xy, 0.0], [r.cov_xy, r.pose_var[1], 0.0], [0.0, 0.0, r.pose_var[2]]]
+    )
+    pose = compose(origin, r.pose)
+    cov = propagate(origin_cov, origin, pose, local)
+    return replace(
+        r,
+        pose=pose,
+        pose_var=np.diag(cov).copy(),
+        cov_xy=float(cov[0, 1]),
+        segments_map=transform_points(r.segments_map.reshape(-1, 2), origin).reshape(-1, 4),
+        t_loop=t_loop,
+        submap=index,
+    )

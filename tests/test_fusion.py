@@ -3,6 +3,8 @@ Monte Carlo references: data drawn from known noise scales, bias and poses."""
 
 from __future__ import annotations
 
+from array import array
+
 import numpy as np
 import pytest
 from scipy.stats import chi2
@@ -11,7 +13,7 @@ from cornerslam_cli.config import load_config
 from cornerslam_cli.frontend import odometry_noise
 from cornerslam_cli.geometry import compose, relative, transform_points
 from cornerslam_cli.motion import ScanMatchConfig
-from cornerslam_cli.motion.fusion import OdometryFusion, bias_matrices, bias_matrix, student_fit
+from cornerslam_cli.motion.fusion import OdometryFusion, bias_matrices, bias_matrix, shifts, student_fit
 from cornerslam_cli.motion.icp import LocalMap, register
 from cornerslam_cli.simworld import office_world, raycast
 
@@ -215,3 +217,54 @@ def test_the_drift_model_follows_the_data_and_needs_evidence_to_change():
     for o, So, m, Sm in draw(np.random.default_rng(22), 0.0, 4.0, np.zeros(2), 200, noise, along=True):
         f.fuse(o, So, m, Sm)
     assert not f.along and np.all(f.c == 0.0)
+
+
+@pytest.mark.parametrize("along", [False, True])
+@pytest.mark.parametrize("outcome", ["fused", "rejected"])
+def test_the_shift_is_what_the_increment_becomes_fused_with_the_final_bias(along, outcome):
+    """shifts() against the fusion itself: the same odometry and match fused once with the bias learnt by
+    then and once with another (the one at the end of the run) differ by the shift computed from the
+    first's BiasTaken — accepted (the match weighted in) or rejected (the corrected odometry alone)."""
+    o, m = np.array([0.5, 0.02, 0.1]), np.array([0.47, 0.0, 0.12])
+    So, Sm = np.diag([4e-3, 1e-3, 2e-3]), np.diag([1e-3, 2e-3, 1e-4])
+    if outcome == "rejected":
+        m = m + np.array([2.0, 0.0, 0.0])
+    then, end = np.array([0.03, 0.008]), np.array([-0.01, 0.002])
+    got = {}
+    for c in (then, end):
+        f = fusion(adapt_min_samples=2, adapt_every=1000)  # learning on the first samples, kept after
+        f.fuse(o, So, o, Sm)  # (one sample; the next fuse learns, the state is then set)
+        f._learn = lambda: None  # noqa: SLF001 — the state below, not a learnt one
+        f.k, f.s, f.c, f.along = 1.0, 1.0, c, along
+        fused = f.fuse(o, So, m, Sm)
+        assert fused.accepted == (outcome == "fused")
+        got[tuple(c)] = (fused.inc, f.taken(o, fused.gain), f)
+    (inc_then, taken, _), (inc_end, _, f_end) = got[tuple(then)], got[tuple(end)]
+    shift = shifts(np.array([taken.row()]), f_end.bias)[0]
+    assert np.abs(shift).max() > 1e-3  # (a case that moves)
+    np.testing.assert_allclose(inc_then + shift, inc_end, atol=1e-12)
+    assert shifts(np.zeros((2, 15)), f_end.bias).tolist() == [[0.0] * 3] * 2  # no bias taken: no shift
+
+
+def test_the_whole_run_bias_is_fitted_on_every_sample_and_leaves_the_fusion_as_it_was():
+    """whole_run_bias against a fit by hand on all the samples drawn (the same learner on a fusion whose
+    window holds them all), while the fusion keeps its last window's state; without whole_run it refuses."""
+    rng = np.random.default_rng(21)
+    noise = odometry_noise(load_config(None))
+    c = np.array([0.02, 0.01])
+    drawn = list(draw(rng, 0.05, 6.0, c, 300, noise))
+    f, everything = fusion(adapt_window=60, adapt_min_samples=5), fusion(adapt_window=300)
+    f.every_sample = array("d")  # (as whole_run=True makes it)
+    for o, So, m, Sm in drawn:
+        f.fuse(o, So, m, Sm)
+        everything.samples.append((m - o, So, Sm, o))
+    state = (f.k, f.s, f.c.copy(), f.along)
+    bias = f.whole_run_bias()
+    assert (f.k, f.s, f.along) == (state[0], state[1], state[3]) and np.array_equal(f.c, state[2])
+    everything.k, everything.s = state[0], state[1]  # (the same starting point as the copy's fit)
+    everything._learn()
+    o = np.array([x[0] for x in drawn])
+    np.testing.assert_allclose(bias(o), everything.bias(o), rtol=1e-9, atol=1e-12)
+    assert np.all(np.abs(everything.c - c) < 0.005)  # (the drawn bias, found)
+    with pytest.raises(ValueError, match="whole_run"):
+        fusion().whole_run_bias()

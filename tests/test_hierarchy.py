@@ -421,8 +421,7 @@ def test_a_step_in_the_global_frame_carries_the_lever_arm_of_its_origins_heading
     from its own (x–θ, y–θ uncorrelated, as the step record holds them), composed 200,000 times. A pose
     8 m from its origin, whose heading σ is 2°: the lever arm more than doubles the xy spread."""
     from cornerslam_cli.geometry import compose, wrap_angle
-    from cornerslam_cli.hierarchy import globalise
-    from cornerslam_cli.slam import StepRecord
+    from cornerslam_cli.slam import StepRecord, globalise
 
     rng = np.random.default_rng(3)
     origin, local = np.array([2.0, -1.0, 0.7]), np.array([6.0, 5.0, -0.4])

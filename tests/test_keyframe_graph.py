@@ -4,14 +4,18 @@ run's smoothed trajectory read from the nodes."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
 from cornerslam_cli.config import config_from
 from cornerslam_cli.frontend import frames, open_input
-from cornerslam_cli.geometry import compose, relative, wrap_angle
+from cornerslam_cli.geometry import chain, compose, relative, wrap_angle
+from cornerslam_cli.graph.smooth import recalibrated
 from cornerslam_cli.graph.submap import det3, keyframe_factors, keyframe_nodes, propagate
 from cornerslam_cli.hierarchy import HierarchicalSlam
+from cornerslam_cli.motion.fusion import bias_matrices, shifts
 
 
 def arc(n: int = 12, step: float = 0.4, turn: float = 0.15) -> tuple[np.ndarray, np.ndarray]:
@@ -125,3 +129,139 @@ def test_a_runs_smoothed_poses_hang_from_the_nodes(sim_log, spacing):
     assert np.all(np.diff(nodes) >= 0) and nodes[-1] == len(hs.smoothed) - 1
     if spacing == 0.0:
         assert len(hs.smoothed) == hs.n_steps + 1  # a node per keyframe and the first origin
+
+
+def test_chain_composes_the_increments_one_after_another():
+    rng = np.random.default_rng(5)
+    inc = np.column_stack((rng.uniform(-0.2, 0.6, 40), rng.normal(0, 0.05, 40), rng.normal(0, 0.6, 40)))
+    want = [inc[0]]
+    for d in inc[1:]:
+        want.append(compose(want[-1], d))
+    np.testing.assert_allclose(chain(inc), np.array(want), atol=1e-12)
+
+
+def test_a_recalibrated_chain_is_the_filter_chain_moved_by_each_steps_shift():
+    """recalibrated (graph/smooth.py): with no shift, the submap's own keyframe chain (keyframe_factors'
+    rel) and each step's offset from its node (as final_poses reads it from the filter); with a shift, the
+    chain of the filter's step increments each moved by its shift, independently composed."""
+    inc, poses = arc(12)
+    nodes = keyframe_nodes(poses, 1.0, 0.5)
+    before = np.searchsorted(nodes, np.arange(len(poses)), side="right") - 1
+    anchors = np.where((before >= 0)[:, None], poses[nodes[before.clip(0)]], 0.0)
+    sub = SimpleNamespace(poses=poses)
+    rel, at, offsets = recalibrated(sub, np.zeros((12, 3)), nodes)
+    np.testing.assert_allclose(
+        rel, keyframe_factors(poses, np.tile(np.eye(3), (12, 1, 1)), np.eye(3), nodes)[0]
+    )
+    np.testing.assert_allclose(at, poses[nodes], atol=1e-12)
+    np.testing.assert_allclose(offsets, relative(anchors, poses), atol=1e-12)
+    shift = np.random.default_rng(2).normal(0, [0.01, 0.01, 0.003], (12, 3))
+    moved = [inc[0] + shift[0]]
+    for d, s in zip(inc[1:], shift[1:], strict=True):
+        moved.append(compose(moved[-1], d + s))
+    moved = np.array(moved)
+    rel, at, offsets = recalibrated(sub, shift, nodes)
+    np.testing.assert_allclose(at, moved[nodes], atol=1e-12)
+    chained = [rel[0]]
+    for r in rel[1:]:
+        chained.append(compose(chained[-1], r))
+    np.testing.assert_allclose(chained, moved[nodes], atol=1e-12)
+    hang = np.where((before >= 0)[:, None], moved[nodes[before.clip(0)]], 0.0)
+    np.testing.assert_allclose(compose(hang, offsets), moved, atol=1e-12)
+
+
+def test_a_runs_recalibrated_poses_are_its_steps_moved_by_the_final_bias(sim_log):
+    """Without loop closing the keyframe graph is a chain: finished with the bias learnt by the end (here
+    a stand-in: 1 % scale, 0.01 rad/m), the smoothed trajectory is the filter's step increments each moved
+    by its shift (what its frame's BiasTaken says), composed from the first pose; across submaps too."""
+    cfg = config_from({}, ["submaps.max_steps=6", "loops.enabled=false", "graph.recalibrate=true"])
+    src = open_input(sim_log, cfg)
+    hs = HierarchicalSlam(cfg, src.laser2base)
+    fs = list(frames(src, cfg))
+    online = np.array([hs.step(f).pose for f in fs])
+    assert sum(f.bias_taken is not None for f in fs) == len(fs) - 1  # all but the first
+    rows = np.array([[0.0] * 15 if f.bias_taken is None else f.bias_taken.row() for f in fs])
+
+    def bias(o):
+        return bias_matrices(o, False) @ np.array([0.01, 0.01])
+
+    shift = shifts(rows, bias)
+    assert np.abs(shift).max() > 1e-4
+    hs.finish(bias)
+    moved = compose(online[0], chain(relative(online[:-1], online[1:]) + shift[1:]))
+    np.testing.assert_allclose(hs.final_poses()[1:], moved, atol=1e-6)
+
+
+def test_recalibrated_landmarks_keep_their_place_relative_to_the_robot_that_last_saw_them(sim_log):
+    """map.csv once recalibrated (finish with a bias): each landmark where the smoothed pose of the step
+    that last observed it puts it — relative to that pose, where the filter had it relative to its own
+    pose then (landmark_frames), as lines.csv's segments move with the smoothed poses."""
+    cfg = config_from({}, ["submaps.max_steps=6", "loops.enabled=false"])
+    src = open_input(sim_log, cfg)
+    hs = HierarchicalSlam(cfg, src.laser2base)
+    for f in frames(src, cfg):
+        hs.step(f)
+    hs.finish(lambda o: bias_matrices(o, False) @ np.array([0.02, 0.02]))
+    table, poses = hs.landmark_table(), hs.final_poses()
+    assert len(table["id"]) > 0
+    for s, t in zip(hs.closed, hs.tables, strict=True):
+        k = t["last_step"]
+        seen = np.column_stack((t["x"], t["y"], np.zeros(len(k))))
+        want = relative(s.poses[k - s.first_step], seen)[:, :2]
+        rows = np.isin(table["id"], t["id"])
+        placed = np.column_stack((table["x"][rows], table["y"][rows], np.zeros(rows.sum())))
+        np.testing.assert_allclose(relative(poses[k], placed)[:, :2], want, atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    "overrides, learnt",
+    [
+        (["graph.recalibrate=true"], True),
+        ([], False),
+        (["graph.recalibrate=true", "scan_match.enabled=false"], False),
+    ],
+)
+def test_a_run_recalibrates_with_its_front_ends_bias_only_when_it_matched_scans_and_is_asked_to(
+    sim_log, tmp_path, monkeypatch, overrides, learnt
+):
+    """pipeline.run_filter's wiring of graph.recalibrate: finish gets the bias the scan matcher fits on the
+    whole run (OdometryFusion.bias of a fitted copy) with graph.recalibrate=true, None by default (off)
+    or without scan matching."""
+    from cornerslam_cli.motion.fusion import OdometryFusion
+    from cornerslam_cli.pipeline import run
+    from cornerslam_cli.span import Span
+
+    got = []
+    finish = HierarchicalSlam.finish
+    monkeypatch.setattr(
+        HierarchicalSlam, "finish", lambda self, bias=None: (got.append(bias), finish(self, bias))
+    )
+    cfg = config_from({}, ["submaps.max_steps=20", "loops.enabled=false", *overrides])
+    run(sim_log, cfg, tmp_path / "out", span=Span(max_scans=60))
+    assert len(got) == 1
+    if learnt:
+        assert isinstance(got[0].__self__, OdometryFusion) and got[0].__func__ is OdometryFusion.bias
+        fitted = got[0].__self__  # (a copy sharing the run's samples: all of them, under the window)
+        assert len(fitted.every_sample) == 24 * len(fitted.samples) > 0
+    else:
+        assert got[0] is None
+
+
+@pytest.mark.parametrize(
+    "overrides, ignored",
+    [
+        ([], None),
+        (["submaps.enabled=false"], "submaps.enabled=false"),
+        (["scan_match.enabled=false"], "scan_match.enabled=false"),
+    ],
+)
+def test_graph_recalibrate_says_when_it_has_nothing_to_do(sim_log, tmp_path, overrides, ignored):
+    """graph.recalibrate=true on a run without the keyframe graph or without scan matching warns that it is
+    ignored and why (as graph.refine does), and not otherwise."""
+    from cornerslam_cli.pipeline import run
+    from cornerslam_cli.span import Span
+
+    cfg = config_from({}, ["graph.recalibrate=true", "loops.enabled=false", *overrides])
+    summary = run(sim_log, cfg, tmp_path / "out", span=Span(max_scans=30))
+    said = [w for w in summary.warnings if "graph.recalibrate=true is ignored" in w]
+    assert len(said) == (ignored is not None) and all(ignored in w for w in said)

@@ -102,6 +102,12 @@ class GraphConfig:
     kernel_scale: float = num(2.8, gt=0.0, le=1e6)
     node_spacing: float = num(1.0, ge=0.0, le=1e6)  # m between keyframe nodes (0: every keyframe)
     node_angle: float = num(0.5, ge=0.0, le=math.pi)  # rad: a turn this large makes a node too
+    # the smoothed trajectory's keyframe chain takes the odometry bias the front end fits on the whole run
+    # (motion/fusion.py whole_run_bias), not the one it had learnt by each step: every increment moved by
+    # the share of the odometry in it (graph/smooth.py recalibrated); the online estimate and the closures
+    # found stay as they were. Off by default: it moves increments the filter's corners had already
+    # corrected (README "The smoothed chain, recalibrated": infinite-corridor, the 3-lap simulated office)
+    recalibrate: bool = False
     # dense refinement (graph/refine.py; off: README "Dense refinement"): as the run goes, each node's
     # scan registered against its refine_neighbours nearest earlier nodes within refine_radius m that lie
     # refine_min_path m of path back (each with its chain neighbours' points, those as far back), kept

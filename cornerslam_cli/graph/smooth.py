@@ -16,10 +16,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..geometry import compose, reanchor
+from ..geometry import chain, compose, reanchor, relative
 from .params import GraphConfig
 from .posegraph import PoseGraph
-from .submap import LoopMatch, Submap, overlap_steps
+from .submap import LoopMatch, Submap, hanging, overlap_steps
 
 
 def smooth(
@@ -49,3 +49,16 @@ def keyframe_loop(a: Submap, b: Submap, m: LoopMatch) -> tuple[int, int, np.ndar
         return a.node, b.node, m.pose, m.cov
     rel, cov = reanchor(m.pose, m.cov, a.anchor_poses[i], b.anchor_poses[j])
     return int(a.step_nodes[i]), int(b.step_nodes[j]), rel, cov
+
+
+def recalibrated(
+    sub: Submap, shift: np.ndarray, nodes: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Closed submap ``sub``'s keyframe chain with each step's increment moved by ``shift`` (s, 3): what
+    the odometry bias learnt by the end of the run changes of it (motion/fusion.py ``shifts``). Returns
+    the chain's rel (m, 3) between its ``nodes`` (keyframe_nodes), the nodes' poses in its frame and each
+    step's pose relative to the node it hangs from (hierarchy.py ``final_poses``)."""
+    prev = np.vstack((np.zeros(3), sub.poses[:-1]))
+    poses = chain(relative(prev, sub.poses) + shift)
+    anchors = np.vstack((np.zeros(3), poses[nodes[:-1]]))
+    return relative(anchors, poses[nodes]), poses[nodes], relative(hanging(poses, nodes)[1], poses)

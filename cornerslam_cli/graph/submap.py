@@ -210,6 +210,13 @@ def keyframe_nodes(poses: np.ndarray, spacing: float, angle: float) -> np.ndarra
     return np.array(nodes)
 
 
+def hanging(poses: np.ndarray, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per step of a closed submap (its local ``poses``), the index into ``nodes`` of the last node at or
+    before it (−1: none, it hangs from the submap's origin) and that node's pose (the origin's: 0)."""
+    before = np.searchsorted(nodes, np.arange(len(poses)), side="right") - 1
+    return before, np.where((before >= 0)[:, None], poses[nodes[before.clip(0)]], 0.0)
+
+
 def keyframe_factors(
     poses: np.ndarray, covs: np.ndarray, end_cov: np.ndarray, nodes: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -274,15 +281,20 @@ def propagate(acc: np.ndarray, p0: np.ndarray, p1: np.ndarray, cov: np.ndarray) 
     return _moved(acc, p0, p1) + rotate_pose_covariance(cov, p0[2])
 
 
-def landmark_frames(sub: Submap, nodes: np.ndarray, last_step: np.ndarray) -> np.ndarray:
+def landmark_frames(
+    sub: Submap, nodes: np.ndarray, last_step: np.ndarray, offsets: np.ndarray | None = None
+) -> np.ndarray:
     """(n, 3) where the solved keyframe graph puts ``sub``'s frame for each of its landmarks: as seen from
-    the node that the step which last observed it (``last_step``, log steps) hangs from — node ∘ its
-    anchor pose⁻¹. The graph bends a submap along its nodes, so one rigid frame for all its landmarks
-    (its origin's) would leave a landmark seen late in the submap where the early path puts it, off the
-    smoothed trajectory by the submap's own drift; this way each keeps the pose relative to the robot
-    that the filter gave it. ``nodes``: the graph's node poses."""
+    the step which last observed it (``last_step``, log steps) — its smoothed pose (the node it hangs
+    from ∘ its offset from it) ∘ its filtered pose⁻¹, which without ``offsets`` (s, 3: each step's from
+    its node, graph.recalibrate's) is node ∘ its anchor pose⁻¹. The graph bends a submap along its nodes,
+    so one rigid frame for all its landmarks (its origin's) would leave a landmark seen late in the submap
+    where the early path puts it, off the smoothed trajectory by the submap's own drift; this way each
+    keeps the pose relative to the robot that the filter gave it. ``nodes``: the graph's node poses."""
     k = np.asarray(last_step, dtype=np.int64) - sub.first_step
-    return compose(nodes[sub.step_nodes[k]], inverse(sub.anchor_poses[k]))
+    if offsets is None:
+        return compose(nodes[sub.step_nodes[k]], inverse(sub.anchor_poses[k]))
+    return compose(compose(nodes[sub.step_nodes[k]], offsets[k]), inverse(sub.poses[k]))
 
 
 def place_table(table: dict[str, np.ndarray], frames: np.ndarray, index: int) -> dict[str, np.ndarray]:

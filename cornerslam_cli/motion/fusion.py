@@ -47,7 +47,9 @@ such a turn.
 
 from __future__ import annotations
 
+import copy
 import math
+from array import array
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -65,6 +67,7 @@ CHI2_3_MEDIAN = 2.365974  # median of χ² with 3 degrees of freedom
 S_MAX = 1e4  # the match's covariance is inflated at most this much
 BIAS_SIGMAS = 3.0  # a drift term is kept when it is this many standard errors from zero
 ALONG_EVIDENCE = BIAS_SIGMAS**2 / 2  # the drift along the path is taken when likelier by this (NLL)
+SAMPLE = 24  # numbers a sample is kept as for the whole run: d (3), Σ_o (9), Σ_m (9), o (3)
 
 
 @dataclass(frozen=True)
@@ -75,6 +78,20 @@ class Fused:
     gain: np.ndarray  # (3, 3) the weight the match got: inc = corrected odometry + gain·(m − it)
 
 
+@dataclass(frozen=True)
+class BiasTaken:
+    """What one increment took of the odometry's bias as learnt by then: the smoothed trajectory moves it
+    by ``keep``·(``bias`` − the bias learnt by the end of the run) (graph/smooth.py ``recalibrated``)."""
+
+    odom: np.ndarray  # (3,) the odometry increment
+    bias: np.ndarray  # (3,) B(o)·c taken out of it (OdometryFusion.corrected)
+    keep: np.ndarray  # (3, 3) I − gain: the share of the corrected odometry in the increment
+
+    def row(self) -> list[float]:
+        """Its 15 numbers, flat (the hierarchy keeps one row per step)."""
+        return [*self.odom, *self.bias, *self.keep.ravel()]
+
+
 def nis(d: np.ndarray, S: np.ndarray) -> np.ndarray:
     """dᵢᵀ Sᵢ⁻¹ dᵢ for stacks d (n, 3), S (n, 3, 3)."""
     return np.einsum("ni,ni->n", d, np.linalg.solve(S, d[..., None])[..., 0])
@@ -83,7 +100,7 @@ def nis(d: np.ndarray, S: np.ndarray) -> np.ndarray:
 class OdometryFusion:
     """Combines odometry and scan-match increments; learns the noise scales k, s and the bias c."""
 
-    def __init__(self, cfg: ScanMatchConfig):
+    def __init__(self, cfg: ScanMatchConfig, whole_run: bool = False):
         self.gate, self.min_samples, self.every = cfg.gate, cfg.adapt_min_samples, cfg.adapt_every
         self.k_min, self.k_max = cfg.adapt_min, cfg.adapt_max
         self.k, self.s = 1.0, 1.0
@@ -94,10 +111,23 @@ class OdometryFusion:
         )
         self.n_rejected = 0
         self._since = 0
+        # with ``whole_run``, every sample of the run, SAMPLE numbers each (d, Σ_o, Σ_m, o): the bias
+        # fitted on all of them (:meth:`whole_run_bias`, graph.recalibrate's) — 192 bytes a keyframe
+        self.every_sample = array("d") if whole_run else None
 
     def corrected(self, o: np.ndarray) -> np.ndarray:
         """The odometry increment with the learnt scale error and drift taken out."""
         return o - bias_matrix(o, self.along) @ self.c
+
+    def bias(self, o: np.ndarray) -> np.ndarray:
+        """(n, 3) the bias B(o)·c that :meth:`corrected` takes out of each increment of ``o`` (n, 3), as
+        learnt so far."""
+        return bias_matrices(np.asarray(o, dtype=float), self.along) @ self.c
+
+    def taken(self, o: np.ndarray, gain: np.ndarray) -> BiasTaken:
+        """The bias the increment ``o``, fused with ``gain`` (Fused.gain), took out (learnt so far)."""
+        o = np.array(o, dtype=float)
+        return BiasTaken(o, bias_matrix(o, self.along) @ self.c, np.eye(3) - gain)
 
     def fuse(
         self,
@@ -117,6 +147,8 @@ class OdometryFusion:
         d = m - o
         d[2] = wrap_angle(d[2])
         self.samples.append((d, cov_o, cov_m, np.array(o, dtype=float)))
+        if self.every_sample is not None:
+            self.every_sample.extend((*d, *np.ravel(cov_o), *np.ravel(cov_m), *o))
         self._since += 1
         if len(self.samples) >= self.min_samples and (
             self._since >= self.every or len(self.samples) < 2 * self.every
@@ -147,11 +179,27 @@ class OdometryFusion:
         """Covariance of an odometry increment used without a match: the configured model at least."""
         return max(self.k, 1.0) * cov_o
 
+    def whole_run_bias(self) -> Callable[[np.ndarray], np.ndarray]:
+        """The bias as :meth:`bias` gives it, but with the scales and bias fitted once on every sample of
+        the run instead of the last ``adapt_window``: one robot's odometry bias is taken as constant, and
+        a window's estimate is noisy (a term that fails its 3σ test in the last window would be dropped
+        from every step). This fusion's own state is left as it was. Needs ``whole_run`` (ValueError)."""
+        if self.every_sample is None:
+            raise ValueError("whole_run_bias: this fusion was made without whole_run, it kept no samples")
+        rows = np.frombuffer(self.every_sample).reshape(-1, SAMPLE)
+        fit = copy.copy(self)
+        if len(rows) >= self.min_samples:
+            So, Sm = rows[:, 3:12].reshape(-1, 3, 3), rows[:, 12:21].reshape(-1, 3, 3)
+            fit._fit(rows[:, :3], So, Sm, rows[:, 21:])
+        return fit.bias
+
     def _learn(self) -> None:
-        d = np.array([x[0] for x in self.samples])
-        So = np.array([x[1] for x in self.samples])
-        Sm = np.array([x[2] for x in self.samples])
-        o = np.array([x[3] for x in self.samples])
+        """Re-estimate the scales and bias on the window's samples."""
+        self._fit(*(np.array([x[i] for x in self.samples]) for i in range(4)))
+
+    def _fit(self, d: np.ndarray, So: np.ndarray, Sm: np.ndarray, o: np.ndarray) -> None:
+        """Set k, s, c and the drift model from disagreements d (n, 3), the odometry's and the matches'
+        covariances So, Sm (n, 3, 3) and the odometry increments o (n, 3) (module docstring)."""
         lo = np.array([np.log(self.k_min), 0.0])
         hi = np.array([np.log(self.k_max), np.log(S_MAX)])
         x0 = np.clip(np.log([self.k, self.s]), lo, hi)
@@ -179,6 +227,14 @@ class OdometryFusion:
         g = float(np.median(q)) / CHI2_3_MEDIAN
         self.k = float(np.clip(k * g, self.k_min, self.k_max))
         self.s = float(np.clip(s * g, 1.0, S_MAX))
+
+
+def shifts(taken: np.ndarray, bias: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """(n, 3) how far each increment moves with the bias learnt by the end of the run instead of the one
+    it took: ``taken`` (n, 15) its BiasTaken rows (zeros: it took none), ``bias`` that of the
+    fusion at the end (OdometryFusion.bias). keep·(bias then − bias now)."""
+    keep = taken[:, 6:].reshape(-1, 3, 3)
+    return np.einsum("nij,nj->ni", keep, taken[:, 3:6] - bias(taken[:, :3]))
 
 
 def bias_matrix(o: np.ndarray, along: bool = False) -> np.ndarray:

@@ -41,7 +41,7 @@ from ..geometry import (
     wrap_angle,
 )
 from .correlative import Window, search
-from .fusion import OdometryFusion, student_fit
+from .fusion import BiasTaken, OdometryFusion, student_fit
 from .kernels import first_in_cell, icp_iterations, line_terms, neighbour_scatter
 from .nearest import BucketGrid
 from .params import ScanMatchConfig
@@ -243,6 +243,7 @@ class MatchResult:
     matched: bool  # the scan match was fused; False: the odometry increment alone (no map, low fit, gated)
     cov: np.ndarray  # (3, 3) covariance of the increment into this scan, previous scan's frame
     searched: bool = False  # the correlative search ran (the odometry window exceeded ICP's basin)
+    taken: BiasTaken | None = None  # the odometry's bias it took (None: the first scan)
 
 
 class ScanMatcher:
@@ -335,7 +336,8 @@ class ScanMatcher:
         # odometry is exact and the fusion hardly weighs the match)
         floor = np.diag([cfg.sigma_xy**2, cfg.sigma_xy**2, cfg.sigma_theta**2])
         cov = fused.cov + fused.gain @ floor @ fused.gain.T
-        return MatchResult(compose(self.pose, fused.inc), reg.fit, fused.accepted, cov, searched)
+        taken = self.fusion.taken(o, fused.gain)
+        return MatchResult(compose(self.pose, fused.inc), reg.fit, fused.accepted, cov, searched, taken)
 
     def _fit_at(self, points: np.ndarray, pose: np.ndarray) -> float:
         """Share of ``points`` within ``inlier_distance`` of the local map at ``pose``."""
@@ -343,9 +345,8 @@ class ScanMatcher:
 
     def _fallback(self, o: np.ndarray, cov_o: np.ndarray, fit: float, searched: bool = False) -> MatchResult:
         self.n_fallback += 1
-        return MatchResult(
-            compose(self.pose, self.fusion.corrected(o)), fit, False, self.fusion.k * cov_o, searched
-        )
+        pose, taken = compose(self.pose, self.fusion.corrected(o)), self.fusion.taken(o, np.zeros((3, 3)))
+        return MatchResult(pose, fit, False, self.fusion.k * cov_o, searched, taken)
 
     def _window(self, cov_o: np.ndarray) -> Window:
         """Search half-widths: ``search_sigmas`` standard deviations of the odometry model (k = 1: the
