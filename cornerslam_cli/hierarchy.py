@@ -181,8 +181,8 @@ class HierarchicalSlam:
         self.t_loop += time.perf_counter() - t0
 
     def _recalibrated(self, bias: Callable[[np.ndarray], np.ndarray]) -> list:
-        """The closed submaps' chains with the increments moved to the bias learnt by the end (the steps'
-        offsets kept for final_poses; closures as measured); untouched, bit for bit, when no step moves."""
+        """The closed submaps' chains with the increments moved to ``bias`` (the whole run's; the
+        steps' offsets kept for final_poses; closures as measured); bit for bit the same if none moves."""
         spacing = (self.cfg.graph.node_spacing, self.cfg.graph.node_angle)
         shift = shifts(np.frombuffer(self.taken).reshape(-1, len(NO_BIAS)), bias)
         if not shift.any():

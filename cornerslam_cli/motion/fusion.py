@@ -81,7 +81,7 @@ class Fused:
 @dataclass(frozen=True)
 class BiasTaken:
     """What one increment took of the odometry's bias as learnt by then: the smoothed trajectory moves it
-    by ``keep``·(``bias`` − the bias learnt by the end of the run) (graph/smooth.py ``recalibrated``)."""
+    by ``keep``·(``bias`` − the bias fitted on the whole run) (graph/smooth.py ``recalibrated``)."""
 
     odom: np.ndarray  # (3,) the odometry increment
     bias: np.ndarray  # (3,) B(o)·c taken out of it (OdometryFusion.corrected)
@@ -183,7 +183,8 @@ class OdometryFusion:
         """The bias as :meth:`bias` gives it, but with the scales and bias fitted once on every sample of
         the run instead of the last ``adapt_window``: one robot's odometry bias is taken as constant, and
         a window's estimate is noisy (a term that fails its 3σ test in the last window would be dropped
-        from every step). This fusion's own state is left as it was. Needs ``whole_run`` (ValueError)."""
+        from every step); fewer than ``adapt_min_samples`` samples: the bias learnt so far. This fusion's
+        own state is left as it was. Needs ``whole_run`` (ValueError)."""
         if self.every_sample is None:
             raise ValueError("whole_run_bias: this fusion was made without whole_run, it kept no samples")
         rows = np.frombuffer(self.every_sample).reshape(-1, SAMPLE)
@@ -230,9 +231,9 @@ class OdometryFusion:
 
 
 def shifts(taken: np.ndarray, bias: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
-    """(n, 3) how far each increment moves with the bias learnt by the end of the run instead of the one
-    it took: ``taken`` (n, 15) its BiasTaken rows (zeros: it took none), ``bias`` that of the
-    fusion at the end (OdometryFusion.bias). keep·(bias then − bias now)."""
+    """(n, 3) how far each increment moves with the bias fitted on the whole run instead of the one it
+    took: ``taken`` (n, 15) its BiasTaken rows (zeros: it took none), ``bias`` the fusion's
+    (OdometryFusion.whole_run_bias). keep·(bias then − bias now)."""
     keep = taken[:, 6:].reshape(-1, 3, 3)
     return np.einsum("nij,nj->ni", keep, taken[:, 3:6] - bias(taken[:, :3]))
 
