@@ -233,6 +233,7 @@ def test_the_shift_is_what_the_increment_becomes_fused_with_the_final_bias(along
     got = {}
     for c in (then, end):
         f = fusion(adapt_min_samples=2, adapt_every=1000)  # learning on the first samples, kept after
+        f.every_sample = array("d")  # (as whole_run=True makes it: taken() is None without)
         f.fuse(o, So, o, Sm)  # (one sample; the next fuse learns, the state is then set)
         f._learn = lambda: None  # noqa: SLF001 — the state below, not a learnt one
         f.k, f.s, f.c, f.along = 1.0, 1.0, c, along
@@ -244,6 +245,7 @@ def test_the_shift_is_what_the_increment_becomes_fused_with_the_final_bias(along
     assert np.abs(shift).max() > 1e-3  # (a case that moves)
     np.testing.assert_allclose(inc_then + shift, inc_end, atol=1e-12)
     assert shifts(np.zeros((2, 15)), f_end.bias).tolist() == [[0.0] * 3] * 2  # no bias taken: no shift
+    assert fusion().taken(o, np.eye(3)) is None  # not kept without whole_run
 
 
 def test_the_whole_run_bias_is_fitted_on_every_sample_and_leaves_the_fusion_as_it_was():

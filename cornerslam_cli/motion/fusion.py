@@ -124,8 +124,11 @@ class OdometryFusion:
         learnt so far."""
         return bias_matrices(np.asarray(o, dtype=float), self.along) @ self.c
 
-    def taken(self, o: np.ndarray, gain: np.ndarray) -> BiasTaken:
-        """The bias the increment ``o``, fused with ``gain`` (Fused.gain), took out (learnt so far)."""
+    def taken(self, o: np.ndarray, gain: np.ndarray) -> BiasTaken | None:
+        """The bias the increment ``o``, fused with ``gain`` (Fused.gain), took out (learnt so far); None
+        unless this fusion keeps the whole run (``whole_run``: only graph.recalibrate reads it)."""
+        if self.every_sample is None:
+            return None
         o = np.array(o, dtype=float)
         return BiasTaken(o, bias_matrix(o, self.along) @ self.c, np.eye(3) - gain)
 
