@@ -407,11 +407,16 @@ def test_a_prior_without_a_usable_covariance_searches_the_whole_capped_window():
 
 
 @functools.cache
-def pillared_corridor_pair():
-    """A corridor with a pillar every 1.2 m on one wall, driven east then back west: alignments 1.2 m
-    apart along it fit almost as well (the pillars repeat, the ends are out of view)."""
-    walls = [sw.polyline([(-30.0, -1.0), (60.0, -1.0)]), sw.polyline([(-30.0, 1.0), (60.0, 1.0)])]
-    pillars = [sw.rectangle(x, 0.85, 0.3, 0.3) for x in np.arange(-30.0, 60.0, 1.2)]
+def pillared_corridor_pair(
+    period: float = 1.2, size: float = 0.3, sides: tuple[float, ...] = (0.85,), walls: bool = True
+):
+    """A corridor with a ``size`` pillar every ``period`` m on one wall (or at each y of ``sides``; no
+    walls: a colonnade), driven east then back west: alignments ``period`` apart along it fit almost as
+    well (the pillars repeat, the ends are out of view)."""
+    ys = (-1.0, 1.0) if walls else ()
+    walls = [sw.polyline([(-30.0, y), (60.0, y)]) for y in ys]
+    xs = np.arange(-30.0, 60.0, period)
+    pillars = [sw.rectangle(x, y, size, size) for x in xs for y in sides]
     world = sw.make_world(walls + pillars, "pillared corridor")
     path_a, path_b = straight_path((5.0, 0.0), (15.0, 0.0)), straight_path((16.0, 0.2), (6.0, 0.2))
     a, b = build_submap(world, path_a, 0, seed=1), build_submap(world, path_b, 5, seed=2)
@@ -428,6 +433,23 @@ def test_a_repeated_structure_inside_the_window_is_ambiguous_on_points(monkeypat
     assert points.match_points(
         room_a, room_b, compose(room_truth, PRIOR_OFF), PRIOR_COV * 9.0, CFG, ICP
     ).accepted
+
+
+def test_the_window_covers_the_predictions_3_sigma_so_a_repeat_inside_it_is_seen(monkeypatch):
+    # pillars every 3 m, the prediction 0.5 m off the truth along the corridor with σ 1 m: the next
+    # pillar's alignment lies 2.5 m from the prediction, inside its ±3σ. The default window covers the
+    # ±3σ (up to POINT_MAX_CELLS cells), sees it fit as well and refuses the match; a window capped
+    # at 2 m (the default before) missed it and verified a place the points cannot tell from the next
+    monkeypatch.setattr(points, "distinct", lambda *args: True)  # (the slide test alone would refuse it)
+    a, b, truth = pillared_corridor_pair(3.0, 0.6, (1.0, -1.0), walls=False)
+    cov = np.diag([1.0, 1.0, 0.05**2])
+    for off in (0.5, -0.5):
+        prior = compose(truth, (off, 0.0, 0.0))
+        assert points.points_window(cov, CFG, points.POINT_RES * ICP.search_resolution).xy == 3.0
+        m = points.match_points(a, b, prior, cov, CFG, ICP)
+        assert not m.accepted and m.reason == loops.AMBIGUOUS
+        capped = points.match_points(a, b, prior, cov, replace(CFG, point_max_xy=2.0), ICP)
+        assert capped.accepted and pose_error(capped.pose, truth)[0] < 0.05
 
 
 class _Field:
