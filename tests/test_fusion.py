@@ -63,6 +63,24 @@ def test_no_bias_is_invented_and_exact_odometry_is_learnt_as_exact():
     assert np.abs(fused.inc - o).max() < 1e-3  # the fused increment stays on the odometry
 
 
+def test_each_bias_term_records_the_first_increment_it_was_taken_out_of():
+    # summary.json's odometry_model.*_from_keyframe: the increment (1-based) whose fusion first used the
+    # term, checked against the fusion's own state increment by increment; never taken: None
+    rng = np.random.default_rng(11)
+    noise = odometry_noise(load_config(None))
+    f, taken = fusion(), [[], []]
+    for o, So, m, Sm in draw(rng, 0.05, 6.0, np.array([0.02, 0.01]), 100, noise):
+        f.fuse(o, So, m, Sm)
+        for i in range(2):
+            taken[i].append(f.c[i] != 0.0)
+    want = [taken[i].index(True) + 1 for i in range(2)]
+    assert f.first_taken == want and all(w > f.min_samples - 1 for w in want)
+    exact = fusion()
+    for o, So, m, Sm in draw(rng, 0.0, 4.0, np.zeros(2), 100, noise):
+        exact.fuse(o, So, m, Sm)
+    assert exact.first_taken == [None, None]
+
+
 def test_the_fused_increment_is_the_information_weighted_mean():
     """Before any learning (k = s = 1): the fused increment and its covariance equal the product of
     the two Gaussians, computed in information form."""

@@ -111,6 +111,10 @@ class OdometryFusion:
         )
         self.n_rejected = 0
         self._since = 0
+        self.n_fused = 0  # increments fused so far (one a matched keyframe)
+        # the first increment each bias term (scale, drift) was taken out of — 1-based, None: never yet
+        # (summary.json odometry_model: until then the odometry's share of each increment carried it)
+        self.first_taken: list[int | None] = [None, None]
         # with ``whole_run``, every sample of the run, SAMPLE numbers each (d, Σ_o, Σ_m, o): the bias
         # fitted on all of them (:meth:`whole_run_bias`, graph.recalibrate's) — 192 bytes a keyframe
         self.every_sample = array("d") if whole_run else None
@@ -158,6 +162,9 @@ class OdometryFusion:
         ):
             self._learn()
             self._since = 0
+        self.n_fused += 1
+        for i in np.flatnonzero(self.c):
+            self.first_taken[i] = self.first_taken[i] or self.n_fused
         oc = self.corrected(o)
         dc = m - oc
         dc[2] = wrap_angle(dc[2])

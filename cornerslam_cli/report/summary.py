@@ -144,6 +144,8 @@ def odometry_model(matcher) -> OdometryModel | None:
         odom_scale_error=float(f.c[0]),
         heading_drift_per_m=float(f.c[1]),
         heading_drift_along_path=bool(f.along),
+        scale_error_from_keyframe=f.first_taken[0],
+        heading_drift_from_keyframe=f.first_taken[1],
     )
 
 
