@@ -110,11 +110,13 @@ def errors(run: Path, gt: Path, last_good: int | None = None, refuted: np.ndarra
 
 def bias_taken(run: Path, gt: Path) -> dict:
     """When ``run``'s front end first took the odometer scale error and the heading drift out of an
-    increment (summary.json odometry_model, 1-based matched keyframes; None: never), the terms at the
+    increment (summary.json odometry_model: the steps; None: never), the terms at the
     end, and its chain's (scan_matched.tum) heading error against the reference — the turn since the
     first keyframe less the reference's — just before the drift was taken and its rate after (° per 100
     keyframes)."""
     model = json.loads((run / "summary.json").read_text())["odometry_model"]
+    if "scale_error_from_keyframe" not in model and model["odom_scale_error"] != 0.0:
+        sys.exit(f"{run}: summary.json predates odometry_model.*_from_keyframe: re-run radish_panel.py")
     stamps, chain = read_tum(run / "scan_matched.tum")
     inside, ref = interpolate_inside(*read_tum(gt), stamps)
     turn = wrap_angle((chain[inside, 2] - chain[inside, 2][0]) - (ref[:, 2] - ref[0, 2]))
@@ -201,15 +203,15 @@ def main() -> None:
     lines += [
         "",
         "When the front end took the odometry's bias out (noisy runs; summary.json `odometry_model`): "
-        "the first matched keyframe whose increment had the odometer scale error, the heading drift "
-        "taken out (a term is taken once it is 3 standard errors from zero; each log's odometry was made "
-        "with +2 % scale and 0.005 rad/m drift), the terms at the end, and the scan-matched chain's "
+        "the step (trajectory.csv's) whose increment first had the odometer scale error, the heading "
+        "drift taken out (a term is taken once it is 3 standard errors from zero; each log's odometry "
+        "was made with +2 % scale and 0.005 rad/m drift), the terms at the end, and the scan-matched chain's "
         "heading error against the reference (its turn since the first keyframe less the reference's) "
         "just before the drift was taken, and its rate before and after (° per 100 keyframes). Until "
         "then the odometry's share of each increment (about a tenth in heading, where the matches are "
         "the sharper) carries the drift into the chain.",
         "",
-        "| log | keyframes | scale taken from | drift taken from | scale, drift at the end "
+        "| log | steps | scale taken from step | drift taken from step | scale, drift at the end "
         "| chain heading error before the drift (°) | rate before → after (°/100) |",
         "|---|---:|---:|---:|---|---:|---|",
     ]

@@ -196,7 +196,7 @@ class OdometryModel(JsonResult):
     odom_scale_error: float
     heading_drift_per_m: float
     heading_drift_along_path: bool | None = optional()
-    # appended: the first matched keyframe (1-based) whose increment had the scale error / the drift taken
+    # appended: the step (trajectory.csv's) whose increment first had the scale error / the drift taken
     # out (left out: never) — the increments before it carried that term in the odometry's share of them
     scale_error_from_keyframe: int | None = optional()
     heading_drift_from_keyframe: int | None = optional()

@@ -14,7 +14,7 @@ from cornerslam_cli.frontend import odometry_noise
 from cornerslam_cli.geometry import compose, relative, transform_points
 from cornerslam_cli.motion import ScanMatchConfig
 from cornerslam_cli.motion.fusion import OdometryFusion, bias_matrices, bias_matrix, shifts, student_fit
-from cornerslam_cli.motion.icp import LocalMap, register
+from cornerslam_cli.motion.icp import LocalMap, ScanMatcher, register
 from cornerslam_cli.simworld import office_world, raycast
 
 ANGLES = np.radians(np.arange(-90.0, 90.5, 1.0))
@@ -63,22 +63,47 @@ def test_no_bias_is_invented_and_exact_odometry_is_learnt_as_exact():
     assert np.abs(fused.inc - o).max() < 1e-3  # the fused increment stays on the odometry
 
 
-def test_each_bias_term_records_the_first_increment_it_was_taken_out_of():
-    # summary.json's odometry_model.*_from_keyframe: the increment (1-based) whose fusion first used the
-    # term, checked against the fusion's own state increment by increment; never taken: None
+def test_each_bias_term_records_the_first_step_it_was_taken_out_of():
+    # summary.json's odometry_model.*_from_keyframe: the step (1 = the first increment) whose increment
+    # first used the term, checked against the fusion's own state step by step; never taken: None
     rng = np.random.default_rng(11)
     noise = odometry_noise(load_config(None))
     f, taken = fusion(), [[], []]
     for o, So, m, Sm in draw(rng, 0.05, 6.0, np.array([0.02, 0.01]), 100, noise):
         f.fuse(o, So, m, Sm)
+        f.note_step()
         for i in range(2):
             taken[i].append(f.c[i] != 0.0)
     want = [taken[i].index(True) + 1 for i in range(2)]
-    assert f.first_taken == want and all(w > f.min_samples - 1 for w in want)
+    assert f.first_taken == want and f.n_steps == 100 and all(w > f.min_samples - 1 for w in want)
     exact = fusion()
     for o, So, m, Sm in draw(rng, 0.0, 4.0, np.zeros(2), 100, noise):
         exact.fuse(o, So, m, Sm)
+        exact.note_step()
     assert exact.first_taken == [None, None]
+    # the first time, not the latest: a term dropped and taken again keeps its first step; a step with
+    # no match (the odometry alone, no fuse) still counts
+    g = fusion()
+    for c, want_first in (((0.0, 0.0), [None, None]), ((0.01, 0.0), [2, None]), ((0.0, 0.0), [2, None]),
+                          ((0.01, 0.002), [2, 4])):  # fmt: skip
+        g.c = np.array(c)
+        g.note_step()
+        assert g.first_taken == want_first
+
+
+def test_the_matcher_counts_every_step_after_the_first_fallbacks_too():
+    # the step numbers are trajectory.csv's: a keyframe that fell back to the odometry (no map to match,
+    # a fit below min_fit) is a step too
+    matcher = ScanMatcher(ScanMatchConfig(), odometry_noise(load_config(None)))
+    world, rng = office_world(), np.random.default_rng(3)
+    for i in range(4):
+        pose = np.array([2.0 + 0.3 * i, 2.0, 0.0])
+        # after the first, scans of nowhere the map has been: no point fits, the odometry alone is used
+        points = scan(world, pose, rng) if i == 0 else rng.uniform(50.0, 60.0, (100, 2))
+        matcher.step(points, pose)
+        matcher.fusion.c = np.array([0.01, 0.0]) if i == 1 else matcher.fusion.c
+    assert matcher.n_fallback == 3 and matcher.fusion.n_steps == 3
+    assert matcher.fusion.first_taken == [2, None]  # set after step 1's increment: step 2's took it
 
 
 def test_the_fused_increment_is_the_information_weighted_mean():

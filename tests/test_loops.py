@@ -413,11 +413,10 @@ def pillared_corridor_pair(
     """A corridor with a ``size`` pillar every ``period`` m on one wall (or at each y of ``sides``; no
     walls: a colonnade), driven east then back west: alignments ``period`` apart along it fit almost as
     well (the pillars repeat, the ends are out of view)."""
-    ys = (-1.0, 1.0) if walls else ()
-    walls = [sw.polyline([(-30.0, y), (60.0, y)]) for y in ys]
+    long_walls = [sw.polyline([(-30.0, y), (60.0, y)]) for y in ((-1.0, 1.0) if walls else ())]
     xs = np.arange(-30.0, 60.0, period)
     pillars = [sw.rectangle(x, y, size, size) for x in xs for y in sides]
-    world = sw.make_world(walls + pillars, "pillared corridor")
+    world = sw.make_world(long_walls + pillars, "pillared corridor")
     path_a, path_b = straight_path((5.0, 0.0), (15.0, 0.0)), straight_path((16.0, 0.2), (6.0, 0.2))
     a, b = build_submap(world, path_a, 0, seed=1), build_submap(world, path_b, 5, seed=2)
     return a, b, relative(path_a[0], path_b[0])

@@ -65,14 +65,14 @@ class LoopConfig:
     # and no pose of the window away from it scores point_distinct × as well (not a repeated structure)
     point_search: bool = True
     # ... for at most this many candidates per closed submap (nearest first): each costs a correlative
-    # search or two, ~15 ms; at 8 a close, loop closing made infinite-corridor's last 10 % of steps 2.6×
+    # search or two, ~15–25 ms; at 8 a close, loop closing made infinite-corridor's last 10 % of steps 2.6×
     # its first
     point_searches: int = num(1, ge=0, le=1000)
     # m, and at most 25 cells of the point search's grid (graph/points.py: 2 × scan_match.search_resolution,
     # 5 m). 5 (was 2): the window must cover the prediction's ±3σ for "no other pose scores as well" to
-    # mean anything — capped at 2 m with a 3σ of 3 m, orebro (under scan_match.warmup) verified a place
-    # 2.6 m off the truth at the window's edge; the default panel is unchanged
-    # (docs/results/variant_loops.point_max_xy-5.md)
+    # mean anything — capped at 2 m with a 3σ of 3 m, orebro verified a place 2.6 m off the truth near
+    # the window's edge (radish_panel.py --set scan_match.warmup=10000 at 98044d2: ATE 0.82 m; 0.10 at
+    # 5 m); the default panel within its spread (docs/results/variant_loops.point_max_xy-5.md)
     point_max_xy: float = num(5.0, gt=0.0, le=100.0)
     point_max_theta: float = num(0.5, gt=0.0, le=math.pi)  # rad
     point_shift: float = num(0.5, gt=0.0, le=100.0)  # m

@@ -111,9 +111,9 @@ class OdometryFusion:
         )
         self.n_rejected = 0
         self._since = 0
-        self.n_fused = 0  # increments fused so far (one a matched keyframe)
-        # the first increment each bias term (scale, drift) was taken out of — 1-based, None: never yet
-        # (summary.json odometry_model: until then the odometry's share of each increment carried it)
+        self.n_steps = 0  # increments seen (:meth:`note_step`): fused, gated or fallen back to odometry
+        # the step (trajectory.csv's) whose increment first had each bias term (scale, drift) taken out —
+        # None: never yet (summary.json odometry_model: until then the odometry's share carried it)
         self.first_taken: list[int | None] = [None, None]
         # with ``whole_run``, every sample of the run, SAMPLE numbers each (d, Σ_o, Σ_m, o): the bias
         # fitted on all of them (:meth:`whole_run_bias`, graph.recalibrate's) — 192 bytes a keyframe
@@ -162,9 +162,6 @@ class OdometryFusion:
         ):
             self._learn()
             self._since = 0
-        self.n_fused += 1
-        for i in np.flatnonzero(self.c):
-            self.first_taken[i] = self.first_taken[i] or self.n_fused
         oc = self.corrected(o)
         dc = m - oc
         dc[2] = wrap_angle(dc[2])
@@ -184,6 +181,13 @@ class OdometryFusion:
         inc[2] = wrap_angle(inc[2])
         cov = (np.eye(3) - K) @ So
         return Fused(inc, 0.5 * (cov + cov.T), True, K)
+
+    def note_step(self) -> None:
+        """One more increment went out, with the bias as it stands (ScanMatcher.step, after the first
+        scan): counted, and the first step each term was taken out of noted."""
+        self.n_steps += 1
+        for i in np.flatnonzero(self.c):
+            self.first_taken[i] = self.first_taken[i] or self.n_steps
 
     def fallback_cov(self, cov_o: np.ndarray) -> np.ndarray:
         """Covariance of an odometry increment used without a match: the configured model at least."""

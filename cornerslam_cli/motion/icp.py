@@ -259,9 +259,7 @@ class ScanMatcher:
         self.pose: np.ndarray | None = None  # fused pose of the previous scan
         self.odom: np.ndarray | None = None  # wheel pose of the previous scan
         self.last_map_pose: np.ndarray | None = None
-        self.n_matched = 0
-        self.n_searched = 0
-        self.n_fallback = 0
+        self.n_matched = self.n_searched = self.n_fallback = 0
 
     @property
     def n_rejected(self) -> int:
@@ -295,6 +293,7 @@ class ScanMatcher:
             result = MatchResult(odom.copy(), 1.0, True, np.zeros((3, 3)))
         else:
             result = self._match(points, relative(self.odom, odom))
+            self.fusion.note_step()
         self.pose, self.odom = result.pose, odom
         self._grow_map(points, result.pose)
         return result
