@@ -97,7 +97,7 @@ class ScanMatchConfig:
     # 20 on 2026-12-02, variant_scan_match.warmup-20.md: 8 logs better, 5 worse beyond their spread, fhw-exact
     # 0.007 → 0.261 m and edmonton 0.379 → 0.173; over the whole log, 10000, on 2026-12-04,
     # variant_scan_match.warmup-10000.md: 3 better, 8 worse — edmonton 0.352 → 0.226, its drift taken
-    # from the first keyframe instead of the 124th, but csail-exact 0.080 → 0.260)
+    # out from step 1 instead of step 124, but csail-exact 0.080 → 0.260)
     warmup: int = num(0, ge=0, le=10000)
     adapt_every: int = num(25, ge=1, le=100000)  # keyframes between two re-estimates
     adapt_min_samples: int = num(5, ge=2, le=100000)  # ... the model itself (scale 1) until this many
