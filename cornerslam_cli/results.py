@@ -200,6 +200,10 @@ class OdometryModel(JsonResult):
     # out (left out: never) — the increments before it carried that term in the odometry's share of them
     scale_error_from_keyframe: int | None = optional()
     heading_drift_from_keyframe: int | None = optional()
+    # appended, with graph.recalibrate only: the scale error and drift fitted on every keyframe of the run,
+    # which the smoothed chain was recalibrated to (the fields above are the last window's)
+    whole_run_scale_error: float | None = optional()
+    whole_run_heading_drift_per_m: float | None = optional()
 
 
 @dataclass(frozen=True, kw_only=True)

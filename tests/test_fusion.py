@@ -310,6 +310,8 @@ def test_the_whole_run_bias_is_fitted_on_every_sample_and_leaves_the_fusion_as_i
     everything._learn()
     o = np.array([x[0] for x in drawn])
     np.testing.assert_allclose(bias(o), everything.bias(o), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(f.whole_run_fit[0], everything.c, rtol=1e-9)
+    assert f.whole_run_fit[1] == everything.along
     assert np.all(np.abs(everything.c - c) < 0.005)  # (the drawn bias, found)
     with pytest.raises(ValueError, match="whole_run"):
         fusion().whole_run_bias()

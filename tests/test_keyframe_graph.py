@@ -4,6 +4,7 @@ run's smoothed trajectory read from the nodes."""
 
 from __future__ import annotations
 
+import json
 from types import SimpleNamespace
 
 import numpy as np
@@ -239,12 +240,16 @@ def test_a_run_recalibrates_with_its_front_ends_bias_only_when_it_matched_scans_
     cfg = config_from({}, ["submaps.max_steps=20", "loops.enabled=false", *overrides])
     run(sim_log, cfg, tmp_path / "out", span=Span(max_scans=60))
     assert len(got) == 1
+    model = json.loads((tmp_path / "out" / "summary.json").read_text()).get("odometry_model") or {}
+    whole = ("whole_run_scale_error", "whole_run_heading_drift_per_m")
     if learnt:
         assert isinstance(got[0].__self__, OdometryFusion) and got[0].__func__ is OdometryFusion.bias
         fitted = got[0].__self__  # (a copy sharing the run's samples: all of them, under the window)
         assert len(fitted.every_sample) == 24 * len(fitted.samples) > 0
+        # summary.json says which bias the smoothed chain was recalibrated to: the copy's
+        assert [model[k] for k in whole] == pytest.approx(list(fitted.c), abs=0.0)
     else:
-        assert got[0] is None
+        assert got[0] is None and not any(k in model for k in whole)
 
 
 @pytest.mark.parametrize(

@@ -118,6 +118,7 @@ class OdometryFusion:
         # with ``whole_run``, every sample of the run, SAMPLE numbers each (d, Σ_o, Σ_m, o): the bias
         # fitted on all of them (:meth:`whole_run_bias`, graph.recalibrate's) — 192 bytes a keyframe
         self.every_sample = array("d") if whole_run else None
+        self.whole_run_fit: tuple[np.ndarray, bool] | None = None  # (c, along) :meth:`whole_run_bias` found
 
     def corrected(self, o: np.ndarray) -> np.ndarray:
         """The odometry increment with the learnt scale error and drift taken out."""
@@ -198,7 +199,8 @@ class OdometryFusion:
         the run instead of the last ``adapt_window``: one robot's odometry bias is taken as constant, and
         a window's estimate is noisy (a term that fails its 3σ test in the last window would be dropped
         from every step); fewer than ``adapt_min_samples`` samples: the bias learnt so far. This fusion's
-        own state is left as it was. Needs ``whole_run`` (ValueError)."""
+        own state is left as it was, but for ``whole_run_fit`` (c, along), kept for summary.json. Needs
+        ``whole_run`` (ValueError)."""
         if self.every_sample is None:
             raise ValueError("whole_run_bias: this fusion was made without whole_run, it kept no samples")
         rows = np.frombuffer(self.every_sample).reshape(-1, SAMPLE)
@@ -206,6 +208,7 @@ class OdometryFusion:
         if len(rows) >= self.min_samples:
             So, Sm = rows[:, 3:12].reshape(-1, 3, 3), rows[:, 12:21].reshape(-1, 3, 3)
             fit._fit(rows[:, :3], So, Sm, rows[:, 21:])
+        self.whole_run_fit = (fit.c.copy(), bool(fit.along))
         return fit.bias
 
     def _learn(self) -> None:
