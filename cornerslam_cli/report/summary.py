@@ -138,7 +138,7 @@ def odometry_model(matcher) -> OdometryModel | None:
     if matcher is None:
         return None
     f = matcher.fusion
-    whole = f.whole_run_fit[0] if f.whole_run_fit is not None else (None, None)
+    whole = (None, None) if f.whole_run_fit is None else [float(v) for v in f.whole_run_fit[0]]
     return OdometryModel(
         odom_noise_scale=f.k,
         match_noise_scale=f.s,
@@ -147,8 +147,8 @@ def odometry_model(matcher) -> OdometryModel | None:
         heading_drift_along_path=bool(f.along),
         scale_error_from_keyframe=f.first_taken[0],
         heading_drift_from_keyframe=f.first_taken[1],
-        whole_run_scale_error=None if whole[0] is None else float(whole[0]),
-        whole_run_heading_drift_per_m=None if whole[1] is None else float(whole[1]),
+        whole_run_scale_error=whole[0],
+        whole_run_heading_drift_per_m=whole[1],
     )
 
 
