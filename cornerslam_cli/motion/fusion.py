@@ -66,6 +66,8 @@ IRLS = 4  # re-weighting passes
 CHI2_3_MEDIAN = 2.365974  # median of χ² with 3 degrees of freedom
 S_MAX = 1e4  # the match's covariance is inflated at most this much
 BIAS_SIGMAS = 3.0  # a drift term is kept when it is this many standard errors from zero
+# (not shrunk by 1 − se²/c² instead: 10 of the 15 panel logs worse, every exact one among them —
+# docs/results/variant_bias_shrinkage_vs_50a4f18.md)
 ALONG_EVIDENCE = BIAS_SIGMAS**2 / 2  # the drift along the path is taken when likelier by this (NLL)
 SAMPLE = 24  # numbers a sample is kept as for the whole run: d (3), Σ_o (9), Σ_m (9), o (3)
 
