@@ -51,7 +51,6 @@ from .graph.submap import (
     landmark_frames,
     place_table,
 )
-from .motion.fusion import shifts
 from .slam import Slam, StepRecord, globalise
 
 if TYPE_CHECKING:
@@ -184,7 +183,7 @@ class HierarchicalSlam:
         """The closed submaps' chains with the increments moved to ``bias`` (the whole run's; the
         steps' offsets kept for final_poses; closures as measured); bit for bit the same if none moves."""
         spacing = (self.cfg.graph.node_spacing, self.cfg.graph.node_angle)
-        shift = shifts(np.frombuffer(self.taken).reshape(-1, len(NO_BIAS)), bias)
+        shift = bias(np.frombuffer(self.taken).reshape(-1, len(NO_BIAS)))
         if not shift.any():
             return self.chains
         out = [

@@ -117,6 +117,9 @@ class OdometryFusion:
         # the step (trajectory.csv's) whose increment first had each bias term (scale, drift) taken out —
         # None: never yet (summary.json odometry_model: until then the odometry's share carried it)
         self.first_taken: list[int | None] = [None, None]
+        # a term taken out and later dropped again (its 3σ test failed in a later window): not held as a
+        # constant of this odometry, so graph.recalibrate does not carry it back (:meth:`backfill`)
+        self.dropped = [False, False]
         # with ``whole_run``, every sample of the run, SAMPLE numbers each (d, Σ_o, Σ_m, o): the bias
         # fitted on all of them (:meth:`whole_run_bias`, graph.recalibrate's) — 192 bytes a keyframe
         self.every_sample = array("d") if whole_run else None
@@ -191,6 +194,8 @@ class OdometryFusion:
         self.n_steps += 1
         for i in np.flatnonzero(self.c):
             self.first_taken[i] = self.first_taken[i] or self.n_steps
+        for i in range(2):
+            self.dropped[i] = self.dropped[i] or (self.first_taken[i] is not None and self.c[i] == 0.0)
 
     def fallback_cov(self, cov_o: np.ndarray) -> np.ndarray:
         """Covariance of an odometry increment used without a match: the configured model at least."""
@@ -247,6 +252,28 @@ class OdometryFusion:
         g = float(np.median(q)) / CHI2_3_MEDIAN
         self.k = float(np.clip(k * g, self.k_min, self.k_max))
         self.s = float(np.clip(s * g, 1.0, S_MAX))
+
+
+def backfill(taken: np.ndarray, fusion: OdometryFusion) -> np.ndarray:
+    """(n, 3) how far each step's increment moves when the bias terms it was fused without, because the
+    learner had not yet taken them out (the steps before ``fusion.first_taken``), are taken out as fitted
+    on the whole run — only terms that the whole run holds and that, once taken, the learner never
+    dropped again (a term that comes and goes is not a constant of the odometry: exact odometry's
+    scans-against-reference disagreement in one stretch). ``taken``: the steps' BiasTaken rows (n, 15;
+    row k = trajectory.csv step k; zeros: none). Needs :meth:`OdometryFusion.whole_run_bias` first."""
+    if fusion.whole_run_fit is None:
+        raise ValueError("backfill: call whole_run_bias first")
+    c, along = fusion.whole_run_fit
+    B = bias_matrices(taken[:, :3], along)
+    step = np.arange(len(taken))
+    add = np.zeros((len(taken), 3))
+    for i in range(2):
+        first = fusion.first_taken[i]
+        if first is None or fusion.dropped[i] or c[i] == 0.0:
+            continue
+        before = step < first
+        add[before] += B[before, :, i] * c[i]
+    return -np.einsum("nij,nj->ni", taken[:, 6:].reshape(-1, 3, 3), add)
 
 
 def shifts(taken: np.ndarray, bias: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
