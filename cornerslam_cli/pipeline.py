@@ -18,7 +18,6 @@ from .config import Config
 from .errors import OutputError, display_path
 from .frontend import Frame, Input, check_processed, frames, open_input, warn_mount
 from .hierarchy import HierarchicalSlam
-from .motion.fusion import backfill
 from .report.occupancy import ScanStore
 from .report.oserrors import output_errors
 from .report.outdir import StagedDir
@@ -145,10 +144,7 @@ def run_filter(
         warn_mount(src, cfg)
         if graph is not None:
             learnt = src.matcher is not None and cfg.graph.recalibrate
-            if learnt:
-                fusion = src.matcher.fusion
-                fusion.whole_run_bias()
-            graph.finish((lambda rows: backfill(rows, fusion)) if learnt else None)
+            graph.finish(src.matcher.fusion.carry_back if learnt else None)
             for warning in (graph.solver_warning(), graph.refinement.solver_warning()):
                 if warning:
                     src.reader.stats.warn(warning)

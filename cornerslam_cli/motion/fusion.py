@@ -83,7 +83,7 @@ class Fused:
 @dataclass(frozen=True)
 class BiasTaken:
     """What one increment took of the odometry's bias as learnt by then: the smoothed trajectory moves it
-    by ``keep``·(``bias`` − the bias fitted on the whole run) (graph/smooth.py ``recalibrated``)."""
+    by what it did not take (OdometryFusion.carry_back, graph/smooth.py ``recalibrated``)."""
 
     odom: np.ndarray  # (3,) the odometry increment
     bias: np.ndarray  # (3,) B(o)·c taken out of it (OdometryFusion.corrected)
@@ -118,7 +118,7 @@ class OdometryFusion:
         # None: never yet (summary.json odometry_model: until then the odometry's share carried it)
         self.first_taken: list[int | None] = [None, None]
         # a term taken out and later dropped again (its 3σ test failed in a later window): not held as a
-        # constant of this odometry, so graph.recalibrate does not carry it back (:meth:`backfill`)
+        # constant of this odometry, so graph.recalibrate does not carry it back (:meth:`carry_back`)
         self.dropped = [False, False]
         # with ``whole_run``, every sample of the run, SAMPLE numbers each (d, Σ_o, Σ_m, o): the bias
         # fitted on all of them (:meth:`whole_run_bias`, graph.recalibrate's) — 192 bytes a keyframe
@@ -218,6 +218,27 @@ class OdometryFusion:
         self.whole_run_fit = (fit.c.copy(), bool(fit.along))
         return fit.bias
 
+    def carry_back(self, taken: np.ndarray) -> np.ndarray:
+        """(n, 3) how far each step's increment moves (graph.recalibrate) when the bias terms it was fused
+        without — the learner had not yet taken them out: the steps before ``first_taken`` — are taken out
+        as fitted on the whole run (:meth:`whole_run_bias`, run here): only terms the whole run holds and
+        that, once taken, the learner never dropped again (a term that comes and goes is no constant of
+        the odometry: exact odometry's disagreement with the scans along one stretch). ``taken``: the
+        steps' BiasTaken rows (n, 15; row k = trajectory.csv step k; zeros: it took none). An increment
+        inc = (I − K)·(o − B(o)·c) + K·m moves by −(I − K)·B(o)·c_added."""
+        self.whole_run_bias()
+        c, along = self.whole_run_fit
+        B = bias_matrices(taken[:, :3], along)
+        step = np.arange(len(taken))
+        added = np.zeros((len(taken), 3))
+        for i in range(2):
+            first = self.first_taken[i]
+            if first is None or self.dropped[i] or c[i] == 0.0:
+                continue
+            before = step < first
+            added[before] += B[before, :, i] * c[i]
+        return -np.einsum("nij,nj->ni", taken[:, 6:].reshape(-1, 3, 3), added)
+
     def _learn(self) -> None:
         """Re-estimate the scales and bias on the window's samples."""
         self._fit(*(np.array([x[i] for x in self.samples]) for i in range(4)))
@@ -252,36 +273,6 @@ class OdometryFusion:
         g = float(np.median(q)) / CHI2_3_MEDIAN
         self.k = float(np.clip(k * g, self.k_min, self.k_max))
         self.s = float(np.clip(s * g, 1.0, S_MAX))
-
-
-def backfill(taken: np.ndarray, fusion: OdometryFusion) -> np.ndarray:
-    """(n, 3) how far each step's increment moves when the bias terms it was fused without, because the
-    learner had not yet taken them out (the steps before ``fusion.first_taken``), are taken out as fitted
-    on the whole run — only terms that the whole run holds and that, once taken, the learner never
-    dropped again (a term that comes and goes is not a constant of the odometry: exact odometry's
-    scans-against-reference disagreement in one stretch). ``taken``: the steps' BiasTaken rows (n, 15;
-    row k = trajectory.csv step k; zeros: none). Needs :meth:`OdometryFusion.whole_run_bias` first."""
-    if fusion.whole_run_fit is None:
-        raise ValueError("backfill: call whole_run_bias first")
-    c, along = fusion.whole_run_fit
-    B = bias_matrices(taken[:, :3], along)
-    step = np.arange(len(taken))
-    add = np.zeros((len(taken), 3))
-    for i in range(2):
-        first = fusion.first_taken[i]
-        if first is None or fusion.dropped[i] or c[i] == 0.0:
-            continue
-        before = step < first
-        add[before] += B[before, :, i] * c[i]
-    return -np.einsum("nij,nj->ni", taken[:, 6:].reshape(-1, 3, 3), add)
-
-
-def shifts(taken: np.ndarray, bias: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
-    """(n, 3) how far each increment moves with the bias fitted on the whole run instead of the one it
-    took: ``taken`` (n, 15) its BiasTaken rows (zeros: it took none), ``bias`` the fusion's
-    (OdometryFusion.whole_run_bias). keep·(bias then − bias now)."""
-    keep = taken[:, 6:].reshape(-1, 3, 3)
-    return np.einsum("nij,nj->ni", keep, taken[:, 3:6] - bias(taken[:, :3]))
 
 
 def bias_matrix(o: np.ndarray, along: bool = False) -> np.ndarray:
