@@ -110,7 +110,8 @@ class GraphConfig:
     # term out, that term as fitted on the whole run (motion/fusion.py carry_back: only terms the whole run
     # holds and the learner never dropped once taken), each increment moved by the share of the odometry
     # in it (graph/smooth.py recalibrated); the online estimate and the closures stay as they were (README
-    # "The smoothed chain, recalibrated": edmonton 0.352 -> 0.316, every exact-odometry log unchanged)
+    # "The smoothed chain, recalibrated": every exact-odometry log unchanged; edmonton 0.352 -> 0.316 at the
+    # default submaps, but its mean over submaps.max_distance 9.5/10/10.5 m 0.295 -> 0.354: off)
     recalibrate: bool = False
     # dense refinement (graph/refine.py; off: README "Dense refinement"): as the run goes, each node's
     # scan registered against its refine_neighbours nearest earlier nodes within refine_radius m that lie
