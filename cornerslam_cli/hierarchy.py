@@ -51,7 +51,6 @@ from .graph.submap import (
     landmark_frames,
     place_table,
 )
-from .motion.fusion import shifts
 from .slam import Slam, StepRecord, globalise
 
 if TYPE_CHECKING:
@@ -161,9 +160,10 @@ class HierarchicalSlam:
             or self.slam.ekf.n_landmarks >= lim.max_landmarks
         )
 
-    def finish(self, bias: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
-        """Close the last submap (its loops too) when it has steps; solve the keyframe graph — with ``bias``
-        (OdometryFusion.whole_run_bias), each step's increment moved to it (graph.recalibrate)."""
+    def finish(self, recalibration: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
+        """Close the last submap (its loops too) when it has steps; solve the keyframe graph — with
+        ``recalibration`` (OdometryFusion.carry_back: the steps' BiasTaken rows → how far each step's
+        increment moves), each step's increment moved so (graph.recalibrate)."""
         t0 = time.perf_counter()
         if self._open.poses:
             self._close(self.n_steps - 1, last=True)
@@ -173,18 +173,19 @@ class HierarchicalSlam:
                 for r in self.loops
                 if r.factor >= 0
             ]
-            chains = self.chains if bias is None or self.taken is None else self._recalibrated(bias)
+            recalibrate = recalibration is not None and self.taken is not None
+            chains = self._recalibrated(recalibration) if recalibrate else self.chains
             self.smoothed = smooth(self.cfg.graph, chains, self.graph.poses()[: len(self.closed)], loops)
             self.unconverged += not self.smoothed.converged
             if self.cfg.graph.refine:  # (its own solve's warning: Refinement.solver_warning)
                 self.refinement.finish(self.graph, self.smoothed, self._match_scale)
         self.t_loop += time.perf_counter() - t0
 
-    def _recalibrated(self, bias: Callable[[np.ndarray], np.ndarray]) -> list:
-        """The closed submaps' chains with the increments moved to ``bias`` (the whole run's; the
+    def _recalibrated(self, recalibration: Callable[[np.ndarray], np.ndarray]) -> list:
+        """The closed submaps' chains with the increments moved by ``recalibration`` (:meth:`finish`; the
         steps' offsets kept for final_poses; closures as measured); bit for bit the same if none moves."""
         spacing = (self.cfg.graph.node_spacing, self.cfg.graph.node_angle)
-        shift = shifts(np.frombuffer(self.taken).reshape(-1, len(NO_BIAS)), bias)
+        shift = recalibration(np.frombuffer(self.taken).reshape(-1, len(NO_BIAS)))
         if not shift.any():
             return self.chains
         out = [

@@ -144,7 +144,7 @@ def run_filter(
         warn_mount(src, cfg)
         if graph is not None:
             learnt = src.matcher is not None and cfg.graph.recalibrate
-            graph.finish(src.matcher.fusion.whole_run_bias() if learnt else None)
+            graph.finish(src.matcher.fusion.carry_back if learnt else None)
             for warning in (graph.solver_warning(), graph.refinement.solver_warning()):
                 if warning:
                     src.reader.stats.warn(warning)

@@ -201,7 +201,8 @@ class OdometryModel(JsonResult):
     scale_error_from_keyframe: int | None = optional()
     heading_drift_from_keyframe: int | None = optional()
     # appended, with graph.recalibrate only: the scale error and drift fitted on every keyframe of the run,
-    # which the smoothed chain was recalibrated to (the fields above are the last window's)
+    # which the smoothed chain carried back to the steps before each was first taken (unless dropped once
+    # taken: motion/fusion.py carry_back; the fields above are the last window's)
     whole_run_scale_error: float | None = optional()
     whole_run_heading_drift_per_m: float | None = optional()
 

@@ -13,7 +13,7 @@ from cornerslam_cli.config import load_config
 from cornerslam_cli.frontend import odometry_noise
 from cornerslam_cli.geometry import compose, relative, transform_points
 from cornerslam_cli.motion import ScanMatchConfig
-from cornerslam_cli.motion.fusion import OdometryFusion, bias_matrices, bias_matrix, shifts, student_fit
+from cornerslam_cli.motion.fusion import OdometryFusion, bias_matrices, bias_matrix, student_fit
 from cornerslam_cli.motion.icp import LocalMap, ScanMatcher, register
 from cornerslam_cli.simworld import office_world, raycast
 
@@ -89,6 +89,7 @@ def test_each_bias_term_records_the_first_step_it_was_taken_out_of():
         g.c = np.array(c)
         g.note_step()
         assert g.first_taken == want_first
+    assert g.dropped == [True, False]  # the scale was taken at step 2 and dropped at step 3; the drift held
 
 
 def test_the_matcher_counts_every_step_after_the_first_fallbacks_too():
@@ -262,35 +263,6 @@ def test_the_drift_model_follows_the_data_and_needs_evidence_to_change():
     assert not f.along and np.all(f.c == 0.0)
 
 
-@pytest.mark.parametrize("along", [False, True])
-@pytest.mark.parametrize("outcome", ["fused", "rejected"])
-def test_the_shift_is_what_the_increment_becomes_fused_with_the_final_bias(along, outcome):
-    """shifts() against the fusion itself: the same odometry and match fused once with the bias learnt by
-    then and once with another (the one at the end of the run) differ by the shift computed from the
-    first's BiasTaken — accepted (the match weighted in) or rejected (the corrected odometry alone)."""
-    o, m = np.array([0.5, 0.02, 0.1]), np.array([0.47, 0.0, 0.12])
-    So, Sm = np.diag([4e-3, 1e-3, 2e-3]), np.diag([1e-3, 2e-3, 1e-4])
-    if outcome == "rejected":
-        m = m + np.array([2.0, 0.0, 0.0])
-    then, end = np.array([0.03, 0.008]), np.array([-0.01, 0.002])
-    got = {}
-    for c in (then, end):
-        f = fusion(adapt_min_samples=2, adapt_every=1000)  # learning on the first samples, kept after
-        f.every_sample = array("d")  # (as whole_run=True makes it: taken() is None without)
-        f.fuse(o, So, o, Sm)  # (one sample; the next fuse learns, the state is then set)
-        f._learn = lambda: None  # noqa: SLF001 — the state below, not a learnt one
-        f.k, f.s, f.c, f.along = 1.0, 1.0, c, along
-        fused = f.fuse(o, So, m, Sm)
-        assert fused.accepted == (outcome == "fused")
-        got[tuple(c)] = (fused.inc, f.taken(o, fused.gain), f)
-    (inc_then, taken, _), (inc_end, _, f_end) = got[tuple(then)], got[tuple(end)]
-    shift = shifts(np.array([taken.row()]), f_end.bias)[0]
-    assert np.abs(shift).max() > 1e-3  # (a case that moves)
-    np.testing.assert_allclose(inc_then + shift, inc_end, atol=1e-12)
-    assert shifts(np.zeros((2, 15)), f_end.bias).tolist() == [[0.0] * 3] * 2  # no bias taken: no shift
-    assert fusion().taken(o, np.eye(3)) is None  # not kept without whole_run
-
-
 def test_the_whole_run_bias_is_fitted_on_every_sample_and_leaves_the_fusion_as_it_was():
     """whole_run_bias against a fit by hand on all the samples drawn (the same learner on a fusion whose
     window holds them all), while the fusion keeps its last window's state; without whole_run it refuses."""
@@ -315,3 +287,46 @@ def test_the_whole_run_bias_is_fitted_on_every_sample_and_leaves_the_fusion_as_i
     assert np.all(np.abs(everything.c - c) < 0.005)  # (the drawn bias, found)
     with pytest.raises(ValueError, match="whole_run"):
         fusion().whole_run_bias()
+
+
+@pytest.mark.parametrize("along", [False, True])
+@pytest.mark.parametrize("outcome", ["fused", "rejected"])
+def test_carry_back_moves_only_the_steps_before_a_held_term_was_taken_as_fusing_with_it_would(along, outcome):
+    """carry_back() against the fusion itself: a step fused before the drift was taken, fused again with
+    the whole run's drift taken out as well (its scale as it was), moves by carry_back's row for it —
+    accepted (the match weighted in) or rejected (the corrected odometry alone); the steps from the one
+    that first took it do not move, nor does any step when the term was dropped once taken, when the
+    whole run does not hold it, or when it was never taken."""
+    o, m = np.array([0.5, 0.02, 0.1]), np.array([0.47, 0.0, 0.12])
+    So, Sm = np.diag([4e-3, 1e-3, 2e-3]), np.diag([1e-3, 2e-3, 1e-4])
+    if outcome == "rejected":
+        m = m + np.array([2.0, 0.0, 0.0])
+    then, whole = np.array([0.03, 0.0]), np.array([0.025, 0.008])
+    fused = {}
+    for c in (then, np.array([then[0], whole[1]])):
+        f = fusion(adapt_min_samples=2, adapt_every=1000)
+        f.every_sample = array("d")
+        f.fuse(o, So, o, Sm)
+        f._learn = lambda: None  # noqa: SLF001 — the state below, not a learnt one
+        f.k, f.s, f.c, f.along = 1.0, 1.0, c, along
+        out = f.fuse(o, So, m, Sm)
+        assert out.accepted == (outcome == "fused")
+        fused[c[1]] = (out.inc, f.taken(o, out.gain))
+    (inc_then, taken), (inc_with, _) = fused[0.0], fused[whole[1]]
+    rows = np.array([[0.0] * 15, taken.row(), taken.row(), taken.row()])  # steps 0 (no increment) to 3
+
+    def carried(first, dropped, fit):
+        f.first_taken, f.dropped = first, dropped
+        f.whole_run_bias = lambda: setattr(f, "whole_run_fit", (fit, along))  # the run's fit, stood in
+        return f.carry_back(rows)
+
+    shift = carried([1, 3], [False, False], whole)
+    np.testing.assert_allclose(inc_then + shift[1], inc_with, atol=1e-12)
+    np.testing.assert_allclose(shift[2], shift[1], atol=0.0)
+    assert np.abs(shift[1]).max() > 1e-4 and not shift[0].any() and not shift[3].any()
+    assert not carried([1, 3], [False, True], whole).any()  # dropped once taken
+    assert not carried([1, 3], [False, False], then).any()  # the whole run does not hold it
+    assert not carried([1, None], [False, False], whole).any()  # never taken
+    with pytest.raises(ValueError, match="whole_run"):
+        fusion().carry_back(rows)  # (no samples kept: whole_run_bias refuses)
+    assert fusion().taken(o, np.eye(3)) is None  # not kept without whole_run

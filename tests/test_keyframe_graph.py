@@ -16,7 +16,7 @@ from cornerslam_cli.geometry import chain, compose, relative, wrap_angle
 from cornerslam_cli.graph.smooth import recalibrated
 from cornerslam_cli.graph.submap import det3, keyframe_factors, keyframe_nodes, propagate
 from cornerslam_cli.hierarchy import HierarchicalSlam
-from cornerslam_cli.motion.fusion import bias_matrices, shifts
+from cornerslam_cli.motion.fusion import bias_matrices
 
 
 def arc(n: int = 12, step: float = 0.4, turn: float = 0.15) -> tuple[np.ndarray, np.ndarray]:
@@ -171,6 +171,17 @@ def test_a_recalibrated_chain_is_the_filter_chain_moved_by_each_steps_shift():
     np.testing.assert_allclose(compose(hang, offsets), moved, atol=1e-12)
 
 
+def moved_to(c: np.ndarray):
+    """A stand-in for OdometryFusion.carry_back: every step moved to the bias ``c`` (scale, drift) from the
+    one it took, keep·(B(o)·c_then − B(o)·c), from its BiasTaken row."""
+
+    def recalibration(rows: np.ndarray) -> np.ndarray:
+        keep = rows[:, 6:].reshape(-1, 3, 3)
+        return np.einsum("nij,nj->ni", keep, rows[:, 3:6] - bias_matrices(rows[:, :3], False) @ c)
+
+    return recalibration
+
+
 def test_a_runs_recalibrated_poses_are_its_steps_moved_by_the_final_bias(sim_log):
     """Without loop closing the keyframe graph is a chain: finished with the bias learnt by the end (here
     a stand-in: 1 % scale, 0.01 rad/m), the smoothed trajectory is the filter's step increments each moved
@@ -183,12 +194,10 @@ def test_a_runs_recalibrated_poses_are_its_steps_moved_by_the_final_bias(sim_log
     assert sum(f.bias_taken is not None for f in fs) == len(fs) - 1  # all but the first
     rows = np.array([[0.0] * 15 if f.bias_taken is None else f.bias_taken.row() for f in fs])
 
-    def bias(o):
-        return bias_matrices(o, False) @ np.array([0.01, 0.01])
-
-    shift = shifts(rows, bias)
+    recalibration = moved_to(np.array([0.01, 0.01]))
+    shift = recalibration(rows)
     assert np.abs(shift).max() > 1e-4
-    hs.finish(bias)
+    hs.finish(recalibration)
     moved = compose(online[0], chain(relative(online[:-1], online[1:]) + shift[1:]))
     np.testing.assert_allclose(hs.final_poses()[1:], moved, atol=1e-6)
 
@@ -202,7 +211,7 @@ def test_recalibrated_landmarks_keep_their_place_relative_to_the_robot_that_last
     hs = HierarchicalSlam(cfg, src.laser2base)
     for f in frames(src, cfg):
         hs.step(f)
-    hs.finish(lambda o: bias_matrices(o, False) @ np.array([0.02, 0.02]))
+    hs.finish(moved_to(np.array([0.02, 0.02])))
     table, poses = hs.landmark_table(), hs.final_poses()
     assert len(table["id"]) > 0
     for s, t in zip(hs.closed, hs.tables, strict=True):
@@ -225,29 +234,27 @@ def test_recalibrated_landmarks_keep_their_place_relative_to_the_robot_that_last
 def test_a_run_recalibrates_with_its_front_ends_bias_only_when_it_matched_scans_and_is_asked_to(
     sim_log, tmp_path, monkeypatch, overrides, learnt
 ):
-    """pipeline.run_filter's wiring of graph.recalibrate: finish gets the bias the scan matcher fits on the
-    whole run (OdometryFusion.bias of a fitted copy) with graph.recalibrate=true, None by default (off)
-    or without scan matching."""
+    """pipeline.run_filter's wiring of graph.recalibrate: finish gets the scan matcher's fusion's
+    carry_back (the bias it fits on the whole run, carried back) with graph.recalibrate=true, None by
+    default (off) or without scan matching."""
     from cornerslam_cli.motion.fusion import OdometryFusion
     from cornerslam_cli.pipeline import run
     from cornerslam_cli.span import Span
 
     got = []
     finish = HierarchicalSlam.finish
-    monkeypatch.setattr(
-        HierarchicalSlam, "finish", lambda self, bias=None: (got.append(bias), finish(self, bias))
-    )
+    monkeypatch.setattr(HierarchicalSlam, "finish", lambda self, r=None: (got.append(r), finish(self, r)))
     cfg = config_from({}, ["submaps.max_steps=20", "loops.enabled=false", *overrides])
     run(sim_log, cfg, tmp_path / "out", span=Span(max_scans=60))
     assert len(got) == 1
     model = json.loads((tmp_path / "out" / "summary.json").read_text()).get("odometry_model") or {}
     whole = ("whole_run_scale_error", "whole_run_heading_drift_per_m")
     if learnt:
-        assert isinstance(got[0].__self__, OdometryFusion) and got[0].__func__ is OdometryFusion.bias
-        fitted = got[0].__self__  # (a copy sharing the run's samples: all of them, under the window)
-        assert len(fitted.every_sample) == 24 * len(fitted.samples) > 0
-        # summary.json says which bias the smoothed chain was recalibrated to: the copy's
-        assert [model[k] for k in whole] == pytest.approx(list(fitted.c), abs=0.0)
+        assert isinstance(got[0].__self__, OdometryFusion) and got[0].__func__ is OdometryFusion.carry_back
+        fusion = got[0].__self__  # (the run's: every sample kept, all of them under the window here)
+        assert len(fusion.every_sample) == 24 * len(fusion.samples) > 0
+        # summary.json says which bias was carried back: the whole run's fit
+        assert [model[k] for k in whole] == pytest.approx(list(fusion.whole_run_fit[0]), abs=0.0)
     else:
         assert got[0] is None and not any(k in model for k in whole)
 

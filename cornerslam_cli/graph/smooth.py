@@ -55,7 +55,7 @@ def recalibrated(
     sub: Submap, shift: np.ndarray, nodes: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Closed submap ``sub``'s keyframe chain with each step's increment moved by ``shift`` (s, 3): what
-    the odometry bias fitted on the whole run changes of it (motion/fusion.py ``shifts``). Returns
+    carrying the odometry bias back changes of it (motion/fusion.py ``carry_back``). Returns
     the chain's rel (m, 3) between its ``nodes`` (keyframe_nodes), the nodes' poses in its frame and each
     step's pose relative to the node it hangs from (hierarchy.py ``final_poses``)."""
     prev = np.vstack((np.zeros(3), sub.poses[:-1]))

@@ -83,7 +83,7 @@ class Fused:
 @dataclass(frozen=True)
 class BiasTaken:
     """What one increment took of the odometry's bias as learnt by then: the smoothed trajectory moves it
-    by ``keep``·(``bias`` − the bias fitted on the whole run) (graph/smooth.py ``recalibrated``)."""
+    by what it did not take (OdometryFusion.carry_back, graph/smooth.py ``recalibrated``)."""
 
     odom: np.ndarray  # (3,) the odometry increment
     bias: np.ndarray  # (3,) B(o)·c taken out of it (OdometryFusion.corrected)
@@ -117,6 +117,9 @@ class OdometryFusion:
         # the step (trajectory.csv's) whose increment first had each bias term (scale, drift) taken out —
         # None: never yet (summary.json odometry_model: until then the odometry's share carried it)
         self.first_taken: list[int | None] = [None, None]
+        # a term taken out and later dropped again (its 3σ test failed in a later window): not held as a
+        # constant of this odometry, so graph.recalibrate does not carry it back (:meth:`carry_back`)
+        self.dropped = [False, False]
         # with ``whole_run``, every sample of the run, SAMPLE numbers each (d, Σ_o, Σ_m, o): the bias
         # fitted on all of them (:meth:`whole_run_bias`, graph.recalibrate's) — 192 bytes a keyframe
         self.every_sample = array("d") if whole_run else None
@@ -191,6 +194,8 @@ class OdometryFusion:
         self.n_steps += 1
         for i in np.flatnonzero(self.c):
             self.first_taken[i] = self.first_taken[i] or self.n_steps
+        for i in range(2):
+            self.dropped[i] = self.dropped[i] or (self.first_taken[i] is not None and self.c[i] == 0.0)
 
     def fallback_cov(self, cov_o: np.ndarray) -> np.ndarray:
         """Covariance of an odometry increment used without a match: the configured model at least."""
@@ -212,6 +217,27 @@ class OdometryFusion:
             fit._fit(rows[:, :3], So, Sm, rows[:, 21:])
         self.whole_run_fit = (fit.c.copy(), bool(fit.along))
         return fit.bias
+
+    def carry_back(self, taken: np.ndarray) -> np.ndarray:
+        """(n, 3) how far each step's increment moves (graph.recalibrate) when the bias terms it was fused
+        without — the learner had not yet taken them out: the steps before ``first_taken`` — are taken out
+        as fitted on the whole run (:meth:`whole_run_bias`, run here): only terms the whole run holds and
+        that, once taken, the learner never dropped again (a term that comes and goes is no constant of
+        the odometry: exact odometry's disagreement with the scans along one stretch). ``taken``: the
+        steps' BiasTaken rows (n, 15; row k = trajectory.csv step k; zeros: it took none). An increment
+        inc = (I − K)·(o − B(o)·c) + K·m moves by −(I − K)·B(o)·c_added."""
+        self.whole_run_bias()
+        c, along = self.whole_run_fit
+        B = bias_matrices(taken[:, :3], along)
+        step = np.arange(len(taken))
+        added = np.zeros((len(taken), 3))
+        for i in range(2):
+            first = self.first_taken[i]
+            if first is None or self.dropped[i] or c[i] == 0.0:
+                continue
+            before = step < first
+            added[before] += B[before, :, i] * c[i]
+        return -np.einsum("nij,nj->ni", taken[:, 6:].reshape(-1, 3, 3), added)
 
     def _learn(self) -> None:
         """Re-estimate the scales and bias on the window's samples."""
@@ -247,14 +273,6 @@ class OdometryFusion:
         g = float(np.median(q)) / CHI2_3_MEDIAN
         self.k = float(np.clip(k * g, self.k_min, self.k_max))
         self.s = float(np.clip(s * g, 1.0, S_MAX))
-
-
-def shifts(taken: np.ndarray, bias: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
-    """(n, 3) how far each increment moves with the bias fitted on the whole run instead of the one it
-    took: ``taken`` (n, 15) its BiasTaken rows (zeros: it took none), ``bias`` the fusion's
-    (OdometryFusion.whole_run_bias). keep·(bias then − bias now)."""
-    keep = taken[:, 6:].reshape(-1, 3, 3)
-    return np.einsum("nij,nj->ni", keep, taken[:, 3:6] - bias(taken[:, :3]))
 
 
 def bias_matrix(o: np.ndarray, along: bool = False) -> np.ndarray:
