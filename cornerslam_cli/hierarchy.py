@@ -160,9 +160,9 @@ class HierarchicalSlam:
             or self.slam.ekf.n_landmarks >= lim.max_landmarks
         )
 
-    def finish(self, recalibration: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
+    def finish(self, shift_of: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
         """Close the last submap (its loops too) when it has steps; solve the keyframe graph — with
-        ``recalibration`` (OdometryFusion.carry_back: the steps' BiasTaken rows → how far each step's
+        ``shift_of`` (OdometryFusion.carry_back: the steps' BiasTaken rows → how far each step's
         increment moves), each step's increment moved so (graph.recalibrate)."""
         t0 = time.perf_counter()
         if self._open.poses:
@@ -173,19 +173,18 @@ class HierarchicalSlam:
                 for r in self.loops
                 if r.factor >= 0
             ]
-            recalibrate = recalibration is not None and self.taken is not None
-            chains = self._recalibrated(recalibration) if recalibrate else self.chains
+            chains = self.chains if shift_of is None or self.taken is None else self._recalibrated(shift_of)
             self.smoothed = smooth(self.cfg.graph, chains, self.graph.poses()[: len(self.closed)], loops)
             self.unconverged += not self.smoothed.converged
             if self.cfg.graph.refine:  # (its own solve's warning: Refinement.solver_warning)
                 self.refinement.finish(self.graph, self.smoothed, self._match_scale)
         self.t_loop += time.perf_counter() - t0
 
-    def _recalibrated(self, recalibration: Callable[[np.ndarray], np.ndarray]) -> list:
-        """The closed submaps' chains with the increments moved by ``recalibration`` (:meth:`finish`; the
+    def _recalibrated(self, shift_of: Callable[[np.ndarray], np.ndarray]) -> list:
+        """The closed submaps' chains with the increments moved by ``shift_of`` (:meth:`finish`; the
         steps' offsets kept for final_poses; closures as measured); bit for bit the same if none moves."""
         spacing = (self.cfg.graph.node_spacing, self.cfg.graph.node_angle)
-        shift = recalibration(np.frombuffer(self.taken).reshape(-1, len(NO_BIAS)))
+        shift = shift_of(np.frombuffer(self.taken).reshape(-1, len(NO_BIAS)))
         if not shift.any():
             return self.chains
         out = [
