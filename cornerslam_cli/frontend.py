@@ -87,7 +87,7 @@ class Frame:
     # how much too small the scan matcher has found its fits' covariances (motion/fusion.py's learnt s,
     # 1 without scan matching): a fit's covariance misses what makes real matches wrong
     match_scale: float = 1.0
-    bias_taken: BiasTaken | None = None  # the odometry bias the increment took out (graph.recalibrate only)
+    bias_taken: BiasTaken | None = None  # how the increment was fused, for graph.recalibrate (only then)
     points: np.ndarray | None = None  # (k, 2) float32 valid beam end points, sensor frame (occupancy grid)
 
 

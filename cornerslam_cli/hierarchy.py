@@ -57,7 +57,7 @@ if TYPE_CHECKING:
     from .config import Config
     from .frontend import Frame
 
-NO_BIAS = (0.0,) * 15  # a step whose increment took no odometry bias (BiasTaken.row's length)
+NO_BIAS = (0.0,) * 12  # a step whose increment took no odometry bias (BiasTaken.row's length)
 COV_FLOOR = np.diag([1e-8, 1e-8, 1e-10])  # added to a submap's end covariance: a still robot gives Σ = 0
 # the corners gave no verdict (too few in common, no hypothesis) or a pose the points refute (low fitness:
 # usually a corner constellation repeated elsewhere): the points decide, around the graph's prediction

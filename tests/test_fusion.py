@@ -313,7 +313,7 @@ def test_carry_back_moves_only_the_steps_before_a_held_term_was_taken_as_fusing_
         assert out.accepted == (outcome == "fused")
         fused[c[1]] = (out.inc, f.taken(o, out.gain))
     (inc_then, taken), (inc_with, _) = fused[0.0], fused[whole[1]]
-    rows = np.array([[0.0] * 15, taken.row(), taken.row(), taken.row()])  # steps 0 (no increment) to 3
+    rows = np.array([[0.0] * 12, taken.row(), taken.row(), taken.row()])  # steps 0 (no increment) to 3
 
     def carried(first, dropped, fit):
         f.first_taken, f.dropped = first, dropped

@@ -172,27 +172,28 @@ def test_a_recalibrated_chain_is_the_filter_chain_moved_by_each_steps_shift():
 
 
 def moved_to(c: np.ndarray):
-    """A stand-in for OdometryFusion.carry_back: every step moved to the bias ``c`` (scale, drift) from the
-    one it took, keep·(B(o)·c_then − B(o)·c), from its BiasTaken row."""
+    """A stand-in for OdometryFusion.carry_back: every step moved as if it had the bias ``c`` (scale,
+    drift) taken out as well, −keep·B(o)·c, from its BiasTaken row."""
 
     def recalibration(rows: np.ndarray) -> np.ndarray:
-        keep = rows[:, 6:].reshape(-1, 3, 3)
-        return np.einsum("nij,nj->ni", keep, rows[:, 3:6] - bias_matrices(rows[:, :3], False) @ c)
+        keep = rows[:, 3:].reshape(-1, 3, 3)
+        return -np.einsum("nij,nj->ni", keep, bias_matrices(rows[:, :3], False) @ c)
 
     return recalibration
 
 
 def test_a_runs_recalibrated_poses_are_its_steps_moved_by_the_final_bias(sim_log):
-    """Without loop closing the keyframe graph is a chain: finished with the bias learnt by the end (here
-    a stand-in: 1 % scale, 0.01 rad/m), the smoothed trajectory is the filter's step increments each moved
-    by its shift (what its frame's BiasTaken says), composed from the first pose; across submaps too."""
+    """Without loop closing the keyframe graph is a chain: finished with a bias carried back (here a
+    stand-in: 1 % scale, 0.01 rad/m added to every step), the smoothed trajectory is the filter's step
+    increments each moved by its shift (from its frame's BiasTaken), composed from the first pose; across
+    submaps too."""
     cfg = config_from({}, ["submaps.max_steps=6", "loops.enabled=false", "graph.recalibrate=true"])
     src = open_input(sim_log, cfg)
     hs = HierarchicalSlam(cfg, src.laser2base)
     fs = list(frames(src, cfg))
     online = np.array([hs.step(f).pose for f in fs])
     assert sum(f.bias_taken is not None for f in fs) == len(fs) - 1  # all but the first
-    rows = np.array([[0.0] * 15 if f.bias_taken is None else f.bias_taken.row() for f in fs])
+    rows = np.array([[0.0] * 12 if f.bias_taken is None else f.bias_taken.row() for f in fs])
 
     recalibration = moved_to(np.array([0.01, 0.01]))
     shift = recalibration(rows)

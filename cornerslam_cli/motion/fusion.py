@@ -82,16 +82,16 @@ class Fused:
 
 @dataclass(frozen=True)
 class BiasTaken:
-    """What one increment took of the odometry's bias as learnt by then: the smoothed trajectory moves it
-    by what it did not take (OdometryFusion.carry_back, graph/smooth.py ``recalibrated``)."""
+    """How one increment was fused, as far as taking a bias term out of it afterwards needs: the smoothed
+    trajectory moves it by what it did not take (OdometryFusion.carry_back, graph/smooth.py
+    ``recalibrated``)."""
 
     odom: np.ndarray  # (3,) the odometry increment
-    bias: np.ndarray  # (3,) B(o)·c taken out of it (OdometryFusion.corrected)
     keep: np.ndarray  # (3, 3) I − gain: the share of the corrected odometry in the increment
 
     def row(self) -> list[float]:
-        """Its 15 numbers, flat (the hierarchy keeps one row per step)."""
-        return [*self.odom, *self.bias, *self.keep.ravel()]
+        """Its 12 numbers, flat (the hierarchy keeps one row per step)."""
+        return [*self.odom, *self.keep.ravel()]
 
 
 def nis(d: np.ndarray, S: np.ndarray) -> np.ndarray:
@@ -135,12 +135,11 @@ class OdometryFusion:
         return bias_matrices(np.asarray(o, dtype=float), self.along) @ self.c
 
     def taken(self, o: np.ndarray, gain: np.ndarray) -> BiasTaken | None:
-        """The bias the increment ``o``, fused with ``gain`` (Fused.gain), took out (learnt so far); None
-        unless this fusion keeps the whole run (``whole_run``: only graph.recalibrate reads it)."""
+        """The increment ``o`` and the weight ``gain`` (Fused.gain) it was fused with; None unless this
+        fusion keeps the whole run (``whole_run``: only graph.recalibrate reads it)."""
         if self.every_sample is None:
             return None
-        o = np.array(o, dtype=float)
-        return BiasTaken(o, bias_matrix(o, self.along) @ self.c, np.eye(3) - gain)
+        return BiasTaken(np.array(o, dtype=float), np.eye(3) - gain)
 
     def fuse(
         self,
@@ -224,7 +223,7 @@ class OdometryFusion:
         as fitted on the whole run (:meth:`whole_run_bias`, run here): only terms the whole run holds and
         that, once taken, the learner never dropped again (a term that comes and goes is no constant of
         the odometry: exact odometry's disagreement with the scans along one stretch). ``taken``: the
-        steps' BiasTaken rows (n, 15; row k = trajectory.csv step k; zeros: it took none). An increment
+        steps' BiasTaken rows (n, 12; row k = trajectory.csv step k; zeros: it took none). An increment
         inc = (I − K)·(o − B(o)·c) + K·m moves by −(I − K)·B(o)·c_added."""
         self.whole_run_bias()
         c, along = self.whole_run_fit
@@ -237,7 +236,7 @@ class OdometryFusion:
                 continue
             before = step < first
             added[before] += B[before, :, i] * c[i]
-        return -np.einsum("nij,nj->ni", taken[:, 6:].reshape(-1, 3, 3), added)
+        return -np.einsum("nij,nj->ni", taken[:, 3:].reshape(-1, 3, 3), added)
 
     def _learn(self) -> None:
         """Re-estimate the scales and bias on the window's samples."""

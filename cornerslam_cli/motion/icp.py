@@ -243,7 +243,7 @@ class MatchResult:
     matched: bool  # the scan match was fused; False: the odometry increment alone (no map, low fit, gated)
     cov: np.ndarray  # (3, 3) covariance of the increment into this scan, previous scan's frame
     searched: bool = False  # the correlative search ran (the odometry window exceeded ICP's basin)
-    taken: BiasTaken | None = None  # the odometry bias it took (None: first scan; kept with recalibrate)
+    taken: BiasTaken | None = None  # how it was fused (None: first scan; kept with recalibrate)
 
 
 class ScanMatcher:
