@@ -125,8 +125,8 @@ def run_filter(
     if cfg.graph.recalibrate and (graph is None or src.matcher is None):
         why = "submaps.enabled=false runs the single map" if graph is None else "scan_match.enabled=false"
         src.reader.stats.warn(
-            f"graph.recalibrate=true is ignored: it moves the keyframe graph's steps to the odometry bias "
-            f"the scan matcher learnt, and {why}"
+            f"graph.recalibrate=true is ignored: it carries the odometry bias the scan matcher learnt back "
+            f"into the keyframe graph's steps, and {why}"
         )
     with RunWriter(dest, src.laser2base, cfg.grid, scans) as writer:
         for frame in frame_iter:

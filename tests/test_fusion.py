@@ -292,41 +292,49 @@ def test_the_whole_run_bias_is_fitted_on_every_sample_and_leaves_the_fusion_as_i
 @pytest.mark.parametrize("along", [False, True])
 @pytest.mark.parametrize("outcome", ["fused", "rejected"])
 def test_carry_back_moves_only_the_steps_before_a_held_term_was_taken_as_fusing_with_it_would(along, outcome):
-    """carry_back() against the fusion itself: a step fused before the drift was taken, fused again with
-    the whole run's drift taken out as well (its scale as it was), moves by carry_back's row for it —
-    accepted (the match weighted in) or rejected (the corrected odometry alone); the steps from the one
-    that first took it do not move, nor does any step when the term was dropped once taken, when the
-    whole run does not hold it, or when it was never taken."""
+    """carry_back() against the fusion itself: an increment fused with no bias taken out, fused again with
+    the whole run's terms taken out, moves by carry_back's row — for each term only at the steps before
+    the learner first took it, and not when it dropped the term once taken or never took it; accepted
+    (the match weighted in) or rejected (the corrected odometry alone)."""
     o, m = np.array([0.5, 0.02, 0.1]), np.array([0.47, 0.0, 0.12])
     So, Sm = np.diag([4e-3, 1e-3, 2e-3]), np.diag([1e-3, 2e-3, 1e-4])
     if outcome == "rejected":
         m = m + np.array([2.0, 0.0, 0.0])
-    then, whole = np.array([0.03, 0.0]), np.array([0.025, 0.008])
+    whole = np.array([0.025, 0.008])
     fused = {}
-    for c in (then, np.array([then[0], whole[1]])):
+    for terms in ((), (0,), (1,), (0, 1)):  # the whole run's terms taken out of this increment
         f = fusion(adapt_min_samples=2, adapt_every=1000)
         f.every_sample = array("d")
         f.fuse(o, So, o, Sm)
         f._learn = lambda: None  # noqa: SLF001 — the state below, not a learnt one
-        f.k, f.s, f.c, f.along = 1.0, 1.0, c, along
+        f.k, f.s, f.c, f.along = 1.0, 1.0, np.where(np.isin([0, 1], terms), whole, 0.0), along
         out = f.fuse(o, So, m, Sm)
         assert out.accepted == (outcome == "fused")
-        fused[c[1]] = (out.inc, f.taken(o, out.gain))
-    (inc_then, taken), (inc_with, _) = fused[0.0], fused[whole[1]]
-    rows = np.array([[0.0] * 12, taken.row(), taken.row(), taken.row()])  # steps 0 (no increment) to 3
+        fused[terms] = out.inc
+    taken = f.taken(o, out.gain)  # (the gain and gate verdict do not depend on the bias: k, s fixed)
+    rows = np.array([[0.0] * 12, *[taken.row()] * 4])  # steps 0 (no increment) to 4
 
-    def carried(first, dropped, fit):
+    def moved(terms):
+        return fused[terms] - fused[()]
+
+    def carried(first, dropped):
         f.first_taken, f.dropped = first, dropped
-        f.whole_run_bias = lambda: setattr(f, "whole_run_fit", (fit, along))  # the run's fit, stood in
+        f.whole_run_bias = lambda: setattr(f, "whole_run_fit", (whole, along))  # the run's fit, stood in
         return f.carry_back(rows)
 
-    shift = carried([1, 3], [False, False], whole)
-    np.testing.assert_allclose(inc_then + shift[1], inc_with, atol=1e-12)
-    np.testing.assert_allclose(shift[2], shift[1], atol=0.0)
-    assert np.abs(shift[1]).max() > 1e-4 and not shift[0].any() and not shift[3].any()
-    assert not carried([1, 3], [False, True], whole).any()  # dropped once taken
-    assert not carried([1, 3], [False, False], then).any()  # the whole run does not hold it
-    assert not carried([1, None], [False, False], whole).any()  # never taken
+    for first, dropped, want in (  # want: the terms carried back to steps 1, 2, 3, 4
+        ([2, 4], [False, False], [(0, 1), (1,), (1,), ()]),
+        ([3, 2], [False, False], [(0, 1), (0,), (), ()]),
+        ([2, 4], [True, False], [(1,), (1,), (1,), ()]),
+        ([2, 4], [False, True], [(0,), (), (), ()]),
+        ([None, 4], [False, False], [(1,), (1,), (1,), ()]),
+        ([2, None], [False, False], [(0,), (), (), ()]),
+    ):
+        shift = carried(first, dropped)
+        assert not shift[0].any(), first
+        for k, terms in enumerate(want, start=1):
+            np.testing.assert_allclose(shift[k], moved(terms), atol=1e-12, err_msg=f"{first} {dropped} {k}")
+    assert np.abs(moved((0,))).max() > 1e-4 and np.abs(moved((1,))).max() > 1e-4  # (cases that move)
     with pytest.raises(ValueError, match="whole_run"):
         fusion().carry_back(rows)  # (no samples kept: whole_run_bias refuses)
     assert fusion().taken(o, np.eye(3)) is None  # not kept without whole_run

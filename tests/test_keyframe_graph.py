@@ -182,7 +182,7 @@ def moved_to(c: np.ndarray):
     return recalibration
 
 
-def test_a_runs_recalibrated_poses_are_its_steps_moved_by_the_final_bias(sim_log):
+def test_a_runs_recalibrated_poses_are_its_steps_moved_by_their_shifts(sim_log):
     """Without loop closing the keyframe graph is a chain: finished with a bias carried back (here a
     stand-in: 1 % scale, 0.01 rad/m added to every step), the smoothed trajectory is the filter's step
     increments each moved by its shift (from its frame's BiasTaken), composed from the first pose; across

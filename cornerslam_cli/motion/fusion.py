@@ -202,11 +202,11 @@ class OdometryFusion:
 
     def whole_run_bias(self) -> Callable[[np.ndarray], np.ndarray]:
         """The bias as :meth:`bias` gives it, but with the scales and bias fitted once on every sample of
-        the run instead of the last ``adapt_window``: one robot's odometry bias is taken as constant, and
-        a window's estimate is noisy (a term that fails its 3σ test in the last window would be dropped
-        from every step); fewer than ``adapt_min_samples`` samples: the bias learnt so far. This fusion's
-        own state is left as it was, but for ``whole_run_fit`` (c, along), kept for summary.json. Needs
-        ``whole_run`` (ValueError)."""
+        the run instead of the last ``adapt_window`` (what :meth:`carry_back` carries back: one robot's
+        odometry bias is taken as constant, and the whole run estimates it best); fewer than
+        ``adapt_min_samples`` samples: the bias learnt so far. This fusion's own state is left as it was,
+        but for ``whole_run_fit`` (c, along), kept for summary.json and carry_back. Needs ``whole_run``
+        (ValueError)."""
         if self.every_sample is None:
             raise ValueError("whole_run_bias: this fusion was made without whole_run, it kept no samples")
         rows = np.frombuffer(self.every_sample).reshape(-1, SAMPLE)
@@ -232,7 +232,7 @@ class OdometryFusion:
         added = np.zeros((len(taken), 3))
         for i in range(2):
             first = self.first_taken[i]
-            if first is None or self.dropped[i] or c[i] == 0.0:
+            if first is None or self.dropped[i]:  # (a term the whole run does not hold has c[i] = 0)
                 continue
             before = step < first
             added[before] += B[before, :, i] * c[i]
