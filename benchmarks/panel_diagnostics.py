@@ -64,6 +64,13 @@ def trajectory(run: Path, gt: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return est, sub, ref
 
 
+def against_reference(run: Path, name: str, gt: Path) -> tuple[np.ndarray, np.ndarray]:
+    """``run``'s poses in ``name`` (a TUM file) where the reference covers them, and the reference there."""
+    stamps, est = read_tum(run / name)
+    inside, ref = interpolate_inside(*read_tum(gt), stamps)
+    return est[inside], ref
+
+
 def scaled_rmse(est: np.ndarray, ref: np.ndarray) -> tuple[float, float]:
     """Scale of the best similarity of ``est`` (n, 3) onto ``ref`` (> 1: est is smaller) and the ATE
     RMSE after it (evaluate.align_sim2)."""
@@ -120,9 +127,8 @@ def bias_taken(run: Path, gt: Path) -> dict:
     model = json.loads((run / "summary.json").read_text())["odometry_model"]
     if "scale_error_from_keyframe" not in model and model["odom_scale_error"] != 0.0:
         sys.exit(f"{run}: summary.json predates odometry_model.*_from_keyframe: re-run radish_panel.py")
-    stamps, chain = read_tum(run / "scan_matched.tum")
-    inside, ref = interpolate_inside(*read_tum(gt), stamps)
-    turn = wrap_angle((chain[inside, 2] - chain[inside, 2][0]) - (ref[:, 2] - ref[0, 2]))
+    chain, ref = against_reference(run, "scan_matched.tum", gt)
+    turn = wrap_angle((chain[:, 2] - chain[0, 2]) - (ref[:, 2] - ref[0, 2]))
     heading = np.degrees(np.unwrap(turn))
     k = model.get("heading_drift_from_keyframe")
     row = {
@@ -144,9 +150,8 @@ def heading_lags(run: Path, gt: Path, name: str) -> list[float]:
     reference over each of LAGS keyframes: the error's turn from keyframe i to i + L less the
     reference's. The median, not the RMS: the few keyframes whose reference its scans refute by 10–20°
     (csail, fhw: reference_check.md) would set an RMS."""
-    stamps, est = read_tum(run / name)
-    inside, ref = interpolate_inside(*read_tum(gt), stamps)
-    error = np.unwrap(wrap_angle(est[inside, 2] - ref[:, 2]))
+    est, ref = against_reference(run, name, gt)
+    error = np.unwrap(wrap_angle(est[:, 2] - ref[:, 2]))
     return [float(np.degrees(np.median(np.abs(error[lag:] - error[:-lag])))) for lag in LAGS]
 
 
