@@ -264,7 +264,7 @@ def test_the_drift_model_follows_the_data_and_needs_evidence_to_change():
 
 
 def test_the_whole_run_bias_is_fitted_on_every_sample_and_leaves_the_fusion_as_it_was():
-    """whole_run_bias against a fit by hand on all the samples drawn (the same learner on a fusion whose
+    """fit_whole_run against a fit by hand on all the samples drawn (the same learner on a fusion whose
     window holds them all), while the fusion keeps its last window's state; without whole_run it refuses."""
     rng = np.random.default_rng(21)
     noise = odometry_noise(load_config(None))
@@ -276,17 +276,18 @@ def test_the_whole_run_bias_is_fitted_on_every_sample_and_leaves_the_fusion_as_i
         f.fuse(o, So, m, Sm)
         everything.samples.append((m - o, So, Sm, o))
     state = (f.k, f.s, f.c.copy(), f.along)
-    bias = f.whole_run_bias()
+    c_fit, along = f.fit_whole_run()
+    assert (c_fit, along) == f.whole_run_fit
     assert (f.k, f.s, f.along) == (state[0], state[1], state[3]) and np.array_equal(f.c, state[2])
     everything.k, everything.s = state[0], state[1]  # (the same starting point as the copy's fit)
     everything._learn()
     o = np.array([x[0] for x in drawn])
-    np.testing.assert_allclose(bias(o), everything.bias(o), rtol=1e-9, atol=1e-12)
-    np.testing.assert_allclose(f.whole_run_fit[0], everything.c, rtol=1e-9)
-    assert f.whole_run_fit[1] == everything.along
+    np.testing.assert_allclose(bias_matrices(o, along) @ c_fit, everything.bias(o), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(c_fit, everything.c, rtol=1e-9)
+    assert along == everything.along
     assert np.all(np.abs(everything.c - c) < 0.005)  # (the drawn bias, found)
     with pytest.raises(ValueError, match="whole_run"):
-        fusion().whole_run_bias()
+        fusion().fit_whole_run()
 
 
 @pytest.mark.parametrize("along", [False, True])
@@ -319,7 +320,7 @@ def test_carry_back_moves_only_the_steps_before_a_held_term_was_taken_as_fusing_
 
     def carried(first, dropped):
         f.first_taken, f.dropped = first, dropped
-        f.whole_run_bias = lambda: setattr(f, "whole_run_fit", (whole, along))  # the run's fit, stood in
+        f.fit_whole_run = lambda: (whole, along)  # the run's fit, stood in
         return f.carry_back(rows)
 
     for first, dropped, want in (  # want: the terms carried back to steps 1, 2, 3, 4
@@ -336,5 +337,5 @@ def test_carry_back_moves_only_the_steps_before_a_held_term_was_taken_as_fusing_
             np.testing.assert_allclose(shift[k], moved(terms), atol=1e-12, err_msg=f"{first} {dropped} {k}")
     assert np.abs(moved((0,))).max() > 1e-4 and np.abs(moved((1,))).max() > 1e-4  # (cases that move)
     with pytest.raises(ValueError, match="whole_run"):
-        fusion().carry_back(rows)  # (no samples kept: whole_run_bias refuses)
+        fusion().carry_back(rows)  # (no samples kept: fit_whole_run refuses)
     assert fusion().taken(o, np.eye(3)) is None  # not kept without whole_run

@@ -121,9 +121,9 @@ class OdometryFusion:
         # constant of this odometry, so graph.recalibrate does not carry it back (:meth:`carry_back`)
         self.dropped = [False, False]
         # with ``whole_run``, every sample of the run, SAMPLE numbers each (d, Σ_o, Σ_m, o): the bias
-        # fitted on all of them (:meth:`whole_run_bias`, graph.recalibrate's) — 192 bytes a keyframe
+        # fitted on all of them (:meth:`fit_whole_run`, graph.recalibrate's) — 192 bytes a keyframe
         self.every_sample = array("d") if whole_run else None
-        self.whole_run_fit: tuple[np.ndarray, bool] | None = None  # (c, along) :meth:`whole_run_bias` found
+        self.whole_run_fit: tuple[np.ndarray, bool] | None = None  # (c, along) :meth:`fit_whole_run` found
 
     def corrected(self, o: np.ndarray) -> np.ndarray:
         """The odometry increment with the learnt scale error and drift taken out."""
@@ -189,44 +189,43 @@ class OdometryFusion:
 
     def note_step(self) -> None:
         """One more increment went out, with the bias as it stands (ScanMatcher.step, after the first
-        scan): counted, and the first step each term was taken out of noted."""
+        scan): counted, the first step each term was taken out of noted, and a term taken and now not
+        marked dropped."""
         self.n_steps += 1
-        for i in np.flatnonzero(self.c):
-            self.first_taken[i] = self.first_taken[i] or self.n_steps
         for i in range(2):
+            if self.c[i] != 0.0:
+                self.first_taken[i] = self.first_taken[i] or self.n_steps
             self.dropped[i] = self.dropped[i] or (self.first_taken[i] is not None and self.c[i] == 0.0)
 
     def fallback_cov(self, cov_o: np.ndarray) -> np.ndarray:
         """Covariance of an odometry increment used without a match: the configured model at least."""
         return max(self.k, 1.0) * cov_o
 
-    def whole_run_bias(self) -> Callable[[np.ndarray], np.ndarray]:
-        """The bias as :meth:`bias` gives it, but with the scales and bias fitted once on every sample of
-        the run instead of the last ``adapt_window`` (what :meth:`carry_back` carries back: one robot's
-        odometry bias is taken as constant, and the whole run estimates it best); fewer than
-        ``adapt_min_samples`` samples: the bias learnt so far. This fusion's own state is left as it was,
-        but for ``whole_run_fit`` (c, along), kept for summary.json and carry_back. Needs ``whole_run``
-        (ValueError)."""
+    def fit_whole_run(self) -> tuple[np.ndarray, bool]:
+        """The bias terms c and model ``along`` fitted once on every sample of the run instead of the last
+        ``adapt_window`` (what :meth:`carry_back` carries back: one robot's odometry bias is taken as
+        constant, and the whole run estimates it best); fewer than ``adapt_min_samples`` samples: the bias
+        learnt so far. Also kept as ``whole_run_fit`` (summary.json reads it); this fusion's own state is
+        left as it was. Needs ``whole_run`` (ValueError)."""
         if self.every_sample is None:
-            raise ValueError("whole_run_bias: this fusion was made without whole_run, it kept no samples")
+            raise ValueError("fit_whole_run: this fusion was made without whole_run, it kept no samples")
         rows = np.frombuffer(self.every_sample).reshape(-1, SAMPLE)
         fit = copy.copy(self)
         if len(rows) >= self.min_samples:
             So, Sm = rows[:, 3:12].reshape(-1, 3, 3), rows[:, 12:21].reshape(-1, 3, 3)
             fit._fit(rows[:, :3], So, Sm, rows[:, 21:])
         self.whole_run_fit = (fit.c.copy(), bool(fit.along))
-        return fit.bias
+        return self.whole_run_fit
 
     def carry_back(self, taken: np.ndarray) -> np.ndarray:
         """(n, 3) how far each step's increment moves (graph.recalibrate) when the bias terms it was fused
         without — the learner had not yet taken them out: the steps before ``first_taken`` — are taken out
-        as fitted on the whole run (:meth:`whole_run_bias`, run here): only terms the whole run holds and
+        as fitted on the whole run (:meth:`fit_whole_run`, run here): only terms the whole run holds and
         that, once taken, the learner never dropped again (a term that comes and goes is no constant of
         the odometry: exact odometry's disagreement with the scans along one stretch). ``taken``: the
         steps' BiasTaken rows (n, 12; row k = trajectory.csv step k; zeros: it took none). An increment
         inc = (I − K)·(o − B(o)·c) + K·m moves by −(I − K)·B(o)·c_added."""
-        self.whole_run_bias()
-        c, along = self.whole_run_fit
+        c, along = self.fit_whole_run()
         B = bias_matrices(taken[:, :3], along)
         step = np.arange(len(taken))
         added = np.zeros((len(taken), 3))
