@@ -4,6 +4,8 @@ run's smoothed trajectory read from the nodes."""
 
 from __future__ import annotations
 
+import copy
+import csv
 import json
 from types import SimpleNamespace
 
@@ -278,3 +280,89 @@ def test_graph_recalibrate_says_when_it_has_nothing_to_do(sim_log, tmp_path, ove
     summary = run(sim_log, cfg, tmp_path / "out", span=Span(max_scans=30))
     said = [w for w in summary.warnings if "graph.recalibrate=true is ignored" in w]
     assert len(said) == (ignored is not None) and all(ignored in w for w in said)
+
+
+def written_poses(out, columns: tuple[str, str, str] = ("x", "y", "theta")) -> np.ndarray:
+    """(n, 3) the ``columns`` of the trajectory.csv a run wrote into ``out``."""
+    with open(out / "trajectory.csv", newline="") as f:
+        return np.array([[float(row[c]) for c in columns] for row in csv.DictReader(f)])
+
+
+def test_a_run_writes_its_steps_moved_by_the_bias_its_own_fusion_carries_back(sim_log, tmp_path, monkeypatch):
+    """End to end, the real OdometryFusion.carry_back on a run's own BiasTaken rows (sim_log's odometry:
+    2 % long, 0.01 rad/m drift, which the learner takes out only after some steps): row k of the
+    hierarchy's ``taken`` is trajectory step k (its odometry increment and the bias the fusion had then);
+    each term carried moves the steps before the one that first took it and none from it on; and without
+    loop closing the trajectory the run wrote is its online steps each moved by that shift, composed from
+    the first pose — with graph.recalibrate=false, the online trajectory itself."""
+    from cornerslam_cli.motion.fusion import OdometryFusion
+    from cornerslam_cli.pipeline import run
+    from cornerslam_cli.span import Span
+
+    seen, used = {}, []  # the hierarchy at finish; (fusion, o, c) of every increment the fusions handled
+    finish, taken = HierarchicalSlam.finish, OdometryFusion.taken
+
+    def finishing(self, shift_of=None):
+        seen.update(online=self.final_poses().copy(), shift_of=shift_of)
+        if shift_of is not None:
+            seen.update(rows=np.frombuffer(self.taken).reshape(-1, 12).copy())
+            seen.update(shift=shift_of(seen["rows"]))
+        return finish(self, shift_of)
+
+    def taking(self, o, gain):  # (after fuse or the fallback: self.c is the bias this increment had)
+        used.append((self, np.array(o, dtype=float), self.c.copy()))
+        return taken(self, o, gain)
+
+    monkeypatch.setattr(HierarchicalSlam, "finish", finishing)
+    monkeypatch.setattr(OdometryFusion, "taken", taking)
+    sets = ["submaps.max_steps=20", "loops.enabled=false"]
+    run(sim_log, config_from({}, [*sets, "graph.recalibrate=true"]), tmp_path / "on", span=Span(max_scans=60))
+    fusion, rows, shift, online = seen["shift_of"].__self__, seen["rows"], seen["shift"], seen["online"]
+    assert seen["shift_of"].__func__ is OdometryFusion.carry_back
+
+    # row k is step k: row 0 (the first scan) took nothing; row k's odometry is the written odometry's
+    # increment k-1 → k, and fusing it was the k-th increment the run's fusion handled
+    odom = written_poses(tmp_path / "on", ("odom_x", "odom_y", "odom_theta"))
+    assert len(rows) == len(shift) == len(online) == len(odom) == fusion.n_steps + 1
+    assert not rows[0].any() and not shift[0].any()
+    np.testing.assert_allclose(rows[1:, :3], relative(odom[:-1], odom[1:]), atol=1e-7)
+    mine = [(o, c) for f, o, c in used if f is fusion]
+    assert np.array_equal(np.array([o for o, _ in mine]), rows[1:, :3])
+    had = np.vstack((np.zeros(2), [c for _, c in mine]))  # the bias each step's increment was fused with
+    carried = [i for i in range(2) if fusion.first_taken[i] is not None and not fusion.dropped[i]]
+    for i in range(2):
+        first = np.flatnonzero(had[:, i])
+        assert fusion.first_taken[i] == (int(first[0]) if len(first) else None)
+    assert any(fusion.first_taken[i] > 1 for i in carried)  # a term the learner took only after some steps
+
+    # each term carried moves every step before its first_taken, none from it on; together, the shift
+    whole = np.zeros_like(shift)
+    for i in carried:
+        alone = copy.copy(fusion)
+        alone.first_taken = [f if j == i else None for j, f in enumerate(fusion.first_taken)]
+        part = alone.carry_back(rows)
+        first = fusion.first_taken[i]
+        assert not part[first:].any() and np.all(np.abs(part[1:first]).max(axis=1) > 0)
+        whole += part
+    np.testing.assert_allclose(shift, whole, rtol=0, atol=1e-15)
+    last = max(fusion.first_taken[i] for i in carried)
+    assert not shift[last:].any() and np.abs(shift[last - 1]).max() > 1e-6
+    assert np.abs(shift).max() > 1e-4
+
+    # what the run wrote: the online trajectory (as trajectory.csv's online columns place it, in the
+    # odometry frame) with each increment moved by the shift, composed from the first pose
+    placed = written_poses(tmp_path / "on", ("online_x", "online_y", "online_theta"))
+    to_written = compose(placed[0], relative(online[0], np.zeros(3)))  # the map frame in the written one
+    np.testing.assert_allclose(compose(to_written, online), placed, atol=1e-6)
+    moved = compose(placed[0], chain(relative(online[:-1], online[1:]) + shift[1:]))
+    written = written_poses(tmp_path / "on")
+    np.testing.assert_allclose(written[0], placed[0], atol=1e-9)
+    np.testing.assert_allclose(written[1:], moved, atol=1e-6)
+    assert np.abs(written - placed).max() > 1e-3  # (the shift moved it: not the online one)
+
+    # graph.recalibrate=false: no shift, the online trajectory written, the same online steps
+    seen.clear()
+    run(sim_log, config_from({}, sets), tmp_path / "off", span=Span(max_scans=60))
+    assert seen["shift_of"] is None
+    np.testing.assert_allclose(seen["online"], online, atol=1e-12)
+    np.testing.assert_allclose(written_poses(tmp_path / "off"), placed, atol=1e-6)
