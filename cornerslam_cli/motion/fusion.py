@@ -195,7 +195,7 @@ class OdometryFusion:
         for i in range(2):
             if self.c[i] != 0.0:
                 self.first_taken[i] = self.first_taken[i] or self.n_steps
-            self.dropped[i] = self.dropped[i] or (self.first_taken[i] is not None and self.c[i] == 0.0)
+            self.dropped[i] = self.dropped[i] or bool(self.first_taken[i] is not None and self.c[i] == 0.0)
 
     def fallback_cov(self, cov_o: np.ndarray) -> np.ndarray:
         """Covariance of an odometry increment used without a match: the configured model at least."""
