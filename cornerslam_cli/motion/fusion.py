@@ -189,8 +189,8 @@ class OdometryFusion:
 
     def note_step(self) -> None:
         """One more increment went out, with the bias as it stands (ScanMatcher.step, after the first
-        scan): counted, the first step each term was taken out of noted, and a term taken and now not
-        marked dropped."""
+        scan): counted; the first step each term was taken out of, noted; a term taken before but not
+        now, marked dropped."""
         self.n_steps += 1
         for i in range(2):
             if self.c[i] != 0.0:
