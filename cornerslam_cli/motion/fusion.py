@@ -129,11 +129,6 @@ class OdometryFusion:
         """The odometry increment with the learnt scale error and drift taken out."""
         return o - bias_matrix(o, self.along) @ self.c
 
-    def bias(self, o: np.ndarray) -> np.ndarray:
-        """(n, 3) the bias B(o)·c that :meth:`corrected` takes out of each increment of ``o`` (n, 3), as
-        learnt so far."""
-        return bias_matrices(np.asarray(o, dtype=float), self.along) @ self.c
-
     def taken(self, o: np.ndarray, gain: np.ndarray) -> BiasTaken | None:
         """The increment ``o`` and the weight ``gain`` (Fused.gain) it was fused with; None unless this
         fusion keeps the whole run (``whole_run``: only graph.recalibrate reads it)."""
