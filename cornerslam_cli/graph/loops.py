@@ -198,7 +198,8 @@ def pair_hypotheses(
     b_pairs: CornerPairs | None = None,
 ) -> Hypotheses:
     """Every agreement of a pair of b's corners (n_b, 3) with a pair of a's (n_a, 3) (module docstring),
-    at most ``cfg.max_hypotheses``, by support, then votes, then length. ``a_pairs``/``b_pairs``: their
+    at most ``cfg.max_hypotheses`` (kept by rank in their Hough cell, then votes, then length), ordered by
+    support, ties in that order. ``a_pairs``/``b_pairs``: their
     :class:`~cornerslam_cli.graph.submap.CornerPairs` when kept (a closed submap's), else made here."""
     a, b = np.asarray(a, dtype=float).reshape(-1, 3), np.asarray(b, dtype=float).reshape(-1, 3)
     a_pairs = CornerPairs.of(a) if a_pairs is None else a_pairs
