@@ -640,6 +640,56 @@ def mcap_out_is_a_pipe_or_device(w: World) -> Case:
     return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", fifo], fifo)
 
 
+@fault(2, "is a name cornerslam uses for its own bookkeeping", "give another file name")
+def mcap_out_is_the_marker(w: World) -> Case:
+    """`--mcap-out OUT/.cornerslam-output`, the name of the output's ownership marker: refused (before,
+    the marker overwrote the MCAP and the run printed success)"""
+    mc = w.tmp / "out" / ".cornerslam-output"
+    return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", mc], mc)
+
+
+@fault(2, "is a name cornerslam uses for its own bookkeeping")
+def mcap_out_is_the_lock_file(w: World) -> Case:
+    """`--mcap-out .OUT.lock`, the name of the output's lock file: refused (before, the MCAP was
+    deleted with the lock and the run printed success)"""
+    mc = w.tmp / ".out.lock"
+    return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", mc], mc)
+
+
+@fault(2, "exists and is not a lock file cornerslam wrote", "move it away")
+def a_users_file_named_like_the_lock(w: World) -> Case:
+    """a file of the user's named `.OUT.lock` beside `--out OUT`: refused, the file kept (before, it
+    was taken as the lock and deleted after the run)"""
+    lock = w.tmp / ".out.lock"
+    lock.write_text("precious\n")
+    return Case(["run", w.log, "--out", w.tmp / "out"], lock)
+
+
+@fault(2, "is in the way of cornerslam's lock file", "move it away")
+def a_symlink_named_like_the_lock(w: World) -> Case:
+    """a symlink (to a file of the user's) named `.OUT.lock` beside `--out OUT`: refused, both kept
+    (before, the symlink was deleted)"""
+    (w.tmp / "mine.txt").write_text("precious\n")
+    (w.tmp / ".out.lock").symlink_to(w.tmp / "mine.txt")
+    return Case(["run", w.log, "--out", w.tmp / "out"], w.tmp / ".out.lock")
+
+
+@fault(2, "is in the way of cornerslam's lock file", "move it away")
+def a_directory_named_like_the_lock(w: World) -> Case:
+    """a directory named `.OUT.lock` beside `--out OUT`: refused, kept (before: "cannot write 'OUT': it
+    is a directory")"""
+    (w.tmp / ".out.lock").mkdir()
+    return Case(["compare", w.log, "--assoc", "icnn", "--out", w.tmp / "out"], w.tmp / ".out.lock")
+
+
+@fault(0)
+def a_lock_file_left_by_a_killed_run(w: World) -> Case:
+    """an empty `.OUT.lock` (a run killed while creating it, or written by a version before the lock
+    files were marked): used as the lock, removed after"""
+    (w.tmp / ".out.lock").touch()
+    return Case(["run", w.log, "--out", w.tmp / "out"], after=lambda: complete(w.tmp / "out"))
+
+
 @fault(2, "is not a regular file")
 def simulate_into_a_pipe(w: World) -> Case:
     """`simulate OUT.mcap` where OUT.mcap (or OUT.gt.tum, OUT.corners.csv) is a FIFO or a device:

@@ -29,6 +29,7 @@ import secrets
 import shutil
 import signal
 import socket
+import stat
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
@@ -36,11 +37,13 @@ from pathlib import Path
 
 from ..errors import OutputError
 from .oserrors import output_error, output_errors, resolved
-from .ownership import check_replaceable, check_same_log, is_within, mark_output, refuse_special_file
+from .ownership import MARKER, check_replaceable, check_same_log, is_within, mark_output, refuse_special_file
 
 _NAME_KEEP = 200  # bytes of a name kept in its sibling names (+ at most 45 of suffix: within 255)
 HOST = hashlib.sha1(socket.gethostname().encode()).hexdigest()[:8]  # leftovers are judged on their host
+LOCK_MARK = b"cornerslam output lock\n"  # what a lock file holds (an empty one: being created)
 _SIBLING = re.compile(r"(partial|old)-([0-9a-f]{8})-(\d+)(?:-.+)?")
+_BOOKKEEPING = re.compile(r"\..+\.(lock|(partial|old)-[0-9a-f]{8}-\d+(-.+)?)")  # a lock's, a sibling's name
 
 
 # ---------------------------------------------------------------------------- sibling names
@@ -130,13 +133,31 @@ def staged_file(dest: Path) -> Path:
     return Path(tmp)
 
 
+def _open_lock(path: Path) -> int:
+    """Open (create) the lock file ``path``; OutputError when something not cornerslam's is there (a
+    symlink, a directory, a file holding anything but ``LOCK_MARK``): it is deleted on release."""
+    why = "move it away (cornerslam deletes its lock file after use), or give another output name"
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o666)
+    except OSError as exc:
+        if exc.errno in (errno.ELOOP, errno.EISDIR):
+            raise OutputError(f"'{path}' is in the way of cornerslam's lock file there", why) from None
+        raise
+    regular = stat.S_ISREG(os.fstat(fd).st_mode)  # (a FIFO is not read: pread would fail on it)
+    if not regular or not LOCK_MARK.startswith(os.pread(fd, len(LOCK_MARK) + 1, 0)):
+        os.close(fd)
+        raise OutputError(f"'{path}' exists and is not a lock file cornerslam wrote", why)
+    return fd
+
+
 @contextmanager
 def target_lock(target: Path) -> Iterator[None]:
     """Hold an exclusive lock on ``.NAME.lock`` beside ``target`` (waiting for another holder);
-    the lock file is deleted on release. File systems without flock go unlocked."""
+    the lock file, marked ``LOCK_MARK``, is deleted on release — one that is not cornerslam's is
+    refused (:func:`_open_lock`). File systems without flock go unlocked."""
     path = target.parent / f".{_stem(target.name)}.lock"
     while True:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+        fd = _open_lock(path)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX)
             if os.path.samestat(os.fstat(fd), os.stat(path)):
@@ -153,6 +174,8 @@ def target_lock(target: Path) -> Iterator[None]:
             raise
         os.close(fd)
     try:
+        if os.fstat(fd).st_size == 0:
+            os.pwrite(fd, LOCK_MARK, 0)
         yield
     finally:
         path.unlink(missing_ok=True)
@@ -274,6 +297,9 @@ class StagedDir:
             raise OutputError(f"'{dest}' names a directory", "give a file name")
         final = resolved(shown)
         with output_errors(shown):
+            if final.name == MARKER or _BOOKKEEPING.fullmatch(final.name):
+                why = "give another file name"
+                raise OutputError(f"'{shown}' is a name cornerslam uses for its own bookkeeping", why)
             if is_within(final, self.target):
                 staged = self.path / final.relative_to(self.target)
                 staged.parent.mkdir(parents=True, exist_ok=True)
