@@ -745,6 +745,11 @@ def test_parse_assocs_empty_list_is_a_usage_error(text):
             "error: invalid value for '--seed': 'q' is not a valid integer "
             "(see 'cornerslam simulate --help')",
         ),
+        (
+            ["run", "x.log", "-q", "-v"],
+            "error: -q (only errors) and -v (more log output) contradict each other: give one "
+            "(see 'cornerslam run --help')",
+        ),
         (["bogus"], "error: no such command 'bogus' (see 'cornerslam --help')"),
         (["--bogus"], "error: no such option '--bogus' (see 'cornerslam --help')"),
     ],

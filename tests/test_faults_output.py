@@ -640,6 +640,16 @@ def mcap_out_is_a_pipe_or_device(w: World) -> Case:
     return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", fifo], fifo)
 
 
+@fault(2, "is inside the compare output", "give a directory outside it")
+def run_into_a_compare_outputs_run(w: World) -> Case:
+    """`run --out CMP/pca`, one associator's run of a comparison (or a new directory inside it): refused,
+    the comparison kept (before, the run replaced that directory and comparison.csv no longer described it)"""
+    cmp = w.tmp / "cmp"
+    previous_output(cmp / "pca")
+    mark_output(cmp, "compare")
+    return Case(["run", w.log, "--out", cmp / "pca"], cmp / "pca")
+
+
 @fault(2, "is a name cornerslam uses for its own bookkeeping", "give another file name")
 def mcap_out_is_the_marker(w: World) -> Case:
     """`--mcap-out OUT/.cornerslam-output`, the name of the output's ownership marker: refused (before,
