@@ -13,6 +13,7 @@ the world (walls, true poses) or arithmetic written out here, never the code und
 from __future__ import annotations
 
 import base64
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -318,6 +319,39 @@ def test_grid_traced_in_parts_equals_the_grid_traced_at_once(monkeypatch):
     assert whole.origin == parts.origin and whole.resolution == parts.resolution
 
 
+def test_a_store_far_from_the_odometry_origin_keeps_millimetres():
+    """The same scans with every pose moved by 10⁷ m (UTM-scale odometry): the same grid cells, its
+    origin moved by 10⁷ m, the same map consistency and rays to a micrometre, and moving a scan
+    (the smoothed poses) moves it alike. Before the store kept odometry-frame float32 (1 m apart at
+    10⁷ m): map.pgm a star of rays, the consistency 0."""
+    from cornerslam_cli.report.consistency import store_consistency
+
+    rng = np.random.default_rng(7)
+    wall = np.column_stack((np.full(60, 3.0), np.linspace(-2.0, 2.0, 60)))
+    poses = np.column_stack((np.arange(150) * 0.05, np.zeros(150), rng.normal(0.0, 0.05, 150)))
+    far = np.array([1e7, -2e7, 0.0])
+    near, moved = ScanStore(), ScanStore()
+    for p in poses:
+        scan = wall - (p[0], 0.0)  # (the heading's noise ignored: any scan will do)
+        near.add(p, scan)
+        moved.add(p + far, scan)
+    # the first scan moved (applied on the left): by d, θ near the origin, by what is the same there
+    d, th = np.array([0.01, -0.02]), 0.003
+    R = np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
+    near.move(np.array([0]), np.array([[*d, th]]))
+    moved.move(np.array([0]), np.array([[*(d + far[:2] - R @ far[:2]), th]]))
+    (s0, e0), (s1, e1) = near.rays(), moved.rays()
+    np.testing.assert_allclose(s1 - far[:2], s0, atol=1e-6)
+    np.testing.assert_allclose(e1 - far[:2], e0, atol=1e-6)
+    g0, g1 = (occupancy.build_grid(s, 0.05, 10**7, print) for s in (near, moved))
+    assert np.array_equal(g0.cells, g1.cells) and (OCCUPIED == g0.cells).any()
+    np.testing.assert_allclose(np.subtract(g1.origin, g0.origin), far[:2], atol=1e-6)
+    odoms = poses[:, :3]
+    c0, c1 = store_consistency(near, odoms), store_consistency(moved, odoms + far)
+    assert dataclasses.asdict(c0) == pytest.approx(dataclasses.asdict(c1), rel=1e-6, abs=1e-9)
+    assert c0.revisit_share > 0 and c0.occupied_cells > 0
+
+
 def test_scan_store_thins_beyond_its_cap():
     store = ScanStore(max_points=1000)
     for i in range(10):
@@ -367,7 +401,13 @@ def test_results_mcap_places_the_robot_and_its_scans_alone(far_log, far_run):
     scans = msgs["/cornerslam/scan"]
     assert len(scans) == n and {m["frame_id"] for m in scans} == {"map"}
     assert scans[0]["point_stride"] == 8 and [f["name"] for f in scans[0]["fields"]] == ["x", "y"]
-    pts = np.concatenate([np.frombuffer(base64.b64decode(m["data"]), "<f4").reshape(-1, 2) for m in scans])
+    assert {m["pose"]["orientation"]["w"] for m in scans} == {1.0}  # each cloud at its pose: a position
+
+    def placed(m: dict) -> np.ndarray:
+        at = m["pose"]["position"]
+        return np.frombuffer(base64.b64decode(m["data"]), "<f4").reshape(-1, 2) + (at["x"], at["y"])
+
+    pts = np.concatenate([placed(m) for m in scans])
     assert len(pts) > 10_000
     d = distance_to_walls(apply(WORLD_FROM_ODOM, pts[::20].astype(float)), far_log["world"].walls)
     assert np.percentile(d, 95) < 0.05

@@ -257,11 +257,12 @@ def _transform(ns: int, parent: str, child: str, pose) -> dict:
 FLOAT32 = 7  # foxglove.NumericType
 
 
-def _point_cloud(ns: int, xy: np.ndarray) -> dict:
-    """A foxglove.PointCloud of the points ``xy`` (k, 2) in ``map``: float32 x, y per point."""
+def _point_cloud(ns: int, xy: np.ndarray, origin: np.ndarray) -> dict:
+    """A foxglove.PointCloud of the points ``xy`` (k, 2) relative to ``origin`` (the cloud's pose) in
+    ``map``: float32 x, y per point."""
     fields = [{"name": "x", "offset": 0, "type": FLOAT32}, {"name": "y", "offset": 4, "type": FLOAT32}]
     data = np.ascontiguousarray(xy, dtype="<f4").tobytes()
-    return {"timestamp": _time(ns), "frame_id": MAP_FRAME, "pose": _pose(0.0, 0.0), "point_stride": 8,
+    return {"timestamp": _time(ns), "frame_id": MAP_FRAME, "pose": _pose(*origin), "point_stride": 8,
             "fields": fields, "data": base64.b64encode(data).decode()}  # fmt: skip
 
 
@@ -310,7 +311,10 @@ def write_results_mcap(
             for ns, o in zip(stamps_ns, odom_raw, strict=True)
         ]
     if scans is not None:
-        msgs += [(ns, "scan", _point_cloud(ns, xy)) for ns, xy in zip(stamps_ns, scans.points, strict=True)]
+        msgs += [
+            (ns, "scan", _point_cloud(ns, xy, scans.anchor))
+            for ns, xy in zip(stamps_ns, scans.points, strict=True)
+        ]
     if stamps_ns:
         t0 = stamps_ns[0]
         msgs.append((t0, "path", _poses_in_frame(t0, run.corrected)))

@@ -7,7 +7,9 @@ reach it end in it (gmapping's ``occ_thresh`` of 0.25), free when beams reach it
 unknown when no beam reaches it. Beams without a return (NaN, inf, out of range) mark nothing, nor do
 beams longer than ``MAX_BEAM`` (a range no laser measures: 1e30 m in a log with range_max = inf).
 
-The scans are kept (float32, the odometry frame) until the run ends, when the map's extent is known;
+The scans are kept (float32, the odometry frame relative to the first scan's laser position, so that
+odometry far from its origin — UTM-scale coordinates — keeps millimetres) until the run ends, when
+the map's extent is known;
 past ``MAX_POINTS`` end points the store keeps every second beam (and so on), and a grid of more than
 ``grid.max_cells`` cells is written at a coarser resolution: both with a warning. A cell costs five
 bytes (two uint16 counts, saturating at 65,535 beams, and its value) plus the PNG's one or two. Ray tracing is
@@ -44,8 +46,9 @@ PNG_COLOURS = {OCCUPIED: (0, 0, 0), FREE: (255, 255, 255), UNKNOWN: (190, 190, 1
 
 class ScanStore:
     """The scans of a run as rays: per scan the laser's position and its beams' end points, in the
-    odometry frame (float32), thinned to at most ``max_points`` end points. The poses are kept
-    packed (16 bytes a scan), and a thinned scan is a copy: a view would keep all of its beams."""
+    odometry frame (float32, less ``anchor``: the first scan's laser position, float64), thinned to at
+    most ``max_points`` end points. The poses are kept packed (16 bytes a scan), and a thinned scan is a
+    copy: a view would keep all of its beams."""
 
     def __init__(self, max_points: int = MAX_POINTS):
         self.max_points = max_points
@@ -55,15 +58,19 @@ class ScanStore:
         self.points: list[np.ndarray] = []
         self.n_points = 0
         self.n_seen = 0  # end points given, before thinning
+        self.anchor = np.zeros(2)  # what ``origins`` and ``points`` are stored less of (the first origin)
 
     def add(self, laser2odom: np.ndarray, points: np.ndarray) -> None:
         """One scan: ``points`` (k, 2) in the laser frame, the laser at pose ``laser2odom`` (x, y, θ)."""
+        if not self.headings:
+            self.anchor = np.array(laser2odom[:2], dtype=float)
         self.n_seen += len(points)
         c, s = math.cos(laser2odom[2]), math.sin(laser2odom[2])
         p = np.asarray(points, dtype=float)[:: self.stride]
         p = p[np.hypot(p[:, 0], p[:, 1]) <= MAX_BEAM]
-        moved = np.column_stack((c * p[:, 0] - s * p[:, 1], s * p[:, 0] + c * p[:, 1])) + laser2odom[:2]
-        self.origins.extend(np.asarray(laser2odom[:2], dtype=np.float32).tolist())
+        at = np.asarray(laser2odom[:2], dtype=float) - self.anchor
+        moved = np.column_stack((c * p[:, 0] - s * p[:, 1], s * p[:, 0] + c * p[:, 1])) + at
+        self.origins.extend(at.astype(np.float32).tolist())
         self.headings.append(float(laser2odom[2]))
         self.points.append(moved.astype(np.float32))
         self.n_points += len(moved)
@@ -74,12 +81,13 @@ class ScanStore:
             self.n_points = sum(len(q) for q in self.points)
 
     def xy(self) -> np.ndarray:
-        """(n, 2) float32 the laser's position per scan: a view of the store's, written through."""
+        """(n, 2) float32 the laser's position per scan less ``anchor``: a view of the store's, written
+        through."""
         return np.frombuffer(self.origins, dtype=np.float32).reshape(-1, 2)
 
     def poses(self) -> np.ndarray:
         """(n, 3) the laser's pose per scan (x, y, θ), float64."""
-        return np.column_stack((self.xy(), self.headings))
+        return np.column_stack((self.xy() + self.anchor, self.headings))
 
     def move(self, index: np.ndarray, delta: np.ndarray) -> None:
         """Move scan i by the pose ``delta[index[i]]`` (x, y, θ, applied on the left: the smoothed
@@ -91,6 +99,7 @@ class ScanStore:
                 continue
             c, s = math.cos(dth), math.sin(dth)
             R = np.array([[c, -s], [s, c]])
+            dx, dy = R @ self.anchor + (dx, dy) - self.anchor  # the same move of the stored (less anchor)
             origins[i] = (R @ origins[i].astype(float) + (dx, dy)).astype(np.float32)
             self.headings[i] += dth
             self.points[i] = (self.points[i].astype(float) @ R.T + (dx, dy)).astype(np.float32)
@@ -119,7 +128,7 @@ class ScanStore:
             return np.empty((0, 2)), np.empty((0, 2))
         counts = [len(q) for q in points]
         start = np.repeat(self.xy()[scans].astype(float), counts, axis=0)
-        return start, np.concatenate(points).astype(float)
+        return start + self.anchor, np.concatenate(points).astype(float) + self.anchor
 
     def parts(self, size: int) -> list[slice]:
         """Consecutive runs of scans of about ``size`` kept end points each (a larger scan alone)."""
@@ -263,7 +272,7 @@ def extent(store: ScanStore, parts: list[slice]) -> tuple[np.ndarray, np.ndarray
             start, end = store.xy()[scans][seen], np.concatenate(points)
             a, b = np.minimum(start.min(0), end.min(0)), np.maximum(start.max(0), end.max(0))
             lo, hi = (a, b) if lo is None else (np.minimum(lo, a), np.maximum(hi, b))
-    return None if lo is None else (lo.astype(float), hi.astype(float))
+    return None if lo is None else (lo.astype(float) + store.anchor, hi.astype(float) + store.anchor)
 
 
 def classify(hits: np.ndarray, passes: np.ndarray) -> np.ndarray:
