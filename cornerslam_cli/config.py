@@ -11,11 +11,13 @@ A config file is UTF-8 YAML of at most 1 MiB, one document, no key given twice. 
 are allowed, but a document that expands to more than ``MAX_YAML_NODES`` nodes (an alias bomb:
 aliases of lists of aliases) is refused before anything is built from it, and error messages quote
 at most a short prefix of any value. A plain value YAML 1.1 reads as a base-60 number (``1:30`` is
-90, ``1:30.5`` is 90.5: a time written as minutes:seconds) is refused naming the key and the text,
-in a file and in ``--set``: no key takes such text, and 90 is rarely what was meant.
+90, ``1:30.5`` is 90.5: a time written as minutes:seconds) or as an octal one (an integer with a
+leading zero: ``010`` is 8, ``0300`` is 192) is refused naming the key and the text, in a file and in
+``--set``: no key takes such text, and 90 or 8 is rarely what was meant (``0x10`` is 16 and
+``00.5`` is 0.5, as written).
 
 Over 400 lines because the YAML reading (a safe loader refusing keys given twice, alias bombs and
-base-60 numbers, its errors naming file and line) sits beside the validation it feeds: both decide
+base-60 and octal numbers, its errors naming file and line) sits beside the validation it feeds: both decide
 what a user's config may say; the YAML half could move to a module of its own, as textfile.py did.
 """
 
@@ -120,6 +122,7 @@ def _dotted_keys(cls: type) -> list[str]:
 _YAML11_EXPONENT = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)[eE][+-]?\d+$")
 _SIGNED_FRACTION = re.compile(r"^[+-]\.\d+$")
 _NON_FINITE = re.compile(r"^[+-]?(nan|inf|infinity)$", re.IGNORECASE)
+_ZERO_PADDED = re.compile(r"^[+-]?0[0-9_]*[0-9][0-9_]*$")  # 010, 08: an integer with a leading zero
 
 
 def _number_text(value: str) -> bool:
@@ -140,6 +143,15 @@ class LongInteger:
     def __repr__(self) -> str:
         based = self.text.lstrip("+-")[1:2].lower() in ("x", "o", "b")  # the 0x / 0o / 0b is no digit
         return f"{self.text[:10]}... ({sum(c.isalnum() for c in self.text) - 2 * based:,} digits)"
+
+
+def _unpadded(value: Any) -> str | None:
+    """The hint for an integer with a leading zero that YAML 1.1 reads as text (08, 09: no octal
+    digits; 010 is refused as octal before this), else None."""
+    if not (isinstance(value, str) and _ZERO_PADDED.match(value)):
+        return None
+    sign = "-" if value.startswith("-") else ""
+    return f"write it without leading zeros ({sign}{value.lstrip('+-').replace('_', '').lstrip('0') or '0'})"
 
 
 def _as_float(value: int | float) -> float:
@@ -196,13 +208,13 @@ def _coerce(value: Any, tp: Any, key: str, allowed: Range | None = None) -> Any:
         return value
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"config key '{key}' must be an integer, got {got}")
+            raise ConfigError(f"config key '{key}' must be an integer, got {got}", _unpadded(value))
         return value
     if tp is float:
         if isinstance(value, str) and _number_text(value):
             value = float(value)
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"config key '{key}' must be a number, got {got}")
+            raise ConfigError(f"config key '{key}' must be a number, got {got}", _unpadded(value))
         return _as_float(value)
     if tp is str:
         if isinstance(value, bool):  # YAML 1.1: yes/no/on/off are booleans
@@ -241,35 +253,43 @@ def from_dict(cls: type, data: dict, prefix: str = "") -> Any:
 # --------------------------------------------------------------------------- YAML
 _INT_TAG = "tag:yaml.org,2002:int"
 _FLOAT_TAG = "tag:yaml.org,2002:float"
-_SEXAGESIMAL_TAG = "tag:cornerslam,2026:sexagesimal"
+_UNLIKE_TAG = "tag:cornerslam,2026:unlike-as-written"  # a number YAML 1.1 reads in base 60 or 8
+_OCTAL = re.compile(r"^[-+]?0[0-7_]*[0-7][0-7_]*$")  # YAML 1.1's base 8 ('0' and '0_' are 0 either way)
 
 
 @dataclass(frozen=True)
-class Sexagesimal:
-    """A plain YAML scalar that YAML 1.1 reads as a base-60 number (``1:30`` → 90): ``text`` as
-    written, ``value`` what YAML 1.1 makes of it, ``line`` (1-based) where it stands. Never a config
-    value: :func:`_refuse_sexagesimal` refuses it under the key it was given for."""
+class UnlikeNumber:
+    """A plain YAML scalar that YAML 1.1 reads as a number other than the decimal one it looks like: a
+    base-60 number (``1:30`` → 90) or an octal one (``010`` → 8). ``text`` as written, ``value`` what
+    YAML 1.1 makes of it, ``line`` (1-based) where it stands. Never a config value:
+    :func:`_refuse_unlike_number` refuses it under the key it was given for."""
 
     text: str
     value: int | float | LongInteger
     line: int
 
+    @property
+    def octal(self) -> bool:
+        return ":" not in self.text
+
 
 class _ConfigLoader(yaml.SafeLoader):
     """PyYAML's safe loader that refuses a key given twice in one mapping (PyYAML keeps the last) and
-    keeps a base-60 number (``1:30``) as a :class:`Sexagesimal`, to be refused; everything else is
-    resolved and built as ``yaml.safe_load`` does."""
+    keeps a base-60 number (``1:30``) or an octal one (``010``) as an :class:`UnlikeNumber`, to be
+    refused; everything else is resolved and built as ``yaml.safe_load`` does."""
 
     def resolve(self, kind: type, value: str, implicit: tuple[bool, bool]) -> str:
         tag = super().resolve(kind, value, implicit)
         if tag in (_INT_TAG, _FLOAT_TAG) and ":" in value:  # only YAML 1.1's base-60 forms have a colon
-            return _SEXAGESIMAL_TAG
+            return _UNLIKE_TAG
+        if tag == _INT_TAG and _OCTAL.match(value):  # (a float is decimal: 010.5 is 10.5)
+            return _UNLIKE_TAG
         return tag
 
-    def construct_sexagesimal(self, node: yaml.ScalarNode) -> Sexagesimal:
+    def construct_unlike_number(self, node: yaml.ScalarNode) -> UnlikeNumber:
         as_float = "." in node.value
         value = self.construct_yaml_float(node) if as_float else self.construct_yaml_int(node)
-        return Sexagesimal(node.value, value, node.start_mark.line + 1)
+        return UnlikeNumber(node.value, value, node.start_mark.line + 1)
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
         seen: dict[tuple[str, str], yaml.Mark] = {}
@@ -297,12 +317,12 @@ class _ConfigLoader(yaml.SafeLoader):
 
 
 _ConfigLoader.add_constructor(_INT_TAG, _ConfigLoader.construct_yaml_int)
-_ConfigLoader.add_constructor(_SEXAGESIMAL_TAG, _ConfigLoader.construct_sexagesimal)
+_ConfigLoader.add_constructor(_UNLIKE_TAG, _ConfigLoader.construct_unlike_number)
 
 
-def _find_sexagesimal(value: Any, key: str = "") -> tuple[str, Sexagesimal] | None:
-    """The first base-60 number in ``value`` (parsed YAML) and the dotted key it is under."""
-    if isinstance(value, Sexagesimal):
+def _find_unlike_number(value: Any, key: str = "") -> tuple[str, UnlikeNumber] | None:
+    """The first base-60 or octal number in ``value`` (parsed YAML) and the dotted key it is under."""
+    if isinstance(value, UnlikeNumber):
         return key, value
     if isinstance(value, dict):
         items = value.items()
@@ -311,27 +331,34 @@ def _find_sexagesimal(value: Any, key: str = "") -> tuple[str, Sexagesimal] | No
     else:
         return None
     for k, v in items:
-        name = k.text if isinstance(k, Sexagesimal) else str(k)
+        name = k.text if isinstance(k, UnlikeNumber) else str(k)
         sub = f"{key}{name}" if name.startswith("[") else f"{key}.{name}" if key else name
-        if isinstance(k, Sexagesimal):
+        if isinstance(k, UnlikeNumber):
             return sub, k
-        if found := _find_sexagesimal(v, sub):
+        if found := _find_unlike_number(v, sub):
             return found
     return None
 
 
-def _refuse_sexagesimal(value: Any, key: str = "", where: str = "") -> None:
-    """ConfigError if ``value`` (parsed YAML, under the dotted ``key``) holds a base-60 number;
-    ``where`` names the file it was read from."""
-    found = _find_sexagesimal(value, key)
+def _refuse_unlike_number(value: Any, key: str = "", where: str = "") -> None:
+    """ConfigError if ``value`` (parsed YAML, under the dotted ``key``) holds a base-60 or octal
+    number; ``where`` names the file it was read from."""
+    found = _find_unlike_number(value, key)
     if found is None:
         return
     name, s = found
     at = f"{where} line {s.line}: " if where else ""
+    text = short_text(s.text)
+    if s.octal:  # 010: 8 or 10? (ambiguous: refused, not read either way)
+        what, fix = "an octal number", f"{_unpadded(s.text)}, or quote it ('{text}')"
+    else:
+        what, fix = (
+            "a base-60 number",
+            f"write the number itself, in seconds for a time, or quote it ('{text}')",
+        )
     raise ConfigError(
-        f"{at}config key '{short_text(name)}' = {short_text(s.text)} is a base-60 number to YAML 1.1, "
-        f"read as {short_repr(s.value)}",
-        f"write the number itself, in seconds for a time, or quote it ('{short_text(s.text)}') if it is text",
+        f"{at}config key '{short_text(name)}' = {text} is {what} to YAML 1.1, read as {short_repr(s.value)}",
+        f"{fix} if it is text",
     )
 
 
@@ -459,7 +486,7 @@ def read_config_file(path: str | Path) -> dict:
         lines = {k.removeprefix("config."): n for k, n in lines.items() if k.startswith("config.")}
         where = f"{where} (the config section of a run's summary.json)"
         log.info("%s: running with the config its run used", where)
-    _refuse_sexagesimal(loaded, where=where)
+    _refuse_unlike_number(loaded, where=where)
     return ConfigFileData(_empty_null_sections(loaded, Config, where, lines=lines), where, lines)
 
 
@@ -476,7 +503,7 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     except yaml.YAMLError:
         value = raw
     try:
-        _refuse_sexagesimal(value, ".".join(keys))  # as a value error of --set: naming the key
+        _refuse_unlike_number(value, ".".join(keys))  # as a value error of --set: naming the key
     except ConfigError as e:  # and the --set it came from, as every other value error of a --set does
         raise ConfigError(override_place(text) + e.msg, e.hint) from None
     return keys, value

@@ -93,16 +93,19 @@ class Span:
     def expected_scans(self, total: int, duration: float) -> int:
         """Scans the span should hold in a log of ``total`` scans over ``duration`` seconds (progress)."""
         rate = total / duration if duration > 0 else 0.0
-        lo = _as_index(self.start, rate, 0)
-        hi = min(_as_index(self.end, rate, total), total)
+        lo = _as_index(self.start, rate, 0, total)
+        hi = _as_index(self.end, rate, total, total)
         n = max(hi - lo, 0)
         return min(n, self.max_scans) if self.max_scans is not None else n
 
 
-def _as_index(b: Bound | None, rate: float, default: int) -> int:
+def _as_index(b: Bound | None, rate: float, default: int, total: int) -> int:
+    """The scan index ``b`` falls at, clamped to ``total`` before any int() (``--start 1e308`` times
+    the scan rate is inf: int(inf) raised OverflowError)."""
     if b is None:
         return default
-    return int(b.value) if b.index else int(b.value * rate)
+    x = b.value if b.index else b.value * rate
+    return int(x) if x < total else total
 
 
 @dataclass

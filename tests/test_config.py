@@ -278,6 +278,74 @@ def test_a_base_60_number_is_refused_naming_the_file_key_and_text(tmp_path, line
     assert str(e.value).startswith(want)
 
 
+@pytest.mark.parametrize(
+    ("line", "key", "text", "read_as", "decimal"),
+    [
+        ("scan_match:\n  window: 010\n", "scan_match.window", "010", "8", "10"),
+        ("submaps:\n  max_steps: 0300\n", "submaps.max_steps", "0300", "192", "300"),
+        ("input:\n  laser:\n    x: -0_10\n", "input.laser.x", "-0_10", "-8", "-10"),  # a float key too
+        ("input:\n  odom_frame: 017\n", "input.odom_frame", "017", "15", "17"),  # and a string key
+        ("loops:\n  min_gap: [00]\n", "loops.min_gap[0]", "00", "0", "0"),
+    ],
+)
+def test_an_octal_number_is_refused_naming_the_file_key_and_text(tmp_path, line, key, text, read_as, decimal):
+    """YAML 1.1 (PyYAML) reads an integer with a leading zero as octal: `window: 010` became 8 and
+    `--set submaps.max_steps=0300` 192, silently. 010 may mean 8 or 10: refused, as `1:30` is."""
+    p = tmp_path / "c.yaml"
+    p.write_text("# a config\n" + line)
+    with pytest.raises(ConfigError) as e:
+        load_config(p)
+    assert str(e.value) == (
+        f"config file '{p}' line {line.count(chr(10)) + 1}: config key '{key}' = {text} is an octal number "
+        f"to YAML 1.1, read as {read_as} (write it without leading zeros ({decimal}), or quote it "
+        f"('{text}') if it is text)"
+    )
+    dotted = key.split("[")[0]
+    with pytest.raises(ConfigError) as e:
+        load_config(None, [f"{dotted}={text}"])
+    assert str(e.value).startswith(f"--set '{dotted}={text}': config key '{dotted}' = {text} is an octal")
+
+
+@pytest.mark.parametrize(
+    ("setting", "want"),
+    [
+        ("input.laser.x=0x10", 16.0),  # hex is not ambiguous: read as YAML 1.1 reads it
+        ("scan_match.window=0x10", 16),
+        ("input.laser.x=00.5", 0.5),  # a float with a leading zero is decimal to YAML 1.1 too
+        ("input.laser.x=010.5", 10.5),
+        ("input.laser.x=+09.5", 9.5),
+        ("input.laser.x=0e0", 0.0),
+        ("input.laser.x=0", 0.0),
+        ("input.laser.x='010'", "refused"),  # text where a number is expected
+    ],
+)
+def test_numbers_with_a_leading_zero_that_yaml_reads_as_written(setting, want):
+    key = setting.split("=")[0]
+    if want == "refused":
+        with pytest.raises(ConfigError, match="must be a number"):
+            load_config(None, [setting])
+        return
+    cfg = load_config(None, [setting]).to_dict()
+    got = cfg[key.split(".")[0]]
+    for k in key.split(".")[1:]:
+        got = got[k]
+    assert got == want and type(got) is type(want)
+
+
+@pytest.mark.parametrize(
+    ("setting", "kind"), [("scan_match.window=08", "an integer"), ("input.laser.x=09", "a number")]
+)
+def test_a_leading_zero_yaml_reads_as_text_says_to_drop_it(setting, kind):
+    """08 and 09 have no octal digits: YAML 1.1 reads them as text, refused where a number is expected,
+    with the same advice as 010."""
+    key, text = setting.split("=")
+    with pytest.raises(ConfigError) as e:
+        load_config(None, [setting])
+    assert str(e.value).endswith(
+        f"config key '{key}' must be {kind}, got '{text}' (write it without leading zeros ({text[1:]}))"
+    )
+
+
 def test_base_60_text_quoted_is_text_and_every_other_scalar_reads_as_safe_load_reads_it(tmp_path):
     import yaml
 
@@ -287,9 +355,11 @@ def test_base_60_text_quoted_is_text_and_every_other_scalar_reads_as_safe_load_r
     p.write_text("input:\n  odom_frame: '1:30'\n")
     assert load_config(p).input.odom_frame == "1:30"
     assert load_config(None, ["input.odom_frame='1:30'"]).input.odom_frame == "1:30"
-    # a colon that YAML 1.1 does not read as a number stays text; every other form is untouched
+    # a colon that YAML 1.1 does not read as a number stays text, as does a leading zero that it does not
+    # read as octal (0, a float, 08); every other form is untouched
     text = (
-        "a: [0:30, 1:60, 12:5a, 0x1F, 0o17, 017, 0b101, 1_000, +12, 1e3, 1.5e3, 1.5, .5, -.5, "
+        "a: [0:30, 1:60, 12:5a, 0x1F, 0o17, 0, 0_, 00.5, 017.5, 08, 0b101, 1_000, +12, 1e3, 1.5e3, 1.5, "
+        ".5, -.5, "
         ".inf, -.Inf, .nan, yes, off, ~, null, 2001-12-14, '2001-12-14 21:59:43.10', 2001-12-14 21:59:43.10, "
         "'1:30', \"1:30\", a:b, 'x', 190, -3]\n"
     )

@@ -118,6 +118,28 @@ def test_tab_separated_lines_read_as_space_separated(tmp_path, gz):
             np.testing.assert_array_equal(m.ranges, n.ranges)
 
 
+@pytest.mark.parametrize("name", ["b.clf", "b.clf.gz", "b"])
+def test_a_utf8_byte_order_mark_is_not_part_of_the_first_tag(tmp_path, name):
+    """A log saved as 'UTF-8 with BOM' reads as without it, gzipped or with no extension too (its first
+    line was lost without a word: the tag 'ï»¿ROBOTLASER1' a topic of its own, and no format detected)."""
+    import gzip
+
+    from _log_fixtures import make_odoms, make_scans
+
+    from cornerslam_cli.logs.writers import write_carmen
+
+    plain = write_carmen(tmp_path / "p.clf", make_scans(), make_odoms(), odom_lines=False)
+    text = "".join(line for line in plain.read_text().splitlines(True) if not line.startswith("#"))
+    assert text.startswith("ROBOTLASER1 ")  # the mark sits on a line with data (the first scan)
+    plain.write_text(text)
+    data = "\ufeff".encode() + text.encode()
+    (tmp_path / name).write_bytes(gzip.compress(data) if name.endswith(".gz") else data)
+    with open_log(plain) as a, open_log(tmp_path / name) as b:
+        want, got = list(a.messages()), list(b.messages())
+        assert b.info().topics == a.info().topics and b.stats.warnings == []
+    assert [(type(m), m.stamp) for m in got] == [(type(m), m.stamp) for m in want] and len(got) == 24
+
+
 def _odom_line(t, x):
     return f"ODOM {x} 0 0 0 0 0 {t} host {t}\n"
 

@@ -47,6 +47,27 @@ def test_expected_scans_for_the_progress_line():
     assert Span(Bound(5.0, False), None, 7).expected_scans(100, 50.0) == 7  # 2 scans/s
     assert Span(Bound(40.0, False)).expected_scans(100, 50.0) == 20
     assert Span(Bound(200, True)).expected_scans(100, 50.0) == 0
+    # seconds past any log: clamped to the log before int() (1e308 s × 2 scans/s is inf: OverflowError)
+    assert Span(Bound(1e308, False)).expected_scans(100, 50.0) == 0
+    assert Span(None, Bound(1e308, False)).expected_scans(100, 50.0) == 100
+    assert Span(Bound(5.0, False), Bound(1e308, False), 7).expected_scans(100, 50.0) == 7
+
+
+@pytest.mark.parametrize(
+    "command, span, code",
+    [
+        ("run", ("--start", "1e308"), 2),
+        ("compare", ("--start", "1e308"), 2),
+        ("run", ("--end", "1e308", "--max-scans", "5"), 0),
+    ],
+)
+def test_seconds_past_any_log_are_no_internal_error(sim_log, tmp_path, command, span, code):
+    """Any finite --start or --end behaves as 1e300 does (a probe: 1e308 exited 1 with an OverflowError
+    from the progress line's estimate): a start past the log selects no scan, an end past it ends nowhere."""
+    res = invoke(command, sim_log, "--out", tmp_path / "o", "-q", *span)
+    assert res.exit_code == code, res.output
+    if code == 2:
+        assert res.stderr.startswith("error: --start 1e+308 selects no scan of log 'sim.mcap'"), res.stderr
 
 
 def test_run_by_scan_index_and_count_records_the_span(sim_log, tmp_path):

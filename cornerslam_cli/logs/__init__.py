@@ -13,6 +13,7 @@ every problem with the input.
 
 from __future__ import annotations
 
+import codecs
 import gzip
 import shlex
 import stat
@@ -91,8 +92,9 @@ def detect_format(path: str | Path) -> str:
         raise LogError(f"'{p.name}' is not a valid {suffix} file (bad magic bytes)", "check the file")
     if fmt is None:
         # no known extension: a CARMEN text log is recognized by its first tag
-        tag = head.split(None, 1)[0] if head.split() else b""
-        if tag in (b"FLASER", b"RLASER", b"ROBOTLASER1", b"ODOM", b"PARAM", b"#") or head[:1] == b"#":
+        text = head.removeprefix(codecs.BOM_UTF8)  # (the CARMEN reader drops a byte-order mark too)
+        tag = text.split(None, 1)[0] if text.split() else b""
+        if tag in (b"FLASER", b"RLASER", b"ROBOTLASER1", b"ODOM", b"PARAM", b"#") or text[:1] == b"#":
             return "carmen"
         raise LogError(f"unsupported log '{p.name}'", f"give {SUPPORTED}")
     return fmt

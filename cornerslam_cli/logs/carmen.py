@@ -37,6 +37,7 @@ odometry source, the pre-read's stamps) each depend on the others.
 
 from __future__ import annotations
 
+import codecs
 import gzip
 import io
 import math
@@ -58,6 +59,7 @@ POSE_NAMES = ("x", "y", "theta", "odom_x", "odom_y", "odom_theta")  # FLASER's a
 ROBOTLASER_NAMES = ("start_angle", "fov", "angular_resolution", "maximum_range")  # its 2nd–5th fields
 ROBOTLASER_POSES = tuple((w, n) for w in ("laser", "robot") for n in ("x", "y", "theta"))  # after remissions
 GZIP_MAGIC = b"\x1f\x8b"
+BOM = codecs.BOM_UTF8.decode("latin-1")  # a UTF-8 byte-order mark as read here: 'ï»¿'
 
 
 def flaser_increment(n: int) -> float:
@@ -79,13 +81,15 @@ def _open_text(path: Path) -> io.TextIOBase:
 
 
 def _lines(path: Path, stats: ReadStats | None) -> Iterator[str]:
-    """Lines of a (possibly gzip-compressed) text log; a cut/damaged gzip ends the lines with a warning."""
+    """Lines of a (possibly gzip-compressed) text log; a cut/damaged gzip ends the lines with a warning.
+    A UTF-8 byte-order mark (an editor saving as 'UTF-8 with BOM') is dropped: it made the first
+    line's tag 'ï»¿FLASER', a topic of its own, and the line was lost without a word."""
     n = 0
     try:
         with _open_text(path) as f:
             for line in f:
                 n += 1
-                yield line
+                yield line.removeprefix(BOM) if n == 1 else line
     except (EOFError, gzip.BadGzipFile, zlib.error) as exc:
         if stats is not None:
             why = "cut short" if isinstance(exc, EOFError) else "damaged"
