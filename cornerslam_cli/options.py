@@ -248,12 +248,10 @@ def check_time_offset(relations, time_offset: float) -> None:
 
 
 def setup_logging(verbose: int, quiet: bool) -> None:
-    """Log to stderr: warnings by default, ``-v`` info, ``-vv`` debug, ``-q`` errors only (both: a usage
-    error)."""
-    from .report.progress import log_to_stderr
-
+    """Log to stderr: warnings by default, ``-v`` info, ``-vv`` debug, ``-q`` errors only (not both)."""
     if verbose and quiet:
         raise click.UsageError("-q (only errors) and -v (more log output) contradict each other: give one")
+    from .report.progress import log_to_stderr
 
     log_to_stderr(logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)])
 

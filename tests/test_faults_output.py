@@ -650,6 +650,17 @@ def run_into_a_compare_outputs_run(w: World) -> Case:
     return Case(["run", w.log, "--out", cmp / "pca"], cmp / "pca")
 
 
+@fault(2, "is inside the compare output", "give a directory outside it")
+def run_into_an_unmarked_compare_outputs_run(w: World) -> Case:
+    """the same inside a compare output of a version before the ownership marker (known by its
+    comparison.csv): refused"""
+    cmp = w.tmp / "cmp"
+    (cmp / "pca").mkdir(parents=True)
+    (cmp / "comparison.csv").write_text("assoc,steps,landmarks,ate\npca,3,4,0.1\n")
+    (cmp / "pca" / "summary.json").write_text('{\n  "cornerslam_version": "0.1.0"\n}\n')
+    return Case(["run", w.log, "--out", cmp / "pca"], cmp / "pca")
+
+
 @fault(2, "is a name cornerslam uses for its own bookkeeping", "give another file name")
 def mcap_out_is_the_marker(w: World) -> Case:
     """`--mcap-out OUT/.cornerslam-output`, the name of the output's ownership marker: refused (before,
@@ -690,6 +701,17 @@ def a_directory_named_like_the_lock(w: World) -> Case:
     is a directory")"""
     (w.tmp / ".out.lock").mkdir()
     return Case(["compare", w.log, "--assoc", "icnn", "--out", w.tmp / "out"], w.tmp / ".out.lock")
+
+
+@fault(2, "is in the way of cornerslam's lock file", "move it away")
+def a_socket_named_like_the_lock(w: World) -> Case:
+    """a Unix socket named `.OUT.lock` beside `--out OUT` (opening one fails with ENXIO): refused, kept
+    (before: exit 1, internal error)"""
+    import socket
+
+    with socket.socket(socket.AF_UNIX) as sock:
+        sock.bind(str(w.tmp / ".out.lock"))
+    return Case(["run", w.log, "--out", w.tmp / "out"], w.tmp / ".out.lock")
 
 
 @fault(0)

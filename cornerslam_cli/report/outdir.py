@@ -139,8 +139,8 @@ def _open_lock(path: Path) -> int:
     why = "move it away (cornerslam deletes its lock file after use), or give another output name"
     try:
         fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o666)
-    except OSError as exc:
-        if exc.errno in (errno.ELOOP, errno.EISDIR):
+    except OSError:  # a symlink (ELOOP), a directory (EISDIR), a socket (ENXIO): anything but a file
+        if os.path.lexists(path) and not stat.S_ISREG(os.lstat(path).st_mode):
             raise OutputError(f"'{path}' is in the way of cornerslam's lock file there", why) from None
         raise
     regular = stat.S_ISREG(os.fstat(fd).st_mode)  # (a FIFO is not read: pread would fail on it)

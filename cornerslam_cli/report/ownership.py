@@ -171,10 +171,9 @@ def check_replaceable(
     """Refuse (OutputError) to replace ``target`` (resolved) by a ``kind`` output unless the module
     doc's rules allow it. ``inputs`` are the run's input files; ``shown`` names the target in errors."""
     shown = target if shown is None else shown
-    parent = read_marker(target.parent)
-    if parent is not None and parent["kind"] == "compare":
+    if output_kind(target.parent) == "compare":
         raise OutputError(
-            f"'{shown}' is inside the compare output '{shown.parent}': its runs belong to that comparison",
+            f"'{shown}' is inside the compare output '{target.parent}': its runs belong to that comparison",
             "give a directory outside it (rerunning the comparison replaces them all)",
         )
     _refuse_foreign(target, kind, shown)
