@@ -1,5 +1,5 @@
 """``python -m cornerslam_cli`` = the ``cornerslam`` command."""
 
-from .cli import main
+from .entry import main
 
 main()

@@ -92,3 +92,22 @@ def test_a_signal_raised_inside_a_compiled_kernel_still_exits_as_the_signal(term
     res = CliRunner().invoke(group, ["work"])
     assert res.exit_code == code and res.output.startswith(f"{word}: no output written"), res.output
     assert "internal error" not in res.output
+
+
+def test_ctrl_c_while_the_command_is_still_importing_exits_130_in_one_line():
+    """The console script's entry (cornerslam_cli.entry): a Ctrl-C that lands while the command line's
+    modules are imported (here: raised by the import of cornerslam_cli.cli itself, in a fresh
+    interpreter) gives exit 130 and the one line a running command gives, not a traceback and exit 1."""
+    code = (
+        "import sys\n"
+        "class Ctrl_c:\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if name == 'cornerslam_cli.cli':\n"
+        "            raise KeyboardInterrupt\n"
+        "sys.meta_path.insert(0, Ctrl_c())\n"
+        "from cornerslam_cli.entry import main\n"
+        "main()\n"
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert res.returncode == 130, res.stderr
+    assert res.stderr == "interrupted: no output written (a previous complete output directory is kept)\n"

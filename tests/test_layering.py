@@ -47,6 +47,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("compare", "batch"),
     ("options",),  # the command line's shared options and option parsers
     ("cli",),
+    ("entry",),
     ("__main__",),
 ]
 
