@@ -228,7 +228,8 @@ class MapConsistency(JsonResult):
 
 @dataclass(frozen=True, kw_only=True)
 class Timing(JsonResult):
-    """Stage times summed over the steps [s], the slowest matching step, the wall time of the run."""
+    """Stage times summed over the steps [s], the slowest matching step, the wall time of the run (in
+    a comparison: the associator's own filter run; its stage times include the shared extraction)."""
 
     t_extract: float
     t_predict: float
