@@ -152,6 +152,10 @@ def test_info_shows_the_first_scans_beams_preset_and_beam_times(sim_log, tmp_pat
     assert res.exit_code == 0, res.output
     assert "  beams     181 over 180.0° (1.000° apart), 0.100–30.000 m: preset sick_lms_1deg" in res.output
     assert "  beam times 100.00 µs apart (the log's time_increment, 18.0 ms a sweep): deskewed" in res.output
+    one = [RawScan(T0 + 0.1 * i, 0.0, 0.01, np.array([5.0]), 0.1, 30.0) for i in range(3)]
+    res = invoke("info", write_mcap(tmp_path / "one.mcap", one, odoms))
+    assert res.exit_code == 0, res.output
+    assert "  beams     1 (a single beam), 0.100–30.000 m: " in res.output  # (was: "1 over 0.0°")
 
 
 def test_info_lists_the_topics_of_a_log_whose_first_scan_cannot_be_read(tmp_path):

@@ -283,10 +283,8 @@ def scan_lines(scan: Scan, preset: str | None) -> list[str]:
     inc = math.degrees(abs(scan.angle_increment))
     fov = inc * max(scan.n_beams - 1, 0)
     which = f"preset {preset}" if preset else "no laser preset matches (the config's sensor model)"
-    lines = [
-        f"  beams     {scan.n_beams} over {fov:.1f}° ({inc:.3f}° apart), "
-        f"{scan.range_min:.3f}–{scan.range_max:.3f} m: {which}"
-    ]
+    spread = f"over {fov:.1f}° ({inc:.3f}° apart)" if scan.n_beams > 1 else "(a single beam)"
+    lines = [f"  beams     {scan.n_beams} {spread}, {scan.range_min:.3f}–{scan.range_max:.3f} m: {which}"]
     if scan.time_increment:
         sweep = 1e3 * abs(scan.time_increment) * max(scan.n_beams - 1, 0)
         lines.append(
