@@ -498,6 +498,9 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     keys = [k.strip() for k in key.split(".")]
     if not all(keys):
         raise ConfigError(f"--set '{shown}' has an empty key", "e.g. --set association.alpha=0.01")
+    if raw.lstrip().startswith("#"):  # YAML would read a comment: no value at all
+        why = f"quote it if it is the value: --set \"{short_text(key)}='{short_text(raw.strip())}'\""
+        raise ConfigError(f"--set '{shown}': '#' starts a YAML comment, so the value would be empty", why)
     try:
         value = _parse_yaml(raw, f"--set '{shown}'") if raw.strip() else ""
     except yaml.YAMLError:

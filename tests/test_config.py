@@ -126,6 +126,18 @@ def test_a_bad_value_given_with_set_names_the_set_even_over_a_file(tmp_path):
     assert str(e.value).startswith(f"config file '{p}' line 3: config key 'scan_match.gate'")
 
 
+def test_a_set_whose_value_starts_a_yaml_comment_says_so():
+    """`--set input.scan_topic=#x`: YAML reads a comment, no value (before: "must be a string, got
+    None"); quoted, it is the text."""
+    with pytest.raises(ConfigError) as e:
+        load_config(None, ["input.scan_topic=#x"])
+    assert str(e.value) == (
+        "--set 'input.scan_topic=#x': '#' starts a YAML comment, so the value would be empty "
+        "(quote it if it is the value: --set \"input.scan_topic='#x'\")"
+    )
+    assert load_config(None, ["input.scan_topic='#x'"]).input.scan_topic == "#x"
+
+
 def test_a_bad_value_from_neither_a_file_nor_set_is_reported_as_it_was():
     # a laser preset's layer is ours, not the user's: no place to point at (a bad one is a bug)
     with pytest.raises(ConfigError) as e:
