@@ -164,7 +164,7 @@ def test_batch_lines_table_failures_and_totals():
     assert batch_lines(rows, ["association.pca.group_size"]) == [
         "log          assoc  group_size  status   steps  landmarks  ATE m",
         "office.mcap  pca    3           ok       501    88         0.012",
-        "office.mcap  icnn   5           skipped  501    85         nan",
+        "office.mcap  icnn   5           skipped  501    85         -",  # no ATE (was: nan)
         "bad.bag      pca    3           failed   -      -          -",
         "bad.bag      icnn   5           failed   -      -          -",
         "failed (2x): /data/bad.bag: no scans (check --scan-topic)",

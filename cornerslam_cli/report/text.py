@@ -198,7 +198,7 @@ def batch_lines(rows: list[dict], keys: list[str]) -> list[str]:
     part), each distinct failure once with its count, and the totals."""
 
     def num(v, fmt):
-        return "-" if v is None else format(v, fmt)
+        return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, fmt)  # nan: no ATE
 
     head = ["log", "assoc", *(k.rsplit(".", 1)[-1] for k in keys), "status", "steps", "landmarks", "ATE m"]
     table = [
