@@ -43,7 +43,7 @@ _NAME_KEEP = 200  # bytes of a name kept in its sibling names (+ at most 45 of s
 HOST = hashlib.sha1(socket.gethostname().encode()).hexdigest()[:8]  # leftovers are judged on their host
 LOCK_MARK = b"cornerslam output lock\n"  # what a lock file holds (an empty one: being created)
 _SIBLING = re.compile(r"(partial|old)-([0-9a-f]{8})-(\d+)(?:-.+)?")
-_BOOKKEEPING = re.compile(r"\..+\.(lock|(partial|old)-[0-9a-f]{8}-\d+(-.+)?)")  # a lock's, a sibling's name
+_BOOKKEEPING = re.compile(rf"\..+\.(lock|{_SIBLING.pattern})")  # a lock's name, a staging sibling's
 
 
 # ---------------------------------------------------------------------------- sibling names
