@@ -142,6 +142,9 @@ class RunInput(JsonResult):
     # appended: where laser_upside_down came from — tf (the log's tf) or config (input.laser.upside_down)
     # — not always laser_to_base_source's (a CARMEN ROBOTLASER1 mount is planar: its flag is the config's)
     laser_upside_down_source: str | None = optional()
+    # appended: the robot's frame, which the odometry gives the pose of and the laser mount is in — a
+    # nav_msgs/Odometry's child_frame_id, else input.base_frame; absent for a CARMEN log (no frames)
+    base_frame: str | None = optional()
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -113,10 +113,8 @@ def decode_laserscan_ros1(data: bytes | memoryview) -> LaserScanTuple:
     return LaserScanTuple((sec, nsec), frame, a_min, a_max, a_inc, r_min, r_max, ranges, t_inc)
 
 
-def decode_odometry_cdr(
-    data: bytes | memoryview,
-) -> tuple[Stamp, float, float, tuple[float, float, float, float]]:
-    """(stamp, x, y, quaternion xyzw) of a CDR nav_msgs/Odometry (header, child_frame_id, pose)."""
+def _odometry_head_cdr(data: bytes | memoryview) -> tuple[str, Stamp, int, int]:
+    """(byte order, stamp, offset of child_frame_id's length, that length) of a CDR nav_msgs/Odometry."""
     size = len(data)
     if size < 20 or data[0] != 0 or data[1] not in (0, 1):
         raise DecodeError("Odometry too short or unsupported CDR encapsulation")
@@ -126,6 +124,47 @@ def decode_odometry_cdr(
     if off + 4 > size:
         raise DecodeError("Odometry frame_id overruns the message")
     (clen,) = struct.unpack_from(e + "I", data, off)
+    return e, (sec, nsec), off, clen
+
+
+def _odometry_head_ros1(data: bytes | memoryview) -> tuple[Stamp, int, int]:
+    """As :func:`_odometry_head_cdr` (without the byte order), for ROS 1 serialization."""
+    size = len(data)
+    if size < 20:
+        raise DecodeError("Odometry too short")
+    _, sec, nsec, slen = _ROS1_HDR.unpack_from(data, 0)
+    off = 16 + slen
+    if off + 4 > size:
+        raise DecodeError("Odometry frame_id overruns the message")
+    (clen,) = _U32_LE.unpack_from(data, off)
+    return (sec, nsec), off, clen
+
+
+def _text(data: bytes | memoryview, start: int, length: int, what: str) -> str:
+    """The string of ``length`` bytes at ``start`` (a CDR string's NUL dropped)."""
+    if start + length > len(data):
+        raise DecodeError(f"{what} overruns the message")
+    return bytes(data[start : start + length]).rstrip(b"\0").decode("utf-8", "replace")
+
+
+def odometry_frame_cdr(data: bytes | memoryview) -> str:
+    """The child_frame_id of a CDR nav_msgs/Odometry: the frame whose pose it gives (the robot's)."""
+    _, _, off, clen = _odometry_head_cdr(data)
+    return _text(data, off + 4, clen, "Odometry child_frame_id")
+
+
+def odometry_frame_ros1(data: bytes | memoryview) -> str:
+    """As :func:`odometry_frame_cdr`, for ROS 1 serialization."""
+    _, off, clen = _odometry_head_ros1(data)
+    return _text(data, off + 4, clen, "Odometry child_frame_id")
+
+
+def decode_odometry_cdr(
+    data: bytes | memoryview,
+) -> tuple[Stamp, float, float, tuple[float, float, float, float]]:
+    """(stamp, x, y, quaternion xyzw) of a CDR nav_msgs/Odometry (header, child_frame_id, pose)."""
+    size = len(data)
+    e, (sec, nsec), off, clen = _odometry_head_cdr(data)
     off = 4 + ((off + 4 + clen - 4 + 7) & ~7)  # after child_frame_id, aligned 8
     if off + 56 > size:
         raise DecodeError("Odometry pose overruns the message")
@@ -138,13 +177,7 @@ def decode_odometry_ros1(
 ) -> tuple[Stamp, float, float, tuple[float, float, float, float]]:
     """As :func:`decode_odometry_cdr`, for ROS 1 serialization."""
     size = len(data)
-    if size < 20:
-        raise DecodeError("Odometry too short")
-    _, sec, nsec, slen = _ROS1_HDR.unpack_from(data, 0)
-    off = 16 + slen
-    if off + 4 > size:
-        raise DecodeError("Odometry frame_id overruns the message")
-    (clen,) = _U32_LE.unpack_from(data, off)
+    (sec, nsec), off, clen = _odometry_head_ros1(data)
     off += 4 + clen
     if off + 56 > size:
         raise DecodeError("Odometry pose overruns the message")
@@ -184,6 +217,7 @@ class Decoder:
             raise DecodeError(f"message encoding {channel.encoding!r} not supported (cdr or ros1)")
         self.laserscan = decode_laserscan_ros1 if self.ros1 else decode_laserscan_cdr
         self.odometry = decode_odometry_ros1 if self.ros1 else decode_odometry_cdr
+        self.odometry_frame = odometry_frame_ros1 if self.ros1 else odometry_frame_cdr
         self._name: str | None = None
 
     def _deserialize(self, data: bytes | memoryview):
@@ -193,14 +227,6 @@ class Decoder:
         if self.ros1:
             return store.deserialize_ros1(data, self._name)
         return store.deserialize_cdr(data, self._name)
-
-    def odometry(
-        self, data: bytes | memoryview
-    ) -> tuple[Stamp, float, float, tuple[float, float, float, float]]:
-        """(stamp, x, y, quaternion xyzw) of a nav_msgs/Odometry."""
-        msg = self._deserialize(data)
-        p, q = msg.pose.pose.position, msg.pose.pose.orientation
-        return (msg.header.stamp.sec, msg.header.stamp.nanosec), p.x, p.y, (q.x, q.y, q.z, q.w)
 
     def transforms(self, data: bytes | memoryview) -> list:
         """[(parent, child, stamp, translation xyz, quaternion xyzw)] of a tf message."""

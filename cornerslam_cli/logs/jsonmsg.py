@@ -112,6 +112,10 @@ class JsonDecoder:
         q = _vector(msg, "pose", "pose", "orientation", keys="xyzw")
         return json_stamp(_field(msg, "header")), x, y, q  # type: ignore[return-value]
 
+    def odometry_frame(self, data: bytes | memoryview) -> str:
+        """The child_frame_id of a nav_msgs/Odometry: the frame whose pose it gives (the robot's)."""
+        return _frame(_object(data), "child_frame_id")
+
     def transforms(self, data: bytes | memoryview) -> list:
         """[(parent, child, stamp, translation xyz, quaternion xyzw)] of a tf message."""
         msg = _object(data)

@@ -409,7 +409,10 @@ class RosLogReader:
         return Decoder(channel)
 
     def laser_to_base(self) -> Pose2 | None:
-        """Pose (x, y, yaw) of the laser in base_frame from tf_static/tf, else None.
+        """Pose (x, y, yaw) of the laser in the robot's frame from tf_static/tf, else None. The robot's
+        frame is the one the odometry gives the pose of: its nav_msgs/Odometry messages' child_frame_id
+        (``base_frame`` becomes it), or ``base_frame`` when they leave it empty, when the tf does not
+        link it to the laser but links ``base_frame`` (warned), and for odometry read from tf.
 
         Reads from the start of the log until the first scan has been seen and, after it, all tf_static
         messages (when counts are known) and, when the log has other tf topics, more messages until the
@@ -429,6 +432,8 @@ class RosLogReader:
                     self.path.name, t, self._channels[t].encoding,
                 )  # fmt: skip
         frame = None
+        base = self._odometry_frame() or self.base_frame  # the frame whose pose the odometry gives
+        odom_children: set[str] = set()  # odom_frame→child on tf: the robot's motion, not its mount
         edges: dict[tuple[str, str], np.ndarray] = {}
         static_left = sum(self._channels[t].count or 0 for t in tf_topics if t == "/tf_static")
         counts_known = all(self._channels[t].count is not None for t in tf_topics if t == "/tf_static")
@@ -447,7 +452,7 @@ class RosLogReader:
                     if len(edges) != linked_at and dynamic:
                         linked_at = len(edges)
                         with np.errstate(invalid="ignore", over="ignore"):
-                            linked = chain_transform(edges, self.base_frame, frame) is not None
+                            linked = chain_transform(edges, base, frame) is not None
                     if not dynamic or (linked and self.odom_on_tf):
                         break
             try:
@@ -460,8 +465,9 @@ class RosLogReader:
                 for parent, child, _, t, q in decs[topic].transforms(data):
                     if topic == self.odom_topic and len(self._tf_pairs) < 50:
                         self._tf_pairs.add((parent, child))
-                    if (parent, child) == (self.odom_frame, self.base_frame):
-                        self.odom_on_tf = True
+                    if parent == self.odom_frame:
+                        odom_children.add(child)
+                        self.odom_on_tf = base in odom_children
                         continue
                     if parent == child:
                         continue
@@ -480,7 +486,24 @@ class RosLogReader:
             self._laser2base = None
             return None
         with np.errstate(invalid="ignore", over="ignore"):  # an inf in a tf: the result is checked below
-            T = chain_transform(edges, self.base_frame, frame)
+            T = chain_transform(edges, base, frame)
+            if T is None and base != self.base_frame:  # not linked to the laser: is input.base_frame?
+                T_config = chain_transform(edges, self.base_frame, frame)
+                if T_config is not None:
+                    self.stats.warn(
+                        "%s: odometry '%s' gives the pose of frame '%s' (its child_frame_id), which the tf "
+                        "does not link to the laser's frame '%s': the mount is taken from the tf %s→%s",
+                        self.path.name, self.odom_topic, base, frame, self.base_frame, frame,
+                    )  # fmt: skip
+                    T, base = T_config, self.base_frame
+        if base != self.base_frame:
+            logger.info(
+                "%s: odometry '%s' gives the pose of frame '%s' (its child_frame_id), not of "
+                "input.base_frame '%s': the laser mount is looked up from '%s'",
+                self.path.name, self.odom_topic, base, self.base_frame, base,
+            )  # fmt: skip
+            self.base_frame = base
+        self.odom_on_tf = self.base_frame in odom_children
         self._laser2base = None if T is None else pose2_from_matrix(T)
         if self._laser2base is not None and not all(math.isfinite(v) for v in self._laser2base):
             self.stats.warn("%s: the tf %s→%s is not finite: ignored", self.path.name, self.base_frame, frame)
@@ -493,6 +516,21 @@ class RosLogReader:
                     self.path.name, self.base_frame, frame, tilt,
                 )  # fmt: skip
         return self._laser2base  # type: ignore[return-value]
+
+    def _odometry_frame(self) -> str:
+        """The child_frame_id of the odometry topic's first decodable nav_msgs/Odometry ('/' stripped):
+        the frame whose pose the odometry gives, the robot's; "" when odometry is read from tf, or the
+        messages leave it empty (``input.base_frame`` is taken then)."""
+        if self._odom_sel.kind != "odometry":
+            return ""
+        dec = self._decoder(self.odom_topic)
+        for i, (_, _, data) in enumerate(self.source.raw_messages({self.odom_topic})):
+            try:
+                return strip_frame(dec.odometry_frame(data))
+            except Exception:  # noqa: BLE001 - bad bytes: messages() counts them; try the next message
+                if i >= 20:
+                    break
+        return ""
 
     def odom_tf_problem(self) -> tuple[tuple[str, str], bool] | None:
         """When odometry is read from tf and :meth:`laser_to_base` saw no odom_frame→base_frame

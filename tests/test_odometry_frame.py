@@ -1,0 +1,119 @@
+"""The robot's frame is the one the odometry gives the pose of: a nav_msgs/Odometry's child_frame_id.
+
+A TurtleBot's tree: /odom tracks base_footprint, /tf_static has base_footprint→base_link (x = −0.5
+here) and base_link→laser (x = 0.6). The laser is then at x = 0.1 on the robot the odometry moves —
+not at base_link's 0.6, which a run took before (exit 0, no warning) when input.base_frame was left
+at base_link.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from _log_fixtures import make_odoms, make_scans, write_messages_mcap
+from click.testing import CliRunner
+from mcap.reader import make_reader
+from rosbags.typesys import Stores, get_typestore
+
+from cornerslam_cli.cli import cli
+from cornerslam_cli.logs import open_log
+from cornerslam_cli.logs.cdr import odometry_frame_cdr, odometry_frame_ros1
+from cornerslam_cli.logs.writers import RawScan, serializer
+from cornerslam_cli.types import OdomSample
+
+ENCODINGS = ("cdr", "ros1", "json")
+
+
+def _turtlebot(path, encoding: str, child: str = "base_footprint", tf=(("base_footprint", "base_link", -0.5),
+               ("base_link", "laser", 0.6)), scans=None, odoms=None):  # fmt: skip
+    """An MCAP of scans on frame ``laser``, odometry odom→``child`` and a /tf_static of ``tf`` (parent,
+    child, x) edges."""
+    ros = serializer(encoding)
+    scans = make_scans(6) if scans is None else scans
+    odoms = make_odoms(8) if odoms is None else odoms
+    t0 = min(scans[0].stamp, odoms[0].stamp) - 0.01
+    msgs = [
+        ("/tf_static", "tf2_msgs/msg/TFMessage", int(t0 * 1e9), ros.tf(t0, p, c, x, 0.0, 0.0))
+        for p, c, x in tf
+    ]
+    msgs += [("/scan", "sensor_msgs/msg/LaserScan", int(s.stamp * 1e9), ros.laserscan(s)) for s in scans]
+    msgs += [
+        ("/odom", "nav_msgs/msg/Odometry", int(o.stamp * 1e9), ros.odometry(o, "odom", child)) for o in odoms
+    ]
+    return write_messages_mcap(path, sorted(msgs, key=lambda m: m[2]), encoding=encoding)
+
+
+@pytest.mark.parametrize("encoding", ENCODINGS)
+def test_the_mount_is_taken_in_the_odometry_s_child_frame(tmp_path, encoding):
+    log = _turtlebot(tmp_path / "tb.mcap", encoding)
+    with open_log(log) as r:
+        assert r.laser_to_base() == pytest.approx((0.1, 0.0, 0.0), abs=1e-12)
+        assert r.base_frame == "base_footprint"
+        assert not r.stats.warnings
+    # with the config's base_link named by the messages themselves: base_link's mount, as before
+    same = _turtlebot(tmp_path / "bl.mcap", encoding, child="base_link")
+    with open_log(same) as r:
+        assert r.laser_to_base() == pytest.approx((0.6, 0.0, 0.0), abs=1e-12) and r.base_frame == "base_link"
+
+
+@pytest.mark.parametrize("encoding", ENCODINGS)
+def test_an_empty_child_frame_leaves_the_config_s_base_frame(tmp_path, encoding):
+    log = _turtlebot(tmp_path / "e.mcap", encoding, child="")
+    with open_log(log) as r:
+        assert r.laser_to_base() == pytest.approx((0.6, 0.0, 0.0), abs=1e-12) and r.base_frame == "base_link"
+    with open_log(log, base_frame="base_footprint") as r:
+        assert r.laser_to_base() == pytest.approx((0.1, 0.0, 0.0), abs=1e-12)
+
+
+def test_a_child_frame_the_tf_does_not_link_falls_back_to_the_config_s_warned(tmp_path):
+    log = _turtlebot(tmp_path / "u.mcap", "cdr", child="chassis")
+    with open_log(log) as r:
+        assert r.laser_to_base() == pytest.approx((0.6, 0.0, 0.0), abs=1e-12) and r.base_frame == "base_link"
+        (w,) = r.stats.warnings
+        assert "'chassis' (its child_frame_id)" in w and "base_link→laser" in w
+
+
+def test_without_any_tf_for_the_laser_the_odometry_s_frame_is_named(tmp_path):
+    log = _turtlebot(tmp_path / "n.mcap", "cdr", tf=(("base_footprint", "imu", 0.2),))
+    with open_log(log) as r:
+        assert r.laser_to_base() is None and r.base_frame == "base_footprint"
+
+
+@pytest.mark.parametrize("child", ["", "b", "base_footprint", "abc", "/robot1/base_footprint_long_name"])
+@pytest.mark.parametrize("frame_id", ["", "odom", "od"])
+def test_child_frame_decoding_matches_rosbags(child, frame_id):
+    """The hand decoder against rosbags' deserializer, over string lengths that move every alignment."""
+    o = OdomSample(12.5, 1.0, -2.0, 0.3)
+    for enc, decode, store, deserialize in (
+        ("cdr", odometry_frame_cdr, Stores.ROS2_HUMBLE, "deserialize_cdr"),
+        ("ros1", odometry_frame_ros1, Stores.ROS1_NOETIC, "deserialize_ros1"),
+    ):
+        raw = serializer(enc).odometry(o, frame_id, child)
+        want = getattr(get_typestore(store), deserialize)(raw, "nav_msgs/msg/Odometry").child_frame_id
+        assert decode(raw) == want == child
+
+
+def test_a_run_records_the_frame_and_the_results_mcap_moves_it(tmp_path):
+    """summary.json says the robot's frame; the results MCAP's odom → base names it (not base_link,
+    which would give base_link a second parent beside the log's base_footprint → base_link)."""
+    scans = [
+        RawScan(100.0 + i, -1.5, 0.01, np.full(301, 3.0, np.float32), 0.05, 20.0, "laser") for i in range(5)
+    ]
+    odoms = [OdomSample(100.0 + i, 0.1 * i, 0.0, 0.0) for i in range(5)]
+    log = _turtlebot(tmp_path / "tb.mcap", "cdr", scans=scans, odoms=odoms)
+    res = CliRunner().invoke(
+        cli, ["run", str(log), "--out", str(tmp_path / "o"), "-q", "--mcap-out", str(tmp_path / "r.mcap")]
+    )
+    assert res.exit_code == 0, res.output
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert summary["input"]["base_frame"] == "base_footprint"
+    assert summary["input"]["laser_to_base"] == pytest.approx([0.1, 0.0, 0.0], abs=1e-9)
+    with open(tmp_path / "r.mcap", "rb") as f:
+        frames = {
+            (m["parent_frame_id"], m["child_frame_id"])
+            for _, c, msg in make_reader(f).iter_messages(topics=["/cornerslam/odom_tf"])
+            for m in [json.loads(msg.data)]
+        }
+    assert frames == {("odom", "base_footprint")}
