@@ -25,7 +25,7 @@ from .base import LogInfo, LogReader, ReadStats, TopicInfo
 from .carmen import GZIP_MAGIC, CarmenReader
 from .mcap import MAGIC as MCAP_MAGIC
 from .mcap import open_mcap
-from .rosbag import open_rosbag1, open_rosbag2
+from .rosbag import STORAGE_SUFFIXES, open_rosbag1, open_rosbag2
 
 __all__ = [
     "READERS",
@@ -44,8 +44,16 @@ READERS: dict[str, Callable[..., LogReader]] = {
     "rosbag2": open_rosbag2,
     "carmen": CarmenReader,
 }
-EXTENSIONS = {".mcap": "mcap", ".bag": "rosbag1", ".clf": "carmen", ".log": "carmen", ".gz": "carmen"}
+EXTENSIONS = {
+    ".mcap": "mcap",
+    ".bag": "rosbag1",
+    ".db3": "rosbag2",  # a ROS 2 bag's sqlite3 storage file alone
+    ".clf": "carmen",
+    ".log": "carmen",
+    ".gz": "carmen",
+}
 ROSBAG1_MAGIC = b"#ROSBAG V2.0"
+SQLITE_MAGIC = b"SQLite format 3\x00"
 SUPPORTED = "a .mcap file, a ROS 1 .bag, a ROS 2 bag directory or a CARMEN log (.clf/.log/.gz)"
 
 
@@ -67,9 +75,12 @@ def detect_format(path: str | Path) -> str:
         raise LogError(f"log '{p}' does not exist", "check the path")
     check_regular(p)
     if p.is_dir():
-        if (p / "metadata.yaml").is_file():
-            return "rosbag2"
-        raise LogError(f"directory '{p}' is not a ROS 2 bag (no metadata.yaml)", f"give {SUPPORTED}")
+        if (p / "metadata.yaml").is_file() or any(f.suffix in STORAGE_SUFFIXES for f in p.iterdir()):
+            return "rosbag2"  # (without metadata.yaml: read from its one storage file, logs/rosbag.py)
+        raise LogError(
+            f"directory '{p}' is not a ROS 2 bag (no metadata.yaml, no .mcap or .db3 file)",
+            f"give {SUPPORTED}",
+        )
     try:
         with open(p, "rb") as f:
             head = f.read(64)
@@ -82,13 +93,11 @@ def detect_format(path: str | Path) -> str:
     if head.startswith(ROSBAG1_MAGIC):
         return "rosbag1"
     _refuse_compressed(p, head)
+    if head.startswith(SQLITE_MAGIC):
+        return "rosbag2"
     suffix = p.suffix.lower()
-    if suffix == ".db3":
-        raise LogError(
-            f"'{p.name}' is a ROS 2 bag storage file", "give the bag directory (with metadata.yaml)"
-        )
     fmt = EXTENSIONS.get(suffix)
-    if fmt in ("mcap", "rosbag1"):
+    if fmt in ("mcap", "rosbag1", "rosbag2"):
         raise LogError(f"'{p.name}' is not a valid {suffix} file (bad magic bytes)", "check the file")
     if fmt is None:
         # no known extension: a CARMEN text log is recognized by its first tag

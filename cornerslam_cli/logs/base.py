@@ -109,7 +109,7 @@ class LogInfo:
     start: float | None
     end: float | None
     duration: float
-    n_messages: int
+    n_messages: int | None  # None: not known (a bag's stale metadata)
     topics: tuple[TopicInfo, ...]
     scan_topic: str
     odom_topic: str

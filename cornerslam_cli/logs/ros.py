@@ -381,7 +381,8 @@ class RosLogReader:
                 rate = (c.count - 1) / duration
             topics.append(TopicInfo(c.topic, normalize_msgtype(c.msgtype), c.count, rate, c.encoding))
         problems = tuple(f"{p} ({h})" for p, h in self._problems())
-        n = sum(c.count or 0 for c in self._channels.values())
+        counts = [c.count for c in self._channels.values()]
+        n = None if None in counts else sum(counts)  # None: a source that cannot say (stale metadata)
         return LogInfo(
             format=self.format,
             path=str(self.path),

@@ -1,23 +1,75 @@
-"""ROS 1 ``.bag`` files and ROS 2 bag directories (sqlite3 or mcap storage), through rosbags.
+"""ROS 1 ``.bag`` files and ROS 2 bags (sqlite3 or mcap storage), through rosbags.
 
 rosbags reads the bag indices at open (counts, time span: ``info()`` is cheap) and streams the
 raw message bytes, which go through the same decoders as MCAP (hand-written LaserScan decoder for
 ROS 1 and CDR, rosbags' typestore for Odometry and tf). A bag rosbags cannot open (unindexed,
 corrupt) raises LogError; data that turns out corrupt while reading ends the read with a warning.
+
+A ROS 2 bag whose storage is one MCAP file is read by cornerslam's own MCAP reader, as that file
+given alone is (a file cut by a killed recorder is read up to the cut; a topic's message definition
+recorded as "unknown" does not matter). A bag directory without metadata.yaml but with one storage
+file (``.mcap`` or ``.db3``) is read from that file, warned; a ``.db3`` may be given alone. rosbags
+(0.11) refuses a sqlite3 bag in which a type's definition is recorded in an encoding it does not
+know (rosbag2 Iron+ records "unknown", or nothing, for a type whose .msg it could not find): those
+definitions are left out (:class:`_Sqlite3`); cornerslam needs none but LaserScan's, Odometry's
+and tf's, which it has. metadata.yaml message counts of 0 over a storage that holds messages (a
+killed recorder's, an edited bag's) are taken as unknown, warned, not as an empty bag.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 
+import apsw  # rosbags' SQLite binding (a dependency of rosbags)
+import yaml
 from rosbags.interfaces import MessageDefinitionFormat
 from rosbags.rosbag1 import Reader as Reader1
 from rosbags.rosbag2 import Reader as Reader2
+from rosbags.rosbag2.reader import DirectoryReader
+from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 
 from ..errors import LogError
 from .base import Channel, ReadStats
+from .mcap import McapSource
 from .ros import RosLogReader
+
+DEFINITION_COLUMNS = ("topic_type", "encoding", "encoded_message_definition", "type_description_hash")
+KNOWN_DEFINITIONS = ("ros2msg", "ros2idl")  # the encodings of message definitions rosbags reads
+
+
+def _known_definitions_only(cursor: apsw.Cursor, row: tuple):
+    """apsw row tracer: drops a ``message_definitions`` row whose encoding rosbags does not know."""
+    if len(row) == 4 and row[1] not in KNOWN_DEFINITIONS:
+        if tuple(d[0] for d in cursor.getdescription()) == DEFINITION_COLUMNS:
+            return None  # (apsw skips the row)
+    return row
+
+
+def _trace_definitions(conn: apsw.Connection) -> None:
+    conn.row_trace = _known_definitions_only
+
+
+class _Sqlite3(Sqlite3Reader):
+    """rosbags' sqlite3 storage, reading past message definitions in an encoding it does not know:
+    their rows are left out while it opens the file (a connection hook of apsw, the SQLite binding
+    rosbags uses, for this opening only), so those types read as having no definition."""
+
+    def _open(self) -> None:
+        apsw.connection_hooks.append(_trace_definitions)
+        try:
+            super()._open()
+        finally:
+            apsw.connection_hooks.remove(_trace_definitions)
+
+
+class _Directory(DirectoryReader):
+    STORAGE_PLUGINS = {**DirectoryReader.STORAGE_PLUGINS, "sqlite3": _Sqlite3}
+
+
+class _Reader2(Reader2):
+    STORAGE_PLUGINS = {**Reader2.STORAGE_PLUGINS, "dir": _Directory, ".db3": _Sqlite3}
 
 
 class RosbagSource:
@@ -30,7 +82,7 @@ class RosbagSource:
         self.encoding = "cdr" if ros2 else "ros1"
         kind = "ROS 2 bag" if ros2 else "ROS 1 bag"
         try:
-            self._reader = (Reader2 if ros2 else Reader1)(self.path)
+            self._reader = (_Reader2 if ros2 else Reader1)(self.path)
             self._reader.open()
         except Exception as exc:  # noqa: BLE001 - rosbags raises many types for bad bags
             hint = "check the bag"
@@ -49,6 +101,20 @@ class RosbagSource:
             count = c.msgcount + (prev.count or 0 if prev else 0)
             merged[c.topic] = Channel(c.topic, c.msgtype, enc, count, c.msgdef.data, fmt)
         self._channels = list(merged.values())
+        if ros2 and self._channels and not self._reader.message_count and self._holds_messages():
+            self.stats.warn(
+                "%s: its metadata.yaml counts no messages but its storage holds some (metadata.yaml is "
+                "stale; `ros2 bag reindex` writes it again): message counts unknown",
+                self.path.name,
+            )
+            self._channels = [replace(c, count=None) for c in self._channels]
+
+    def _holds_messages(self) -> bool:
+        """Whether the storage holds a message (asked when the metadata counts none)."""
+        try:
+            return next(iter(self._reader.messages()), None) is not None
+        except Exception:  # noqa: BLE001 - a damaged storage: the read will say so
+            return False
 
     def channels(self) -> list[Channel]:
         return self._channels
@@ -82,5 +148,51 @@ def open_rosbag1(path: Path, **kw) -> RosLogReader:
 
 
 def open_rosbag2(path: Path, **kw) -> RosLogReader:
+    """A ROS 2 bag directory, or a ``.db3`` storage file alone (see the module docstring)."""
     stats = ReadStats()
-    return RosLogReader(RosbagSource(path, stats, ros2=True), path, stats=stats, **kw)
+    path = Path(path)
+    storage = _sole_storage(path, stats)
+    if storage.suffix != ".mcap":
+        return RosLogReader(RosbagSource(storage, stats, ros2=True), path, stats=stats, **kw)
+    try:
+        source = McapSource(storage, stats)
+    except LogError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - as open_mcap: the file is not readable MCAP
+        raise LogError(
+            f"cannot read ROS 2 bag '{path.name}': {storage.name}: {exc}", "check the bag"
+        ) from exc
+    source.format = "rosbag2"
+    return RosLogReader(source, path, stats=stats, **kw)
+
+
+STORAGE_SUFFIXES = (".mcap", ".db3")
+
+
+def _sole_storage(path: Path, stats: ReadStats) -> Path:
+    """What to read of a ROS 2 bag: its one MCAP file when metadata.yaml says so (mcap storage, one
+    file, no file compression); the one storage file of a directory without metadata.yaml (warned);
+    else ``path`` itself (a directory for rosbags, or a ``.db3``)."""
+    if not path.is_dir():
+        return path
+    metadata = path / "metadata.yaml"
+    if not metadata.is_file():
+        files = sorted(f for f in path.iterdir() if f.suffix in STORAGE_SUFFIXES and f.is_file())
+        if len(files) != 1:
+            raise LogError(
+                f"ROS 2 bag directory '{path.name}' has no metadata.yaml and {len(files)} storage files",
+                f"`ros2 bag reindex {path.name}` writes its metadata.yaml again; or give one storage file",
+            )
+        stats.warn("%s has no metadata.yaml: its one storage file %s is read alone", path.name, files[0].name)
+        return files[0]
+    try:
+        info = yaml.safe_load(metadata.read_text())["rosbag2_bagfile_information"]
+        files = info["relative_file_paths"]
+        storage, compressed = info["storage_identifier"], info.get("compression_format")
+    except Exception:  # noqa: BLE001 - unreadable metadata: rosbags says what is wrong with it
+        return path
+    if storage == "mcap" and not compressed and isinstance(files, list) and len(files) == 1:
+        sole = path / str(files[0])
+        if sole.suffix == ".mcap" and sole.is_file():
+            return sole
+    return path

@@ -249,7 +249,8 @@ def info_lines(
     (``laser``: the laser's (x, y, yaw) in the base frame from tf — a CARMEN log's ROBOTLASER1 laser
     pose — or None, and ``upside_down`` there; ``scan``: the first scan, its geometry and beam times,
     with the laser ``preset`` it matches), problems and notes."""
-    lines = [f"file:      {display_path(log_path)}", f"format:    {i.format}", f"messages:  {i.n_messages}"]
+    n = "unknown" if i.n_messages is None else i.n_messages
+    lines = [f"file:      {display_path(log_path)}", f"format:    {i.format}", f"messages:  {n}"]
     if i.start is not None:
         lines.append(f"start:     {i.start:.3f} s")
         lines.append(f"duration:  {i.duration:.2f} s")

@@ -1,0 +1,147 @@
+"""ROS 2 bags as recorders leave them: a topic whose message definition is "unknown" (rosbag2 Iron+
+records that for a type whose .msg it could not find), an MCAP cut by a killed recorder, a directory
+without metadata.yaml, a metadata.yaml whose counts are stale, a ``.db3`` given alone. Each read
+gives the scans and odometry of the intact bag (or of the part that is there)."""
+
+from __future__ import annotations
+
+import shutil
+import sqlite3
+
+import numpy as np
+import pytest
+import yaml
+from _log_fixtures import make_odoms, make_scans, split, write_log
+from mcap.reader import make_reader
+from mcap.writer import Writer
+
+from cornerslam_cli.errors import LogError
+from cornerslam_cli.logs import open_log
+
+
+def _read(path):
+    with open_log(path) as log:
+        scans, odoms = split(log.messages())
+        return scans, odoms, list(log.stats.warnings), log.info()
+
+
+def _same(a, b) -> None:
+    """Two reads' scans and odometry are the same (b may stop early: a cut file)."""
+    (sa, oa), (sb, ob) = a[:2], b[:2]
+    assert len(sb) > 0 and len(ob) > 0
+    assert [s.stamp for s in sb] == [s.stamp for s in sa[: len(sb)]]
+    for x, y in zip(sa, sb, strict=False):
+        np.testing.assert_array_equal(x.ranges, y.ranges)
+    assert [(o.stamp, o.x, o.y, o.theta) for o in ob] == [(o.stamp, o.x, o.y, o.theta) for o in oa[: len(ob)]]
+
+
+@pytest.fixture
+def bags(tmp_path):
+    scans, odoms = make_scans(40), make_odoms(42)
+    sq = write_log("rosbag2-sqlite3", tmp_path / "sq", scans, odoms)
+    mc = write_log("rosbag2-mcap", tmp_path / "mc", scans, odoms)
+    return sq, mc, _read(sq)
+
+
+@pytest.mark.parametrize("encoding", ["unknown", ""])
+def test_an_unknown_message_definition_in_sqlite3_storage_is_read_past(bags, tmp_path, encoding):
+    sq, _, ref = bags
+    bag = tmp_path / "unknown"
+    shutil.copytree(sq, bag)
+    with sqlite3.connect(next(bag.glob("*.db3"))) as db:
+        db.execute(
+            "INSERT INTO topics (name, type, serialization_format, offered_qos_profiles, "
+            "type_description_hash) VALUES ('/custom', 'my_msgs/msg/Foo', 'cdr', '[]', 'RIHS01_00')"
+        )
+        db.execute(
+            "INSERT INTO message_definitions (topic_type, encoding, encoded_message_definition, "
+            "type_description_hash) VALUES ('my_msgs/msg/Foo', ?, '', 'RIHS01_00')",
+            (encoding,),
+        )
+    got = _read(bag)  # rosbags 0.11 alone: KeyError 'unknown' ("cannot read ROS 2 bag 'unknown': 'unknown'")
+    _same(ref, got)
+    assert len(got[0]) == len(ref[0])
+
+
+def _rewrite_mcap(src, dst, unknown_topic: bool = False, keep: float = 1.0) -> None:
+    """``src`` copied to ``dst`` (with a channel of schema encoding "unknown" added; cut to ``keep``)."""
+    with open(src, "rb") as f, open(dst, "wb") as g:
+        w = Writer(g)
+        w.start(profile="ros2", library="test")
+        schemas, chans = {}, {}
+        for schema, ch, m in make_reader(f).iter_messages():
+            if schema.id not in schemas:
+                schemas[schema.id] = w.register_schema(schema.name, schema.encoding, schema.data)
+            if ch.id not in chans:
+                chans[ch.id] = w.register_channel(
+                    ch.topic, ch.message_encoding, schemas[schema.id], ch.metadata
+                )
+            w.add_message(chans[ch.id], m.log_time, m.data, m.publish_time)
+        if unknown_topic:
+            sid = w.register_schema("my_msgs/msg/Foo", "unknown", b"")
+            w.add_message(w.register_channel("/custom", "cdr", sid), 1, b"\x00\x01\x00\x00", 1)
+        w.finish()
+    if keep < 1.0:
+        data = dst.read_bytes()
+        dst.write_bytes(data[: int(len(data) * keep)])
+
+
+def test_an_unknown_schema_encoding_in_mcap_storage_is_read_past(bags):
+    _, mc, ref = bags
+    f = next(mc.glob("*.mcap"))
+    _rewrite_mcap(f, f.with_suffix(".tmp"), unknown_topic=True)
+    f.with_suffix(".tmp").replace(f)
+    got = _read(mc)
+    _same(ref, got)
+    assert got[3].format == "rosbag2" and "/custom" in {t.name for t in got[3].topics}
+
+
+def test_a_bag_whose_mcap_was_cut_is_read_up_to_the_cut(bags):
+    _, mc, ref = bags
+    f = next(mc.glob("*.mcap"))
+    data = f.read_bytes()
+    f.write_bytes(data[: len(data) * 2 // 3])  # a killed recorder: no summary, no footer, a record cut
+    scans, odoms, warnings, _ = got = _read(mc)
+    _same(ref, got)
+    assert len(scans) < len(ref[0]) and any("ends early" in w or "no end magic" in w for w in warnings)
+
+
+@pytest.mark.parametrize("which", [0, 1])
+def test_a_bag_without_metadata_is_read_from_its_one_storage_file_warned(bags, which):
+    bag = bags[which]
+    (bag / "metadata.yaml").unlink()
+    scans, odoms, warnings, info = got = _read(bag)
+    _same(bags[2], got)
+    assert len(scans) == len(bags[2][0]) and info.format == "rosbag2"
+    assert any("has no metadata.yaml" in w and "read alone" in w for w in warnings)
+
+
+def test_a_bag_without_metadata_and_two_storage_files_says_to_reindex(bags):
+    sq = bags[0]
+    (sq / "metadata.yaml").unlink()
+    db = next(sq.glob("*.db3"))
+    shutil.copy(db, sq / "second.db3")
+    with pytest.raises(LogError, match="has no metadata.yaml and 2 storage files") as err:
+        open_log(sq)
+    assert "ros2 bag reindex" in err.value.hint
+
+
+def test_a_db3_given_alone_is_read(bags):
+    sq, _, ref = bags
+    got = _read(next(sq.glob("*.db3")))
+    _same(ref, got)
+    assert len(got[0]) == len(ref[0])
+
+
+def test_stale_metadata_counts_are_unknown_not_an_empty_bag(bags):
+    sq, _, ref = bags
+    meta = yaml.safe_load((sq / "metadata.yaml").read_text())
+    info = meta["rosbag2_bagfile_information"]
+    info["message_count"] = 0
+    for t in info["topics_with_message_count"]:
+        t["message_count"] = 0
+    (sq / "metadata.yaml").write_text(yaml.safe_dump(meta))
+    scans, _, warnings, li = got = _read(sq)  # before: "topic '/scan' … has no messages"
+    _same(ref, got)
+    assert len(scans) == len(ref[0]) and li.n_messages is None
+    assert any("metadata.yaml counts no messages" in w for w in warnings)
