@@ -145,3 +145,21 @@ def test_stale_metadata_counts_are_unknown_not_an_empty_bag(bags):
     _same(ref, got)
     assert len(scans) == len(ref[0]) and li.n_messages is None
     assert any("metadata.yaml counts no messages" in w for w in warnings)
+
+
+def test_a_split_mcap_bag_with_an_unknown_definition_names_it(bags):
+    """Several MCAP files go through rosbags, which refuses an "unknown" schema encoding: say that, not
+    a bare KeyError text ("cannot read ROS 2 bag 'mc': 'unknown' (check the bag)")."""
+    _, mc, _ = bags
+    f = next(mc.glob("*.mcap"))
+    for name in ("a.mcap", "b.mcap"):
+        _rewrite_mcap(f, mc / name, unknown_topic=True)
+    f.unlink()
+    meta = yaml.safe_load((mc / "metadata.yaml").read_text())
+    meta["rosbag2_bagfile_information"]["relative_file_paths"] = ["a.mcap", "b.mcap"]
+    (mc / "metadata.yaml").write_text(yaml.safe_dump(meta))
+    with pytest.raises(
+        LogError, match=r"a message definition is in an encoding rosbags does not read"
+    ) as err:
+        open_log(mc)
+    assert "'unknown'" in str(err.value) and "one at a time" in err.value.hint

@@ -85,10 +85,13 @@ class RosbagSource:
             self._reader = (_Reader2 if ros2 else Reader1)(self.path)
             self._reader.open()
         except Exception as exc:  # noqa: BLE001 - rosbags raises many types for bad bags
-            hint = "check the bag"
-            if "index" in str(exc).lower():
+            problem, hint = str(exc), "check the bag"
+            if "index" in problem.lower():
                 hint = "the bag is not indexed (recording interrupted?): run `rosbag reindex` on it"
-            raise LogError(f"cannot read {kind} '{self.path.name}': {exc}", hint) from exc
+            if isinstance(exc, KeyError):  # rosbags' lookup of a message definition's encoding
+                problem = f"a message definition is in an encoding rosbags does not read ({exc})"
+                hint = "give its storage files (.mcap, .db3) one at a time"
+            raise LogError(f"cannot read {kind} '{self.path.name}': {problem}", hint) from exc
         merged: dict[str, Channel] = {}
         for c in self._reader.connections:
             fmt = ""
