@@ -387,7 +387,10 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
         unread = no_scan_read(log_path, "run has none to process", topics_hint=False, stats=reader.stats)
     preset = None if scan is None else detect_preset(scan.n_beams, scan.angle_increment)
     upside_down = laser is not None and bool(reader.laser_upside_down())
-    _echo(info_lines(log_path, log_info, laser, scan, preset, upside_down))
+    frames = None  # the robot's frame (the odometry's child_frame_id, else input.base_frame), the laser's
+    if laser is not None and getattr(reader, "laser_frame", None):
+        frames = (reader.base_frame, reader.laser_frame)
+    _echo(info_lines(log_path, log_info, laser, scan, preset, upside_down, frames))
     if unread is not None:  # exit 2, as run
         raise unread
     odom_tf = getattr(reader, "odom_tf_problem", lambda: None)()  # ROS logs: tf odometry not on tf

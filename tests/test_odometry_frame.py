@@ -109,6 +109,8 @@ def test_a_run_records_the_frame_and_the_results_mcap_moves_it(tmp_path):
     assert res.exit_code == 0, res.output
     summary = json.loads((tmp_path / "o" / "summary.json").read_text())
     assert summary["input"]["base_frame"] == "base_footprint"
+    info = CliRunner().invoke(cli, ["info", str(log)])
+    assert "x=0.100 m y=0.000 m yaw=0.000 rad (from tf base_footprint→laser)" in info.output
     assert summary["input"]["laser_to_base"] == pytest.approx([0.1, 0.0, 0.0], abs=1e-9)
     with open(tmp_path / "r.mcap", "rb") as f:
         frames = {

@@ -207,6 +207,8 @@ def test_info_lines():
         "problem:   no odometry",
         "note:      a note",
     ]
+    named = info_lines("office.mcap", info, (0.1, -0.02, math.pi / 2), tf_frames=("base_footprint", "laser"))
+    assert "  laser     x=0.100 m y=-0.020 m yaw=1.571 rad (from tf base_footprint→laser)" in named
     empty = LogInfo("carmen", "x.clf", None, None, 0.0, 0, (), "", "", "")
     assert info_lines("x.clf", empty, None) == [
         "file:      x.clf",

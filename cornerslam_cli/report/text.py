@@ -244,11 +244,13 @@ def info_lines(
     scan: Scan | None = None,
     preset: str | None = None,
     upside_down: bool = False,
+    tf_frames: tuple[str, str] | None = None,
 ) -> list[str]:
     """``cornerslam info``: the log's format, topics with counts and rates, what a run would use
-    (``laser``: the laser's (x, y, yaw) in the base frame from tf — a CARMEN log's ROBOTLASER1 laser
-    pose — or None, and ``upside_down`` there; ``scan``: the first scan, its geometry and beam times,
-    with the laser ``preset`` it matches), problems and notes."""
+    (``laser``: the laser's (x, y, yaw) in the base frame from tf — ``tf_frames`` names the two,
+    e.g. (base_footprint, laser) — a CARMEN log's ROBOTLASER1 laser pose — or None, and
+    ``upside_down`` there; ``scan``: the first scan, its geometry and beam times, with the laser
+    ``preset`` it matches), problems and notes."""
     n = "unknown" if i.n_messages is None else i.n_messages
     lines = [f"file:      {display_path(log_path)}", f"format:    {i.format}", f"messages:  {n}"]
     if i.start is not None:
@@ -268,6 +270,8 @@ def info_lines(
         flip = ", upside down: scans mirrored" if upside_down else ""
         x, y, yaw = laser
         source = ROBOTLASER_SOURCE if i.format == "carmen" else "from tf"
+        if tf_frames and i.format != "carmen":
+            source += f" {short_text(tf_frames[0])}→{short_text(tf_frames[1])}"
         lines.append(f"  laser     x={x:.3f} m y={y:.3f} m yaw={yaw:.3f} rad{flip} ({source})")
     else:
         lines.append("  laser     not on tf: from the config's input.laser (built-in default x=0 y=0 yaw=0)")
