@@ -188,12 +188,20 @@ def odometry_noise(cfg: Config) -> Callable[[np.ndarray], np.ndarray]:
 def keyframe_pairs(src: Input, cfg: Config) -> Iterator[Synced]:
     """The log's keyframes (streaming): scans prepared (logs/sync.py's synchroniser, keyframe selection)
     with the odometry at their stamps, deskewed."""
-    msgs = scans_prepared(src.reader, cfg, src.laser_upside_down)
-    if src.span.given:
-        msgs = select(msgs, src.span, src.span_used, src.path.name)
+    msgs = src.reader.messages()
+    if src.span.given:  # on the scans as read: those left out give their beams back to the reader's counts
+        left_out = partial(_uncount, src.reader.stats)
+        msgs = select(msgs, src.span, src.span_used, src.path.name, left_out, cfg.input.scan_time_offset)
+    msgs = scans_prepared(src.reader, cfg, src.laser_upside_down, msgs)
     msgs = reanchor_odometry(msgs, cfg.input.odom_jump, src.stats, src.reader.stats.warn)
     synced = synchronise(msgs, src.stats, src.reader.stats.warn)  # its warning lands in summary.json too
     return _deskewed(select_keyframes(synced, cfg.keyframes, src.stats), src, cfg)
+
+
+def _uncount(stats: ReadStats, scan: Scan) -> None:
+    """Take a scan the span left out off the reader's beam counts: summary.json's describe the span."""
+    stats.beams -= scan.n_beams
+    stats.beams_dropped -= scan.n_invalid
 
 
 def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None = None) -> Iterator[Frame]:

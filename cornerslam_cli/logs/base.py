@@ -124,7 +124,7 @@ class ReadStats:
 
     scans: int = 0  # scans yielded
     odoms: int = 0  # odometry samples yielded
-    beams: int = 0  # beams in the yielded scans' messages
+    beams: int = 0  # beams in the yielded scans' messages (a run's: less a span's left out)
     beams_dropped: int = 0  # of which invalid (NaN, inf, <= 0, < range_min, >= range_max)
     scans_skipped: int = 0  # scans not yielded: bad angle_increment, no beams
     size_mismatch: int = 0  # scans whose ranges count disagreed with angle_min/max/increment
