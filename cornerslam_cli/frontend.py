@@ -29,7 +29,7 @@ from .geometry import matrix_from_pose, transform_points
 from .lasers import mount_source
 from .logs import ReadStats, open_log
 from .logs.deskew import deskew
-from .logs.sync import Synced, SyncStats, reanchor_odometry, select_keyframes, synchronise
+from .logs.sync import CLOCKS_HINT, Synced, SyncStats, reanchor_odometry, select_keyframes, synchronise
 from .logs.unreadable import damaged_error
 from .motion import ScanMatcher
 from .motion.fusion import BiasTaken, OdometryFusion
@@ -251,6 +251,8 @@ def check_processed(src: Input, n_frames: int, n_points: int) -> None:
         if rs.damaged:  # the damage, more likely than the stamps, is why
             raise damaged_error(src.path, rs, "no scan could be processed")
         _undecoded_error(src.path, rs)
+        if clocks := stats.other_clocks():
+            raise LogError(f"log '{src.path}': no scan could be processed: {clocks}", CLOCKS_HINT)
         raise LogError(
             f"log '{src.path}': no scan could be processed ({stats.scans_in} scans read, "
             f"{stats.before_first_odom} before the first and {stats.after_last_odom} "
