@@ -482,7 +482,7 @@ class RosLogReader:
                 logger.debug("laser_to_base: skipping undecodable %s message: %s", topic, exc)
         self.laser_frame = frame
         self._tf_read_all = read_all
-        if frame is None:
+        if not frame:  # no scan read, or its frame_id empty: tf2 ignores transforms to a frame ""
             self._laser2base = None
             return None
         with np.errstate(invalid="ignore", over="ignore"):  # an inf in a tf: the result is checked below
