@@ -220,6 +220,23 @@ def test_several_odometry_topics(tmp_path):
     assert open_log(tmp_path / "b.mcap", odom_topic="/ekf").odom_topic == "/ekf"
 
 
+def test_info_on_several_odometry_topics_says_which_and_why(tmp_path):
+    """``info`` with two Odometry topics, none /odom: the odometry line says so and names --odom-topic
+    (a probe: it said "none found" above an error naming both); with /odom among them: /odom is taken,
+    a note and an info-level log line (-v) naming the others and --odom-topic (a probe: nothing said so)."""
+    neither = scan_messages() + odom_messages("/wheel") + odom_messages("/ekf")
+    res = CliRunner().invoke(cli, ["info", str(write_messages_mcap(tmp_path / "b.mcap", neither))])
+    assert res.exit_code == 2 and "error: log 'b.mcap' has 2 Odometry topics: /ekf, /wheel" in res.output
+    lines = res.output.splitlines()
+    assert "  odometry  - (2 nav_msgs/Odometry topics: choose one with --odom-topic)" in lines
+    both = scan_messages() + odom_messages("/odom") + odom_messages("/odometry/filtered")
+    res = CliRunner().invoke(cli, ["info", "-v", str(write_messages_mcap(tmp_path / "a.mcap", both))])
+    assert res.exit_code == 0, res.output
+    note = "2 Odometry topics: /odom taken, not /odometry/filtered (choose one with --odom-topic)"
+    assert f"note:      {note}" in res.stdout.splitlines()
+    assert f"log 'a.mcap': {note}" in res.stderr
+
+
 def _scan(ranges, **kw):
     args = dict(stamp=100.0, angle_min=-1.0, angle_increment=0.01, range_min=0.1, range_max=10.0)
     args.update(kw)
