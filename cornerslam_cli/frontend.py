@@ -29,7 +29,7 @@ from .geometry import matrix_from_pose, transform_points
 from .lasers import mount_source
 from .logs import ReadStats, open_log
 from .logs.deskew import deskew
-from .logs.sync import Synced, SyncStats, reanchor_odometry, select_keyframes, synchronise
+from .logs.sync import CLOCKS_HINT, Synced, SyncStats, reanchor_odometry, select_keyframes, synchronise
 from .logs.unreadable import damaged_error
 from .motion import ScanMatcher
 from .motion.fusion import BiasTaken, OdometryFusion
@@ -188,12 +188,20 @@ def odometry_noise(cfg: Config) -> Callable[[np.ndarray], np.ndarray]:
 def keyframe_pairs(src: Input, cfg: Config) -> Iterator[Synced]:
     """The log's keyframes (streaming): scans prepared (logs/sync.py's synchroniser, keyframe selection)
     with the odometry at their stamps, deskewed."""
-    msgs = scans_prepared(src.reader, cfg, src.laser_upside_down)
-    if src.span.given:
-        msgs = select(msgs, src.span, src.span_used, src.path.name)
+    msgs = src.reader.messages()
+    if src.span.given:  # on the scans as read: those left out give their beams back to the reader's counts
+        left_out = partial(_uncount, src.reader.stats)
+        msgs = select(msgs, src.span, src.span_used, src.path.name, left_out, cfg.input.scan_time_offset)
+    msgs = scans_prepared(src.reader, cfg, src.laser_upside_down, msgs)
     msgs = reanchor_odometry(msgs, cfg.input.odom_jump, src.stats, src.reader.stats.warn)
     synced = synchronise(msgs, src.stats, src.reader.stats.warn)  # its warning lands in summary.json too
     return _deskewed(select_keyframes(synced, cfg.keyframes, src.stats), src, cfg)
+
+
+def _uncount(stats: ReadStats, scan: Scan) -> None:
+    """Take a scan the span left out off the reader's beam counts: summary.json's describe the span."""
+    stats.beams -= scan.n_beams
+    stats.beams_dropped -= scan.n_invalid
 
 
 def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None = None) -> Iterator[Frame]:
@@ -243,6 +251,8 @@ def check_processed(src: Input, n_frames: int, n_points: int) -> None:
         if rs.damaged:  # the damage, more likely than the stamps, is why
             raise damaged_error(src.path, rs, "no scan could be processed")
         _undecoded_error(src.path, rs)
+        if clocks := stats.other_clocks():
+            raise LogError(f"log '{src.path}': no scan could be processed: {clocks}", CLOCKS_HINT)
         raise LogError(
             f"log '{src.path}': no scan could be processed ({stats.scans_in} scans read, "
             f"{stats.before_first_odom} before the first and {stats.after_last_odom} "
@@ -351,10 +361,14 @@ def warn_mount(src: Input, cfg: Config) -> None:
     sets it, so true was the user's). Called once the run has its frames, so that a log that fails
     gives its one-line error alone."""
     if src.laser_source == "default":
+        why = f"has no tf {_tf_text(src, cfg)}"
+        if getattr(src.reader, "laser_frame", None) == "":  # a scan read, its frame empty: no tf names it
+            topic = short_text(src.info.scan_topic)
+            why = f"has scans on '{topic}' with an empty header frame_id, so no tf can place the laser"
         src.reader.stats.warn(
-            "log '%s' has no tf %s: the laser is taken at the built-in default x=0 y=0 yaw=0 on "
-            "the robot (set input.laser.x/y/yaw to its mount, or input.laser.from_tf=false to keep it)",
-            src.path.name, _tf_text(src, cfg),
+            "log '%s' %s: the laser is taken at the built-in default x=0 y=0 yaw=0 on the robot (set "
+            "input.laser.x/y/yaw to its mount, or input.laser.from_tf=false to keep it)",
+            src.path.name, why,
         )  # fmt: skip
     if cfg.input.laser.upside_down and src.laser_upside_down_source == "tf" and not src.laser_upside_down:
         src.reader.stats.warn(

@@ -149,9 +149,10 @@ class RunInput(JsonResult):
 
 @dataclass(frozen=True, kw_only=True)
 class Counts(JsonResult):
-    """How many of each thing a run saw: steps, landmarks, matches; the reader's beams and scans; the
-    synchroniser's scans and odometry (``logs.sync.SyncStats``); associator budget hits; the scan
-    matcher's outcomes (absent when scan matching was off)."""
+    """How many of each thing a run saw: steps, landmarks, matches; the reader's beams (those of the scans
+    in ``--start``/``--end``/``--max-scans``, as ``scans_in``) and scans; the synchroniser's scans and
+    odometry (``logs.sync.SyncStats``); associator budget hits; the scan matcher's outcomes (absent when
+    scan matching was off)."""
 
     steps: int
     landmarks: int

@@ -3,7 +3,8 @@
 A bound is seconds from the log's first scan (``--start 12.5``) or, with a ``#`` prefix, the index of
 a scan on the scan topic (``--end '#300'``: 0 is the first scan). ``--start`` is inclusive, ``--end``
 exclusive; ``--max-scans N`` keeps at most N scans from the start. :func:`select` filters the
-reader's messages: scans outside the span are dropped, odometry passes (the synchroniser needs the
+reader's messages: scans outside the span are dropped (handed to ``left_out``: the reader's beam counts
+give them back, so summary.json's describe the span), odometry passes (the synchroniser needs the
 samples around each scan), and reading stops at the first odometry sample at or after the last scan
 kept, so ``--end`` or ``--max-scans`` near the start of a long log reads little of it. What was
 used is recorded in :class:`SpanUsed` (summary.json ``input.span``).
@@ -12,7 +13,7 @@ used is recorded in :class:`SpanUsed` (summary.json ``input.span``).
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 
 from .errors import CornerslamError
@@ -138,10 +139,19 @@ class SpanUsed:
         )
 
 
-def select(messages: Iterable, span: Span, used: SpanUsed, log_name: str) -> Iterator:
+def select(
+    messages: Iterable,
+    span: Span,
+    used: SpanUsed,
+    log_name: str,
+    left_out: Callable[[Scan], None] | None = None,
+    stamp_offset: float = 0.0,
+) -> Iterator:
     """The messages of ``span``: scans inside it (counted in ``used``), odometry until the first
-    sample at or after the last scan kept. A span that holds no scan of the log is a CornerslamError
-    naming the options and the log's extent."""
+    sample at or after the last scan kept, its stamp plus ``stamp_offset`` (``input.scan_time_offset``,
+    added to the scans' stamps after the selection). Each scan read but dropped goes to ``left_out``.
+    A span that holds no scan of the log is a CornerslamError naming the options and the log's extent."""
+    drop = left_out or (lambda scan: None)
     t0 = stop_at = None
     ended_at: tuple[int, float] | None = None  # the scan where the end came before any was kept
     i = -1
@@ -156,10 +166,12 @@ def select(messages: Iterable, span: Span, used: SpanUsed, log_name: str) -> Ite
         t0 = msg.stamp if t0 is None else t0
         t = msg.stamp - t0
         if stop_at is not None or (span.start is not None and not span.start.reached(i, t)):
+            drop(msg)
             continue
         if (span.end is not None and span.end.reached(i, t)) or used.scans == span.max_scans:
-            stop_at = used.last_time + t0 if used.last_time is not None else -math.inf
+            stop_at = used.last_time + t0 + stamp_offset if used.last_time is not None else -math.inf
             ended_at = (i, t) if used.scans == 0 else None
+            drop(msg)
             continue
         used.keep(i, t)
         yield msg

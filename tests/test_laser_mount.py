@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 import pytest
-from _log_fixtures import split, write_log, write_messages_mcap
+from _log_fixtures import make_scans, split, write_log, write_messages_mcap
 from _run_helpers import run_cli
 
 from cornerslam_cli.logs import open_log
@@ -363,3 +363,20 @@ def test_clockwise_upside_down_laser_turned_on_the_robot_with_a_sweep(tmp_path, 
     assert len(ta) == len(tb) > 20
     for k in ("x", "y", "theta"):
         np.testing.assert_allclose(tb[k], ta[k], atol=1e-6)
+
+
+@pytest.mark.parametrize("tf_static", [None, (0.2, 0.0, 0.0)])
+def test_scans_with_an_empty_frame_id_are_warned_of_as_such(tmp_path, tf_static):
+    """Scans whose header frame_id is empty: no tf can place the laser (a /tf_static base_link→"", which
+    tf2 would ignore, is not used): the warning says so, not that the log has no tf base_link→laser (a
+    probe)."""
+    raw = [dataclasses.replace(s, frame_id="") for s in make_scans()]
+    log = write_log("mcap-cdr", tmp_path, raw, tf_static=tf_static)
+    s = run_cli(log, tmp_path / "a")
+    assert s["input"]["laser_to_base_source"] == "default"
+    assert (
+        "log 'log.mcap' has scans on '/scan' with an empty header frame_id, so no tf can place the laser: "
+        "the laser is taken at the built-in default x=0 y=0 yaw=0 on the robot (set input.laser.x/y/yaw "
+        "to its mount, or input.laser.from_tf=false to keep it)"
+    ) in s["warnings"]
+    assert not any("has no tf" in w for w in s["warnings"])

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -151,22 +152,42 @@ def test_a_compressed_log_cornerslam_does_not_read_is_named_as_such(
         ("x.clf", "bz2", "bunzip2 -c {p} > {d}/x-decompressed.clf"),
         ("x.clf.bz2", "bz2", "bunzip2 -k {p}"),
         ("x.clf", "xz", "unxz -c {p} > {d}/x-decompressed.clf"),
+        ("x.mcap.zst", "zstd", "unzstd -k {p}"),
+        # a compression suffix the tool may not know: the output named without it (it kept it: a probe's
+        # log.mcap.zstd gave "> log.mcap-decompressed.zstd"), as for one in capitals, which only gunzip knows
+        ("x.mcap.zstd", "zstd", "unzstd -c {p} > {d}/x.mcap"),
+        ("x.zstd", "zstd", "unzstd -c {p} > {d}/x"),
+        ("X.MCAP.ZST", "zstd", "unzstd -c {p} > {d}/X.MCAP"),
+        ("X.CLF.XZ", "xz", "unxz -c {p} > {d}/X.CLF"),
+        ("x.clf.bz", "bz2", "bunzip2 -c {p} > {d}/x.clf"),
+        ("x.mcap", "zstd", "unzstd -c {p} > {d}/x-decompressed.mcap"),
     ],
 )
 def test_the_decompress_command_works_whatever_the_name(tmp_path, name, compress, command):
     """The hint's command must work as given: gunzip -k / unxz -k / unzstd on a name without their
     suffix (a gzipped MCAP named x.mcap, a bzip2'd x.clf) refuse it ("unknown suffix -- ignored")
-    or, bunzip2, write 'x.clf.out': such a file is decompressed to stdout, into a named file."""
+    or, bunzip2, write 'x.clf.out': such a file is decompressed to stdout, into a named file. Where the
+    tool is installed, the command is run and must give the log back."""
     import bz2
     import gzip
     import lzma
+    import shutil
+    import subprocess
 
-    raw = write_log("mcap-cdr" if name.endswith("mcap") else "carmen", tmp_path).read_bytes()
+    import zstandard
+
+    raw = write_log("mcap-cdr" if "mcap" in name.lower() else "carmen", tmp_path).read_bytes()
     p = tmp_path / name
-    p.write_bytes({"gzip": gzip.compress, "bz2": bz2.compress, "xz": lzma.compress}[compress](raw))
+    compressors = {"gzip": gzip.compress, "bz2": bz2.compress, "xz": lzma.compress}
+    p.write_bytes(zstandard.compress(raw) if compress == "zstd" else compressors[compress](raw))
     with pytest.raises(LogError) as err:
         open_log(p)
-    assert f"decompress it first: {command.format(p=p, d=tmp_path)}" in err.value.hint, err.value.hint
+    given = command.format(p=p, d=tmp_path)
+    assert err.value.hint.split("decompress it first: ")[1].split(" (a CARMEN")[0] == given, err.value.hint
+    if shutil.which(given.split()[0]):
+        subprocess.run(given, shell=True, check=True, cwd=tmp_path, capture_output=True)
+        out = given.split("> ")[1] if "> " in given else str(p.with_suffix(""))
+        assert Path(out).read_bytes() == raw
 
 
 def test_no_laserscan(tmp_path):
@@ -218,6 +239,23 @@ def test_several_odometry_topics(tmp_path):
         open_log(write_messages_mcap(tmp_path / "b.mcap", neither)).messages()
     assert "--odom-topic" in err.value.hint
     assert open_log(tmp_path / "b.mcap", odom_topic="/ekf").odom_topic == "/ekf"
+
+
+def test_info_on_several_odometry_topics_says_which_and_why(tmp_path):
+    """``info`` with two Odometry topics, none /odom: the odometry line says so and names --odom-topic
+    (a probe: it said "none found" above an error naming both); with /odom among them: /odom is taken,
+    a note and an info-level log line (-v) naming the others and --odom-topic (a probe: nothing said so)."""
+    neither = scan_messages() + odom_messages("/wheel") + odom_messages("/ekf")
+    res = CliRunner().invoke(cli, ["info", str(write_messages_mcap(tmp_path / "b.mcap", neither))])
+    assert res.exit_code == 2 and "error: log 'b.mcap' has 2 Odometry topics: /ekf, /wheel" in res.output
+    lines = res.output.splitlines()
+    assert "  odometry  - (2 nav_msgs/Odometry topics: choose one with --odom-topic)" in lines
+    both = scan_messages() + odom_messages("/odom") + odom_messages("/odometry/filtered")
+    res = CliRunner().invoke(cli, ["info", "-v", str(write_messages_mcap(tmp_path / "a.mcap", both))])
+    assert res.exit_code == 0, res.output
+    note = "2 Odometry topics: /odom taken, not /odometry/filtered (choose one with --odom-topic)"
+    assert f"note:      {note}" in res.stdout.splitlines()
+    assert f"log 'a.mcap': {note}" in res.stderr
 
 
 def _scan(ranges, **kw):

@@ -151,3 +151,32 @@ def test_an_end_before_the_start_in_other_units_says_so(sim_log, tmp_path, span)
     assert "selects no scan of log 'sim.mcap': the first scan its start lets in (#" in err, err
     assert "is already past its end (give an end after the start)" in err and "\n" not in err
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(
+    "span",
+    [
+        ("--start", "#5", "--max-scans", "10"),
+        ("--start", "0.5", "--end", "1.5"),
+        # the span is taken on the scans as read, then their stamps shifted: the odometry is read past
+        # the last one's shifted stamp (else it would be "after the last odometry")
+        ("--start", "#5", "--max-scans", "10", "--set", "input.scan_time_offset=0.3"),
+    ],
+)
+def test_beam_counts_are_the_spans_scans(tmp_path, span):
+    """summary.json's beams_total / beams_invalid count the scans the run processed, as scans_in does
+    (a probe: they counted every scan read, the ones before --start and after --end too)."""
+    from _log_fixtures import make_odoms, make_scans
+
+    from cornerslam_cli.logs.writers import write_mcap
+
+    raw = make_scans(30, beams=181)
+    log = write_mcap(tmp_path / "log.mcap", raw, make_odoms(31))
+    res = invoke("run", log, "--out", tmp_path / "o", "-q", *span)
+    assert res.exit_code == 0, res.output
+    kept = raw[5:15]  # #5 to #14; 0.5 s to 1.5 s from the first scan (10 Hz) is the same ten
+    counts = summary(tmp_path / "o")["counts"]
+    valid = [(s.ranges > 0) & (s.ranges >= 0.1) & (s.ranges < 30.0) for s in kept]  # NaN compares False
+    assert counts["scans_in"] == 10
+    assert counts["beams_total"] == sum(len(s.ranges) for s in kept) == 1810
+    assert counts["beams_invalid"] == sum(int((~v).sum()) for v in valid) > 0

@@ -195,3 +195,35 @@ def test_memory_does_not_grow_with_unpaired_messages(case):
 
     small, large = peak_bytes(lambda: run(3000)), peak_bytes(lambda: run(9000))
     assert large < 1.3 * small, (small, large)
+
+
+@pytest.mark.parametrize("scan_t0, odom_t0", [(100.0, 1_700_000_000.0), (1_700_000_000.0, 100.0)])
+def test_scans_and_odometry_on_different_clocks_are_said_to_be(tmp_path, scan_t0, odom_t0):
+    """Scans stamped ~100 s (simulated time) and odometry ~1.7e9 s (wall clock), or the reverse: the
+    error names both spans and the clocks (a probe: it spoke of scans before the first / after the last
+    odometry sample only)."""
+    from _log_fixtures import make_odoms, make_scans
+    from click.testing import CliRunner
+
+    from cornerslam_cli.cli import cli
+    from cornerslam_cli.logs.writers import write_mcap
+
+    log = write_mcap(tmp_path / "log.mcap", make_scans(12, t0=scan_t0), make_odoms(13, t0=odom_t0))
+    res = CliRunner().invoke(cli, ["run", str(log), "--out", str(tmp_path / "o"), "-q"])
+    assert res.exit_code == 2, res.output
+    scans, odom = f"{scan_t0 + 0.05:.3f} to {scan_t0 + 1.15:.3f} s", f"{odom_t0:.3f} to {odom_t0 + 1.2:.3f} s"
+    assert f"no scan could be processed: the scans are stamped {scans} and the odometry {odom}" in res.stderr
+    assert "their stamps are on different clocks" in res.stderr and "use_sim_time" in res.stderr
+
+
+@pytest.mark.parametrize("apart, clocks", [(200.0, False), (5000.0, True)])
+def test_only_stamps_more_than_an_hour_from_the_odometry_are_on_another_clock(apart, clocks):
+    """A gap the synchroniser skips (over 30 s) is not yet another clock; more than an hour is
+    (CLOCKS_APART), and the one warning says so."""
+    msgs = [OdomSample(t, t, 0.0, 0.0) for t in (0.0, 0.5, 1.0)] + [scan(1.0 + apart + i) for i in range(3)]
+    st, warned = SyncStats(), []
+    assert list(synchronise(msgs, st, lambda fmt, *a: warned.append(fmt % a))) == []
+    assert st.after_last_odom == 3 and len(warned) == 1
+    assert ("on different clocks" in warned[0]) is clocks and (
+        "different clocks" in st.other_clocks()
+    ) is clocks

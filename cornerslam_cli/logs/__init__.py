@@ -109,21 +109,25 @@ def detect_format(path: str | Path) -> str:
     return fmt
 
 
-_COMPRESSED = {  # magic -> (name, decompressor, the suffix it needs to name its output)
-    b"BZh": ("bzip2", "bunzip2", ".bz2"),
-    b"\xfd7zXZ\x00": ("xz", "unxz", ".xz"),
-    b"\x28\xb5\x2f\xfd": ("zstd", "unzstd", ".zst"),
+# magic -> (name, decompressor, the suffixes that name the compression: the first, as written, is the one
+# every version of the tool names its output from; the others it may not know (an older zstd .zstd), nor
+# the first in capitals (unzstd, unxz, bunzip2: X.ZST has "an unknown suffix")
+_COMPRESSED = {
+    b"BZh": ("bzip2", "bunzip2", (".bz2", ".bz")),
+    b"\xfd7zXZ\x00": ("xz", "unxz", (".xz",)),
+    b"\x28\xb5\x2f\xfd": ("zstd", "unzstd", (".zst", ".zstd")),
 }
 
 
-def _decompress_command(p: Path, tool: str, suffix: str) -> str:
-    """How to decompress ``p``: ``tool -k FILE`` when its name ends in ``suffix``; otherwise the tool
-    cannot name its output (gunzip -k x.mcap: "unknown suffix -- ignored"), so to stdout, to a file."""
+def _decompress_command(p: Path, tool: str, suffixes: tuple[str, ...]) -> str:
+    """How to decompress ``p``: ``tool -k FILE`` when its name ends in ``suffixes[0]``; otherwise the
+    tool may not name its output (gunzip -k x.mcap: "unknown suffix -- ignored"), so to stdout, to a file
+    named without the compression's suffix (log.mcap.zstd: log.mcap), else with ``-decompressed``."""
     shown = display_path(p)
-    if p.suffix.lower() == suffix:
+    if p.suffix == suffixes[0]:
         return f"{tool} -k {shlex.quote(shown)}"
-    out = str(Path(shown).with_name(f"{p.stem}-decompressed{p.suffix}"))
-    return f"{tool} -c {shlex.quote(shown)} > {shlex.quote(out)}"
+    name = p.stem if p.suffix.lower() in suffixes else f"{p.stem}-decompressed{p.suffix}"
+    return f"{tool} -c {shlex.quote(shown)} > {shlex.quote(str(Path(shown).with_name(name)))}"
 
 
 def _refuse_compressed(p: Path, head: bytes) -> None:
@@ -140,13 +144,13 @@ def _refuse_compressed(p: Path, head: bytes) -> None:
             if inner.startswith(magic):
                 raise LogError(
                     f"'{p.name}' is a gzip-compressed {what}",
-                    f"decompress it first: {_decompress_command(p, 'gunzip', '.gz')}",
+                    f"decompress it first: {_decompress_command(p, 'gunzip', ('.gz',))}",
                 )
-    for magic, (name, tool, suffix) in _COMPRESSED.items():
+    for magic, (name, tool, suffixes) in _COMPRESSED.items():
         if head.startswith(magic):
             raise LogError(
                 f"'{p.name}' is compressed with {name}",
-                f"decompress it first: {_decompress_command(p, tool, suffix)} "
+                f"decompress it first: {_decompress_command(p, tool, suffixes)} "
                 "(a CARMEN log may be given gzip-compressed)",
             )
 

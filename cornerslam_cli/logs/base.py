@@ -43,7 +43,7 @@ from ..errors import LogError, printable
 from ..geometry import normalize_quaternion, yaw_from_quaternion
 from ..ranges import cut_text, short_text
 from ..types import OdomSample, Scan
-from .deskew import MAX_SWEEP
+from .deskew import time_increment_problem
 
 logger = logging.getLogger("cornerslam.logs")
 
@@ -124,7 +124,7 @@ class ReadStats:
 
     scans: int = 0  # scans yielded
     odoms: int = 0  # odometry samples yielded
-    beams: int = 0  # beams in the yielded scans' messages
+    beams: int = 0  # beams in the yielded scans' messages (a run's: less a span's left out)
     beams_dropped: int = 0  # of which invalid (NaN, inf, <= 0, < range_min, >= range_max)
     scans_skipped: int = 0  # scans not yielded: bad angle_increment, no beams
     size_mismatch: int = 0  # scans whose ranges count disagreed with angle_min/max/increment
@@ -349,13 +349,13 @@ def make_scan(
         r = np.asarray(ranges, dtype=np.float64)
         valid = (r > 0.0) & (r >= lo) & (r < hi)  # NaN compares False; inf fails r < hi
     idx = np.flatnonzero(valid)
-    if time_increment and not abs(time_increment) * n <= MAX_SWEEP:  # (NaN fails it too)
+    if time_increment and (problem := time_increment_problem(time_increment, n)):
         stats.bad_time_increment += 1
         if stats.bad_time_increment == 1:
             stats.warn(
-                "%s: scan at %.3f has time_increment %r s (its %d beams would take longer than %g s): "
-                "the beams' times are taken as unknown, the scan is not corrected for motion",
-                where, stamp, time_increment, n, MAX_SWEEP,
+                "%s: scan at %.3f has time_increment %r s (%s): taken as not given, the beams' times from "
+                "input.beam_time when set, else the scan is not corrected for motion", where, stamp,
+                time_increment, problem,
             )  # fmt: skip
         time_increment = 0.0
     stats.scans += 1

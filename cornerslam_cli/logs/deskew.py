@@ -28,6 +28,16 @@ from ..types import Scan
 MAX_SWEEP = 1.0  # s: a scan whose beams would span longer than this has a broken time_increment
 
 
+def time_increment_problem(time_increment: float, n_beams: int) -> str:
+    """Why a message's ``time_increment`` (s between beams) cannot give the times of its ``n_beams``
+    beams, for a warning; "" when it can."""
+    if not math.isfinite(time_increment):
+        return "not a finite number"
+    if abs(time_increment) * n_beams > MAX_SWEEP:
+        return f"its {n_beams} beams would take longer than {MAX_SWEEP:g} s"
+    return ""
+
+
 def motion(twist: np.ndarray, t: np.ndarray) -> np.ndarray:
     """(n, 3) the pose after time(s) ``t`` (n,) of constant body-frame velocity ``twist`` (vx, vy, ω)
     from the identity: θ = ωt, translation ∫₀ᵗ R(ωs) v ds = R(θ/2) · v t · sinc(θ/2) (exact)."""

@@ -162,13 +162,14 @@ class _OdomSel:
     kind: str  # "odometry" | "tf" | ""
     problem: str = ""
     hint: str = ""
+    note: str = ""  # a choice among several, for ``info``'s notes
 
 
 class RosLogReader:
     """A :class:`LogReader` over any :class:`RawSource` (MCAP, ROS 1 bag, ROS 2 bag).
 
     Topic selection (when not given): the only sensor_msgs/LaserScan topic; the only
-    nav_msgs/Odometry topic (several: the one named ``/odom``, else an error), else tf
+    nav_msgs/Odometry topic (several: the one named ``/odom``, noted, else an error), else tf
     odom_frame→base_frame transforms found on a tf2_msgs/TFMessage topic other than /tf_static.
     Errors of selection are raised by :meth:`messages`, :meth:`check` and :meth:`laser_to_base`,
     never by :meth:`info`, which reports them.
@@ -302,7 +303,12 @@ class RosLogReader:
             return _OdomSel(odoms[0], "odometry")
         if len(odoms) > 1:
             if "/odom" in odoms:
-                return _OdomSel("/odom", "odometry")
+                others = listing([t for t in odoms if t != "/odom"])
+                note = (
+                    f"{len(odoms)} Odometry topics: /odom taken, not {others} (choose one with --odom-topic)"
+                )
+                logger.info("log '%s': %s", name, note)
+                return _OdomSel("/odom", "odometry", note=note)
             return _OdomSel(
                 "",
                 "",
@@ -395,6 +401,7 @@ class RosLogReader:
             odom_topic=self.odom_topic,
             odom_source=self._odom_source_label(),
             problems=problems,
+            notes=(self._odom_sel.note,) if self._odom_sel.note else (),
         )
 
     # ---------------------------------------------------------------- decoding
@@ -483,7 +490,7 @@ class RosLogReader:
                 logger.debug("laser_to_base: skipping undecodable %s message: %s", topic, exc)
         self.laser_frame = frame
         self._tf_read_all = read_all
-        if frame is None:
+        if not frame:  # no scan read, or its frame_id empty: tf2 ignores transforms to a frame ""
             self._laser2base = None
             return None
         with np.errstate(invalid="ignore", over="ignore"):  # an inf in a tf: the result is checked below

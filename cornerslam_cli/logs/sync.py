@@ -16,7 +16,9 @@ stamps that go backwards or repeat. "Backwards" is relative to the last scan tha
 paired: a scan more than MAX_GAP after the newest sample (one far-future stamp, 1e18; also one logged
 before the first sample, checked when that sample comes) is skipped without becoming the reference, so
 it cannot make the later scans look late.
-Odometry samples that go back in time are dropped and counted too. One warning sums them up.
+Odometry samples that go back in time are dropped and counted too. One warning sums them up; when no
+scan met the odometry and their stamps lie more than :data:`CLOCKS_APART` apart, it (and the run's
+error) says they are on different clocks (:meth:`SyncStats.other_clocks`).
 """
 
 from __future__ import annotations
@@ -36,6 +38,14 @@ from .params import KeyframeConfig, OdomJumpConfig
 log = logging.getLogger(__name__)
 
 MAX_GAP = 30.0  # s: odometry this far apart does not bracket a scan; a scan waits this long for odometry
+# s: scans and odometry whose stamps do not overlap and lie farther apart than this are on different clocks
+# (simulated time from 0 against the wall clock, ~1.7e9 s; a header stamped in another time zone): one
+# recording's topics run seconds apart at most, and the gaps the synchroniser skips are MAX_GAP
+CLOCKS_APART = 3600.0
+CLOCKS_HINT = (
+    "check that the recording used one clock for both (use_sim_time in every node, or in none) and that "
+    "the drivers fill the header stamps"
+)
 MAX_PENDING = 1000  # scans waiting for odometry at most
 MAX_ODOM = 10_000  # odometry samples kept ahead of the scans at most
 # s: a scan's velocity (deskewing: logs/deskew.py) is the odometry's mean over this long after its stamp —
@@ -59,6 +69,20 @@ class Synced:
 
 
 @dataclass
+class StampRange:
+    """The earliest and latest stamp of a stream, seconds (``lo`` > ``hi``: none seen)."""
+
+    lo: float = np.inf
+    hi: float = -np.inf
+
+    def see(self, t: float) -> None:
+        self.lo, self.hi = min(self.lo, t), max(self.hi, t)
+
+    def text(self) -> str:
+        return f"{self.lo:.3f} to {self.hi:.3f} s"
+
+
+@dataclass
 class SyncStats:
     scans_in: int = 0
     scans_out: int = 0
@@ -69,15 +93,29 @@ class SyncStats:
     odom_time_backwards: int = 0
     keyframes_skipped: int = 0
     odom_jumps: int = 0
+    scan_stamps: StampRange = field(default_factory=StampRange)  # (not counts: not in as_dict)
+    odom_stamps: StampRange = field(default_factory=StampRange)
 
     @property
     def scans_skipped(self) -> int:
         return self.before_first_odom + self.after_last_odom + self.odom_gap + self.scan_time_backwards
 
     def as_dict(self) -> dict:
-        d = dict(self.__dict__)
+        d = {k: v for k, v in self.__dict__.items() if not isinstance(v, StampRange)}
         d["scans_skipped"] = self.scans_skipped
         return d
+
+    def other_clocks(self) -> str:
+        """Why no scan met the odometry, when their stamps are on different clocks (their spans do not
+        overlap and lie more than CLOCKS_APART apart), naming both spans; else ""."""
+        s, o = self.scan_stamps, self.odom_stamps
+        apart = max(o.lo - s.hi, s.lo - o.hi)  # inf with either unseen
+        if self.scans_out or not CLOCKS_APART < apart < np.inf:
+            return ""
+        return (
+            f"the scans are stamped {s.text()} and the odometry {o.text()}, {apart:.4g} s apart: "
+            "their stamps are on different clocks"
+        )
 
 
 def synchronise(
@@ -138,6 +176,7 @@ def synchronise(
     for msg in messages:
         if isinstance(msg, Scan):
             st.scans_in += 1
+            st.scan_stamps.see(msg.stamp)
             if msg.stamp <= last_scan_stamp:
                 st.scan_time_backwards += 1
                 continue
@@ -161,6 +200,7 @@ def synchronise(
                 pending.popleft()  # no odometry came for it: dropped now, counted when it is known why
                 waited_out += 1
         elif isinstance(msg, OdomSample):
+            st.odom_stamps.see(msg.stamp)
             if msg.stamp <= last_odom_stamp:
                 st.odom_time_backwards += 1
                 continue
@@ -212,14 +252,16 @@ def _warn_skipped(st: SyncStats, warn: Callable[..., None]) -> None:
     if not (st.scans_skipped or st.odom_time_backwards):
         return
     gap = f", {st.odom_gap} in gaps of the odometry (no sample within {MAX_GAP:g} s)" if st.odom_gap else ""
+    clocks = st.other_clocks()
     warn(
         "skipped %d scans before the first and %d after the last odometry sample%s, "
-        "%d scans and %d odometry samples whose stamps went backwards or repeated",
+        "%d scans and %d odometry samples whose stamps went backwards or repeated%s",
         st.before_first_odom,
         st.after_last_odom,
         gap,
         st.scan_time_backwards,
         st.odom_time_backwards,
+        f" ({clocks}: {CLOCKS_HINT})" if clocks else "",
     )
 
 

@@ -265,7 +265,7 @@ def info_lines(
         lines.append(f"  {name:<28} {msgtype:<30} {count:>8} msgs {rate}{note}")
     lines.append("run would use:")
     lines.append(f"  scans     {short_text(i.scan_topic, 200) or '-'}")
-    lines.append(f"  odometry  {short_text(i.odom_topic, 200) or '-'} ({i.odom_source or 'none found'})")
+    lines.append(f"  odometry  {short_text(i.odom_topic, 200) or '-'} ({i.odom_source or _no_odometry(i)})")
     if laser is not None:
         flip = ", upside down: scans mirrored" if upside_down else ""
         x, y, yaw = laser
@@ -280,6 +280,13 @@ def info_lines(
     lines += [f"problem:   {text}" for text in i.problems]
     lines += [f"note:      {text}" for text in i.notes]
     return lines
+
+
+def _no_odometry(i: LogInfo) -> str:
+    """Why ``info`` names no odometry topic: several Odometry topics (run takes one named /odom, else
+    refuses to guess), or none."""
+    n = sum(t.msgtype == "nav_msgs/Odometry" for t in i.topics)
+    return f"{n} nav_msgs/Odometry topics: choose one with --odom-topic" if n > 1 else "none found"
 
 
 def scan_lines(scan: Scan, preset: str | None) -> list[str]:
