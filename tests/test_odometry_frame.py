@@ -18,6 +18,7 @@ from mcap.reader import make_reader
 from rosbags.typesys import Stores, get_typestore
 
 from cornerslam_cli.cli import cli
+from cornerslam_cli.errors import LogError
 from cornerslam_cli.logs import open_log
 from cornerslam_cli.logs.cdr import odometry_frame_cdr, odometry_frame_ros1
 from cornerslam_cli.logs.writers import RawScan, serializer
@@ -27,9 +28,9 @@ ENCODINGS = ("cdr", "ros1", "json")
 
 
 def _turtlebot(path, encoding: str, child: str = "base_footprint", tf=(("base_footprint", "base_link", -0.5),
-               ("base_link", "laser", 0.6)), scans=None, odoms=None):  # fmt: skip
+               ("base_link", "laser", 0.6)), scans=None, odoms=None, on_tf=()):  # fmt: skip
     """An MCAP of scans on frame ``laser``, odometry odom→``child`` and a /tf_static of ``tf`` (parent,
-    child, x) edges."""
+    child, x) edges; with ``on_tf`` (children of odom) the odometry as /tf odom→each of them instead."""
     ros = serializer(encoding)
     scans = make_scans(6) if scans is None else scans
     odoms = make_odoms(8) if odoms is None else odoms
@@ -40,7 +41,14 @@ def _turtlebot(path, encoding: str, child: str = "base_footprint", tf=(("base_fo
     ]
     msgs += [("/scan", "sensor_msgs/msg/LaserScan", int(s.stamp * 1e9), ros.laserscan(s)) for s in scans]
     msgs += [
-        ("/odom", "nav_msgs/msg/Odometry", int(o.stamp * 1e9), ros.odometry(o, "odom", child)) for o in odoms
+        ("/odom", "nav_msgs/msg/Odometry", int(o.stamp * 1e9), ros.odometry(o, "odom", child))
+        for o in odoms
+        if not on_tf
+    ]
+    msgs += [
+        ("/tf", "tf2_msgs/msg/TFMessage", int(o.stamp * 1e9), ros.tf(o.stamp, "odom", c, o.x, o.y, o.theta))
+        for o in odoms
+        for c in on_tf
     ]
     return write_messages_mcap(path, sorted(msgs, key=lambda m: m[2]), encoding=encoding)
 
@@ -119,3 +127,35 @@ def test_a_run_records_the_frame_and_the_results_mcap_moves_it(tmp_path):
             for m in [json.loads(msg.data)]
         }
     assert frames == {("odom", "base_footprint")}
+
+
+def test_tf_odometry_moving_the_frame_base_link_rides_on_is_taken_as_the_robot_s(tmp_path):
+    """nav2's tree with odometry on /tf: odom→base_footprint, base_footprint→base_link on /tf_static.
+    base_link rides on the frame the odometry moves: that frame is the robot's (before: exit 2 after
+    reading the whole log, "--set input.base_frame=base_footprint")."""
+    odoms = make_odoms(8)
+    log = _turtlebot(tmp_path / "tf.mcap", "cdr", odoms=odoms, on_tf=("base_footprint",))
+    with open_log(log) as r:
+        assert r.laser_to_base() == pytest.approx((0.1, 0.0, 0.0), abs=1e-12)
+        assert r.base_frame == "base_footprint" and r.odom_on_tf
+        got = [m for m in r.messages() if isinstance(m, OdomSample)]
+        assert r.info().odom_source == "tf odom→base_footprint"
+    np.testing.assert_allclose([(o.stamp, o.x, o.y) for o in got], [(o.stamp, o.x, o.y) for o in odoms])
+    # without the laser mount looked up first (input.laser.from_tf=false), the odometry is read as well
+    with open_log(log) as r:
+        assert sum(isinstance(m, OdomSample) for m in r.messages()) == len(odoms)
+
+
+@pytest.mark.parametrize(
+    "on_tf, tf",
+    [
+        (("robot1/base_link", "robot2/base_link"), (("robot1/base_link", "laser", 0.1),)),  # two robots
+        (("chassis",), (("base_footprint", "base_link", -0.5), ("base_link", "laser", 0.6))),  # unlinked
+    ],
+    ids=["two_children", "base_frame_not_on_it"],
+)
+def test_tf_odometry_whose_robot_frame_is_not_clear_is_refused_as_before(tmp_path, on_tf, tf):
+    log = _turtlebot(tmp_path / "tf.mcap", "cdr", on_tf=on_tf, tf=tf)
+    with open_log(log) as r:
+        with pytest.raises(LogError, match="has no odom→base_link transform"):
+            list(r.messages())

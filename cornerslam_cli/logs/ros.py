@@ -129,6 +129,9 @@ def missing_odom_tf(
     return problem, hint
 
 
+ROBOT_FRAME_MESSAGES = 200  # messages of a tf odometry topic read for the robot's frame at most
+
+
 def listing(names: list[str], most: int = 10) -> str:
     """``"/a, /b"`` or ``"none"``, for error messages: long names shortened, at most ``most`` of them."""
     shown = ", ".join(short_text(n) for n in sorted(names)[:most])
@@ -190,7 +193,9 @@ class RosLogReader:
         self.format = source.format
         self.stats = stats if stats is not None else ReadStats()
         self.odom_frame = strip_frame(odom_frame)
-        self.base_frame = strip_frame(base_frame)
+        self.base_frame = strip_frame(base_frame)  # the robot's frame: the config's until resolved
+        self.config_base_frame = self.base_frame
+        self._robot_resolved = False  # _robot_frame() has set base_frame to the odometry's frame
         self._want_scan = scan_topic
         self._want_odom = odom_topic
         self._channels = {c.topic: c for c in source.channels()}
@@ -331,7 +336,8 @@ class RosLogReader:
         if self._odom_sel.kind == "odometry":
             return ODOMETRY
         if self._odom_sel.kind == "tf":
-            return f"tf {self.odom_frame}→{self.base_frame}"
+            base = self.base_frame if self._problems() else self._robot_frame()
+            return f"tf {self.odom_frame}→{base}"
         return ""
 
     def _encoding_problem(self, topic: str) -> tuple[str, str] | None:
@@ -440,7 +446,7 @@ class RosLogReader:
                     self.path.name, t, self._channels[t].encoding,
                 )  # fmt: skip
         frame = None
-        base = self._odometry_frame() or self.base_frame  # the frame whose pose the odometry gives
+        base = self._robot_frame()  # the frame whose pose the odometry gives
         odom_children: set[str] = set()  # odom_frame→child on tf: the robot's motion, not its mount
         edges: dict[tuple[str, str], np.ndarray] = {}
         static_left = sum(self._channels[t].count or 0 for t in tf_topics if t == "/tf_static")
@@ -495,22 +501,16 @@ class RosLogReader:
             return None
         with np.errstate(invalid="ignore", over="ignore"):  # an inf in a tf: the result is checked below
             T = chain_transform(edges, base, frame)
-            if T is None and base != self.base_frame:  # not linked to the laser: is input.base_frame?
-                T_config = chain_transform(edges, self.base_frame, frame)
+            config = self.config_base_frame
+            if T is None and base != config and self._odom_sel.kind == "odometry":  # is input.base_frame?
+                T_config = chain_transform(edges, config, frame)
                 if T_config is not None:
                     self.stats.warn(
                         "%s: odometry '%s' gives the pose of frame '%s' (its child_frame_id), which the tf "
                         "does not link to the laser's frame '%s': the mount is taken from the tf %s→%s",
-                        self.path.name, self.odom_topic, base, frame, self.base_frame, frame,
+                        self.path.name, self.odom_topic, base, frame, config, frame,
                     )  # fmt: skip
-                    T, base = T_config, self.base_frame
-        if base != self.base_frame:
-            logger.info(
-                "%s: odometry '%s' gives the pose of frame '%s' (its child_frame_id), not of "
-                "input.base_frame '%s': the laser mount is looked up from '%s'",
-                self.path.name, self.odom_topic, base, self.base_frame, base,
-            )  # fmt: skip
-            self.base_frame = base
+                    T, self.base_frame = T_config, config
         self.odom_on_tf = self.base_frame in odom_children
         self._laser2base = None if T is None else pose2_from_matrix(T)
         if self._laser2base is not None and not all(math.isfinite(v) for v in self._laser2base):
@@ -525,12 +525,58 @@ class RosLogReader:
                 )  # fmt: skip
         return self._laser2base  # type: ignore[return-value]
 
+    def _robot_frame(self) -> str:
+        """The frame the odometry gives the pose of, which ``base_frame`` becomes (logged when it is
+        not the config's): a nav_msgs/Odometry's child_frame_id; for tf odometry, the frame odom_frame
+        moves on its topic when base_frame is not that but rides on it (:meth:`_tf_odometry_frame`);
+        the config's when neither says."""
+        if self._robot_resolved:
+            return self.base_frame
+        self._robot_resolved = True
+        if self._odom_sel.kind == "odometry":
+            robot, how = self._odometry_frame(), "its child_frame_id"
+        else:
+            robot, how = self._tf_odometry_frame(), f"the one child of {self.odom_frame} on it"
+        if robot and robot != self.base_frame:
+            logger.info(
+                "%s: odometry '%s' gives the pose of frame '%s' (%s), not of input.base_frame '%s': "
+                "the laser mount is looked up from '%s'",
+                self.path.name, self.odom_topic, robot, how, self.base_frame, robot,
+            )  # fmt: skip
+            self.base_frame = robot
+        return self.base_frame
+
+    def _tf_odometry_frame(self) -> str:
+        """For tf odometry whose topic has no odom_frame→base_frame among its first
+        :data:`ROBOT_FRAME_MESSAGES` messages: the one frame odom_frame is the parent of there, when
+        base_frame rides on it (nav2's odom→base_footprint, base_footprint→base_link on /tf_static);
+        "" otherwise — base_frame a child of odom_frame, several or no children, or a base_frame the tf
+        does not link to it (a typo as likely as another tree: the read then says what the topic has)."""
+        if self._odom_sel.kind != "tf":
+            return ""
+        topics = {self.odom_topic} | ({"/tf_static"} & set(self._channels))
+        decs = {t: self._decoder(t) for t in topics if self._encoding_problem(t) is None}
+        children, links = set(), {}  # odom_frame's children; the other transforms, as links
+        for i, (topic, _, data) in enumerate(self.source.raw_messages(set(decs))):
+            if i >= ROBOT_FRAME_MESSAGES or self.base_frame in children:
+                break
+            try:
+                for parent, child, *_ in decs[topic].transforms(data):
+                    if parent == self.odom_frame:
+                        children.add(child)
+                    elif parent != child:
+                        links[(parent, child)] = np.eye(4)  # (only whether frames are linked is asked)
+            except Exception:  # noqa: BLE001 - bad bytes: messages() counts them
+                continue
+        if self.base_frame in children or len(children) != 1:
+            return ""
+        robot = children.pop()
+        return robot if chain_transform(links, robot, self.base_frame) is not None else ""
+
     def _odometry_frame(self) -> str:
         """The child_frame_id of the odometry topic's first decodable nav_msgs/Odometry ('/' stripped):
-        the frame whose pose the odometry gives, the robot's; "" when odometry is read from tf, or the
-        messages leave it empty (``input.base_frame`` is taken then)."""
-        if self._odom_sel.kind != "odometry":
-            return ""
+        the frame whose pose the odometry gives, the robot's; "" when the messages leave it empty
+        (``input.base_frame`` is taken then)."""
         dec = self._decoder(self.odom_topic)
         for i, (_, _, data) in enumerate(self.source.raw_messages({self.odom_topic})):
             try:
@@ -561,6 +607,7 @@ class RosLogReader:
     def messages(self) -> Iterator[Scan | OdomSample]:
         """Scans and odometry samples in log-time order (raises LogError now if topics are missing)."""
         self.check()
+        self._robot_frame()  # (tf odometry is read for its frame)
         return self._iter()
 
     def scans(self) -> Iterator[Scan]:
