@@ -114,10 +114,25 @@ def _run_batch(
     scheduler: str | None,
     progress: Callable[[BatchState], None] | None,
 ) -> list[dict]:
+    client = _connect(scheduler) if scheduler else None  # before the output: a wrong address writes nothing
+    try:
+        return _run_claimed(combos, Path(out_dir), jobs, client, progress)
+    finally:
+        if client is not None:
+            client.close()
+
+
+def _run_claimed(
+    combos: Sequence[Combo],
+    out: Path,
+    jobs: int | None,
+    client,  # dask.distributed.Client | None (Dask is optional)
+    progress: Callable[[BatchState], None] | None,
+) -> list[dict]:
+    """:func:`_run_batch` once the Dask ``client`` (None: local processes) is connected."""
     from .config import Config, from_dict
     from .report.summary import config_hash, input_hash
 
-    out = Path(out_dir)
     claim_dir(out, "batch")  # refuses a directory that is not a batch's, before any work
     clear_stale(out / BATCH_CSV)  # temporary files of a killed batch
     columns = batch_columns([k for k, _ in combos[0].sweep] if combos else [])
@@ -165,8 +180,8 @@ def _run_batch(
     todo.sort(key=lambda i: -_size(combos[i].log))  # biggest logs first: a shorter tail on N workers
     tasks = [(i, combos[i].log, combos[i].config, str((out / combos[i].name).resolve())) for i in todo]
     try:
-        if scheduler:
-            _run_dask(tasks, scheduler, finished)
+        if client is not None:
+            _run_dask(tasks, client, finished)
         elif tasks:
             _run_local(tasks, jobs or os.cpu_count() or 1, finished)
     finally:
@@ -309,23 +324,31 @@ def _init_worker(level: int) -> None:
     stopped_by_parent()
 
 
-def _run_dask(tasks: list[tuple], scheduler: str, finished: Callable[[int, dict], None]) -> None:
+def _connect(scheduler: str):
+    """A Dask client of the scheduler at ``scheduler``; CornerslamError when Dask is not installed, the
+    address names no transport Dask has (``http://…``: its client would hang 20 s on exit), or nothing
+    answers there within 10 s."""
     try:
-        from dask.distributed import Client, as_completed
+        from dask.distributed import Client
+        from distributed.comm import parse_address
+        from distributed.comm.registry import get_backend
     except ImportError:
         raise CornerslamError(
-            "--scheduler needs Dask distributed, which is not installed", "pip install cornerslam[dask]"
+            "--scheduler needs Dask distributed, which is not installed", 'pip install ".[dask]"'
         ) from None
+    hint = "check the address (tcp://host:port) and that `dask scheduler` is running"
     try:
-        client = Client(scheduler, timeout=10, set_as_default=False)
+        get_backend(parse_address(scheduler)[0])
+        return Client(scheduler, timeout=10, set_as_default=False)
     except (OSError, TimeoutError, ValueError) as e:
-        raise CornerslamError(
-            f"cannot connect to the Dask scheduler at '{scheduler}': {' '.join(str(e).split())}",
-            "check the address (tcp://host:port) and that `dask scheduler` is running",
-        ) from None
-    with client:
-        if not tasks:
-            return
+        problem = f"cannot connect to the Dask scheduler at '{scheduler}': {' '.join(str(e).split())}"
+        raise CornerslamError(problem, hint) from None
+
+
+def _run_dask(tasks: list[tuple], client, finished: Callable[[int, dict], None]) -> None:
+    from dask.distributed import as_completed
+
+    if tasks:
         idx, logs, cfgs, outs = (list(t) for t in zip(*tasks, strict=True))
         futures = client.map(run_one, logs, cfgs, outs, pure=False)
         index = {f.key: i for f, i in zip(futures, idx, strict=True)}

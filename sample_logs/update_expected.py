@@ -16,6 +16,7 @@ import argparse
 import contextlib
 import datetime
 import json
+import math
 import subprocess
 import sys
 import tempfile
@@ -82,9 +83,20 @@ def differences(old: dict, new: dict) -> list[str]:
             lines.append(f"{name}: new")
             continue
         for key, value in entry.items():
-            if old[name].get(key) != value:
+            if _moved(old[name].get(key), value):
                 lines.append(f"{name}: {key} {_show(old[name].get(key))} -> {_show(value)}")
     return lines
+
+
+def _moved(old, new) -> bool:
+    """Whether a figure moved: counts by any change, floats by more than a millionth of their size
+    (what :func:`_show` prints; below that another machine's rounding moves them, and the regression
+    test's tolerances are far wider), lists element by element."""
+    if isinstance(old, list) and isinstance(new, list):
+        return len(old) != len(new) or any(_moved(a, b) for a, b in zip(old, new, strict=True))
+    if isinstance(old, float) and isinstance(new, float):
+        return not math.isclose(old, new, rel_tol=1e-6, abs_tol=1e-9)
+    return old != new
 
 
 def _show(value) -> str:

@@ -7,6 +7,7 @@ import json
 import os
 import re
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -298,10 +299,21 @@ def test_scheduler_without_dask_asks_to_install_the_extra(monkeypatch, logs, tmp
     combos = plan(logs[:1], ["pca"])
     monkeypatch.setitem(sys.modules, "dask", None)
     monkeypatch.setitem(sys.modules, "dask.distributed", None)
-    with pytest.raises(CornerslamError, match=r"pip install cornerslam\[dask\]"):
-        run_batch(combos, tmp_path, scheduler="tcp://127.0.0.1:8786")
-    rows = read_batch(tmp_path / "batch.csv")
-    assert [r["status"] for r in rows] == ["pending"]  # interrupted batches say what is left
+    with pytest.raises(CornerslamError, match=r'pip install "\.\[dask\]"'):
+        run_batch(combos, tmp_path / "out", scheduler="tcp://127.0.0.1:8786")
+    assert not (tmp_path / "out").exists()  # refused before any output (it wrote 'pending' rows)
+
+
+def test_a_scheduler_address_dask_cannot_reach_is_refused_at_once_writing_nothing(logs, tmp_path):
+    """http://… names no transport Dask has: exit 2 at once (its client hung 20 s on exit and printed a
+    traceback, and the output directory was left with 'pending' rows; found by a README probe)."""
+    pytest.importorskip("dask.distributed")
+    args = ["batch", str(logs[0]), "--assoc", "pca", "--out", str(tmp_path / "out"), "-q"]
+    started = time.monotonic()
+    res = CliRunner().invoke(cli, [*args, "--scheduler", "http://x"])
+    assert res.exit_code == 2 and "unknown address scheme 'http'" in res.output, res.output
+    assert "Traceback" not in res.output and time.monotonic() - started < 10
+    assert not (tmp_path / "out").exists()
 
 
 def test_a_bug_in_one_combination_is_a_failed_row(monkeypatch, logs, tmp_path):

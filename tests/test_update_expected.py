@@ -92,3 +92,17 @@ def test_accept_needs_a_reason(script, reason):
         script.main(["--accept", reason], run=fake_runs(json.loads(before)["runs"]))
     assert exc.value.code == 2
     assert script.EXPECTED.read_bytes() == before
+
+
+def test_rounding_level_differences_are_not_moves(script, capsys):
+    """Another machine's last bits (the ATE 0.0296836 printed twice as 'moved', exit 1: found by a
+    README probe) are not a move; a change in the 6th significant digit is."""
+    stored = json.loads(script.EXPECTED.read_bytes())["runs"]
+    ate = stored["sim_office.mcap"]["ate_rmse"]
+    pose = stored["sim_office.mcap"]["final_pose"]
+    nudged = {"sim_office.mcap": {"ate_rmse": ate * (1 + 1e-9), "final_pose": [v + 1e-12 for v in pose]}}
+    assert script.main([], run=fake_runs(stored, nudged)) == 0
+    assert "no figure moved" in capsys.readouterr().out
+    moved = {"sim_office.mcap": {"ate_rmse": ate * (1 + 1e-5)}}
+    assert script.main([], run=fake_runs(stored, moved)) == 1
+    assert capsys.readouterr().out.strip().startswith("sim_office.mcap: ate_rmse")
