@@ -265,6 +265,7 @@ def run(
         config_path, overrides, names[0] if names else None, scan_topic, odom_topic, log_path
     )
     progress = Progress(f"{display_path(Path(log_path).name)} ({cfg.association.method})", not quiet)
+    _say_compiling(quiet)
     try:
         summary = run_pipeline(
             log_path,
@@ -340,6 +341,7 @@ def compare(
     check_method_not_set(overrides, assocs)  # (after the config: an unknown name is named as such)
     out_dir = Path(out) if out else default_out_dir(Path(log_path), "compare")
     progress = Progress(f"{display_path(Path(log_path).name)} (compare)", not quiet)
+    _say_compiling(quiet)
     try:
         summaries = run_compare(
             log_path, cfg, names, out_dir, ground_truth, jobs, progress, relations, time_offset,
@@ -350,6 +352,15 @@ def compare(
     if not quiet:
         _echo(comparison_lines(summaries))
         click.echo(f"wrote {out_dir} (report: {out_dir / 'report.html'})")
+
+
+def _say_compiling(quiet: bool) -> None:
+    """On stderr, unless ``quiet``: that the kernels are compiled first, when their caches are empty (a
+    first run's minute would otherwise pass without a word, its progress line only after it)."""
+    from .compiled import compile_note
+
+    if not quiet and (note := compile_note()):
+        click.echo(note, err=True)
 
 
 @cli.command()
@@ -580,6 +591,8 @@ def _batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, q
     check_sweep_not_set(overrides, swept)  # the sweep is set after each --set: one would be ignored
     combos = plan(logs, names, swept, overrides, config_path)
     progress = BatchProgress(not quiet)
+    if not scheduler:  # (a cluster's workers compile where they run)
+        _say_compiling(quiet)
     try:
         rows = run_batch(combos, out, jobs, scheduler, progress)
     except KeyboardInterrupt as e:

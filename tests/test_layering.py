@@ -43,7 +43,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("slam",),  # the filter over the frames: steps, landmarks
     ("hierarchy",),  # local EKF submaps (slam) joined by the pose graph (graph)
     ("report",),  # run writer, figures, MCAP out, output directories, printed text, progress display
-    ("pipeline", "simulate", "sweep"),  # a run; the simulated log; a batch's plan
+    ("pipeline", "simulate", "sweep", "compiled"),  # a run; the simulated log; a batch's plan; the kernels
     ("compare", "batch"),
     ("options",),  # the command line's shared options and option parsers
     ("cli",),
