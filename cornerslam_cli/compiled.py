@@ -26,7 +26,7 @@ KERNEL_MODULES = (  # every module with kernels (tests/test_compiled.py checks t
 
 
 def compile_note() -> str:
-    """"compiling N numerical kernels …" when some kernel has no cached compilation yet, else ""."""
+    """The line to say when some kernel has no cached compilation yet ("compiling N …"), else ""."""
     for name in KERNEL_MODULES:  # (a run imports them all anyway)
         importlib.import_module(name)
     n = jit.uncached()
