@@ -66,6 +66,12 @@ def test_content_sniffed_before_extension(tmp_path):
         (lambda d: (d / "x.bag").write_bytes(b"not a bag") and None or d / "x.bag", "not a valid .bag"),
         (lambda d: (d / "x.log").write_text("hello world\n") and None or d / "x.log", "not a CARMEN log"),
         (lambda d: (d / "x.db3").write_bytes(b"SQLite format 3") and None or d / "x.db3", "not a valid .db3"),
+        (  # another SQLite file than a bag's .db3 (review: sent to the bag reader, "Unrecognized storage")
+            lambda d: (
+                (d / "x.sqlite").write_bytes(b"SQLite format 3\x00" + bytes(84)) and None or d / "x.sqlite"
+            ),
+            "unsupported log 'x.sqlite'",
+        ),
     ],
 )
 def test_bad_paths(tmp_path, make, match):

@@ -159,3 +159,65 @@ def test_tf_odometry_whose_robot_frame_is_not_clear_is_refused_as_before(tmp_pat
     with open_log(log) as r:
         with pytest.raises(LogError, match="has no odom→base_link transform"):
             list(r.messages())
+
+
+def _with_first_odometry(log, tmp_path, child: str):
+    """The TurtleBot log again, its first Odometry message's child_frame_id ``child``."""
+    ros, odoms = serializer("cdr"), make_odoms(8)
+    with open(log, "rb") as f:
+        msgs = [(c.topic, s.name, m.log_time, m.data) for s, c, m in make_reader(f).iter_messages()]
+    first = next(i for i, m in enumerate(msgs) if m[0] == "/odom")
+    msgs[first] = (*msgs[first][:3], ros.odometry(odoms[0], "odom", child))
+    return write_messages_mcap(tmp_path / f"first-{child or 'empty'}.mcap", msgs)
+
+
+@pytest.mark.parametrize("child", ["", "odom"])
+def test_the_first_child_frame_that_names_a_robot_frame_is_taken(tmp_path, child):
+    """An empty child_frame_id in the first message, or odom itself (odom→odom is no robot): the next
+    messages' base_footprint (review: the first message alone decided, silently base_link's mount)."""
+    log = _with_first_odometry(_turtlebot(tmp_path / "tb.mcap", "cdr"), tmp_path, child)
+    with open_log(log) as r:
+        assert (
+            r.laser_to_base() == pytest.approx((0.1, 0.0, 0.0), abs=1e-12)
+            and r.base_frame == "base_footprint"
+        )
+
+
+def test_a_base_frame_the_user_names_is_the_robot_s_whatever_the_odometry_says(tmp_path):
+    """input.base_frame set to another frame than the default base_link corrects a wrong child_frame_id."""
+    log = _turtlebot(
+        tmp_path / "tb.mcap", "cdr", tf=(("base_footprint", "chassis", -0.5), ("chassis", "laser", 0.6))
+    )
+    with open_log(log, base_frame="chassis") as r:
+        assert r.laser_to_base() == pytest.approx((0.6, 0.0, 0.0), abs=1e-12) and r.base_frame == "chassis"
+    with open_log(log) as r:  # left at base_link: the odometry's frame
+        assert (
+            r.laser_to_base() == pytest.approx((0.1, 0.0, 0.0), abs=1e-12)
+            and r.base_frame == "base_footprint"
+        )
+
+
+def test_tf_odometry_found_after_many_other_tf_messages(tmp_path):
+    """250 /tf messages of a wheel before the first odom→base_footprint (review: the frame was looked for
+    in the first 200 messages of every tf topic, so the run was refused)."""
+    ros, odoms = serializer("cdr"), make_odoms(8)
+    log = _turtlebot(tmp_path / "tb.mcap", "cdr", odoms=odoms, on_tf=("base_footprint",))
+    with open(log, "rb") as f:
+        msgs = [(c.topic, s.name, m.log_time, m.data) for s, c, m in make_reader(f).iter_messages()]
+    t0 = msgs[0][2]
+    wheel = [
+        (
+            "/tf",
+            "tf2_msgs/msg/TFMessage",
+            t0 + i,
+            ros.tf((t0 + i) * 1e-9, "base_link", "wheel", 0.1, 0.2, 0.0),
+        )
+        for i in range(1, 251)
+    ]
+    late = write_messages_mcap(tmp_path / "late.mcap", sorted(msgs + wheel, key=lambda m: m[2]))
+    with open_log(late) as r:
+        assert (
+            r.laser_to_base() == pytest.approx((0.1, 0.0, 0.0), abs=1e-12)
+            and r.base_frame == "base_footprint"
+        )
+        assert sum(isinstance(m, OdomSample) for m in r.messages()) == len(odoms)

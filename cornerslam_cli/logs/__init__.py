@@ -93,9 +93,9 @@ def detect_format(path: str | Path) -> str:
     if head.startswith(ROSBAG1_MAGIC):
         return "rosbag1"
     _refuse_compressed(p, head)
-    if head.startswith(SQLITE_MAGIC):
-        return "rosbag2"
     suffix = p.suffix.lower()
+    if head.startswith(SQLITE_MAGIC) and suffix == ".db3":  # (another SQLite file: unsupported, below)
+        return "rosbag2"
     fmt = EXTENSIONS.get(suffix)
     if fmt in ("mcap", "rosbag1", "rosbag2"):
         raise LogError(f"'{p.name}' is not a valid {suffix} file (bad magic bytes)", "check the file")

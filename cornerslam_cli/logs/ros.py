@@ -32,6 +32,7 @@ from .base import (
     normalize_msgtype,
     strip_frame,
 )
+from .params import InputConfig
 from .unreadable import damage_problem
 
 LASERSCAN = "sensor_msgs/LaserScan"
@@ -129,7 +130,8 @@ def missing_odom_tf(
     return problem, hint
 
 
-ROBOT_FRAME_MESSAGES = 200  # messages of a tf odometry topic read for the robot's frame at most
+DEFAULT_BASE_FRAME = InputConfig.base_frame  # input.base_frame left at this: the odometry's frame is taken
+ROBOT_FRAME_MESSAGES = 2000  # messages of the odometry topic read for the robot's frame at most
 
 
 def listing(names: list[str], most: int = 10) -> str:
@@ -527,12 +529,15 @@ class RosLogReader:
 
     def _robot_frame(self) -> str:
         """The frame the odometry gives the pose of, which ``base_frame`` becomes (logged when it is
-        not the config's): a nav_msgs/Odometry's child_frame_id; for tf odometry, the frame odom_frame
-        moves on its topic when base_frame is not that but rides on it (:meth:`_tf_odometry_frame`);
-        the config's when neither says."""
+        not the config's): a nav_msgs/Odometry's child_frame_id (:meth:`_odometry_frame`); for tf
+        odometry, the frame odom_frame moves on its topic when base_frame is not that but rides on it
+        (:meth:`_tf_odometry_frame`); the config's when neither says, and when it is not the default
+        base_link: a frame the user named (to correct a wrong child_frame_id) is the robot's."""
         if self._robot_resolved:
             return self.base_frame
         self._robot_resolved = True
+        if self.base_frame != DEFAULT_BASE_FRAME:
+            return self.base_frame
         if self._odom_sel.kind == "odometry":
             robot, how = self._odometry_frame(), "its child_frame_id"
         else:
@@ -551,14 +556,17 @@ class RosLogReader:
         :data:`ROBOT_FRAME_MESSAGES` messages: the one frame odom_frame is the parent of there, when
         base_frame rides on it (nav2's odom→base_footprint, base_footprint→base_link on /tf_static);
         "" otherwise — base_frame a child of odom_frame, several or no children, or a base_frame the tf
-        does not link to it (a typo as likely as another tree: the read then says what the topic has)."""
+        does not link to it (a typo as likely as another tree: the read then says what the topic has).
+        /tf_static is read beside the odometry topic for the links, its messages not counted."""
         if self._odom_sel.kind != "tf":
             return ""
         topics = {self.odom_topic} | ({"/tf_static"} & set(self._channels))
         decs = {t: self._decoder(t) for t in topics if self._encoding_problem(t) is None}
         children, links = set(), {}  # odom_frame's children; the other transforms, as links
-        for i, (topic, _, data) in enumerate(self.source.raw_messages(set(decs))):
-            if i >= ROBOT_FRAME_MESSAGES or self.base_frame in children:
+        n = 0  # messages of the odometry topic read
+        for topic, _, data in self.source.raw_messages(set(decs)):
+            n += topic == self.odom_topic
+            if n > ROBOT_FRAME_MESSAGES or self.base_frame in children:
                 break
             try:
                 for parent, child, *_ in decs[topic].transforms(data):
@@ -574,16 +582,22 @@ class RosLogReader:
         return robot if chain_transform(links, robot, self.base_frame) is not None else ""
 
     def _odometry_frame(self) -> str:
-        """The child_frame_id of the odometry topic's first decodable nav_msgs/Odometry ('/' stripped):
-        the frame whose pose the odometry gives, the robot's; "" when the messages leave it empty
+        """The first child_frame_id ('/' stripped) among the odometry topic's first
+        :data:`ROBOT_FRAME_MESSAGES` nav_msgs/Odometry messages that names a frame other than
+        odom_frame: the frame whose pose the odometry gives, the robot's; "" when they leave it empty
         (``input.base_frame`` is taken then)."""
+        if self._channels[self.odom_topic].count == 0:
+            return ""
         dec = self._decoder(self.odom_topic)
         for i, (_, _, data) in enumerate(self.source.raw_messages({self.odom_topic})):
+            if i >= ROBOT_FRAME_MESSAGES:
+                break
             try:
-                return strip_frame(dec.odometry_frame(data))
+                child = strip_frame(dec.odometry_frame(data))
             except Exception:  # noqa: BLE001 - bad bytes: messages() counts them; try the next message
-                if i >= 20:
-                    break
+                continue
+            if child and child != self.odom_frame:  # (odom→odom would be no robot at all)
+                return child
         return ""
 
     def odom_tf_problem(self) -> tuple[tuple[str, str], bool] | None:

@@ -35,6 +35,7 @@ from .base import Channel, ReadStats
 from .mcap import McapSource
 from .ros import RosLogReader
 
+STORAGE_SUFFIXES = (".mcap", ".db3")  # a ROS 2 bag's storage files
 DEFINITION_COLUMNS = ("topic_type", "encoding", "encoded_message_definition", "type_description_hash")
 KNOWN_DEFINITIONS = ("ros2msg", "ros2idl")  # the encodings of message definitions rosbags reads
 
@@ -54,7 +55,9 @@ def _trace_definitions(conn: apsw.Connection) -> None:
 class _Sqlite3(Sqlite3Reader):
     """rosbags' sqlite3 storage, reading past message definitions in an encoding it does not know:
     their rows are left out while it opens the file (a connection hook of apsw, the SQLite binding
-    rosbags uses, for this opening only), so those types read as having no definition."""
+    rosbags uses, installed while ``_open`` runs: a connection another thread opens meanwhile gets the
+    row tracer too, which drops no message row, those having 3 columns), so those types read as having
+    no definition. rosbags ≥ 0.11.6 (its ``_open``; pyproject.toml)."""
 
     def _open(self) -> None:
         apsw.connection_hooks.append(_trace_definitions)
@@ -167,9 +170,6 @@ def open_rosbag2(path: Path, **kw) -> RosLogReader:
         ) from exc
     source.format = "rosbag2"
     return RosLogReader(source, path, stats=stats, **kw)
-
-
-STORAGE_SUFFIXES = (".mcap", ".db3")
 
 
 def _sole_storage(path: Path, stats: ReadStats) -> Path:
