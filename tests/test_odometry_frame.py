@@ -221,3 +221,11 @@ def test_tf_odometry_found_after_many_other_tf_messages(tmp_path):
             and r.base_frame == "base_footprint"
         )
         assert sum(isinstance(m, OdomSample) for m in r.messages()) == len(odoms)
+
+
+def test_a_tf_through_an_empty_frame_name_links_nothing(tmp_path):
+    """base_footprint→"" and ""→laser: tf2 refuses a frame "", so no mount comes from them (review: the
+    chain went through the empty name and gave x = 0.5)."""
+    log = _turtlebot(tmp_path / "e.mcap", "cdr", tf=(("base_footprint", "", 0.2), ("", "laser", 0.3)))
+    with open_log(log) as r:
+        assert r.laser_to_base() is None

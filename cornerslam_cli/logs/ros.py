@@ -485,7 +485,7 @@ class RosLogReader:
                         odom_children.add(child)
                         self.odom_on_tf = base in odom_children
                         continue
-                    if parent == child:
+                    if parent == child or not parent or not child:  # (tf2 refuses a frame "")
                         continue
                     if sum(v * v for v in q) < 1e-12:  # no rotation at all: not a transform
                         self.stats.warn(
