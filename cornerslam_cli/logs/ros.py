@@ -426,9 +426,9 @@ class RosLogReader:
 
     def laser_to_base(self) -> Pose2 | None:
         """Pose (x, y, yaw) of the laser in the robot's frame from tf_static/tf, else None. The robot's
-        frame is the one the odometry gives the pose of: its nav_msgs/Odometry messages' child_frame_id
-        (``base_frame`` becomes it), or ``base_frame`` when they leave it empty, when the tf does not
-        link it to the laser but links ``base_frame`` (warned), and for odometry read from tf.
+        frame is the one the odometry gives the pose of (:meth:`_robot_frame`; ``base_frame`` becomes
+        it), or the configured base_frame when the tf does not link the odometry's frame to the laser
+        but links that one (warned).
 
         Reads from the start of the log until the first scan has been seen and, after it, all tf_static
         messages (when counts are known) and, when the log has other tf topics, more messages until the
