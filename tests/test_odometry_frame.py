@@ -229,3 +229,23 @@ def test_a_tf_through_an_empty_frame_name_links_nothing(tmp_path):
     log = _turtlebot(tmp_path / "e.mcap", "cdr", tf=(("base_footprint", "", 0.2), ("", "laser", 0.3)))
     with open_log(log) as r:
         assert r.laser_to_base() is None
+
+
+def test_odometry_giving_the_poses_of_two_frames_is_warned(tmp_path):
+    """Two publishers on /odom (the wheels' base_link, an EKF's base_footprint): the odometry jumps
+    between two estimates; the read says so, naming both and how many messages each (review)."""
+    ros, odoms = serializer("cdr"), make_odoms(8)
+    log = _turtlebot(tmp_path / "tb.mcap", "cdr", odoms=odoms)
+    with open(log, "rb") as f:
+        msgs = [(c.topic, s.name, m.log_time, m.data) for s, c, m in make_reader(f).iter_messages()]
+    odom = [i for i, m in enumerate(msgs) if m[0] == "/odom"]
+    for j in range(0, len(odom), 3):  # every third message from the other publisher
+        msgs[odom[j]] = (*msgs[odom[j]][:3], ros.odometry(odoms[j], "odom", "/base_link"))
+    log = write_messages_mcap(tmp_path / "two.mcap", msgs)
+    with open_log(log) as r:
+        list(r.messages())
+        (w,) = [w for w in r.stats.warnings if "gives the poses of 2 frames" in w]
+        assert "'base_footprint' in 5 messages, 'base_link' in 3 messages" in w and "--odom-topic" in w
+    with open_log(_turtlebot(tmp_path / "one.mcap", "cdr")) as r:
+        list(r.messages())
+        assert not any("frames" in w for w in r.stats.warnings)

@@ -134,6 +134,15 @@ DEFAULT_BASE_FRAME = InputConfig.base_frame  # input.base_frame left at this: th
 ROBOT_FRAME_MESSAGES = 2000  # messages of the odometry topic read for the robot's frame at most
 
 
+def _child_frame(decoder, data: bytes | memoryview) -> str:
+    """A nav_msgs/Odometry's child_frame_id; "" when it cannot be read (the pose still can: a JSON
+    message without the field)."""
+    try:
+        return decoder.odometry_frame(data)
+    except Exception:  # noqa: BLE001 - only a warning depends on it
+        return ""
+
+
 def listing(names: list[str], most: int = 10) -> str:
     """``"/a, /b"`` or ``"none"``, for error messages: long names shortened, at most ``most`` of them."""
     shown = ", ".join(short_text(n) for n in sorted(names)[:most])
@@ -637,6 +646,7 @@ class RosLogReader:
         where, odom_where = f"{self.path.name}:{scan_t}", f"{self.path.name}:{odom_t}"
         n_tf_match = 0
         tf_seen: set[tuple[str, str]] = set()  # (parent, child) on the odometry tf topic
+        children: dict[str, int] = {}  # nav_msgs/Odometry messages by child_frame_id
         for topic, log_time, data in self.source.raw_messages({scan_t, odom_t} if odometry else {scan_t}):
             try:
                 if topic == scan_t:
@@ -661,6 +671,8 @@ class RosLogReader:
                         tf_seen.update((parent, child) for parent, child, *_ in transforms)
                 else:
                     poses = [odom_dec.odometry(data)]
+                    child = _child_frame(odom_dec, data)
+                    children[child] = children.get(child, 0) + 1
                 for (sec, nsec), x, y, q in poses:
                     sample = st.odometry_sample(odom_where, sec + nsec * 1e-9, float(x), float(y), q)
                     if sample is not None:
@@ -675,7 +687,24 @@ class RosLogReader:
             )
         if st.decode_failed > 5:
             st.warn("%s: %d messages could not be decoded in total", self.path.name, st.decode_failed)
+        self._warn_children(children)
         st.check_scans_yielded(self.path.name, scan_t)
+
+    def _warn_children(self, children: dict[str, int]) -> None:
+        """Warn when the Odometry messages give the poses of several frames (``children``: messages by
+        child_frame_id, "" and odom_frame left out): two publishers on one topic, whose poses the
+        odometry then jumps between."""
+        frames: dict[str, int] = {}
+        for c, n in children.items():
+            frames[strip_frame(c)] = frames.get(strip_frame(c), 0) + n
+        named = sorted(((n, c) for c, n in frames.items() if c not in ("", self.odom_frame)), reverse=True)
+        if len(named) > 1:
+            self.stats.warn(
+                "%s: odometry '%s' gives the poses of %d frames (%s): two publishers on one topic? its "
+                "poses then jump between them; record one, or choose another topic with --odom-topic",
+                self.path.name, short_text(self.odom_topic), len(named),
+                ", ".join(f"'{short_text(c)}' in {n} messages" for n, c in named[:5]),
+            )  # fmt: skip
 
     def close(self) -> None:
         self.source.close()
