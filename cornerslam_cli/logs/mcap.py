@@ -467,10 +467,16 @@ class McapSource:
         self._f.close()
 
 
+def mcap_source(path: Path, stats: ReadStats, what: str, hint: str = "check the file") -> McapSource:
+    """A :class:`McapSource` over ``path``; LogError "cannot read ``what``: …" when it is not readable
+    MCAP (an MCAP file given alone, or a ROS 2 bag's one storage file: logs/rosbag.py)."""
+    try:
+        return McapSource(path, stats)
+    except (OSError, struct.error, McapFormatError, io.UnsupportedOperation) as exc:
+        raise LogError(f"cannot read {what}: {exc}", hint) from exc
+
+
 def open_mcap(path: Path, **kw) -> RosLogReader:
     stats = ReadStats()
-    try:
-        source = McapSource(path, stats)
-    except (OSError, struct.error, McapFormatError, io.UnsupportedOperation) as exc:
-        raise LogError(f"cannot read MCAP file '{Path(path).name}': {exc}", "check the file") from exc
+    source = mcap_source(path, stats, f"MCAP file '{Path(path).name}'")
     return RosLogReader(source, path, stats=stats, **kw)

@@ -32,7 +32,7 @@ from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 
 from ..errors import LogError
 from .base import Channel, ReadStats
-from .mcap import McapSource
+from .mcap import mcap_source
 from .ros import RosLogReader
 
 STORAGE_SUFFIXES = (".mcap", ".db3")  # a ROS 2 bag's storage files
@@ -160,14 +160,7 @@ def open_rosbag2(path: Path, **kw) -> RosLogReader:
     storage = _sole_storage(path, stats)
     if storage.suffix != ".mcap":
         return RosLogReader(RosbagSource(storage, stats, ros2=True), path, stats=stats, **kw)
-    try:
-        source = McapSource(storage, stats)
-    except LogError:
-        raise
-    except Exception as exc:  # noqa: BLE001 - as open_mcap: the file is not readable MCAP
-        raise LogError(
-            f"cannot read ROS 2 bag '{path.name}': {storage.name}: {exc}", "check the bag"
-        ) from exc
+    source = mcap_source(storage, stats, f"ROS 2 bag '{path.name}': {storage.name}", "check the bag")
     source.format = "rosbag2"
     return RosLogReader(source, path, stats=stats, **kw)
 
