@@ -13,7 +13,7 @@ from cornerslam_cli.config import load_config
 from cornerslam_cli.frontend import odometry_noise
 from cornerslam_cli.geometry import compose, relative, transform_points
 from cornerslam_cli.motion import ScanMatchConfig
-from cornerslam_cli.motion.fusion import OdometryFusion, bias_matrices, bias_matrix, student_fit
+from cornerslam_cli.motion.fusion import SCALE_MIN, OdometryFusion, bias_matrices, bias_matrix, student_fit
 from cornerslam_cli.motion.icp import LocalMap, ScanMatcher, register
 from cornerslam_cli.simworld import office_world, raycast
 
@@ -61,6 +61,27 @@ def test_no_bias_is_invented_and_exact_odometry_is_learnt_as_exact():
     assert f.k < 1e-3 and f.s == pytest.approx(4.0, rel=0.5)
     assert np.all(f.c == 0.0)  # not significant: not applied
     assert np.abs(fused.inc - o).max() < 1e-3  # the fused increment stays on the odometry
+
+
+def test_a_scale_error_below_scale_min_is_left_in_even_when_significant():
+    # exact odometry and matches 0.5 % short along the direction of travel (ICP along a corridor,
+    # motion/fusion.py SCALE_MIN): significant over the window, but no odometer's error to take out
+    rng = np.random.default_rng(13)
+    noise = odometry_noise(load_config(None))
+    f = fusion()
+    for o, So, m, Sm in draw(rng, 0.0, 4.0, np.array([SCALE_MIN / 2, 0.0]), 300, noise):
+        fused = f.fuse(o, So, m, Sm)
+        f.note_step()
+    assert np.abs(fused.inc - o).max() < 1e-3  # the odometry is kept as it is
+    d, So, Sm, o = (np.array([x[i] for x in f.samples]) for i in range(4))
+    _, c, se = student_fit(d, f.k * So + f.s * Sm, bias_matrices(o, f.along))
+    assert abs(c[0]) >= 3 * se[0]  # the 3σ rule alone would take it out
+    assert f.c[0] == 0.0  # (a cold start may take one from its first handful of samples, then drop it)
+    # an odometer 2 % off is still taken out
+    f = fusion()
+    for o, So, m, Sm in draw(rng, 0.0, 4.0, np.array([0.02, 0.0]), 300, noise):
+        f.fuse(o, So, m, Sm)
+    assert f.c[0] == pytest.approx(0.02, abs=0.004)
 
 
 def test_each_bias_term_records_the_first_step_it_was_taken_out_of():
