@@ -21,13 +21,13 @@ drift per metre (systematic errors that no noise scale absorbs: they add up alon
 maximise the likelihood (Nelder–Mead on log k, log s; c solved by weighted least squares inside,
 re-weighted for the Student-t so that up to a few wrong matches do not move them); a drift term is
 kept only when it is at least ``BIAS_SIGMAS`` standard errors from zero, and a scale error only when it is
-also at least ``SCALE_MIN``: the matches have systematic errors of their own along the direction of travel
-— along a corridor, where the scans constrain it weakly, ICP's increments fall short by up to 0.5–1 %
-(infinite-corridor, whose exact odometry runs ~1 km of corridors: 0.5 % short over the half of its steps
-with the weakest along-track fit, 0.1 % over the other) — and a window of such steps makes that shortfall
-"significant": the learner then took a 0.4–0.5 % scale error out of exact odometry over hundreds of steps
-and shrank the corridors with it (infinite-corridor-exact 0.181 m ATE; 0.048 with the floor). A real
-odometer's scale error worth taking out is larger than what the matches themselves can be off by.
+also at least ``SCALE_MIN``: the matches have a scale error of their own along the direction of travel —
+where few scan points face it (a corridor), ICP's increments fall short of the reference by ~1 %
+(docs/results/reference_check.md: infinite-corridor-exact −0.98 % over its 912 such keyframes, −0.31 %
+over the others) —, and over a window of such steps that shortfall is "significant": the 3σ rule alone
+took a scale error of ~0.5 % out of infinite-corridor-exact's exact odometry for much of the run and
+shrank its corridors with it (benchmarks/scale_learnt.py). A real odometer's scale error worth taking
+out is larger than what the matches themselves can be off by.
 
 **Where the drift acts.** An odometry integrated along the path (wheel encoders at a high rate) drifts
 *during* an increment of length L, so its direction of travel turns by c_θ·L/2 as well: B(o) gains the
@@ -75,7 +75,7 @@ S_MAX = 1e4  # the match's covariance is inflated at most this much
 BIAS_SIGMAS = 3.0  # a drift term is kept when it is this many standard errors from zero
 # (not shrunk by 1 − se²/c² instead: 10 of the 15 panel logs worse, every exact one among them —
 # docs/results/variant_bias_shrinkage_vs_50a4f18.md)
-SCALE_MIN = 0.01  # a scale error is taken out from 1 %: twice the matches' own shortfall (module docstring)
+SCALE_MIN = 0.01  # a scale error is taken out from 1 %: the matches' own shortfall can reach it (docstring)
 ALONG_EVIDENCE = BIAS_SIGMAS**2 / 2  # the drift along the path is taken when likelier by this (NLL)
 SAMPLE = 24  # numbers a sample is kept as for the whole run: d (3), Σ_o (9), Σ_m (9), o (3)
 
