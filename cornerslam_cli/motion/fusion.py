@@ -25,9 +25,9 @@ also at least ``SCALE_MIN``: the matches have a scale error of their own along t
 where few scan points face it (a corridor), ICP's increments fall short of the reference by ~1 %
 (docs/results/reference_check.md: infinite-corridor-exact −0.98 % over its 912 such keyframes, −0.31 %
 over the others) —, and over a window of such steps that shortfall is "significant": the 3σ rule alone
-took a scale error of ~0.5 % out of infinite-corridor-exact's exact odometry for much of the run and
-shrank its corridors with it (benchmarks/scale_learnt.py). A real odometer's scale error worth taking
-out is larger than what the matches themselves can be off by.
+took a scale error out of infinite-corridor-exact's exact odometry at a quarter of its re-estimates
+(median 0.43 %) and shrank its corridors with it (docs/results/scale_learnt.md). A real odometer's
+scale error worth taking out is larger than what the matches themselves can be off by.
 
 **Where the drift acts.** An odometry integrated along the path (wheel encoders at a high rate) drifts
 *during* an increment of length L, so its direction of travel turns by c_θ·L/2 as well: B(o) gains the
