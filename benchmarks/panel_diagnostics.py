@@ -223,7 +223,8 @@ def main() -> None:
         "",
         "When the front end took the odometry's bias out (noisy runs; summary.json `odometry_model`): "
         "the step (trajectory.csv's) whose increment first had the odometer scale error, the heading "
-        "drift taken out (a term is taken once it is 3 standard errors from zero; each log's odometry "
+        "drift taken out (a term is taken once it is 3 standard errors from zero, a scale error once it "
+        "is also ≥ 1 %; each log's odometry "
         "was made with +2 % scale and 0.005 rad/m drift), the terms at the end, and the scan-matched chain's "
         "heading error against the reference (its turn since the first keyframe less the reference's) "
         "just before the drift was taken, and its rate before and after (° per 100 keyframes). Until "

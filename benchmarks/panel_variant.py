@@ -21,10 +21,11 @@ moved this log", and judge a change by the whole table.
 builds. Where a submap ends decides which closures pass and how the submaps' errors add up between them
 (README: infinite-corridor 0.659 / 0.383 / 0.361 m at 9.5 / 10 / 10.5 with identical chains), so a
 change's verdict on such a log under the 1 µm copies is mostly which side of that spread it lands on.
-``--perturb kernel`` samples the front end's own chaos, which neither of the others reaches (their chains
-are identical): the K copies run with ``scan_match.robust_scale`` (ICP's Cauchy kernel, 0.05 m) moved by
-±0.2 %, ±0.4 %, … — far below anything a user would tune. On edmonton that moves the scan-matched chain
-from 0.307 to 0.135–0.380 m and the ATE from 0.352 to 0.16–0.43 m (README, "How much the figures vary"):
+``--perturb kernel`` samples the front end's own chaos, which the others hardly reach (their chains move
+on few logs): the K copies run with ``scan_match.robust_scale`` (ICP's Cauchy kernel, 0.05 m)
+moved by ±0.2 %, ±0.4 %, … — far below anything a user would tune. On edmonton that moves the scan-matched
+chain 0.307 → 0.135–0.307 m and the ATE 0.352 → 0.162–0.352 m (docs/results/panel_spread_kernel.md;
+README, "The front end's own chaos"):
 ICP's along-track pose in a weakly constrained stretch moves by centimetres when its input moves by a
 millimetre, and the bias and closures learnt downstream carry it.
 Writes a markdown report (default docs/results/variant_<settings>.md, or variant_vs_<REV>.md; with
@@ -51,7 +52,9 @@ from intel_spread import perturbed_log  # noqa: E402
 from panel_spread import MOVED, moved_values, odom_lines, panel  # noqa: E402
 from real_logs import ROOT, default_data  # noqa: E402
 
-MAX_K = 18  # ... so --perturb submaps at most ±45 % (±50 % would reach 0, which the config refuses)
+from cornerslam_cli.config import set_leaves  # noqa: E402
+
+MAX_K = 18  # copies of a --perturb by config: submaps.max_distance at most ±45 % (±50 %: 0, refused)
 
 
 def run(log: Path, out: Path, extra: list[str], env: dict[str, str]) -> tuple[float, float, float]:
@@ -237,14 +240,11 @@ def main() -> None:
     args = ap.parse_args()
     if not args.sets and args.baseline == "HEAD":
         ap.error("nothing to compare: give --set KEY=VALUE and/or --baseline REV")
-    keys = ["".join(s.split("=")[0].split()) for s in args.sets]  # "submaps . max_distance" too
     if args.perturb in MOVED:
         moved = MOVED[args.perturb][0]
-        section, _, name = moved.partition(".")
-        pairs = zip(keys, args.sets, strict=True)
-        sets_it = any(k == moved or (k == section and name in s) for k, s in pairs)
+        sets_it = any(leaf == moved for _, leaf, _ in set_leaves(args.sets))  # a mapping's keys too
         if args.k > MAX_K:
-            ap.error(f"--perturb {args.perturb}: --k at most {MAX_K}")
+            ap.error(f"--perturb {args.perturb}: --k at most {MAX_K} (submaps: ±5 % a copy, 0 is refused)")
         if sets_it:  # a variant of the perturbed key would be overridden by the copies' own --set
             ap.error(f"--perturb {args.perturb} moves {moved} itself: compare it with --perturb odom")
     logs = panel(args.data)

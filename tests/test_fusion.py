@@ -76,7 +76,8 @@ def test_a_scale_error_below_scale_min_is_left_in_even_when_significant():
     d, So, Sm, o = (np.array([x[i] for x in f.samples]) for i in range(4))
     _, c, se = student_fit(d, f.k * So + f.s * Sm, bias_matrices(o, f.along))
     assert abs(c[0]) >= 3 * se[0]  # the 3σ rule alone would take it out
-    assert f.c[0] == 0.0  # (a cold start may take one from its first handful of samples, then drop it)
+    assert f.c[0] == 0.0
+    assert f.first_taken[0] is None or f.dropped[0]  # a cold start's term (its first samples): dropped
     # an odometer 2 % off is still taken out
     f = fusion()
     for o, So, m, Sm in draw(rng, 0.0, 4.0, np.array([0.02, 0.0]), 300, noise):

@@ -125,8 +125,9 @@ class OdometryFusion:
         # the step (trajectory.csv's) whose increment first had each bias term (scale, drift) taken out —
         # None: never yet (summary.json odometry_model: until then the odometry's share carried it)
         self.first_taken: list[int | None] = [None, None]
-        # a term taken out and later dropped again (its 3σ test failed in a later window): not held as a
-        # constant of this odometry, so graph.recalibrate does not carry it back (:meth:`carry_back`)
+        # a term taken out and later dropped again (its 3σ test, or a scale error's SCALE_MIN, failed in a
+        # later window): not held as a constant of this odometry, so graph.recalibrate does not carry it
+        # back (:meth:`carry_back`)
         self.dropped = [False, False]
         # with ``whole_run``, every sample of the run, SAMPLE numbers each (d, Σ_o, Σ_m, o): the bias
         # fitted on all of them (:meth:`fit_whole_run`, graph.recalibrate's) — 192 bytes a keyframe
