@@ -69,6 +69,20 @@ def odom_lines(log: Path, k: int) -> list[int]:
     return [round(n * i / (k + 1)) for i in range(1, k + 1)]
 
 
+def copies(name: str, log: Path, k: int, perturb: str, tmp: Path) -> list[tuple[Path, list[str], str]]:
+    """The K + 1 runs of one log: (log file, extra options, what was moved) — the log itself, then K
+    copies with one ODOM line moved by 1 µm (``odom``: the line's 1-based index among the ODOM lines) or
+    the log itself with :data:`MOVED`'s key moved (``submaps``, ``kernel``: its value)."""
+    if perturb in MOVED:
+        key = MOVED[perturb][0]
+        return [
+            (log, [], ""),
+            *((log, ["--set", f"{key}={v:g}"], f"{v:g}") for v in moved_values(perturb, k)),
+        ]
+    moved = [(n, perturbed_log(log, n, tmp / f"{name}-odom{n}.log")) for n in odom_lines(log, k)]
+    return [(log, [], ""), *((p, [], str(n)) for n, p in moved)]
+
+
 def figures(s: dict) -> tuple[float, int, float]:
     """(accuracy figure, loop closures accepted, the scan-matched chain's figure) of a run's summary: ATE
     RMSE, or the relation error."""
@@ -87,19 +101,12 @@ def measure(data: Path, k: int, jobs: int, tmp: Path, perturb: str = "odom") -> 
     with ThreadPoolExecutor(jobs) as pool:
         plan = []
         for name, log, score in panel(data):
-            if perturb in MOVED:
-                key, values = MOVED[perturb][0], moved_values(perturb, k)
-                copies = [(log, [*score, "--set", f"{key}={v:g}"]) for v in values]
-                moves = [f"{v:g}" for v in values]
-            else:
-                lines = odom_lines(log, k)
-                copies = [(perturbed_log(log, n, tmp / f"{name}-odom{n}.log"), score) for n in lines]
-                moves = [str(n) for n in lines]
+            runs_of = copies(name, log, k, perturb, tmp)
             runs = [
-                pool.submit(run, p, tmp / f"out-{name}-{i}", extra)
-                for i, (p, extra) in enumerate([(log, score), *copies])
+                pool.submit(run, p, tmp / f"out-{name}-{i}", [*score, *extra])
+                for i, (p, extra, _) in enumerate(runs_of)
             ]
-            plan.append((name, moves, runs))
+            plan.append((name, [move for _, _, move in runs_of[1:]], runs))
         return [row(name, moves, [figures(r.result()) for r in runs]) for name, moves, runs in plan]
 
 
@@ -191,19 +198,22 @@ def report(rows: list[dict], k: int, perturb: str = "odom") -> list[str]:
 
 def means(rows: list[dict]) -> list[str]:
     """The median and the worst of the logs' means, noisy and exact odometry apart (Intel left out)."""
+    by_log = {r["log"]: r["mean"] for r in rows}
+    return [
+        f"- {group}: median of the means {median:.3f} m, worst mean {by_log[worst]:.3f} m ({worst})"
+        for group, median, worst in group_means(by_log)
+    ]
+
+
+def group_means(means: dict[str, float]) -> list[tuple[str, float, str]]:
+    """Per group of logs (noisy radish, exact radish; Intel in neither) that ``means`` (log → its mean
+    figure) has: (the group, the median of its logs' means, the log with the largest)."""
     out = []
-    for kind, pick in (
-        ("noisy", lambda n: not n.endswith("-exact")),
-        ("exact", lambda n: n.endswith("-exact")),
-    ):
-        part = [r for r in rows if r["log"] != "intel" and pick(r["log"])]
-        if part:
-            worst = max(part, key=lambda r: r["mean"])
-            median = float(np.median([r["mean"] for r in part]))
-            out.append(
-                f"- {kind} odometry: median of the means {median:.3f} m, worst mean {worst['mean']:.3f} m "
-                f"({worst['log']})"
-            )
+    for group, pick in (("noisy odometry", lambda n: n != "intel" and not n.endswith("-exact")),
+                        ("exact odometry", lambda n: n.endswith("-exact"))):  # fmt: skip
+        sel = {n: m for n, m in means.items() if pick(n)}
+        if sel:
+            out.append((group, float(np.median(list(sel.values()))), max(sel, key=sel.get)))
     return out
 
 

@@ -48,8 +48,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _baseline import build_env, revision, source_tree  # noqa: E402
-from intel_spread import perturbed_log  # noqa: E402
-from panel_spread import MOVED, moved_values, odom_lines, panel  # noqa: E402
+from panel_spread import MOVED, copies, group_means, moved_values, panel  # noqa: E402
 from real_logs import ROOT, default_data  # noqa: E402
 
 from cornerslam_cli.config import set_leaves  # noqa: E402
@@ -72,16 +71,6 @@ def run(log: Path, out: Path, extra: list[str], env: dict[str, str]) -> tuple[fl
     return a["ate"]["rmse"], a["scan_odom_ate"]["rmse"], revisit
 
 
-def copies(name: str, log: Path, k: int, perturb: str, tmp: Path) -> list[tuple[Path, list[str]]]:
-    """The K + 1 runs of one log: (log file, extra options) — the log itself, then K copies with one ODOM
-    line moved by 1 µm (``odom``) or the log itself with a config key moved (``submaps``, ``kernel``)."""
-    if perturb in MOVED:
-        key = MOVED[perturb][0]
-        return [(log, []), *((log, ["--set", f"{key}={v:g}"]) for v in moved_values(perturb, k))]
-    moved = (perturbed_log(log, n, tmp / f"{name}-odom{n}.log") for n in odom_lines(log, k))
-    return [(log, []), *((p, []) for p in moved)]
-
-
 def measure(logs, builds, k: int, jobs: int, tmp: Path, perturb: str = "odom") -> list[dict]:
     """Every log in K + 1 copies (:func:`copies`) through both builds (``builds``: name → (environment,
     extra options))."""
@@ -91,7 +80,7 @@ def measure(logs, builds, k: int, jobs: int, tmp: Path, perturb: str = "odom") -
             runs = {
                 b: [
                     pool.submit(run, p, tmp / f"out-{b}-{name}-{i}", [*score, *extra, *more], env)
-                    for i, (p, more) in enumerate(copies(name, log, k, perturb, tmp))
+                    for i, (p, more, _) in enumerate(copies(name, log, k, perturb, tmp))
                 ]
                 for b, (env, extra) in builds.items()
             }
@@ -150,17 +139,13 @@ def revisit_table(rows: list[dict]) -> list[str]:
 def summary(rows: list[dict]) -> list[str]:
     """Per group of logs (noisy radish, exact radish): median and worst of the per-log means."""
     out = []
-    for group, pick in (("noisy odometry", lambda n: n != "intel" and not n.endswith("-exact")),
-                        ("exact odometry", lambda n: n.endswith("-exact"))):  # fmt: skip
-        sel = [r for r in rows if pick(r["log"])]
-        if not sel:
-            continue
-        for b in ("baseline", "variant"):
-            means = {r["log"]: np.mean([f for f, *_ in r[b]]) for r in sel}
-            worst = max(means, key=means.get)
+    means = {
+        b: {r["log"]: float(np.mean([f for f, *_ in r[b]])) for r in rows} for b in ("baseline", "variant")
+    }
+    for groups in zip(*(group_means(m) for m in means.values()), strict=True):
+        for b, (group, median, worst) in zip(means, groups, strict=True):
             out.append(
-                f"- {group}, {b}: median of the means {np.median(list(means.values())):.3f} m, worst "
-                f"{means[worst]:.3f} m ({worst})"
+                f"- {group}, {b}: median of the means {median:.3f} m, worst {means[b][worst]:.3f} m ({worst})"
             )
     verdicts = [verdict(np.array(r["baseline"])[:, 0], np.array(r["variant"])[:, 0]) for r in rows]
     out.append(
