@@ -108,22 +108,26 @@ def main() -> None:
         f"(see its docstring): keyframes 1–{args.keyframes} of {args.log} (default config), each keyframe's "
         f"registration from the odometry's guess run again from {STARTS} starts ±{SPREAD:g} m along the "
         "heading around the pose it ended on. *Range*: max − min of where they end along the heading (cm); "
-        "*ends*: each start's end relative to the run's pose (cm, starts from −, behind, to +). "
-        "Deterministic.",
+        "*σ*: ICP's own standard deviation there (cm, its covariance at the pose, before the fusion scales "
+        "it by its learnt s); *ends*: each start's end relative to the run's pose (cm, starts from −, "
+        "behind, to +). Deterministic.",
         "",
-        "| keyframe | plain: range | plain: ends | line-fitted: range | line-fitted: ends |",
-        "|---:|---:|---|---:|---|",
+        "| keyframe | ICP's σ along the heading | plain: range | plain: ends | line-fitted: range "
+        "| line-fitted: ends |",
+        "|---:|---:|---:|---|---:|---|",
     ]
     within = {"plain": 0, "line": 0}
     for k in sorted(calls):
         points, map_points, guess, pose = calls[k]
         local = LocalMap.build(map_points)
         a = ends(points, local, guess, pose, cfg)
+        u = np.array([np.cos(pose[2]), np.sin(pose[2])])
+        sigma = float(np.sqrt(u @ register(points, local, pose, cfg, prior=guess).cov[:2, :2] @ u))
         b = ends(points, line_fitted(local), guess, pose, cfg)
         within["plain"] += np.ptp(a) <= 0.03
         within["line"] += np.ptp(b) <= 0.03
         lines.append(
-            f"| {k} | {100 * np.ptp(a):.1f} | {' '.join(f'{100 * v:+.1f}' for v in a)} "
+            f"| {k} | {100 * sigma:.1f} | {100 * np.ptp(a):.1f} | {' '.join(f'{100 * v:+.1f}' for v in a)} "
             f"| {100 * np.ptp(b):.1f} | {' '.join(f'{100 * v:+.1f}' for v in b)} |"
         )
     lines += [
