@@ -47,10 +47,11 @@ MOVED = {
 }
 
 
-def moved_values(perturb: str, k: int) -> list[float]:
-    """The K values of :data:`MOVED`'s key for ``perturb`` beside its default, nearest first (kernel:
-    −0.2 %, +0.2 %, −0.4 %, +0.4 %, …)."""
-    _, base, step = MOVED[perturb]
+def moved_values(perturb: str, k: int, base: float | None = None) -> list[float]:
+    """The K values of :data:`MOVED`'s key for ``perturb`` beside ``base`` (default: its default), nearest
+    first (kernel: −0.2 %, +0.2 %, −0.4 %, +0.4 %, …)."""
+    _, default, step = MOVED[perturb]
+    base = default if base is None else base
     return [round(base * (1 + (-1) ** (i + 1) * step * (1 + i // 2)), 9) for i in range(k)]
 
 
@@ -69,15 +70,18 @@ def odom_lines(log: Path, k: int) -> list[int]:
     return [round(n * i / (k + 1)) for i in range(1, k + 1)]
 
 
-def copies(name: str, log: Path, k: int, perturb: str, tmp: Path) -> list[tuple[Path, list[str], str]]:
+def copies(
+    name: str, log: Path, k: int, perturb: str, tmp: Path, base: float | None = None
+) -> list[tuple[Path, list[str], str]]:
     """The K + 1 runs of one log: (log file, extra options, what was moved) — the log itself, then K
     copies with one ODOM line moved by 1 µm (``odom``: the line's 1-based index among the ODOM lines) or
-    the log itself with :data:`MOVED`'s key moved (``submaps``, ``kernel``: its value)."""
+    the log itself with :data:`MOVED`'s key moved (``submaps``, ``kernel``: its value; around ``base``
+    when the run sets the key to it)."""
     if perturb in MOVED:
         key = MOVED[perturb][0]
         return [
             (log, [], ""),
-            *((log, ["--set", f"{key}={v:g}"], f"{v:g}") for v in moved_values(perturb, k)),
+            *((log, ["--set", f"{key}={v:g}"], f"{v:g}") for v in moved_values(perturb, k, base)),
         ]
     moved = [(n, perturbed_log(log, n, tmp / f"{name}-odom{n}.log")) for n in odom_lines(log, k)]
     return [(log, [], ""), *((p, [], str(n)) for n, p in moved)]

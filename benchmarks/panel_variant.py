@@ -27,7 +27,9 @@ moved by ±0.2 %, ±0.4 %, … — far below anything a user would tune. On edmo
 chain 0.307 → 0.135–0.307 m and the ATE 0.352 → 0.162–0.352 m (docs/results/panel_spread_kernel.md;
 README, "The front end's own chaos"):
 ICP's along-track pose in a weakly constrained stretch moves by centimetres when its input moves by a
-millimetre, and the bias and closures learnt downstream carry it.
+millimetre, and the bias and closures learnt downstream carry it. A variant that sets the perturbed key
+itself (``--set scan_match.robust_scale=0.1 --perturb kernel``) has its copies moved by the same relative
+steps around its own value.
 Writes a markdown report (default docs/results/variant_<settings>.md, or variant_vs_<REV>.md; with
 ``--perturb submaps`` / ``kernel`` the name ends in ``_submaps`` / ``_kernel``).
 """
@@ -73,16 +75,16 @@ def run(log: Path, out: Path, extra: list[str], env: dict[str, str]) -> tuple[fl
 
 def measure(logs, builds, k: int, jobs: int, tmp: Path, perturb: str = "odom") -> list[dict]:
     """Every log in K + 1 copies (:func:`copies`) through both builds (``builds``: name → (environment,
-    extra options))."""
+    extra options, the value the build's options set the perturbed key to, or None))."""
     with ThreadPoolExecutor(jobs) as pool:
         plan = []
         for name, log, score in logs:
             runs = {
                 b: [
                     pool.submit(run, p, tmp / f"out-{b}-{name}-{i}", [*score, *extra, *more], env)
-                    for i, (p, more, _) in enumerate(copies(name, log, k, perturb, tmp))
+                    for i, (p, more, _) in enumerate(copies(name, log, k, perturb, tmp, value))
                 ]
-                for b, (env, extra) in builds.items()
+                for b, (env, extra, value) in builds.items()
             }
             plan.append((name, runs))
         return [{"log": n, **{b: [f.result() for f in fs] for b, fs in runs.items()}} for n, runs in plan]
@@ -155,7 +157,14 @@ def summary(rows: list[dict]) -> list[str]:
     return out
 
 
-def report(rows: list[dict], sets: list[str], base_rev: str, k: int, perturb: str = "odom") -> list[str]:
+def report(
+    rows: list[dict],
+    sets: list[str],
+    base_rev: str,
+    k: int,
+    perturb: str = "odom",
+    value: float | None = None,
+) -> list[str]:
     cmd = " ".join(["python benchmarks/panel_variant.py", *(f"--set {s}" for s in sets), f"--k {k}"])
     if base_rev != "HEAD":
         cmd += f" --baseline {base_rev}"
@@ -168,6 +177,12 @@ def report(rows: list[dict], sets: list[str], base_rev: str, k: int, perturb: st
             f"with `{key}` at {values} m beside this checkout's default "
             f"({base:g} m; the baseline's copies too)"
         )
+        if value is not None:  # the variant sets the key itself: its copies move around its value
+            own = ", ".join(f"{v:g}" for v in moved_values(perturb, k, value))
+            copies_are = (
+                f"with `{key}` moved by the same steps: the baseline's at {values} m beside its default "
+                f"({base:g} m), the variant's at {own} m beside its {value:g} m"
+            )
     base = "the defaults" if base_rev == "HEAD" else f"revision {revision(base_rev)}, its defaults"
     variant = ", ".join(f"`{s}`" for s in sets) or "its defaults"
     title = ", ".join(f"`{s}`" for s in sets) or f"this build ({revision()})"
@@ -225,13 +240,17 @@ def main() -> None:
     args = ap.parse_args()
     if not args.sets and args.baseline == "HEAD":
         ap.error("nothing to compare: give --set KEY=VALUE and/or --baseline REV")
+    value = None
     if args.perturb in MOVED:
         moved = MOVED[args.perturb][0]
-        sets_it = any(leaf == moved for _, leaf, _ in set_leaves(args.sets))  # a mapping's keys too
         if args.k > MAX_K:
             ap.error(f"--perturb {args.perturb}: --k at most {MAX_K} (submaps: ±5 % a copy, 0 is refused)")
-        if sets_it:  # a variant of the perturbed key would be overridden by the copies' own --set
-            ap.error(f"--perturb {args.perturb} moves {moved} itself: compare it with --perturb odom")
+        # a variant of the perturbed key itself: its copies move around the value it sets, by the same
+        # relative steps as the baseline's around the default
+        sets_it = [v for _, leaf, v in set_leaves(args.sets) if leaf == moved]
+        if sets_it and not isinstance(sets_it[-1], (int, float)):
+            ap.error(f"--perturb {args.perturb}: {moved} must be a number to move it")
+        value = float(sets_it[-1]) if sets_it else None
     logs = panel(args.data)
     if args.logs:
         wanted = args.logs.split(",")
@@ -245,9 +264,9 @@ def main() -> None:
     sets = [x for s in args.sets for x in ("--set", s)]
     with tempfile.TemporaryDirectory(prefix="panel-variant-") as tmp, contextlib.ExitStack() as stack:
         src = ROOT if args.baseline == "HEAD" else stack.enter_context(source_tree(args.baseline))
-        builds = {"baseline": (build_env(src), []), "variant": (build_env(ROOT), sets)}
+        builds = {"baseline": (build_env(src), [], None), "variant": (build_env(ROOT), sets, value)}
         rows = measure(logs, builds, args.k, args.jobs, Path(tmp), args.perturb)
-    text = "\n".join(report(rows, args.sets, args.baseline, args.k, args.perturb))
+    text = "\n".join(report(rows, args.sets, args.baseline, args.k, args.perturb, value))
     out.write_text(text)
     print(text)
 
