@@ -209,13 +209,22 @@ def means(rows: list[dict]) -> list[str]:
     ]
 
 
+GROUPS = ("noisy odometry", "exact odometry")
+
+
+def in_group(name: str, group: str) -> bool:
+    """Whether log ``name`` is in ``group`` (:data:`GROUPS`: the radish logs with noisy odometry, those
+    with exact odometry; Intel in neither)."""
+    exact = name.endswith("-exact")
+    return name != "intel" and (exact if group == "exact odometry" else not exact)
+
+
 def group_means(means: dict[str, float]) -> list[tuple[str, float, str]]:
-    """Per group of logs (noisy radish, exact radish; Intel in neither) that ``means`` (log → its mean
-    figure) has: (the group, the median of its logs' means, the log with the largest)."""
+    """Per group of logs (:data:`GROUPS`) that ``means`` (log → its mean figure) has: (the group, the
+    median of its logs' means, the log with the largest)."""
     out = []
-    for group, pick in (("noisy odometry", lambda n: n != "intel" and not n.endswith("-exact")),
-                        ("exact odometry", lambda n: n.endswith("-exact"))):  # fmt: skip
-        sel = {n: m for n, m in means.items() if pick(n)}
+    for group in GROUPS:
+        sel = {n: m for n, m in means.items() if in_group(n, group)}
         if sel:
             out.append((group, float(np.median(list(sel.values()))), max(sel, key=sel.get)))
     return out
