@@ -43,7 +43,8 @@ def recorded(self):
 
 fusion.OdometryFusion._learn = recorded
 gt = log[: -len(".log")] + ".gt.tum"
-main(["run", log, "--out", out, "-q", "--ground-truth", gt], standalone_mode=False)
+if rc := main(["run", log, "--out", out, "-q", "--ground-truth", gt], standalone_mode=False):
+    sys.exit(rc)  # (click returns a failed run's exit code here: not a record of a whole run)
 print(json.dumps(held))
 """
 

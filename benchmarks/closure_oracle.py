@@ -67,7 +67,8 @@ def oracle(verify):
 
 hierarchy.match_submaps = oracle(hierarchy.match_submaps)
 hierarchy.match_points = oracle(hierarchy.match_points)
-main(["run", log, "--out", out, "-q"], standalone_mode=False)
+if rc := main(["run", log, "--out", out, "-q"], standalone_mode=False):
+    sys.exit(rc)  # (click returns a failed run's exit code here: not a record of a whole run)
 print(json.dumps({r: flipped.count(r) for r in sorted(soft)}))
 """
 

@@ -58,7 +58,8 @@ def stepped(self, points, odom):
     return step(self, points, odom)
 
 icp.register, icp.ScanMatcher.step = recorded, stepped
-main(["run", log, "--out", out, "-q"], standalone_mode=False)
+if rc := main(["run", log, "--out", out, "-q"], standalone_mode=False):
+    sys.exit(rc)  # (click returns a failed run's exit code here: not a record of a whole run)
 pickle.dump(calls, open(out + "/calls.pkl", "wb"))
 """
 

@@ -66,7 +66,8 @@ hierarchy.HierarchicalSlam._close = _close
 result = {}
 if mode == "cli":
     from cornerslam_cli.cli import main
-    main(rest, standalone_mode=False)
+    if rc := main(rest, standalone_mode=False):
+        sys.exit(rc)  # (click returns a failed run's exit code here)
 elif mode == "dump":
     from cornerslam_cli.frontend import frames, open_input
     from cornerslam_cli.options import command_config

@@ -48,7 +48,8 @@ def recorded(self, *args):
 
 fusion.OdometryFusion._fit = recorded
 gt = log[: -len(".log")] + ".gt.tum"
-main(["run", log, "--out", out, "-q", "--ground-truth", gt], standalone_mode=False)
+if rc := main(["run", log, "--out", out, "-q", "--ground-truth", gt], standalone_mode=False):
+    sys.exit(rc)  # (click returns a failed run's exit code here: not a record of a whole run)
 print(json.dumps(taken))
 """
 
