@@ -13,6 +13,7 @@ and ``build_env`` checks where ``cornerslam_cli`` is imported from before handin
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -58,3 +59,14 @@ def revision(rev: str = "HEAD") -> str:
         [*git, "status", "--porcelain", "--untracked-files=no"], capture_output=True, text=True
     )
     return head + ("+changes" if rev == "HEAD" and dirty.stdout.strip() else "")
+
+
+def child_json(code: str, *args: str, what: str):
+    """Run ``code`` (a Python program: cornerslam with a hook, its record printed as JSON on its last line
+    of stdout) as ``python -c code ARGS`` from this repository's root; its record. A child that fails
+    (its own exit code, a failed cornerslam run's included) stops the benchmark with ``what`` and the end of
+    its stderr."""
+    res = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, cwd=ROOT)
+    if res.returncode != 0:
+        raise SystemExit(f"{what}: {res.stderr.strip()[-2000:]}")
+    return json.loads(res.stdout.strip().splitlines()[-1])

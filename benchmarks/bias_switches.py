@@ -16,14 +16,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 import tempfile
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _baseline import revision  # noqa: E402
+from _baseline import child_json, revision  # noqa: E402
 from radish_panel import BUILDINGS  # noqa: E402
 from real_logs import ROOT, default_data  # noqa: E402
 
@@ -51,10 +50,7 @@ print(json.dumps(held))
 
 def one(log: Path, out: Path) -> dict:
     """One run of ``log``: the re-estimates' record of :data:`CHILD` and the run's ATE."""
-    res = subprocess.run([sys.executable, "-c", CHILD, str(log), str(out)], capture_output=True, text=True)
-    if res.returncode != 0:
-        raise RuntimeError(f"{log.name}: {res.stderr.strip()[-2000:]}")
-    held = json.loads(res.stdout.strip().splitlines()[-1])
+    held = child_json(CHILD, str(log), str(out), what=log.name)
     summary = json.loads((out / "summary.json").read_text())
     switches = [sum(a[i] != b[i] for a, b in zip(held[:-1], held[1:], strict=True)) for i in range(2)]
     shares = [sum(h[i] for h in held) / max(len(held), 1) for i in range(2)]

@@ -19,12 +19,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _baseline import child_json  # noqa: E402
 from radish_panel import BUILDINGS  # noqa: E402
 from real_logs import ROOT, default_data  # noqa: E402
 
@@ -75,12 +75,8 @@ print(json.dumps({r: flipped.count(r) for r in sorted(soft)}))
 
 def oracle_run(log: Path, out: Path, base: Path, gt: Path) -> dict:
     """The oracle run of ``log`` into ``out``: {reason: closures it accepted for that reason}."""
-    cmd = [sys.executable, "-c", CHILD, str(log), str(out), str(base), str(gt),
-           str(ORACLE_XY), str(ORACLE_THETA), ",".join(SOFT)]  # fmt: skip
-    res = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
-    if res.returncode != 0:
-        raise SystemExit(f"oracle run of {log.name} failed: {res.stderr.strip()[-2000:]}")
-    return json.loads(res.stdout.strip().splitlines()[-1])
+    args = (log, out, base, gt, ORACLE_XY, ORACLE_THETA, ",".join(SOFT))
+    return child_json(CHILD, *map(str, args), what=f"oracle run of {log.name} failed")
 
 
 def summary(run: Path) -> tuple[float, int]:

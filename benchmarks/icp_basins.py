@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import pickle
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
@@ -28,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _baseline import revision  # noqa: E402
+from _baseline import child_json, revision  # noqa: E402
 from real_logs import ROOT, default_data  # noqa: E402
 
 from cornerslam_cli.motion.icp import NORMAL_NEIGHBOURS, LocalMap, register  # noqa: E402
@@ -39,7 +38,7 @@ SPREAD = 0.1  # m either way along the heading
 
 # One run in a child process: the first registration of each of the first keyframes, pickled.
 CHILD = r"""
-import pickle, sys
+import json, pickle, sys
 from cornerslam_cli.cli import main
 from cornerslam_cli.motion import icp
 
@@ -61,6 +60,7 @@ icp.register, icp.ScanMatcher.step = recorded, stepped
 if rc := main(["run", log, "--out", out, "-q"], standalone_mode=False):
     sys.exit(rc)  # (click returns a failed run's exit code here: not a record of a whole run)
 pickle.dump(calls, open(out + "/calls.pkl", "wb"))
+print(json.dumps(out + "/calls.pkl"))
 """
 
 
@@ -95,12 +95,8 @@ def main() -> None:
     args = ap.parse_args()
     log = args.data / "radish" / f"{args.log}.log"
     with tempfile.TemporaryDirectory() as tmp:
-        res = subprocess.run(
-            [sys.executable, "-c", CHILD, str(log), tmp, str(args.keyframes)], capture_output=True, text=True
-        )
-        if res.returncode != 0:
-            raise SystemExit(f"{log.name}: {res.stderr.strip()[-2000:]}")
-        calls = pickle.loads((Path(tmp) / "calls.pkl").read_bytes())
+        record = child_json(CHILD, str(log), tmp, str(args.keyframes), what=log.name)
+        calls = pickle.loads(Path(record).read_bytes())
     cfg = ScanMatchConfig()
     lines = [
         "# Where ICP ends from starts a few centimetres apart",

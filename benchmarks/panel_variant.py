@@ -53,7 +53,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _baseline import build_env, revision, source_tree  # noqa: E402
-from panel_spread import MOVED, copies, group_means, in_group, moved_values, panel  # noqa: E402
+from panel_spread import GROUPS, MOVED, copies, group_means, in_group, moved_values, panel  # noqa: E402
 from real_logs import ROOT, default_data  # noqa: E402
 
 from cornerslam_cli.config import load_config, set_leaves  # noqa: E402
@@ -159,8 +159,8 @@ def resampled_mean(x: np.ndarray, rng: np.random.Generator) -> float:
 def median_shift(
     rows: list[dict], draws: int = DRAWS, seed: int = 0
 ) -> dict[str, tuple[float, float, float]]:
-    """Per group of logs (as :func:`group_means`): the variant's median of the per-log means less the
-    baseline's, and the 5th and 95th percentiles of that difference when each log's K + 1 figures are
+    """Per group of logs the rows have (panel_spread.GROUPS): the variant's median of the per-log means
+    less the baseline's, and the 5th and 95th percentiles of that difference when each log's K + 1 figures are
     resampled with replacement in each build (a fixed seed: the report is reproducible). The verdicts
     judge one log at a time; this judges the median, which a change can move by less than any one log's
     spread and still move."""
@@ -169,8 +169,9 @@ def median_shift(
     out = {}
     if min(len(f) for fig in figures.values() for f in fig.values()) < 2:
         return out  # (one run a log: no spread to resample)
-    for group, *_ in group_means(dict.fromkeys(figures["baseline"], 0.0)):
-        logs = [n for n in figures["baseline"] if in_group(n, group)]
+    for group in GROUPS:
+        if not (logs := [n for n in figures["baseline"] if in_group(n, group)]):
+            continue
         observed = float(
             np.median([figures["variant"][n].mean() for n in logs])
             - np.median([figures["baseline"][n].mean() for n in logs])

@@ -18,13 +18,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _baseline import revision  # noqa: E402
+from _baseline import child_json, revision  # noqa: E402
 from radish_panel import BUILDINGS  # noqa: E402
 from real_logs import ROOT, default_data  # noqa: E402
 
@@ -56,15 +55,7 @@ print(json.dumps(taken))
 
 def one(log: Path, out: Path, scale_min: float) -> dict:
     """One run of ``log`` with ``fusion.SCALE_MIN`` = ``scale_min``: the figures of :data:`CHILD`'s record."""
-    res = subprocess.run(
-        [sys.executable, "-c", CHILD, str(log), str(out), repr(scale_min)],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-    )
-    if res.returncode != 0:
-        raise SystemExit(f"{log.name}: {res.stderr.strip()[-2000:]}")
-    c = [abs(x) for x in json.loads(res.stdout.strip().splitlines()[-1])]
+    c = [abs(x) for x in child_json(CHILD, str(log), str(out), repr(scale_min), what=log.name)]
     s = json.loads((out / "summary.json").read_text())
     took = sorted(x for x in c if x > 0)
     return {
