@@ -16,6 +16,7 @@ import os
 import signal
 import sys
 import threading
+from functools import partial
 from pathlib import Path
 
 from .blas import single_threaded_blas
@@ -265,7 +266,6 @@ def run(
         config_path, overrides, names[0] if names else None, scan_topic, odom_topic, log_path
     )
     progress = Progress(f"{display_path(Path(log_path).name)} ({cfg.association.method})", not quiet)
-    _say_compiling(quiet)
     try:
         summary = run_pipeline(
             log_path,
@@ -279,6 +279,7 @@ def run(
             mcap_out=mcap_out,
             config_path=config_path,
             span=span,
+            compiling=partial(_say_compiling, quiet),
         )
     finally:
         progress.close()
@@ -341,11 +342,10 @@ def compare(
     check_method_not_set(overrides, assocs)  # (after the config: an unknown name is named as such)
     out_dir = Path(out) if out else default_out_dir(Path(log_path), "compare")
     progress = Progress(f"{display_path(Path(log_path).name)} (compare)", not quiet)
-    _say_compiling(quiet)
     try:
         summaries = run_compare(
             log_path, cfg, names, out_dir, ground_truth, jobs, progress, relations, time_offset,
-            default_place=not out, span=span,
+            default_place=not out, span=span, compiling=partial(_say_compiling, quiet),
         )  # fmt: skip
     finally:
         progress.close()

@@ -127,10 +127,13 @@ class Input:
     laser_upside_down_source: str = "config"
 
 
-def open_input(log_path: str | Path, cfg: Config, span: Span | None = None) -> Input:
+def open_input(
+    log_path: str | Path, cfg: Config, span: Span | None = None, compiling: Callable[[], None] | None = None
+) -> Input:
     """Open the log, check its topics (exit-2 errors before any work), find the laser mount and load the
     extractor's and the scan matcher's compiled kernels (start-up work, not the first step's); ``span``:
-    the part to process."""
+    the part to process; ``compiling``: called just before the kernels load (the command line's note that a
+    first run compiles them: after the log's checks, so that a bad log's error comes alone)."""
     inp = cfg.input
     reader = open_log(
         Path(log_path),
@@ -145,6 +148,8 @@ def open_input(log_path: str | Path, cfg: Config, span: Span | None = None) -> I
     matcher = ScanMatcher(cfg.scan_match, odometry_noise(cfg)) if cfg.scan_match.enabled else None
     if matcher is not None and cfg.submaps.enabled and cfg.graph.recalibrate:  # (before any use)
         matcher.fusion = OdometryFusion(cfg.scan_match, whole_run=True)  # keeps every sample
+    if compiling is not None:
+        compiling()
     load_kernels(cfg.sensor, cfg.lines)
     with signals_deferred():
         load_association_kernels()

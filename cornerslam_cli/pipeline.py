@@ -48,13 +48,15 @@ def run(
     mcap_out: str | Path | None = None,
     config_path: str | Path | None = None,
     span: Span | None = None,
+    compiling: Callable[[], None] | None = None,
 ) -> RunSummary:
     """Run corner EKF-SLAM on one log and write the output directory atomically: the tables, with
     ``plot`` the figures and report.html, and ``mcap_out`` beside it, all committed at once.
 
     The output places are checked before any work (report/ownership.py); the run's inputs — the log,
     the ground truth (also LOG.gt.tum found beside the log), the relations, the config file
-    ``config_path`` — are never written over; ``span``: the part of the log to process (span.py).
+    ``config_path`` — are never written over; ``span``: the part of the log to process (span.py);
+    ``compiling``: frontend.open_input's.
     Returns the summary (also written to summary.json) with ``out_dir``, the committed directory.
     """
     wall0 = time.perf_counter()
@@ -64,7 +66,7 @@ def run(
     with StagedDir(out_dir, "run", inputs, log_path, own_log_only=not out) as stage:
         mcap_path = stage.stage_file(mcap_out, ours=is_results_mcap) if mcap_out else None
         ref = load_reference(Path(log_path), ground_truth, relations, time_offset)  # bad files fail first
-        src = open_input(log_path, cfg, span)
+        src = open_input(log_path, cfg, span, compiling)
         scans = ScanStore() if mcap_path else None  # kept for the results MCAP's scans
         summary = run_filter(frames(src, cfg, progress), src, cfg, stage.path, ref, wall0, scans)
         write_extras(stage, plot, mcap_out, mcap_path, ref.gt_path, scans)

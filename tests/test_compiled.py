@@ -6,6 +6,7 @@ import importlib.util
 import re
 from pathlib import Path
 
+import pytest
 from click.testing import CliRunner
 
 import cornerslam_cli
@@ -60,3 +61,14 @@ def test_run_says_it_compiles_when_the_caches_are_empty_and_not_when_quiet(tmp_p
     monkeypatch.setattr(jit, "uncached", lambda: 0)
     res = CliRunner().invoke(cli, [*args[:3], str(tmp_path / "c"), *args[4:]])
     assert res.exit_code == 0 and "compiling" not in res.stderr
+
+
+@pytest.mark.parametrize("command", ["run", "compare"])
+def test_a_bad_logs_error_comes_alone_even_when_the_caches_are_empty(tmp_path, monkeypatch, command):
+    """The note is said after the log's checks: a log without the odometry topic asked for gives its
+    one line and exit 2, not a minute's promise first."""
+    monkeypatch.setattr(jit, "uncached", lambda: 7)
+    log = Path(__file__).resolve().parents[1] / "sample_logs" / "sim_office.mcap"
+    res = CliRunner().invoke(cli, [command, str(log), "--out", str(tmp_path / "o"), "--odom-topic", "/nope"])
+    assert res.exit_code == 2, res.output
+    assert "compiling" not in res.stderr and "has no topic '/nope'" in res.stderr
