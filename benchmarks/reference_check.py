@@ -94,17 +94,19 @@ def facing(local: LocalMap, tree: cKDTree, placed: np.ndarray, u: np.ndarray) ->
     return int(np.sum(np.abs(local.normals[i[ok]] @ u) > np.cos(FACING)))
 
 
-def check(args: tuple[Path, list[str]]) -> dict:
+def check(args: tuple[Path, list[str]], refute: bool = True) -> dict:
     log, sets = args
     run_cfg, src, pairs = keyframes(log, sets)
     if log.suffix == ".mcap":  # the simulated control: its ground truth at the keyframes' stamps
         ref = reference(log, log.parent, np.array([p.scan.stamp for p in pairs]))
     else:
         ref = np.array([p.odom for p in pairs])  # -exact logs: the reference poses are the odometry
-    return scored(log.name.removesuffix(".log"), run_cfg.scan_match, src.laser2base, pairs, ref)
+    return scored(log.name.removesuffix(".log"), run_cfg.scan_match, src.laser2base, pairs, ref, refute)
 
 
-def scored(name: str, cfg: ScanMatchConfig, laser2base, pairs, ref: np.ndarray) -> dict:
+def scored(name: str, cfg: ScanMatchConfig, laser2base, pairs, ref: np.ndarray, refute: bool = True) -> dict:
+    """The keyframes' checks (module docstring); ``refute`` False: the small-scale ones only (ICP from
+    the reference), without the correlative search of the refutation."""
     pts = [transform_points(p.scan.points(), laser2base) for p in pairs]  # base frame
     refuted, small = [], []
     for k in range(cfg.window, len(pairs)):
@@ -129,6 +131,8 @@ def scored(name: str, cfg: ScanMatchConfig, laser2base, pairs, ref: np.ndarray) 
                 facing(local, tree, transform_points(q, ref[k]), u),
             )
         )
+        if not refute:
+            continue
         found = search(
             q, local.points, ref[k], Window(SEARCH_XY, SEARCH_THETA), cfg.search_resolution, cfg.search_sigma
         )
