@@ -507,12 +507,20 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
     click.echo(format_extraction(segments, corners))
     if target is not None:
         from .report.oserrors import output_errors
+        from .report.outdir import clear_stale, staged_file
 
         with output_errors(plot_path):
-            # the target's directory made; written through the path as given, whose suffix names the
-            # format (the target's may not: link.png -> fig.txt)
+            # the target's directory made; written beside the target and renamed onto it (a killed
+            # extract leaves no cut figure, and an earlier one whole), in the format the path as given
+            # names (the target's suffix may not: link.png -> fig.txt)
             target.parent.mkdir(parents=True, exist_ok=True)
-            plot_extraction(scan, segments, corners, Path(plot_path))
+            clear_stale(target)  # hidden files of a killed extract
+            tmp = staged_file(target)
+            try:
+                plot_extraction(scan, segments, corners, tmp, fmt=Path(plot_path).suffix[1:].lower())
+                os.replace(tmp, target)
+            finally:
+                tmp.unlink(missing_ok=True)
         click.echo(f"wrote {plot_path}")
 
 

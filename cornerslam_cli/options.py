@@ -147,18 +147,21 @@ PRESET = _PresetName()
 
 class _FigurePath(click.ParamType):
     """A figure file (``extract --plot``): a path, not a directory, ending in an extension matplotlib
-    writes (it appends .png to a name without one, and refuses an unknown one after the work)."""
+    writes (it appends .png to a name without one, and refuses an unknown one after the work) in a format
+    whose file can name cornerslam as its creator (report/ownership.py ``figure_mark``: what lets a later
+    ``--plot`` replace it and nothing else; .gif, .webp, … cannot, and .pgf needs a LaTeX install)."""
 
     name = "FILE.png"
 
     def convert(self, value, param, ctx):
+        from .report.ownership import figure_mark
         from .report.plots import agg_backend
 
         agg_backend()  # (a bad MPLBACKEND would end the import)
         from matplotlib.backend_bases import FigureCanvasBase
 
         path = click.Path(dir_okay=False).convert(value, param, ctx)
-        formats = sorted(FigureCanvasBase.get_supported_filetypes())
+        formats = sorted(f for f in FigureCanvasBase.get_supported_filetypes() if figure_mark(f))
         if os.path.splitext(path)[1][1:].lower() not in formats:
             shown = click.format_filename(path)
             self.fail(f"'{shown}' does not end in a figure format (.{', .'.join(formats)})", param, ctx)

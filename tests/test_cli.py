@@ -283,6 +283,38 @@ def test_extract_prints_and_plots(sim_log, tmp_path):
     assert png.stat().st_size > 10_000
 
 
+def test_extract_plot_cut_short_keeps_the_earlier_figure_and_leaves_no_part(sim_log, tmp_path, monkeypatch):
+    """The figure is written beside its target and renamed onto it: a write cut short (a kill, a full
+    disk: here an error after half the bytes) leaves the earlier figure whole and no partial file."""
+    from cornerslam_cli.report import extract_plot
+
+    svg = tmp_path / "scan.svg"
+    assert invoke("extract", sim_log, "--step", 3, "--plot", svg).exit_code == 0
+    before = svg.read_bytes()
+    draw = extract_plot.plot_extraction
+
+    def cut_short(scan, segments, corners, path, title="", fmt=None):
+        draw(scan, segments, corners, path, title, fmt)
+        Path(path).write_bytes(Path(path).read_bytes()[: len(before) // 2])
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(extract_plot, "plot_extraction", cut_short)
+    res = invoke("extract", sim_log, "--step", 4, "--plot", svg)
+    assert res.exit_code == 2 and "no space left on device" in res.stderr, res.output
+    assert svg.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["scan.svg"]
+
+
+@pytest.mark.parametrize("name", ["scan.gif", "scan.webp", "scan.pgf", "scan.svgz"])
+def test_extract_plot_refuses_formats_whose_files_it_could_not_recognise_later(sim_log, tmp_path, name):
+    """Only formats whose file can name cornerslam as its creator: an extract figure in any other could
+    not be replaced by the next --plot (nor told from a user's file), and .pgf needs LaTeX (an internal
+    error after the work); refused before any work, no directory made."""
+    res = invoke("extract", sim_log, "--plot", tmp_path / "new" / name)
+    assert res.exit_code == 2 and "does not end in a figure format (" in res.stderr, res.output
+    formats = res.stderr.split("figure format (", 1)[1]
+    assert ".png, " in formats and ".gif" not in formats and not (tmp_path / "new").exists()
+
+
 def test_extract_step_is_the_steps_scan_and_its_features(tmp_path):
     """extract_step counts scans from 0 and extracts them as the filter's front end does; a step
     past the end is a ConfigError naming the valid range, and the CLI prints it as one line."""

@@ -55,8 +55,11 @@ def _ellipse(mean: np.ndarray, cov: np.ndarray, n_sigma: float = 3.0, n: int = 6
     return (mean[:, None] + vecs @ (n_sigma * np.sqrt(np.maximum(vals, 0.0))[:, None] * circle)).T
 
 
-def plot_extraction(scan: Scan, segments: Segments, corners: Corners, path, title: str = "") -> None:
-    """Draw the scan points, segments and corners with their 3σ position ellipses to ``path`` (PNG, …).
+def plot_extraction(
+    scan: Scan, segments: Segments, corners: Corners, path, title: str = "", fmt: str | None = None
+) -> None:
+    """Draw the scan points, segments and corners with their 3σ position ellipses to ``path`` (PNG, …;
+    ``fmt``: the format, by default the one its suffix names).
 
     Sensor frame, metres, equal aspect. Type I corners are dots, type II (end points) stars, as in the
     paper's Fig 14; the ellipses are the (x, y) block of each corner's covariance (Fig 15).
@@ -86,5 +89,6 @@ def plot_extraction(scan: Scan, segments: Segments, corners: Corners, path, titl
     ax.legend(loc="best", fontsize=8)
     fig.tight_layout()
     # marked as ours where the format can say so: a later extract --plot may replace it (ownership.py)
-    fig.savefig(Path(path), dpi=120, **figure_mark(Path(path).suffix[1:].lower()))
+    fmt = fmt or Path(path).suffix[1:].lower()  # (the format: of the name, unless given)
+    fig.savefig(Path(path), dpi=120, format=fmt, **figure_mark(fmt))
     plt.close(fig)
