@@ -43,7 +43,7 @@ from .blas import single_threaded_blas, single_threaded_blas_env
 from .errors import CornerslamError, ResultsError, display_path, for_command, one_line, save_traceback
 from .report.oserrors import output_errors
 from .report.outdir import clear_stale, staged_file
-from .report.ownership import claim_dir
+from .report.ownership import claim_dir, other_log_error
 from .results import Hashes, RunSummary
 from .sweep import Combo
 from .workers import warnings_kept, warnings_once
@@ -142,16 +142,18 @@ def _run_claimed(
     gt_hashes: dict[str, str | None | bool] = {}  # False: a ground truth the run cannot read
     todo: list[int] = []
     for i, c in enumerate(combos):
-        if c.error:
-            rows[i] = _row(c, "failed", error=c.error)
-            state.failed += 1
-            continue
-        if c.log not in log_hashes:  # once per log, not per combination
+        if not c.error and c.log not in log_hashes:  # once per log, not per combination
             try:
                 log_hashes[c.log] = input_hash(Path(c.log))
             except (OSError, CornerslamError):
                 log_hashes[c.log] = None  # the run reports the unreadable log (or pipe)
             gt_hashes[c.log] = _ground_truth_hash(c.log)
+        # a file of the same name elsewhere, batched into this OUT before, is refused
+        other = other_log_error(out / c.name, Path(c.log), c.name, log_hashes.get(c.log), "batch")
+        if error := c.error or (one_line(other) if other else ""):
+            rows[i] = _row(c, "failed", error=error)
+            state.failed += 1
+            continue
         figures = None
         gt_hash = gt_hashes[c.log]
         if log_hashes[c.log] is not None and gt_hash is not False:

@@ -283,6 +283,30 @@ def test_resume_skips_complete_unchanged_and_reruns_changed(first, logs, tmp_pat
     assert statuses == ["ok", "skipped", "skipped", "ok"]
 
 
+def test_another_log_of_the_same_name_does_not_replace_an_earlier_batchs_output(first, logs, tmp_path):
+    """Two files named good.mcap in two directories, batched into one OUT by two commands: the second's
+    rows fail naming both logs and the first's outputs stay; the same bytes moved elsewhere are the same
+    log, resumed (before: the second replaced the first's directories without a word)."""
+    import shutil
+
+    shutil.copytree(first[0], tmp_path / "out")
+    out = tmp_path / "out"
+    before = (out / "good__icnn__association.pca.group_size=3" / "trajectory.tum").read_bytes()
+    elsewhere = tmp_path / "other" / "good.mcap"
+    elsewhere.parent.mkdir()
+    simulate_log(elsewhere, seed=4, rate=1.0, beams=181)  # another log of the same name
+    rows = run_batch(plan([elsewhere], ["icnn"], {KEY: [3]}), out, jobs=1)
+    assert rows[0]["status"] == "failed" and not rows[0]["internal"]
+    assert "'good__icnn__association.pca.group_size=3' holds the output of '" in rows[0]["error"]
+    assert f"not of '{elsewhere}': batched into one OUT (give this batch its own --out" in rows[0]["error"]
+    assert (out / "good__icnn__association.pca.group_size=3" / "trajectory.tum").read_bytes() == before
+    moved = tmp_path / "moved" / "good.mcap"
+    moved.parent.mkdir()
+    shutil.copy(logs[0], moved)
+    moved.with_name("good.gt.tum").write_bytes(logs[0].with_name("good.gt.tum").read_bytes())
+    assert [r["status"] for r in run_batch(plan([moved], ["icnn"], {KEY: [3]}), out, jobs=1)] == ["skipped"]
+
+
 def test_dask_cluster_gives_the_same_batch_csv(first, logs, tmp_path):
     distributed = pytest.importorskip("dask.distributed")
     out, rows, _ = first

@@ -222,13 +222,33 @@ def recorded_log(path: Path) -> Path | None:
 def check_same_log(target: Path, log: Path, shown: Path) -> None:
     """Refuse (OutputError) to replace at ``target`` an output made from another log than ``log``:
     for the default place, named after the log's stem, which two logs may share."""
+    if e := other_log_error(target, log, shown):
+        raise e
+
+
+def other_log_error(
+    target: Path, log: Path, shown: Path | str, log_hash: str | None = None, command: str = "run"
+) -> OutputError | None:
+    """The error :func:`check_same_log` raises, None when ``target`` holds no output of another log.
+    ``command`` "batch": a batch's combination, named after the log's file name, which two files
+    elsewhere may share; with ``log_hash`` (report/summary.py input_hash) an output of the same bytes at
+    another path (the logs moved) is the same log's."""
     other = recorded_log(target) if target.is_dir() else None
-    if other is not None and other != log.resolve():
-        raise OutputError(
-            f"'{shown}' holds the output of '{other}', not of '{log}': the default output "
-            "directory of both logs",
-            "give this run its own --out, or remove the other output first",
-        )
+    if other is None or other == log.resolve() or (log_hash and _input_hash(target) == log_hash):
+        return None
+    where = "batched into one OUT" if command == "batch" else "the default output directory of both logs"
+    return OutputError(
+        f"'{shown}' holds the output of '{other}', not of '{log}': {where}",
+        f"give this {command} its own --out, or remove the other output first",
+    )
+
+
+def _input_hash(run_dir: Path) -> str | None:
+    """The log hash a run output's summary.json records, None when it has none."""
+    try:
+        return json.loads((run_dir / "summary.json").read_bytes()[: 1 << 24])["hashes"]["input"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
 
 
 def refuse_special_file(path: Path, shown: str | Path) -> None:
