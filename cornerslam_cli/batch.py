@@ -51,15 +51,8 @@ from .workers import warnings_kept, warnings_once
 log = logging.getLogger("cornerslam.batch")
 
 BATCH_CSV = "batch.csv"
-FIGURES = [
-    "steps",
-    "landmarks",
-    "matched_total",
-    "t_match",
-    "t_total",
-    "wall_time",
-    "ate_rmse",
-    "odom_ate_rmse",
+FIGURES = [  # batch.csv's figures of each run
+    *("steps", "landmarks", "matched_total", "t_match", "t_total", "wall_time", "ate_rmse", "odom_ate_rmse")
 ]
 TIMING_FIGURES = ("t_match", "t_total", "wall_time")  # differ between runs of the same combination
 STATUSES = ("ok", "failed", "skipped", "pending")
@@ -328,11 +321,11 @@ def _init_worker(level: int) -> None:
 
 def _connect(scheduler: str):
     """A Dask client of the scheduler at ``scheduler``; CornerslamError when Dask is not installed, the
-    address names no transport Dask has (``http://…``: its client would hang 20 s on exit), or nothing
-    answers there within 10 s."""
+    address names no transport Dask has (``http://…``: its client would hang 20 s on exit) or no port
+    (``tcp://host``: likewise), or nothing answers there within 10 s."""
     try:
         from dask.distributed import Client
-        from distributed.comm import parse_address
+        from distributed.comm.addressing import parse_address, parse_host_port
         from distributed.comm.registry import get_backend
     except ImportError:
         raise CornerslamError(
@@ -340,7 +333,10 @@ def _connect(scheduler: str):
         ) from None
     hint = "check the address (tcp://host:port) and that `dask scheduler` is running"
     try:
-        get_backend(parse_address(scheduler)[0])
+        scheme, where = parse_address(scheduler)
+        get_backend(scheme)
+        if scheme in ("tcp", "tls"):  # host:port checked here: a client that fails on it hangs 20 s too
+            parse_host_port(where)
         return Client(scheduler, timeout=10, set_as_default=False)
     except (OSError, TimeoutError, ValueError) as e:
         problem = f"cannot connect to the Dask scheduler at '{scheduler}': {' '.join(str(e).split())}"

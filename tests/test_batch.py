@@ -328,16 +328,55 @@ def test_scheduler_without_dask_asks_to_install_the_extra(monkeypatch, logs, tmp
     assert not (tmp_path / "out").exists()  # refused before any output (it wrote 'pending' rows)
 
 
-def test_a_scheduler_address_dask_cannot_reach_is_refused_at_once_writing_nothing(logs, tmp_path):
-    """http://… names no transport Dask has: exit 2 at once (its client hung 20 s on exit and printed a
-    traceback, and the output directory was left with 'pending' rows; found by a README probe)."""
+@pytest.mark.parametrize(
+    "address, problem",
+    [
+        ("http://x", "unknown address scheme 'http'"),
+        ("tcp://127.0.0.1", "missing port number in address '127.0.0.1'"),
+        ("tcp://localhost:", "invalid literal for int()"),
+    ],
+)
+def test_a_scheduler_address_dask_cannot_reach_is_refused_at_once_writing_nothing(
+    logs, tmp_path, address, problem
+):
+    """http://… names no transport Dask has, tcp://host no port: exit 2 at once (their clients hung 20 s
+    on exit and printed a traceback, and the output directory was left with 'pending' rows; found by a
+    README probe and a hostile-user probe)."""
     pytest.importorskip("dask.distributed")
     args = ["batch", str(logs[0]), "--assoc", "pca", "--out", str(tmp_path / "out"), "-q"]
     started = time.monotonic()
-    res = CliRunner().invoke(cli, [*args, "--scheduler", "http://x"])
-    assert res.exit_code == 2 and "unknown address scheme 'http'" in res.output, res.output
+    res = CliRunner().invoke(cli, [*args, "--scheduler", address])
+    assert res.exit_code == 2 and problem in res.output, res.output
     assert "Traceback" not in res.output and time.monotonic() - started < 10
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("address", ["tcp://127.0.0.1", "tcp://localhost:"])
+def test_a_scheduler_address_without_a_port_ends_the_process_at_once(logs, tmp_path, address):
+    """Its half-made client used to hang the process 20 s on exit, printing "Exception ignored …
+    Traceback" after the one-line error (found by a hostile-user probe): only a process of its own
+    shows that, not CliRunner."""
+    pytest.importorskip("dask.distributed")
+    import subprocess
+
+    args = [
+        "batch",
+        str(logs[0]),
+        "--assoc",
+        "pca",
+        "--out",
+        str(tmp_path / "out"),
+        "-q",
+        "--scheduler",
+        address,
+    ]
+    started = time.monotonic()
+    res = subprocess.run(
+        [sys.executable, "-m", "cornerslam_cli", *args], capture_output=True, text=True, timeout=60
+    )
+    assert res.returncode == 2 and "cannot connect to the Dask scheduler" in res.stderr, res.stderr
+    assert "Traceback" not in res.stderr and "Exception ignored" not in res.stderr, res.stderr
+    assert time.monotonic() - started < 15 and not (tmp_path / "out").exists()
 
 
 def test_a_bug_in_one_combination_is_a_failed_row(monkeypatch, logs, tmp_path):
