@@ -588,6 +588,9 @@ def _batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, q
     from .report.ownership import check_claimable
     from .sweep import plan
 
+    if scheduler == "":  # an unset shell variable: it ran on this machine's cores without a word
+        raise click.BadParameter("'' names no scheduler (an unset shell variable?)", param_hint="--scheduler")
+
     check_option_agrees(overrides, {"association.method": assocs})  # --assoc is set after each --set
     names = parse_assocs(assocs, allow_many=True) or [
         command_config(config_path, overrides).association.method

@@ -273,6 +273,10 @@ class UnlikeNumber:
         return ":" not in self.text
 
 
+class _DuplicateKey(yaml.constructor.ConstructorError):
+    """A mapping gives one key twice (a YAML error, but not one that makes a --set value a string)."""
+
+
 class _ConfigLoader(yaml.SafeLoader):
     """PyYAML's safe loader that refuses a key given twice in one mapping (PyYAML keeps the last) and
     keeps a base-60 number (``1:30``) or an octal one (``010``) as an :class:`UnlikeNumber`, to be
@@ -298,7 +302,7 @@ class _ConfigLoader(yaml.SafeLoader):
                 continue
             k = (key_node.tag, key_node.value)
             if k in seen:
-                raise yaml.constructor.ConstructorError(
+                raise _DuplicateKey(
                     None,
                     None,
                     f"key '{short_text(key_node.value)}' is given twice (first at line {seen[k].line + 1})",
@@ -394,8 +398,8 @@ def _key_lines(node: yaml.Node, prefix: str, lines: dict[str, int]) -> None:
     if not isinstance(node, yaml.MappingNode):
         return
     for key_node, value_node in node.value:
-        if isinstance(key_node, yaml.ScalarNode):
-            key = prefix + str(key_node.value)
+        if isinstance(key_node, yaml.ScalarNode):  # the key as loaded: `null:` is None, `true:` True
+            key = prefix + str(_ConfigLoader("").construct_object(key_node))
             lines.setdefault(key, key_node.start_mark.line + 1)
             _key_lines(value_node, key + ".", lines)  # (bounded: _expanded_size ran first)
 
@@ -503,6 +507,8 @@ def parse_override(text: str) -> tuple[list[str], Any]:
         raise ConfigError(f"--set '{shown}': '#' starts a YAML comment, so the value would be empty", why)
     try:
         value = _parse_yaml(raw, f"--set '{shown}'") if raw.strip() else ""
+    except _DuplicateKey as e:  # a mapping, not a string: `--set 'grid={resolution: 1, resolution: 2}'`
+        raise ConfigError(f"--set '{shown}': {e.problem}", "give each key once") from None
     except yaml.YAMLError:
         value = raw
     try:

@@ -146,10 +146,7 @@ PRESET = _PresetName()
 
 
 class _FigurePath(click.ParamType):
-    """A figure file (``extract --plot``): a path, not a directory, ending in an extension matplotlib
-    writes (it appends .png to a name without one, and refuses an unknown one after the work) in a format
-    whose file can name cornerslam as its creator (report/ownership.py ``figure_mark``: what lets a later
-    ``--plot`` replace it and nothing else; .gif, .webp, … cannot, and .pgf needs a LaTeX install)."""
+    """``extract --plot``'s file, in a format whose file names its creator (ownership.figure_mark)."""
 
     name = "FILE.png"
 

@@ -351,6 +351,13 @@ def test_a_scheduler_address_dask_cannot_reach_is_refused_at_once_writing_nothin
     assert not (tmp_path / "out").exists()
 
 
+def test_an_empty_scheduler_address_is_refused(tmp_path):
+    """``--scheduler "$ADDR"`` with ADDR unset: it ran on this machine's cores without a word."""
+    res = CliRunner().invoke(cli, ["batch", "x.mcap", "--out", str(tmp_path / "out"), "--scheduler", ""])
+    assert res.exit_code == 2 and "'' names no scheduler (an unset shell variable?)" in res.output, res.output
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.parametrize("address", ["tcp://127.0.0.1", "tcp://localhost:"])
 def test_a_scheduler_address_without_a_port_ends_the_process_at_once(logs, tmp_path, address):
     """Its half-made client used to hang the process 20 s on exit, printing "Exception ignored …

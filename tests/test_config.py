@@ -98,6 +98,9 @@ def test_an_unknown_key_suggests_a_key_further_down_of_that_name(override, hint)
             "'scan_match.window' must be an integer",
         ),
         ("ekf:\n  alhpa1: 0.1\n", 2, "unknown config key 'ekf.alhpa1'"),
+        # keys YAML reads as null or a boolean (the line was lost: the key looked up as written)
+        ("ekf:\n  alpha1: 0.1\nnull: 3\n", 3, "unknown config key 'None'"),
+        ("ekf:\n  alpha1: 0.1\n  true: 3\n", 3, "unknown config key 'ekf.True'"),
         ("lines:\n  min_points: 6\nassociation: 3\n", 3, "'association' must be a mapping"),
     ],
 )
@@ -447,3 +450,12 @@ def test_a_check_across_the_keys_a_set_of_a_mapping_names_is_located_at_it():
     with pytest.raises(ConfigError) as e:  # two --sets: either may be the mistake, neither is named
         load_config(None, ["scan_match.adapt_min_samples=50", "scan_match.adapt_window=10"])
     assert str(e.value).startswith("config section 'scan_match'")
+
+
+def test_a_key_given_twice_in_a_set_mapping_is_named():
+    """As in a file (it was taken as a string: "'grid' must be a mapping, got '{…}'")."""
+    with pytest.raises(ConfigError) as e:
+        load_config(None, ["grid={resolution: 0.1, resolution: 0.2}"])
+    head = "--set 'grid={resolution: 0.1, resolution: 0.2}': key 'resolution' is given twice"
+    assert str(e.value).startswith(head)
+    assert load_config(None, ["input.scan_topic=a: b: c"]).input.scan_topic == "a: b: c"  # not YAML: text

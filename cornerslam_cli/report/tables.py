@@ -154,6 +154,14 @@ def read_tum(
 
     a, lines = read_number_rows(path, what, LogError, "TUM pose", TUM_LAYOUT, 8)
     name = f"{what} '{path}'"
+    q = a[:, 4:8]
+    if len(a) >= 2 and not np.any(q[:, :3]) and np.any(np.abs(np.abs(q[:, 3]) - 1.0) > 1e-3):
+        # a relations file's z roll pitch yaw read as qx qy qz qw: (0, 0, 0, yaw), not of unit length
+        raise LogError(
+            f"{name} looks like a relations file (t1 t2 x y z roll pitch yaw: where its quaternions "
+            "should be, each line has 0 0 0 and a number that is not ±1)",
+            f"give it as --relations; a TUM file has lines {TUM_LAYOUT}",
+        )
     refuse_far(a, lines, [1, 2, 3], name, LogError, TUM_LAYOUT)
     back = np.flatnonzero(np.diff(a[:, 0]) < 0)
     if len(back):
