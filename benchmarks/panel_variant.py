@@ -199,11 +199,15 @@ def summary(rows: list[dict]) -> list[str]:
                 f"- {group}, {b}: median of the means {median:.3f} m, worst {means[b][worst]:.3f} m ({worst})"
             )
     for group, (delta, lo, hi) in median_shift(rows).items():
+        reading = (
+            "clear of 0: the copies' spread alone gives such a change about 1 time in 10"
+            if lo > 0 or hi < 0
+            else "it spans 0: no change of the median shown"
+        )
         out.append(
             f"- {group}: variant − baseline median of the means {delta:+.3f} m, 90 % bootstrap interval "
-            f"{lo:+.3f} … {hi:+.3f} m (each log's runs resampled in both builds, {DRAWS} draws; clear of 0: "
-            "the copies' spread alone gives such a change about 1 time in 10, and with K + 1 runs a log the "
-            "interval is rough)"
+            f"{lo:+.3f} … {hi:+.3f} m (each log's runs resampled in both builds, {DRAWS} draws; {reading}; "
+            "with K + 1 runs a log the interval is rough)"
         )
     verdicts = [verdict(np.array(r["baseline"])[:, 0], np.array(r["variant"])[:, 0]) for r in rows]
     out.append(

@@ -42,7 +42,7 @@ from . import __version__
 from .blas import single_threaded_blas, single_threaded_blas_env
 from .errors import CornerslamError, ResultsError, display_path, for_command, one_line, save_traceback
 from .report.oserrors import output_errors
-from .report.outdir import clear_stale, staged_file
+from .report.outdir import clear_stale, staged_write
 from .report.ownership import claim_dir, other_log_error
 from .results import Hashes, RunSummary
 from .sweep import Combo
@@ -51,9 +51,7 @@ from .workers import warnings_kept, warnings_once
 log = logging.getLogger("cornerslam.batch")
 
 BATCH_CSV = "batch.csv"
-FIGURES = [  # batch.csv's figures of each run
-    *("steps", "landmarks", "matched_total", "t_match", "t_total", "wall_time", "ate_rmse", "odom_ate_rmse")
-]
+FIGURES = "steps,landmarks,matched_total,t_match,t_total,wall_time,ate_rmse,odom_ate_rmse".split(",")
 TIMING_FIGURES = ("t_match", "t_total", "wall_time")  # differ between runs of the same combination
 STATUSES = ("ok", "failed", "skipped", "pending")
 BATCH_OPTIONS = ("--assoc",)  # of errors.OPTION_OF, the options cornerslam batch takes (the rest by --set)
@@ -141,9 +139,11 @@ def _run_claimed(
             except (OSError, CornerslamError):
                 log_hashes[c.log] = None  # the run reports the unreadable log (or pipe)
             gt_hashes[c.log] = _ground_truth_hash(c.log)
-        # a file of the same name elsewhere, batched into this OUT before, is refused
-        other = other_log_error(out / c.name, Path(c.log), c.name, log_hashes.get(c.log), "batch")
-        if error := c.error or (one_line(other) if other else ""):
+        error = c.error
+        if not error and log_hashes[c.log] is not None:  # (an unreadable log's run says why)
+            other = other_log_error(out / c.name, Path(c.log), c.name, log_hashes[c.log], "batch")
+            error = one_line(other) if other else ""  # a file of the same name batched into OUT before
+        if error:
             rows[i] = _row(c, "failed", error=error)
             state.failed += 1
             continue
@@ -336,7 +336,10 @@ def _connect(scheduler: str):
         scheme, where = parse_address(scheduler)
         get_backend(scheme)
         if scheme in ("tcp", "tls"):  # host:port checked here: a client that fails on it hangs 20 s too
-            parse_host_port(where)
+            try:
+                parse_host_port(where)
+            except ValueError:
+                raise ValueError(f"no port in '{where}' (tcp://host:port)") from None
         return Client(scheduler, timeout=10, set_as_default=False)
     except (OSError, TimeoutError, ValueError) as e:
         problem = f"cannot connect to the Dask scheduler at '{scheduler}': {' '.join(str(e).split())}"
@@ -373,20 +376,13 @@ class _CsvWriter:
         if throttle and now - self.last < 1.0:
             return
         self.last = now
-        with output_errors(self.path):
-            tmp = staged_file(self.path)
-            try:
-                with open(tmp, "w", newline="") as f:
-                    w = csv.writer(f, lineterminator="\n")
-                    w.writerow(self.columns)
-                    for r in rows:
-                        w.writerow(["" if r.get(k) is None else csv_value(r[k]) for k in self.columns])
-                    f.flush()
-                    os.fsync(f.fileno())
-                os.replace(tmp, self.path)
-            except BaseException:
-                tmp.unlink(missing_ok=True)
-                raise
+        with output_errors(self.path), staged_write(self.path) as tmp, open(tmp, "w", newline="") as f:
+            w = csv.writer(f, lineterminator="\n")
+            w.writerow(self.columns)
+            for r in rows:
+                w.writerow(["" if r.get(k) is None else csv_value(r[k]) for k in self.columns])
+            f.flush()
+            os.fsync(f.fileno())
 
 
 def read_batch(path: str | Path) -> list[dict[str, str]]:

@@ -507,20 +507,15 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
     click.echo(format_extraction(segments, corners))
     if target is not None:
         from .report.oserrors import output_errors
-        from .report.outdir import clear_stale, staged_file
+        from .report.outdir import staged_write
 
         with output_errors(plot_path):
             # the target's directory made; written beside the target and renamed onto it (a killed
             # extract leaves no cut figure, and an earlier one whole), in the format the path as given
             # names (the target's suffix may not: link.png -> fig.txt)
             target.parent.mkdir(parents=True, exist_ok=True)
-            clear_stale(target)  # hidden files of a killed extract
-            tmp = staged_file(target)
-            try:
+            with staged_write(target) as tmp:
                 plot_extraction(scan, segments, corners, tmp, fmt=Path(plot_path).suffix[1:].lower())
-                os.replace(tmp, target)
-            finally:
-                tmp.unlink(missing_ok=True)
         click.echo(f"wrote {plot_path}")
 
 

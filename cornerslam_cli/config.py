@@ -251,6 +251,7 @@ def from_dict(cls: type, data: dict, prefix: str = "") -> Any:
 
 
 # --------------------------------------------------------------------------- YAML
+_NULL_TAG, _BOOL_TAG = "tag:yaml.org,2002:null", "tag:yaml.org,2002:bool"
 _INT_TAG = "tag:yaml.org,2002:int"
 _FLOAT_TAG = "tag:yaml.org,2002:float"
 _UNLIKE_TAG = "tag:cornerslam,2026:unlike-as-written"  # a number YAML 1.1 reads in base 60 or 8
@@ -391,17 +392,20 @@ def _expanded_size(node: yaml.Node, sizes: dict[int, int | None], where: str) ->
     return n
 
 
-def _key_lines(node: yaml.Node, prefix: str, lines: dict[str, int]) -> None:
+def _key_lines(node: yaml.Node, prefix: str, lines: dict[str, int], loader: _ConfigLoader) -> None:
     """Fill ``lines`` with the 1-based line of each key of the mapping ``node`` and of its nested
     mappings, dotted (``ekf.alpha1``). An alias is walked once, where it is first defined (its keys'
     lines are the anchor's: what the user would edit)."""
     if not isinstance(node, yaml.MappingNode):
         return
     for key_node, value_node in node.value:
-        if isinstance(key_node, yaml.ScalarNode):  # the key as loaded: `null:` is None, `true:` True
-            key = prefix + str(_ConfigLoader("").construct_object(key_node))
+        if isinstance(key_node, yaml.ScalarNode):
+            text = key_node.value  # as loaded where YAML reads it otherwise: `null:` is None, `true:` True
+            if key_node.tag in (_NULL_TAG, _BOOL_TAG, _INT_TAG, _FLOAT_TAG):
+                text = str(loader.construct_object(key_node))
+            key = prefix + text
             lines.setdefault(key, key_node.start_mark.line + 1)
-            _key_lines(value_node, key + ".", lines)  # (bounded: _expanded_size ran first)
+            _key_lines(value_node, key + ".", lines, loader)  # (bounded: _expanded_size ran first)
 
 
 def _parse_yaml(text: str, where: str, lines: dict[str, int] | None = None) -> Any:
@@ -416,7 +420,7 @@ def _parse_yaml(text: str, where: str, lines: dict[str, int] | None = None) -> A
             return None
         _expanded_size(node, {}, where)
         if lines is not None:
-            _key_lines(node, "", lines)
+            _key_lines(node, "", lines, loader)
         return loader.construct_document(node)
     except RecursionError:
         raise ConfigError(f"{where} is nested too deeply", "a config has two or three levels") from None

@@ -332,8 +332,8 @@ def test_scheduler_without_dask_asks_to_install_the_extra(monkeypatch, logs, tmp
     "address, problem",
     [
         ("http://x", "unknown address scheme 'http'"),
-        ("tcp://127.0.0.1", "missing port number in address '127.0.0.1'"),
-        ("tcp://localhost:", "invalid literal for int()"),
+        ("tcp://127.0.0.1", "no port in '127.0.0.1' (tcp://host:port)"),
+        ("tcp://localhost:", "no port in 'localhost:' (tcp://host:port)"),
     ],
 )
 def test_a_scheduler_address_dask_cannot_reach_is_refused_at_once_writing_nothing(

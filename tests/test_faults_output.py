@@ -18,6 +18,7 @@ import json
 import os
 import shutil
 import signal
+import stat
 import subprocess
 import sys
 import threading
@@ -1217,15 +1218,17 @@ def test_simulate_writes_over_its_own_earlier_log(tmp_path):
     assert out.with_suffix(".gt.tum").exists() and out.with_suffix(".corners.csv").exists()
 
 
-@pytest.mark.parametrize("name", ["scan.png", "scan.pdf", "scan.svg", "scan.jpg", "scan.TIFF"])
+@pytest.mark.parametrize("name", ["s.png", "s.pdf", "s.svg", "s.jpg", "s.TIFF", "s.ps", "s.eps"])
 def test_extract_plot_writes_over_its_own_earlier_figure(name, tmp_path, valid_log):
     """`extract --plot` again to the same name replaces the figure it wrote (a re-run is the usual case),
-    in each format whose file can name its creator."""
+    in each format whose file can name its creator, keeping the file's permissions (it is written beside
+    and renamed onto it)."""
     figure = tmp_path / name
     for step in ("1", "2"):
         res = CliRunner().invoke(cli, ["extract", str(valid_log), "--step", step, "--plot", str(figure)])
         assert res.exit_code == 0, res.output
-    assert figure.stat().st_size > 1000
+        figure.chmod(0o640)
+    assert figure.stat().st_size > 1000 and stat.S_IMODE(figure.stat().st_mode) == 0o640
 
 
 def test_enoent_is_a_user_error_only_where_the_directory_creates_no_files(tmp_path, monkeypatch):

@@ -133,6 +133,22 @@ def staged_file(dest: Path) -> Path:
     return Path(tmp)
 
 
+@contextmanager
+def staged_write(dest: Path) -> Iterator[Path]:
+    """A hidden file beside ``dest`` to write the whole of it in (:func:`staged_file`; leftovers of
+    killed writers cleared first), renamed onto ``dest`` when the block ends, with the mode of the file
+    it replaces; removed when the block raises (an error, Ctrl-C): ``dest`` is never seen half written."""
+    clear_stale(dest)
+    tmp = staged_file(dest)
+    try:
+        yield tmp
+        if dest.is_file():
+            os.chmod(tmp, stat.S_IMODE(os.stat(dest).st_mode))
+        os.replace(tmp, dest)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
 def _open_lock(path: Path) -> int:
     """Open (create) the lock file ``path``; OutputError when something not cornerslam's is there (a
     symlink, a directory, a file holding anything but ``LOCK_MARK``): it is deleted on release."""

@@ -211,12 +211,18 @@ def recorded_log(path: Path) -> Path | None:
         return Path(marker["log"])
     summaries = [path / "summary.json", *sorted(path.glob("*/summary.json"))]  # a run; a compare's runs
     for summary in summaries:
-        try:
-            log = json.loads(summary.read_bytes()[: 1 << 24])["input"]["log"]
-        except (OSError, ValueError, KeyError, TypeError):
-            continue
-        return Path(log).resolve() if isinstance(log, str) else None
+        log = _summary_field(summary, "input", "log")
+        if log is not None:
+            return Path(log).resolve() if isinstance(log, str) else None
     return None
+
+
+def _summary_field(summary: Path, section: str, key: str):
+    """``summary[section][key]`` of a summary.json (its first 16 MiB), None when it has none."""
+    try:
+        return json.loads(summary.read_bytes()[: 1 << 24])[section][key]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
 
 
 def check_same_log(target: Path, log: Path, shown: Path) -> None:
@@ -234,7 +240,8 @@ def other_log_error(
     elsewhere may share; with ``log_hash`` (report/summary.py input_hash) an output of the same bytes at
     another path (the logs moved) is the same log's."""
     other = recorded_log(target) if target.is_dir() else None
-    if other is None or other == log.resolve() or (log_hash and _input_hash(target) == log_hash):
+    same = other is not None and str(other) == os.path.realpath(log)  # (realpath: no error on a loop)
+    if other is None or same or (log_hash and _input_hash(target) == log_hash):
         return None
     where = "batched into one OUT" if command == "batch" else "the default output directory of both logs"
     return OutputError(
@@ -245,10 +252,7 @@ def other_log_error(
 
 def _input_hash(run_dir: Path) -> str | None:
     """The log hash a run output's summary.json records, None when it has none."""
-    try:
-        return json.loads((run_dir / "summary.json").read_bytes()[: 1 << 24])["hashes"]["input"]
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
+    return _summary_field(run_dir / "summary.json", "hashes", "input")
 
 
 def refuse_special_file(path: Path, shown: str | Path) -> None:

@@ -154,9 +154,14 @@ def read_tum(
 
     a, lines = read_number_rows(path, what, LogError, "TUM pose", TUM_LAYOUT, 8)
     name = f"{what} '{path}'"
-    q = a[:, 4:8]
-    if len(a) >= 2 and not np.any(q[:, :3]) and np.any(np.abs(np.abs(q[:, 3]) - 1.0) > 1e-3):
-        # a relations file's z roll pitch yaw read as qx qy qz qw: (0, 0, 0, yaw), not of unit length
+    q, later = a[:, 4:8], a[:, 1] - a[:, 0]  # a relations file's t2 − t1 where x should be
+    if (
+        len(a) >= 2
+        and not np.any(q[:, :3])
+        and np.all(np.abs(q[:, 3]) <= np.pi)
+        and np.any(np.abs(np.abs(q[:, 3]) - 1.0) > 1e-3)
+        and np.all((np.abs(later) < 1e4) & (np.abs(a[:, 1]) > 1e5))
+    ):  # its z roll pitch yaw read as qx qy qz qw: (0, 0, 0, yaw), and a clock's t2 near t1 as x
         raise LogError(
             f"{name} looks like a relations file (t1 t2 x y z roll pitch yaw: where its quaternions "
             "should be, each line has 0 0 0 and a number that is not ±1)",
