@@ -42,7 +42,7 @@ from . import __version__
 from .blas import single_threaded_blas, single_threaded_blas_env
 from .errors import CornerslamError, ResultsError, display_path, for_command, one_line, save_traceback
 from .report.oserrors import output_errors
-from .report.outdir import clear_stale, staged_write
+from .report.outdir import staged_write
 from .report.ownership import claim_dir, other_log_error
 from .results import Hashes, RunSummary
 from .sweep import Combo
@@ -125,7 +125,6 @@ def _run_claimed(
     from .report.summary import config_hash, input_hash
 
     claim_dir(out, "batch")  # refuses a directory that is not a batch's, before any work
-    clear_stale(out / BATCH_CSV)  # temporary files of a killed batch
     columns = batch_columns([k for k, _ in combos[0].sweep] if combos else [])
     rows = [_row(c, "pending") for c in combos]
     state = BatchState(len(combos))
@@ -362,7 +361,8 @@ def _run_dask(tasks: list[tuple], client, finished: Callable[[int, dict], None])
 
 
 class _CsvWriter:
-    """batch.csv, replaced atomically on each write (at most once a second when throttled)."""
+    """batch.csv, replaced atomically on each write (at most once a second when throttled; the first, before
+    any run, also clears the temporary files of a killed batch: outdir.staged_write)."""
 
     def __init__(self, path: Path, columns: list[str]):
         self.path = path
