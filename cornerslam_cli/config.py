@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import datetime
 import logging
 import math
 import re
@@ -237,7 +238,7 @@ def from_dict(cls: type, data: dict, prefix: str = "") -> Any:
             log.warning("config key '%s%s' is no longer used and was ignored: %s", prefix, key, retired[key])
             continue
         if key not in names:
-            name = short_text(key) if isinstance(key, str) else short_repr(key)
+            name = short_text(str(key)) if isinstance(key, (str, datetime.date)) else short_repr(key)
             raise ConfigError(f"unknown config key '{prefix}{name}'", _closest(str(key)[:100], cls, prefix))
         kwargs[key] = _coerce(value, hints[key], prefix + key, field_range(fields[key]))
     try:
@@ -254,6 +255,7 @@ def from_dict(cls: type, data: dict, prefix: str = "") -> Any:
 _NULL_TAG, _BOOL_TAG = "tag:yaml.org,2002:null", "tag:yaml.org,2002:bool"
 _INT_TAG = "tag:yaml.org,2002:int"
 _FLOAT_TAG = "tag:yaml.org,2002:float"
+_TIMESTAMP_TAG = "tag:yaml.org,2002:timestamp"  # a date key: named as YAML prints it (2024-01-01)
 _UNLIKE_TAG = "tag:cornerslam,2026:unlike-as-written"  # a number YAML 1.1 reads in base 60 or 8
 _OCTAL = re.compile(r"^[-+]?0[0-7_]*[0-7][0-7_]*$")  # YAML 1.1's base 8 ('0' and '0_' are 0 either way)
 
@@ -401,7 +403,7 @@ def _key_lines(node: yaml.Node, prefix: str, lines: dict[str, int], loader: _Con
     for key_node, value_node in node.value:
         if isinstance(key_node, yaml.ScalarNode):
             text = key_node.value  # as loaded where YAML reads it otherwise: `null:` is None, `true:` True
-            if key_node.tag in (_NULL_TAG, _BOOL_TAG, _INT_TAG, _FLOAT_TAG):
+            if key_node.tag in (_NULL_TAG, _BOOL_TAG, _INT_TAG, _FLOAT_TAG, _TIMESTAMP_TAG):
                 text = str(loader.construct_object(key_node))
             key = prefix + text
             lines.setdefault(key, key_node.start_mark.line + 1)
@@ -547,7 +549,7 @@ def _merge(base: dict, path: list[str], value: Any) -> None:
 def override_leaves(keys: list[str], value: Any) -> list[tuple[str, Any]]:
     """(dotted key, value) of each key a ``--set`` (:func:`parse_override`'s ``keys``, ``value``) sets:
     a mapping's leaves (``--set 'input={scan_topic: /b}'``; an empty mapping sets none)."""
-    key = ".".join(keys)
+    key = ".".join(map(str, keys))  # a mapping's key YAML reads as a number, a date or null: as printed
     if isinstance(value, dict):
         return [leaf for k, v in value.items() for leaf in override_leaves([key, k], v)]
     return [(key, value)]

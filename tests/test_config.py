@@ -4,7 +4,7 @@ from pathlib import Path
 
 import pytest
 
-from cornerslam_cli.config import Config, dump_config, load_config
+from cornerslam_cli.config import Config, dump_config, load_config, set_leaves
 from cornerslam_cli.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -101,6 +101,8 @@ def test_an_unknown_key_suggests_a_key_further_down_of_that_name(override, hint)
         # keys YAML reads as null or a boolean (the line was lost: the key looked up as written)
         ("ekf:\n  alpha1: 0.1\nnull: 3\n", 3, "unknown config key 'None'"),
         ("ekf:\n  alpha1: 0.1\n  true: 3\n", 3, "unknown config key 'ekf.True'"),
+        # a date (it was named datetime.date(2024, 1, 1), with no line)
+        ("ekf:\n  alpha1: 0.1\n  2024-01-01: 3\n", 3, "unknown config key 'ekf.2024-01-01'"),
         ("lines:\n  min_points: 6\nassociation: 3\n", 3, "'association' must be a mapping"),
     ],
 )
@@ -459,3 +461,21 @@ def test_a_key_given_twice_in_a_set_mapping_is_named():
     head = "--set 'grid={resolution: 0.1, resolution: 0.2}': key 'resolution' is given twice"
     assert str(e.value).startswith(head)
     assert load_config(None, ["input.scan_topic=a: b: c"]).input.scan_topic == "a: b: c"  # not YAML: text
+
+
+@pytest.mark.parametrize(
+    "mapping, key",
+    [
+        ("{1: 3}", "ekf.1"),
+        ("{null: 3}", "ekf.None"),
+        ("{1.5: 3}", "ekf.1.5"),
+        ("{2024-01-01: 3}", "ekf.2024-01-01"),
+    ],
+)
+def test_a_set_mapping_key_yaml_reads_as_no_string_is_an_unknown_key(mapping, key):
+    """``--set 'ekf={1: 3}'`` was an internal error (its leaves' dotted names joined the key as a number)."""
+    text = f"ekf={mapping}"
+    assert [leaf for _, leaf, _ in set_leaves([text])] == [key]
+    with pytest.raises(ConfigError) as e:
+        load_config(None, [text])
+    assert str(e.value).startswith(f"--set '{text}': unknown config key '{key}'")
