@@ -32,8 +32,11 @@ itself (``--set scan_match.robust_scale=0.1 --perturb kernel``) has its copies m
 steps around its own value.
 Writes a markdown report (default docs/results/variant_<settings>.md, or variant_vs_<REV>.md; with
 ``--perturb submaps`` / ``kernel`` the name ends in ``_submaps`` / ``_kernel``) and every run's figures
-beside it (the same name, .json). Besides the per-log verdicts the report gives, per group, the change of
-the median of the per-log means with a bootstrap interval over each log's runs (:func:`median_shift`).
+beside it (the same name, .json); ``--from-json FILE --at REV`` writes the report again from such a file
+(the runs made at REV, with the command's other options as they were then) without running anything —
+after a change of the report's wording. Besides the per-log verdicts the report gives, per group, the
+change of the median of the per-log means with a bootstrap interval over each log's runs
+(:func:`median_shift`).
 """
 
 from __future__ import annotations
@@ -75,6 +78,9 @@ def run(log: Path, out: Path, extra: list[str], env: dict[str, str]) -> tuple[fl
     if "relations" in a:
         return a["relations"]["trans_mean"], a["scan_odom_relations"]["trans_mean"], revisit
     return a["ate"]["rmse"], a["scan_odom_ate"]["rmse"], revisit
+
+
+BUILDS = ("baseline", "variant")
 
 
 def measure(logs, builds, k: int, jobs: int, tmp: Path, perturb: str = "odom") -> list[dict]:
@@ -224,7 +230,12 @@ def report(
     k: int,
     perturb: str = "odom",
     value: float | None = None,
+    at: str | None = None,
 ) -> list[str]:
+    """The report's lines; ``at``: the revision the runs were made at, when it is not this checkout (the
+    report re-rendered from its saved runs, ``--from-json``)."""
+    rev = at or revision()
+    again = f" (this report written again from its runs, .json, at {revision()})" if at else ""
     cmd = " ".join(["python benchmarks/panel_variant.py", *(f"--set {s}" for s in sets), f"--k {k}"])
     if base_rev != "HEAD":
         cmd += f" --baseline {base_rev}"
@@ -245,11 +256,11 @@ def report(
             )
     base = "the defaults" if base_rev == "HEAD" else f"revision {revision(base_rev)}, its defaults"
     variant = ", ".join(f"`{s}`" for s in sets) or "its defaults"
-    title = ", ".join(f"`{s}`" for s in sets) or f"this build ({revision()})"
+    title = ", ".join(f"`{s}`" for s in sets) or f"this build ({rev})"
     return [
         f"# Panel: {title} against {base}",
         "",
-        f"`{cmd}` at {revision()}. Variant: this build with {variant}; baseline: {base}. Each log runs "
+        f"`{cmd}` at {rev}{again}. Variant: this build with {variant}; baseline: {base}. Each log runs "
         f"as it is and {copies_are}{'' if value is not None else ', in both builds'}; "
         "cells give the mean of the figures and their range. Verdict **better** / **worse** only when the "
         "ranges do not overlap. Figures: ATE RMSE against the corrected poses beside each radish log; "
@@ -275,6 +286,16 @@ def report(
     ]
 
 
+def run_panel(logs, args, value: float | None) -> list[dict]:
+    """Both builds' runs of every log (:func:`measure`), in a temporary directory."""
+    sets = [x for s in args.sets for x in ("--set", s)]
+    with tempfile.TemporaryDirectory(prefix="panel-variant-") as tmp, contextlib.ExitStack() as stack:
+        src = ROOT if args.baseline == "HEAD" else stack.enter_context(source_tree(args.baseline))
+        builds = {"baseline": (build_env(src), [], None), "variant": (build_env(ROOT), sets, value)}
+        assert tuple(builds) == BUILDS
+        return measure(logs, builds, args.k, args.jobs, Path(tmp), args.perturb)
+
+
 def slug(sets: list[str], base_rev: str) -> str:
     """A file name for the comparison: the settings (``scan_match.window-20``), or the baseline revision."""
     text = "_".join(sets) if sets else f"vs_{base_rev}"
@@ -297,7 +318,11 @@ def main() -> None:
         "scan_match.robust_scale ±0.2 %%, ...",
     )
     ap.add_argument("--out", type=Path, default=None)
+    ap.add_argument("--from-json", type=Path, default=None, help="write the report from this file's runs")
+    ap.add_argument("--at", default=None, help="with --from-json: the revision its runs were made at")
     args = ap.parse_args()
+    if (args.from_json is None) != (args.at is None):
+        ap.error("--from-json and --at go together: the saved runs and the revision they were made at")
     if not args.sets and args.baseline == "HEAD":
         ap.error("nothing to compare: give --set KEY=VALUE and/or --baseline REV")
     value = None
@@ -325,16 +350,20 @@ def main() -> None:
         ap.error(f"{', '.join(missing)} not found (pass --data DIR)")
     suffix = f"_{args.perturb}" if args.perturb in MOVED else ""
     out = args.out or ROOT / "docs" / "results" / f"variant_{slug(args.sets, args.baseline)}{suffix}.md"
-    sets = [x for s in args.sets for x in ("--set", s)]
-    with tempfile.TemporaryDirectory(prefix="panel-variant-") as tmp, contextlib.ExitStack() as stack:
-        src = ROOT if args.baseline == "HEAD" else stack.enter_context(source_tree(args.baseline))
-        builds = {"baseline": (build_env(src), [], None), "variant": (build_env(ROOT), sets, value)}
-        rows = measure(logs, builds, args.k, args.jobs, Path(tmp), args.perturb)
-    text = "\n".join(report(rows, args.sets, args.baseline, args.k, args.perturb, value))
+    if args.from_json is not None:
+        saved = json.loads(args.from_json.read_text())
+        rows = [{k: np.array(v, dtype=float) if k != "log" else v for k, v in r.items()} for r in saved]
+        rows = [r for r in rows if r["log"] in {n for n, _, _ in logs}]
+    else:
+        rows = run_panel(logs, args, value)
+    text = "\n".join(report(rows, args.sets, args.baseline, args.k, args.perturb, value, args.at))
     out.write_text(text)
     # every run's figures (figure, chain's figure, revisit), for reading the panel again another way
     clean = [
-        {"log": r["log"], **{b: [[None if np.isnan(x) else x for x in run] for run in r[b]] for b in builds}}
+        {
+            "log": r["log"],
+            **{b: [[None if np.isnan(x) else float(x) for x in run] for run in r[b]] for b in BUILDS},
+        }
         for r in rows
     ]
     out.with_name(out.name.removesuffix(".md") + ".json").write_text(json.dumps(clean, indent=1) + "\n")
