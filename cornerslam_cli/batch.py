@@ -257,7 +257,7 @@ def run_one(log: str, config: dict, out_dir: str) -> dict:
             from .config import Config, from_dict
             from .pipeline import run
 
-            summary = run(log, from_dict(Config, config), out_dir)
+            summary = run(log, from_dict(Config, config), out_dir, inside="batch")
             result = {"status": "ok", "figures": figures_from_summary(summary)}
         except SystemExit:  # the batch was interrupted and ended us (workers.stopped_by_parent)
             os._exit(143)  # the staging is removed: end here, not in the combination queued to us next

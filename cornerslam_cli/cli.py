@@ -430,8 +430,14 @@ def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
     from .simulate import simulate_log
 
     setup_logging(verbose, quiet)
-    with output_errors(out_path):
-        res = simulate_log(Path(out_path), seed=seed, laps=laps, rate=rate, beams=beams, speed=speed)
+    progress = Progress("simulate", enabled=not quiet)
+    try:
+        with output_errors(out_path):
+            res = simulate_log(
+                Path(out_path), seed=seed, laps=laps, rate=rate, beams=beams, speed=speed, progress=progress
+            )
+    finally:
+        progress.close()
     if not quiet:
         click.echo(
             f"wrote {res['log']} ({res['scans']} scans, {res['duration']:.1f} s), "

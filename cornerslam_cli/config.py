@@ -255,6 +255,7 @@ def from_dict(cls: type, data: dict, prefix: str = "") -> Any:
 _NULL_TAG, _BOOL_TAG = "tag:yaml.org,2002:null", "tag:yaml.org,2002:bool"
 _INT_TAG = "tag:yaml.org,2002:int"
 _FLOAT_TAG = "tag:yaml.org,2002:float"
+_MERGE_TAG = "tag:yaml.org,2002:merge"  # `<<: *base`: the keys of another mapping merged into this one
 _TIMESTAMP_TAG = "tag:yaml.org,2002:timestamp"  # a date key: named as YAML prints it (2024-01-01)
 _UNLIKE_TAG = "tag:cornerslam,2026:unlike-as-written"  # a number YAML 1.1 reads in base 60 or 8
 _OCTAL = re.compile(r"^[-+]?0[0-7_]*[0-7][0-7_]*$")  # YAML 1.1's base 8 ('0' and '0_' are 0 either way)
@@ -398,9 +399,16 @@ def _key_lines(node: yaml.Node, prefix: str, lines: dict[str, int], loader: _Con
     """Fill ``lines`` with the 1-based line of each key of the mapping ``node`` and of its nested
     mappings, dotted (``ekf.alpha1``). An alias is walked once, where it is first defined (its keys'
     lines are the anchor's: what the user would edit)."""
+    if isinstance(node, yaml.SequenceNode):  # a merge key's list of mappings
+        for item in node.value:
+            _key_lines(item, prefix, lines, loader)
+        return
     if not isinstance(node, yaml.MappingNode):
         return
+    merged = [v for k, v in node.value if k.tag == _MERGE_TAG]  # their keys are this mapping's
     for key_node, value_node in node.value:
+        if key_node.tag == _MERGE_TAG:
+            continue
         if isinstance(key_node, yaml.ScalarNode):
             text = key_node.value  # as loaded where YAML reads it otherwise: `null:` is None, `true:` True
             if key_node.tag in (_NULL_TAG, _BOOL_TAG, _INT_TAG, _FLOAT_TAG, _TIMESTAMP_TAG):
@@ -408,6 +416,8 @@ def _key_lines(node: yaml.Node, prefix: str, lines: dict[str, int], loader: _Con
             key = prefix + text
             lines.setdefault(key, key_node.start_mark.line + 1)
             _key_lines(value_node, key + ".", lines, loader)  # (bounded: _expanded_size ran first)
+    for value_node in merged:  # after the mapping's own keys, which win over merged ones (as in YAML)
+        _key_lines(value_node, prefix, lines, loader)
 
 
 def _parse_yaml(text: str, where: str, lines: dict[str, int] | None = None) -> Any:

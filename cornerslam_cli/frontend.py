@@ -22,7 +22,7 @@ import numpy as np
 from .association import load_kernels as load_association_kernels
 from .config import Config
 from .errors import ConfigError, LogError
-from .features import extract, load_kernels, signals_deferred
+from .features import extract, load_kernels
 from .filter import load_kernels as load_filter_kernels
 from .filter.models import increment_noise
 from .geometry import matrix_from_pose, transform_points
@@ -37,6 +37,7 @@ from .motion.icp import load_kernels as load_motion_kernels
 from .ranges import short_text
 from .span import Span, SpanUsed, select
 from .types import Corners, Scan, Segments
+from .workers import signals_deferred
 
 log = logging.getLogger("cornerslam.frontend")
 

@@ -49,6 +49,7 @@ def run(
     config_path: str | Path | None = None,
     span: Span | None = None,
     compiling: Callable[[], None] | None = None,
+    inside: str | None = None,
 ) -> RunSummary:
     """Run corner EKF-SLAM on one log and write the output directory atomically: the tables, with
     ``plot`` the figures and report.html, and ``mcap_out`` beside it, all committed at once.
@@ -56,14 +57,15 @@ def run(
     The output places are checked before any work (report/ownership.py); the run's inputs — the log,
     the ground truth (also LOG.gt.tum found beside the log), the relations, the config file
     ``config_path`` — are never written over; ``span``: the part of the log to process (span.py);
-    ``compiling``: frontend.open_input's.
+    ``compiling``: frontend.open_input's; ``inside="batch"``: a batch's run, written inside its
+    directory (any other output there is refused).
     Returns the summary (also written to summary.json) with ``out_dir``, the committed directory.
     """
     wall0 = time.perf_counter()
     out_dir = Path(out) if out else default_out_dir(Path(log_path), cfg.association.method)
     gt = ground_truth or find_ground_truth(Path(log_path))
     inputs = [p for p in (log_path, gt, relations, config_path) if p]
-    with StagedDir(out_dir, "run", inputs, log_path, own_log_only=not out) as stage:
+    with StagedDir(out_dir, "run", inputs, log_path, own_log_only=not out, inside=inside) as stage:
         mcap_path = stage.stage_file(mcap_out, ours=is_results_mcap) if mcap_out else None
         ref = load_reference(Path(log_path), ground_truth, relations, time_offset)  # bad files fail first
         src = open_input(log_path, cfg, span, compiling)

@@ -17,7 +17,10 @@ and writes beside the log ``OUT.gt.tum`` (true base poses at the scan stamps) an
 
 from __future__ import annotations
 
+import logging
 import os
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -33,6 +36,9 @@ from .report.ownership import refuse_special_file
 from .report.tables import write_tum
 from .simworld import OFFICE_LOOP, World, office_world, raycast, true_corners
 from .types import OdomSample
+from .workers import signals_deferred
+
+log = logging.getLogger("cornerslam.simulate")
 
 EPOCH = 1_700_000_000.0  # an arbitrary fixed start time, seconds
 
@@ -134,6 +140,7 @@ def simulate_log(
     sigma_a: float = SimParams.sigma_a,
     sweep: float = 0.0,
     odometry: dict[str, float] | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> dict:
     """Write the synthetic log ``out`` (.mcap), ``out.gt.tum`` and ``out.corners.csv``.
 
@@ -147,6 +154,7 @@ def simulate_log(
     ``time_increment`` (a laser whose scans are skewed by the motion: logs/deskew.py); 0 = all at once.
     ``odometry`` (library only): the odometry's error terms, any of SimParams' ``odom_scale``,
     ``odom_drift``, ``odom_sigma_trans``, ``odom_sigma_rot`` (all 0: the odometry is the truth).
+    ``progress(done, total)`` is called as the scans are ray-cast (the long part).
     """
     if out.suffix != ".mcap":
         raise ConfigError(f"simulate writes MCAP: '{out}' must end in .mcap")
@@ -186,7 +194,10 @@ def simulate_log(
     angles = angle_min + inc * np.arange(p.beams)
     beam_time = sweep / (p.beams - 1)
     scans = []
-    for ts, (x, y, th) in zip(t_scan, gt, strict=True):
+    t0 = time.perf_counter()
+    for k, (ts, (x, y, th)) in enumerate(zip(t_scan, gt, strict=True)):
+        if progress is not None:
+            progress(k, len(t_scan))
         if sweep > 0.0:  # the base's true pose at each beam's time
             tb = ts + beam_time * np.arange(p.beams)
             x, y = np.interp(tb, t, truth[:, 0]), np.interp(tb, t, truth[:, 1])
@@ -200,6 +211,10 @@ def simulate_log(
         scans.append(
             RawScan(float(ts), angle_min, inc, r.astype(np.float32), 0.05, p.max_range, "laser", beam_time)
         )
+    if progress is not None:
+        progress(len(t_scan), len(t_scan))
+    log.info("ray-cast %d scans of %d beams in %.1f s", len(scans), p.beams, time.perf_counter() - t0)
+    t0 = time.perf_counter()
     odoms = [OdomSample(float(ti), *o) for ti, o in zip(t, odom, strict=True)]
     out.parent.mkdir(parents=True, exist_ok=True)  # as --out and --mcap-out do
     gt_path, corners_path = paths[1:]
@@ -211,11 +226,13 @@ def simulate_log(
         write_tum(staged[gt_path], t_scan, gt)
         c = true_corners(world)
         np.savetxt(staged[corners_path], c, delimiter=",", header="x,y,phi", comments="", fmt="%.6f")
-        for path, tmp in staged.items():
-            os.replace(tmp, path)
+        with signals_deferred():  # the three renamed as one: Ctrl-C now would leave a mixed set
+            for path, tmp in staged.items():
+                os.replace(tmp, path)
     finally:  # Ctrl-C or a full disk: no partial log, and an earlier log is kept whole
         for tmp in staged.values():
             tmp.unlink(missing_ok=True)
+    log.info("wrote the log, ground truth and corners in %.1f s", time.perf_counter() - t0)
     return {
         "log": str(out),
         "gt": str(gt_path),

@@ -13,6 +13,9 @@ staging) and then exits instead of starting the combination queued to it next.
 A ``batch`` says each distinct warning once (:func:`warnings_once`): every combination loads the same
 keys and runs the same log, and would say the same thing again; its workers keep their warnings
 (:func:`warnings_kept`) and the batch says them as each combination finishes.
+
+What must not be cut by Ctrl-C — several renames that make one output, loading the kernels' cache —
+runs with SIGINT and SIGTERM held back (:func:`signals_deferred`).
 """
 
 from __future__ import annotations
@@ -128,3 +131,18 @@ def _warnings_to(decide: Callable[[logging.LogRecord], bool]) -> Iterator[None]:
     finally:
         for h in handlers:
             h.removeFilter(only_if)
+
+
+@contextmanager
+def signals_deferred() -> Iterator[None]:
+    """SIGINT and SIGTERM blocked in the block (delivered when it ends); a no-op where signals cannot be
+    blocked (not POSIX, not the main thread)."""
+    block = getattr(signal, "pthread_sigmask", None)
+    if block is None or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = block(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    try:
+        yield
+    finally:
+        block(signal.SIG_SETMASK, old)

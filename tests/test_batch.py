@@ -307,6 +307,26 @@ def test_another_log_of_the_same_name_does_not_replace_an_earlier_batchs_output(
     assert [r["status"] for r in run_batch(plan([moved], ["icnn"], {KEY: [3]}), out, jobs=1)] == ["skipped"]
 
 
+@pytest.mark.parametrize("command", ["run", "compare"])
+def test_a_run_or_comparison_inside_a_batchs_directory_is_refused(command, first, logs, tmp_path):
+    """`run --out OUT/<combination>` replaced a batch's run with another log's and batch.csv still
+    described the old one (a later batch then refused it as another log's); `compare --out OUT/x` put a
+    comparison among its runs. Both are refused before any work, as inside a comparison's directory."""
+    import shutil
+
+    shutil.copytree(first[0], tmp_path / "out")
+    combination = tmp_path / "out" / "good__icnn__association.pca.group_size=3"
+    before = (combination / "trajectory.tum").read_bytes()
+    target = combination if command == "run" else tmp_path / "out" / "cmp"
+    res = CliRunner().invoke(cli, [command, str(logs[0]), "--assoc", "pca", "--out", str(target)])
+    assert res.exit_code == 2, res.output
+    assert (
+        f"'{target}' is inside the batch output '{tmp_path / 'out'}': its runs belong to that batch"
+        in res.output
+    )
+    assert (combination / "trajectory.tum").read_bytes() == before and not (tmp_path / "out" / "cmp").exists()
+
+
 def test_dask_cluster_gives_the_same_batch_csv(first, logs, tmp_path):
     distributed = pytest.importorskip("dask.distributed")
     out, rows, _ = first

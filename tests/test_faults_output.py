@@ -1218,6 +1218,47 @@ def test_simulate_writes_over_its_own_earlier_log(tmp_path):
     assert out.with_suffix(".gt.tum").exists() and out.with_suffix(".corners.csv").exists()
 
 
+def test_simulate_renames_its_three_files_as_one(tmp_path, monkeypatch):
+    """Ctrl-C between `simulate`'s renames left the new log beside the old ground truth (a later `run`
+    scored it against the wrong poses): SIGINT raised after the first rename now arrives only after the
+    third, so the set is all new."""
+    import signal
+
+    from cornerslam_cli import simulate as sim
+
+    out = tmp_path / "s.mcap"
+    sim.simulate_log(out, seed=1, rate=1.0, beams=11)
+    old = {p: p.read_bytes() for p in (out, out.with_suffix(".gt.tum"))}  # (the corners: the world's)
+    replace, done = sim.os.replace, []
+
+    def replace_then_interrupt(src, dst):
+        replace(src, dst)
+        done.append(dst)
+        if len(done) == 1:
+            signal.raise_signal(signal.SIGINT)
+
+    monkeypatch.setattr(sim.os, "replace", replace_then_interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        sim.simulate_log(out, seed=2, rate=2.0, beams=11)  # (the ground truth: at other stamps)
+    assert len(done) == 3
+    assert all(p.read_bytes() != b for p, b in old.items())  # the log and its ground truth both new
+
+
+def test_simulate_reports_its_progress(tmp_path):
+    """`simulate` said nothing until it was done (72 s on a long log), `-v` gave no stage totals: its
+    ray-casting reports (done, total) up to the whole, and -v logs each stage."""
+    from cornerslam_cli.simulate import simulate_log
+
+    calls = []
+    res = simulate_log(tmp_path / "s.mcap", rate=1.0, beams=11, progress=lambda d, n: calls.append((d, n)))
+    assert calls[0] == (0, res["scans"]) and calls[-1] == (res["scans"], res["scans"])
+    assert [d for d, _ in calls] == sorted(d for d, _ in calls)
+    said = CliRunner().invoke(
+        cli, ["simulate", str(tmp_path / "v.mcap"), "--beams", "11", "--rate", "1", "-v"]
+    )
+    assert said.exit_code == 0 and "ray-cast" in said.output and "wrote the log" in said.output, said.output
+
+
 @pytest.mark.parametrize("name", ["s.png", "s.pdf", "s.svg", "s.jpg", "s.TIFF", "s.ps", "s.eps"])
 def test_extract_plot_writes_over_its_own_earlier_figure(name, tmp_path, valid_log):
     """`extract --plot` again to the same name replaces the figure it wrote (a re-run is the usual case),

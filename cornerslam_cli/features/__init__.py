@@ -8,13 +8,10 @@ covariance (eq 2–8), ``corners.py`` the two corner types and their covariance 
 
 from __future__ import annotations
 
-import signal
-import threading
-from contextlib import contextmanager
-
 import numpy as np
 
 from ..types import Corners, Scan, Segments
+from ..workers import signals_deferred
 from .corners import extract_corners
 from .lines import extract_segments, fit_lines
 from .params import CornersConfig, LinesConfig, SensorConfig
@@ -50,21 +47,6 @@ def load_kernels(sensor: SensorConfig, lines: LinesConfig) -> None:
     with signals_deferred(), np.errstate(all="ignore"):
         segments, jac_ends = extract_segments(scan, sensor, lines)
         extract_corners(scan, segments, jac_ends, sensor, CornersConfig())
-
-
-@contextmanager
-def signals_deferred():
-    """SIGINT and SIGTERM blocked in the block (delivered when it ends); a no-op where signals cannot be
-    blocked (not POSIX, not the main thread)."""
-    block = getattr(signal, "pthread_sigmask", None)
-    if block is None or threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    old = block(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
-    try:
-        yield
-    finally:
-        block(signal.SIG_SETMASK, old)
 
 
 def extract(

@@ -27,7 +27,6 @@ import os
 import re
 import secrets
 import shutil
-import signal
 import socket
 import stat
 import tempfile
@@ -36,6 +35,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from ..errors import OutputError
+from ..workers import signals_deferred
 from .oserrors import output_error, output_errors, resolved
 from .ownership import MARKER, check_replaceable, check_same_log, is_within, mark_output, refuse_special_file
 
@@ -198,16 +198,6 @@ def target_lock(target: Path) -> Iterator[None]:
         os.close(fd)
 
 
-@contextmanager
-def _signals_deferred() -> Iterator[None]:
-    """SIGINT and SIGTERM wait until the block is done (then arrive as usual)."""
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
-
-
 def _check_name(target: Path, shown: Path) -> None:
     try:
         limit = os.pathconf(target.parent, "PC_NAME_MAX")
@@ -239,6 +229,7 @@ class StagedDir:
         inputs: Sequence[str | Path] = (),
         log: str | Path | None = None,
         own_log_only: bool = False,
+        inside: str | None = None,
     ):
         self.shown = Path(target)
         self.target = resolved(self.shown)
@@ -246,6 +237,7 @@ class StagedDir:
         self.inputs = [Path(p) for p in inputs]
         self.log = None if log is None else Path(log)  # recorded in the marker
         self.own_log_only = own_log_only  # the default place: refuse another log's output there
+        self.inside = inside  # the kind of output this one is part of (a batch's run), or None
         self.files: list[tuple[Path, Path]] = []  # (staged, final) files renamed by commit()
         self.committed = False
         with output_errors(self.shown):
@@ -269,7 +261,7 @@ class StagedDir:
                 raise
 
     def _check_replaceable(self) -> None:
-        check_replaceable(self.target, self.kind, self.inputs, self.shown)
+        check_replaceable(self.target, self.kind, self.inputs, self.shown, self.inside)
         if self.own_log_only and self.log is not None:
             check_same_log(self.target, self.log, self.shown)
 
@@ -340,7 +332,7 @@ class StagedDir:
         with target_lock(self.target):
             self._check_replaceable()  # it may have changed
             mark_output(self.path, self.kind, self.log)
-            with _signals_deferred():
+            with signals_deferred():
                 old = self._swap()
                 for staged, final in self.files:
                     os.replace(staged, final)

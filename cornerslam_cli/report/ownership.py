@@ -29,6 +29,7 @@ from ..logs.mcap import header_library
 from .oserrors import output_errors, resolved
 
 MARKER = ".cornerslam-output"
+_GROUPS = {"compare": ("comparison", "them all"), "batch": ("batch", "its runs")}  # outputs made of runs
 KINDS = ("run", "compare", "batch")
 _LEGACY = (  # outputs written before the marker: (file, how it begins, kind)
     ("summary.json", b'{\n  "cornerslam_version"', "run"),
@@ -166,15 +167,19 @@ def _refuse_foreign(target: Path, kind: str, shown: Path) -> None:
 
 
 def check_replaceable(
-    target: Path, kind: str, inputs: Sequence[Path] = (), shown: Path | None = None
+    target: Path, kind: str, inputs: Sequence[Path] = (), shown: Path | None = None, inside: str | None = None
 ) -> None:
     """Refuse (OutputError) to replace ``target`` (resolved) by a ``kind`` output unless the module
-    doc's rules allow it. ``inputs`` are the run's input files; ``shown`` names the target in errors."""
+    doc's rules allow it. ``inputs`` are the run's input files; ``shown`` names the target in errors;
+    ``inside``: the kind of output whose part this one is (``batch``: a batch's run), else an output
+    inside a comparison's or a batch's directory is refused — those runs belong to it."""
     shown = target if shown is None else shown
-    if output_kind(target.parent) == "compare":
+    parent = output_kind(target.parent)
+    if parent in _GROUPS and parent != inside:
+        whose, again = _GROUPS[parent]
         raise OutputError(
-            f"'{shown}' is inside the compare output '{target.parent}': its runs belong to that comparison",
-            "give a directory outside it (rerunning the comparison replaces them all)",
+            f"'{shown}' is inside the {parent} output '{target.parent}': its runs belong to that {whose}",
+            f"give a directory outside it (rerunning the {whose} replaces {again})",
         )
     _refuse_foreign(target, kind, shown)
     if not target.is_dir():
