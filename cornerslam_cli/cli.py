@@ -186,7 +186,7 @@ def _interrupted(ctx: click.Context, e: KeyboardInterrupt) -> None:
     if written is not None:
         text = f"after the output was complete ('{written}' is written)"
     else:
-        text = "no output written (a previous complete output directory is kept)"
+        text = "no output written (an earlier output there, if any, is kept)"
     click.echo(f"{word}: {text}", err=True)
     ctx.exit(code)
 
@@ -216,7 +216,8 @@ def _echo(lines: list[str]) -> None:
 def cli() -> None:
     """Natural-corner EKF-SLAM (Yan et al. 2014) on recorded 2D laser logs.
 
-    Exit codes: 0 success, 1 internal error (traceback saved), 2 bad input or usage.
+    Exit codes: 0 success, 1 internal error (traceback saved), 2 bad input or usage, 130 Ctrl-C,
+    143 SIGTERM, 141 output pipe closed.
     """
 
 
@@ -426,10 +427,13 @@ def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
     Example:
       cornerslam simulate sim.mcap --seed 3 && cornerslam run sim.mcap
     """
+    from .errors import OutputError
     from .report.oserrors import output_errors
     from .simulate import simulate_log
 
     setup_logging(verbose, quiet)
+    if out_path.endswith(("/", os.sep)):  # Path drops the slash that says a directory was meant
+        raise OutputError(f"'{out_path}' names a directory", "give a file name ending in .mcap")
     progress = Progress("simulate", enabled=not quiet)
     try:
         with output_errors(out_path):

@@ -500,7 +500,10 @@ def read_config_file(path: str | Path) -> dict:
     if loaded is None:
         return {}
     if not isinstance(loaded, dict):
-        raise ConfigError(f"{where} must contain a mapping of sections, not {type(loaded).__name__}")
+        raise ConfigError(
+            f"{where} must contain a mapping of sections, not {type(loaded).__name__}",
+            "write 'section:' lines with their keys indented below, as configs/default.yaml does",
+        )
     if SUMMARY_MARK in loaded and isinstance(loaded.get("config"), dict):  # a run's summary.json
         loaded = loaded["config"]  # the config that run used: run again with it
         lines = {k.removeprefix("config."): n for k, n in lines.items() if k.startswith("config.")}

@@ -9,6 +9,6 @@ def main() -> None:
     try:
         from .cli import main as cli
     except KeyboardInterrupt:
-        sys.stderr.write("interrupted: no output written (a previous complete output directory is kept)\n")
+        sys.stderr.write("interrupted: no output written (an earlier output there, if any, is kept)\n")
         sys.exit(130)
     cli()

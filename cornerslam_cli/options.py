@@ -311,9 +311,10 @@ def check_method_not_set(overrides, assocs: str) -> None:
 
     for text, leaf, loaded in set_leaves(overrides):
         if leaf == "association.method":
+            given = str(loaded) in [a.strip() for a in assocs.split(",")]
+            what = "leave the --set out" if given else f"give --assoc {loaded} instead"
             raise click.UsageError(
-                f"compare runs each associator of --assoc ({assocs}): --set '{text}' would be "
-                f"ignored; give --assoc {loaded} instead"
+                f"compare runs each associator of --assoc ({assocs}): --set '{text}' would be ignored; {what}"
             )
 
 

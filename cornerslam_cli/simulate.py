@@ -157,7 +157,8 @@ def simulate_log(
     ``progress(done, total)`` is called as the scans are ray-cast (the long part).
     """
     if out.suffix != ".mcap":
-        raise ConfigError(f"simulate writes MCAP: '{out}' must end in .mcap")
+        named = "has no name before .mcap" if out.name == ".mcap" else "must end in .mcap"
+        raise ConfigError(f"simulate writes MCAP: '{out}' {named}")
     world = office_world() if world is None else world
     waypoints = OFFICE_LOOP if waypoints is None else np.asarray(waypoints, dtype=float).reshape(-1, 2)
     if len(waypoints) < 2:

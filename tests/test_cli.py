@@ -651,8 +651,32 @@ def test_compare_refuses_a_set_of_association_method(sim_log, tmp_path):
     for given in ("association.method=jcbb", "association={method: jcbb}"):
         res = invoke("compare", sim_log, "--set", given, "--out", tmp_path / "c")
         assert res.exit_code == 2 and "--assoc" in res.output and given in res.output, res.output
-        assert "give --assoc jcbb instead" in res.output
+        assert "leave the --set out" in res.output  # jcbb is one of the default --assoc (it said: give it)
         assert not (tmp_path / "c").exists()
+    res = invoke(
+        "compare", sim_log, "--assoc", "pca,icnn", "--set", "association.method=jcbb", "--out", tmp_path / "c"
+    )
+    assert res.exit_code == 2 and "give --assoc jcbb instead" in res.output, res.output
+
+
+@pytest.mark.parametrize(
+    "args, said",
+    [
+        (
+            ["simulate", "{tmp}/s.mcap/"],
+            "'{tmp}/s.mcap/' names a directory (give a file name ending in .mcap)",
+        ),
+        (["simulate", "{tmp}/.mcap"], "'{tmp}/.mcap' has no name before .mcap"),
+        (["run", "{log}", "--config", "{tmp}/list.yaml"], "not list (write 'section:' lines with their keys"),
+    ],
+)
+def test_small_mistakes_say_what_to_do(args, said, sim_log, tmp_path):
+    """Found by a hostile-user probe: `simulate a.mcap/` wrote the file a.mcap; `simulate .mcap` was told
+    to end in .mcap; a config that is a list said what was wrong but not what to write."""
+    (tmp_path / "list.yaml").write_text("- a\n- b\n")
+    res = invoke(*(a.format(tmp=tmp_path, log=sim_log) for a in args))
+    assert res.exit_code == 2 and said.format(tmp=tmp_path) in res.output, res.output
+    assert not (tmp_path / "s.mcap").exists()
 
 
 def test_compare_warns_that_a_config_file_s_association_method_is_ignored(sim_log, tmp_path):

@@ -38,7 +38,7 @@ from cornerslam_cli.report.outdir import HOST, StagedDir, clear_stale, target_lo
 from cornerslam_cli.report.ownership import MARKER, mark_output
 
 CMD = [sys.executable, "-c", "from cornerslam_cli.cli import main; main()"]
-KEPT = "no output written (a previous complete output directory is kept)"
+KEPT = "no output written (an earlier output there, if any, is kept)"
 
 
 @dataclass

@@ -110,4 +110,4 @@ def test_ctrl_c_while_the_command_is_still_importing_exits_130_in_one_line():
     )
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert res.returncode == 130, res.stderr
-    assert res.stderr == "interrupted: no output written (a previous complete output directory is kept)\n"
+    assert res.stderr == "interrupted: no output written (an earlier output there, if any, is kept)\n"
