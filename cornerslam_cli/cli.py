@@ -340,7 +340,7 @@ def compare(
     cfg = command_config(
         config_path, overrides, None, scan_topic, odom_topic, log_path, {"association.method": (why, names)}
     )
-    check_method_not_set(overrides, assocs)  # (after the config: an unknown name is named as such)
+    check_method_not_set(overrides, ",".join(names))  # (after the config: an unknown name is named as such)
     out_dir = Path(out) if out else default_out_dir(Path(log_path), "compare")
     progress = Progress(f"{display_path(Path(log_path).name)} (compare)", not quiet)
     try:

@@ -128,7 +128,7 @@ def compare(
             summaries = _run_filters(assocs, dirs, jobs, progress)
         finally:
             _SHARED.clear()
-        write_comparison(stage.path, summaries, plots, ref.gt_path)
+        write_comparison(stage.path, summaries, plots, ref.gt_path, progress)
         for d in dirs:
             mark_output(d, "run", Path(log_path))  # each is a complete run output
         final = stage.commit()

@@ -306,13 +306,12 @@ def check_option_agrees(overrides, options: dict[str, str | None]) -> None:
 
 def check_method_not_set(overrides, assocs: str) -> None:
     """A usage error for ``compare`` given a ``--set`` of ``association.method``: compare runs each
-    associator of ``--assoc``, so the ``--set`` would be ignored without a word."""
+    associator of ``--assoc`` (``assocs``, comma-joined), so the ``--set`` would be ignored without a word."""
     from .config import set_leaves
 
-    for text, leaf, loaded in set_leaves(overrides):
+    for text, leaf, m in set_leaves(overrides):
         if leaf == "association.method":
-            given = str(loaded) in [a.strip() for a in assocs.split(",")]
-            what = "leave the --set out" if given else f"give --assoc {loaded} instead"
+            what = "drop the --set" if str(m) in assocs.split(",") else f"give --assoc {m} instead"
             raise click.UsageError(
                 f"compare runs each associator of --assoc ({assocs}): --set '{text}' would be ignored; {what}"
             )

@@ -651,7 +651,7 @@ def test_compare_refuses_a_set_of_association_method(sim_log, tmp_path):
     for given in ("association.method=jcbb", "association={method: jcbb}"):
         res = invoke("compare", sim_log, "--set", given, "--out", tmp_path / "c")
         assert res.exit_code == 2 and "--assoc" in res.output and given in res.output, res.output
-        assert "leave the --set out" in res.output  # jcbb is one of the default --assoc (it said: give it)
+        assert "drop the --set" in res.output  # jcbb is one of the default --assoc (it said: give it)
         assert not (tmp_path / "c").exists()
     res = invoke(
         "compare", sim_log, "--assoc", "pca,icnn", "--set", "association.method=jcbb", "--out", tmp_path / "c"

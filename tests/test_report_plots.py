@@ -66,9 +66,12 @@ def run_pngs(outputs):
     return plot_run(outputs[0])
 
 
+COMPARE_PROGRESS: list[tuple[int, int, str]] = []  # what plot_compare reported while drawing
+
+
 @pytest.fixture(scope="module")
 def compare_pngs(outputs):
-    return plot_compare(outputs[1])
+    return plot_compare(outputs[1], progress=lambda *a: COMPARE_PROGRESS.append(a))
 
 
 def check_png(path: Path) -> None:
@@ -91,6 +94,10 @@ def test_plot_compare_writes_comparison_and_each_run(outputs, compare_pngs):
     assert sorted(compare_pngs) == sorted(expected)
     for p in expected:
         check_png(p)
+    # its progress (compare's figures took 8–14 s on a long log with no line): one step per comparison
+    # figure and per run's set, from 0 to all of them
+    n = len(COMPARE_FIGURES) + len(ASSOCS)
+    assert COMPARE_PROGRESS == [(k, n, "figures") for k in range(n)] + [(n, n, "figures")]
     # the side-by-side maps are wider than tall, one panel per associator
     w, h = png_size(cmp_dir / "compare_maps.png")
     assert w > 1.5 * h

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 from ..results import Accuracy, Ate, RelationError, RunSummary
@@ -56,11 +57,15 @@ def _or_nan(result: Ate | RelationError | None, name: str) -> float:
 
 
 def write_comparison(
-    out_dir: Path, summaries: list[RunSummary], plots: bool = True, ground_truth: str | Path | None = None
+    out_dir: Path,
+    summaries: list[RunSummary],
+    plots: bool = True,
+    ground_truth: str | Path | None = None,
+    progress: Callable[..., None] | None = None,
 ) -> None:
     """``out_dir``/comparison.csv from the run ``summaries`` (one per associator, in order) and, with
     ``plots``, the comparison figures and report.html drawn from the runs in ``out_dir`` (with the
-    ``ground_truth`` TUM file the runs read, if any)."""
+    ``ground_truth`` TUM file the runs read, if any), the figures reported to ``progress``."""
     with CsvTable(out_dir / "comparison.csv", COMPARISON_COLUMNS) as table:
         for s in summaries:
             table.row(*comparison_row(s))
@@ -68,5 +73,5 @@ def write_comparison(
         from .html import write_report
         from .plots import plot_compare
 
-        plot_compare(out_dir, ground_truth)
+        plot_compare(out_dir, ground_truth, progress)
         write_report(out_dir)

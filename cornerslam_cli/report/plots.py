@@ -30,6 +30,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -387,19 +388,28 @@ def _assoc_color(assoc: str, i: int) -> str:
     return ASSOC_COLORS.get(assoc, f"C{i}")
 
 
-def plot_compare(out_dir: Path, ground_truth: str | Path | None = None) -> list[Path]:
+def plot_compare(
+    out_dir: Path, ground_truth: str | Path | None = None, progress: Callable[..., None] | None = None
+) -> list[Path]:
     """Write the comparison figures into a compare directory and each associator's run figures
-    (``ground_truth`` as for :func:`load_run`)."""
+    (``ground_truth`` as for :func:`load_run`); ``progress(done, total, "figures")`` as they are drawn
+    (each run's set counts as one: a few seconds on a long log)."""
     out_dir = Path(out_dir)
     runs = [load_run(out_dir / a, ground_truth) for a in compare_assocs(out_dir)]
     log_name = runs[0].log_name if runs else out_dir.name
-    written = [
-        _plot_compare_matching(runs, log_name, out_dir / "compare_matching.png"),
-        _plot_compare_maps(runs, log_name, out_dir / "compare_maps.png"),
-        _plot_compare_timing(runs, log_name, out_dir / "compare_timing.png"),
+    drawers = [
+        lambda: [_plot_compare_matching(runs, log_name, out_dir / "compare_matching.png")],
+        lambda: [_plot_compare_maps(runs, log_name, out_dir / "compare_maps.png")],
+        lambda: [_plot_compare_timing(runs, log_name, out_dir / "compare_timing.png")],
+        *(lambda run=run: plot_run(run.out_dir, ground_truth) for run in runs),
     ]
-    for run in runs:
-        written += plot_run(run.out_dir, ground_truth)
+    written: list[Path] = []
+    for k, draw in enumerate(drawers):
+        if progress is not None:
+            progress(k, len(drawers), "figures")
+        written += draw()
+    if progress is not None:
+        progress(len(drawers), len(drawers), "figures")
     return written
 
 
