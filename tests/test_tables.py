@@ -70,6 +70,20 @@ def test_staged_dir_replaces_only_on_commit(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
 
 
+def test_a_staged_dir_not_committed_takes_away_the_directories_it_made(tmp_path):
+    """An interrupted `compare --out new/deep/c` left new/deep/ behind, empty: the directories above the
+    target that the output made go with it, deepest first, but not one another file has come into."""
+    with pytest.raises(RuntimeError):
+        with StagedDir(tmp_path / "new" / "deep" / "out"):
+            raise RuntimeError("interrupted")
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(RuntimeError):
+        with StagedDir(tmp_path / "new" / "deep" / "out"):
+            (tmp_path / "new" / "mine.txt").write_text("a user's file")
+            raise RuntimeError("interrupted")
+    assert sorted(p.name for p in (tmp_path / "new").iterdir()) == ["mine.txt"]
+
+
 def test_write_json_is_strict_json(tmp_path):
     """NaN and ±inf (Python floats, numpy scalars, inside arrays) are written as null: every JSON
     reader accepts the file, Python's own with NaN refused too."""

@@ -242,6 +242,8 @@ class StagedDir:
         self.committed = False
         with output_errors(self.shown):
             self._check_replaceable()
+            # the directories above the target this output makes: an output not committed takes them away
+            self.made = [d for d in (self.target.parent, *self.target.parent.parents) if not d.exists()]
             self.target.parent.mkdir(parents=True, exist_ok=True)
             _check_name(self.target, self.shown)
             with target_lock(self.target):
@@ -273,6 +275,11 @@ class StagedDir:
             _remove(self.path)
             for staged, _ in self.files:
                 _remove(staged)
+            for d in self.made:  # deepest first; one another process has filled since is left
+                try:
+                    d.rmdir()
+                except OSError:
+                    break
         elif isinstance(exc, KeyboardInterrupt):
             exc.output_written = self.shown  # type: ignore[attr-defined]  # the CLI says so
         if isinstance(exc, OSError) and self._ours(exc.filename):
