@@ -30,7 +30,7 @@ from .lasers import mount_source
 from .logs import ReadStats, open_log
 from .logs.deskew import deskew
 from .logs.sync import CLOCKS_HINT, Synced, SyncStats, reanchor_odometry, select_keyframes, synchronise
-from .logs.unreadable import damaged_error
+from .logs.unreadable import damaged_error, no_scan_read
 from .motion import ScanMatcher
 from .motion.fusion import BiasTaken, OdometryFusion
 from .motion.icp import load_kernels as load_motion_kernels
@@ -254,8 +254,9 @@ def check_processed(src: Input, n_frames: int, n_points: int) -> None:
         )
     if n_frames == 0:
         rs = src.reader.stats
-        if rs.damaged:  # the damage, more likely than the stamps, is why
-            raise damaged_error(src.path, rs, "no scan could be processed")
+        if rs.damaged or not (stats.scans_in or rs.decode_failed):  # damage, none read: not the stamps
+            what = "no scan could be processed"
+            raise damaged_error(src.path, rs, what) if rs.damaged else no_scan_read(src.path, what, stats=rs)
         _undecoded_error(src.path, rs)
         if clocks := stats.other_clocks():
             raise LogError(f"log '{src.path}': no scan could be processed: {clocks}", CLOCKS_HINT)

@@ -27,6 +27,8 @@ from .logs.params import LaserMountConfig
 from .ranges import short_text
 from .types import Scan
 
+log = logging.getLogger("cornerslam.lasers")
+
 
 @dataclass(frozen=True)
 class LaserPreset:
@@ -143,6 +145,24 @@ def _check_method(method: str, data: dict, overrides: Sequence[str]) -> None:
         raise located(key, data, overrides) from None
 
 
+def warn_mismatch(name: str, log_path: str | Path, cfg: Config) -> None:
+    """A warning when the pinned preset ``name`` is not the laser of the log's scans (a config written
+    by ``cornerslam config`` for another log names its preset): its sensor model and extraction settings
+    are then another sensor's."""
+    geometry = first_scan_geometry(log_path, cfg)
+    if geometry is None or detect_preset(*geometry) == name:
+        return
+    p, (beams, inc) = PRESETS[name], geometry
+    fits = detect_preset(beams, inc)
+    log.warning(
+        "input.laser_preset '%s' is for %s beams %.3g° apart, but the scans of '%s' have %d beams %.3g° "
+        "apart: its sensor model and extraction settings are another laser's (%s)",
+        name, "/".join(map(str, p.beams)), p.increment_deg, Path(log_path).name, beams,
+        math.degrees(abs(inc)),
+        f"'{fits}' fits them; set input.laser_preset to it or to auto" if fits else "set it to auto or none",
+    )  # fmt: skip
+
+
 def resolve_config(
     log_path: str | Path | None,
     config_path: str | Path | None,
@@ -169,6 +189,8 @@ def resolve_config(
             return cfg
     elif choice in PRESETS:
         name = choice
+        if log_path is not None:
+            warn_mismatch(name, log_path, cfg)
     else:
         hint = did_you_mean(choice[:100], PRESETS, then=" ")
         e = ConfigError(

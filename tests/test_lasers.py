@@ -109,3 +109,19 @@ def test_mines_config_through_the_cli(tmp_path, monkeypatch):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["input"]["laser_to_base"] == [0.145, 0.0, 0.0]
     assert summary["input"]["laser_to_base_source"] == "config"
+
+
+def test_a_pinned_preset_another_lasers_scans_do_not_fit_is_warned_about(caplog):
+    """A config `cornerslam config` wrote for a SICK log names its preset; run on a Hokuyo log it gave
+    the SICK's sensor model and extraction settings without a word (a hostile-user probe)."""
+    pinned = ["input.laser_preset=sick_lms_1deg"]
+    with caplog.at_level("WARNING"):
+        cfg = resolve_config(SAMPLES / "mines_exp3_cut.bag", None, pinned)
+    assert cfg.input.laser_preset == "sick_lms_1deg"  # pinned is pinned: warned, not changed
+    said = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert len(said) == 1 and "'hokuyo_urg04lx' fits them" in said[0], said
+    assert "682 beams 0.352° apart" in said[0]
+    caplog.clear()
+    with caplog.at_level("WARNING"):
+        resolve_config(SAMPLES / "intel_cut.clf", None, pinned)  # its own laser: nothing to say
+    assert not [r for r in caplog.records if r.levelname == "WARNING"]

@@ -20,7 +20,10 @@ def no_scan_read(
     ``stats`` showing damaged parts skipped, the error is :func:`damaged_error`'s."""
     if stats is not None and stats.damaged:  # the scans' messages were not read: no odometry count
         return damaged_error(log, stats, f"no scan could be read, so {so}", odometry=False)
-    hint = "its warnings (not shown with -q) say why"
+    if stats is not None and stats.warnings:  # -q does not show them: the first in the line itself
+        hint = f"its first warning: {stats.warnings[0]}"
+    else:  # none to point at (a ROS 2 bag whose metadata.yaml names topics its storage file lacks)
+        hint = "the reader found none of the scan messages its index lists: the index and the data disagree"
     return LogError(
         f"log '{log}' has no scan that could be read, so {so}",
         hint + ("; `cornerslam info LOG` lists its topics" if topics_hint else ""),
