@@ -661,6 +661,10 @@ def config_command(log_path, config_path, overrides, preset, verbose, quiet):
 
     setup_logging(verbose, quiet)
     check_option_agrees(overrides, {"input.laser_preset": preset})  # (it silently won)
+    if log_path is not None:  # a LOG that is none (no preset to choose from it: never opened) is refused
+        from .logs import detect_format
+
+        detect_format(log_path)
     by_option = f"input.laser_preset={yaml_quoted(preset)}" if preset else None
     try:
         cfg = command_config(

@@ -24,6 +24,12 @@ from .types import Scan
 INDEX_DIGITS = 100  # a '#INDEX' of more digits is refused (past any log; int() stops at 4,300 anyway)
 
 
+def seconds(t: float) -> str:
+    """``t`` to the microsecond, without float noise: compared in an error with a bound given to more
+    digits than one, "907.7" beside a "--end 907.7" it is past said nothing."""
+    return repr(round(float(t), 6))
+
+
 @dataclass(frozen=True)
 class Bound:
     """One end of a span: ``value`` seconds from the first scan, or a scan index when ``index``."""
@@ -32,7 +38,7 @@ class Bound:
     index: bool
 
     def text(self) -> str:
-        return f"#{self.value}" if self.index else f"{self.value:g}"
+        return f"#{self.value}" if self.index else f"{self.value:.15g}"  # as given (:g cut it to 6 digits)
 
     def reached(self, i: int, t: float) -> bool:
         """Whether scan ``i`` at ``t`` seconds from the first scan is at or past this bound."""
@@ -178,11 +184,11 @@ def select(
     if used.scans == 0 and ended_at is not None:  # the log was not read to its end: no extent to give
         raise CornerslamError(
             f"{span.describe()} selects no scan of log '{log_name}': the first scan its start lets in "
-            f"(#{ended_at[0]}, {ended_at[1]:.1f} s from the first) is already past its end",
+            f"(#{ended_at[0]}, {seconds(ended_at[1])} s from the first) is already past its end",
             "give an end after the start",
         )
     if used.scans == 0:
-        extent = f"{i + 1} scans over {t:.1f} s" if t0 is not None else "no scans"
+        extent = f"{i + 1} scan{'s' if i else ''} over {seconds(t)} s" if t0 is not None else "no scans"
         raise CornerslamError(
             f"{span.describe()} selects no scan of log '{log_name}' ({extent})",
             "choose a span inside the log: seconds from its first scan, or #INDEX",

@@ -943,6 +943,13 @@ def test_output_columns_extend_the_interface_and_never_change_it():
 
 
 # ---------------------------------------------------------------------------- config
+@pytest.mark.parametrize("preset", ["none", "sick_lms_1deg", "auto"])
+def test_config_of_a_log_that_does_not_exist_exits_2(preset, tmp_path):
+    """With --preset none the LOG was never opened, so a wrong path printed a config, exit 0."""
+    res = invoke("config", tmp_path / "nope.mcap", "--preset", preset)
+    assert res.exit_code == 2 and f"log '{tmp_path / 'nope.mcap'}' does not exist" in res.output, res.output
+
+
 def test_config_prints_the_resolved_config_that_run_uses(tmp_path):
     """`cornerslam config LOG --set ...` prints what `run LOG --set ...` resolves (preset chosen from
     the log's scans); fed back as --config it gives the same config (the same hash), and without a

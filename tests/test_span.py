@@ -153,6 +153,15 @@ def test_an_end_before_the_start_in_other_units_says_so(sim_log, tmp_path, span)
     assert not (tmp_path / "o").exists()
 
 
+def test_seconds_in_errors_keep_their_digits():
+    """'--start 930.86420001 selects no scan' was said as 930.864 (the last scan at 930.8642 looked let
+    in), and a first scan past an --end of 907.7 as "907.7 s"."""
+    from cornerslam_cli.span import Bound, seconds
+
+    assert Bound(930.86420001, False).text() == "930.86420001" and Bound(5.0, False).text() == "5"
+    assert seconds(907.6500000000001) == "907.65" and seconds(907.7000004) == "907.7"
+
+
 @pytest.mark.parametrize(
     "span",
     [
