@@ -126,6 +126,23 @@ def test_a_bag_without_metadata_and_two_storage_files_says_to_reindex(bags):
     assert "ros2 bag reindex" in err.value.hint
 
 
+@pytest.mark.parametrize("which, edit", [(0, "empty"), (1, "empty"), (0, "start as text")])  # (mcap: unread)
+def test_a_metadata_yaml_with_a_field_missing_or_mistyped_says_so(bags, which, edit):
+    """rosbags' own words came through: "'NoneType' object is not subscriptable", "can only concatenate
+    str (not "int") to str" (a hostile-user probe)."""
+    bag = bags[which]
+    meta = yaml.safe_load((bag / "metadata.yaml").read_text())
+    if edit == "empty":
+        text = ""
+    else:
+        meta["rosbag2_bagfile_information"]["starting_time"]["nanoseconds_since_epoch"] = "abc"
+        text = yaml.safe_dump(meta)
+    (bag / "metadata.yaml").write_text(text)
+    with pytest.raises(LogError, match="its metadata.yaml lacks a field or has one of the wrong type") as err:
+        open_log(bag)
+    assert "ros2 bag reindex" in err.value.hint
+
+
 def test_a_db3_given_alone_is_read(bags):
     sq, _, ref = bags
     got = _read(next(sq.glob("*.db3")))

@@ -94,6 +94,9 @@ class RosbagSource:
             if isinstance(exc, KeyError):  # rosbags' lookup of a message definition's encoding
                 problem = f"a message definition is in an encoding rosbags does not read ({exc})"
                 hint = "give its storage files (.mcap, .db3) one at a time"
+            elif ros2 and (isinstance(exc, TypeError) or "NoneType" in problem):  # metadata.yaml's fields
+                problem = f"its metadata.yaml lacks a field or has one of the wrong type ({problem})"
+                hint = "restore its metadata.yaml (`ros2 bag reindex` writes one), or give its storage file"
             raise LogError(f"cannot read {kind} '{self.path.name}': {problem}", hint) from exc
         merged: dict[str, Channel] = {}
         for c in self._reader.connections:
