@@ -24,6 +24,8 @@ def extract_step(
     when the log has no such scan, naming the valid range; LogError when it yields no scan at all
     (every chunk corrupt, every scan undecodable: there is no range to name)."""
     with open_log(Path(log_path), scan_topic=cfg.input.scan_topic, odom_topic=cfg.input.odom_topic) as reader:
+        if cfg.input.odom_topic:  # given though not needed: a wrong one is refused as run refuses it
+            reader.check()
         n = 0
         scans = reader.scans() if prepare is None else prepare(reader)
         for scan in scans:  # odometry is not needed for one scan's features

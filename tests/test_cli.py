@@ -276,6 +276,16 @@ def test_run_line_counts_the_scans_the_reader_could_not_use(tmp_path):
     assert "; 20 more scans unusable, not read: see the warnings)" in res.stdout
 
 
+def test_extract_refuses_a_wrong_odometry_topic_as_run_does(sim_log):
+    """extract needs no odometry, but an --odom-topic given wrong was ignored on ROS logs (exit 0) while
+    a CARMEN log refused it (a hostile-user probe)."""
+    res = invoke("extract", sim_log, "--odom-topic", "/nope")
+    assert res.exit_code == 2 and "has no topic '/nope'" in res.output, res.output
+    res = invoke("extract", sim_log, "--odom-topic", "/scan")
+    assert res.exit_code == 2 and "not nav_msgs/Odometry" in res.output, res.output
+    assert invoke("extract", sim_log, "--odom-topic", "/odom").exit_code == 0
+
+
 def test_extract_prints_and_plots(sim_log, tmp_path):
     png = tmp_path / "scan.png"
     res = invoke("extract", sim_log, "--step", 3, "--plot", png)
