@@ -34,7 +34,8 @@ Writes a markdown report (default docs/results/variant_<settings>.md, or variant
 ``--perturb submaps`` / ``kernel`` the name ends in ``_submaps`` / ``_kernel``) and every run's figures
 beside it (the same name, .json); ``--from-json FILE --at REV`` writes the report again from such a file
 (the runs made at REV, with the command's other options as they were then) without running anything —
-after a change of the report's wording. Besides the per-log verdicts the report gives, per group, the
+after a change of the report's wording; the file is left as it is, and the report's statistics and
+defaults are this checkout's. Besides the per-log verdicts the report gives, per group, the
 change of the median of the per-log means with a bootstrap interval over each log's runs
 (:func:`median_shift`).
 """
@@ -346,7 +347,7 @@ def main() -> None:
         if unknown := sorted(set(wanted) - {n for n, _, _ in logs}):
             ap.error(f"unknown log(s) {', '.join(unknown)} (the panel's: {', '.join(n for n, _, _ in logs)})")
         logs = [x for x in logs if x[0] in wanted]
-    if missing := [str(p) for _, p, _ in logs if not p.exists()]:
+    if args.from_json is None and (missing := [str(p) for _, p, _ in logs if not p.exists()]):
         ap.error(f"{', '.join(missing)} not found (pass --data DIR)")
     suffix = f"_{args.perturb}" if args.perturb in MOVED else ""
     out = args.out or ROOT / "docs" / "results" / f"variant_{slug(args.sets, args.baseline)}{suffix}.md"
@@ -354,10 +355,15 @@ def main() -> None:
         saved = json.loads(args.from_json.read_text())
         rows = [{k: np.array(v, dtype=float) if k != "log" else v for k, v in r.items()} for r in saved]
         rows = [r for r in rows if r["log"] in {n for n, _, _ in logs}]
+        if bad := [r["log"] for r in rows if any(len(r[b]) != args.k + 1 for b in BUILDS)]:
+            ap.error(f"{args.from_json}: {', '.join(bad)} not run {args.k + 1} times a build (--k {args.k})")
     else:
         rows = run_panel(logs, args, value)
     text = "\n".join(report(rows, args.sets, args.baseline, args.k, args.perturb, value, args.at))
     out.write_text(text)
+    if args.from_json is not None:  # its runs stay where they are (a --logs subset would drop the rest)
+        print(text)
+        return
     # every run's figures (figure, chain's figure, revisit), for reading the panel again another way
     clean = [
         {

@@ -427,13 +427,12 @@ def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
     Example:
       cornerslam simulate sim.mcap --seed 3 && cornerslam run sim.mcap
     """
-    from .errors import OutputError
     from .report.oserrors import output_errors
+    from .report.outdir import refuse_directory_name
     from .simulate import simulate_log
 
     setup_logging(verbose, quiet)
-    if out_path.endswith(("/", os.sep)):  # Path drops the slash that says a directory was meant
-        raise OutputError(f"'{out_path}' names a directory", "give a file name ending in .mcap")
+    refuse_directory_name(out_path, "give a file name ending in .mcap")
     progress = Progress("simulate", enabled=not quiet)
     try:
         with output_errors(out_path):

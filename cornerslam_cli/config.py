@@ -399,10 +399,6 @@ def _key_lines(node: yaml.Node, prefix: str, lines: dict[str, int], loader: _Con
     """Fill ``lines`` with the 1-based line of each key of the mapping ``node`` and of its nested
     mappings, dotted (``ekf.alpha1``). An alias is walked once, where it is first defined (its keys'
     lines are the anchor's: what the user would edit)."""
-    if isinstance(node, yaml.SequenceNode):  # a merge key's list of mappings
-        for item in node.value:
-            _key_lines(item, prefix, lines, loader)
-        return
     if not isinstance(node, yaml.MappingNode):
         return
     merged = [v for k, v in node.value if k.tag == _MERGE_TAG]  # their keys are this mapping's
@@ -417,7 +413,8 @@ def _key_lines(node: yaml.Node, prefix: str, lines: dict[str, int], loader: _Con
             lines.setdefault(key, key_node.start_mark.line + 1)
             _key_lines(value_node, key + ".", lines, loader)  # (bounded: _expanded_size ran first)
     for value_node in merged:  # after the mapping's own keys, which win over merged ones (as in YAML)
-        _key_lines(value_node, prefix, lines, loader)
+        for m in value_node.value if isinstance(value_node, yaml.SequenceNode) else [value_node]:
+            _key_lines(m, prefix, lines, loader)
 
 
 def _parse_yaml(text: str, where: str, lines: dict[str, int] | None = None) -> Any:
@@ -502,7 +499,7 @@ def read_config_file(path: str | Path) -> dict:
     if not isinstance(loaded, dict):
         raise ConfigError(
             f"{where} must contain a mapping of sections, not {type(loaded).__name__}",
-            "write 'section:' lines with their keys indented below, as configs/default.yaml does",
+            "write 'section:' lines with their keys indented below, as `cornerslam config` prints",
         )
     if SUMMARY_MARK in loaded and isinstance(loaded.get("config"), dict):  # a run's summary.json
         loaded = loaded["config"]  # the config that run used: run again with it

@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+import os
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -148,16 +149,18 @@ def _check_method(method: str, data: dict, overrides: Sequence[str]) -> None:
 def warn_mismatch(name: str, log_path: str | Path, cfg: Config) -> None:
     """A warning when the pinned preset ``name`` is not the laser of the log's scans (a config written
     by ``cornerslam config`` for another log names its preset): its sensor model and extraction settings
-    are then another sensor's."""
+    are then another sensor's. Only the beams' spacing is compared: fewer beams at the preset's spacing
+    are its laser's scans cropped by the driver, which pinning the preset is how to model."""
     geometry = first_scan_geometry(log_path, cfg)
-    if geometry is None or detect_preset(*geometry) == name:
+    p = PRESETS[name]
+    if geometry is None or abs(math.degrees(abs(geometry[1])) - p.increment_deg) <= 0.02 * p.increment_deg:
         return
-    p, (beams, inc) = PRESETS[name], geometry
+    beams, inc = geometry
     fits = detect_preset(beams, inc)
     log.warning(
         "input.laser_preset '%s' is for %s beams %.3g° apart, but the scans of '%s' have %d beams %.3g° "
         "apart: its sensor model and extraction settings are another laser's (%s)",
-        name, "/".join(map(str, p.beams)), p.increment_deg, Path(log_path).name, beams,
+        name, "/".join(map(str, p.beams)), p.increment_deg, Path(os.path.abspath(log_path)).name, beams,
         math.degrees(abs(inc)),
         f"'{fits}' fits them; set input.laser_preset to it or to auto" if fits else "set it to auto or none",
     )  # fmt: skip

@@ -308,23 +308,26 @@ def test_another_log_of_the_same_name_does_not_replace_an_earlier_batchs_output(
 
 
 @pytest.mark.parametrize("command", ["run", "compare"])
-def test_a_run_or_comparison_inside_a_batchs_directory_is_refused(command, first, logs, tmp_path):
-    """`run --out OUT/<combination>` replaced a batch's run with another log's and batch.csv still
-    described the old one (a later batch then refused it as another log's); `compare --out OUT/x` put a
-    comparison among its runs. Both are refused before any work, as inside a comparison's directory."""
+def test_a_run_or_comparison_in_the_place_of_a_batchs_run_is_refused(command, first, logs, tmp_path):
+    """`run --out OUT/<combination>` replaced a batch's run with another log's while batch.csv still
+    described the old one (a later batch then refused it as another log's): refused before any work, as
+    inside a comparison's directory. A directory beside the batch's runs is not one of them (a batch into
+    cornerslam_out, then a run's default place there)."""
     import shutil
 
     shutil.copytree(first[0], tmp_path / "out")
     combination = tmp_path / "out" / "good__icnn__association.pca.group_size=3"
     before = (combination / "trajectory.tum").read_bytes()
-    target = combination if command == "run" else tmp_path / "out" / "cmp"
-    res = CliRunner().invoke(cli, [command, str(logs[0]), "--assoc", "pca", "--out", str(target)])
+    res = CliRunner().invoke(cli, [command, str(logs[0]), "--assoc", "pca", "--out", str(combination)])
     assert res.exit_code == 2, res.output
     assert (
-        f"'{target}' is inside the batch output '{tmp_path / 'out'}': its runs belong to that batch"
+        f"'{combination}' is inside the batch output '{tmp_path / 'out'}': its runs belong to that batch"
         in res.output
     )
-    assert (combination / "trajectory.tum").read_bytes() == before and not (tmp_path / "out" / "cmp").exists()
+    assert (combination / "trajectory.tum").read_bytes() == before
+    beside = tmp_path / "out" / "mine"
+    res = CliRunner().invoke(cli, [command, str(logs[0]), "--assoc", "pca", "--out", str(beside), "-q"])
+    assert res.exit_code == 0 and beside.is_dir(), res.output
 
 
 def test_dask_cluster_gives_the_same_batch_csv(first, logs, tmp_path):

@@ -676,6 +676,7 @@ def test_compare_refuses_a_set_of_association_method(sim_log, tmp_path):
             ["simulate", "{tmp}/s.mcap/"],
             "'{tmp}/s.mcap/' names a directory (give a file name ending in .mcap)",
         ),
+        (["simulate", "{tmp}/s.mcap/."], "'{tmp}/s.mcap/.' names a directory"),
         (["simulate", "{tmp}/.mcap"], "'{tmp}/.mcap' has no name before .mcap"),
         (["run", "{log}", "--config", "{tmp}/list.yaml"], "not list (write 'section:' lines with their keys"),
     ],
@@ -687,6 +688,12 @@ def test_small_mistakes_say_what_to_do(args, said, sim_log, tmp_path):
     res = invoke(*(a.format(tmp=tmp_path, log=sim_log) for a in args))
     assert res.exit_code == 2 and said.format(tmp=tmp_path) in res.output, res.output
     assert not (tmp_path / "s.mcap").exists()
+
+
+def test_help_lists_every_exit_code():
+    res = invoke("--help")  # 130/143/141 were missing
+    said = " ".join(res.output.split())
+    assert res.exit_code == 0 and "130 Ctrl-C, 143 SIGTERM, 141 output pipe closed" in said
 
 
 def test_compare_warns_that_a_config_file_s_association_method_is_ignored(sim_log, tmp_path):

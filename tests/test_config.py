@@ -104,7 +104,7 @@ def test_an_unknown_key_suggests_a_key_further_down_of_that_name(override, hint)
         # keys a YAML merge key (<<) brings in: where they are written (they had no place)
         ("<<: {association: {alpha: 5}}\n", 1, "'association.alpha' = 5.0 is out of range"),
         ("association:\n  <<: {alfa: 0.5}\n", 2, "unknown config key 'association.alfa'"),
-        ("b: &b\n  alfa: 1\nassociation:\n  <<: [*b]\n", 1, "unknown config key 'b'"),
+        ("ekf: &b {alpha1: 0.1}\nassociation:\n  <<: [*b]\n", 1, "unknown config key 'association.alpha1'"),
         ("association:\n  <<: {alpha: 0.01}\n  alpha: 7\n", 3, "'association.alpha' = 7.0"),  # its own wins
         # a date (it was named datetime.date(2024, 1, 1), with no line)
         ("ekf:\n  alpha1: 0.1\n  2024-01-01: 3\n", 3, "unknown config key 'ekf.2024-01-01'"),

@@ -125,3 +125,15 @@ def test_a_pinned_preset_another_lasers_scans_do_not_fit_is_warned_about(caplog)
     with caplog.at_level("WARNING"):
         resolve_config(SAMPLES / "intel_cut.clf", None, pinned)  # its own laser: nothing to say
     assert not [r for r in caplog.records if r.levelname == "WARNING"]
+
+
+def test_a_pinned_preset_is_not_warned_about_for_its_own_laser_cropped(tmp_path, caplog):
+    """A 270° laser's driver publishing 180° of it (fewer beams, the same spacing) is that laser: its
+    preset pinned is how such a user gets its sensor model (auto finds none), not a mistake."""
+    from cornerslam_cli.simulate import simulate_log
+
+    log = tmp_path / "cropped.mcap"
+    simulate_log(log, rate=1.0, beams=721, fov=math.radians(180.0))  # 0.25° apart, as hokuyo_270deg
+    with caplog.at_level("WARNING"):
+        resolve_config(log, None, ["input.laser_preset=hokuyo_270deg"])
+    assert not [r for r in caplog.records if r.levelname == "WARNING"]

@@ -396,8 +396,8 @@ def test_a_text_file_that_is_a_symlink_loop_is_named_so(tmp_path):
 def test_a_log_whose_scans_were_none_of_them_read_says_so_not_that_the_stamps_are_wrong():
     """A ROS 2 bag whose metadata.yaml names a scan topic its storage lacks, or a ROS 1 bag whose index
     points past its end, gave "0 scans read … check that the topics overlap in time" (a hostile-user
-    probe): not one scan was read, so the reader's first warning is the line's reason, or with none the
-    index and the data disagree."""
+    probe): not one scan was read, so the reader's first warning is the line's reason, or with none that the
+    reader found none of the messages its index lists (reindex it)."""
     from types import SimpleNamespace
 
     from cornerslam_cli.frontend import check_processed
@@ -413,4 +413,6 @@ def test_a_log_whose_scans_were_none_of_them_read_says_so_not_that_the_stamps_ar
     damaged = error(["x.bag: read stopped, the bag is damaged: Header could not be read"])
     assert damaged.startswith("log 'x.bag' has no scan that could be read, so no scan could be processed")
     assert "its first warning: x.bag: read stopped, the bag is damaged" in damaged
-    assert "the index and the data disagree" in error([]) and "overlap in time" not in error([])
+    none = error([])
+    assert "found none of the scan messages its index lists: reindex it" in none
+    assert "overlap in time" not in none

@@ -138,7 +138,7 @@ def test_a_metadata_yaml_with_a_field_missing_or_mistyped_says_so(bags, which, e
         meta["rosbag2_bagfile_information"]["starting_time"]["nanoseconds_since_epoch"] = "abc"
         text = yaml.safe_dump(meta)
     (bag / "metadata.yaml").write_text(text)
-    with pytest.raises(LogError, match="its metadata.yaml lacks a field or has one of the wrong type") as err:
+    with pytest.raises(LogError, match="a field of its metadata.yaml or storage is missing or mis") as err:
         open_log(bag)
     assert "ros2 bag reindex" in err.value.hint
 

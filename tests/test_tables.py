@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cornerslam_cli.errors import LogError
+from cornerslam_cli.errors import LogError, OutputError
 from cornerslam_cli.report.outdir import StagedDir
 from cornerslam_cli.report.ownership import MARKER, mark_output
 from cornerslam_cli.report.tables import (
@@ -82,6 +82,9 @@ def test_a_staged_dir_not_committed_takes_away_the_directories_it_made(tmp_path)
             (tmp_path / "new" / "mine.txt").write_text("a user's file")
             raise RuntimeError("interrupted")
     assert sorted(p.name for p in (tmp_path / "new").iterdir()) == ["mine.txt"]
+    with pytest.raises(OutputError):  # refused while staging (a name too long): the same
+        StagedDir(tmp_path / "other" / "deep" / ("x" * 300))
+    assert not (tmp_path / "other").exists()
 
 
 def test_write_json_is_strict_json(tmp_path):

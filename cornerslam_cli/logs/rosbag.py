@@ -75,6 +75,9 @@ class _Reader2(Reader2):
     STORAGE_PLUGINS = {**Reader2.STORAGE_PLUGINS, "dir": _Directory, ".db3": _Sqlite3}
 
 
+META = "metadata.yaml"  # a ROS 2 bag directory's index
+
+
 class RosbagSource:
     """A :class:`~cornerslam_cli.logs.ros.RawSource` over a rosbags reader (ROS 1 or ROS 2)."""
 
@@ -94,8 +97,8 @@ class RosbagSource:
             if isinstance(exc, KeyError):  # rosbags' lookup of a message definition's encoding
                 problem = f"a message definition is in an encoding rosbags does not read ({exc})"
                 hint = "give its storage files (.mcap, .db3) one at a time"
-            elif ros2 and (isinstance(exc, TypeError) or "NoneType" in problem):  # metadata.yaml's fields
-                problem = f"its metadata.yaml lacks a field or has one of the wrong type ({problem})"
+            elif (isinstance(exc, TypeError) or "NoneType" in problem) and (self.path / META).is_file():
+                problem = f"a field of its metadata.yaml or storage is missing or mistyped ({problem})"
                 hint = "restore its metadata.yaml (`ros2 bag reindex` writes one), or give its storage file"
             raise LogError(f"cannot read {kind} '{self.path.name}': {problem}", hint) from exc
         merged: dict[str, Channel] = {}

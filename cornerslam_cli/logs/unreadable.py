@@ -23,7 +23,7 @@ def no_scan_read(
     if stats is not None and stats.warnings:  # -q does not show them: the first in the line itself
         hint = f"its first warning: {stats.warnings[0]}"
     else:  # none to point at (a ROS 2 bag whose metadata.yaml names topics its storage file lacks)
-        hint = "the reader found none of the scan messages its index lists: the index and the data disagree"
+        hint = "the reader found none of the scan messages its index lists: reindex it or copy it again"
     return LogError(
         f"log '{log}' has no scan that could be read, so {so}",
         hint + ("; `cornerslam info LOG` lists its topics" if topics_hint else ""),

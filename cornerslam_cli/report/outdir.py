@@ -211,6 +211,14 @@ def _check_name(target: Path, shown: Path) -> None:
         )
 
 
+def refuse_directory_name(dest: str | Path, hint: str = "give a file name") -> None:
+    """OutputError when ``dest``, a file's name as given, names a directory (``a.mcap/``, ``a.mcap/.``):
+    Path drops what said so, and would write the file ``a.mcap``."""
+    text = os.fspath(dest)
+    if text.endswith(("/", os.sep)) or os.path.basename(text) in (".", ".."):
+        raise OutputError(f"'{text}' names a directory", hint)
+
+
 # ---------------------------------------------------------------------------- the staged directory
 class StagedDir:
     """A ``kind`` output directory built in a hidden sibling and renamed onto ``target`` on
@@ -245,22 +253,40 @@ class StagedDir:
             # the directories above the target this output makes: an output not committed takes them away
             self.made = [d for d in (self.target.parent, *self.target.parent.parents) if not d.exists()]
             self.target.parent.mkdir(parents=True, exist_ok=True)
-            _check_name(self.target, self.shown)
-            with target_lock(self.target):
-                clear_stale(self.target)
-                pid = live_writer(self.target)
-                if pid is not None:
-                    raise OutputError(
-                        f"another cornerslam process (pid {pid}) is writing '{self.shown}'",
-                        "wait for it to finish, or give another output directory",
-                    )
-                path = tempfile.mkdtemp(prefix=_sibling(self.target, "partial") + "-", dir=self.target.parent)
-            self.path = Path(path)
             try:
-                os.chmod(self.path, 0o777 & ~_umask())
+                self.path = self._stage()
             except BaseException:
-                _remove(self.path)
+                self._unmake()
                 raise
+
+    def _stage(self) -> Path:
+        """The hidden staging directory beside the target, made under the target's lock."""
+        _check_name(self.target, self.shown)
+        with target_lock(self.target):
+            clear_stale(self.target)
+            pid = live_writer(self.target)
+            if pid is not None:
+                raise OutputError(
+                    f"another cornerslam process (pid {pid}) is writing '{self.shown}'",
+                    "wait for it to finish, or give another output directory",
+                )
+            prefix = _sibling(self.target, "partial") + "-"
+            path = Path(tempfile.mkdtemp(prefix=prefix, dir=self.target.parent))
+        try:
+            os.chmod(path, 0o777 & ~_umask())
+        except BaseException:
+            _remove(path)
+            raise
+        return path
+
+    def _unmake(self) -> None:
+        """Take away the directories above the target this output made (``made``), deepest first; one
+        another file has come into since is left, and those above it."""
+        for d in self.made:
+            try:
+                d.rmdir()
+            except OSError:
+                break
 
     def _check_replaceable(self) -> None:
         check_replaceable(self.target, self.kind, self.inputs, self.shown, self.inside)
@@ -275,11 +301,7 @@ class StagedDir:
             _remove(self.path)
             for staged, _ in self.files:
                 _remove(staged)
-            for d in self.made:  # deepest first; one another process has filled since is left
-                try:
-                    d.rmdir()
-                except OSError:
-                    break
+            self._unmake()
         elif isinstance(exc, KeyboardInterrupt):
             exc.output_written = self.shown  # type: ignore[attr-defined]  # the CLI says so
         if isinstance(exc, OSError) and self._ours(exc.filename):
@@ -308,8 +330,7 @@ class StagedDir:
         the target an existing ``dest`` is replaced only when ``ours(dest)`` says cornerslam wrote it
         (``None``: any file)."""
         shown = Path(dest)
-        if str(dest).endswith(("/", os.sep)):  # Path drops the slash that says a directory was meant
-            raise OutputError(f"'{dest}' names a directory", "give a file name")
+        refuse_directory_name(dest)
         final = resolved(shown)
         with output_errors(shown):
             if final.name == MARKER or _BOOKKEEPING.fullmatch(final.name):

@@ -18,6 +18,7 @@ output: report/outdir.py.
 
 from __future__ import annotations
 
+import csv
 import json
 import os
 from collections.abc import Iterator, Sequence
@@ -29,7 +30,7 @@ from ..logs.mcap import header_library
 from .oserrors import output_errors, resolved
 
 MARKER = ".cornerslam-output"
-_GROUPS = {"compare": ("comparison", "them all"), "batch": ("batch", "its runs")}  # outputs made of runs
+_GROUPS = {"compare": "comparison", "batch": "batch"}  # outputs made of runs
 KINDS = ("run", "compare", "batch")
 _LEGACY = (  # outputs written before the marker: (file, how it begins, kind)
     ("summary.json", b'{\n  "cornerslam_version"', "run"),
@@ -166,20 +167,32 @@ def _refuse_foreign(target: Path, kind: str, shown: Path) -> None:
         )
 
 
+def _batch_runs(out: Path) -> set[str]:
+    """The run directories a batch's ``batch.csv`` in ``out`` lists (its ``out_dir`` column)."""
+    try:
+        with open(out / "batch.csv", newline="", encoding="utf-8") as f:
+            return {row.get("out_dir") or "" for row in csv.DictReader(f)} - {""}
+    except (OSError, ValueError, csv.Error):
+        return set()
+
+
 def check_replaceable(
     target: Path, kind: str, inputs: Sequence[Path] = (), shown: Path | None = None, inside: str | None = None
 ) -> None:
     """Refuse (OutputError) to replace ``target`` (resolved) by a ``kind`` output unless the module
     doc's rules allow it. ``inputs`` are the run's input files; ``shown`` names the target in errors;
     ``inside``: the kind of output whose part this one is (``batch``: a batch's run), else an output
-    inside a comparison's or a batch's directory is refused — those runs belong to it."""
+    inside a comparison's directory, or in the place of a run its batch.csv lists in a batch's, is
+    refused — those belong to it (another directory beside a batch's runs is not one of them:
+    ``cornerslam_out`` may hold a batch and the default places of runs)."""
     shown = target if shown is None else shown
     parent = output_kind(target.parent)
-    if parent in _GROUPS and parent != inside:
-        whose, again = _GROUPS[parent]
+    ours = parent == "compare" or (parent == "batch" and target.name in _batch_runs(target.parent))
+    if ours and parent != inside:
+        whose = _GROUPS[parent]
         raise OutputError(
             f"'{shown}' is inside the {parent} output '{target.parent}': its runs belong to that {whose}",
-            f"give a directory outside it (rerunning the {whose} replaces {again})",
+            f"give a directory outside it; rerunning the {whose} replaces them",
         )
     _refuse_foreign(target, kind, shown)
     if not target.is_dir():
