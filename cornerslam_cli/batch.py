@@ -9,8 +9,9 @@ the plan's order. A failed row's error is its one line: a bad input's message (a
 
 Resume: a combination is skipped (status ``skipped``, its figures re-read) when ``OUT/<name>/summary.json``
 is complete and its ``hashes`` (sha256 of the log's bytes, sha256 of the resolved config, version)
-equal this run's, and ground truth is present now iff it was then. Anything else is run again; a
-failed combination leaves no directory and is always retried.
+equal this run's, ground truth is present now iff it was then, and every file its marker lists is there
+(a file's content is not checked). Anything else is run again; a failed combination leaves no
+directory and is always retried.
 
 batch.csv is rewritten atomically (temporary file + rename) as combinations finish (at most once a
 second) and at the end; while the batch runs, or after it was interrupted, the combinations not yet
@@ -43,7 +44,7 @@ from .blas import single_threaded_blas, single_threaded_blas_env
 from .errors import CornerslamError, ResultsError, display_path, for_command, one_line, save_traceback
 from .report.oserrors import output_errors
 from .report.outdir import staged_write
-from .report.ownership import claim_dir, other_log_error
+from .report.ownership import claim_dir, other_log_error, read_marker
 from .results import Hashes, RunSummary
 from .sweep import Combo
 from .workers import warnings_kept, warnings_once
@@ -241,7 +242,8 @@ def _resumable(run_dir: Path, expect: Hashes, has_gt: bool) -> dict | None:
         return None  # missing, unreadable or from an older layout: run it again
     if s.hashes != expect or (s.accuracy is not None) != has_gt:
         return None
-    return figures_from_summary(s)
+    files = (read_marker(run_dir) or {}).get("files", [])  # a file of the run deleted since: run it again
+    return None if any(not os.path.lexists(run_dir / f) for f in files) else figures_from_summary(s)
 
 
 def run_one(log: str, config: dict, out_dir: str) -> dict:

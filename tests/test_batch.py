@@ -281,6 +281,11 @@ def test_resume_skips_complete_unchanged_and_reruns_changed(first, logs, tmp_pat
     (out / changed[0].name / "summary.json").write_text('{"counts": ')
     statuses = [r["status"] for r in run_batch(changed, out, jobs=2)]
     assert statuses == ["ok", "skipped", "skipped", "ok"]
+    # nor one a file of which was deleted since (a hostile-user probe: map.csv gone, still "skipped")
+    (out / changed[1].name / "map.csv").unlink()
+    statuses = [r["status"] for r in run_batch(changed, out, jobs=2)]
+    assert statuses == ["skipped", "ok", "skipped", "skipped"]
+    assert (out / changed[1].name / "map.csv").is_file()
 
 
 def test_another_log_of_the_same_name_does_not_replace_an_earlier_batchs_output(first, logs, tmp_path):
