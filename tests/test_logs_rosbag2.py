@@ -143,6 +143,18 @@ def test_a_metadata_yaml_with_a_field_missing_or_mistyped_says_so(bags, which, e
     assert "ros2 bag reindex" in err.value.hint
 
 
+def test_negative_metadata_counts_are_unknown(bags):
+    """`info` printed an edited metadata.yaml's "-5 msgs" as they were (a hostile-user probe)."""
+    sq, _, ref = bags
+    meta = yaml.safe_load((sq / "metadata.yaml").read_text())
+    meta["rosbag2_bagfile_information"]["topics_with_message_count"][0]["message_count"] = -5
+    (sq / "metadata.yaml").write_text(yaml.safe_dump(meta))
+    scans, _, warnings, li = got = _read(sq)
+    _same(ref, got)
+    assert all(t.count is None for t in li.topics)
+    assert any("counts a negative number of messages" in w for w in warnings)
+
+
 def test_a_db3_given_alone_is_read(bags):
     sq, _, ref = bags
     got = _read(next(sq.glob("*.db3")))

@@ -31,6 +31,7 @@ from rosbags.rosbag2.reader import DirectoryReader
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 
 from ..errors import LogError
+from ..ranges import short_text
 from .base import Channel, ReadStats
 from .mcap import mcap_source
 from .ros import RosLogReader
@@ -113,7 +114,11 @@ class RosbagSource:
             count = c.msgcount + (prev.count or 0 if prev else 0)
             merged[c.topic] = Channel(c.topic, c.msgtype, enc, count, c.msgdef.data, fmt)
         self._channels = list(merged.values())
-        if ros2 and self._channels and not self._reader.message_count and self._holds_messages():
+        if bad := [c.topic for c in self._channels if (c.count or 0) < 0]:  # an edited metadata.yaml's
+            self.stats.warn("%s: its metadata.yaml counts a negative number of messages on %s: message "
+                            "counts unknown", self.path.name, ", ".join(map(short_text, bad)))  # fmt: skip
+            self._channels = [replace(c, count=None) for c in self._channels]
+        elif ros2 and self._channels and not self._reader.message_count and self._holds_messages():
             self.stats.warn(
                 "%s: its metadata.yaml counts no messages but its storage holds some (metadata.yaml is "
                 "stale; `ros2 bag reindex` writes it again): message counts unknown",
