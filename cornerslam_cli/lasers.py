@@ -97,11 +97,15 @@ def mount_source(cfg: Config) -> str:
 
 def detect_preset(n_beams: int, angle_increment: float) -> str | None:
     """Name of the preset matching a scan of ``n_beams`` beams ``angle_increment`` rad apart, or None."""
-    inc = math.degrees(abs(angle_increment))
     for name, p in PRESETS.items():
-        if n_beams in p.beams and abs(inc - p.increment_deg) <= 0.02 * p.increment_deg:
+        if n_beams in p.beams and spaced_as(p, angle_increment):
             return name
     return None
+
+
+def spaced_as(p: LaserPreset, angle_increment: float) -> bool:
+    """Whether beams ``angle_increment`` rad apart are the preset's (within 2 % of its step)."""
+    return abs(math.degrees(abs(angle_increment)) - p.increment_deg) <= 0.02 * p.increment_deg
 
 
 def first_scan(reader) -> Scan | None:
@@ -153,7 +157,7 @@ def warn_mismatch(name: str, log_path: str | Path, cfg: Config) -> None:
     are its laser's scans cropped by the driver, which pinning the preset is how to model."""
     geometry = first_scan_geometry(log_path, cfg)
     p = PRESETS[name]
-    if geometry is None or abs(math.degrees(abs(geometry[1])) - p.increment_deg) <= 0.02 * p.increment_deg:
+    if geometry is None or spaced_as(p, geometry[1]):
         return
     beams, inc = geometry
     fits = detect_preset(beams, inc)
