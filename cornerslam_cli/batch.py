@@ -44,7 +44,7 @@ from .blas import single_threaded_blas, single_threaded_blas_env
 from .errors import CornerslamError, ResultsError, display_path, for_command, one_line, save_traceback
 from .report.oserrors import output_errors
 from .report.outdir import staged_write
-from .report.ownership import claim_dir, other_log_error, read_marker
+from .report.ownership import claim_dir, files_intact, other_log_error
 from .results import Hashes, RunSummary
 from .sweep import Combo
 from .workers import warnings_kept, warnings_once
@@ -242,8 +242,7 @@ def _resumable(run_dir: Path, expect: Hashes, has_gt: bool) -> dict | None:
         return None  # missing, unreadable or from an older layout: run it again
     if s.hashes != expect or (s.accuracy is not None) != has_gt:
         return None
-    files = (read_marker(run_dir) or {}).get("files", [])  # a file of the run deleted since: run it again
-    return None if any(not os.path.lexists(run_dir / f) for f in files) else figures_from_summary(s)
+    return figures_from_summary(s) if files_intact(run_dir) else None
 
 
 def run_one(log: str, config: dict, out_dir: str) -> dict:

@@ -286,6 +286,17 @@ def test_resume_skips_complete_unchanged_and_reruns_changed(first, logs, tmp_pat
     statuses = [r["status"] for r in run_batch(changed, out, jobs=2)]
     assert statuses == ["skipped", "ok", "skipped", "skipped"]
     assert (out / changed[1].name / "map.csv").is_file()
+    # nor one a file of which was cut short since (a copy interrupted: it was "skipped (complete)")
+    traj = out / changed[2].name / "trajectory.tum"
+    whole = traj.read_bytes()
+    traj.write_bytes(whole[: len(whole) // 2])
+    statuses = [r["status"] for r in run_batch(changed, out, jobs=2)]
+    assert statuses == ["skipped", "skipped", "ok", "skipped"]
+    assert traj.read_bytes() == whole
+    # a marker edited by hand into other types: run again, not a crash
+    marker = out / changed[3].name / ".cornerslam-output"
+    marker.write_text(json.dumps(json.loads(marker.read_text()) | {"sizes": ["trajectory.tum"]}))
+    assert [r["status"] for r in run_batch(changed, out, jobs=2)] == ["skipped"] * 3 + ["ok"]
 
 
 def test_another_log_of_the_same_name_does_not_replace_an_earlier_batchs_output(first, logs, tmp_path):

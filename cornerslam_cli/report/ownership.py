@@ -21,6 +21,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import stat
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
@@ -67,13 +68,38 @@ def output_kind(path: Path) -> str | None:
 
 def mark_output(path: Path, kind: str, log: Path | None = None) -> None:
     """Mark the directory ``path`` as a cornerslam output of ``kind`` made from ``log`` (recorded
-    resolved); a run or comparison lists the entries it holds now (its complete contents)."""
+    resolved); a run or comparison lists the entries it holds now (its complete contents) and, appended,
+    the size of each of its regular files (``sizes``: batch's resume tells a file cut short since)."""
     marker: dict = {"cornerslam": __version__, "kind": kind}
     if log is not None:
         marker["log"] = os.fsdecode(log.resolve())
     if kind != "batch":  # a batch directory grows as it runs: its own rows are checked one by one
-        marker["files"] = [rel for rel, _ in _entries(path)]
+        entries = list(_entries(path))
+        marker["files"] = [rel for rel, _ in entries]
+        marker["sizes"] = {rel: e.stat().st_size for rel, e in entries if e.is_file() and not e.is_symlink()}
     (path / MARKER).write_text(json.dumps(marker, indent=1) + "\n")
+
+
+def files_intact(run_dir: Path) -> bool:
+    """Whether every file the run's marker lists is still there and, where it recorded their sizes, of
+    the same size: a file deleted or cut short since (a copy interrupted, a disk full) is run again. An
+    edit that keeps a file's size is not seen."""
+    marker = read_marker(run_dir) or {}
+    files, sizes = marker.get("files", []), marker.get("sizes", {})
+    if not isinstance(files, list) or not isinstance(sizes, dict):
+        return False  # (a marker edited by hand)
+    if any(not isinstance(f, str) or not os.path.lexists(run_dir / f) for f in files):
+        return False
+    return all(isinstance(f, str) and _size(run_dir / f) == n for f, n in sizes.items())
+
+
+def _size(path: Path) -> int:
+    """The size of the regular file ``path`` in bytes, −1 when it is not one (or cannot be read)."""
+    try:
+        st = os.stat(path, follow_symlinks=False)
+    except (OSError, ValueError):
+        return -1
+    return st.st_size if stat.S_ISREG(st.st_mode) else -1
 
 
 def _entries(path: Path, prefix: str = "") -> Iterator[tuple[str, Path]]:
