@@ -173,7 +173,10 @@ def _run_claimed(
             progress(state)
 
     todo.sort(key=lambda i: -_size(combos[i].log))  # biggest logs first: a shorter tail on N workers
-    tasks = [(i, combos[i].log, combos[i].config, str((out / combos[i].name).resolve())) for i in todo]
+    tasks = [
+        (i, c.log, c.config, str((out / c.name).resolve()), c.notes)
+        for i, c in ((i, combos[i]) for i in todo)
+    ]
     try:
         if client is not None:
             _run_dask(tasks, client, finished)
@@ -245,8 +248,9 @@ def _resumable(run_dir: Path, expect: Hashes, has_gt: bool) -> dict | None:
     return figures_from_summary(s) if files_intact(run_dir) else None
 
 
-def run_one(log: str, config: dict, out_dir: str) -> dict:
-    """Run one combination (in a worker): ``{"status": "ok", "figures": ...}`` or the failure line.
+def run_one(log: str, config: dict, out_dir: str, notes: tuple[str, ...] = ()) -> dict:
+    """Run one combination (in a worker): ``{"status": "ok", "figures": ...}`` or the failure line;
+    ``notes``: its config's warnings, said when the batch planned it, kept for its summary.json.
 
     Module-level and importing the package lazily, so spawn and Dask workers can unpickle it by name
     and set the BLAS thread count before numpy is first imported. The run's warnings are not printed
@@ -258,7 +262,7 @@ def run_one(log: str, config: dict, out_dir: str) -> dict:
             from .config import Config, from_dict
             from .pipeline import run
 
-            summary = run(log, from_dict(Config, config), out_dir, inside="batch")
+            summary = run(log, from_dict(Config, config), out_dir, inside="batch", notes=notes)
             result = {"status": "ok", "figures": figures_from_summary(summary)}
         except SystemExit:  # the batch was interrupted and ended us (workers.stopped_by_parent)
             os._exit(143)  # the staging is removed: end here, not in the combination queued to us next
@@ -289,7 +293,7 @@ def _run_local(tasks: list[tuple], jobs: int, finished: Callable[[int, dict], No
             initargs=(logging.getLogger().getEffectiveLevel(),),
         )
         try:
-            futures = {pool.submit(run_one, log, cfg, out): i for i, log, cfg, out in tasks}
+            futures = {pool.submit(run_one, *task): i for i, *task in tasks}
             for fut in as_completed(futures):
                 try:
                     result = fut.result()
@@ -350,8 +354,8 @@ def _run_dask(tasks: list[tuple], client, finished: Callable[[int, dict], None])
     from dask.distributed import as_completed
 
     if tasks:
-        idx, logs, cfgs, outs = (list(t) for t in zip(*tasks, strict=True))
-        futures = client.map(run_one, logs, cfgs, outs, pure=False)
+        idx, *columns = (list(t) for t in zip(*tasks, strict=True))
+        futures = client.map(run_one, *columns, pure=False)
         index = {f.key: i for f, i in zip(futures, idx, strict=True)}
         for fut in as_completed(futures, loop=client.loop):
             try:

@@ -258,14 +258,16 @@ def run(
       cornerslam run sample_logs/sim_office.mcap --assoc jcbb --out out/
     """
     from .pipeline import run as run_pipeline
+    from .workers import warnings_copied
 
     setup_logging(verbose, quiet)
     names = parse_assocs(assoc, allow_many=False, log_path=log_path)
     check_time_offset(relations, time_offset)
     span = parse_span(start, end, max_scans)
-    cfg = command_config(
-        config_path, overrides, names[0] if names else None, scan_topic, odom_topic, log_path
-    )
+    with warnings_copied() as notes:  # the config's (a preset not the log's laser): summary.json's too
+        cfg = command_config(
+            config_path, overrides, names[0] if names else None, scan_topic, odom_topic, log_path
+        )
     progress = Progress(f"{display_path(Path(log_path).name)} ({cfg.association.method})", not quiet)
     try:
         summary = run_pipeline(
@@ -281,6 +283,7 @@ def run(
             config_path=config_path,
             span=span,
             compiling=partial(_say_compiling, quiet),
+            notes=notes,
         )
     finally:
         progress.close()
@@ -331,22 +334,22 @@ def compare(
     """
     from .compare import compare as run_compare
     from .pipeline import default_out_dir
+    from .workers import warnings_copied
 
     setup_logging(verbose, quiet)
     names = parse_assocs(assocs, allow_many=True)
     check_time_offset(relations, time_offset)
     span = parse_span(start, end, max_scans)
-    why = f"compare runs each associator of --assoc ({','.join(names)})"
-    cfg = command_config(
-        config_path, overrides, None, scan_topic, odom_topic, log_path, {"association.method": (why, names)}
-    )
+    ignored = {"association.method": (f"compare runs each associator of --assoc ({','.join(names)})", names)}
+    with warnings_copied() as notes:  # the config's: each run's summary.json's too
+        cfg = command_config(config_path, overrides, None, scan_topic, odom_topic, log_path, ignored)
     check_method_not_set(overrides, ",".join(names))  # (after the config: an unknown name is named as such)
     out_dir = Path(out) if out else default_out_dir(Path(log_path), "compare")
     progress = Progress(f"{display_path(Path(log_path).name)} (compare)", not quiet)
     try:
         summaries = run_compare(
             log_path, cfg, names, out_dir, ground_truth, jobs, progress, relations, time_offset,
-            default_place=not out, span=span, compiling=partial(_say_compiling, quiet),
+            default_place=not out, span=span, compiling=partial(_say_compiling, quiet), notes=notes,
         )  # fmt: skip
     finally:
         progress.close()

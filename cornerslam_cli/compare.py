@@ -21,7 +21,7 @@ from pathlib import Path
 
 from .config import Config
 from .frontend import Frame, Input, frames, open_input, warn_mount
-from .pipeline import run_filter
+from .pipeline import keep_notes, run_filter
 from .report.comparison import write_comparison
 from .report.outdir import StagedDir
 from .report.ownership import mark_output
@@ -102,16 +102,19 @@ def compare(
     default_place: bool = False,
     span: Span | None = None,
     compiling: Callable[[], None] | None = None,
+    notes: Sequence[str] = (),
 ) -> list[RunSummary]:
     """Run each associator in ``assocs`` on ``log_path``; write OUT/ASSOC/, OUT/comparison.csv and
     (``plots``) the figures and OUT/report.html, committed together. The output place is checked
     before any work (``default_place``: OUT is named after the log: another log's output there is
-    refused, not replaced); ``span``: the part of the log to process; ``compiling``: frontend.open_input's."""
+    refused, not replaced); ``span``: the part of the log to process; ``compiling``: frontend.open_input's;
+    ``notes``: warnings already said about the config, kept for each run's summary.json."""
     inputs = [p for p in (log_path, ground_truth, relations) if p]
     with StagedDir(out, "compare", inputs, log_path, own_log_only=default_place) as stage:
         ref = load_reference(Path(log_path), ground_truth, relations, time_offset)
         t0 = time.perf_counter()
         src: Input = open_input(log_path, cfg, span, compiling)
+        keep_notes(src, notes)
         frame_list: list[Frame] = list(frames(src, cfg, progress))
         # the input's: warned once here, not once per associator (its runs skip a repeat); as a run
         # warns it, only when the frames have valid beams (else their error comes alone: check_processed)

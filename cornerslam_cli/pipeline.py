@@ -11,11 +11,11 @@ from __future__ import annotations
 import logging
 import os
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 
 from .config import Config
-from .errors import OutputError, display_path
+from .errors import OutputError, display_path, printable
 from .frontend import Frame, Input, check_processed, frames, open_input, warn_mount
 from .hierarchy import HierarchicalSlam
 from .report.occupancy import ScanStore
@@ -50,6 +50,7 @@ def run(
     span: Span | None = None,
     compiling: Callable[[], None] | None = None,
     inside: str | None = None,
+    notes: Sequence[str] = (),
 ) -> RunSummary:
     """Run corner EKF-SLAM on one log and write the output directory atomically: the tables, with
     ``plot`` the figures and report.html, and ``mcap_out`` beside it, all committed at once.
@@ -58,7 +59,8 @@ def run(
     the ground truth (also LOG.gt.tum found beside the log), the relations, the config file
     ``config_path`` — are never written over; ``span``: the part of the log to process (span.py);
     ``compiling``: frontend.open_input's; ``inside="batch"``: a batch's run, written inside its
-    directory (any other output there is refused).
+    directory (any other output there is refused); ``notes``: warnings already said about the config
+    (workers.warnings_copied), kept for summary.json's list.
     Returns the summary (also written to summary.json) with ``out_dir``, the committed directory.
     """
     wall0 = time.perf_counter()
@@ -69,11 +71,22 @@ def run(
         mcap_path = stage.stage_file(mcap_out, ours=is_results_mcap) if mcap_out else None
         ref = load_reference(Path(log_path), ground_truth, relations, time_offset)  # bad files fail first
         src = open_input(log_path, cfg, span, compiling)
+        keep_notes(src, notes)
         scans = ScanStore() if mcap_path else None  # kept for the results MCAP's scans
         summary = run_filter(frames(src, cfg, progress), src, cfg, stage.path, ref, wall0, scans)
         write_extras(stage, plot, mcap_out, mcap_path, ref.gt_path, scans)
         summary = summary.with_out_dir(stage.commit())
     return summary
+
+
+def keep_notes(src: Input, notes: Sequence[str]) -> None:
+    """Keep warnings said before the log was opened (the config's: workers.warnings_copied) in the
+    input's list, summary.json's, as its reader's warn would, without saying them again."""
+    stats = src.reader.stats
+    for text in map(printable, notes):
+        stats.said.add(text)
+        if text not in stats.warnings and len(stats.warnings) < 100:
+            stats.warnings.append(text)
 
 
 def write_extras(

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import ConfigError, one_line
-from .workers import warnings_once
+from .workers import warnings_copied, warnings_once
 
 _UNSAFE = re.compile(r"[^A-Za-z0-9._=+-]")
 _MAX_NAME = 180  # well under the 255-byte file name limit, leaving room for the staging prefix
@@ -33,7 +33,8 @@ class Combo:
     ``config`` is the fully resolved config as plain data (``Config.to_dict()``), laser preset included
     as ``run`` would choose it, so workers rebuild it without the config file; ``sweep`` holds (dotted
     key, value as written) in the order swept. ``error`` is set when the log could not be opened to
-    choose its laser preset: the combination is reported failed without running.
+    choose its laser preset: the combination is reported failed without running. ``notes``: the warnings
+    resolving its config gave (a pinned preset not the log's laser), kept for its summary.json.
     """
 
     log: str
@@ -42,6 +43,7 @@ class Combo:
     name: str
     config: dict = field(compare=False, repr=False)
     error: str = ""
+    notes: tuple[str, ...] = field(default=(), compare=False, repr=False)
 
 
 def value_text(v: Any) -> str:
@@ -113,12 +115,13 @@ def _plan(
             sweep = tuple(zip(sweeps, values, strict=True))
             sets = [*overrides, f"association.method={assoc}", *(f"{k}={v}" for k, v in sweep)]
             error = ""
-            try:
-                cfg = resolve_config(log, config_path, sets)
-            except LogError as e:  # the log's rows fail; the batch goes on
-                cfg, error = load_config(config_path, sets), one_line(e)
+            with warnings_copied() as notes:
+                try:
+                    cfg = resolve_config(log, config_path, sets)
+                except LogError as e:  # the log's rows fail; the batch goes on
+                    cfg, error = load_config(config_path, sets), one_line(e)
             name = _dir_name(labels[log], assoc, sweep)
-            combos.append(Combo(log, assoc, sweep, name, cfg.to_dict(), error))
+            combos.append(Combo(log, assoc, sweep, name, cfg.to_dict(), error, tuple(notes)))
     names = [c.name for c in combos]
     if len(set(names)) != len(names):
         dup = next(n for n in names if names.count(n) > 1)

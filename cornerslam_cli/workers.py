@@ -111,6 +111,38 @@ def warnings_kept() -> Iterator[list[str]]:
 
 
 @contextmanager
+def warnings_copied() -> Iterator[list[str]]:
+    """Within it, warnings are kept, in the order logged, in the list it gives — also under ``-q``, which
+    does not print them — and printed as the handlers would anyway (the config's warnings, for
+    summary.json: pipeline.keep_notes)."""
+    kept: list[str] = []
+    root = logging.getLogger()
+    level, handlers = root.level, list(root.handlers)
+    levels = [h.level for h in handlers]
+
+    class Copy(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            if record.levelno == logging.WARNING:
+                kept.append(record.getMessage())
+
+    copy = Copy(logging.WARNING)
+    for h, own in zip(handlers, levels, strict=True):  # each prints no more than it did
+        h.setLevel(max(own, level))
+    added = [copy] if handlers else [copy, logging.lastResort]  # (none: the last resort printed them)
+    for h in added:
+        root.addHandler(h)
+    root.setLevel(min(level, logging.WARNING) if handlers else level)
+    try:
+        yield kept
+    finally:
+        for h in added:
+            root.removeHandler(h)
+        root.setLevel(level)
+        for h, own in zip(handlers, levels, strict=True):
+            h.setLevel(own)
+
+
+@contextmanager
 def _warnings_to(decide: Callable[[logging.LogRecord], bool]) -> Iterator[None]:
     """Each warning record reaching the root logger's handlers is passed to ``decide`` once (not once
     per handler); every handler prints it only if ``decide`` returned True."""

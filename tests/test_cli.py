@@ -1129,3 +1129,32 @@ def test_a_log_name_with_control_characters_reaches_the_terminal_escaped(tmp_pat
     assert "new\\nline" in warning  # one line, the newline shown as \n
     report = next(line for line in res.stdout.splitlines() if "5 steps" in line)
     assert report.startswith(str(tmp_path)) and "new\\nline" in report
+
+
+def test_the_configs_warnings_are_in_summary_json_too(tmp_path):
+    """A pinned laser preset that is not the log's laser is warned about while the config resolves,
+    before the log is opened for the run: summary.json's warnings lacked it (said on the terminal only,
+    so a run read later looked clean). Now run's, each of compare's runs' and each batch combination's
+    summary.json keep it, and the terminal still says it once."""
+    log, pinned = (
+        Path(__file__).parent.parent / "sample_logs" / "intel_cut.clf",
+        "input.laser_preset=hokuyo_urg04lx",
+    )
+    common = ["--set", pinned, "--set", "submaps.enabled=false", "-q"]
+
+    def mismatch(lines):
+        return [w for w in lines if "input.laser_preset 'hokuyo_urg04lx' is for" in w]
+
+    res = invoke("run", log, "--out", tmp_path / "run", "--max-scans", 15, *common[:-1])
+    assert res.exit_code == 0, res.output
+    assert len(mismatch(res.stderr.splitlines())) == 1
+    summaries = [tmp_path / "run" / "summary.json"]
+    res = invoke("compare", log, "--assoc", "icnn,pca", "--out", tmp_path / "cmp", "--max-scans", 15, *common)
+    assert res.exit_code == 0, res.output
+    summaries += [tmp_path / "cmp" / a / "summary.json" for a in ("icnn", "pca")]
+    res = invoke("batch", log, "--assoc", "icnn", "--out", tmp_path / "batch", "--jobs", 1, *common)
+    assert res.exit_code == 0, res.output
+    summaries += list((tmp_path / "batch").glob("*/summary.json"))
+    assert len(summaries) == 4
+    for s in summaries:
+        assert len(mismatch(json.loads(s.read_text())["warnings"])) == 1, s
