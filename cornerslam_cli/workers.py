@@ -128,7 +128,8 @@ def warnings_copied() -> Iterator[list[str]]:
     copy = Copy(logging.WARNING)
     for h, own in zip(handlers, levels, strict=True):  # each prints no more than it did
         h.setLevel(max(own, level))
-    added = [copy] if handlers else [copy, logging.lastResort]  # (none: the last resort printed them)
+    # (no handler: the last resort printed them, and must still)
+    added = [copy] if handlers or logging.lastResort is None else [copy, logging.lastResort]
     for h in added:
         root.addHandler(h)
     root.setLevel(min(level, logging.WARNING) if handlers else level)

@@ -297,6 +297,18 @@ def test_resume_skips_complete_unchanged_and_reruns_changed(first, logs, tmp_pat
     marker = out / changed[3].name / ".cornerslam-output"
     marker.write_text(json.dumps(json.loads(marker.read_text()) | {"sizes": ["trajectory.tum"]}))
     assert [r["status"] for r in run_batch(changed, out, jobs=2)] == ["skipped"] * 3 + ["ok"]
+    # nor is one whose marker is gone (a copy without dotfiles: a file cut short would go unseen); without
+    # it the files are not known to be ours, so nothing there is replaced: a failed row naming them
+    (out / changed[0].name / ".cornerslam-output").unlink()
+    rows = run_batch(changed, out, jobs=2)
+    assert [r["status"] for r in rows] == ["failed"] + ["skipped"] * 3
+    assert "which cornerslam did not write" in rows[0]["error"]
+    # a marker whose file list was edited into something else: what is ours is unknown, so nothing there
+    # is replaced — a failed row naming the files, not an internal error
+    marker.write_text(json.dumps(json.loads(marker.read_text()) | {"files": None}))
+    rows = run_batch(changed, out, jobs=2)
+    assert [r["status"] for r in rows] == ["failed", "skipped", "skipped", "failed"]  # (0: as above)
+    assert "which cornerslam did not write" in rows[3]["error"] and "internal" not in rows[3]["error"]
 
 
 def test_another_log_of_the_same_name_does_not_replace_an_earlier_batchs_output(first, logs, tmp_path):

@@ -81,19 +81,26 @@ def mark_output(path: Path, kind: str, log: Path | None = None) -> None:
 
 
 def files_intact(run_dir: Path) -> bool:
-    """Whether every file the run's marker lists is still there and, where it recorded their sizes, of
-    the same size: a file deleted or cut short since (a copy interrupted, a disk full) is run again. An
-    edit that keeps a file's size is not seen."""
-    marker = read_marker(run_dir) or {}
-    files, sizes = marker.get("files", []), marker.get("sizes", {})
-    if not isinstance(files, list) or not isinstance(sizes, dict):
-        return False  # (a marker edited by hand)
-    if any(not isinstance(f, str) or not os.path.lexists(run_dir / f) for f in files):
+    """Whether the run directory's marker is there, every file it lists is still there and, where it
+    recorded their sizes, of the same size: a file deleted or cut short since (a copy interrupted, a disk
+    full; the marker itself, or a copy without it) is run again. An edit that keeps a file's size is not
+    seen."""
+    marker = read_marker(run_dir)
+    if marker is None:
         return False
-    return all(isinstance(f, str) and _size(run_dir / f) == n for f, n in sizes.items())
+    files, sizes = marker.get("files", []), marker.get("sizes", {})
+    if (
+        not isinstance(files, list)
+        or not all(isinstance(f, str) for f in files)
+        or not isinstance(sizes, dict)
+    ):
+        return False  # (a marker edited by hand)
+    if any(not os.path.lexists(run_dir / f) for f in files) or not set(sizes) <= set(files):
+        return False
+    return all(type(n) is int and n >= 0 and file_size(run_dir / f) == n for f, n in sizes.items())
 
 
-def _size(path: Path) -> int:
+def file_size(path: Path) -> int:
     """The size of the regular file ``path`` in bytes, −1 when it is not one (or cannot be read)."""
     try:
         st = os.stat(path, follow_symlinks=False)
@@ -135,7 +142,8 @@ def foreign_entries(path: Path) -> list[str]:
         return _foreign_legacy(path, output_kind(path))
     if "files" not in marker:
         return []
-    listed = set(marker["files"])
+    listed = marker["files"]  # (a marker edited by hand into something else lists nothing)
+    listed = {f for f in listed if isinstance(f, str)} if isinstance(listed, list) else set()
     out: list[str] = []
     for rel, entry in _entries(path):
         if any(rel.startswith(f + "/") for f in out):
