@@ -473,7 +473,7 @@ def evaluate(out_dir, ground_truth, relations, time_offset, correct_scale, verbo
       cornerslam evaluate cornerslam_out/intel_pca --relations intel.relations --time-offset 976052857.334
     """
     from .evaluate import evaluate_files
-    from .report.run_dir import check_one_run
+    from .report.run_dir import check_one_run, check_unchanged
 
     setup_logging(verbose, quiet)
     if not ground_truth and not relations:
@@ -482,6 +482,7 @@ def evaluate(out_dir, ground_truth, relations, time_offset, correct_scale, verbo
         raise click.UsageError("--correct-scale scales the ATE: give --ground-truth FILE.tum too")
     check_time_offset(relations, time_offset)
     check_one_run(out_dir)  # a compare or batch directory: names its run directories
+    check_unchanged(out_dir)  # its trajectory.tum cut short since: not scored as the whole run
     res = evaluate_files(out_dir, ground_truth, relations, time_offset, correct_scale)
     _echo(evaluation_lines(res))
 

@@ -104,6 +104,15 @@ def test_evaluate_reports_ate(sim_log, tmp_path):
     assert invoke("run", sim_log, "--out", out, "-q").exit_code == 0
     res = invoke("evaluate", out, "--ground-truth", sim_log.with_suffix(".gt.tum"))
     assert res.exit_code == 0 and "ATE  rmse" in res.output
+    # its trajectory.tum cut at a line since (a copy interrupted): refused, not scored as the whole run
+    traj = out / "trajectory.tum"
+    lines = traj.read_text().splitlines(keepends=True)
+    traj.write_text("".join(lines[: len(lines) // 3]))
+    res = invoke("evaluate", out, "--ground-truth", sim_log.with_suffix(".gt.tum"))
+    one_line_error(res, "trajectory.tum' holds", "but its run wrote", "cut short or changed since")
+    # ... but the file itself, named, is scored as it is
+    res = invoke("evaluate", traj, "--ground-truth", sim_log.with_suffix(".gt.tum"))
+    assert res.exit_code == 0 and "ATE  rmse" in res.output
 
 
 def test_evaluate_correct_scale_reports_the_scale_and_needs_ground_truth(tmp_path):

@@ -18,7 +18,7 @@ import numpy as np
 from ..errors import LogError, display_path
 from ..evaluate import align_se2, apply_se2, interpolate_inside
 from ..results import RunSummary
-from .ownership import output_kind
+from .ownership import file_size, output_kind, read_marker
 from .tables import read_csv, read_tum
 
 log = logging.getLogger(__name__)
@@ -92,6 +92,24 @@ def check_one_run(path: str | Path) -> None:
     raise LogError(
         f"'{display_path(p)}' is a cornerslam {kind} output: it holds {holds}",
         f"evaluate one of them with the same options: {example}",
+    )
+
+
+def check_unchanged(path: str | Path, name: str = "trajectory.tum") -> None:
+    """Refuse the run directory ``path`` when its file ``name`` is not the size its run wrote (its
+    marker's ``sizes``): cut short (a copy interrupted, a disk full) or changed since, its score would
+    be a part's, as if the whole. An output without recorded sizes (an older version's) is not checked;
+    a file given by its own path is scored as it is."""
+    p = Path(path)
+    sizes = (read_marker(p) or {}).get("sizes") if p.is_dir() else None
+    wrote = sizes.get(name) if isinstance(sizes, dict) else None
+    has = file_size(p / name)
+    if type(wrote) is not int or has < 0 or has == wrote:
+        return  # (not recorded; or missing, which reading it says)
+    raise LogError(
+        f"'{display_path(p / name)}' holds {has:,} bytes, but its run wrote {wrote:,}: it was cut short or "
+        "changed since",
+        f"run the log again, or score the file as it is: cornerslam evaluate {display_path(p / name)} …",
     )
 
 
