@@ -66,11 +66,17 @@ def test_scan_stamped_before_odometry_that_arrived_earlier_still_interpolates():
 def test_backwards_and_duplicate_stamps_are_dropped():
     msgs = [OdomSample(0.0, 0, 0, 0), scan(1.0), scan(1.0), scan(0.9), OdomSample(2.0, 2, 0, 0)]
     msgs += [OdomSample(1.9, 9, 9, 0), scan(1.5)]
-    st = SyncStats()
-    out = list(synchronise(msgs, st))
+    st, warned = SyncStats(), []
+    out = list(synchronise(msgs, st, lambda fmt, *a: warned.append(fmt % a)))
     assert [s.scan.stamp for s in out] == [1.0, 1.5]
     assert st.scan_time_backwards == 2 and st.odom_time_backwards == 1
     assert out[0].odom[0] == pytest.approx(1.0)
+    # one warning naming only the kinds that happened, in the singular for one (it said "skipped 0 scans
+    # before the first and 0 after the last odometry sample, 2 scans and 1 odometry samples whose …")
+    assert warned == [
+        "skipped 2 scans: 2 whose stamps went backwards or repeated; "
+        "1 odometry sample whose stamps went backwards or repeated"
+    ]
 
 
 @pytest.mark.parametrize("far", [0, 2])

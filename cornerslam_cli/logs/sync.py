@@ -251,18 +251,25 @@ def _warn_skipped(st: SyncStats, warn: Callable[..., None]) -> None:
     """One warning summing up the scans and odometry samples that synchronise skipped."""
     if not (st.scans_skipped or st.odom_time_backwards):
         return
-    gap = f", {st.odom_gap} in gaps of the odometry (no sample within {MAX_GAP:g} s)" if st.odom_gap else ""
+    ends = " and ".join(
+        f"{n} {where} the {end}" for n, where, end in ((st.before_first_odom, "before", "first"),
+                                                    (st.after_last_odom, "after", "last")) if n
+    )  # fmt: skip
+    parts = [
+        f"{ends} odometry sample" if ends else "",
+        f"{st.odom_gap} in gaps of the odometry (no sample within {MAX_GAP:g} s)" if st.odom_gap else "",
+        f"{st.scan_time_backwards} whose stamps went backwards or repeated" if st.scan_time_backwards else "",
+    ]
+    scans = ", ".join(p for p in parts if p)
+    n_scans, n_odom = st.scans_skipped, st.odom_time_backwards
+    said = [
+        f"{n_scans} scan{'s' if n_scans != 1 else ''}: {scans}" if scans else "",
+        f"{n_odom} odometry sample{'s' if n_odom != 1 else ''} whose stamps went backwards or repeated"
+        if n_odom
+        else "",
+    ]
     clocks = st.other_clocks()
-    warn(
-        "skipped %d scans before the first and %d after the last odometry sample%s, "
-        "%d scans and %d odometry samples whose stamps went backwards or repeated%s",
-        st.before_first_odom,
-        st.after_last_odom,
-        gap,
-        st.scan_time_backwards,
-        st.odom_time_backwards,
-        f" ({clocks}: {CLOCKS_HINT})" if clocks else "",
-    )
+    warn("skipped %s%s", "; ".join(s for s in said if s), f" ({clocks}: {CLOCKS_HINT})" if clocks else "")
 
 
 def reanchor_odometry(
