@@ -7,11 +7,19 @@ from cornerslam_cli.blas import single_threaded_blas
 single_threaded_blas()
 
 import os  # noqa: E402
+import signal  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import pytest  # noqa: E402
 
 from cornerslam_cli.simulate import simulate_log  # noqa: E402
+
+# A suite started in the background by a shell without job control (`pytest … &` in a script) inherits
+# SIGINT ignored (POSIX), and so would every run it starts: the Ctrl-C tests (test_interrupt.py,
+# test_faults_output.py) then saw their runs finish instead of stop. Python's handler, as a foreground
+# start has it (the runs started get SIGINT's default, and install theirs).
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @pytest.fixture(scope="session")
