@@ -302,7 +302,7 @@ def test_resume_skips_complete_unchanged_and_reruns_changed(first, logs, tmp_pat
     (out / changed[0].name / ".cornerslam-output").unlink()
     rows = run_batch(changed, out, jobs=2)
     assert [r["status"] for r in rows] == ["failed"] + ["skipped"] * 3
-    assert "which cornerslam did not write" in rows[0]["error"]
+    assert "which cornerslam did not write (its .cornerslam-output marker" in rows[0]["error"]
     # a marker whose file list was edited into something else: what is ours is unknown, so nothing there
     # is replaced — a failed row naming the files, not an internal error
     marker.write_text(json.dumps(json.loads(marker.read_text()) | {"files": None}))

@@ -248,8 +248,14 @@ def check_replaceable(
     extra = foreign_entries(target)
     if extra:
         more = f" (and {len(extra) - 1} more)" if len(extra) > 1 else ""
+        # (an output that lost its marker — copied without dotfiles — reads as one of a version before it)
+        lost = (
+            f" (its {MARKER} marker, which lists what it wrote, is missing)"
+            if read_marker(target) is None
+            else ""
+        )
         raise OutputError(
-            f"'{shown}' holds '{extra[0]}'{more}, which cornerslam did not write",
+            f"'{shown}' holds '{extra[0]}'{more}, which cornerslam did not write{lost}",
             "move it out first, or give another output directory",
         )
 
