@@ -156,7 +156,7 @@ def _warnings_to(decide: Callable[[logging.LogRecord], bool]) -> Iterator[None]:
             setattr(record, mark, decide(record))
         return getattr(record, mark)
 
-    handlers = list(logging.getLogger().handlers) or [logging.lastResort]
+    handlers = list(logging.getLogger().handlers) or [h for h in (logging.lastResort,) if h is not None]
     for h in handlers:  # first: a filter that writes (the status line's clearing) must not see a dropped one
         h.filters.insert(0, only_if)
     try:

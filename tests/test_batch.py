@@ -297,6 +297,12 @@ def test_resume_skips_complete_unchanged_and_reruns_changed(first, logs, tmp_pat
     marker = out / changed[3].name / ".cornerslam-output"
     marker.write_text(json.dumps(json.loads(marker.read_text()) | {"sizes": ["trajectory.tum"]}))
     assert [r["status"] for r in run_batch(changed, out, jobs=2)] == ["skipped"] * 3 + ["ok"]
+    # nor is one whose marker lists no files at all (edited by hand: a review found it "skipped")
+    unlisted = out / changed[1].name / ".cornerslam-output"
+    edited = json.loads(unlisted.read_text())
+    del edited["files"]
+    unlisted.write_text(json.dumps(edited))
+    assert run_batch(changed, out, jobs=2)[1]["status"] != "skipped"
     # nor is one whose marker is gone (a copy without dotfiles: a file cut short would go unseen); without
     # it the files are not known to be ours, so nothing there is replaced: a failed row naming them
     (out / changed[0].name / ".cornerslam-output").unlink()

@@ -113,6 +113,11 @@ def test_evaluate_reports_ate(sim_log, tmp_path):
     # ... but the file itself, named, is scored as it is
     res = invoke("evaluate", traj, "--ground-truth", sim_log.with_suffix(".gt.tum"))
     assert res.exit_code == 0 and "ATE  rmse" in res.output
+    # a link to a part in its place is followed: refused too (a review: it was scored as the whole)
+    short = tmp_path / "short.tum"
+    traj.rename(short)
+    traj.symlink_to(short)
+    one_line_error(invoke("evaluate", out, "--ground-truth", sim_log.with_suffix(".gt.tum")), "cut short")
 
 
 def test_evaluate_correct_scale_reports_the_scale_and_needs_ground_truth(tmp_path):

@@ -75,7 +75,7 @@ def test_backwards_and_duplicate_stamps_are_dropped():
     # before the first and 0 after the last odometry sample, 2 scans and 1 odometry samples whose …")
     assert warned == [
         "skipped 2 scans: 2 whose stamps went backwards or repeated; "
-        "1 odometry sample whose stamps went backwards or repeated"
+        "1 odometry sample whose stamp went backwards or repeated"
     ]
 
 

@@ -258,18 +258,20 @@ def _warn_skipped(st: SyncStats, warn: Callable[..., None]) -> None:
     parts = [
         f"{ends} odometry sample" if ends else "",
         f"{st.odom_gap} in gaps of the odometry (no sample within {MAX_GAP:g} s)" if st.odom_gap else "",
-        f"{st.scan_time_backwards} whose stamps went backwards or repeated" if st.scan_time_backwards else "",
+        f"{st.scan_time_backwards} whose {_stamps(st.scan_time_backwards)}" if st.scan_time_backwards else "",
     ]
     scans = ", ".join(p for p in parts if p)
     n_scans, n_odom = st.scans_skipped, st.odom_time_backwards
     said = [
         f"{n_scans} scan{'s' if n_scans != 1 else ''}: {scans}" if scans else "",
-        f"{n_odom} odometry sample{'s' if n_odom != 1 else ''} whose stamps went backwards or repeated"
-        if n_odom
-        else "",
+        f"{n_odom} odometry sample{'s' if n_odom != 1 else ''} whose {_stamps(n_odom)}" if n_odom else "",
     ]
     clocks = st.other_clocks()
     warn("skipped %s%s", "; ".join(s for s in said if s), f" ({clocks}: {CLOCKS_HINT})" if clocks else "")
+
+
+def _stamps(n: int) -> str:
+    return "stamp went backwards or repeated" if n == 1 else "stamps went backwards or repeated"
 
 
 def reanchor_odometry(

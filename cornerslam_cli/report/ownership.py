@@ -86,9 +86,9 @@ def files_intact(run_dir: Path) -> bool:
     full; the marker itself, or a copy without it) is run again. An edit that keeps a file's size is not
     seen."""
     marker = read_marker(run_dir)
-    if marker is None:
+    if marker is None or marker.get("kind") != "run" or "files" not in marker:
         return False
-    files, sizes = marker.get("files", []), marker.get("sizes", {})
+    files, sizes = marker["files"], marker.get("sizes", {})
     if (
         not isinstance(files, list)
         or not all(isinstance(f, str) for f in files)
@@ -249,8 +249,9 @@ def check_replaceable(
     if extra:
         more = f" (and {len(extra) - 1} more)" if len(extra) > 1 else ""
         # (an output that lost its marker — copied without dotfiles — reads as one of a version before it)
+        state = "damaged" if os.path.lexists(target / MARKER) else "missing"
         lost = (
-            f" (its {MARKER} marker, which lists what it wrote, is missing)"
+            f" (its {MARKER} marker, which lists what it wrote, is {state})"
             if read_marker(target) is None
             else ""
         )

@@ -98,13 +98,14 @@ def check_one_run(path: str | Path) -> None:
 def check_unchanged(path: str | Path, name: str = "trajectory.tum") -> None:
     """Refuse the run directory ``path`` when its file ``name`` is not the size its run wrote (its
     marker's ``sizes``): cut short (a copy interrupted, a disk full) or changed since, its score would
-    be a part's, as if the whole. An output without recorded sizes (an older version's) is not checked;
-    a file given by its own path is scored as it is."""
+    be a part's, as if the whole. A link in its place is followed (what is read is checked). An output
+    without recorded sizes (an older version's, or one copied without its marker) is not checked; a file
+    given by its own path is scored as it is."""
     p = Path(path)
     sizes = (read_marker(p) or {}).get("sizes") if p.is_dir() else None
     wrote = sizes.get(name) if isinstance(sizes, dict) else None
-    has = file_size(p / name)
-    if type(wrote) is not int or has < 0 or has == wrote:
+    has = file_size((p / name).resolve()) if p.is_dir() else -1
+    if type(wrote) is not int or wrote < 0 or has < 0 or has == wrote:
         return  # (not recorded; or missing, which reading it says)
     raise LogError(
         f"'{display_path(p / name)}' holds {has:,} bytes, but its run wrote {wrote:,}: it was cut short or "
