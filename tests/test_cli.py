@@ -118,6 +118,14 @@ def test_evaluate_reports_ate(sim_log, tmp_path):
     traj.rename(short)
     traj.symlink_to(short)
     one_line_error(invoke("evaluate", out, "--ground-truth", sim_log.with_suffix(".gt.tum")), "cut short")
+    # a copy without its marker (no sizes): its poses against the steps summary.json counts
+    (out / MARKER).unlink()
+    res = invoke("evaluate", out, "--ground-truth", sim_log.with_suffix(".gt.tum"))
+    one_line_error(res, "poses, but its run's summary.json counts", "steps: it was cut short")
+    traj.unlink()
+    short.rename(traj)
+    traj.write_text("".join(lines))  # whole again: scored
+    assert invoke("evaluate", out, "--ground-truth", sim_log.with_suffix(".gt.tum")).exit_code == 0
 
 
 def test_evaluate_correct_scale_reports_the_scale_and_needs_ground_truth(tmp_path):

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import LogError, display_path
+from ..errors import LogError, ResultsError, display_path
 from ..evaluate import align_se2, apply_se2, interpolate_inside
 from ..results import RunSummary
 from .ownership import file_size, output_kind, read_marker
@@ -99,19 +99,40 @@ def check_unchanged(path: str | Path, name: str = "trajectory.tum") -> None:
     """Refuse the run directory ``path`` when its file ``name`` is not the size its run wrote (its
     marker's ``sizes``): cut short (a copy interrupted, a disk full) or changed since, its score would
     be a part's, as if the whole. A link in its place is followed (what is read is checked). An output
-    without recorded sizes (an older version's, or one copied without its marker) is not checked; a file
-    given by its own path is scored as it is."""
+    without recorded sizes (an older version's, or one copied without its marker) is checked by its poses
+    against the steps its summary.json counts, when it has one; a file given by its own path is scored as
+    it is."""
     p = Path(path)
     sizes = (read_marker(p) or {}).get("sizes") if p.is_dir() else None
     wrote = sizes.get(name) if isinstance(sizes, dict) else None
     has = file_size((p / name).resolve()) if p.is_dir() else -1
-    if type(wrote) is not int or wrote < 0 or has < 0 or has == wrote:
-        return  # (not recorded; or missing, which reading it says)
+    if has < 0 or has == wrote:
+        return  # (missing, which reading it says)
+    if type(wrote) is not int or wrote < 0:
+        _check_poses(p, name)
+        return
     raise LogError(
         f"'{display_path(p / name)}' holds {has:,} bytes, but its run wrote {wrote:,}: it was cut short or "
         "changed since",
         f"run the log again, or score the file as it is: cornerslam evaluate {display_path(p / name)} …",
     )
+
+
+def _check_poses(p: Path, name: str) -> None:
+    """:func:`check_unchanged` without recorded sizes: the poses of ``name`` against the steps of the run's
+    summary.json (one pose a step), when it can be read."""
+    try:
+        steps = RunSummary.read(p).counts.steps
+        with open(p / name, "rb") as f:
+            poses = sum(1 for line in f if line.strip() and not line.lstrip().startswith(b"#"))
+    except (OSError, ResultsError):
+        return
+    if poses != steps:
+        raise LogError(
+            f"'{display_path(p / name)}' holds {poses:,} poses, but its run's summary.json counts {steps:,} "
+            "steps: it was cut short or changed since",
+            f"run the log again, or score the file as it is: cornerslam evaluate {display_path(p / name)} …",
+        )
 
 
 def load_run(out_dir: str | Path, ground_truth: str | Path | None = None) -> RunData:
