@@ -260,11 +260,9 @@ def check_processed(src: Input, n_frames: int, n_points: int) -> None:
         _undecoded_error(src.path, rs)
         if clocks := stats.other_clocks():
             raise LogError(f"log '{src.path}': no scan could be processed: {clocks}", CLOCKS_HINT)
+        skipped = f"; skipped: {why}" if (why := stats.skipped_why()) else ""
         raise LogError(
-            f"log '{src.path}': no scan could be processed ({stats.scans_in} scans read, "
-            f"{stats.before_first_odom} before the first and {stats.after_last_odom} "
-            f"after the last odometry sample, {stats.odom_gap} in gaps of the odometry, "
-            f"{stats.scan_time_backwards} with a stamp that went backwards or repeated)",
+            f"log '{src.path}': no scan could be processed ({stats.scans_in} scans read{skipped})",
             "check that the scan and odometry topics overlap in time and that their header stamps increase",
         )
 

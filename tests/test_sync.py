@@ -233,3 +233,17 @@ def test_only_stamps_more_than_an_hour_from_the_odometry_are_on_another_clock(ap
     assert ("on different clocks" in warned[0]) is clocks and (
         "different clocks" in st.other_clocks()
     ) is clocks
+
+
+def test_the_skipped_scans_are_named_by_why_only_those_that_happened():
+    """The words of the warning above and of run's "no scan could be processed (12 scans read; skipped:
+    12 after the last odometry sample)" (it listed every count, "0 before the first and 0 after …")."""
+    assert SyncStats().skipped_why() == ""
+    st = SyncStats()
+    st.after_last_odom = 12
+    assert st.skipped_why() == "12 after the last odometry sample"
+    st.before_first_odom, st.odom_gap, st.scan_time_backwards = 3, 2, 1
+    assert st.skipped_why() == (
+        "3 before the first and 12 after the last odometry sample, 2 in gaps of the odometry (no sample "
+        "within 30 s), 1 whose stamp went backwards or repeated"
+    )

@@ -100,6 +100,25 @@ class SyncStats:
     def scans_skipped(self) -> int:
         return self.before_first_odom + self.after_last_odom + self.odom_gap + self.scan_time_backwards
 
+    def skipped_why(self) -> str:
+        """The scans synchronise skipped, by why, only the kinds that happened ("" when none): "3 before the
+        first and 2 after the last odometry sample, 198 in gaps of the odometry (…), 1 whose stamp went
+        backwards or repeated"."""
+        ends = " and ".join(
+            f"{n} {where} the {end}" for n, where, end in ((self.before_first_odom, "before", "first"),
+                                                        (self.after_last_odom, "after", "last")) if n
+        )  # fmt: skip
+        parts = [
+            f"{ends} odometry sample" if ends else "",
+            f"{self.odom_gap} in gaps of the odometry (no sample within {MAX_GAP:g} s)"
+            if self.odom_gap
+            else "",
+            f"{self.scan_time_backwards} whose {_stamps(self.scan_time_backwards)}"
+            if self.scan_time_backwards
+            else "",
+        ]
+        return ", ".join(p for p in parts if p)
+
     def as_dict(self) -> dict:
         d = {k: v for k, v in self.__dict__.items() if not isinstance(v, StampRange)}
         d["scans_skipped"] = self.scans_skipped
@@ -251,16 +270,7 @@ def _warn_skipped(st: SyncStats, warn: Callable[..., None]) -> None:
     """One warning summing up the scans and odometry samples that synchronise skipped."""
     if not (st.scans_skipped or st.odom_time_backwards):
         return
-    ends = " and ".join(
-        f"{n} {where} the {end}" for n, where, end in ((st.before_first_odom, "before", "first"),
-                                                    (st.after_last_odom, "after", "last")) if n
-    )  # fmt: skip
-    parts = [
-        f"{ends} odometry sample" if ends else "",
-        f"{st.odom_gap} in gaps of the odometry (no sample within {MAX_GAP:g} s)" if st.odom_gap else "",
-        f"{st.scan_time_backwards} whose {_stamps(st.scan_time_backwards)}" if st.scan_time_backwards else "",
-    ]
-    scans = ", ".join(p for p in parts if p)
+    scans = st.skipped_why()
     n_scans, n_odom = st.scans_skipped, st.odom_time_backwards
     said = [
         f"{n_scans} scan{'s' if n_scans != 1 else ''}: {scans}" if scans else "",
