@@ -173,10 +173,8 @@ def _run_claimed(
             progress(state)
 
     todo.sort(key=lambda i: -_size(combos[i].log))  # biggest logs first: a shorter tail on N workers
-    tasks = [
-        (i, c.log, c.config, str((out / c.name).resolve()), c.notes)
-        for i, c in ((i, combos[i]) for i in todo)
-    ]
+    picked = [(i, combos[i]) for i in todo]
+    tasks = [(i, c.log, c.config, str((out / c.name).resolve()), c.notes) for i, c in picked]
     try:
         if client is not None:
             _run_dask(tasks, client, finished)

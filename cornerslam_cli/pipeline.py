@@ -81,12 +81,11 @@ def run(
 
 def keep_notes(src: Input, notes: Sequence[str]) -> None:
     """Keep warnings said before the log was opened (the config's: workers.warnings_copied) in the
-    input's list, summary.json's, as its reader's warn would, without saying them again."""
+    input's list, summary.json's, by its reader's warn, marked said so that it does not say them again."""
     stats = src.reader.stats
-    for text in map(printable, notes):
-        stats.said.add(text)
-        if text not in stats.warnings and len(stats.warnings) < 100:
-            stats.warnings.append(text)
+    for text in notes:
+        stats.said.add(printable(text))
+        stats.warn("%s", text)
 
 
 def write_extras(

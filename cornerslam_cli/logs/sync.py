@@ -104,20 +104,14 @@ class SyncStats:
         """The scans synchronise skipped, by why, only the kinds that happened ("" when none): "3 before the
         first and 2 after the last odometry sample, 198 in gaps of the odometry (…), 1 whose stamp went
         backwards or repeated"."""
-        ends = " and ".join(
-            f"{n} {where} the {end}" for n, where, end in ((self.before_first_odom, "before", "first"),
-                                                        (self.after_last_odom, "after", "last")) if n
-        )  # fmt: skip
-        parts = [
-            f"{ends} odometry sample" if ends else "",
-            f"{self.odom_gap} in gaps of the odometry (no sample within {MAX_GAP:g} s)"
-            if self.odom_gap
-            else "",
-            f"{self.scan_time_backwards} whose {_stamps(self.scan_time_backwards)}"
-            if self.scan_time_backwards
-            else "",
-        ]
-        return ", ".join(p for p in parts if p)
+        ends = [(self.before_first_odom, "before the first"), (self.after_last_odom, "after the last")]
+        ends = [f"{n} {where}" for n, where in ends if n]
+        parts = [" and ".join(ends) + " odometry sample"] if ends else []
+        if self.odom_gap:
+            parts.append(f"{self.odom_gap} in gaps of the odometry (no sample within {MAX_GAP:g} s)")
+        if self.scan_time_backwards:
+            parts.append(f"{self.scan_time_backwards} whose {_stamps(self.scan_time_backwards)}")
+        return ", ".join(parts)
 
     def as_dict(self) -> dict:
         d = {k: v for k, v in self.__dict__.items() if not isinstance(v, StampRange)}
