@@ -34,6 +34,11 @@ from fault_corpus import Expected, make_odoms, make_scans
 from cornerslam_cli.cli import cli
 from cornerslam_cli.errors import OutputError
 from cornerslam_cli.logs.writers import write_mcap
+
+# report.html binds plot_run / plot_compare when first imported: imported now, not first by a case that
+# has patched them to `interrupt` — html would keep the patch for every later test in this process (a
+# later report, test_results.py's, was then "interrupted")
+from cornerslam_cli.report import html  # noqa: F401, I001
 from cornerslam_cli.report.outdir import HOST, StagedDir, clear_stale, target_lock
 from cornerslam_cli.report.ownership import MARKER, mark_output
 
