@@ -123,7 +123,7 @@ def _run_claimed(
 ) -> list[dict]:
     """:func:`_run_batch` once the Dask ``client`` (None: local processes) is connected."""
     from .config import Config, from_dict
-    from .report.summary import config_hash, input_hash
+    from .report.summary import code_hash, config_hash, input_hash
 
     claim_dir(out, "batch")  # refuses a directory that is not a batch's, before any work
     columns = batch_columns([k for k, _ in combos[0].sweep] if combos else [])
@@ -151,7 +151,7 @@ def _run_claimed(
         gt_hash = gt_hashes[c.log]
         if log_hashes[c.log] is not None and gt_hash is not False:
             expect = Hashes(input=log_hashes[c.log], config=config_hash(from_dict(Config, c.config)),
-                            version=__version__, ground_truth=gt_hash or None)  # fmt: skip
+                            version=__version__, ground_truth=gt_hash or None, code=code_hash())  # fmt: skip
             figures = _resumable(out / c.name, expect, gt_hash is not None)
         if figures is not None:
             rows[i] = _row(c, "skipped", figures=figures)

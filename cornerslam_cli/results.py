@@ -250,7 +250,8 @@ class Timing(JsonResult):
 
 @dataclass(frozen=True, kw_only=True)
 class Hashes(JsonResult):
-    """sha256 of the log's bytes and of the resolved config, and the version: what batch resumes by;
+    """sha256 of the log's bytes and of the resolved config, the version and the source's sha256 (``code``:
+    the version does not change with every commit): what batch resumes by;
     ``ground_truth``: sha256 of the ground truth's poses the run was scored against (absent without
     one), so a ground truth replaced or edited beside the log is not reported with the old ATE."""
 
@@ -258,6 +259,7 @@ class Hashes(JsonResult):
     config: str
     version: str
     ground_truth: str | None = optional()  # appended (2026-12-03)
+    code: str | None = optional()  # appended (2026-12-05): sha256 of the build's source (summary.code_hash)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -18,6 +18,7 @@ from cornerslam_cli.batch import TIMING_FIGURES, batch_columns, read_batch, run_
 from cornerslam_cli.cli import cli
 from cornerslam_cli.errors import ConfigError, CornerslamError
 from cornerslam_cli.report.ownership import MARKER
+from cornerslam_cli.results import Hashes
 from cornerslam_cli.simulate import simulate_log
 from cornerslam_cli.sweep import plan
 
@@ -518,6 +519,35 @@ def test_resume_reruns_a_combination_whose_ground_truth_changed(tmp_path):
     summary = json.loads((out / combos[0].name / "summary.json").read_text())
     assert summary["accuracy"]["ate"]["rmse"] == pytest.approx(float(again["ate_rmse"]))
     assert [r["status"] for r in run_batch(combos, out, jobs=1)] == ["skipped"]  # unchanged since: reused
+
+
+def test_resume_reruns_a_combination_another_build_ran(tmp_path, monkeypatch):
+    """The version stays 0.1.0 from commit to commit while the figures change: a run of another build's
+    code (its summary.json's hashes.code), or of one before the hash was kept, is run again, not reported
+    as "skipped" with that build's figures (before: skipped, the old figures)."""
+    from cornerslam_cli.report import summary as summary_mod
+
+    log = tmp_path / "sim.mcap"
+    simulate_log(log, seed=3, rate=1.0, beams=181)
+    combos, out = plan([log], ["pca"]), tmp_path / "out"
+    assert [r["status"] for r in run_batch(combos, out, jobs=1)] == ["ok"]
+    path = out / combos[0].name / "summary.json"
+    ours = summary_mod.code_hash()
+    assert json.loads(path.read_text())["hashes"]["code"] == ours
+    assert [r["status"] for r in run_batch(combos, out, jobs=1)] == ["skipped"]
+    # the batch as another build would plan it (its runs are in worker processes: this build's hash)
+    monkeypatch.setattr(summary_mod, "code_hash", lambda: "f" * 64)
+    assert [r["status"] for r in run_batch(combos, out, jobs=1)] == ["ok"]
+    monkeypatch.undo()
+    assert [r["status"] for r in run_batch(combos, out, jobs=1)] == ["skipped"]
+    s = json.loads(path.read_text())
+    expect = Hashes(**s["hashes"])
+    assert expect.code == ours and batch_mod._resumable(path.parent, expect, has_gt=True) is not None
+    other = Hashes(**{**s["hashes"], "code": "e" * 64})
+    assert batch_mod._resumable(path.parent, other, has_gt=True) is None  # as another build asks
+    del s["hashes"]["code"]  # as a build before the hash was kept wrote it
+    path.write_text(json.dumps(s, indent=2))
+    assert batch_mod._resumable(path.parent, Hashes(**{**expect.to_json(), "code": ours}), True) is None
 
 
 @pytest.mark.parametrize(

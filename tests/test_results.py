@@ -158,7 +158,7 @@ def test_summary_json_of_a_simulated_run_has_the_layout_and_values_it_always_had
     assert list(s["input"]) == INPUT_KEYS and list(s["counts"]) == COUNT_KEYS
     assert list(s["timing"]) == TIMING_KEYS and list(s["accuracy"]) == ACCURACY_KEYS
     assert list(s["accuracy"]["ate"]) == ATE_KEYS
-    assert list(s["hashes"]) == ["input", "config", "version", "ground_truth"]  # ground_truth appended
+    assert list(s["hashes"]) == ["input", "config", "version", "ground_truth", "code"]  # appended, in turn
     assert s["mode"] == "slam" and s["assoc"] == "pca" and s["warnings"] == []
     assert s["input"]["log"] == str(sim_log) and s["input"]["format"] == "mcap"
     assert s["input"]["laser_to_base"] == [0.1, 0.0, 0.0] and s["input"]["laser_to_base_source"] == "tf"

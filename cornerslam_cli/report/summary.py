@@ -4,6 +4,7 @@ writer (run_writer.py)."""
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -95,7 +96,11 @@ def build_summary(
         warnings=tuple(src.reader.stats.warnings),
         accuracy=accuracy,
         hashes=Hashes(
-            input=input_hash(src.path), config=config_hash(cfg), version=__version__, ground_truth=gt_hash
+            input=input_hash(src.path),
+            config=config_hash(cfg),
+            version=__version__,
+            ground_truth=gt_hash,
+            code=code_hash(),
         ),
         config=cfg.to_dict(),
         versions=_versions(),
@@ -191,6 +196,20 @@ def reference_hash(stamps: np.ndarray, poses: np.ndarray) -> str:
     return h.hexdigest()
 
 
+@functools.cache
+def code_hash() -> str:
+    """sha256 of this build's source: every .py file of the package (path and bytes, in path order). The
+    version stays 0.1.0 from commit to commit while the figures change; this tells two builds apart, so
+    batch does not take a run of another build's code for a finished one (its ``hashes.code``)."""
+    root = Path(__file__).resolve().parents[1]
+    h = hashlib.sha256()
+    for f in sorted(root.rglob("*.py")):
+        h.update(f.relative_to(root).as_posix().encode() + b"\0")
+        h.update(f.read_bytes())
+        h.update(b"\0")
+    return h.hexdigest()
+
+
 def input_hash(path: Path) -> str:
     """sha256 of the log's bytes (every file, in name order, for a ROS 2 bag directory); a LogError
     for a pipe or a device (reading it would consume or hang on it)."""
@@ -209,7 +228,10 @@ def _versions() -> dict:
     import importlib.metadata as md
 
     out = {"python": platform.python_version()}
-    for name in ("numpy", "scipy", "mcap", "rosbags", "click", "pyyaml"):
+    # the runtime dependencies, then those the figures also depend on: numba compiles the kernels (with
+    # llvmlite), gtsam solves the pose graph, matplotlib draws the figures (appended 2026-12-05)
+    names = ("numpy", "scipy", "mcap", "rosbags", "click", "pyyaml")
+    for name in (*names, "numba", "llvmlite", "gtsam", "matplotlib"):
         try:
             out[name] = md.version(name)
         except md.PackageNotFoundError:
