@@ -561,7 +561,7 @@ def _figure_target(plot_path: str) -> Path:
     "sweeps",
     multiple=True,
     metavar="KEY=V1,V2,...",
-    help="Run each value of a config key; repeat for a grid, e.g. --sweep association.pca.group_size=3,5.",
+    help="Run each value of a config key; repeat for a grid, e.g. --sweep submaps.max_distance=5,10.",
 )
 @config_options
 @click.option("--out", required=True, type=GivenPath(), help="Batch directory (resumable).")
@@ -576,12 +576,12 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
     """Run every LOG × associator × swept config value into OUT/<name>/ and tabulate in OUT/batch.csv.
 
     A bad log fails its rows without stopping the batch; rerunning the same command skips the
-    combinations already complete with the same log, config and version. Exit 0 only if every
+    combinations already complete with the same log, config and build. Exit 0 only if every
     combination ran or was skipped; otherwise 2 (bad input), or 1 if any failed by a bug.
 
     \b
     Example:
-      cornerslam batch sample_logs/*.mcap --assoc icnn,pca --sweep association.pca.group_size=3,5 \\
+      cornerslam batch sample_logs/*.mcap --assoc icnn,pca --sweep submaps.max_distance=5,10 \\
           --out sweep/ --jobs 2
     """
     from .workers import warnings_once

@@ -367,13 +367,16 @@ def warn_mount(src: Input, cfg: Config) -> None:
     gives its one-line error alone."""
     if src.laser_source == "default":
         why = f"has no tf {_tf_text(src, cfg)}"
+        keep = ", or input.laser.from_tf=false to keep it"
         if getattr(src.reader, "laser_frame", None) == "":  # a scan read, its frame empty: no tf names it
             topic = short_text(src.info.scan_topic)
             why = f"has scans on '{topic}' with an empty header frame_id, so no tf can place the laser"
+        if src.info.format == "carmen":  # no tf to look in, nor a key to turn that off
+            why, keep = f"gives no laser mount (its {short_text(src.info.scan_topic)} lines carry none)", ""
         src.reader.stats.warn(
             "log '%s' %s: the laser is taken at the built-in default x=0 y=0 yaw=0 on the robot (set "
-            "input.laser.x/y/yaw to its mount, or input.laser.from_tf=false to keep it)",
-            src.path.name, why,
+            "input.laser.x/y/yaw to its mount%s)",
+            src.path.name, why, keep,
         )  # fmt: skip
     if cfg.input.laser.upside_down and src.laser_upside_down_source == "tf" and not src.laser_upside_down:
         src.reader.stats.warn(

@@ -40,7 +40,7 @@ def config_options(f):
         "overrides",
         multiple=True,
         metavar="KEY=VALUE",
-        help="Override a config key, e.g. --set association.pca.group_size=5 (repeatable).",
+        help="Override a config key, e.g. --set submaps.enabled=false (repeatable).",
     )(f)
     f = click.option(
         "--config",

@@ -383,6 +383,20 @@ def test_extract_from_a_log_with_no_readable_scan_names_no_range(tmp_path):
     assert "0..0" not in res.stderr
 
 
+def test_a_gzipped_carmen_log_finds_its_ground_truth(tmp_path):
+    """NAME.log.gz beside NAME.gt.tum: the ground truth is found (before: only NAME.log.gz.gt.tum and
+    NAME.log.gt.tum were looked for, so a gzipped radish log was run unscored, nothing said)."""
+    from cornerslam_cli.report.run_writer import find_ground_truth
+
+    log = tmp_path / "orebro.log.gz"
+    log.write_bytes(b"")
+    assert find_ground_truth(log) is None
+    for name in ("orebro.gt.tum", "orebro.log.gt.tum", "orebro.log.gz.gt.tum"):  # the later, the nearer
+        (tmp_path / name).write_text("0 0 0 0 0 0 0 1\n")
+        assert find_ground_truth(log) == tmp_path / name
+    assert find_ground_truth(tmp_path / "orebro.log") == tmp_path / "orebro.log.gt.tum"
+
+
 @pytest.mark.parametrize("command", ["run", "compare"])
 def test_a_damaged_ground_truth_beside_the_log_says_why_it_was_read(command, tmp_path):
     """LOG.gt.tum beside the log, not readable: the error named a file the user had not given, without

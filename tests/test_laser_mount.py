@@ -8,6 +8,7 @@ import dataclasses
 import json
 import logging
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -310,6 +311,27 @@ def test_info_names_a_carmen_robotlaser_mount_as_run_does(tmp_path):
     assert res.exit_code == 0, res.output
     (line,) = [t for t in res.output.splitlines() if t.startswith("  laser ")]
     assert line.endswith(" rad (from the log's ROBOTLASER1 laser pose)") and "tf" not in line, line
+
+
+def test_a_carmen_flaser_log_without_a_mount_is_not_said_to_lack_tf(tmp_path):
+    """A FLASER log carries no laser mount and CARMEN has no tf: the warning, run's mount line and info
+    say the log's laser lines give none (they said "has no tf base_link→laser … or
+    input.laser.from_tf=false to keep it", advice that does not apply)."""
+    from click.testing import CliRunner
+
+    from cornerslam_cli.cli import cli
+
+    log = Path(__file__).resolve().parents[1] / "sample_logs" / "intel_cut.clf"  # FLASER and ODOM lines
+    res = CliRunner().invoke(cli, ["run", str(log), "--max-scans", "5", "--out", str(tmp_path / "a")])
+    assert res.exit_code == 0, res.output
+    s = json.loads((tmp_path / "a" / "summary.json").read_text())
+    (warning,) = [w for w in s["warnings"] if "built-in default" in w]
+    assert "gives no laser mount (its FLASER lines carry none)" in warning and "tf" not in warning, warning
+    line = mount_line(RunSummary.read(tmp_path / "a").input)
+    assert line.endswith("(the built-in default: not in the log's laser lines, not in the config)"), line
+    res = CliRunner().invoke(cli, ["info", str(log)])
+    (line,) = [t for t in res.output.splitlines() if t.startswith("  laser ")]
+    assert "not in its laser lines" in line and "tf" not in line, line
 
 
 def test_upside_down_alone_still_warns_of_the_default_position(tmp_path):

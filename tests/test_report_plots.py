@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import shutil
 import struct
@@ -134,7 +135,20 @@ def test_map_draws_every_landmark_ellipse_and_trajectory(outputs):
         assert len(polys) == 1 and len(polys[0].get_paths()) == len(run.landmarks["id"]) > 0
         assert len(segs) == 1 and len(segs[0].get_segments()) == len(run.lines["step"]) > 0
         labels = [line.get_label() for line in ax.get_lines()]
-        assert {"odometry", "corrected (EKF)", "ground truth (aligned)"} <= set(labels)
+        # trajectory.tum's trajectory named as what it is: the pose graph's with the two levels (the
+        # default), the EKF's with the single map (the legend said "corrected (EKF)" for both)
+        assert run.summary.counts.submaps is not None
+        assert {"odometry", "smoothed (pose graph)", "ground truth (aligned)"} <= set(labels)
+        assert "corrected (EKF)" not in labels
+        single = dataclasses.replace(
+            run,
+            summary=dataclasses.replace(
+                run.summary, counts=dataclasses.replace(run.summary.counts, submaps=None)
+            ),
+        )
+        ax.clear()
+        _draw_map(ax, single)
+        assert "corrected (EKF)" in [line.get_label() for line in ax.get_lines()]
         assert ax.get_xlabel() == "x [m]" and ax.get_ylabel() == "y [m]"
     finally:
         plt.close(fig)

@@ -218,7 +218,7 @@ def test_info_lines():
         "run would use:",
         "  scans     -",
         "  odometry  - (none found)",
-        "  laser     not on tf: from the config's input.laser (built-in default x=0 y=0 yaw=0)",
+        "  laser     not in its laser lines: from the config's input.laser (built-in default x=0 y=0 yaw=0)",
     ]
 
 

@@ -166,7 +166,7 @@ def _draw_map(ax, run: RunData, segments_alpha: float = 0.18, legend: bool = Tru
         ax.plot(
             m[:, 0], m[:, 1], color=COLORS["scan_odometry"], lw=0.9, ls="-.", label="scan-matched odometry"
         )
-    ax.plot(c[:, 0], c[:, 1], color=COLORS["corrected"], lw=1.2, label="corrected (EKF)")
+    ax.plot(c[:, 0], c[:, 1], color=COLORS["corrected"], lw=1.2, label=corrected_label(run))
     _draw_landmarks(ax, run.landmarks, label=f"landmarks ({len(run.landmarks.get('x', ()))}, 3σ)")
     _draw_loop_closures(ax, run.loop_closures())
     if len(c):
@@ -177,6 +177,12 @@ def _draw_map(ax, run: RunData, segments_alpha: float = 0.18, legend: bool = Tru
         ax.legend(loc="best", fontsize=8, framealpha=0.85)
 
 
+def corrected_label(run: RunData) -> str:
+    """What trajectory.tum holds: the pose graph's smoothed trajectory with the two levels, the EKF's
+    with the single map (the paper's)."""
+    return "corrected (EKF)" if run.summary.counts.submaps is None else "smoothed (pose graph)"
+
+
 def _draw_loop_closures(ax, seg: np.ndarray) -> None:
     """The accepted loop closures ``seg`` (k, 2, 2): a line between the two submap origins, dots at
     the origins; one artist however many, thinner and fainter past MANY_LOOPS."""
@@ -185,8 +191,9 @@ def _draw_loop_closures(ax, seg: np.ndarray) -> None:
         return
     xy = np.concatenate((seg, np.full((k, 1, 2), np.nan)), axis=1).reshape(-1, 2)  # NaN: a break
     thin = min(1.0, math.sqrt(MANY_LOOPS / k))
+    alpha = 1.0 if thin == 1.0 else max(0.25, 0.8 * thin)  # Intel's 79 read as trajectory at 0.6
     ax.plot(xy[:, 0], xy[:, 1], "-o", color=COLORS["loop"], lw=1.2 * thin, ms=3 * max(thin, 0.5),
-            alpha=max(0.4, thin), zorder=3, label=f"loop closures ({k} accepted)")  # fmt: skip
+            alpha=alpha, zorder=3, label=f"loop closures ({k} accepted)")  # fmt: skip
 
 
 def _frame_the_map(ax, run: RunData, margin: float = 0.05) -> None:
@@ -348,6 +355,9 @@ def plot_corners(run: RunData, path: Path) -> Path:
     new = _bin_sum(t["n_new"], size)
     ax2.bar(step, new, width=size, color=COLORS["landmark"], label="new landmarks")
     ax2.set_ylabel("new landmarks" + ("" if size == 1 else f"\nper {size} steps"))
+    from matplotlib.ticker import MaxNLocator
+
+    ax2.yaxis.set_major_locator(MaxNLocator(integer=True))  # counts: no 2.5 landmarks
     ax2.set_xlabel("step")
     ax2.grid(True, lw=0.3, alpha=0.5)
     return _save(fig, path)
@@ -441,7 +451,7 @@ def _plot_compare_maps(runs: list[RunData], log_name: str, path: Path) -> Path:
         note = _accuracy_note(r.summary)
         n_lm = len(r.landmarks.get("x", ()))
         loops = r.summary.counts.loops_accepted
-        closures = "" if loops is None else f", {loops} loop closures"
+        closures = "" if loops is None else f", {loops} loop closure{'' if loops == 1 else 's'}"
         ax.set_title(f"{r.assoc}: {n_lm} landmarks{closures}" + (f"\n{note}" if note else ""), fontsize=10)
     if runs:
         _shared_legend(fig, axes[0][: len(runs)])

@@ -250,13 +250,15 @@ class RunWriter:
 
 
 def find_ground_truth(log_path: Path) -> Path | None:
-    """``LOG.gt.tum`` beside the log (also without the log's extension), if present; for ``.`` or
-    ``..`` (a ROS 2 bag directory run from inside it), beside that directory."""
+    """``LOG.gt.tum`` beside the log (also without the log's extension, and for a gzipped log without
+    ``.gz`` too: NAME.log.gz finds NAME.gt.tum), if present; for ``.`` or ``..`` (a ROS 2 bag directory
+    run from inside it), beside that directory."""
     if log_path.name in ("", ".."):
         log_path = Path(os.path.abspath(log_path))
         if not log_path.name:  # the root directory
             return None
-    candidates = [log_path.with_name(log_path.name + ".gt.tum"), log_path.with_suffix(".gt.tum")]
+    names = [log_path] + ([log_path.with_suffix("")] if log_path.suffix == ".gz" else [])
+    candidates = [c for p in names for c in (p.with_name(p.name + ".gt.tum"), p.with_suffix(".gt.tum"))]
     return next((c for c in candidates if c.is_file()), None)
 
 

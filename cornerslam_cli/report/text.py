@@ -92,6 +92,7 @@ MOUNT_SOURCES = {
 }
 # a CARMEN log's "tf" mount: a ROBOTLASER1 line's laser pose (logs/carmen.py laser_to_base)
 ROBOTLASER_SOURCE = "from the log's ROBOTLASER1 laser pose"
+CARMEN_DEFAULT_SOURCE = "the built-in default: not in the log's laser lines, not in the config"
 
 
 UPSIDE_DOWN_SOURCES = {"tf": "from the log's tf", "config": "from the config's input.laser.upside_down"}
@@ -104,6 +105,8 @@ def mount_line(inp: RunInput) -> str:
     source = MOUNT_SOURCES.get(inp.laser_to_base_source, inp.laser_to_base_source)
     if inp.laser_to_base_source == "tf" and inp.format == "carmen":
         source = ROBOTLASER_SOURCE
+    elif inp.laser_to_base_source == "default" and inp.format == "carmen":  # CARMEN has no tf
+        source = CARMEN_DEFAULT_SOURCE
     at = f"laser mount: x={x:.3f} m y={y:.3f} m yaw={yaw:.3f} rad"
     flip_source = inp.laser_upside_down_source
     if not inp.laser_upside_down:
@@ -274,7 +277,8 @@ def info_lines(
             source += f" {short_text(tf_frames[0])}→{short_text(tf_frames[1])}"
         lines.append(f"  laser     x={x:.3f} m y={y:.3f} m yaw={yaw:.3f} rad{flip} ({source})")
     else:
-        lines.append("  laser     not on tf: from the config's input.laser (built-in default x=0 y=0 yaw=0)")
+        where = "not in its laser lines" if i.format == "carmen" else "not on tf"
+        lines.append(f"  laser     {where}: from the config's input.laser (built-in default x=0 y=0 yaw=0)")
     if scan is not None:
         lines += scan_lines(scan, preset)
     lines += [f"problem:   {text}" for text in i.problems]
