@@ -10,6 +10,7 @@ Over 400 lines because every command's click declaration lives here beside the o
 
 from __future__ import annotations
 
+import errno
 import io
 import logging
 import os
@@ -89,6 +90,18 @@ def _stdout_gone() -> None:
         pass
 
 
+class _ClosedStdout(io.TextIOBase):
+    """Standard output when the process was started with it closed (Python's ``sys.stdout`` is then None
+    and click's echo writes nothing): a write fails as on a closed descriptor, so the command exits 2
+    saying so, as `ls >&-` does, instead of 0 with its report lost."""
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, text: str) -> int:
+        raise OSError(errno.EBADF, "standard output is closed")
+
+
 def _stdout_write_failed(exc: BaseException) -> bool:
     """Whether ``exc`` (an OSError) was raised writing to standard output (click.echo without
     ``err``): stdout on a full disk (`> /dev/full`) or a failing device is the environment, not a bug."""
@@ -121,6 +134,8 @@ class _Cli(click.Group):
     def invoke(self, ctx: click.Context):
         if sys.stderr is None:  # started with stderr closed (`2>&-`): messages go nowhere, not into a crash
             sys.stderr = open(os.devnull, "w")  # noqa: SIM115  # open until the process ends
+        if sys.stdout is None:  # started with stdout closed (`>&-`): what it says must fail, not vanish
+            sys.stdout = _ClosedStdout()
         main_thread = threading.current_thread() is threading.main_thread()
         previous = signal.signal(signal.SIGTERM, _on_sigterm) if main_thread else None
         try:

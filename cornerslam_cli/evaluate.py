@@ -193,6 +193,13 @@ def read_relations(path: str | Path) -> np.ndarray:
             f"give it as --ground-truth; a relations file has lines {RELATIONS_LAYOUT}",
         )
     r = v[:, [0, 1, 2, 3, 7]]
+    first = np.sort(np.unique(r, axis=0, return_index=True)[1])  # each distinct row's first line, in order
+    if len(first) < len(r):  # a file joined to itself, a line pasted twice: each relation counts once
+        log.warning(
+            "relations file '%s': %d of its %d relations repeat an earlier line exactly: counted once",
+            path, len(r) - len(first), len(r),
+        )  # fmt: skip
+        r = r[first]
     for note in relations_notes(r):
         log.warning("relations file '%s': %s", path, note)
     return r

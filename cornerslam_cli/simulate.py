@@ -17,6 +17,7 @@ and writes beside the log ``OUT.gt.tum`` (true base poses at the scan stamps) an
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import os
 import time
@@ -127,6 +128,80 @@ def check_options(seed: int, laps: int, p: SimParams, waypoints: np.ndarray = OF
         )
 
 
+def _cast(
+    world: World,
+    waypoints: np.ndarray,
+    laps: int,
+    p: SimParams,
+    seed: int,
+    sweep: float,
+    progress: Callable[[int, int], None] | None,
+) -> tuple[np.ndarray, np.ndarray, list[RawScan], list[OdomSample]]:
+    """The drive, its odometry and its scans (simulate_log's): scan stamps, true poses at them, the
+    ray-cast scans and the odometry samples."""
+    rng = np.random.default_rng(seed)
+    dt = 1.0 / p.odom_rate
+    truth = drive(waypoints, laps, p, dt)  # at the odometry rate
+    t = EPOCH + dt * np.arange(len(truth))
+    odom = corrupt_odometry(truth, p, rng)
+    # scans between odometry samples (offset by a third of a period), true pose interpolated
+    t_scan = np.arange(t[0] + 0.3 * dt, t[-1], 1.0 / p.rate)
+    xs = np.interp(t_scan, t, truth[:, 0])
+    ys = np.interp(t_scan, t, truth[:, 1])
+    ths = wrap_angle(np.interp(t_scan, t, np.unwrap(truth[:, 2])))
+    gt = np.column_stack((xs, ys, ths))
+    angle_min = -p.fov / 2
+    inc = p.fov / (p.beams - 1)
+    angles = angle_min + inc * np.arange(p.beams)
+    beam_time = sweep / (p.beams - 1)
+    scans = []
+    t0 = time.perf_counter()
+    for k, (ts, (x, y, th)) in enumerate(zip(t_scan, gt, strict=True)):
+        if progress is not None:
+            progress(k, len(t_scan))
+        if sweep > 0.0:  # the base's true pose at each beam's time
+            tb = ts + beam_time * np.arange(p.beams)
+            x, y = np.interp(tb, t, truth[:, 0]), np.interp(tb, t, truth[:, 1])
+            th = wrap_angle(np.interp(tb, t, np.unwrap(truth[:, 2])))
+        laser = np.column_stack((x + p.laser_x * np.cos(th), y + p.laser_x * np.sin(th), th))
+        r = raycast(world, laser if sweep > 0.0 else laser[0], angles, p.max_range)
+        r = r + rng.normal(0.0, 1.0, len(r)) * (p.sigma_a + p.sigma_b * np.where(np.isfinite(r), r, 0))
+        r[rng.random(len(r)) < p.dropout] = np.nan
+        r[~(r < p.max_range)] = np.inf
+        r[np.isfinite(r) & (r < 0.05)] = 0.05
+        scans.append(
+            RawScan(float(ts), angle_min, inc, r.astype(np.float32), 0.05, p.max_range, "laser", beam_time)
+        )
+    if progress is not None:
+        progress(len(t_scan), len(t_scan))
+    log.info("ray-cast %d scans of %d beams in %.1f s", len(scans), p.beams, time.perf_counter() - t0)
+    odoms = [OdomSample(float(ti), *o) for ti, o in zip(t, odom, strict=True)]
+    return t_scan, gt, scans, odoms
+
+
+COMPANIONS = "cornerslam simulate companions"  # the log's metadata record: suffix → sha256 of that file
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def companion_hashes(log: Path) -> dict[str, str] | None:
+    """The sha256 of the ground truth and corners files simulate wrote beside ``log`` (by suffix:
+    ``.tum``, ``.csv``), from its metadata; None for a log without the record (an older simulate's) or
+    one that cannot be read."""
+    from mcap.reader import make_reader
+
+    try:
+        with open(log, "rb") as f:
+            for m in make_reader(f).iter_metadata():
+                if m.name == COMPANIONS:
+                    return dict(m.metadata)
+    except Exception:  # noqa: BLE001 - a damaged log: no record to go by
+        return None
+    return None
+
+
 def simulate_log(
     out: Path,
     seed: int = 0,
@@ -174,59 +249,33 @@ def simulate_log(
     paths = (out, out.with_suffix(".gt.tum"), out.with_suffix(".corners.csv"))
     for path in paths:
         refuse_special_file(path, path)
-    # replaced only as a set this command wrote: a log whose MCAP header names the log writer's library
-    if any(path.exists() for path in paths) and header_library(out) != LOG_LIBRARY:
-        there = next(path for path in paths if path.exists())
-        why = "give a new name, or move those files away"
-        raise OutputError(f"'{there}' exists and is not part of a log cornerslam simulate wrote", why)
-    rng = np.random.default_rng(seed)
-    dt = 1.0 / p.odom_rate
-    truth = drive(waypoints, laps, p, dt)  # at the odometry rate
-    t = EPOCH + dt * np.arange(len(truth))
-    odom = corrupt_odometry(truth, p, rng)
-    # scans between odometry samples (offset by a third of a period), true pose interpolated
-    t_scan = np.arange(t[0] + 0.3 * dt, t[-1], 1.0 / p.rate)
-    xs = np.interp(t_scan, t, truth[:, 0])
-    ys = np.interp(t_scan, t, truth[:, 1])
-    ths = wrap_angle(np.interp(t_scan, t, np.unwrap(truth[:, 2])))
-    gt = np.column_stack((xs, ys, ths))
-    angle_min = -p.fov / 2
-    inc = p.fov / (p.beams - 1)
-    angles = angle_min + inc * np.arange(p.beams)
-    beam_time = sweep / (p.beams - 1)
-    scans = []
-    t0 = time.perf_counter()
-    for k, (ts, (x, y, th)) in enumerate(zip(t_scan, gt, strict=True)):
-        if progress is not None:
-            progress(k, len(t_scan))
-        if sweep > 0.0:  # the base's true pose at each beam's time
-            tb = ts + beam_time * np.arange(p.beams)
-            x, y = np.interp(tb, t, truth[:, 0]), np.interp(tb, t, truth[:, 1])
-            th = wrap_angle(np.interp(tb, t, np.unwrap(truth[:, 2])))
-        laser = np.column_stack((x + p.laser_x * np.cos(th), y + p.laser_x * np.sin(th), th))
-        r = raycast(world, laser if sweep > 0.0 else laser[0], angles, p.max_range)
-        r = r + rng.normal(0.0, 1.0, len(r)) * (p.sigma_a + p.sigma_b * np.where(np.isfinite(r), r, 0))
-        r[rng.random(len(r)) < p.dropout] = np.nan
-        r[~(r < p.max_range)] = np.inf
-        r[np.isfinite(r) & (r < 0.05)] = 0.05
-        scans.append(
-            RawScan(float(ts), angle_min, inc, r.astype(np.float32), 0.05, p.max_range, "laser", beam_time)
-        )
-    if progress is not None:
-        progress(len(t_scan), len(t_scan))
-    log.info("ray-cast %d scans of %d beams in %.1f s", len(scans), p.beams, time.perf_counter() - t0)
-    t0 = time.perf_counter()
-    odoms = [OdomSample(float(ti), *o) for ti, o in zip(t, odom, strict=True)]
+    # replaced only as a set this command wrote: a log whose MCAP header names the log writer's library,
+    # and beside it the ground truth and corners as it wrote them (their sha256 in the log's metadata)
+    if any(path.exists() for path in paths):
+        ours = header_library(out) == LOG_LIBRARY
+        written = companion_hashes(out) if ours else None
+        for there in paths if not ours else paths[1:]:
+            if not there.exists():
+                continue
+            # (an older simulate's log keeps no record: its set is taken as it was written)
+            if ours and (written is None or written.get(there.suffix) == _sha256(there)):
+                continue
+            why = "give a new name, or move those files away"
+            raise OutputError(f"'{there}' exists and is not part of a log cornerslam simulate wrote", why)
     out.parent.mkdir(parents=True, exist_ok=True)  # as --out and --mcap-out do
     gt_path, corners_path = paths[1:]
     for path in paths:
         clear_stale(path)  # hidden files of a killed simulate
-    staged = {path: staged_file(path) for path in paths}  # written beside, renamed when all are written
+    # written beside, renamed when all are written; made now, so an unwritable place fails before the work
+    staged = {path: staged_file(path) for path in paths}
     try:
-        write_mcap(staged[out], scans, odoms, tf_static=(p.laser_x, 0.0, 0.0))
+        t_scan, gt, scans, odoms = _cast(world, waypoints, laps, p, seed, sweep, progress)
+        t0 = time.perf_counter()
         write_tum(staged[gt_path], t_scan, gt)
         c = true_corners(world)
         np.savetxt(staged[corners_path], c, delimiter=",", header="x,y,phi", comments="", fmt="%.6f")
+        record = {path.suffix: _sha256(staged[path]) for path in (gt_path, corners_path)}
+        write_mcap(staged[out], scans, odoms, tf_static=(p.laser_x, 0.0, 0.0), metadata={COMPANIONS: record})
         with signals_deferred():  # the three renamed as one: Ctrl-C now would leave a mixed set
             for path, tmp in staged.items():
                 os.replace(tmp, path)

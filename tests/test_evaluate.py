@@ -512,6 +512,22 @@ def test_relations_of_one_instant_or_a_yaw_beyond_pi_are_warned_about(tmp_path, 
     assert caplog.text == ""
 
 
+def test_relations_repeated_exactly_count_once_warned(tmp_path, caplog):
+    """A relations file joined to itself (`cat a a`) was scored with every relation twice, nothing said
+    (a hostile-user probe); a TUM ground truth's repeated lines were already dropped with a warning."""
+    import logging
+
+    from cornerslam_cli.evaluate import read_relations
+
+    lines = ["2.0 3.0 0.5 0 0 0 0 0.1\n", "1.0 2.0 0.1 0 0 0 0 0.2\n", "1.0 2.0 0.1 0 0 0 0 0.25\n"]
+    rel = tmp_path / "r.relations"
+    rel.write_text("".join(lines + lines[:2]))
+    with caplog.at_level(logging.WARNING, logger="cornerslam.evaluate"):
+        r = read_relations(rel)
+    np.testing.assert_array_equal(r[:, [0, 1, 4]], [[2, 3, 0.1], [1, 2, 0.2], [1, 2, 0.25]])  # file order
+    assert "2 of its 5 relations repeat an earlier line exactly: counted once" in caplog.text
+
+
 def test_a_ground_truth_stamp_with_underscores_or_other_digits_is_refused(tmp_path):
     """'1_700_000_002.5' was read as 1700000002.5 (Python's float takes underscores), moving that pose;
     a number in a text file is plain ASCII (found by a hostile-user probe)."""

@@ -1078,6 +1078,27 @@ def test_stdout_on_a_full_disk_is_exit_2(valid_log, tmp_path):
     complete(out)
 
 
+def test_stdout_closed_is_exit_2(valid_log, tmp_path):
+    """`cornerslam info LOG >&-` (stdout closed: Python's sys.stdout is None, and click's echo wrote
+    nothing): exit 2 saying stdout cannot be written, as `ls >&-` does (before: exit 0, the report
+    lost); with -q nothing goes to stdout, so a run succeeds."""
+    out = tmp_path / "out"
+    for args in (["info", str(valid_log)], ["config"], ["run", str(valid_log), "--out", str(out), "-q"]):
+        res = subprocess.run(
+            [*CMD, *args], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, timeout=60,
+            preexec_fn=lambda: os.close(1),
+        )  # fmt: skip
+        if args[-1] == "-q":
+            assert res.returncode == 0, res.stderr
+            continue
+        assert res.returncode == 2, res.stderr
+        assert res.stderr.strip().splitlines()[-1] == (
+            "error: cannot write to standard output: Bad file descriptor (redirect it elsewhere)"
+        ), res.stderr
+        assert "Traceback" not in res.stderr and "Exception ignored" not in res.stderr, res.stderr
+    complete(out)
+
+
 def _children(pid: int) -> list[int]:
     """Pids of the live (not zombie) child processes of ``pid``, from /proc."""
     out = []
@@ -1221,6 +1242,51 @@ def test_simulate_writes_over_its_own_earlier_log(tmp_path):
         res = CliRunner().invoke(cli, ["simulate", str(out), "--beams", "11", "--rate", "1", "--seed", seed])
         assert res.exit_code == 0, res.output
     assert out.with_suffix(".gt.tum").exists() and out.with_suffix(".corners.csv").exists()
+
+
+def test_simulate_keeps_a_users_file_beside_its_own_log(tmp_path, monkeypatch):
+    """Over its own earlier log, simulate replaced NAME.gt.tum and NAME.corners.csv whatever they held: a
+    user's own reference saved there was lost (a hostile-user probe). The log now records the sha256 of
+    the two it wrote (an MCAP metadata record); one that differs is refused, exit 2, and kept."""
+    from cornerslam_cli import simulate as sim
+
+    out = tmp_path / "d.mcap"
+    args = ["simulate", str(out), "--beams", "11", "--rate", "1"]
+    assert CliRunner().invoke(cli, args).exit_code == 0
+    assert set(sim.companion_hashes(out)) == {".tum", ".csv"}
+    assert CliRunner().invoke(cli, [*args, "--seed", "2"]).exit_code == 0  # its own set: replaced
+    for name in ("d.gt.tum", "d.corners.csv"):
+        mine = tmp_path / name
+        kept = mine.read_bytes()
+        mine.write_text("mine\n")
+        res = CliRunner().invoke(cli, args)
+        assert res.exit_code == 2, res.output
+        assert f"'{mine}' exists and is not part of a log cornerslam simulate wrote" in res.stderr
+        assert mine.read_text() == "mine\n"
+        mine.write_bytes(kept)
+    # a log of a simulate before the record (the shipped sample until 2026-12-05): taken as written
+    (tmp_path / "d.gt.tum").write_text("an older simulate's\n")
+    monkeypatch.setattr(sim, "companion_hashes", lambda log: None)
+    sim.simulate_log(out, seed=1, rate=1.0, beams=11)
+    assert (tmp_path / "d.gt.tum").read_text() != "an older simulate's\n"
+
+
+def test_simulate_into_an_unwritable_place_fails_before_the_work(tmp_path, monkeypatch):
+    """A read-only directory: simulate ray-cast the whole log (its progress bar to the end), then failed;
+    run, compare, batch and --mcap-out refuse before any work (a hostile-user probe). Its files are now
+    staged first."""
+    import errno
+
+    from cornerslam_cli import simulate as sim
+
+    place = tmp_path / "ro"
+    place.mkdir()
+    cast = []
+    monkeypatch.setattr(sim, "raycast", lambda *a, **k: cast.append(1))
+    fail_writes_under(monkeypatch, place, errno.EROFS)
+    res = CliRunner().invoke(cli, ["simulate", str(place / "s.mcap"), "--beams", "11", "--rate", "1"])
+    assert res.exit_code == 2 and "read-only file system" in res.stderr.lower(), res.output
+    assert cast == [] and list(place.iterdir()) == []
 
 
 def test_simulate_renames_its_three_files_as_one(tmp_path, monkeypatch):

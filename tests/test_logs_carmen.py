@@ -75,6 +75,11 @@ def test_rlaser_selected_explicitly_and_missing_tag(tmp_path):
         open_log(p, scan_topic="ROBOTLASER1").messages()
     with pytest.raises(LogError, match="no 'ODOM' lines"):
         open_log(p, odom_topic="ODOM").messages()
+    # a tag the log has, but not a laser's: not "has no 'ODOM' lines" (a hostile-user probe)
+    q = tmp_path / "o.log"
+    q.write_text(p.read_text() + "ODOM 1 2 0.1 0 0 0 7.5 host 7.5\n")
+    with pytest.raises(LogError, match=r"o.log': its 'ODOM' lines are not laser lines \(laser lines: FLASER"):
+        open_log(q, scan_topic="ODOM").messages()
 
 
 def test_odom_only_log_has_no_laser(tmp_path):

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import shutil
 import sqlite3
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -116,14 +117,20 @@ def test_a_bag_without_metadata_is_read_from_its_one_storage_file_warned(bags, w
     assert any("has no metadata.yaml" in w and "read alone" in w for w in warnings)
 
 
-def test_a_bag_without_metadata_and_two_storage_files_says_to_reindex(bags):
+def test_a_bag_without_metadata_and_two_storage_files_says_to_reindex(bags, monkeypatch):
     sq = bags[0]
     (sq / "metadata.yaml").unlink()
     db = next(sq.glob("*.db3"))
     shutil.copy(db, sq / "second.db3")
     with pytest.raises(LogError, match="has no metadata.yaml and 2 storage files") as err:
         open_log(sq)
-    assert "ros2 bag reindex" in err.value.hint
+    assert "ros2 bag reindex" in err.value.hint and "give one log file" in err.value.hint
+    # given as `.` from inside it: named by its own name, not '' (a hostile-user probe)
+    monkeypatch.chdir(sq)
+    with pytest.raises(LogError) as err:
+        open_log(Path("."))
+    assert f"directory '{sq.name}' has no metadata.yaml and 2 storage files (" in str(err.value)
+    assert "`ros2 bag reindex .` writes" in err.value.hint
 
 
 @pytest.mark.parametrize("which, edit", [(0, "empty"), (1, "empty"), (0, "start as text")])  # (mcap: unread)

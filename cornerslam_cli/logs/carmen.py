@@ -289,10 +289,11 @@ class CarmenReader:
             if self._want_scan in lasers:
                 scan = self._want_scan
             else:
+                want, present = short_text(self._want_scan), self._counts.get(self._want_scan)
+                what = f": its '{want}' lines are not laser lines" if present else f" has no '{want}' lines"
                 problems.append(
                     (
-                        f"CARMEN log '{name}' has no '{short_text(self._want_scan)}' lines (laser lines: "
-                        f"{', '.join(lasers) or 'none'})",
+                        f"CARMEN log '{name}'{what} (laser lines: {', '.join(lasers) or 'none'})",
                         "choose one of them with --scan-topic",
                     )
                 )

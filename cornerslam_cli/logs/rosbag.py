@@ -18,6 +18,7 @@ killed recorder's, an edited bag's) are taken as unknown, warned, not as an empt
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
@@ -185,12 +186,16 @@ def _sole_storage(path: Path, stats: ReadStats) -> Path:
     metadata = path / "metadata.yaml"
     if not metadata.is_file():
         files = sorted(f for f in path.iterdir() if f.suffix in STORAGE_SUFFIXES and f.is_file())
+        name = path.name or os.path.basename(os.path.abspath(path))  # `.`: the directory's own name
         if len(files) != 1:
+            listed = ", ".join(f.name for f in files[:3]) + (", …" if len(files) > 3 else "")
             raise LogError(
-                f"ROS 2 bag directory '{path.name}' has no metadata.yaml and {len(files)} storage files",
-                f"`ros2 bag reindex {path.name}` writes its metadata.yaml again; or give one storage file",
+                f"directory '{name}' has no metadata.yaml and {len(files)} storage files"
+                + (f" ({listed})" if files else ""),
+                f"give one log file; if it is a ROS 2 bag, `ros2 bag reindex {path}` writes its "
+                "metadata.yaml again",
             )
-        stats.warn("%s has no metadata.yaml: its one storage file %s is read alone", path.name, files[0].name)
+        stats.warn("%s has no metadata.yaml: its one storage file %s is read alone", name, files[0].name)
         return files[0]
     try:
         info = yaml.safe_load(metadata.read_text())["rosbag2_bagfile_information"]

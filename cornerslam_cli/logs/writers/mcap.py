@@ -23,6 +23,7 @@ def write_mcap(
     shuffle_blocks: int = 0,
     summary: bool = True,
     repeat_channels: bool = True,
+    metadata: dict[str, dict[str, str]] | None = None,
     **topics,
 ) -> Path:
     """Write an MCAP log. ``encoding``: ``cdr`` (ROS 2 profile), ``ros1`` (ROS 1 profile), ``json``
@@ -33,7 +34,8 @@ def write_mcap(
     order, one message per chunk: a valid file whose chunks are not in log-time order (the whole log
     is held in memory to do so). ``summary=False`` writes no summary section (no chunk index, no
     statistics), as some recorders do; ``repeat_channels=False`` a summary without the channel and
-    schema records (they are only in the data section: the mcap writer's option).
+    schema records (they are only in the data section: the mcap writer's option). ``metadata``: MCAP
+    Metadata records, name → string map (simulate's record of its companion files).
     """
     from mcap.writer import CompressionType, IndexType, Writer
 
@@ -67,5 +69,7 @@ def write_mcap(
                     topic=topic, message_encoding=ros.message_encoding, schema_id=sid
                 )
             w.add_message(channel_id=cid, log_time=t, data=data, publish_time=t)
+        for name, record in (metadata or {}).items():
+            w.add_metadata(name, record)
         w.finish()
     return path
