@@ -481,25 +481,30 @@ def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
 )
 @verbosity_options
 def evaluate(out_dir, ground_truth, relations, time_offset, correct_scale, verbose, quiet):
-    """Accuracy of a run's trajectory.tum against ground truth or relations.
+    """Accuracy of a run's trajectory.tum against ground truth or relations (without either: the ground
+    truth the run was scored against, when its summary.json names one that is still there).
 
     \b
     Example:
       cornerslam evaluate cornerslam_out/intel_pca --relations intel.relations --time-offset 976052857.334
     """
     from .evaluate import evaluate_files
-    from .report.run_dir import check_one_run, check_unchanged
+    from .report.run_dir import check_one_run, check_unchanged, recorded_ground_truth
+    from .report.text import scored_line
 
     setup_logging(verbose, quiet)
+    check_one_run(out_dir)  # a compare or batch directory: names its run directories
     if not ground_truth and not relations:
-        raise click.UsageError("give --ground-truth FILE.tum or --relations FILE")
+        ground_truth = recorded_ground_truth(out_dir)  # the one the run was scored against, if it is there
+        if not ground_truth:
+            raise click.UsageError("give --ground-truth FILE.tum or --relations FILE")
+        log.info("ground truth: %s, as the run's summary.json names it", ground_truth)
     if correct_scale and not ground_truth:
         raise click.UsageError("--correct-scale scales the ATE: give --ground-truth FILE.tum too")
     check_time_offset(relations, time_offset)
-    check_one_run(out_dir)  # a compare or batch directory: names its run directories
     check_unchanged(out_dir)  # its trajectory.tum cut short since: not scored as the whole run
     res = evaluate_files(out_dir, ground_truth, relations, time_offset, correct_scale)
-    _echo(evaluation_lines(res))
+    _echo([*evaluation_lines(res), scored_line(out_dir, ground_truth, relations, correct_scale)])
 
 
 @cli.command()

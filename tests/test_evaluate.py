@@ -539,3 +539,32 @@ def test_a_ground_truth_stamp_with_underscores_or_other_digits_is_refused(tmp_pa
         gt.write_text(f"{stamp} 0 0 0 0 0 0 1\n1700000003 0 0 0 0 0 0 1\n")
         with pytest.raises(LogError, match="line 1 is not a TUM pose"):
             read_tum(gt, "ground truth")
+
+
+def test_evaluate_without_a_reference_uses_the_runs_and_says_what_it_scored(sim_log, tmp_path):
+    """`evaluate OUTDIR` alone said "give --ground-truth" although the run's summary.json names the
+    ground truth it was scored against; and its report did not say which file was scored against what,
+    aligned how (an evo user's unaligned evo_ape differs: a new-user walkthrough)."""
+    import shutil
+
+    from click.testing import CliRunner
+
+    from cornerslam_cli.cli import cli
+
+    log, gt, out = tmp_path / "sim.mcap", tmp_path / "sim.gt.tum", tmp_path / "run"
+    shutil.copy(sim_log, log)
+    shutil.copy(sim_log.with_suffix(".gt.tum"), gt)
+    assert CliRunner().invoke(cli, ["run", str(log), "--out", str(out), "-q"]).exit_code == 0
+    given = evaluate(out, "--ground-truth", gt)
+    assert given.exit_code == 0
+    assert given.stdout.splitlines()[-1] == (
+        f"scored: {out / 'trajectory.tum'} against ground truth {gt} (SE(2)-aligned, as evo_ape -a)"
+    )
+    alone = evaluate(out)
+    assert alone.exit_code == 0 and alone.stdout == given.stdout and alone.stderr == ""
+    rewrite(gt, lambda rows: rows[:-1])  # one pose fewer: not the poses the run was scored against
+    changed = evaluate(out)
+    assert changed.exit_code == 0 and "has changed since the run was scored against it" in changed.stderr
+    gt.unlink()
+    gone = evaluate(out)
+    assert gone.exit_code == 2 and "give --ground-truth FILE.tum or --relations FILE" in gone.stderr

@@ -95,6 +95,32 @@ def check_one_run(path: str | Path) -> None:
     )
 
 
+def recorded_ground_truth(path: str | Path) -> str | None:
+    """The ground truth a run directory ``path`` was scored against (its summary.json's
+    ``accuracy.ground_truth``, as the run named it) when that file is still there from here; None
+    otherwise (no run, no accuracy, moved). One that changed since the run (its poses' sha256 is not
+    summary.json's ``hashes.ground_truth``) is used, with a warning saying so."""
+    from .summary import reference_hash
+
+    p = Path(path)
+    if not (p / "summary.json").is_file():
+        return None
+    try:
+        s = RunSummary.read(p)
+    except ResultsError:
+        return None
+    gt = s.accuracy.ground_truth if s.accuracy is not None else None
+    if not gt or not Path(gt).is_file():
+        return None
+    try:
+        now = reference_hash(*read_tum(gt, "ground truth"))
+    except (OSError, LogError):
+        return gt  # (reading it again says what is wrong with it)
+    if s.hashes.ground_truth and now != s.hashes.ground_truth:
+        log.warning("ground truth '%s' has changed since the run was scored against it", display_path(gt))
+    return gt
+
+
 def check_unchanged(path: str | Path, name: str = "trajectory.tum") -> None:
     """Refuse the run directory ``path`` when its file ``name`` is not the size its run wrote (its
     marker's ``sizes``): cut short (a copy interrupted, a disk full) or changed since, its score would

@@ -330,6 +330,20 @@ def evaluation_lines(res: Accuracy) -> list[str]:
     return lines
 
 
+def scored_line(out_dir, ground_truth, relations, correct_scale: bool) -> str:
+    """``cornerslam evaluate``'s last line: what was scored against what, and how aligned (evo users
+    compare with ``evo_ape``, whose default is no alignment)."""
+    p = Path(out_dir)
+    what = p / "trajectory.tum" if p.is_dir() else p
+    against = []
+    if ground_truth:
+        how = "Sim(2)-aligned, as evo_ape -a -s" if correct_scale else "SE(2)-aligned, as evo_ape -a"
+        against.append(f"ground truth {display_path(ground_truth)} ({how})")
+    if relations:
+        against.append(f"relations {display_path(relations)}")
+    return f"scored: {display_path(what)} against {' and '.join(against)}"
+
+
 def scan_heading(step: int, scan: Scan) -> str:
     """``cornerslam extract``: which scan, when, and how many of its beams are valid."""
     return f"scan {step} at {scan.stamp:.3f} s: {len(scan.ranges)} valid of {scan.n_beams} beams"
