@@ -42,6 +42,9 @@ from pathlib import Path
 from . import __version__
 from .blas import single_threaded_blas, single_threaded_blas_env
 from .errors import CornerslamError, ResultsError, display_path, for_command, one_line, save_traceback
+from .report.comparison import BATCH_FIGURES as FIGURES
+from .report.comparison import BATCH_MORE_FIGURES as MORE_FIGURES
+from .report.comparison import batch_figures
 from .report.oserrors import output_errors
 from .report.outdir import staged_write
 from .report.ownership import claim_dir, files_intact, other_log_error
@@ -52,7 +55,6 @@ from .workers import warnings_kept, warnings_once
 log = logging.getLogger("cornerslam.batch")
 
 BATCH_CSV = "batch.csv"
-FIGURES = "steps,landmarks,matched_total,t_match,t_total,wall_time,ate_rmse,odom_ate_rmse".split(",")
 TIMING_FIGURES = ("t_match", "t_total", "wall_time")  # differ between runs of the same combination
 STATUSES = ("ok", "failed", "skipped", "pending")
 BATCH_OPTIONS = ("--assoc",)  # of errors.OPTION_OF, the options cornerslam batch takes (the rest by --set)
@@ -60,7 +62,7 @@ BATCH_OPTIONS = ("--assoc",)  # of errors.OPTION_OF, the options cornerslam batc
 
 def batch_columns(sweep_keys: Sequence[str]) -> list[str]:
     """The header of batch.csv for a batch sweeping ``sweep_keys``."""
-    return ["log", "assoc", *sweep_keys, "status", "error", *FIGURES, "out_dir"]
+    return ["log", "assoc", *sweep_keys, "status", "error", *FIGURES, "out_dir", *MORE_FIGURES]
 
 
 @dataclass
@@ -164,8 +166,9 @@ def _run_claimed(
         progress(state)
 
     def finished(i: int, result: dict) -> None:
+        name = Path(combos[i].log).name  # which log a warning is of, unless it says (once per log's runs)
         for text in result.pop("warnings", ()):
-            log.warning("%s", text)  # (said once: warnings_once)
+            log.warning("%s", text if f"'{name}'" in text else f"{name}: {text}")  # said once
         rows[i] = _row(combos[i], **result)
         setattr(state, result["status"], getattr(state, result["status"]) + 1)
         writer.write(rows, throttle=True)
@@ -199,24 +202,9 @@ def _row(c: Combo, status: str, error: str = "", figures: dict | None = None, in
     row = {"log": display_path(c.log), "assoc": c.assoc, **dict(c.sweep), "status": status, "error": error}
     row.update({k: (figures or {}).get(k) for k in FIGURES})
     row["out_dir"] = c.name if status in ("ok", "skipped") else ""
+    row.update({k: (figures or {}).get(k) for k in MORE_FIGURES})
     row["internal"] = internal
     return row
-
-
-def figures_from_summary(s: RunSummary) -> dict:
-    """The batch.csv figures of one run's summary (returned by the run or read from summary.json)."""
-    c, t, acc = s.counts, s.timing, s.accuracy
-    nan = float("nan")
-    return {
-        "steps": c.steps,
-        "landmarks": c.landmarks,
-        "matched_total": c.matched_total,
-        "t_match": float(t.t_match),
-        "t_total": float(t.t_total),
-        "wall_time": float(t.wall_time),
-        "ate_rmse": acc.ate.rmse if acc and acc.ate else nan,
-        "odom_ate_rmse": acc.odom_ate.rmse if acc and acc.odom_ate else nan,
-    }
 
 
 def _ground_truth_hash(log: str) -> str | None | bool:
@@ -243,7 +231,7 @@ def _resumable(run_dir: Path, expect: Hashes, has_gt: bool) -> dict | None:
         return None  # missing, unreadable or from an older layout: run it again
     if s.hashes != expect or (s.accuracy is not None) != has_gt:
         return None
-    return figures_from_summary(s) if files_intact(run_dir) else None
+    return batch_figures(s) if files_intact(run_dir) else None
 
 
 def run_one(log: str, config: dict, out_dir: str, notes: tuple[str, ...] = ()) -> dict:
@@ -261,7 +249,7 @@ def run_one(log: str, config: dict, out_dir: str, notes: tuple[str, ...] = ()) -
             from .pipeline import run
 
             summary = run(log, from_dict(Config, config), out_dir, inside="batch", notes=notes)
-            result = {"status": "ok", "figures": figures_from_summary(summary)}
+            result = {"status": "ok", "figures": batch_figures(summary)}
         except SystemExit:  # the batch was interrupted and ended us (workers.stopped_by_parent)
             os._exit(143)  # the staging is removed: end here, not in the combination queued to us next
         except Exception as e:  # a bug in one combination must not stop the batch either

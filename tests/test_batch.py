@@ -134,6 +134,9 @@ def test_a_warning_of_every_run_is_said_once(logs, tmp_path, caplog):
     said = [r.getMessage() for r in caplog.records]
     assert sum("graph.refine=true is ignored" in t for t in said) == 1, said
     assert len(said) == len(set(said))
+    # a run's warning that does not name its log is said with it: which of the logs it is of
+    name = logs[0].name
+    assert all(t.startswith(f"{name}: ") or f"'{name}'" in t for t in said), said
 
 
 def test_a_kept_warning_does_not_reach_a_handlers_earlier_filters():
@@ -231,6 +234,13 @@ def test_bad_log_fails_its_rows_and_the_rest_succeed(first, logs):
         assert float(r["ate_rmse"]) > 0 and float(r["t_total"]) > 0
         assert (out / r["out_dir"] / "summary.json").is_file()
         assert r["out_dir"] == f"good__{r['assoc']}__{KEY}={r[KEY]}"
+        # appended after out_dir: comparison.csv's relation, scan-matched and loop-closing cells
+        s = json.loads((out / r["out_dir"] / "summary.json").read_text())
+        assert int(r["submaps"]) == s["counts"]["submaps"] > 0
+        assert int(r["loops_accepted"]) == s["counts"]["loops_accepted"]
+        assert float(r["online_ate_rmse"]) == pytest.approx(s["accuracy"]["online_ate"]["rmse"])
+        assert float(r["scan_odom_ate_rmse"]) == pytest.approx(s["accuracy"]["scan_odom_ate"]["rmse"])
+        assert r["rel_trans_mean"] == "nan" and r["refine_factors"] == ""  # no relations; no graph.refine
     for r in rows[4:]:
         assert r["status"] == "failed" and "bad.mcap" in r["error"] and "\n" not in r["error"]
         assert r["steps"] == "" and r["out_dir"] == ""

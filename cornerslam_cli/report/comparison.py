@@ -7,7 +7,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from ..results import Accuracy, Ate, RelationError, RunSummary
-from .tables import COMPARISON_COLUMNS, CsvTable
+from .tables import COMPARISON_COLUMNS, COMPARISON_LOOP_COLUMNS, CsvTable
 
 NAN = float("nan")
 
@@ -37,6 +37,20 @@ def comparison_row(s: RunSummary) -> list:
         _or_nan(acc.scan_odom_relations, "trans_mean"),
         *loop_cells(s),
     ]
+
+
+# batch.csv's figures (cornerslam_cli/batch.py): comparison.csv's cells of the same names (t_match: its
+# t_match_total); then, appended after out_dir (2026-12-05), the relation error, the scan-matched odometry's
+# ATE and the loop-closing cells, as comparison.csv has them
+BATCH_FIGURES = "steps,landmarks,matched_total,t_match,t_total,wall_time,ate_rmse,odom_ate_rmse".split(",")
+BATCH_MORE_FIGURES = ["rel_trans_mean", "rel_rot_mean_deg", "scan_odom_ate_rmse", *COMPARISON_LOOP_COLUMNS]
+
+
+def batch_figures(s: RunSummary) -> dict:
+    """The batch.csv figures of one run's summary (returned by the run or read from summary.json)."""
+    cells = dict(zip(COMPARISON_COLUMNS, comparison_row(s), strict=True))
+    cells["t_match"] = cells["t_match_total"]
+    return {k: cells[k] for k in BATCH_FIGURES + BATCH_MORE_FIGURES}
 
 
 def loop_cells(s: RunSummary) -> list:
