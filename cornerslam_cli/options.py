@@ -381,6 +381,8 @@ def parse_assocs(text: str | None, allow_many: bool, log_path: str | None = None
 
 def parse_sweeps(texts) -> dict[str, list[str]]:
     """``--sweep KEY=V1,V2,...`` values as {key: [values]}; a malformed or repeated key is a usage error."""
+    from .sweep import sweep_values
+
     sweeps: dict[str, list[str]] = {}
     for text in texts:
         key, sep, values = text.partition("=")
@@ -391,10 +393,8 @@ def parse_sweeps(texts) -> dict[str, list[str]]:
             raise click.BadParameter(
                 f"'{key}' is swept twice; give all its values at once", param_hint="--sweep"
             )
-        sweeps[key] = [v.strip() for v in values.split(",")]
-        if "" in sweeps[key]:  # '3,,5' or '3,5,': a value lost in typing, not one to drop silently
-            raise click.BadParameter(
-                f"'{text}' has an empty value; list the values as KEY=V1,V2,... without empty ones",
-                param_hint="--sweep",
-            )
+        try:
+            sweeps[key] = sweep_values(key, values)
+        except ValueError as e:
+            raise click.BadParameter(f"'{text}' {e}", param_hint="--sweep") from None
     return sweeps

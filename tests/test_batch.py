@@ -210,6 +210,23 @@ def test_a_sweep_with_an_empty_value_exits_2(tmp_path, values):
     assert not out.exists()
 
 
+def test_sweep_values_split_outside_braces_and_the_key_given_once():
+    """A swept mapping with a comma inside ('graph={refine: true, refine_radius: 3},{refine: false}') was
+    cut at that comma; the key repeated in each value ('K={a: 1},K={a: 2}', as --set takes one) gave
+    "unknown config key 'K.K={a'" (a hostile-user probe)."""
+    from cornerslam_cli.sweep import sweep_values
+
+    assert sweep_values("graph", "{refine: true, refine_radius: 3},{refine: false}") == [
+        "{refine: true, refine_radius: 3}",
+        "{refine: false}",
+    ]
+    assert sweep_values("k", " [1, 2] , 3") == ["[1, 2]", "3"]
+    with pytest.raises(ValueError, match=r"names scan_match again in a value; .*: scan_match=V1,V2"):
+        sweep_values("scan_match", "{enabled: false},scan_match={enabled: true}")
+    with pytest.raises(ValueError, match="has an empty value"):
+        sweep_values("k", "{a: 1},,{a: 2}")
+
+
 def test_assoc_and_a_set_of_association_method_must_agree(tmp_path):
     """batch --assoc icnn --set association.method=jcbb ran icnn without a word, as run did before
     4aaa3cf (reliability.md: "--assoc ... with a --set of its config key naming another value" exit 2)."""
