@@ -111,3 +111,20 @@ def test_ctrl_c_while_the_command_is_still_importing_exits_130_in_one_line():
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert res.returncode == 130, res.stderr
     assert res.stderr == "interrupted: no output written (an earlier output there, if any, is kept)\n"
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_while_the_interpreter_shuts_down_after_the_command_changes_nothing(sig):
+    """Ctrl-C just after a run ended — its output committed, its report printed — killed the process
+    without a word while the interpreter shut down (exit 130 after a complete output, whose README says
+    "the previous output is kept"), or printed "Exception ignored … KeyboardInterrupt" (a hostile-user
+    probe). The command's exit status now stands: here the signal lands from an atexit hook."""
+    code = (
+        "import atexit, os, signal\n"
+        f"atexit.register(lambda: os.kill(os.getpid(), {int(sig)}))\n"
+        "from cornerslam_cli.entry import main\n"
+        "main()\n"
+    )
+    res = subprocess.run([sys.executable, "-c", code, "config"], capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0, (res.returncode, res.stderr)
+    assert res.stderr == "" and res.stdout.startswith("input:\n")
