@@ -366,13 +366,12 @@ def warn_mount(src: Input, cfg: Config) -> None:
     sets it, so true was the user's). Called once the run has its frames, so that a log that fails
     gives its one-line error alone."""
     if src.laser_source == "default":
-        why = f"has no tf {_tf_text(src, cfg)}"
-        keep = ", or input.laser.from_tf=false to keep it"
+        why, keep = f"has no tf {_tf_text(src, cfg)}", ", or input.laser.from_tf=false to keep it"
+        topic = short_text(src.info.scan_topic)
         if getattr(src.reader, "laser_frame", None) == "":  # a scan read, its frame empty: no tf names it
-            topic = short_text(src.info.scan_topic)
             why = f"has scans on '{topic}' with an empty header frame_id, so no tf can place the laser"
         if src.info.format == "carmen":  # no tf to look in, nor a key to turn that off
-            why, keep = f"gives no laser mount (its {short_text(src.info.scan_topic)} lines carry none)", ""
+            why, keep = f"gives no laser mount (its {topic} lines carry none)", ""
         src.reader.stats.warn(
             "log '%s' %s: the laser is taken at the built-in default x=0 y=0 yaw=0 on the robot (set "
             "input.laser.x/y/yaw to its mount%s)",
