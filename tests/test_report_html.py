@@ -109,8 +109,14 @@ def test_run_report_summary_matches_summary_json(reports):
     assert facts["associator"] == summary["assoc"]
     assert facts["log"] == summary["input"]["log"]
     acc = table_with_header(page, "trajectory")
-    assert [r[0][0] for r in acc[1:]] == ["corrected", "odometry"]
+    # the scan-matched odometry and the online estimate, as `run` prints them (they were left out)
+    names = [r[0][0] for r in acc[1:]]
+    assert names[:2] == ["corrected", "odometry"]
+    keys = {"scan-matched odometry": "scan_odom_ate", "online (causal)": "online_ate"}
+    assert names[2:] == [k for k, v in keys.items() if summary["accuracy"].get(v)]
     assert float(acc[1][1][0]) == pytest.approx(summary["accuracy"]["ate"]["rmse"], rel=1e-3)
+    for row in acc[3:]:
+        assert float(row[1][0]) == pytest.approx(summary["accuracy"][keys[row[0][0]]]["rmse"], rel=1e-3)
     text = path.read_text(encoding="utf-8")
     assert "<details><summary>Resolved configuration" in text
     assert "association" in text and "&quot;method&quot;: &quot;pca&quot;" in text

@@ -41,7 +41,7 @@ nav a { margin-right: 1em; }
 """
 
 CAPTIONS = {
-    "map.png": "Fig 16 — odometry (dashed) and corrected (solid) trajectories, landmarks with 3σ ellipses.",
+    "map.png": "Fig 16 — odometry (dashed), scan-matched (dash-dot) and output (solid) paths, landmarks.",
     "segments.png": "Fig 20 — segment map at the corrected poses with the landmark positions.",
     "timing.png": "Fig 17 — per-step prediction, matching, update and scan-matching time.",
     "corners.png": "Fig 18 — detected vs matched corners per step, and new landmarks.",
@@ -180,7 +180,9 @@ def _accuracy_section(summary: RunSummary) -> list[str]:
         return []
     out = ["<h3>Accuracy</h3>"]
     if acc.ate is not None or acc.odom_ate is not None:
-        rows = [[name, *_ate_cells(a)] for name, a in (("corrected", acc.ate), ("odometry", acc.odom_ate))]
+        more = (("scan-matched odometry", acc.scan_odom_ate), ("online (causal)", acc.online_ate))
+        named = [("corrected", acc.ate), ("odometry", acc.odom_ate), *((n, a) for n, a in more if a)]
+        rows = [[name, *_ate_cells(a)] for name, a in named]
         out += [
             f'<p class="muted">against {esc(acc.ground_truth or "")} (SE(2)-aligned)</p>',
             table(["trajectory", "ATE RMSE [m]", "mean [m]", "max [m]", "heading RMSE [rad]", "poses"], rows),
