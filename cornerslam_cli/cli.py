@@ -393,10 +393,15 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
     from .lasers import detect_preset, first_scan
     from .logs import open_log
     from .logs.unreadable import no_scan_read
+    from .report.ownership import is_results_mcap
 
     setup_logging(verbose, quiet)
     reader = open_log(Path(log_path), scan_topic=scan_topic or "", odom_topic=odom_topic or "")
     log_info = reader.info()
+    if is_results_mcap(Path(log_path)):  # run --mcap-out's output: described, not judged as a log to run
+        lines = info_lines(log_path, replace(log_info, problems=()), None)
+        _echo([*lines[: lines.index("run would use:")], RESULTS_MCAP_NOTE])
+        return
     if log_info.problems:  # a log run refuses (no LaserScan, only odometry, …): its topics, then why
         scan = None
         if log_info.scan_topic:  # scans without odometry: their first is read all the same (scans())
@@ -428,6 +433,12 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
         raise LogError(*odom_tf[0])
     if odom_tf:  # the first 2,000 messages after the first scan only: likely, not certain
         reader.stats.warn("%s in the first 2,000 messages after the first scan (%s)", *odom_tf[0])
+
+
+RESULTS_MCAP_NOTE = (
+    "results:  written by `cornerslam run --mcap-out` (Foxglove schemas: the trajectories, scans, segments, "
+    "landmarks); open it in Foxglove Studio. It is not a log to run"
+)
 
 
 @cli.command()

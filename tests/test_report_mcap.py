@@ -194,3 +194,19 @@ def test_stamp_to_ns_is_exact():
     assert stamp_to_ns("1700000000.006000042") == 1_700_000_000_006_000_042
     assert stamp_to_ns("12") == 12_000_000_000
     assert stamp_to_ns("0.000000001") == 1
+
+
+def test_info_describes_a_results_mcap_instead_of_refusing_it(results, tmp_path):
+    """`info` on run --mcap-out's file listed its topics, then "laser not on tf …" and exit 2 "has no
+    sensor_msgs/LaserScan topic" (a new-user walkthrough): it says what the file is, exit 0."""
+    from click.testing import CliRunner
+
+    from cornerslam_cli.cli import cli
+
+    path = write_results_mcap(results[0], tmp_path / "results.mcap")
+    res = CliRunner().invoke(cli, ["info", str(path)])
+    assert res.exit_code == 0, res.output
+    lines = res.stdout.splitlines()
+    assert "topics:" in lines and "run would use:" not in lines and res.stderr == ""
+    assert lines[-1].startswith("results:  written by `cornerslam run --mcap-out`")
+    assert any(line.split()[0] == TOPICS["path"] for line in lines if line.startswith("  /"))
