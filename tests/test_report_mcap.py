@@ -96,7 +96,33 @@ def test_message_counts(results):
         TOPICS["path"]: 1,
         TOPICS["odom_path"]: 1,
         TOPICS["ground_truth_path"]: 1,  # the sim log has ground truth
+        TOPICS["grid"]: 1,  # the occupancy grid of map.pgm
     }
+
+
+def test_the_grid_is_map_pgm_in_nav_msgs_values(results):
+    """The occupancy grid (map.pgm) was not in the results MCAP (a new-user walkthrough): one
+    foxglove.Grid, cell (0, 0) at map.yaml's origin, rows along +y, int8 100 / 0 / −1."""
+    import base64
+
+    from cornerslam_cli.report.occupancy import FREE, OCCUPIED, UNKNOWN, read_grid
+
+    run_dir, messages, _, _ = results
+    ((_, g),) = messages[TOPICS["grid"]]
+    grid = read_grid(run_dir)
+    rows, cols = grid.cells.shape
+    assert (g["column_count"], g["row_stride"], g["cell_stride"]) == (cols, cols, 1)
+    assert g["cell_size"] == {"x": grid.resolution, "y": grid.resolution}
+    assert (g["pose"]["position"]["x"], g["pose"]["position"]["y"]) == pytest.approx(grid.origin)
+    values = np.frombuffer(base64.b64decode(g["data"]), dtype=np.int8).reshape(rows, cols)
+    for pixel, value in ((OCCUPIED, 100), (FREE, 0), (UNKNOWN, -1)):
+        assert (values == value).sum() == (grid.cells == pixel).sum() > 0
+    # row 0 is the lowest y: map.pgm's pixels upside down (the file is top row first)
+    pgm = (run_dir / "map.pgm").read_bytes()
+    pixels = np.frombuffer(pgm[len(pgm) - rows * cols :], dtype=np.uint8).reshape(rows, cols)[::-1]
+    assert not np.array_equal(pixels, pixels[::-1])  # (a map that reads the same flipped tells nothing)
+    np.testing.assert_array_equal(values == 100, pixels == OCCUPIED)
+    np.testing.assert_array_equal(values == -1, pixels == UNKNOWN)
 
 
 def test_every_payload_validates_against_its_embedded_schema(results):

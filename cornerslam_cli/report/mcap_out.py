@@ -35,6 +35,10 @@ topic                                  schema                     messages
                                                                   ellipse (line loop), corner direction
 ``/cornerslam/segments``               foxglove.SceneUpdate       one per step: that step's segments
                                                                   (line list, kept, so the map builds up)
+``/cornerslam/grid``                   foxglove.Grid              one, at the last stamp, when the run wrote
+                                                                  map.pgm: the occupancy grid, int8 cells
+                                                                  ``occupancy`` 100 / 0 / −1 (occupied /
+                                                                  free / unknown, nav_msgs' values)
 =====================================  =========================  ========================================
 
 The transform is ``map`` → odom (REP 105: corrected pose ∘ odometry⁻¹), not ``map`` → base: the input
@@ -62,7 +66,7 @@ import numpy as np
 
 from ..errors import display_path
 from ..geometry import compose_inverse
-from .occupancy import ScanStore
+from .occupancy import FREE, OCCUPIED, UNKNOWN, Grid, ScanStore, read_grid
 from .ownership import RESULTS_MCAP_LIBRARY
 from .run_dir import ELLIPSE_SIGMA, ellipse_polygons, load_run
 from .tables import json_text
@@ -79,6 +83,7 @@ TOPICS = {
     "scan": "/cornerslam/scan",
     "landmarks": "/cornerslam/landmarks",
     "segments": "/cornerslam/segments",
+    "grid": "/cornerslam/grid",
 }
 LANDMARK_RADIUS = 0.15  # m, sphere diameter in Foxglove
 CORNER_ARROW = 0.4  # m, length of the line showing a corner's direction φ
@@ -140,6 +145,10 @@ _SCENE_ENTITY = _obj(
         **{k: _arr({"type": "object"}) for k in _UNUSED_PRIMITIVES},
     },
 )
+_FIELD = _obj(
+    "foxglove.PackedElementField",
+    {"name": _STRING, "offset": {"type": "integer", "minimum": 0}, "type": {"type": "integer"}},
+)
 SCHEMAS: dict[str, dict] = {
     "foxglove.PoseInFrame": _obj(
         "foxglove.PoseInFrame", {"timestamp": _TIME, "frame_id": _STRING, "pose": _POSE}
@@ -164,16 +173,21 @@ SCHEMAS: dict[str, dict] = {
             "frame_id": _STRING,
             "pose": _POSE,
             "point_stride": {"type": "integer", "minimum": 0},
-            "fields": _arr(
-                _obj(
-                    "foxglove.PackedElementField",
-                    {
-                        "name": _STRING,
-                        "offset": {"type": "integer", "minimum": 0},
-                        "type": {"type": "integer"},
-                    },
-                )
-            ),
+            "fields": _arr(_FIELD),
+            "data": {"type": "string", "contentEncoding": "base64"},
+        },
+    ),
+    "foxglove.Grid": _obj(
+        "foxglove.Grid",
+        {
+            "timestamp": _TIME,
+            "frame_id": _STRING,
+            "pose": _POSE,
+            "column_count": {"type": "integer", "minimum": 0},
+            "cell_size": _obj("foxglove.Vector2", {"x": _num(), "y": _num()}),
+            "row_stride": {"type": "integer", "minimum": 0},
+            "cell_stride": {"type": "integer", "minimum": 0},
+            "fields": _arr(_FIELD),
             "data": {"type": "string", "contentEncoding": "base64"},
         },
     ),
@@ -193,6 +207,7 @@ TOPIC_SCHEMAS = {
     "scan": "foxglove.PointCloud",
     "landmarks": "foxglove.SceneUpdate",
     "segments": "foxglove.SceneUpdate",
+    "grid": "foxglove.Grid",
 }
 
 
@@ -254,7 +269,21 @@ def _transform(ns: int, parent: str, child: str, pose) -> dict:
             "translation": _point(pose[0], pose[1]), "rotation": _quat(pose[2])}  # fmt: skip
 
 
-FLOAT32 = 7  # foxglove.NumericType
+INT8, FLOAT32 = 2, 7  # foxglove.NumericType
+GRID_VALUES = {OCCUPIED: 100, FREE: 0, UNKNOWN: -1}  # map.pgm's pixels → nav_msgs/OccupancyGrid's values
+
+
+def _grid(ns: int, grid: Grid) -> dict:
+    """A foxglove.Grid of the occupancy grid in ``map``: cell (0, 0) at its origin, rows along +y, one
+    int8 ``occupancy`` per cell (GRID_VALUES)."""
+    values = np.full(grid.cells.shape, -1, dtype=np.int8)
+    for pixel, value in GRID_VALUES.items():
+        values[grid.cells == pixel] = value
+    cols, size = grid.cells.shape[1], {"x": grid.resolution, "y": grid.resolution}
+    return {"timestamp": _time(ns), "frame_id": MAP_FRAME, "pose": _pose(*grid.origin), "column_count": cols,
+            "cell_size": size, "row_stride": cols, "cell_stride": 1,
+            "fields": [{"name": "occupancy", "offset": 0, "type": INT8}],
+            "data": base64.b64encode(values.tobytes()).decode()}  # fmt: skip
 
 
 def _point_cloud(ns: int, xy: np.ndarray, origin: np.ndarray) -> dict:
@@ -325,6 +354,8 @@ def write_results_mcap(
             msgs.append((t0, "ground_truth_path", _poses_in_frame(t0, run.ground_truth)))
     msgs += _landmark_messages(run.landmarks, ns_of_step, stamps_ns[0] if stamps_ns else 0)
     msgs += _segment_messages(run.lines, run.steps.astype(int), stamps_ns)
+    if stamps_ns and (grid := read_grid(out_dir)) is not None:  # (written before the results MCAP)
+        msgs.append((stamps_ns[-1], "grid", _grid(stamps_ns[-1], grid)))
     msgs.sort(key=lambda m: m[0])  # stable: per-stamp order as appended
 
     path.parent.mkdir(parents=True, exist_ok=True)

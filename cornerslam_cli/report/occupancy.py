@@ -305,6 +305,21 @@ def write_grid(dest: Path, grid: Grid, name: str = "map") -> None:
     )
 
 
+def read_grid(dest: Path, name: str = "map") -> Grid | None:
+    """The grid :func:`write_grid` wrote in ``dest`` (None when its NAME.pgm or NAME.yaml is missing or
+    not of that form): the cells back with row 0 at the lowest y."""
+    try:
+        data = (dest / f"{name}.pgm").read_bytes()
+        meta = dict(line.split(": ", 1) for line in (dest / f"{name}.yaml").read_text().splitlines())
+        head = data.split(b"\n", 4)  # P5, the comment, "cols rows", 255, the pixels
+        cols, rows = (int(v) for v in head[2].split())
+        cells = np.frombuffer(head[4], dtype=np.uint8)[: rows * cols].reshape(rows, cols)[::-1]
+        x, y, _ = (float(v) for v in meta["origin"].strip("[]").split(","))
+        return Grid(np.ascontiguousarray(cells), float(meta["resolution"]), (x, y))
+    except (OSError, ValueError, KeyError, IndexError):
+        return None
+
+
 def draw_grid(path: Path, grid: Grid, poses: np.ndarray) -> None:
     """``map_grid.png``: the grid (black occupied, white free, grey unknown), top row first, with the
     trajectory ``poses`` (n, 3) drawn in blue; one pixel per cell."""
