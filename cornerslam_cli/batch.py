@@ -151,7 +151,7 @@ def _run_claimed(
             continue
         figures = None
         gt_hash = gt_hashes[c.log]
-        if log_hashes[c.log] is not None and gt_hash is not False:
+        if log_hashes[c.log] is not None and gt_hash is not False and code_hash() is not None:
             expect = Hashes(input=log_hashes[c.log], config=config_hash(from_dict(Config, c.config)),
                             version=__version__, ground_truth=gt_hash or None, code=code_hash())  # fmt: skip
             figures = _resumable(out / c.name, expect, gt_hash is not None)
@@ -166,9 +166,9 @@ def _run_claimed(
         progress(state)
 
     def finished(i: int, result: dict) -> None:
-        name = Path(combos[i].log).name  # which log a warning is of, unless it says (once per log's runs)
+        name = display_path(combos[i].log)  # which log a warning is of (as batch.csv's log), unless it says
         for text in result.pop("warnings", ()):
-            log.warning("%s", text if f"'{name}'" in text else f"{name}: {text}")  # said once
+            log.warning("%s", text if name in text else f"{name}: {text}")  # said once
         rows[i] = _row(combos[i], **result)
         setattr(state, result["status"], getattr(state, result["status"]) + 1)
         writer.write(rows, throttle=True)

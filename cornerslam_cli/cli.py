@@ -407,7 +407,7 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
     setup_logging(verbose, quiet)
     reader = open_log(Path(log_path), scan_topic=scan_topic or "", odom_topic=odom_topic or "")
     log_info = reader.info()
-    if is_results_mcap(Path(log_path)):  # run --mcap-out's output: described, not judged as a log to run
+    if is_results_mcap(Path(log_path)) and not (scan_topic or odom_topic):  # run --mcap-out's: described
         lines = info_lines(log_path, replace(log_info, problems=()), None)
         _echo([*lines[: lines.index("run would use:")], RESULTS_MCAP_NOTE])
         return
@@ -515,9 +515,10 @@ def evaluate(out_dir, ground_truth, relations, time_offset, correct_scale, verbo
     setup_logging(verbose, quiet)
     check_one_run(out_dir)  # a compare or batch directory: names its run directories
     if not ground_truth and not relations:
-        ground_truth = recorded_ground_truth(out_dir)  # the one the run was scored against, if it is there
+        ground_truth, why = recorded_ground_truth(out_dir)  # the one the run was scored against, if there
         if not ground_truth:
-            raise click.UsageError("give --ground-truth FILE.tum or --relations FILE")
+            why = f" ({why})" if why else ""
+            raise click.UsageError(f"give --ground-truth FILE.tum or --relations FILE{why}")
         log.info("ground truth: %s, as the run's summary.json names it", ground_truth)
     if correct_scale and not ground_truth:
         raise click.UsageError("--correct-scale scales the ATE: give --ground-truth FILE.tum too")

@@ -173,11 +173,16 @@ def _dir_name(log_label: str, assoc: str, sweep: tuple[tuple[str, str], ...]) ->
 
 def sweep_values(key: str, text: str) -> list[str]:
     """The values of ``--sweep KEY=TEXT``: TEXT split at the commas outside braces and brackets (a YAML
-    mapping or list keeps its own: ``graph={refine: true, refine_radius: 3},{refine: false}``). A
+    mapping or list keeps its own: ``graph={refine: true, refine_radius: 3},{refine: false}``; so does a
+    quoted value: ``input.scan_topic='/a,b','/c'``). A
     ValueError for an empty value ('3,,5', '3,5,': one lost in typing, not one to drop silently) and for
     the key given again inside ('K={a: 1},K={a: 2}': its values follow one ``KEY=``)."""
-    values, depth, start = [], 0, 0
+    values, depth, start, quote = [], 0, 0, ""
     for i, ch in enumerate(text):
+        if quote:  # inside '…' or "…": commas and braces are the value's
+            quote = "" if ch == quote else quote
+            continue
+        quote = ch if ch in "'\"" else ""
         depth += (ch in "{[") - (ch in "}]" and depth > 0)
         if ch == "," and depth == 0:
             values.append(text[start:i].strip())
@@ -185,6 +190,6 @@ def sweep_values(key: str, text: str) -> list[str]:
     values.append(text[start:].strip())
     if "" in values:
         raise ValueError("has an empty value; list the values as KEY=V1,V2,... without empty ones")
-    if any(v.startswith(f"{key}=") for v in values):
+    if any(v.split("=", 1)[0].strip() == key for v in values if "=" in v):
         raise ValueError(f"names {key} again in a value; give the key once, then its values: {key}=V1,V2")
     return values

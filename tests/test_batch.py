@@ -16,7 +16,7 @@ from click.testing import CliRunner
 from cornerslam_cli import batch as batch_mod
 from cornerslam_cli.batch import TIMING_FIGURES, batch_columns, read_batch, run_batch
 from cornerslam_cli.cli import cli
-from cornerslam_cli.errors import ConfigError, CornerslamError
+from cornerslam_cli.errors import ConfigError, CornerslamError, display_path
 from cornerslam_cli.report.ownership import MARKER
 from cornerslam_cli.results import Hashes
 from cornerslam_cli.simulate import simulate_log
@@ -134,9 +134,9 @@ def test_a_warning_of_every_run_is_said_once(logs, tmp_path, caplog):
     said = [r.getMessage() for r in caplog.records]
     assert sum("graph.refine=true is ignored" in t for t in said) == 1, said
     assert len(said) == len(set(said))
-    # a run's warning that does not name its log is said with it: which of the logs it is of
-    name = logs[0].name
-    assert all(t.startswith(f"{name}: ") or f"'{name}'" in t for t in said), said
+    # a run's warning that does not name its log is said with it, as batch.csv names the log
+    name = display_path(logs[0])
+    assert all(t.startswith(f"{name}: ") or name in t for t in said), said
 
 
 def test_a_kept_warning_does_not_reach_a_handlers_earlier_filters():
@@ -210,6 +210,43 @@ def test_a_sweep_with_an_empty_value_exits_2(tmp_path, values):
     assert not out.exists()
 
 
+def test_a_swept_submaps_section_keeps_its_column(tmp_path):
+    """The appended figure named `submaps` overwrote a swept `submaps` section's column (the header had it
+    twice, the swept values were lost: a review found it); the figure is `n_submaps`."""
+    log = tmp_path / "sim.mcap"
+    simulate_log(log, seed=3, rate=1.0, beams=181)
+    combos = plan([log], ["pca"], {"submaps": ["{enabled: true}", "{enabled: false}"]})
+    rows = run_batch(combos, tmp_path / "out", jobs=1)
+    header = (tmp_path / "out" / "batch.csv").read_text().splitlines()[0].split(",")
+    assert header.count("submaps") == 1 and header == batch_columns(["submaps"])
+    assert [(r["submaps"], r["status"]) for r in read_batch(tmp_path / "out" / "batch.csv")] == [
+        ("{enabled: true}", "ok"),
+        ("{enabled: false}", "ok"),
+    ]
+    assert int(rows[0]["n_submaps"]) > 0 and rows[1]["n_submaps"] in ("", None)  # the single map: none
+
+
+def test_the_code_hash_reads_a_zipped_package_as_its_directory(tmp_path):
+    """code_hash globbed the package's directory: from a zip (zipimport) it found no file and hashed
+    nothing, the same for every build (a review found it); read through importlib.resources it is the
+    directory's hash."""
+    import subprocess
+    import zipfile
+
+    from cornerslam_cli.report.summary import code_hash
+
+    package = Path(batch_mod.__file__).resolve().parent
+    with zipfile.ZipFile(tmp_path / "pkg.zip", "w") as z:
+        for f in sorted(package.rglob("*.py")):
+            z.write(f, f.relative_to(package.parent).as_posix())
+    code = "import cornerslam_cli.report.summary as s; print(s.__file__); print(s.code_hash())"
+    env = {**os.environ, "PYTHONPATH": str(tmp_path / "pkg.zip"), "PYTHONSAFEPATH": "1"}
+    res = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    where, got = res.stdout.split()
+    assert where.startswith(str(tmp_path / "pkg.zip")) and got == code_hash() and len(got) == 64
+
+
 def test_sweep_values_split_outside_braces_and_the_key_given_once():
     """A swept mapping with a comma inside ('graph={refine: true, refine_radius: 3},{refine: false}') was
     cut at that comma; the key repeated in each value ('K={a: 1},K={a: 2}', as --set takes one) gave
@@ -225,6 +262,10 @@ def test_sweep_values_split_outside_braces_and_the_key_given_once():
         sweep_values("scan_match", "{enabled: false},scan_match={enabled: true}")
     with pytest.raises(ValueError, match="has an empty value"):
         sweep_values("k", "{a: 1},,{a: 2}")
+    # quoted values keep their commas and braces; the key repeated with spaces is still the key
+    assert sweep_values("input.scan_topic", "'/a,b','/x{',\"/c\"") == ["'/a,b'", "'/x{'", '"/c"']
+    with pytest.raises(ValueError, match="names graph again"):
+        sweep_values("graph", "{refine: true},graph = {refine: false}")
 
 
 def test_assoc_and_a_set_of_association_method_must_agree(tmp_path):
@@ -253,7 +294,7 @@ def test_bad_log_fails_its_rows_and_the_rest_succeed(first, logs):
         assert r["out_dir"] == f"good__{r['assoc']}__{KEY}={r[KEY]}"
         # appended after out_dir: comparison.csv's relation, scan-matched and loop-closing cells
         s = json.loads((out / r["out_dir"] / "summary.json").read_text())
-        assert int(r["submaps"]) == s["counts"]["submaps"] > 0
+        assert int(r["n_submaps"]) == s["counts"]["submaps"] > 0
         assert int(r["loops_accepted"]) == s["counts"]["loops_accepted"]
         assert float(r["online_ate_rmse"]) == pytest.approx(s["accuracy"]["online_ate"]["rmse"])
         assert float(r["scan_odom_ate_rmse"]) == pytest.approx(s["accuracy"]["scan_odom_ate"]["rmse"])
@@ -565,6 +606,8 @@ def test_resume_reruns_a_combination_another_build_ran(tmp_path, monkeypatch):
     # the batch as another build would plan it (its runs are in worker processes: this build's hash)
     monkeypatch.setattr(summary_mod, "code_hash", lambda: "f" * 64)
     assert [r["status"] for r in run_batch(combos, out, jobs=1)] == ["ok"]
+    monkeypatch.setattr(summary_mod, "code_hash", lambda: None)  # a build whose source cannot be read
+    assert [r["status"] for r in run_batch(combos, out, jobs=1)] == ["ok"]  # nothing taken as finished
     monkeypatch.undo()
     assert [r["status"] for r in run_batch(combos, out, jobs=1)] == ["skipped"]
     s = json.loads(path.read_text())

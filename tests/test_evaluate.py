@@ -563,8 +563,36 @@ def test_evaluate_without_a_reference_uses_the_runs_and_says_what_it_scored(sim_
     alone = evaluate(out)
     assert alone.exit_code == 0 and alone.stdout == given.stdout and alone.stderr == ""
     rewrite(gt, lambda rows: rows[:-1])  # one pose fewer: not the poses the run was scored against
-    changed = evaluate(out)
-    assert changed.exit_code == 0 and "has changed since the run was scored against it" in changed.stderr
+    changed = evaluate(out)  # (another file of that name, or this one edited: not taken for the run's)
+    assert changed.exit_code == 2
+    assert f"('{gt}' here does not hold the poses the run was scored against)" in changed.stderr
     gt.unlink()
     gone = evaluate(out)
     assert gone.exit_code == 2 and "give --ground-truth FILE.tum or --relations FILE" in gone.stderr
+    assert f"the run was scored against '{gt}', not found from here" in gone.stderr
+
+
+def test_evaluate_finds_a_runs_relative_ground_truth_only_from_where_it_ran(sim_log, tmp_path, monkeypatch):
+    """The run names its ground truth as given, relative to where it ran: from elsewhere a file of that
+    name with other poses was taken for it, scored with exit 0 (a review found it)."""
+    import shutil
+
+    from click.testing import CliRunner
+
+    from cornerslam_cli.cli import cli
+
+    here, elsewhere = tmp_path / "here", tmp_path / "elsewhere"
+    for d in (here, elsewhere):
+        (d / "logs").mkdir(parents=True)
+    shutil.copy(sim_log, here / "logs" / "sim.mcap")
+    shutil.copy(sim_log.with_suffix(".gt.tum"), here / "logs" / "sim.gt.tum")
+    rows = (here / "logs" / "sim.gt.tum").read_text().splitlines()
+    (elsewhere / "logs" / "sim.gt.tum").write_text("\n".join(rows[: len(rows) // 2]) + "\n")
+    monkeypatch.chdir(here)
+    assert (
+        CliRunner().invoke(cli, ["run", "logs/sim.mcap", "--out", str(tmp_path / "run"), "-q"]).exit_code == 0
+    )
+    assert evaluate(tmp_path / "run").exit_code == 0
+    monkeypatch.chdir(elsewhere)
+    res = evaluate(tmp_path / "run")
+    assert res.exit_code == 2 and "'logs/sim.gt.tum' here does not hold the poses" in res.stderr

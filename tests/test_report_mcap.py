@@ -236,3 +236,5 @@ def test_info_describes_a_results_mcap_instead_of_refusing_it(results, tmp_path)
     assert "topics:" in lines and "run would use:" not in lines and res.stderr == ""
     assert lines[-1].startswith("results:  written by `cornerslam run --mcap-out`")
     assert any(line.split()[0] == TOPICS["path"] for line in lines if line.startswith("  /"))
+    asked = CliRunner().invoke(cli, ["info", str(path), "--scan-topic", "/nope"])  # judged as a log then
+    assert asked.exit_code == 2 and "/nope" in asked.stderr

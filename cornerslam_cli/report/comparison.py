@@ -43,13 +43,15 @@ def comparison_row(s: RunSummary) -> list:
 # t_match_total); then, appended after out_dir (2026-12-05), the relation error, the scan-matched odometry's
 # ATE and the loop-closing cells, as comparison.csv has them
 BATCH_FIGURES = "steps,landmarks,matched_total,t_match,t_total,wall_time,ate_rmse,odom_ate_rmse".split(",")
-BATCH_MORE_FIGURES = ["rel_trans_mean", "rel_rot_mean_deg", "scan_odom_ate_rmse", *COMPARISON_LOOP_COLUMNS]
+# (``n_submaps``: batch.csv's ``submaps`` would take the name of a swept ``submaps`` section's column)
+BATCH_MORE_FIGURES = ["rel_trans_mean", "rel_rot_mean_deg", "scan_odom_ate_rmse", "n_submaps"]
+BATCH_MORE_FIGURES += COMPARISON_LOOP_COLUMNS[1:]
 
 
 def batch_figures(s: RunSummary) -> dict:
     """The batch.csv figures of one run's summary (returned by the run or read from summary.json)."""
     cells = dict(zip(COMPARISON_COLUMNS, comparison_row(s), strict=True))
-    cells["t_match"] = cells["t_match_total"]
+    cells["t_match"], cells["n_submaps"] = cells["t_match_total"], cells["submaps"]
     return {k: cells[k] for k in BATCH_FIGURES + BATCH_MORE_FIGURES}
 
 

@@ -95,30 +95,33 @@ def check_one_run(path: str | Path) -> None:
     )
 
 
-def recorded_ground_truth(path: str | Path) -> str | None:
+def recorded_ground_truth(path: str | Path) -> tuple[str | None, str]:
     """The ground truth a run directory ``path`` was scored against (its summary.json's
-    ``accuracy.ground_truth``, as the run named it) when that file is still there from here; None
-    otherwise (no run, no accuracy, moved). One that changed since the run (its poses' sha256 is not
-    summary.json's ``hashes.ground_truth``) is used, with a warning saying so."""
+    ``accuracy.ground_truth``, as the run named it: relative to where it ran), when a file there from here
+    holds the same poses (sha256 against ``hashes.ground_truth``); else None and why not, to say (nothing
+    recorded: ""). A file of that name with other poses is not used: another file, or this one changed."""
     from .summary import reference_hash
 
     p = Path(path)
-    if not (p / "summary.json").is_file():
-        return None
     try:
-        s = RunSummary.read(p)
+        s = RunSummary.read(p) if (p / "summary.json").is_file() else None
     except ResultsError:
-        return None
-    gt = s.accuracy.ground_truth if s.accuracy is not None else None
-    if not gt or not Path(gt).is_file():
-        return None
+        s = None
+    gt = s.accuracy.ground_truth if s is not None and s.accuracy is not None else None
+    if not gt:
+        return None, ""
+    if not Path(gt).is_file():
+        return None, f"the run was scored against '{gt}', not found from here"
     try:
-        now = reference_hash(*read_tum(gt, "ground truth"))
+        same = (
+            s.hashes.ground_truth is None
+            or reference_hash(*read_tum(gt, "ground truth")) == s.hashes.ground_truth
+        )
     except (OSError, LogError):
-        return gt  # (reading it again says what is wrong with it)
-    if s.hashes.ground_truth and now != s.hashes.ground_truth:
-        log.warning("ground truth '%s' has changed since the run was scored against it", display_path(gt))
-    return gt
+        same = False
+    if not same:
+        return None, f"'{gt}' here does not hold the poses the run was scored against"
+    return gt, ""
 
 
 def check_unchanged(path: str | Path, name: str = "trajectory.tum") -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import importlib.resources
 import json
 import os
 import platform
@@ -22,6 +23,8 @@ from ..logs import check_regular
 from ..results import Accuracy, Counts, Hashes, OdometryModel, RunInput, RunSummary, Timing
 
 if TYPE_CHECKING:
+    from importlib.resources.abc import Traversable
+
     from ..config import Config
     from ..frontend import Input
     from ..hierarchy import HierarchicalSlam
@@ -197,17 +200,30 @@ def reference_hash(stamps: np.ndarray, poses: np.ndarray) -> str:
 
 
 @functools.cache
-def code_hash() -> str:
-    """sha256 of this build's source: every .py file of the package (path and bytes, in path order). The
-    version stays 0.1.0 from commit to commit while the figures change; this tells two builds apart, so
-    batch does not take a run of another build's code for a finished one (its ``hashes.code``)."""
-    root = Path(__file__).resolve().parents[1]
-    h = hashlib.sha256()
-    for f in sorted(root.rglob("*.py")):
-        h.update(f.relative_to(root).as_posix().encode() + b"\0")
-        h.update(f.read_bytes())
-        h.update(b"\0")
-    return h.hexdigest()
+def code_hash() -> str | None:
+    """sha256 of this build's source: every .py file of the package (path and bytes, in path order; a
+    package installed without its sources, its .pyc files), read through importlib.resources so a zipped
+    package is read too. The version stays 0.1.0 from commit to commit while the figures change; this
+    tells two builds apart, so batch does not take a run of another build's code for a finished one (its
+    ``hashes.code``). None when no such file can be read: then nothing is taken as finished."""
+    files: list[tuple[str, Traversable]] = []
+
+    def walk(folder: Traversable, prefix: str) -> None:
+        for entry in folder.iterdir():
+            if entry.is_dir() and entry.name != "__pycache__":
+                walk(entry, f"{prefix}{entry.name}/")
+            elif entry.is_file():
+                files.append((prefix + entry.name, entry))
+
+    walk(importlib.resources.files("cornerslam_cli"), "")
+    for suffix in (".py", ".pyc"):  # (the .pyc files of a sourceless install lie beside, not in __pycache__)
+        chosen = sorted((name, f) for name, f in files if name.endswith(suffix))
+        if chosen:
+            h = hashlib.sha256()
+            for name, f in chosen:
+                h.update(name.encode() + b"\0" + f.read_bytes() + b"\0")
+            return h.hexdigest()
+    return None
 
 
 def input_hash(path: Path) -> str:
