@@ -286,6 +286,30 @@ def test_the_map_is_framed_on_the_estimate_not_on_drifting_odometry():
     assert -12 < x0 < -10 and 12 < x1 < 14 and -12 < y0 < -10 and 10 < y1 < 12
 
 
+def test_odometry_that_runs_off_the_map_says_so_in_the_legend(outputs):
+    """The map is framed on the estimate, so a drifting odometry was cut at the axes with no sign of it
+    (orebro's left the top: a new-user walkthrough); its legend entry now says it runs off the plot."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from cornerslam_cli.report.plots import _draw_map
+
+    run = load_run(outputs[0])
+    labels = {}
+    for name, shift in (("inside", 0.0), ("off", 300.0)):
+        odometry = run.odometry.copy()
+        odometry[len(odometry) // 2 :, 0] += shift  # its second half 300 m off
+        fig, ax = plt.subplots()
+        try:
+            _draw_map(ax, dataclasses.replace(run, odometry=odometry))
+            labels[name] = [t for t in (line.get_label() for line in ax.get_lines()) if t.startswith("odom")]
+        finally:
+            plt.close(fig)
+    assert labels == {"inside": ["odometry"], "off": ["odometry (runs off the plot)"]}
+
+
 def test_an_unknown_mplbackend_does_not_end_a_plot(sim_log, tmp_path):
     # matplotlib refuses a backend it does not know when it is imported; we draw files with Agg anyway
     import os
