@@ -446,7 +446,7 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
 
 RESULTS_MCAP_NOTE = (
     "results:  written by `cornerslam run --mcap-out` (Foxglove schemas: the trajectories, scans, segments, "
-    "landmarks); open it in Foxglove Studio. It is not a log to run"
+    "landmarks, occupancy grid); open it in Foxglove Studio. It is not a log to run"
 )
 
 

@@ -386,15 +386,11 @@ def parse_sweeps(texts) -> dict[str, list[str]]:
     sweeps: dict[str, list[str]] = {}
     for text in texts:
         key, sep, values = text.partition("=")
-        key = key.strip()
+        key = ".".join(part.strip() for part in key.split("."))  # 'graph .refine': as --set reads it
         if not sep or not key or not values.strip():
             raise click.BadParameter(f"'{text}' is not KEY=V1,V2,...", param_hint="--sweep")
-        if key in sweeps:
-            raise click.BadParameter(
-                f"'{key}' is swept twice; give all its values at once", param_hint="--sweep"
-            )
         try:
-            sweeps[key] = sweep_values(key, values)
+            sweeps[key] = sweep_values(key, values, sweeps)
         except ValueError as e:
             raise click.BadParameter(f"'{text}' {e}", param_hint="--sweep") from None
     return sweeps

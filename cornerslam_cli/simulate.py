@@ -188,8 +188,8 @@ def _sha256(path: Path) -> str:
 
 def companion_hashes(log: Path) -> dict[str, str] | None:
     """The sha256 of the ground truth and corners files simulate wrote beside ``log`` (by suffix:
-    ``.tum``, ``.csv``), from its metadata; None for a log without the record (an older simulate's) or
-    one that cannot be read."""
+    ``.tum``, ``.csv``), from its metadata; {} for a whole log without the record (an older simulate's);
+    None for one whose metadata cannot be read (damaged: nothing to go by)."""
     from mcap.reader import make_reader
 
     try:
@@ -199,7 +199,7 @@ def companion_hashes(log: Path) -> dict[str, str] | None:
                     return dict(m.metadata)
     except Exception:  # noqa: BLE001 - a damaged log: no record to go by
         return None
-    return None
+    return {}
 
 
 def simulate_log(
@@ -257,10 +257,14 @@ def simulate_log(
         for there in paths if not ours else paths[1:]:
             if not there.exists():
                 continue
-            # (an older simulate's log keeps no record: its set is taken as it was written)
-            if ours and (written is None or written.get(there.suffix) == _sha256(there)):
+            if there.is_dir():
+                raise OutputError(f"'{there}' is a directory", "move it away, or give the log another name")
+            # (an older simulate's whole log keeps no record: its set is taken as it was written)
+            if ours and (written == {} or (written and written.get(there.suffix) == _sha256(there))):
                 continue
             why = "give a new name, or move those files away"
+            if ours and written is None:  # its log cut or damaged since: what it wrote cannot be told
+                why = f"the record of it in '{out}' cannot be read (the log is damaged); {why}"
             raise OutputError(f"'{there}' exists and is not part of a log cornerslam simulate wrote", why)
     out.parent.mkdir(parents=True, exist_ok=True)  # as --out and --mcap-out do
     gt_path, corners_path = paths[1:]

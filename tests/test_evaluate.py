@@ -562,6 +562,7 @@ def test_evaluate_without_a_reference_uses_the_runs_and_says_what_it_scored(sim_
     )
     alone = evaluate(out)
     assert alone.exit_code == 0 and alone.stdout == given.stdout and alone.stderr == ""
+    kept = gt.read_text()
     rewrite(gt, lambda rows: rows[:-1])  # one pose fewer: not the poses the run was scored against
     changed = evaluate(out)  # (another file of that name, or this one edited: not taken for the run's)
     assert changed.exit_code == 2
@@ -570,6 +571,15 @@ def test_evaluate_without_a_reference_uses_the_runs_and_says_what_it_scored(sim_
     gone = evaluate(out)
     assert gone.exit_code == 2 and "give --ground-truth FILE.tum or --relations FILE" in gone.stderr
     assert f"the run was scored against '{gt}', not found from here" in gone.stderr
+    # an older version's run kept no sha256 of its poses: which file it was cannot be told, none taken
+    gt.write_text(kept)
+    import json
+
+    s = json.loads((out / "summary.json").read_text())
+    del s["hashes"]["ground_truth"]
+    (out / "summary.json").write_text(json.dumps(s, indent=2))
+    old = evaluate(out)
+    assert old.exit_code == 2 and "kept no sha256 of its poses (an older version's run)" in old.stderr
 
 
 def test_evaluate_finds_a_runs_relative_ground_truth_only_from_where_it_ran(sim_log, tmp_path, monkeypatch):

@@ -1266,9 +1266,23 @@ def test_simulate_keeps_a_users_file_beside_its_own_log(tmp_path, monkeypatch):
         mine.write_bytes(kept)
     # a log of a simulate before the record (the shipped sample until 2026-12-05): taken as written
     (tmp_path / "d.gt.tum").write_text("an older simulate's\n")
-    monkeypatch.setattr(sim, "companion_hashes", lambda log: None)
+    monkeypatch.setattr(sim, "companion_hashes", lambda log: {})  # a whole log without the record
     sim.simulate_log(out, seed=1, rate=1.0, beams=11)
     assert (tmp_path / "d.gt.tum").read_text() != "an older simulate's\n"
+    monkeypatch.undo()
+    # its own log damaged since (cut short: its record unreadable): a user's edit is not taken for its
+    mine = tmp_path / "d.gt.tum"
+    mine.write_text("mine\n")
+    out.write_bytes(out.read_bytes()[:-10])
+    res = CliRunner().invoke(cli, args)
+    assert res.exit_code == 2 and "cannot be read (the log is damaged)" in res.stderr, res.output
+    assert mine.read_text() == "mine\n"
+    # a companion that is a directory is named as one (the log's name was given instead)
+    mine.unlink()
+    (tmp_path / "d.corners.csv").unlink()
+    (tmp_path / "d.corners.csv").mkdir()
+    res = CliRunner().invoke(cli, args)
+    assert res.exit_code == 2 and f"'{tmp_path / 'd.corners.csv'}' is a directory" in res.stderr, res.output
 
 
 def test_simulate_into_an_unwritable_place_fails_before_the_work(tmp_path, monkeypatch):

@@ -40,11 +40,11 @@ def comparison_row(s: RunSummary) -> list:
 
 
 # batch.csv's figures (cornerslam_cli/batch.py): comparison.csv's cells of the same names (t_match: its
-# t_match_total); then, appended after out_dir (2026-12-05), the relation error, the scan-matched odometry's
-# ATE and the loop-closing cells, as comparison.csv has them
+# t_match_total); then, appended after out_dir (2026-12-05), the scan-matched odometry's ATE and the
+# loop-closing cells, as comparison.csv has them
 BATCH_FIGURES = "steps,landmarks,matched_total,t_match,t_total,wall_time,ate_rmse,odom_ate_rmse".split(",")
 # (``n_submaps``: batch.csv's ``submaps`` would take the name of a swept ``submaps`` section's column)
-BATCH_MORE_FIGURES = ["rel_trans_mean", "rel_rot_mean_deg", "scan_odom_ate_rmse", "n_submaps"]
+BATCH_MORE_FIGURES = ["scan_odom_ate_rmse", "n_submaps"]  # (no relation error: batch takes no relations)
 BATCH_MORE_FIGURES += COMPARISON_LOOP_COLUMNS[1:]
 
 

@@ -112,11 +112,10 @@ def recorded_ground_truth(path: str | Path) -> tuple[str | None, str]:
         return None, ""
     if not Path(gt).is_file():
         return None, f"the run was scored against '{gt}', not found from here"
-    try:
-        same = (
-            s.hashes.ground_truth is None
-            or reference_hash(*read_tum(gt, "ground truth")) == s.hashes.ground_truth
-        )
+    if s.hashes.ground_truth is None:  # an older version's run: which file it was cannot be told
+        return None, f"the run names '{gt}' but kept no sha256 of its poses (an older version's run)"
+    try:  # (quietly: reading it to score says what is odd about it)
+        same = reference_hash(*read_tum(gt, "ground truth", lambda _: None)) == s.hashes.ground_truth
     except (OSError, LogError):
         same = False
     if not same:

@@ -204,9 +204,12 @@ def batch_lines(rows: list[dict], keys: list[str]) -> list[str]:
         return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, fmt)  # nan: no ATE
 
     head = ["log", "assoc", *(k.rsplit(".", 1)[-1] for k in keys), "status", "steps", "landmarks", "ATE m"]
+    logs_named: dict[str, set] = {}  # a log by its file name, unless two folders hold logs of that name
+    for r in rows:
+        logs_named.setdefault(Path(r["log"]).name, set()).add(r["log"])
     table = [
         [
-            Path(r["log"]).name,
+            Path(r["log"]).name if len(logs_named[Path(r["log"]).name]) == 1 else r["log"],
             r["assoc"],
             *(str(r[k]) for k in keys),
             r["status"],
