@@ -502,7 +502,7 @@ def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
 @verbosity_options
 def evaluate(out_dir, ground_truth, relations, time_offset, correct_scale, verbose, quiet):
     """Accuracy of a run's trajectory.tum against ground truth or relations (without either: the ground
-    truth the run was scored against, when its summary.json names one that is still there).
+    truth the run was scored against, when the file its summary.json names holds those poses here).
 
     \b
     Example:

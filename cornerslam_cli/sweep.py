@@ -171,14 +171,14 @@ def _dir_name(log_label: str, assoc: str, sweep: tuple[tuple[str, str], ...]) ->
     return name
 
 
-def sweep_values(key: str, text: str, swept: Mapping[str, list[str]] = {}) -> list[str]:  # noqa: B006
-    """The values of ``--sweep KEY=TEXT``: TEXT split at the commas outside braces and brackets (a YAML
-    mapping or list keeps its own: ``graph={refine: true, refine_radius: 3},{refine: false}``; so does a
-    quoted value: ``input.scan_topic='/a,b','/c'``). A
-    ValueError for an empty value ('3,,5', '3,5,': one lost in typing, not one to drop silently) and for
-    the key given again inside ('K={a: 1},K={a: 2}': its values follow one ``KEY=``); and for a key
-    already in ``swept`` (the earlier --sweep options), or a section swept beside a key inside it (two
-    labels for one setting)."""
+def sweep_values(key: str, text: str, swept: Mapping[str, list[str]] | None = None) -> list[str]:
+    """The values of ``--sweep KEY=TEXT``: TEXT split at the commas outside braces, brackets and quotes
+    (a YAML mapping or list keeps its own, ``graph={refine: true, refine_radius: 3},{refine: false}``, and
+    a quoted value, ``input.scan_topic='/a,b','/c'``). A ValueError for an empty value ('3,,5', '3,5,':
+    one lost in typing, not one to drop silently), for the key given again inside ('K={a: 1},K={a: 2}':
+    its values follow one ``KEY=``), and for a key already in ``swept`` (the earlier --sweep options) or
+    a section swept beside a key inside it (two labels for one setting)."""
+    swept = swept or {}
     if key in swept:
         raise ValueError(f"sweeps '{key}' again; give all its values at once")
     if inside := next((k for k in swept if k.startswith(f"{key}.") or key.startswith(f"{k}.")), None):
