@@ -200,6 +200,12 @@ def read_relations(path: str | Path) -> np.ndarray:
             path, len(r) - len(first), len(r),
         )  # fmt: skip
         r = r[first]
+    pairs = np.unique(r[:, :2], axis=0)
+    if len(pairs) < len(r):  # one pair measured twice, differently: both are scored, but say so
+        log.warning(
+            "relations file '%s': %d of its %d relations repeat an earlier pair (t1, t2) with other values: "
+            "each is scored", path, len(r) - len(pairs), len(r),
+        )  # fmt: skip
     for note in relations_notes(r):
         log.warning("relations file '%s': %s", path, note)
     return r

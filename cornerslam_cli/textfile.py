@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import codecs
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -87,17 +88,20 @@ def read_number_rows(
     layout: str,
     n: int,
     more_ok: bool = False,
+    cut_last: Callable[[str], None] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Rows of ``n`` finite numbers (``more_ok``: at least ``n``, the first ``n`` kept), separated by
     spaces or commas; blank lines and ``#`` comments skipped; a file (or endless pipe) beyond
     :data:`MAX_ROWS_BYTES` is refused. Returns the values (k, n) and each row's
     line number (k,). ``item`` names one row ("TUM pose"), ``layout`` its columns; ``error`` is raised
-    naming the file and line."""
+    naming the file and line. ``cut_last``: a last line with too few numbers and no newline after it (a
+    file cut short mid-line) is left out, said through it, instead of an error."""
     p = Path(path)
     name = f"{what} '{p}'"
     rows, lines = [], []
     text = read_text(p, what, error, f"a text file of {layout}", MAX_ROWS_BYTES)
-    for lineno, line in enumerate(text.splitlines(), 1):
+    all_lines = text.splitlines()
+    for lineno, line in enumerate(all_lines, 1):
         s = line.strip()
         if not s or s.startswith("#"):
             continue
@@ -106,6 +110,9 @@ def read_number_rows(
             v = [plain_float(x) for x in parts]
         except ValueError:
             raise error(f"{name} line {lineno} is not a {item}", f"expected: {layout}") from None
+        if len(v) < n and cut_last is not None and lineno == len(all_lines) and not text.endswith("\n"):
+            cut_last(f"{name} ends mid-line (line {lineno}: {len(v)} of {n} values, no newline): left out")
+            continue
         if len(v) < n or (len(v) > n and not more_ok):
             raise error(f"{name} line {lineno} has {len(v)} values", f"expected {n}: {layout}")
         if not all(map(math.isfinite, v[:n])):

@@ -526,6 +526,11 @@ def test_relations_repeated_exactly_count_once_warned(tmp_path, caplog):
         r = read_relations(rel)
     np.testing.assert_array_equal(r[:, [0, 1, 4]], [[2, 3, 0.1], [1, 2, 0.2], [1, 2, 0.25]])  # file order
     assert "2 of its 5 relations repeat an earlier line exactly: counted once" in caplog.text
+    # the pair 1 → 2 measured twice with other yaws (0.2, 0.25): both scored, said
+    assert (
+        "1 of its 3 relations repeat an earlier pair (t1, t2) with other values: each is scored"
+        in caplog.text
+    )
 
 
 def test_a_ground_truth_stamp_with_underscores_or_other_digits_is_refused(tmp_path):
@@ -606,3 +611,22 @@ def test_evaluate_finds_a_runs_relative_ground_truth_only_from_where_it_ran(sim_
     monkeypatch.chdir(elsewhere)
     res = evaluate(tmp_path / "run")
     assert res.exit_code == 2 and "'logs/sim.gt.tum' here does not hold the poses" in res.stderr
+
+
+def test_a_file_cut_mid_line_is_scored_without_its_last_line_said(files):
+    """evaluate's refusal of a cut-short run says "score the file as it is", but a file cut mid-line then
+    failed on its last line's count of values; a last line with too few values and no newline after it is
+    left out, warned (one that ends with a newline is still an error: written so, not cut)."""
+    est, gt = files
+    text = est.read_text()
+    whole = evaluate(est, "--ground-truth", gt)
+    cut = text[: text.rindex("\n", 0, len(text) - 1) + 1] + text.splitlines()[-1][:12]  # 12 chars: 1 value
+    est.write_text(cut)
+    res = evaluate(est, "--ground-truth", gt)
+    assert res.exit_code == 0, res.output
+    n = len(text.splitlines())
+    assert f"ends mid-line (line {n}: 1 of 8 values, no newline): left out" in res.stderr
+    assert f"(n={n - 1})" in res.stdout and f"(n={n})" in whole.stdout
+    est.write_text(cut + "\n")
+    res = evaluate(est, "--ground-truth", gt)
+    assert res.exit_code == 2 and f"line {n} has 1 values" in res.stderr

@@ -152,7 +152,7 @@ def read_tum(
     from ..errors import LogError
     from ..textfile import read_number_rows, refuse_far
 
-    a, lines = read_number_rows(path, what, LogError, "TUM pose", TUM_LAYOUT, 8)
+    a, lines = read_number_rows(path, what, LogError, "TUM pose", TUM_LAYOUT, 8, cut_last=warn)
     name = f"{what} '{path}'"
     q, later = a[:, 4:8], a[:, 1] - a[:, 0]  # a relations file's t2 − t1 where x should be
     if (
