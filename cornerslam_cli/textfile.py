@@ -106,11 +106,15 @@ def read_number_rows(
         if not s or s.startswith("#"):
             continue
         parts = s.replace(",", " ").split()
+        cut = cut_last is not None and lineno == len(all_lines) and not text.endswith(("\n", "\r"))
         try:
             v = [plain_float(x) for x in parts]
         except ValueError:
+            if cut:  # cut inside a number ('-', '1e'): a line cut short, not a wrong one
+                cut_last(f"{name} ends mid-line (line {lineno}, no newline): left out")
+                continue
             raise error(f"{name} line {lineno} is not a {item}", f"expected: {layout}") from None
-        if len(v) < n and cut_last is not None and lineno == len(all_lines) and not text.endswith("\n"):
+        if len(v) < n and cut:
             cut_last(f"{name} ends mid-line (line {lineno}: {len(v)} of {n} values, no newline): left out")
             continue
         if len(v) < n or (len(v) > n and not more_ok):

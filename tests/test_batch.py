@@ -270,8 +270,12 @@ def test_sweep_values_split_outside_braces_and_the_key_given_once():
     # one setting under two labels (a probe ran graph.refine=true labelled as false): refused
     with pytest.raises(ValueError, match="sweeps 'graph.refine' again"):
         sweep_values("graph.refine", "false", {"graph.refine": ["true"]})
-    with pytest.raises(ValueError, match="sweeps 'graph.refine' beside 'graph', one inside the other"):
+    with pytest.raises(ValueError, match=r"sets a key --sweep graph sets too \(one setting, two labels\)"):
         sweep_values("graph.refine", "true,false", {"graph": ["{refine: true}"]})
+    # a swept mapping beside a key it does not set is a grid, as a --set of that key is kept
+    assert sweep_values("graph.refine_radius", "1,3", {"graph": ["{refine: true}", "{refine: false}"]})
+    with pytest.raises(ValueError, match="names graph.refine again"):  # spelt as --set reads it
+        sweep_values("graph.refine", "graph .refine=1")
     from cornerslam_cli.options import parse_sweeps
 
     with pytest.raises(click.BadParameter, match="sweeps 'graph.refine' again"):

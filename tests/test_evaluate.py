@@ -630,3 +630,19 @@ def test_a_file_cut_mid_line_is_scored_without_its_last_line_said(files):
     est.write_text(cut + "\n")
     res = evaluate(est, "--ground-truth", gt)
     assert res.exit_code == 2 and f"line {n} has 1 values" in res.stderr
+
+
+def test_a_cut_inside_a_number_is_a_cut_too_and_a_line_ending_in_cr_is_not(files):
+    """Cut right after a minus sign (or an exponent's 'e'), the last line is no number at all: it was
+    "not a TUM pose", exit 2 (a review found it); a short last line that ends with a CR (an old Mac's
+    line end, or CRLF cut between the two) was written so, and is still an error."""
+    est, gt = files
+    text = est.read_text()
+    last = text.splitlines()[-1]
+    head = text[: text.rindex(last)]
+    est.write_text(head + last.split()[0] + " -")
+    res = evaluate(est, "--ground-truth", gt)
+    assert res.exit_code == 0 and "ends mid-line" in res.stderr, res.output
+    est.write_text(head + " ".join(last.split()[:3]) + "\r")
+    res = evaluate(est, "--ground-truth", gt)
+    assert res.exit_code == 2 and "has 3 values" in res.stderr

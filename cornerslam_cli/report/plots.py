@@ -172,9 +172,12 @@ def _draw_map(ax, run: RunData, segments_alpha: float = 0.18, legend: bool = Tru
     if len(c):
         ax.plot(*c[0, :2], "o", color="k", ms=4, zorder=5, label="start")
     _map_axes(ax)
-    box = _frame_the_map(ax, run)
-    if box is not None and len(o) and not np.all((o[:, :2] >= box[0]) & (o[:, :2] <= box[1])):
-        odometry.set_label("odometry (runs off the plot)")  # (framed on the map, not on the wheels' drift)
+    _frame_the_map(ax, run)
+    if legend and len(o):  # (side-by-side panels share their limits: the last one's, so not said there)
+        ax.apply_aspect()  # the limits as drawn: the equal aspect widens the ones framed on the map
+        (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+        if not np.all((o[:, 0] >= x0) & (o[:, 0] <= x1) & (o[:, 1] >= y0) & (o[:, 1] <= y1)):
+            odometry.set_label("odometry (runs off the plot)")  # (framed on the map, not on the drift)
     if legend:
         ax.legend(loc="best", fontsize=8, framealpha=0.85)
 
@@ -198,10 +201,10 @@ def _draw_loop_closures(ax, seg: np.ndarray) -> None:
             alpha=alpha, zorder=3, label=f"loop closures ({k} accepted)")  # fmt: skip
 
 
-def _frame_the_map(ax, run: RunData, margin: float = 0.05) -> tuple[np.ndarray, np.ndarray] | None:
+def _frame_the_map(ax, run: RunData, margin: float = 0.05) -> None:
     """Axes limits from the map (corrected and scan-matched trajectories, ground truth, landmarks), not
     the raw odometry: drifting 100 m off on a long real log it would shrink the map into a corner. The
-    odometry is drawn where it falls inside. Returns the limits' (lower, upper) corners (None: none set)."""
+    odometry is drawn where it falls inside."""
     parts = [run.corrected[:, :2]]
     parts += [a[:, :2] for a in (run.scan_odometry, run.ground_truth) if a is not None]
     lm = run.landmarks
@@ -210,12 +213,11 @@ def _frame_the_map(ax, run: RunData, margin: float = 0.05) -> tuple[np.ndarray, 
     pts = np.concatenate([p for p in parts if len(p)]) if any(len(p) for p in parts) else np.zeros((0, 2))
     pts = pts[np.isfinite(pts).all(axis=1)]
     if len(pts) == 0:
-        return None
+        return
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     pad = margin * max(float(np.max(hi - lo)), 1.0)
     ax.set_xlim(lo[0] - pad, hi[0] + pad)
     ax.set_ylim(lo[1] - pad, hi[1] + pad)
-    return lo - pad, hi + pad
 
 
 def _map_axes(ax) -> None:
