@@ -40,9 +40,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from frontend_panel import reference  # noqa: E402
 from radish_panel import BUILDINGS  # noqa: E402
 from real_logs import MINES, ROOT, default_data  # noqa: E402
-from revisit_floor import MINES_LOGS, commit, laser_poses  # noqa: E402
+from revisit_floor import MINES_LOGS, cm, commit, laser_poses  # noqa: E402
 
-from cornerslam_cli.evaluate import align_se2  # noqa: E402
+from cornerslam_cli.evaluate import align_se2, apply_se2  # noqa: E402
 from cornerslam_cli.frontend import frames, open_input  # noqa: E402
 from cornerslam_cli.geometry import compose  # noqa: E402
 from cornerslam_cli.lasers import resolve_config  # noqa: E402
@@ -113,10 +113,8 @@ def free_fit(pts: list[np.ndarray], poses: np.ndarray) -> np.ndarray:
 
 def ate(est: np.ndarray, ref: np.ndarray) -> float:
     """RMSE of the positions after the best SE(2) alignment of ``est`` onto ``ref`` (both (n, 3))."""
-    ang, t = align_se2(est[:, :2], ref[:, :2])
-    c, s = np.cos(ang), np.sin(ang)
-    moved = est[:, :2] @ np.array([[c, s], [-s, c]]) + t
-    return float(np.sqrt(np.mean(np.sum((moved - ref[:, :2]) ** 2, axis=1))))
+    moved = apply_se2(*align_se2(est[:, :2], ref[:, :2]), est)
+    return float(np.sqrt(np.mean(np.sum((moved[:, :2] - ref[:, :2]) ** 2, axis=1))))
 
 
 def fitted(case: dict) -> dict:
@@ -150,10 +148,6 @@ def fitted(case: dict) -> dict:
             row["ate"] = (ate(poses, ref), ate(fit, ref), ate(fit, poses))
         rows[name] = row
     return {"name": case["name"], "steps": len(out), "points": sum(len(p) for p in pts), "rows": rows}
-
-
-def cm(score: tuple[float, float]) -> str:
-    return f"{100 * score[0]:.1f} ({100 * score[1]:.0f} %)"
 
 
 def main() -> None:

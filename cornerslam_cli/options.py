@@ -323,16 +323,10 @@ def check_sweep_not_set(overrides, sweeps) -> None:
     so the ``--set`` would be ignored without a word. A swept mapping sets only the keys it names, as a
     ``--set`` of one does (``--sweep 'graph={refine: true},{refine: false}'`` keeps a ``--set
     graph.refine_radius=3``)."""
-    from .config import ConfigError, override_leaves, parse_override, set_leaves
+    from .config import set_leaves
+    from .sweep import swept_leaves
 
-    swept: dict[str, set[str]] = {}  # the --sweep key as given → the dotted keys its values set
-    for key, values in sweeps.items():
-        leaves = swept.setdefault(key, set())
-        for v in values:
-            try:
-                leaves.update(leaf for leaf, _ in override_leaves(*parse_override(f"{key}={v}")))
-            except ConfigError:  # its own error comes when the sweep is planned
-                leaves.add(".".join(part.strip() for part in key.split(".")))
+    swept = {key: swept_leaves(key, values) for key, values in sweeps.items()}  # the keys each one sets
     for text, leaf, _ in set_leaves(overrides):
         for given, leaves in swept.items():
             if any(leaf == k or leaf.startswith(k + ".") for k in leaves):
@@ -381,12 +375,12 @@ def parse_assocs(text: str | None, allow_many: bool, log_path: str | None = None
 
 def parse_sweeps(texts) -> dict[str, list[str]]:
     """``--sweep KEY=V1,V2,...`` values as {key: [values]}; a malformed or repeated key is a usage error."""
-    from .sweep import sweep_values
+    from .sweep import dotted_key, sweep_values
 
     sweeps: dict[str, list[str]] = {}
     for text in texts:
         key, sep, values = text.partition("=")
-        key = ".".join(part.strip() for part in key.split("."))  # 'graph .refine': as --set reads it
+        key = dotted_key(key)
         if not sep or not key or not values.strip():
             raise click.BadParameter(f"'{text}' is not KEY=V1,V2,...", param_hint="--sweep")
         try:

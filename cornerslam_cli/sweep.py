@@ -194,22 +194,24 @@ def sweep_values(key: str, text: str, swept: Mapping[str, list[str]] | None = No
     values.append(text[start:].strip())
     if "" in values:
         raise ValueError("has an empty value; list the values as KEY=V1,V2,... without empty ones")
-    if any(_dotted(v.split("=", 1)[0]) == key for v in values if "=" in v):
+    if any(dotted_key(v.split("=", 1)[0]) == key for v in values if "=" in v):
         raise ValueError(f"names {key} again in a value; give the key once, then its values: {key}=V1,V2")
-    mine = _leaves(key, values)
-    for other, theirs in ((k, _leaves(k, v)) for k, v in swept.items()):  # a section beside a key in it
+    mine = swept_leaves(key, values)
+    for other, theirs in ((k, swept_leaves(k, v)) for k, v in swept.items()):  # a section beside a key in it
         if any(a == b or a.startswith(f"{b}.") or b.startswith(f"{a}.") for a in mine for b in theirs):
             raise ValueError(f"sets a key --sweep {other} sets too (one setting, two labels); sweep it once")
     return values
 
 
-def _dotted(key: str) -> str:
-    """A dotted key as --set reads it: spaces around its parts dropped ('graph .refine')."""
+def dotted_key(key: str) -> str:
+    """A dotted key as --set reads it (config.parse_override): spaces around its parts dropped
+    ('graph .refine')."""
     return ".".join(part.strip() for part in key.split("."))
 
 
-def _leaves(key: str, values: list[str]) -> set[str]:
-    """The dotted keys ``--sweep key=V`` sets for its values (a swept mapping: the keys it names)."""
+def swept_leaves(key: str, values: list[str]) -> set[str]:
+    """The dotted keys ``--sweep key=V`` sets for its values (a swept mapping: the keys it names; a
+    value that does not parse: the key itself, its own error comes when the sweep is planned)."""
     from .config import ConfigError, override_leaves, parse_override
 
     leaves = set()
@@ -217,5 +219,5 @@ def _leaves(key: str, values: list[str]) -> set[str]:
         try:
             leaves.update(leaf for leaf, _ in override_leaves(*parse_override(f"{key}={v}")))
         except ConfigError:  # its own error comes when the sweep is planned
-            leaves.add(_dotted(key))
+            leaves.add(dotted_key(key))
     return leaves
