@@ -104,17 +104,24 @@ def check(args: tuple[Path, list[str]], refute: bool = True) -> dict:
     return scored(log.name.removesuffix(".log"), run_cfg.scan_match, src.laser2base, pairs, ref, refute)
 
 
+def reference_maps(pts: list[np.ndarray], ref: np.ndarray, cfg: ScanMatchConfig):
+    """(k, local map, scan) for every keyframe k from ``cfg.window`` on whose scan keeps at least 10 points:
+    the scans ``pts`` (base frame) of the window keyframes before it placed at their reference poses ``ref``
+    (as the front end builds its map), and scan k, each thinned as the front end thins them."""
+    for k in range(cfg.window, len(pts)):
+        m = np.concatenate([transform_points(pts[i], ref[i]) for i in range(k - cfg.window, k)])
+        local = LocalMap.build(m[voxel_thin(m, cfg.voxel)])
+        q = pts[k][voxel_thin(pts[k], cfg.scan_voxel)]
+        if len(q) >= 10:
+            yield k, local, q
+
+
 def scored(name: str, cfg: ScanMatchConfig, laser2base, pairs, ref: np.ndarray, refute: bool = True) -> dict:
     """The keyframes' checks (module docstring); ``refute`` False: the small-scale ones only (ICP from
     the reference), without the correlative search of the refutation."""
     pts = [transform_points(p.scan.points(), laser2base) for p in pairs]  # base frame
     refuted, small = [], []
-    for k in range(cfg.window, len(pairs)):
-        m = np.concatenate([transform_points(pts[i], ref[i]) for i in range(k - cfg.window, k)])
-        local = LocalMap.build(m[voxel_thin(m, cfg.voxel)])
-        q = pts[k][voxel_thin(pts[k], cfg.scan_voxel)]
-        if len(q) < 10:
-            continue
+    for k, local, q in reference_maps(pts, ref, cfg):
         tree = cKDTree(local.points)
         near = register(q, local, ref[k], cfg).pose  # ICP from the reference pose
         d = relative(ref[k], near)
