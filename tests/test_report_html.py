@@ -111,7 +111,7 @@ def test_run_report_summary_matches_summary_json(reports):
     acc = table_with_header(page, "trajectory")
     # the scan-matched odometry and the online estimate, as `run` prints them (they were left out)
     names = [r[0][0] for r in acc[1:]]
-    assert names[:2] == ["corrected", "odometry"]
+    assert names[:2] == ["smoothed (pose graph)", "odometry"]  # as Fig 16's legend names it (submaps)
     keys = {"scan-matched odometry": "scan_odom_ate", "online (causal)": "online_ate"}
     assert names[2:] == [k for k, v in keys.items() if summary["accuracy"].get(v)]
     assert float(acc[1][1][0]) == pytest.approx(summary["accuracy"]["ate"]["rmse"], rel=1e-3)
@@ -236,12 +236,13 @@ def test_run_report_shows_the_relation_metric_without_ground_truth(tmp_path, rep
         "rot_std_deg": 1,
     }
     summary["accuracy"] = {"relations_file": "intel.relations", "relations": rel, "odom_relations": odom}
+    del summary["counts"]["submaps"]  # the single map's (the paper's): the EKF's own estimate
     (run / "summary.json").write_text(json.dumps(summary))
     page = Page(write_report(run).read_text(encoding="utf-8"))
     assert not [t for t in page.tables if t and t[0] and t[0][0][0] == "trajectory"]  # no ATE
     rows = table_with_header(page, "trajectory (relations)")
     assert [[c[0] for c in r] for r in rows[1:]] == [
-        ["corrected", "0.167", "0.158", "2.5", "3", "120 of 130"],
+        ["corrected (EKF)", "0.167", "0.158", "2.5", "3", "120 of 130"],
         ["odometry", "5.9", "9", "20", "1", "120 of 130"],
     ]
 
@@ -256,6 +257,6 @@ def test_run_report_names_the_times_and_shows_the_map_consistency(reports):
     )
     c = summary["consistency"]
     rows = [[cell[0] for cell in r] for r in table_with_header(page, "trajectory (map)")[1:]]
-    assert rows[0][:3] == ["corrected", str(c["occupied_cells"]), f"{c['cells_vs_odom']:.4g}"]
+    assert rows[0][:3] == ["smoothed (pose graph)", str(c["occupied_cells"]), f"{c['cells_vs_odom']:.4g}"]
     assert rows[1][:3] == ["odometry", str(c["odom_occupied_cells"]), "1"]
     assert float(rows[0][3]) == pytest.approx(100 * c["revisit_mean"], rel=1e-3)

@@ -18,7 +18,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from ..results import Ate, MapConsistency, RelationError, RunSummary, to_json
-from .plots import COMPARE_FIGURES, RUN_FIGURES, compare_assocs, plot_compare, plot_run
+from .plots import COMPARE_FIGURES, RUN_FIGURES, compare_assocs, corrected_label, plot_compare, plot_run
 from .tables import COMPARISON_COLUMNS, COMPARISON_LOOP_COLUMNS, read_csv
 
 CSS = """
@@ -161,7 +161,7 @@ def _summary_section(summary: RunSummary, run_dir: Path) -> list[str]:
     pairs.append(("final pose x, y [m], θ [rad]", ", ".join(f"{v:.3f}" for v in summary.final_pose)))
     out = ["<h2>Summary</h2>", _kv_table(pairs)]
     out += _accuracy_section(summary)
-    out += _consistency_section(summary.consistency)
+    out += _consistency_section(summary.consistency, corrected_label(summary))
     out += _loops_section(run_dir, summary)
     out.append("<h3>Warnings</h3>")
     if summary.warnings:
@@ -181,7 +181,8 @@ def _accuracy_section(summary: RunSummary) -> list[str]:
     out = ["<h3>Accuracy</h3>"]
     if acc.ate is not None or acc.odom_ate is not None:
         more = (("scan-matched odometry", acc.scan_odom_ate), ("online (causal)", acc.online_ate))
-        named = [("corrected", acc.ate), ("odometry", acc.odom_ate), *((n, a) for n, a in more if a)]
+        named = [(corrected_label(summary), acc.ate), ("odometry", acc.odom_ate)]
+        named += [(n, a) for n, a in more if a]
         rows = [[name, *_ate_cells(a)] for name, a in named]
         out += [
             f'<p class="muted">against {esc(acc.ground_truth or "")} (SE(2)-aligned)</p>',
@@ -192,7 +193,7 @@ def _accuracy_section(summary: RunSummary) -> list[str]:
     if extra:
         out.append(_kv_table(extra))
     if acc.relations is not None:
-        named = (("corrected", acc.relations), ("odometry", acc.odom_relations))
+        named = ((corrected_label(summary), acc.relations), ("odometry", acc.odom_relations))
         named += (("scan-matched odometry", acc.scan_odom_relations),) if acc.scan_odom_relations else ()
         source = esc(acc.relations_file or "")
         out += [
@@ -215,12 +216,12 @@ def _relation_cells(e: RelationError | None) -> list:
     return [math.nan if v is None else v for v in values] + [f"{e.n} of {e.n_total}"]
 
 
-def _consistency_section(c: MapConsistency | None) -> list[str]:
-    """The map-consistency figures (no ground truth needed): estimate vs odometry."""
+def _consistency_section(c: MapConsistency | None, name: str) -> list[str]:
+    """The map-consistency figures (no ground truth needed): the estimate (called ``name``) vs odometry."""
     if c is None:
         return []
     rows = [
-        ["corrected", c.occupied_cells, c.cells_vs_odom, 100 * c.revisit_mean, 100 * c.revisit_share],
+        [name, c.occupied_cells, c.cells_vs_odom, 100 * c.revisit_mean, 100 * c.revisit_share],
         ["odometry", c.odom_occupied_cells, 1.0, 100 * c.odom_revisit_mean, 100 * c.odom_revisit_share],
     ]
     return [

@@ -166,7 +166,7 @@ def _draw_map(ax, run: RunData, segments_alpha: float = 0.18, legend: bool = Tru
         ax.plot(
             m[:, 0], m[:, 1], color=COLORS["scan_odometry"], lw=0.9, ls="-.", label="scan-matched odometry"
         )
-    ax.plot(c[:, 0], c[:, 1], color=COLORS["corrected"], lw=1.2, label=corrected_label(run))
+    ax.plot(c[:, 0], c[:, 1], color=COLORS["corrected"], lw=1.2, label=corrected_label(run.summary))
     _draw_landmarks(ax, run.landmarks, label=f"landmarks ({len(run.landmarks.get('x', ()))}, 3σ)")
     _draw_loop_closures(ax, run.loop_closures())
     if len(c):
@@ -182,10 +182,10 @@ def _draw_map(ax, run: RunData, segments_alpha: float = 0.18, legend: bool = Tru
         ax.legend(loc="best", fontsize=8, framealpha=0.85)
 
 
-def corrected_label(run: RunData) -> str:
+def corrected_label(summary: RunSummary) -> str:
     """What trajectory.tum holds: the pose graph's smoothed trajectory with the two levels, the EKF's
-    with the single map (the paper's)."""
-    return "corrected (EKF)" if run.summary.counts.submaps is None else "smoothed (pose graph)"
+    with the single map (the paper's) — the name Fig 16's legend and report.html's tables give it."""
+    return "corrected (EKF)" if summary.counts.submaps is None else "smoothed (pose graph)"
 
 
 def _draw_loop_closures(ax, seg: np.ndarray) -> None:
