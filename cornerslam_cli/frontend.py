@@ -30,7 +30,7 @@ from .lasers import mount_source
 from .logs import ReadStats, open_log
 from .logs.deskew import deskew
 from .logs.sync import CLOCKS_HINT, Synced, SyncStats, reanchor_odometry, select_keyframes, synchronise
-from .logs.unreadable import damaged_error, no_scan_read
+from .logs.unreadable import damaged_error, no_scan_read, raise_if_undecoded
 from .motion import ScanMatcher
 from .motion.fusion import BiasTaken, OdometryFusion
 from .motion.icp import load_kernels as load_motion_kernels
@@ -252,30 +252,24 @@ def check_processed(src: Input, n_frames: int, n_points: int) -> None:
             f"log '{src.path}': every beam of every scan is invalid (NaN, inf, zero or out of range)",
             "check the scan topic, range_min/range_max and input.max_range",
         )
+    if n_frames == 1 and stats.scans_in > 1 and stats.scan_time_backwards >= stats.scans_in - 1:
+        raise LogError(  # one pose is no trajectory: every scan's header stamp is the first one's (zero?)
+            f"log '{src.path}': only its first scan could be processed: the header stamps of the other "
+            f"{stats.scan_time_backwards} repeated or went backwards",
+            "check that the laser driver fills the header stamps",
+        )
     if n_frames == 0:
         rs = src.reader.stats
         if rs.damaged or not (stats.scans_in or rs.decode_failed):  # damage, none read: not the stamps
             what = "no scan could be processed"
             raise damaged_error(src.path, rs, what) if rs.damaged else no_scan_read(src.path, what, stats=rs)
-        _undecoded_error(src.path, rs)
+        raise_if_undecoded(src.path, rs)
         if clocks := stats.other_clocks():
             raise LogError(f"log '{src.path}': no scan could be processed: {clocks}", CLOCKS_HINT)
         skipped = f"; skipped: {why}" if (why := stats.skipped_why()) else ""
         raise LogError(
             f"log '{src.path}': no scan could be processed ({stats.scans_in} scans read{skipped})",
             "check that the scan and odometry topics overlap in time and that their header stamps increase",
-        )
-
-
-def _undecoded_error(log_path: Path, rs: ReadStats) -> None:
-    """Raise LogError naming the decoding failures when they left no scan or no odometry sample (then
-    they, not the stamps, are why no scan could be processed)."""
-    if rs.decode_failed and not (rs.scans and rs.odoms):
-        raise LogError(
-            f"log '{log_path}': no scan could be processed: {rs.decode_failed} messages could not be decoded "
-            f"({rs.scans} scans and {rs.odoms} odometry samples were usable; the first failure: "
-            f"{rs.first_failure})",
-            "check the scan and odometry messages; `cornerslam info LOG` lists the topics and their types",
         )
 
 

@@ -942,7 +942,11 @@ def _probe2_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
         Expected(
             "exit 2: names the decoding failures and the first one",
             2,
-            ("scans_undecodable.mcap", f"{N} messages could not be decoded", "cannot decode a /scan message"),
+            (
+                "scans_undecodable.mcap",
+                f"{N} messages could not be decoded or held unusable values",
+                "cannot decode a /scan message",
+            ),
         ),
     )
     add(
@@ -955,7 +959,7 @@ def _probe2_faults(d: Path, add: Callable[[str, Path, Expected], None]) -> None:
             2,
             (
                 "quat_all_zero.mcap",
-                f"{N + 1} messages could not be decoded",
+                f"{N + 1} messages could not be decoded or held unusable values",
                 "zero-length orientation quaternion",
             ),
         ),

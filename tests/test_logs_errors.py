@@ -216,6 +216,20 @@ def test_several_laserscans_listed(tmp_path):
     assert "--scan-topic" in err.value.hint
     scans, odoms = split(open_log(p, scan_topic="/scan2").messages())
     assert len(scans) == 5 and len(odoms) == 5
+    # info: no scan topic chosen, so no laser mount looked up yet ("not on tf" was said of a tf that may
+    # hold it: a ROS-user probe)
+    res = CliRunner().invoke(cli, ["info", str(p)])
+    assert res.exit_code == 2 and "2 LaserScan topics" in res.stderr
+    assert "  laser     - (no scan topic chosen)" in res.stdout.splitlines() and "not on tf" not in res.stdout
+
+
+def test_a_bags_metadata_file_is_told_to_give_its_directory(tmp_path):
+    """A ROS 2 bag's metadata.yaml given as the log: "unsupported log" said nothing of the directory."""
+    bag = write_log("rosbag2-sqlite3", tmp_path)
+    with pytest.raises(LogError, match="is the metadata of a ROS 2 bag") as err:
+        detect_format(bag / "metadata.yaml")
+    assert err.value.hint == f"give the bag's directory, '{bag}'"
+    assert detect_format(bag) == "rosbag2"
 
 
 def test_no_odometry_hint_names_option(tmp_path):

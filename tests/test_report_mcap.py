@@ -238,3 +238,11 @@ def test_info_describes_a_results_mcap_instead_of_refusing_it(results, tmp_path)
     assert any(line.split()[0] == TOPICS["path"] for line in lines if line.startswith("  /"))
     asked = CliRunner().invoke(cli, ["info", str(path), "--scan-topic", "/nope"])  # judged as a log then
     assert asked.exit_code == 2 and "/nope" in asked.stderr
+    # run (and compare) on it: said to be a run's results, not "has no sensor_msgs/LaserScan topic (record
+    # the laser as …)" (a ROS-user probe)
+    for command in ("run", "compare"):
+        ran = CliRunner().invoke(cli, [command, str(path), "--out", str(tmp_path / command), "-q"])
+        assert ran.exit_code == 2 and not (tmp_path / command).exists()
+        said = "'results.mcap' is the results MCAP of a run (`cornerslam run --mcap-out`), not a log"
+        assert said in ran.stderr
+        assert "summary.json names as input.log" in ran.stderr

@@ -247,3 +247,22 @@ def test_the_skipped_scans_are_named_by_why_only_those_that_happened():
         "3 before the first and 12 after the last odometry sample, 2 in gaps of the odometry (no sample "
         "within 30 s), 1 whose stamp went backwards or repeated"
     )
+
+
+def test_scans_all_stamped_alike_are_refused_not_run_as_one_pose(tmp_path):
+    """Every scan's header stamp the same (a laser driver that leaves it 0): run kept the first scan and
+    exited 0 with a one-pose trajectory (a ROS-user probe); it exits 2 and says why."""
+    import dataclasses
+
+    from _log_fixtures import make_odoms, make_scans
+    from click.testing import CliRunner
+
+    from cornerslam_cli.cli import cli
+    from cornerslam_cli.logs.writers import write_mcap
+
+    scans = [dataclasses.replace(s, stamp=1_700_000_000.5) for s in make_scans(12)]
+    log = write_mcap(tmp_path / "log.mcap", scans, make_odoms(13))
+    res = CliRunner().invoke(cli, ["run", str(log), "--out", str(tmp_path / "o"), "-q"])
+    assert res.exit_code == 2, res.output
+    assert "only its first scan could be processed: the header stamps of the other 11 repeated" in res.stderr
+    assert "fills the header stamps" in res.stderr and not (tmp_path / "o").exists()

@@ -51,6 +51,11 @@ _STATS = struct.Struct("<QHIIIIQQ")
 REORDER_BYTES = 64 << 20  # messages held back to restore log-time order across overlapping chunks
 
 
+# the Header record's library of every results MCAP cornerslam writes (report/mcap_out.py; a log
+# `simulate` writes says "cornerslam": before 2026-12-02 results did too, and are not recognised now)
+RESULTS_MCAP_LIBRARY = "cornerslam results"
+
+
 def header_library(path: str | Path) -> str | None:
     """The library an MCAP file's Header record names (what wrote it), or None for a file that is not an
     MCAP or cannot be read. Reads the magic and the Header record only: its opcode and u64 length,
@@ -144,6 +149,8 @@ class McapSource:
                 f"'{self.name}' is not an MCAP file (bad magic bytes)",
                 "check the file; MCAP files start with \\x89MCAP0",
             )
+        # written by `cornerslam run --mcap-out`: what to say when it is given as a log (logs/ros.py)
+        self.results_of_run = header_library(self.path) == RESULTS_MCAP_LIBRARY
         self.summary_ok = False
         self.index = self._read_summary()
         if self.index is None:

@@ -275,6 +275,12 @@ class RosLogReader:
             return self._want_scan, "", ""
         if not scans and self._lossy():
             return "", *self._lost("no sensor_msgs/LaserScan topic")
+        if not scans and getattr(self.source, "results_of_run", False):
+            return (
+                "",
+                f"'{name}' is the results MCAP of a run (`cornerslam run --mcap-out`), not a log",
+                "give the log the run read, which its summary.json names as input.log",
+            )
         if not scans:
             return (
                 "",
@@ -686,7 +692,8 @@ class RosLogReader:
                 *missing_odom_tf(self.path.name, odom_t, self.odom_frame, self.base_frame, tf_seen)
             )
         if st.decode_failed > 5:
-            st.warn("%s: %d messages could not be decoded in total", self.path.name, st.decode_failed)
+            what = "messages could not be decoded or held unusable values"
+            st.warn("%s: %d %s in total", self.path.name, st.decode_failed, what)
         self._warn_children(children)
         st.check_scans_yielded(self.path.name, scan_t)
 

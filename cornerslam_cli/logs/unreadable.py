@@ -63,3 +63,15 @@ def damage_problem(log: str | Path, stats: ReadStats, what: str) -> tuple[str, s
         f"the file is damaged: copy it again from its source, or salvage its intact parts with "
         f"`mcap recover {log} -o FIXED.mcap`",
     )
+
+
+def raise_if_undecoded(log_path: Path, rs: ReadStats) -> None:
+    """Raise LogError naming the decoding failures when they left no scan or no odometry sample (then
+    they, not the stamps, are why no scan could be processed)."""
+    if rs.decode_failed and not (rs.scans and rs.odoms):
+        raise LogError(
+            f"log '{log_path}': no scan could be processed: {rs.decode_failed} messages could not be decoded "
+            f"or held unusable values ({rs.scans} scans and {rs.odoms} odometry samples were usable; the "
+            f"first failure: {rs.first_failure})",
+            "check the scan and odometry messages; `cornerslam info LOG` lists the topics and their types",
+        )

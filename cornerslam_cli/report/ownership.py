@@ -27,7 +27,7 @@ from pathlib import Path
 
 from .. import __version__
 from ..errors import OutputError
-from ..logs.mcap import header_library
+from ..logs.mcap import RESULTS_MCAP_LIBRARY, header_library
 from .oserrors import output_errors, resolved
 
 MARKER = ".cornerslam-output"
@@ -343,11 +343,6 @@ def claim_dir(path: str | Path, kind: str) -> Path:
         if read_marker(target) is None:
             mark_output(target, kind)
     return target
-
-
-# the Header record's library of every results MCAP cornerslam writes (report/mcap_out.py; a log
-# `simulate` writes says "cornerslam": before 2026-12-02 results did too, and are not recognised now)
-RESULTS_MCAP_LIBRARY = "cornerslam results"
 
 
 FIGURE_CREATOR = "cornerslam extract"  # extract --plot's figures name it in their metadata

@@ -279,6 +279,8 @@ def info_lines(
         if tf_frames and i.format != "carmen":
             source += f" {short_text(tf_frames[0])}→{short_text(tf_frames[1])}"
         lines.append(f"  laser     x={x:.3f} m y={y:.3f} m yaw={yaw:.3f} rad{flip} ({source})")
+    elif not i.scan_topic:  # the mount is looked up for the scan topic's frame: none chosen yet
+        lines.append("  laser     - (no scan topic chosen)")
     else:
         where = "not in its laser lines" if i.format == "carmen" else "not on tf"
         lines.append(f"  laser     {where}: from the config's input.laser (built-in default x=0 y=0 yaw=0)")
