@@ -145,6 +145,9 @@ class RunInput(JsonResult):
     # appended: the robot's frame, which the odometry gives the pose of and the laser mount is in — a
     # nav_msgs/Odometry's child_frame_id, else input.base_frame; absent for a CARMEN log (no frames)
     base_frame: str | None = optional()
+    # appended: the odometry's frame, which it gives the robot's pose in and a results MCAP hangs map from —
+    # a nav_msgs/Odometry's header frame_id, else input.odom_frame; absent for a CARMEN log (no frames)
+    odom_frame: str | None = optional()
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -586,3 +586,28 @@ def test_without_scan_matching_there_is_no_scan_matched_trajectory(far_log, tmp_
     np.testing.assert_allclose(est[0], odom[0], atol=1e-8)
     np.testing.assert_allclose(odom[0], far_log["gt"][0], atol=1e-8)  # the log's first odometry pose
     assert "scan_matched.tum" not in json.loads((out / MARKER).read_text())["files"]
+
+
+TFS = ("tf", "odom_tf")
+
+
+@pytest.mark.parametrize("encoding", ["cdr", "ros1", "json"])
+def test_the_odometrys_own_frame_is_the_one_map_hangs_from(tmp_path, encoding):
+    """Odometry given in frame wheel_odom (its header frame_id): the results MCAP hung map from 'odom', a
+    frame the log never had, and gave base_link a second parent (a ROS-user probe). The frame_id is
+    taken, as the child_frame_id is for the robot's frame, unless input.odom_frame is set (to another
+    frame than the default's: as input.base_frame, a key left at its default cannot be told from unset)."""
+    scans = [
+        RawScan(float(i), -1.5, 0.01, np.full(301, 3.0, np.float32), 0.05, 20.0, "laser") for i in range(5)
+    ]
+    odoms = [OdomSample(float(i), 0.1 * i, 0.0, 0.0) for i in range(5)]
+    log = write_mcap(tmp_path / "w.mcap", scans, odoms, encoding=encoding, odom_frame="wheel_odom")
+    for sets, frame in (([], "wheel_odom"), (["--set", "input.odom_frame=odom_combined"], "odom_combined")):
+        out, mcap = tmp_path / f"o{len(sets)}", tmp_path / f"r{len(sets)}.mcap"
+        args = ["run", str(log), "--out", str(out), "-q", "--mcap-out", str(mcap), *sets]
+        res = CliRunner().invoke(cli, args)
+        assert res.exit_code == 0, res.output
+        assert json.loads((out / "summary.json").read_text())["input"]["odom_frame"] == frame
+        msgs = read_mcap(mcap)
+        links = [{(m["parent_frame_id"], m["child_frame_id"]) for m in msgs[f"/cornerslam/{t}"]} for t in TFS]
+        assert links == [{("map", frame)}, {(frame, "base_link")}]

@@ -159,6 +159,19 @@ def odometry_frame_ros1(data: bytes | memoryview) -> str:
     return _text(data, off + 4, clen, "Odometry child_frame_id")
 
 
+def odometry_parent_cdr(data: bytes | memoryview) -> str:
+    """The header frame_id of a CDR nav_msgs/Odometry: the frame its pose is given in (the odometry's)."""
+    e, _, _, _ = _odometry_head_cdr(data)
+    (slen,) = struct.unpack_from(e + "I", data, 12)
+    return _text(data, 16, slen, "Odometry frame_id")
+
+
+def odometry_parent_ros1(data: bytes | memoryview) -> str:
+    """As :func:`odometry_parent_cdr`, for ROS 1 serialization."""
+    _odometry_head_ros1(data)
+    return _text(data, 16, _ROS1_HDR.unpack_from(data, 0)[3], "Odometry frame_id")
+
+
 def decode_odometry_cdr(
     data: bytes | memoryview,
 ) -> tuple[Stamp, float, float, tuple[float, float, float, float]]:
@@ -218,6 +231,7 @@ class Decoder:
         self.laserscan = decode_laserscan_ros1 if self.ros1 else decode_laserscan_cdr
         self.odometry = decode_odometry_ros1 if self.ros1 else decode_odometry_cdr
         self.odometry_frame = odometry_frame_ros1 if self.ros1 else odometry_frame_cdr
+        self.odometry_parent = odometry_parent_ros1 if self.ros1 else odometry_parent_cdr
         self._name: str | None = None
 
     def _deserialize(self, data: bytes | memoryview):

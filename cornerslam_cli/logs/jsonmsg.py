@@ -116,6 +116,10 @@ class JsonDecoder:
         """The child_frame_id of a nav_msgs/Odometry: the frame whose pose it gives (the robot's)."""
         return _frame(_object(data), "child_frame_id")
 
+    def odometry_parent(self, data: bytes | memoryview) -> str:
+        """The header frame_id of a nav_msgs/Odometry: the frame its pose is given in (the odometry's)."""
+        return _frame(_object(data), "header", "frame_id")
+
     def transforms(self, data: bytes | memoryview) -> list:
         """[(parent, child, stamp, translation xyz, quaternion xyzw)] of a tf message."""
         msg = _object(data)

@@ -131,6 +131,7 @@ def missing_odom_tf(
 
 
 DEFAULT_BASE_FRAME = InputConfig.base_frame  # input.base_frame left at this: the odometry's frame is taken
+DEFAULT_ODOM_FRAME = InputConfig.odom_frame  # ... input.odom_frame: a nav_msgs/Odometry's frame_id is taken
 ROBOT_FRAME_MESSAGES = 2000  # messages of the odometry topic read for the robot's frame at most
 
 
@@ -551,6 +552,8 @@ class RosLogReader:
         if self._robot_resolved:
             return self.base_frame
         self._robot_resolved = True
+        if self._odom_sel.kind == "odometry" and self.odom_frame == DEFAULT_ODOM_FRAME:
+            self._take_odometry_parent()
         if self.base_frame != DEFAULT_BASE_FRAME:
             return self.base_frame
         if self._odom_sel.kind == "odometry":
@@ -595,6 +598,28 @@ class RosLogReader:
             return ""
         robot = children.pop()
         return robot if chain_transform(links, robot, self.base_frame) is not None else ""
+
+    def _take_odometry_parent(self) -> None:
+        """``odom_frame`` becomes the frame the odometry topic's first nav_msgs/Odometry message gives its
+        pose in (its header frame_id, when it names one other than its child_frame_id): the parent the
+        log's tf has for the robot, and the frame a results MCAP hangs ``map`` from (logged when it is not
+        the config's)."""
+        if self._channels[self.odom_topic].count == 0:
+            return
+        dec = self._decoder(self.odom_topic)
+        for _, _, data in self.source.raw_messages({self.odom_topic}):
+            try:
+                parent, child = strip_frame(dec.odometry_parent(data)), strip_frame(dec.odometry_frame(data))
+            except Exception:  # noqa: BLE001 - bad bytes: messages() counts them; the config's frame stays
+                return
+            if parent and parent != child and parent != self.odom_frame:
+                logger.info(
+                    "%s: odometry '%s' gives its poses in frame '%s' (its frame_id), not input.odom_frame "
+                    "'%s'",
+                    self.path.name, self.odom_topic, parent, self.odom_frame,
+                )  # fmt: skip
+                self.odom_frame = parent
+            return
 
     def _odometry_frame(self) -> str:
         """The first child_frame_id ('/' stripped) among the odometry topic's first

@@ -325,7 +325,8 @@ def write_results_mcap(
     ns_of_step = dict(zip(run.steps.astype(int).tolist(), stamps_ns, strict=True))
     odom_raw = read_odom_raw(out_dir)  # odom-frame poses, for the map → odom transform
     inp = run.summary.config.get("input", {})  # the run's config
-    odom_frame = str(inp.get("odom_frame") or "odom")
+    # the frame the odometry gave the poses in (a nav_msgs/Odometry's frame_id), else the config's
+    odom_frame = run.summary.input.odom_frame or str(inp.get("odom_frame") or "odom")
     # the frame the odometry gave the pose of (a nav_msgs/Odometry's child_frame_id), else the config's
     base_frame = run.summary.input.base_frame or str(inp.get("base_frame") or "base_link")
     odom_tf = not run.summary.input.odom_on_tf  # the log lacks odom → base on tf (or did not say)

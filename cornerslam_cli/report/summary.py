@@ -89,6 +89,7 @@ def build_summary(
             laser_upside_down=src.laser_upside_down,
             laser_upside_down_source=src.laser_upside_down_source,
             base_frame=getattr(src.reader, "base_frame", None),
+            odom_frame=getattr(src.reader, "odom_frame", None),
         ),
         assoc=cfg.association.method,
         counts=run_counts(src, totals, n_landmarks, graph),
