@@ -26,7 +26,12 @@ Execution: a spawn-context process pool of ``jobs`` workers (workers import the 
 OPENBLAS_NUM_THREADS etc. default to 1 in their environment), or with ``scheduler="tcp://host:port"``
 a Dask distributed cluster (``pip install cornerslam[dask]``). Dask workers must have cornerslam
 installed and see the logs and OUT at the same absolute paths (a shared filesystem); Dask's nanny
-already starts workers with OPENBLAS_NUM_THREADS=1.
+already starts workers with OPENBLAS_NUM_THREADS=1. A local worker that dies (killed, out of memory)
+breaks its pool: the combinations it took down run again, and only the one whose worker died on it
+again fails (:func:`_run_local`).
+
+Over 400 lines because planning's resume check, the local pool with its recovery from a dead worker
+and the Dask path share the batch's rows and state.
 """
 
 from __future__ import annotations
@@ -89,8 +94,11 @@ def run_batch(
     jobs: int | None = None,
     scheduler: str | None = None,
     progress: Callable[[BatchState], None] | None = None,
+    config_path: str | None = None,
 ) -> list[dict]:
     """Run every combination into ``out_dir/<name>/``; write ``out_dir/batch.csv``; return its rows.
+    ``config_path``: the config file the combinations were planned from, an input of each run (a run
+    whose directory holds it is refused, not written over).
 
     One failing combination (bad log, numerical failure, a bug) never stops the others: its row has
     status ``failed`` and the error line. ``jobs`` local worker processes (default ``os.cpu_count()``),
@@ -98,7 +106,7 @@ def run_batch(
     are said as each combination finishes, each distinct text once.
     """
     with warnings_once():
-        return _run_batch(combos, out_dir, jobs, scheduler, progress)
+        return _run_batch(combos, out_dir, jobs, scheduler, progress, config_path)
 
 
 def _run_batch(
@@ -107,10 +115,11 @@ def _run_batch(
     jobs: int | None,
     scheduler: str | None,
     progress: Callable[[BatchState], None] | None,
+    config_path: str | None = None,
 ) -> list[dict]:
     client = _connect(scheduler) if scheduler else None  # before the output: a wrong address writes nothing
     try:
-        return _run_claimed(combos, Path(out_dir), jobs, client, progress)
+        return _run_claimed(combos, Path(out_dir), jobs, client, progress, config_path)
     finally:
         if client is not None:
             client.close()
@@ -122,6 +131,7 @@ def _run_claimed(
     jobs: int | None,
     client,  # dask.distributed.Client | None (Dask is optional)
     progress: Callable[[BatchState], None] | None,
+    config_path: str | None = None,
 ) -> list[dict]:
     """:func:`_run_batch` once the Dask ``client`` (None: local processes) is connected."""
     from .config import Config, from_dict
@@ -177,7 +187,7 @@ def _run_claimed(
 
     todo.sort(key=lambda i: -_size(combos[i].log))  # biggest logs first: a shorter tail on N workers
     picked = [(i, combos[i]) for i in todo]
-    tasks = [(i, c.log, c.config, str((out / c.name).resolve()), c.notes) for i, c in picked]
+    tasks = [(i, c.log, c.config, str((out / c.name).resolve()), c.notes, config_path) for i, c in picked]
     try:
         if client is not None:
             _run_dask(tasks, client, finished)
@@ -234,9 +244,12 @@ def _resumable(run_dir: Path, expect: Hashes, has_gt: bool) -> dict | None:
     return batch_figures(s) if files_intact(run_dir) else None
 
 
-def run_one(log: str, config: dict, out_dir: str, notes: tuple[str, ...] = ()) -> dict:
+def run_one(
+    log: str, config: dict, out_dir: str, notes: tuple[str, ...] = (), config_path: str | None = None
+) -> dict:
     """Run one combination (in a worker): ``{"status": "ok", "figures": ...}`` or the failure line;
-    ``notes``: its config's warnings, said when the batch planned it, kept for its summary.json.
+    ``notes``: its config's warnings, said when the batch planned it, kept for its summary.json;
+    ``config_path``: the config file it was planned from (an input of the run: never written over).
 
     Module-level and importing the package lazily, so spawn and Dask workers can unpickle it by name
     and set the BLAS thread count before numpy is first imported. The run's warnings are not printed
@@ -248,7 +261,8 @@ def run_one(log: str, config: dict, out_dir: str, notes: tuple[str, ...] = ()) -
             from .config import Config, from_dict
             from .pipeline import run
 
-            summary = run(log, from_dict(Config, config), out_dir, inside="batch", notes=notes)
+            cfg = from_dict(Config, config)
+            summary = run(log, cfg, out_dir, inside="batch", notes=notes, config_path=config_path)
             result = {"status": "ok", "figures": batch_figures(summary)}
         except SystemExit:  # the batch was interrupted and ended us (workers.stopped_by_parent)
             os._exit(143)  # the staging is removed: end here, not in the combination queued to us next
@@ -267,10 +281,35 @@ def _failed(e: BaseException) -> dict:
     return {"status": "failed", "error": error, "internal": True}
 
 
-def _run_local(tasks: list[tuple], jobs: int, finished: Callable[[int, dict], None]) -> None:
+def _run_local(
+    tasks: list[tuple], jobs: int, finished: Callable[[int, dict], None], work: Callable = run_one
+) -> None:
+    """The tasks (index, ``work``'s arguments…) on ``jobs`` local worker processes. A worker that dies
+    (killed, out of memory) breaks its pool and every combination not yet finished with it: those run
+    again, one at a time until the one running when a worker dies is found (failed: "its worker process
+    died"), then in parallel again."""
+    pending, alone = tasks, False
+    while pending:
+        broken = _run_pool(pending, 1 if alone else jobs, finished, work)
+        if broken and alone:  # one at a time, in order: the first not finished was running
+            finished(broken[0][0], {"status": "failed", "error": WORKER_DIED})
+            broken = broken[1:]
+        pending, alone = broken, bool(broken) and not alone
+
+
+WORKER_DIED = "its worker process died while running it (killed? out of memory?)"
+
+
+def _run_pool(
+    tasks: list[tuple], jobs: int, finished: Callable[[int, dict], None], work: Callable
+) -> list[tuple]:
+    """Run ``tasks`` on a pool of ``jobs`` spawned workers, each result to ``finished``; the tasks a
+    broken pool did not finish (a worker died), in the order given."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures.process import BrokenProcessPool
 
+    broken = []
     with single_threaded_blas_env():  # spawned workers inherit it before they import numpy
         pool = ProcessPoolExecutor(
             max_workers=min(jobs, len(tasks)),
@@ -279,19 +318,23 @@ def _run_local(tasks: list[tuple], jobs: int, finished: Callable[[int, dict], No
             initargs=(logging.getLogger().getEffectiveLevel(),),
         )
         try:
-            futures = {pool.submit(run_one, *task): i for i, *task in tasks}
+            futures = {pool.submit(work, *task[1:]): k for k, task in enumerate(tasks)}
             for fut in as_completed(futures):
                 try:
                     result = fut.result()
-                except Exception as e:  # the worker process died (killed, out of memory)
+                except BrokenProcessPool:  # a worker died: run again (_run_local)
+                    broken.append(futures[fut])
+                    continue
+                except Exception as e:  # the task could not be sent or its result not returned
                     result = _failed(e)
-                finished(futures[fut], result)
+                finished(tasks[futures[fut]][0], result)
         except BaseException:  # the batch ends (Ctrl-C, SIGTERM, batch.csv unwritable): so do its workers
             for worker in multiprocessing.active_children():
                 worker.terminate()
             raise
         finally:
             pool.shutdown(wait=True, cancel_futures=True)
+    return [tasks[k] for k in sorted(broken)]
 
 
 def _init_worker(level: int) -> None:

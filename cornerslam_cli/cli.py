@@ -368,6 +368,7 @@ def compare(
         summaries = run_compare(
             log_path, cfg, names, out_dir, ground_truth, jobs, progress, relations, time_offset,
             default_place=not out, span=span, compiling=partial(_say_compiling, quiet), notes=notes,
+            config_path=config_path,
         )  # fmt: skip
     finally:
         progress.close()
@@ -654,7 +655,7 @@ def _batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, q
     if not scheduler:  # (a cluster's workers compile where they run)
         _say_compiling(quiet)
     try:
-        rows = run_batch(combos, out, jobs, scheduler, progress)
+        rows = run_batch(combos, out, jobs, scheduler, progress, str(config_path) if config_path else None)
     except KeyboardInterrupt as e:
         progress.close()
         word, code = _signal_word(e)

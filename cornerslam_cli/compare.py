@@ -103,13 +103,15 @@ def compare(
     span: Span | None = None,
     compiling: Callable[[], None] | None = None,
     notes: Sequence[str] = (),
+    config_path: str | Path | None = None,
 ) -> list[RunSummary]:
     """Run each associator in ``assocs`` on ``log_path``; write OUT/ASSOC/, OUT/comparison.csv and
     (``plots``) the figures and OUT/report.html, committed together. The output place is checked
     before any work (``default_place``: OUT is named after the log: another log's output there is
     refused, not replaced); ``span``: the part of the log to process; ``compiling``: frontend.open_input's;
-    ``notes``: warnings already said about the config, kept for each run's summary.json."""
-    inputs = [p for p in (log_path, ground_truth, relations) if p]
+    ``notes``: warnings already said about the config, kept for each run's summary.json; ``config_path``:
+    the config file (an input: never written over)."""
+    inputs = [p for p in (log_path, ground_truth, relations, config_path) if p]
     with StagedDir(out, "compare", inputs, log_path, own_log_only=default_place) as stage:
         ref = load_reference(Path(log_path), ground_truth, relations, time_offset)
         t0 = time.perf_counter()

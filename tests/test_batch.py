@@ -567,7 +567,7 @@ def test_exit_code_says_whether_every_combination_succeeded(monkeypatch, tmp_pat
         "internal": {"status": "failed", "error": "internal error: ZeroDivisionError", "internal": True},
     }
 
-    def fake_run_batch(combos, out, jobs, scheduler, progress):
+    def fake_run_batch(combos, out, jobs, scheduler, progress, config_path=None):
         return [batch_mod._row(c, **results[s]) for c, s in zip(combos, statuses, strict=True)]
 
     monkeypatch.setattr(batch_mod, "run_batch", fake_run_batch)
@@ -689,3 +689,54 @@ def test_a_failed_rows_hint_names_the_sweep_of_a_swept_topic(tmp_path):
         plan([sample], ["pca"], overrides=["input.odom_topic=/nope"]), tmp_path / "set", jobs=1
     )
     assert row["status"] == "failed" and "--set input.odom_topic=TOPIC" in row["error"], row["error"]
+
+
+def test_a_worker_that_dies_fails_only_the_combination_it_ran(tmp_path):
+    """One worker killed (the OOM killer) broke the pool, and every combination not yet finished — the
+    healthy worker's and the queued ones — failed as an internal error (a hostile-user probe). They run
+    again: the one that kills its worker each time fails, saying so; one that died once succeeds."""
+    from _batch_work import work
+
+    flag = str(tmp_path / "died")
+    tasks = [(0, "a"), (1, "dies"), (2, "b"), (3, "dies once", flag), (4, "c"), (5, "d")]
+    results = {}
+    batch_mod._run_local(tasks, 2, results.__setitem__, work)
+    assert sorted(results) == [0, 1, 2, 3, 4, 5]
+    assert results.pop(1) == {"status": "failed", "error": batch_mod.WORKER_DIED}
+    assert all(r["status"] == "ok" for r in results.values()) and os.path.exists(flag)
+
+
+def test_outputs_inside_other_outputs_are_refused(logs, tmp_path):
+    """A batch into a comparison's directory, a run or comparison into a run's were accepted, and the
+    outer one could no longer be run again ("holds 'sub', which cornerslam did not write"; a hostile-user
+    probe): refused before any work, as a run inside a comparison's directory was."""
+    run_dir = tmp_path / "r1"
+    assert CliRunner().invoke(cli, ["run", str(logs[0]), "--out", str(run_dir), "-q"]).exit_code == 0
+    for command in (["run"], ["compare", "--assoc", "pca"], ["batch"]):
+        inner = run_dir / "sub" / "deeper"
+        res = CliRunner().invoke(cli, [*command, str(logs[0]), "--out", str(inner), "-q"])
+        assert res.exit_code == 2, res.output
+        said = f"'{inner}' is inside the run output '{run_dir}': a run's directory is replaced whole"
+        assert said in res.stderr
+        assert not (run_dir / "sub").exists()
+    assert CliRunner().invoke(cli, ["run", str(logs[0]), "--out", str(run_dir), "-q"]).exit_code == 0
+
+
+def test_a_config_file_inside_the_output_it_would_replace_is_refused(logs, tmp_path):
+    """`compare` and `batch` given --config OUT/…/summary.json (the README's way to repeat a run)
+    replaced the file they read, as `run` refuses to (a hostile-user probe)."""
+    comparison = tmp_path / "c"
+    args = ["compare", str(logs[0]), "--assoc", "pca", "--out", str(comparison), "-q"]
+    assert CliRunner().invoke(cli, args).exit_code == 0
+    config = comparison / "pca" / "summary.json"
+    before = config.read_bytes()
+    res = CliRunner().invoke(cli, [*args, "--config", str(config)])
+    assert res.exit_code == 2 and f"holds the input '{config}'" in res.stderr, res.output
+    out = tmp_path / "b"
+    args = ["batch", str(logs[0]), "--assoc", "pca", "--out", str(out), "-q"]
+    assert CliRunner().invoke(cli, args).exit_code == 0
+    (run_config,) = out.glob("*/summary.json")
+    held = run_config.read_bytes()
+    res = CliRunner().invoke(cli, [*args, "--config", str(run_config), "--set", "submaps.max_distance=6"])
+    assert res.exit_code == 2 and "holds the input" in read_batch(out / "batch.csv")[0]["error"], res.output
+    assert config.read_bytes() == before and run_config.read_bytes() == held

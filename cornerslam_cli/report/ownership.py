@@ -210,6 +210,30 @@ def _batch_runs(out: Path) -> set[str]:
         return set()
 
 
+def _refuse_nested(target: Path, shown: Path, inside: str | None = None) -> None:
+    """Refuse (OutputError) an output ``target`` (resolved) inside another cornerslam output: a run's
+    directory is replaced whole when the run is repeated (a directory inside it would stop that, as one
+    cornerslam did not write), a comparison's and a batch's runs belong to it — except a run of the kind
+    ``inside`` in its own place (a batch's run in the batch's directory)."""
+    child = target
+    for outer in target.parents:
+        kind = output_kind(outer)
+        ours = kind in ("run", "compare") or (kind == "batch" and child.name in _batch_runs(outer))
+        if ours and not (kind == inside and child == target):
+            whose = _GROUPS.get(kind, "run")
+            why = (
+                "a run's directory is replaced whole when it is run again"
+                if kind == "run"
+                else (f"its runs belong to that {whose}")
+            )
+            raise OutputError(
+                f"'{shown}' is inside the {kind} output '{outer}': {why}",
+                f"give a directory outside it; rerunning the {whose} replaces "
+                + ("it" if kind == "run" else "them"),
+            )
+        child = outer
+
+
 def check_replaceable(
     target: Path, kind: str, inputs: Sequence[Path] = (), shown: Path | None = None, inside: str | None = None
 ) -> None:
@@ -220,14 +244,7 @@ def check_replaceable(
     refused — those belong to it (another directory beside a batch's runs is not one of them:
     ``cornerslam_out`` may hold a batch and the default places of runs)."""
     shown = target if shown is None else shown
-    parent = output_kind(target.parent)
-    ours = parent == "compare" or (parent == "batch" and target.name in _batch_runs(target.parent))
-    if ours and parent != inside:
-        whose = _GROUPS[parent]
-        raise OutputError(
-            f"'{shown}' is inside the {parent} output '{target.parent}': its runs belong to that {whose}",
-            f"give a directory outside it; rerunning the {whose} replaces them",
-        )
+    _refuse_nested(target, shown, inside)
     _refuse_foreign(target, kind, shown)
     if not target.is_dir():
         return
@@ -330,6 +347,7 @@ def check_claimable(path: str | Path, kind: str) -> Path:
     shown = Path(path)
     with output_errors(shown):
         target = resolved(shown)
+        _refuse_nested(target, shown)
         _refuse_foreign(target, kind, shown)
     return target
 

@@ -1,0 +1,14 @@
+"""Work for tests/test_batch.py's dead-worker test, importable by name in a spawned worker: a task that
+kills its own worker process every time, or only the first time (a flag file says it did)."""
+
+from __future__ import annotations
+
+import os
+
+
+def work(what: str, flag: str = "") -> dict:
+    if what == "dies" or (what == "dies once" and not os.path.exists(flag)):
+        if flag:
+            open(flag, "w").close()
+        os._exit(3)  # as the OOM killer would end it: no exception, no result
+    return {"status": "ok", "error": what}
