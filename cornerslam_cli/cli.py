@@ -642,9 +642,11 @@ def _batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, q
         raise click.BadParameter("'' names no scheduler (an unset shell variable?)", param_hint="--scheduler")
 
     check_option_agrees(overrides, {"association.method": assocs})  # --assoc is set after each --set
-    names = parse_assocs(assocs, allow_many=True) or [
-        command_config(config_path, overrides).association.method
-    ]
+    names = parse_assocs(assocs, allow_many=True)
+    if names and config_path:  # the file's association.method, if another, is ignored: said, as compare does
+        why = f"batch runs each associator of --assoc ({','.join(names)})"
+        command_config(config_path, overrides, ignored={"association.method": (why, names)})
+    names = names or [command_config(config_path, overrides).association.method]
     if scheduler and jobs:
         log.warning("--jobs is ignored with --scheduler (the cluster's workers run the batch)")
     check_claimable(out, "batch")  # a directory that is not a batch's: refused before any work

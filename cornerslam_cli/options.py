@@ -337,18 +337,24 @@ def check_sweep_not_set(overrides, sweeps) -> None:
 
 
 def parse_assocs(text: str | None, allow_many: bool, log_path: str | None = None) -> list[str]:
-    """The associators an ``--assoc`` value names, each checked against ``association.ASSOCIATORS``
-    (an unknown one: ConfigError with the closest name). ``None`` (not given) is ``[]``: the config's;
-    a value naming none (``''``, an unset shell variable) is a usage error (``run --assoc ''`` ran the
-    config's associator without a word). A list is comma-separated, blanks ignored, and must name
-    distinct associators (a usage error otherwise); a single name is taken whole, spaces around it
-    ignored, and a list given where one is taken (``run``) is a usage error pointing to ``compare``
-    (on ``log_path``, when given)."""
+    """The associators an ``--assoc`` value names, each checked against ``association.ASSOCIATORS`` (an
+    unknown one: ConfigError with the closest name). ``None`` (not given) is ``[]``: the config's; a value
+    naming none (``''``, an unset shell variable) is a usage error (``run --assoc ''`` ran the config's
+    associator without a word). A list is comma-separated, spaces around a name ignored, and must name
+    distinct associators, none empty (``pca,,icnn``: a usage error, as a ``--sweep`` value); a single name
+    is taken whole, spaces around it ignored, and a list given where one is taken (``run``) is a usage
+    error pointing to ``compare`` (on ``log_path``, when given)."""
     from .association import associator_class
 
     if text is None:
         return []
     listed = [a.strip() for a in text.split(",") if a.strip()]
+    if allow_many and listed and len(listed) < text.count(",") + 1:  # as --sweep: one lost in typing
+        raise click.BadParameter(
+            f"'{text}' has an empty name between its commas: give the associators without empty ones, "
+            f"e.g. {','.join(listed)}",
+            param_hint="--assoc",
+        )
     if not allow_many and len(listed) > 1:
         from .errors import display_path
 

@@ -740,3 +740,15 @@ def test_a_config_file_inside_the_output_it_would_replace_is_refused(logs, tmp_p
     res = CliRunner().invoke(cli, [*args, "--config", str(run_config), "--set", "submaps.max_distance=6"])
     assert res.exit_code == 2 and "holds the input" in read_batch(out / "batch.csv")[0]["error"], res.output
     assert config.read_bytes() == before and run_config.read_bytes() == held
+
+
+def test_a_config_files_associator_that_assoc_overrides_is_said(logs, tmp_path):
+    """batch --assoc runs its associators whatever the config file names, as compare does; compare said
+    so, batch did not (a hostile-user probe)."""
+    config = tmp_path / "jc.yaml"
+    config.write_text("association:\n  method: jcbb\n")
+    args = ["batch", str(logs[0]), "--config", str(config), "--assoc", "pca", "--out", str(tmp_path / "b")]
+    res = CliRunner().invoke(cli, args)
+    assert res.exit_code == 0, res.output
+    said = "config key 'association.method' = 'jcbb' is ignored: batch runs each associator of --assoc"
+    assert res.stderr.count(said) == 1

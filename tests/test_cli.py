@@ -819,7 +819,7 @@ def test_compare_rejects_unknown_and_repeated_associators(sim_log, tmp_path):
 
 def test_parse_assocs_good_names():
     assert parse_assocs("icnn,jcbb,pca", allow_many=True) == ["icnn", "jcbb", "pca"]
-    assert parse_assocs(" pca , icnn,,", allow_many=True) == ["pca", "icnn"]  # blanks and spaces dropped
+    assert parse_assocs(" pca , icnn", allow_many=True) == ["pca", "icnn"]  # spaces dropped
     assert parse_assocs(" jcbb", allow_many=False) == ["jcbb"]
     assert parse_assocs(None, allow_many=True) == parse_assocs(None, allow_many=False) == []
     with pytest.raises(click.BadParameter):  # run's default is None, the config's; '' names none
@@ -832,6 +832,18 @@ def test_parse_assocs_repeated_list_is_a_usage_error(text):
         parse_assocs(text, allow_many=True)
     assert e.value.format_message() == (
         f"Invalid value for --assoc: '{text}' must list distinct associators, e.g. icnn,jcbb,pca"
+    )
+
+
+@pytest.mark.parametrize("text", ["pca,,icnn", " pca , icnn,,", "pca,", ",pca"])
+def test_parse_assocs_empty_name_in_a_list_is_a_usage_error(text):
+    """An empty name between commas was dropped silently, while --sweep refuses an empty value as one
+    lost in typing (a hostile-user probe)."""
+    with pytest.raises(click.BadParameter) as e:
+        parse_assocs(text, allow_many=True)
+    assert e.value.format_message().startswith(
+        f"Invalid value for --assoc: '{text}' has an empty name between its commas: give the associators "
+        "without empty ones, e.g. pca"
     )
 
 

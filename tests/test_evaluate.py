@@ -585,6 +585,14 @@ def test_evaluate_without_a_reference_uses_the_runs_and_says_what_it_scored(sim_
     (out / "summary.json").write_text(json.dumps(s, indent=2))
     old = evaluate(out)
     assert old.exit_code == 2 and "kept no sha256 of its poses (an older version's run)" in old.stderr
+    # its summary.json damaged or gone: said (a hostile-user probe: only "give --ground-truth …")
+    (out / "summary.json").write_text("{")
+    damaged = evaluate(out)
+    said = f"(cannot read the run summary '{out / 'summary.json'}': "
+    assert damaged.exit_code == 2 and said in damaged.stderr
+    (out / "summary.json").unlink()
+    none = evaluate(out)
+    assert none.exit_code == 2 and f"('{out}' has no summary.json to name the ground truth" in none.stderr
 
 
 def test_evaluate_finds_a_runs_relative_ground_truth_only_from_where_it_ran(sim_log, tmp_path, monkeypatch):

@@ -123,6 +123,7 @@ INPUT_KEYS = [
     "laser_upside_down",  # appended: the laser's z axis down, its scans mirrored
     "laser_upside_down_source",  # appended: where laser_upside_down came from (tf or config)
     "base_frame",  # appended: the robot's frame (the odometry's child_frame_id, else input.base_frame)
+    "odom_frame",  # appended: the odometry's frame (the odometry's frame_id, else input.odom_frame)
 ]
 COUNT_KEYS = [
     "steps", "landmarks", "matched_total", "beams_total", "beams_invalid", "scans_bad_geometry",

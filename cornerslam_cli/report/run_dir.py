@@ -103,10 +103,12 @@ def recorded_ground_truth(path: str | Path) -> tuple[str | None, str]:
     from .summary import reference_hash
 
     p = Path(path)
+    if p.is_dir() and not (p / "summary.json").is_file():
+        return None, f"'{p}' has no summary.json to name the ground truth the run was scored against"
     try:
         s = RunSummary.read(p) if (p / "summary.json").is_file() else None
-    except ResultsError:
-        s = None
+    except ResultsError as e:  # damaged, cut short: the ground truth it names cannot be read from it
+        return None, e.msg  # ("cannot read the run summary '…/summary.json': why")
     gt = s.accuracy.ground_truth if s is not None and s.accuracy is not None else None
     if not gt:
         return None, ""

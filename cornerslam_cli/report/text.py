@@ -279,7 +279,7 @@ def info_lines(
         if tf_frames and i.format != "carmen":
             source += f" {short_text(tf_frames[0])}→{short_text(tf_frames[1])}"
         lines.append(f"  laser     x={x:.3f} m y={y:.3f} m yaw={yaw:.3f} rad{flip} ({source})")
-    elif not i.scan_topic:  # the mount is looked up for the scan topic's frame: none chosen yet
+    elif not i.scan_topic and i.format != "carmen":  # tf gives the mount of the scan topic's frame: none yet
         lines.append("  laser     - (no scan topic chosen)")
     else:
         where = "not in its laser lines" if i.format == "carmen" else "not on tf"
