@@ -8,8 +8,9 @@ the plan's order. A failed row's error is its one line: a bad input's message (a
 ``internal`` (not a column) so that the CLI exits 1 for a bug and 2 for bad input.
 
 Resume: a combination is skipped (status ``skipped``, its figures re-read) when ``OUT/<name>/summary.json``
-is complete and its ``hashes`` (sha256 of the log's bytes, sha256 of the resolved config, version)
-equal this run's, ground truth is present now iff it was then, and every file its marker lists is there
+is complete and its ``hashes`` (sha256 of the log's bytes, of the resolved config, of the package's code,
+version, and of the ground truth's poses beside the log: none now as then, or the same) equal this run's,
+and every file its marker lists is there
 (a file's content is not checked). Anything else is run again; a failed combination leaves no
 directory and is always retried.
 
@@ -164,7 +165,7 @@ def _run_claimed(
         if log_hashes[c.log] is not None and gt_hash is not False and code_hash() is not None:
             expect = Hashes(input=log_hashes[c.log], config=config_hash(from_dict(Config, c.config)),
                             version=__version__, ground_truth=gt_hash or None, code=code_hash())  # fmt: skip
-            figures = _resumable(out / c.name, expect, gt_hash is not None)
+            figures = _resumable(out / c.name, expect)
         if figures is not None:
             rows[i] = _row(c, "skipped", figures=figures)
             state.skipped += 1
@@ -233,13 +234,15 @@ def _ground_truth_hash(log: str) -> str | None | bool:
         return False
 
 
-def _resumable(run_dir: Path, expect: Hashes, has_gt: bool) -> dict | None:
-    """The figures of a complete earlier run of the same log, config and version, else None."""
+def _resumable(run_dir: Path, expect: Hashes) -> dict | None:
+    """The figures of a complete earlier run of the same log, config, version, code and ground truth
+    (its hash: none then as now, or the same poses; a run it scored nothing of, a ground truth that does
+    not overlap the log, is resumed too), else None."""
     try:
         s = RunSummary.read(run_dir)
     except ResultsError:
         return None  # missing, unreadable or from an older layout: run it again
-    if s.hashes != expect or (s.accuracy is not None) != has_gt:
+    if s.hashes != expect:
         return None
     return batch_figures(s) if files_intact(run_dir) else None
 

@@ -148,19 +148,23 @@ def ate(
 def rpe(est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray, delta_m: float = 1.0) -> Rpe:
     """Relative pose error. Per step: RMSE of the translational error of consecutive relative poses.
     Per metre: mean translational error of relative poses spanning ``delta_m`` metres of ground-truth
-    path, divided by that span (m/m)."""
+    path, divided by that span (m/m). Only pairs with no unscored pose between them (one in a hole of the
+    ground truth, :func:`in_holes`): a pair across a hole is no step of the robot's the reference saw."""
     inside, g = interpolate_inside(gt_t, gt, est_t)
     e = est[inside]
     nan = float("nan")
-    if len(e) < 2:
+    left_out = np.cumsum(~inside)[inside]  # unscored poses before each scored one
+    steps = np.flatnonzero(left_out[1:] == left_out[:-1])  # consecutive pairs none lies between
+    if len(steps) == 0:
         return Rpe(rpe_step_rmse=nan, rpe_step_rot_rmse=nan, rpe_per_m=nan)
-    err = relative(relative(g[:-1], g[1:]), relative(e[:-1], e[1:]))
+    err = relative(relative(g[steps], g[steps + 1]), relative(e[steps], e[steps + 1]))
     step_rmse = float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, axis=1))))
     step_rot_rmse = float(np.sqrt(np.mean(err[:, 2] ** 2)))
     per_m = nan
     dist = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(g[:, :2], axis=0), axis=1))))
     j = np.searchsorted(dist, dist + delta_m)
     ok = j < len(g)
+    ok[ok] &= left_out[ok] == left_out[j[ok]]
     if np.any(ok):
         i, j = np.nonzero(ok)[0], j[ok]
         span = dist[j] - dist[i]

@@ -579,6 +579,7 @@ def _ground_truth_faults(d: Path, add: Callable[[str, Path, Expected], None]) ->
     stamps = [r.split()[0] for r in rows]
     relations = [f"{a} {b} 0.1 0.02 0 0 0 0.05" for a, b in zip(stamps[:-1], stamps[1:], strict=True)]
     positions = [" ".join([*r.split()[:4], "0 0 0 0"]) for r in rows]  # no orientation: not a relation
+    w_first = [" ".join([*r.split()[:4], r.split()[7], *r.split()[4:7]]) for r in rows]  # qw qx qy qz
     log = good.read_bytes()
     no, ok, warned = "exit 2 naming the file", 0, "processed, warned"
     gt, rel = "--ground-truth", "--relations"
@@ -597,6 +598,7 @@ def _ground_truth_faults(d: Path, add: Callable[[str, Path, Expected], None]) ->
         (gt, "gt_is_a_log", log, 2, no, ("gt_is_a_log' is a binary file",)),
         (gt, "gt_is_relations", "\n".join(relations), 2, no, ("looks like a relations file", "--relations")),
         (gt, "gt_positions_only", "\n".join(positions), 2, no, ("line 1 has a zero-length quaternion",)),
+        (gt, "gt_quaternion_w_first", "\n".join(w_first), 2, no, ("out of the plane", "with qw first?")),
         (rel, "relations_binary", log[:3000], 2, no, ("relations file", "binary")),
         (rel, "relations_header", "t1 t2 x y z roll pitch yaw\n", 2, no, ("line 1 is not a relation",)),
         (rel, "relations_outside", "1 2 0 0 0 0 0 0", ok, warned, ("no relation", "falls inside the run")),

@@ -626,12 +626,12 @@ def test_resume_reruns_a_combination_another_build_ran(tmp_path, monkeypatch):
     assert [r["status"] for r in run_batch(combos, out, jobs=1)] == ["skipped"]
     s = json.loads(path.read_text())
     expect = Hashes(**s["hashes"])
-    assert expect.code == ours and batch_mod._resumable(path.parent, expect, has_gt=True) is not None
+    assert expect.code == ours and batch_mod._resumable(path.parent, expect) is not None
     other = Hashes(**{**s["hashes"], "code": "e" * 64})
-    assert batch_mod._resumable(path.parent, other, has_gt=True) is None  # as another build asks
+    assert batch_mod._resumable(path.parent, other) is None  # as another build asks
     del s["hashes"]["code"]  # as a build before the hash was kept wrote it
     path.write_text(json.dumps(s, indent=2))
-    assert batch_mod._resumable(path.parent, Hashes(**{**expect.to_json(), "code": ours}), True) is None
+    assert batch_mod._resumable(path.parent, Hashes(**{**expect.to_json(), "code": ours})) is None
 
 
 @pytest.mark.parametrize(
@@ -752,3 +752,22 @@ def test_a_config_files_associator_that_assoc_overrides_is_said(logs, tmp_path):
     assert res.exit_code == 0, res.output
     said = "config key 'association.method' = 'jcbb' is ignored: batch runs each associator of --assoc"
     assert res.stderr.count(said) == 1
+
+
+def test_a_ground_truth_that_scores_nothing_is_resumed_too(logs, tmp_path):
+    """A LOG.gt.tum beside the log that does not overlap it (accuracy null): every batch ran that
+    combination again, as if never finished (a hostile-user probe). Its poses' hash decides, as for any
+    ground truth."""
+    import shutil
+
+    log = tmp_path / "shifted.mcap"
+    shutil.copy(logs[0], log)
+    rows = logs[0].with_suffix(".gt.tum").read_text().splitlines()
+    log.with_suffix(".gt.tum").write_text(
+        "".join(f"{float(r.split()[0]) - 1e6} {' '.join(r.split()[1:])}\n" for r in rows)
+    )
+    args = ["batch", str(log), "--assoc", "pca", "--out", str(tmp_path / "b"), "-q"]
+    assert CliRunner().invoke(cli, args).exit_code == 0
+    assert json.loads(next((tmp_path / "b").glob("*/summary.json")).read_text())["accuracy"] is None
+    assert CliRunner().invoke(cli, args).exit_code == 0
+    assert [r["status"] for r in read_batch(tmp_path / "b" / "batch.csv")] == ["skipped"]

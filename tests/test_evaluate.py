@@ -654,3 +654,47 @@ def test_a_cut_inside_a_number_is_a_cut_too_and_a_line_ending_in_cr_is_not(files
     est.write_text(head + " ".join(last.split()[:3]) + "\r")
     res = evaluate(est, "--ground-truth", gt)
     assert res.exit_code == 2 and "has 3 values" in res.stderr
+
+
+def test_rpe_leaves_out_the_pairs_across_a_hole_of_the_ground_truth():
+    """A pair of scored poses with unscored ones between them (in a hole of the ground truth) is no step
+    the reference saw: it counted as one, the RPE per step ~6× too large (a hostile-user probe). Checked
+    against the pairs counted one by one."""
+    from cornerslam_cli.evaluate import rpe
+
+    rng = np.random.default_rng(4)
+    t = np.arange(100.0)
+    truth = np.column_stack((0.5 * t, np.sin(0.1 * t), 0.05 * t))
+    est = truth + rng.normal(0.0, 0.01, truth.shape)
+    est[31:60] += (5.0, -3.0, 1.0)  # wrong where the ground truth has no pose: not scored
+    est[60:] += (0.3, 0.0, 0.0)  # drifted across the hole: the step across it is 0.3 m off
+    keep = (t <= 30) | (t >= 60)
+    got = rpe(t, est, t[keep], truth[keep], delta_m=2.0)
+    steps = [k for k in range(99) if keep[k] and keep[k + 1]]
+    err = [relative(relative(truth[k], truth[k + 1]), relative(est[k], est[k + 1])) for k in steps]
+    step, rot = (
+        np.sqrt(np.mean([f(e) for e in err])) for f in (lambda e: e[0] ** 2 + e[1] ** 2, lambda e: e[2] ** 2)
+    )
+    assert got.rpe_step_rmse == pytest.approx(step, rel=1e-12) and step < 0.03
+    assert got.rpe_step_rot_rmse == pytest.approx(rot, rel=1e-12)
+    assert got.rpe_per_m < 0.05  # (its pairs across the hole, 15 m of path, would be metres off)
+
+
+def test_evaluate_says_when_the_runs_ground_truth_has_a_name_that_is_not_utf8(sim_log, tmp_path):
+    """summary.json keeps a name that is not UTF-8 with its bytes replaced (JSON holds Unicode), so
+    `evaluate OUTDIR` could not open it and said it was "not found from here" (a hostile-user probe)."""
+    import os
+    import shutil
+
+    from click.testing import CliRunner
+
+    from cornerslam_cli.cli import cli
+
+    stem = tmp_path / os.fsdecode(b"s\xe9x")
+    shutil.copy(sim_log, f"{stem}.mcap")
+    shutil.copy(sim_log.with_suffix(".gt.tum"), f"{stem}.gt.tum")
+    out = tmp_path / "run"
+    assert CliRunner().invoke(cli, ["run", f"{stem}.mcap", "--out", str(out), "-q"]).exit_code == 0
+    res = evaluate(out)
+    assert res.exit_code == 2 and "a name that is not UTF-8, not kept as it is" in res.stderr
+    assert "--ground-truth" in res.stderr

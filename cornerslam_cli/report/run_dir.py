@@ -113,6 +113,8 @@ def recorded_ground_truth(path: str | Path) -> tuple[str | None, str]:
     if not gt:
         return None, ""
     if not Path(gt).is_file():
+        if "\ufffd" in gt:  # a name that is not UTF-8: summary.json (JSON) kept it with its bytes replaced
+            return None, f"the run was scored against '{gt}', a name that is not UTF-8, not kept as it is"
         return None, f"the run was scored against '{gt}', not found from here"
     if s.hashes.ground_truth is None:  # an older version's run: which file it was cannot be told
         return None, f"the run names '{gt}' but kept no sha256 of its poses (an older version's run)"

@@ -191,6 +191,14 @@ def read_tum(
         keep[same + 1] = False
         a = a[keep]
     qx, qy, qz, qw = _unit_quaternions(a[:, 4:8], name, lines)
+    tilt, tilt_w_first = (np.median(np.hypot(u, v)) for u, v in ((qx, qy), (qy, qz)))  # sin(tilt/2)
+    if tilt > 0.5 and tilt_w_first < 0.1:  # > 60° out of the plane as read, < 12° with qw first
+        degrees = np.degrees(2 * np.arcsin(min(tilt, 1.0)))
+        raise LogError(
+            f"{name}: its quaternions turn the poses out of the plane (by {degrees:.0f}° on the median line) "
+            "and would not as qw qx qy qz: written with qw first?",
+            f"reorder each line to {TUM_LAYOUT}",
+        )
     yaw = yaw_from_quaternion(qx, qy, qz, qw)
     return a[:, 0], np.column_stack((a[:, 1], a[:, 2], yaw))
 
