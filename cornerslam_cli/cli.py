@@ -634,7 +634,7 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
 
 
 def _batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, quiet):
-    from .batch import BATCH_CSV, run_batch
+    from .batch import BATCH_CSV, WORKER_DIED, run_batch
     from .report.ownership import check_claimable
     from .sweep import plan
 
@@ -672,15 +672,18 @@ def _batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, q
         _echo(batch_lines(rows, [k for k, _ in combos[0].sweep]))
         click.echo(f"wrote {Path(out) / BATCH_CSV}")
     failed, _ = batch_counts(rows)
-    if failed:  # as make: a batch with a failed combination is no success (1 if a bug, else 2)
+    if failed:  # as make: a batch with a failed combination is no success (1: a bug or a dead worker; else 2)
         bugs = sum(bool(r["internal"]) for r in rows)
+        died = sum(r["error"] == WORKER_DIED for r in rows)  # killed, out of memory: no bad input either
         word = "internal error" if bugs else "error"
-        which = f" ({bugs} by an internal error: a bug, traceback saved)" if bugs else ""
+        which = [f"{bugs} by an internal error: a bug, traceback saved"] if bugs else []
+        which += [f"{died} whose worker process died (killed? out of memory?)"] if died else []
+        which = f" ({'; '.join(which)})" if which else ""
         click.echo(
             f"{word}: {failed} of {len(rows)} combinations failed{which}: see {Path(out) / BATCH_CSV}",
             err=True,
         )
-        raise click.exceptions.Exit(1 if bugs else 2)
+        raise click.exceptions.Exit(1 if bugs or died else 2)
 
 
 @cli.command("config")

@@ -244,8 +244,9 @@ def _deskewed(pairs: Iterator[Synced], src: Input, cfg: Config) -> Iterator[Sync
 
 
 def check_processed(src: Input, n_frames: int, n_points: int) -> None:
-    """A LogError when the log gave no frame, or frames whose every beam was invalid (``n_points``
-    valid beams in ``n_frames`` frames): the synchroniser's counts say why."""
+    """A LogError when the log gave no frame, only its first scan's (every other scan's stamp repeated or
+    went back: unstamped scans), or frames whose every beam was invalid (``n_points`` valid beams in
+    ``n_frames`` frames): the synchroniser's counts say why."""
     stats = src.stats
     if n_frames > 0 and n_points == 0:
         raise LogError(

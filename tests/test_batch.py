@@ -553,6 +553,11 @@ def test_a_bug_in_one_combination_is_a_failed_row(monkeypatch, logs, tmp_path):
             "internal error: 2 of 3 combinations failed (1 by an internal error: a bug, traceback saved): "
             "see ",
         ),
+        (  # a worker killed (out of memory): no bad input either (a review)
+            ["ok", "died"],
+            1,
+            "error: 1 of 2 combinations failed (1 whose worker process died (killed? out of memory?)): see ",
+        ),
     ],
 )
 def test_exit_code_says_whether_every_combination_succeeded(monkeypatch, tmp_path, statuses, exit_code, line):
@@ -565,6 +570,7 @@ def test_exit_code_says_whether_every_combination_succeeded(monkeypatch, tmp_pat
         "skipped": {"status": "skipped"},
         "failed": batch_mod._failed(CornerslamError("log 'x' is bad")),
         "internal": {"status": "failed", "error": "internal error: ZeroDivisionError", "internal": True},
+        "died": {"status": "failed", "error": batch_mod.WORKER_DIED},
     }
 
     def fake_run_batch(combos, out, jobs, scheduler, progress, config_path=None):
@@ -720,6 +726,10 @@ def test_outputs_inside_other_outputs_are_refused(logs, tmp_path):
         assert said in res.stderr
         assert not (run_dir / "sub").exists()
     assert CliRunner().invoke(cli, ["run", str(logs[0]), "--out", str(run_dir), "-q"]).exit_code == 0
+    # a run's summary.json copied beside (to give as --config) makes no output of its directory (a review)
+    (tmp_path / "summary.json").write_bytes((run_dir / "summary.json").read_bytes())
+    res = CliRunner().invoke(cli, ["run", str(logs[0]), "--out", str(tmp_path / "runs" / "r2"), "-q"])
+    assert res.exit_code == 0, res.output
 
 
 def test_a_config_file_inside_the_output_it_would_replace_is_refused(logs, tmp_path):

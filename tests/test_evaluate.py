@@ -677,7 +677,16 @@ def test_rpe_leaves_out_the_pairs_across_a_hole_of_the_ground_truth():
     )
     assert got.rpe_step_rmse == pytest.approx(step, rel=1e-12) and step < 0.03
     assert got.rpe_step_rot_rmse == pytest.approx(rot, rel=1e-12)
-    assert got.rpe_per_m < 0.05  # (its pairs across the hole, 15 m of path, would be metres off)
+    scored = np.flatnonzero(keep)  # per metre: pairs 2 m of reference path apart, none across the hole
+    g, e = truth[scored], est[scored]
+    dist = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(g[:, :2], axis=0).T))))
+    per_m = []
+    for i in range(len(g)):
+        j = next((j for j in range(i, len(g)) if dist[j] >= dist[i] + 2.0), None)
+        if j is not None and scored[j] - scored[i] == j - i:
+            d = relative(relative(g[i], g[j]), relative(e[i], e[j]))
+            per_m.append(np.hypot(d[0], d[1]) / (dist[j] - dist[i]))
+    assert got.rpe_per_m == pytest.approx(np.mean(per_m), rel=1e-12)
 
 
 def test_evaluate_says_when_the_runs_ground_truth_has_a_name_that_is_not_utf8(sim_log, tmp_path):

@@ -611,3 +611,38 @@ def test_the_odometrys_own_frame_is_the_one_map_hangs_from(tmp_path, encoding):
         msgs = read_mcap(mcap)
         links = [{(m["parent_frame_id"], m["child_frame_id"]) for m in msgs[f"/cornerslam/{t}"]} for t in TFS]
         assert links == [{("map", frame)}, {(frame, "base_link")}]
+
+
+@pytest.mark.parametrize(
+    ("frame_id", "child", "tf_odom", "taken", "on_tf"),
+    [
+        ("base_link", "", None, "odom", False),  # the robot's own frame: its mount edge must stay one
+        ("map", "base_link", None, "odom", False),  # the results MCAP's own frame: map → map
+        ("wheel_odom", "base_link", ("odom", "base_link"), "odom", True),  # the log's tf says otherwise
+        ("wheel_odom", "base_link", ("wheel_odom", "base_link"), "wheel_odom", True),  # the tf agrees
+    ],
+)
+def test_an_odometry_frame_the_tf_does_not_bear_out_is_not_taken(
+    tmp_path, frame_id, child, tf_odom, taken, on_tf
+):
+    """The Odometry's frame_id is taken only where the log's tf agrees with it (a review: frame_id
+    base_link dropped the laser mount's edge, map gave the results MCAP map → map, and wheel_odom beside
+    tf odom → base_link gave base_link two parents); the mount stays the tf's."""
+    from _log_fixtures import make_odoms, make_scans, write_messages_mcap
+
+    from cornerslam_cli.logs import open_log
+    from cornerslam_cli.logs.writers import serializer
+    from cornerslam_cli.logs.writers.ros import LASERSCAN, ODOMETRY, TFMESSAGE
+
+    ros, ns = serializer("cdr"), (lambda t: int(round(t * 1e9)))
+    scans, odoms = make_scans(10), make_odoms(11)
+    msgs = [("/tf_static", TFMESSAGE, ns(0.0), ros.tf(0.0, "base_link", scans[0].frame_id, 0.3, 0.1, 0.5))]
+    msgs += [("/scan", LASERSCAN, ns(s.stamp), ros.laserscan(s)) for s in scans]
+    for o in odoms:
+        msgs.append(("/odom", ODOMETRY, ns(o.stamp), ros.odometry(o, frame_id, child)))
+        if tf_odom:
+            msgs.append(("/tf", TFMESSAGE, ns(o.stamp), ros.tf(o.stamp, *tf_odom, o.x, o.y, o.theta)))
+    log = write_messages_mcap(tmp_path / "f.mcap", sorted(msgs, key=lambda m: m[2]))
+    with open_log(log) as reader:
+        assert reader.laser_to_base() == pytest.approx((0.3, 0.1, 0.5))
+        assert (reader.odom_frame, reader.odom_on_tf) == (taken, on_tf)

@@ -161,3 +161,19 @@ def test_readme_names_every_column_of_each_table_in_order(name, columns):
     row = next(line for line in readme.splitlines() if line.startswith(f"| `{name}` |"))
     named = [c for span in re.findall(r"`([^`]*)`", row) for c in span.split(",")]
     assert list(dict.fromkeys(c for c in named if c in columns)) == columns
+
+
+def test_read_tum_refuses_quaternions_written_w_first_but_reads_an_upside_down_body(tmp_path):
+    """A planar trajectory written stamp x y z qw qx qy qz read as rolled ~180° with a constant yaw (a
+    hostile-user probe): refused, naming the order. A body upside down (z down: qz = qw = 0), driving
+    mostly one way, looks alike at a glance (a review) and is read as it is, its yaw right."""
+    yaw = np.linspace(-0.15, 0.15, 40)
+    rows = [(t, 0.1 * t, 0.0, 0.0, np.sin(a / 2), np.cos(a / 2)) for t, a in enumerate(yaw)]
+    w_first = tmp_path / "w.tum"
+    w_first.write_text("".join(f"{t} {x} {y} {z} {w} 0 0 {qz}\n" for t, x, y, z, qz, w in rows))
+    with pytest.raises(LogError, match=r"out of the plane .* written with qw first\?"):
+        read_tum(w_first, "ground truth")
+    flipped = tmp_path / "z_down.tum"  # rotated π about x, then by yaw about the world's z
+    flipped.write_text("".join(f"{t} {x} {y} {z} {w} {qz} 0 0\n" for t, x, y, z, qz, w in rows))
+    _, poses = read_tum(flipped, "ground truth")
+    assert np.allclose(np.abs(poses[:, 2]), np.abs(yaw), atol=1e-9)

@@ -466,6 +466,7 @@ class RosLogReader:
         frame = None
         base = self._robot_frame()  # the frame whose pose the odometry gives
         odom_children: set[str] = set()  # odom_frame→child on tf: the robot's motion, not its mount
+        base_parents: set[str] = set()  # the robot frame's parents on tf other than /tf_static
         edges: dict[tuple[str, str], np.ndarray] = {}
         static_left = sum(self._channels[t].count or 0 for t in tf_topics if t == "/tf_static")
         counts_known = all(self._channels[t].count is not None for t in tf_topics if t == "/tf_static")
@@ -497,6 +498,8 @@ class RosLogReader:
                 for parent, child, _, t, q in decs[topic].transforms(data):
                     if topic == self.odom_topic and len(self._tf_pairs) < 50:
                         self._tf_pairs.add((parent, child))
+                    if child == base and not static:
+                        base_parents.add(parent)
                     if parent == self.odom_frame:
                         odom_children.add(child)
                         self.odom_on_tf = base in odom_children
@@ -530,6 +533,9 @@ class RosLogReader:
                     )  # fmt: skip
                     T, self.base_frame = T_config, config
         self.odom_on_tf = self.base_frame in odom_children
+        untold = self.odom_frame == DEFAULT_ODOM_FRAME and not self.odom_on_tf  # (input.odom_frame not set)
+        if self._odom_sel.kind == "odometry" and untold:
+            self._take_odometry_parent(base_parents, {f for edge in edges for f in edge})
         self._laser2base = None if T is None else pose2_from_matrix(T)
         if self._laser2base is not None and not all(math.isfinite(v) for v in self._laser2base):
             self.stats.warn("%s: the tf %s→%s is not finite: ignored", self.path.name, self.base_frame, frame)
@@ -552,8 +558,6 @@ class RosLogReader:
         if self._robot_resolved:
             return self.base_frame
         self._robot_resolved = True
-        if self._odom_sel.kind == "odometry" and self.odom_frame == DEFAULT_ODOM_FRAME:
-            self._take_odometry_parent()
         if self.base_frame != DEFAULT_BASE_FRAME:
             return self.base_frame
         if self._odom_sel.kind == "odometry":
@@ -599,27 +603,32 @@ class RosLogReader:
         robot = children.pop()
         return robot if chain_transform(links, robot, self.base_frame) is not None else ""
 
-    def _take_odometry_parent(self) -> None:
-        """``odom_frame`` becomes the frame the odometry topic's first nav_msgs/Odometry message gives its
-        pose in (its header frame_id, when it names one other than its child_frame_id): the parent the
-        log's tf has for the robot, and the frame a results MCAP hangs ``map`` from (logged when it is not
-        the config's)."""
+    def _take_odometry_parent(self, base_parents: set[str], tf_frames: set[str]) -> None:
+        """``odom_frame`` (left at its default) becomes the frame the nav_msgs/Odometry messages give their
+        poses in (the first header frame_id of the odometry topic's first :data:`ROBOT_FRAME_MESSAGES`
+        that names one, logged) when the log's tf agrees: it is the robot's parent there
+        (``base_parents``: then ``odom_on_tf``), or the robot has no parent there and the frame is on no
+        tf at all (``tf_frames``: the mount's frames and the rest) — the frame a results MCAP hangs ``map``
+        from. Not the robot's frame itself, nor ``map`` (the results' own)."""
         if self._channels[self.odom_topic].count == 0:
             return
         dec = self._decoder(self.odom_topic)
-        for _, _, data in self.source.raw_messages({self.odom_topic}):
+        parent = ""
+        for i, (_, _, data) in enumerate(self.source.raw_messages({self.odom_topic})):
+            if i >= ROBOT_FRAME_MESSAGES or parent:
+                break
             try:
-                parent, child = strip_frame(dec.odometry_parent(data)), strip_frame(dec.odometry_frame(data))
-            except Exception:  # noqa: BLE001 - bad bytes: messages() counts them; the config's frame stays
-                return
-            if parent and parent != child and parent != self.odom_frame:
-                logger.info(
-                    "%s: odometry '%s' gives its poses in frame '%s' (its frame_id), not input.odom_frame "
-                    "'%s'",
-                    self.path.name, self.odom_topic, parent, self.odom_frame,
-                )  # fmt: skip
-                self.odom_frame = parent
+                parent = strip_frame(dec.odometry_parent(data))
+            except Exception:  # noqa: BLE001 - bad bytes: messages() counts them; try the next message
+                continue
+        if parent in ("", self.base_frame, self.odom_frame, "map"):  # ("map": the results MCAP's frame)
             return
+        if parent in base_parents or not (base_parents or parent in tf_frames):
+            logger.info(
+                "%s: odometry '%s' gives its poses in frame '%s' (its frame_id), not input.odom_frame '%s'",
+                self.path.name, self.odom_topic, parent, self.odom_frame,
+            )  # fmt: skip
+            self.odom_frame, self.odom_on_tf = parent, parent in base_parents
 
     def _odometry_frame(self) -> str:
         """The first child_frame_id ('/' stripped) among the odometry topic's first

@@ -8,8 +8,10 @@ marker does not list (subdirectories with their own marker are checked against t
 it holds an input of the run or the working directory, and never at a mount point. Outputs of
 versions before the marker count by their own files: a ``summary.json`` beginning with
 ``cornerslam_version`` (run), ``comparison.csv`` or ``batch.csv`` with our header. Anything else is
-refused with an :class:`OutputError` (exit 2) before any work. Replacing one's own output needs no
-flag: rerunning into the same ``--out`` is the usual case. The default place
+refused with an :class:`OutputError` (exit 2) before any work, as is an output inside another
+(:func:`_refuse_nested`). Replacing one's own output needs no flag: rerunning into the same ``--out`` is
+the usual case. Over 400 lines because the rules above, each with the checks of its place, are one
+reading of what may be replaced. The default place
 (``cornerslam_out/<stem>_<assoc>``) is named after the log's stem, which two logs can share
 (``a/aces.log``, ``b/aces.log``): there, an output of another log is refused too, naming both
 (:func:`check_same_log`), rather than silently replaced. Staging and committing an
@@ -216,8 +218,10 @@ def _refuse_nested(target: Path, shown: Path, inside: str | None = None) -> None
     cornerslam did not write), a comparison's and a batch's runs belong to it — except a run of the kind
     ``inside`` in its own place (a batch's run in the batch's directory)."""
     child = target
-    for outer in target.parents:
-        kind = output_kind(outer)
+    for outer in target.parents:  # by their markers: a summary.json copied somewhere makes no output
+        kind = (read_marker(outer) or {}).get("kind")
+        if kind is None and outer == target.parent and output_kind(outer) in _GROUPS:
+            kind = output_kind(outer)  # a comparison or batch of a version before the marker, as before
         ours = kind in ("run", "compare") or (kind == "batch" and child.name in _batch_runs(outer))
         if ours and not (kind == inside and child == target):
             whose = _GROUPS.get(kind, "run")
@@ -240,9 +244,9 @@ def check_replaceable(
     """Refuse (OutputError) to replace ``target`` (resolved) by a ``kind`` output unless the module
     doc's rules allow it. ``inputs`` are the run's input files; ``shown`` names the target in errors;
     ``inside``: the kind of output whose part this one is (``batch``: a batch's run), else an output
-    inside a comparison's directory, or in the place of a run its batch.csv lists in a batch's, is
-    refused — those belong to it (another directory beside a batch's runs is not one of them:
-    ``cornerslam_out`` may hold a batch and the default places of runs)."""
+    anywhere inside a run's or a comparison's directory, or in the place of a run its batch.csv lists in
+    a batch's, is refused (:func:`_refuse_nested`; another directory beside a batch's runs is not one of
+    them: ``cornerslam_out`` may hold a batch and the default places of runs)."""
     shown = target if shown is None else shown
     _refuse_nested(target, shown, inside)
     _refuse_foreign(target, kind, shown)

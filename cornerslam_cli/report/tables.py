@@ -191,8 +191,10 @@ def read_tum(
         keep[same + 1] = False
         a = a[keep]
     qx, qy, qz, qw = _unit_quaternions(a[:, 4:8], name, lines)
-    tilt, tilt_w_first = (np.median(np.hypot(u, v)) for u, v in ((qx, qy), (qy, qz)))  # sin(tilt/2)
-    if tilt > 0.5 and tilt_w_first < 0.1:  # > 60° out of the plane as read, < 12° with qw first
+    # > 60° out of the plane as read (sin of half the tilt), exactly in it read qw qx qy qz, and turning
+    # then (a body upside down, z down, has qz = qw = 0: read as it is)
+    tilt, tilt_w_first = np.median(np.hypot(qx, qy)), np.max(np.hypot(qy, qz))
+    if tilt > 0.5 and tilt_w_first < 0.02 and np.max(np.abs(qw)) > 0.05:
         degrees = np.degrees(2 * np.arcsin(min(tilt, 1.0)))
         raise LogError(
             f"{name}: its quaternions turn the poses out of the plane (by {degrees:.0f}° on the median line) "
