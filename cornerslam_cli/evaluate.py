@@ -53,12 +53,21 @@ def in_holes(stamps: np.ndarray, t: np.ndarray) -> np.ndarray:
     return (after - before > longest) & ~near & inside_span(stamps, t)
 
 
+def scorable(stamps: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Mask of the times ``t`` a ground truth with poses at ``stamps`` scores: within its span or
+    ``GT_NEAR`` of its ends (as evo matches a pose within its max_diff), not in a hole (:func:`in_holes`)."""
+    t = np.asarray(t, dtype=float)
+    near_span = (t >= stamps[0] - GT_NEAR) & (t <= stamps[-1] + GT_NEAR)
+    return near_span & ~in_holes(stamps, t)
+
+
 def interpolate_inside(stamps: np.ndarray, poses: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The trajectory (``stamps``, ``poses``) at the times ``t`` within its span and not in a hole
-    (:func:`in_holes`): (mask of those t, their poses (k, 3), interpolated by
-    :func:`~cornerslam_cli.geometry.interpolate`)."""
-    inside = inside_span(stamps, t) & ~in_holes(stamps, t)
-    return inside, interpolate(stamps, poses, np.asarray(t, dtype=float)[inside])
+    """The trajectory (``stamps``, ``poses``) at the times ``t`` it scores (:func:`scorable`): (mask of
+    those t, their poses (k, 3), interpolated by :func:`~cornerslam_cli.geometry.interpolate`; a time
+    just outside the span takes the end's pose)."""
+    inside = scorable(stamps, t)
+    at = np.clip(np.asarray(t, dtype=float)[inside], stamps[0], stamps[-1])
+    return inside, interpolate(stamps, poses, at)
 
 
 def align_se2(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray]:
@@ -122,7 +131,7 @@ def ate(
     ranges' scale against the reference's, not a 2-D laser's ATE."""
     inside, g = interpolate_inside(gt_t, gt, est_t)
     e = est[inside]
-    holes = int(np.count_nonzero(inside_span(gt_t, est_t) & ~inside)) or None  # (absent when none)
+    holes = int(np.count_nonzero(in_holes(gt_t, est_t))) or None  # (absent when none)
     if len(e) < 2:
         return Ate(n=int(len(e)), rmse=float("nan"), mean=float("nan"), max=float("nan"), in_holes=holes)
     scale = None
@@ -324,7 +333,7 @@ def sparse_note(what: str, gt_t: np.ndarray, est_t: np.ndarray, whose: str = "ru
     lines between its poses (a ground truth of two poses, or one per minute, has no hole by its own
     median spacing); None otherwise."""
     scored = np.asarray(est_t, dtype=float)
-    scored = scored[inside_span(gt_t, scored) & ~in_holes(gt_t, scored)]
+    scored = scored[scorable(gt_t, scored)]
     if len(gt_t) < 2 or not len(scored):
         return None
     before, after = bracket(gt_t, scored)

@@ -707,3 +707,16 @@ def test_evaluate_says_when_the_runs_ground_truth_has_a_name_that_is_not_utf8(si
     res = evaluate(out)
     assert res.exit_code == 2 and "a name that is not UTF-8, not kept as it is" in res.stderr
     assert "--ground-truth" in res.stderr
+
+
+@pytest.mark.parametrize(("shift", "scored"), [(0.004, 50), (-0.004, 50), (0.02, 49), (-0.02, 49)])
+def test_a_pose_just_outside_the_ground_truths_span_is_scored_as_evo_matches_it(shift, scored):
+    """A 100 Hz ground truth starting 3 ms after the first scan: the first pose was dropped as outside its
+    span, where evo matches any pose within its 10 ms max_diff (an interoperability probe). Within
+    GT_NEAR of an end a pose is scored against that end; farther, not."""
+    from cornerslam_cli.evaluate import ate
+
+    t = np.arange(50.0)
+    truth = np.column_stack((0.3 * t, 0.1 * t, 0.02 * t))
+    a = ate(t, truth, t + shift, truth)
+    assert a.n == scored and a.rmse < 0.02
