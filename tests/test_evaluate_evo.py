@@ -3,8 +3,8 @@
 With z = 0 and yaw-only rotations, evo's SE(3) alignment without scale is our SE(2) alignment, so the
 translation RMSE must agree to rounding — for trajectories that fit their reference: for one that fits
 badly (raw odometry) its best 3-D rotation may turn 180° about an axis in the plane, z flipped: the
-trajectory mirrored within the plane, which no rigid motion in the plane gives (README, `evaluate`). Skipped when evo is not installed
-(``pip install evo``).
+trajectory mirrored within the plane, which no rigid motion in the plane gives (README, `evaluate`).
+Skipped when evo is not installed (``pip install evo``).
 """
 
 from __future__ import annotations
