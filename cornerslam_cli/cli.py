@@ -502,8 +502,9 @@ def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
 )
 @verbosity_options
 def evaluate(out_dir, ground_truth, relations, time_offset, correct_scale, verbose, quiet):
-    """Accuracy of a run's trajectory.tum against ground truth or relations (without either: the ground
-    truth the run was scored against, when the file its summary.json names holds those poses here).
+    """Accuracy of a run's trajectory.tum against ground truth or relations (without either: the TUM ground
+    truth the run was scored against, when the file its summary.json names holds those poses here;
+    relations, whose --time-offset is not recorded, are given again).
 
     \b
     Example:

@@ -720,3 +720,29 @@ def test_a_pose_just_outside_the_ground_truths_span_is_scored_as_evo_matches_it(
     truth = np.column_stack((0.3 * t, 0.1 * t, 0.02 * t))
     a = ate(t, truth, t + shift, truth)
     assert a.n == scored and a.rmse < 0.02
+
+
+def test_evaluate_without_a_reference_names_the_relations_the_run_was_scored_against(sim_log, tmp_path):
+    """A run scored with --relations only: `evaluate OUTDIR` said "give --ground-truth … or --relations"
+    and nothing of the file its summary.json names (a new-user walkthrough); it is not reused (its
+    --time-offset is not kept), and the error says so."""
+    from click.testing import CliRunner
+
+    from cornerslam_cli.cli import cli
+    from cornerslam_cli.report.tables import read_tum
+
+    t, gt = read_tum(sim_log.with_suffix(".gt.tum"))
+    rel = tmp_path / "sim.relations"
+    pairs = [(i, i + 5) for i in range(0, len(t) - 5, 5)]
+    rel.write_text("".join(f"{t[i]} {t[j]} {' '.join(map(str, relative(gt[i], gt[j])[:2]))} 0 0 0 "
+                           f"{relative(gt[i], gt[j])[2]}\n" for i, j in pairs))  # fmt: skip
+    log, out = tmp_path / "sim.mcap", tmp_path / "run"
+    log.write_bytes(sim_log.read_bytes())  # (no sim.gt.tum beside it: relations only)
+    args = ["run", str(log), "--out", str(out), "-q", "--relations", str(rel), "--time-offset", "0"]
+    assert CliRunner().invoke(cli, args).exit_code == 0
+    res = evaluate(out)
+    assert res.exit_code == 2
+    assert (
+        f"the run was scored against the relations '{rel}'; summary.json does not keep --time-offset"
+        in res.stderr
+    )

@@ -73,8 +73,9 @@ def ns(t: dict) -> int:
 
 def test_channels_and_schemas_are_the_foxglove_ones(results):
     _, _, channels, schemas = results
-    assert channels == {TOPICS[k]: ("json", TOPIC_SCHEMAS[k]) for k in TOPICS}
-    assert set(schemas) == set(SCHEMAS)
+    said = [k for k in TOPICS if k != "scan"]  # (no scans given: that topic is not declared)
+    assert channels == {TOPICS[k]: ("json", TOPIC_SCHEMAS[k]) for k in said}
+    assert set(schemas) == {TOPIC_SCHEMAS[k] for k in said} and set(schemas) <= set(SCHEMAS)
     for name, (encoding, schema) in schemas.items():
         assert encoding == "jsonschema"
         assert name.startswith("foxglove.") and schema["title"] == name
@@ -246,3 +247,21 @@ def test_info_describes_a_results_mcap_instead_of_refusing_it(results, tmp_path)
         said = "'results.mcap' is the results MCAP of a run (`cornerslam run --mcap-out`), not a log"
         assert said in ran.stderr
         assert "summary.json names as input.log" in ran.stderr
+
+
+def test_an_unscored_runs_results_declare_no_ground_truth_topic(sim_log, tmp_path):
+    """A run without ground truth declared /cornerslam/ground_truth_path with no message, an empty topic
+    in Foxglove's list (a new-user walkthrough)."""
+    import shutil
+
+    from click.testing import CliRunner
+
+    from cornerslam_cli.cli import cli
+
+    log = tmp_path / "alone.mcap"  # (no alone.gt.tum beside it)
+    shutil.copy(sim_log, log)
+    args = ["run", str(log), "--out", str(tmp_path / "o"), "-q", "--max-scans", "30"]
+    assert CliRunner().invoke(cli, [*args, "--mcap-out", str(tmp_path / "r.mcap")]).exit_code == 0
+    with open(tmp_path / "r.mcap", "rb") as f:
+        topics = {c.topic for c in make_reader(f).get_summary().channels.values()}
+    assert TOPICS["path"] in topics and TOPICS["ground_truth_path"] not in topics

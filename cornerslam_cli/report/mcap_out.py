@@ -363,13 +363,16 @@ def write_results_mcap(
     with open(path, "wb") as f:
         w = Writer(f)
         w.start(profile="", library=RESULTS_MCAP_LIBRARY)
+        used = {key for _, key, _ in msgs}  # a topic with nothing to say is not declared (an unscored run)
         schema_ids = {
             name: w.register_schema(name, "jsonschema", json.dumps(schema).encode())
             for name, schema in SCHEMAS.items()
+            if any(TOPIC_SCHEMAS[key] == name for key in used)
         }
         channels = {
             key: w.register_channel(topic, "json", schema_ids[TOPIC_SCHEMAS[key]])
             for key, topic in TOPICS.items()
+            if key in used
         }
         seq: dict[str, int] = dict.fromkeys(TOPICS, 0)
         for ns, key, payload in msgs:

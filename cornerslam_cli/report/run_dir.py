@@ -111,7 +111,9 @@ def recorded_ground_truth(path: str | Path) -> tuple[str | None, str]:
         return None, e.msg  # ("cannot read the run summary '…/summary.json': why")
     gt = s.accuracy.ground_truth if s is not None and s.accuracy is not None else None
     if not gt:
-        return None, ""
+        rel = s.accuracy.relations_file if s is not None and s.accuracy is not None else None
+        why = f"the run was scored against the relations '{rel}'; summary.json does not keep --time-offset"
+        return None, why if rel else ""
     if not Path(gt).is_file():
         if "\ufffd" in gt:  # a name that is not UTF-8: summary.json (JSON) kept it with its bytes replaced
             return None, f"the run was scored against '{gt}', a name that is not UTF-8, not kept as it is"
