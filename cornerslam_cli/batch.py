@@ -56,7 +56,7 @@ from .report.outdir import staged_write
 from .report.ownership import claim_dir, files_intact, other_log_error
 from .results import Hashes, RunSummary
 from .sweep import Combo
-from .workers import warnings_kept, warnings_once
+from .workers import end_children, warnings_kept, warnings_once
 
 log = logging.getLogger("cornerslam.batch")
 
@@ -332,8 +332,7 @@ def _run_pool(
                     result = _failed(e)
                 finished(tasks[futures[fut]][0], result)
         except BaseException:  # the batch ends (Ctrl-C, SIGTERM, batch.csv unwritable): so do its workers
-            for worker in multiprocessing.active_children():
-                worker.terminate()
+            end_children()
             raise
         finally:
             pool.shutdown(wait=True, cancel_futures=True)

@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import multiprocessing
+import signal
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -28,7 +29,7 @@ from .report.ownership import mark_output
 from .report.run_writer import load_reference
 from .results import RunSummary
 from .span import Span
-from .workers import exit_with_parent
+from .workers import end_children, exit_with_parent, signals_deferred
 
 log = logging.getLogger("cornerslam.compare")
 _SHARED: dict = {}  # what forked workers inherit: frames, input, reference
@@ -56,6 +57,16 @@ def _run_one(
         warnings[:] = extracted
 
 
+def _worker_init() -> None:
+    """A forked filter worker: ends when its parent has gone; ignores Ctrl-C (the terminal sends it to the
+    whole process group: the parent decides, and ends its workers) and has SIGTERM's default action (not
+    the parent's handler it was forked with), both unblocked (it was forked inside signals_deferred)."""
+    exit_with_parent()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})
+
+
 def _run_filters(
     assocs: Sequence[str], dirs: list[Path], jobs: int, progress: Callable[..., None] | None
 ) -> list[RunSummary]:
@@ -71,13 +82,19 @@ def _run_filters(
 
     if jobs > 1 and len(assocs) > 1:
         ctx = multiprocessing.get_context("fork")
-        with ProcessPoolExecutor(
-            max_workers=min(jobs, len(assocs)), mp_context=ctx, initializer=exit_with_parent
-        ) as pool:
-            futures = [pool.submit(_run_one, a, d, None, True) for a, d in zip(assocs, dirs, strict=True)]
+        workers = min(jobs, len(assocs))
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init)
+        try:
+            with signals_deferred():  # (the workers fork here: a signal then lands after, in this process)
+                futures = [pool.submit(_run_one, a, d, None, True) for a, d in zip(assocs, dirs, strict=True)]
             for k, _ in enumerate(as_completed(futures), 1):
                 report(k * n)
             summaries = [f.result() for f in futures]
+        except BaseException:  # interrupted (Ctrl-C, SIGTERM) or failed: its workers end with it, now
+            end_children()
+            raise
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
         for s in summaries:  # the runs' warnings, each said once (the extraction's were already)
             for text in s.warnings:
                 _SHARED["src"].reader.stats.say(text)

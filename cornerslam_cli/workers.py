@@ -21,6 +21,7 @@ runs with SIGINT and SIGTERM held back (:func:`signals_deferred`).
 from __future__ import annotations
 
 import logging
+import multiprocessing
 import os
 import signal
 import sys
@@ -179,3 +180,17 @@ def signals_deferred() -> Iterator[None]:
         yield
     finally:
         block(signal.SIG_SETMASK, old)
+
+
+def end_children(grace: float = 2.0) -> None:
+    """End this process's child processes (an interrupted batch's or comparison's pool workers): SIGTERM,
+    then SIGKILL for any still there after ``grace`` seconds — a worker that took a SIGTERM between two
+    tasks, where nothing ends it, ignores the next one and would keep the pool's join waiting forever."""
+    children = multiprocessing.active_children()
+    for child in children:
+        child.terminate()
+    end = time.monotonic() + grace
+    for child in children:
+        child.join(max(0.0, end - time.monotonic()))
+        if child.is_alive():
+            child.kill()

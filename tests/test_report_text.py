@@ -261,3 +261,15 @@ def test_scan_heading():
     k = 170
     scan = Scan(1700000000.4567, np.full(k, 2.0), np.zeros(k), np.arange(k), 181, 0.1, 30.0, 0.01)
     assert scan_heading(40, scan) == "scan 40 at 1700000000.457 s: 170 valid of 181 beams"
+
+
+def test_a_dumb_terminals_status_line_is_erased_without_escape_codes(monkeypatch):
+    """TERM=dumb (Emacs's shell, some CI log viewers) shows ANSI erase-line as garbage: spaces between
+    two carriage returns there (a hostile-user probe), the escape code elsewhere."""
+    from cornerslam_cli.report import progress
+
+    monkeypatch.setenv("TERM", "dumb")
+    dumb = progress._erase()
+    assert "\033" not in dumb and dumb.startswith("\r") and dumb.endswith("\r") and dumb.strip() == ""
+    monkeypatch.setenv("TERM", "xterm-256color")
+    assert progress._erase() == "\r\033[K"

@@ -5,6 +5,8 @@ And the log records written below them (:func:`log_to_stderr`)."""
 from __future__ import annotations
 
 import logging
+import os
+import shutil
 import sys
 import time
 from collections import deque
@@ -44,7 +46,7 @@ class StatusLine:
 
     def _draw(self, text: str) -> None:
         if self.tty:
-            self._write("\r\033[K" + text)
+            self._write(_erase() + text)
             self.drawn = True
         else:
             self._write(text + "\n")
@@ -52,7 +54,7 @@ class StatusLine:
     def clear(self) -> None:
         """Erase the line (a terminal's), so that what is written next starts a clean line: whether it
         is drawn or not (a worker process of ``compare --jobs`` cannot know its parent's line)."""
-        self._write("\r\033[K")
+        self._write(_erase())
         self.drawn = False
 
     def close(self) -> None:
@@ -155,3 +157,11 @@ class _TerminalFormatter(logging.Formatter):
 
     def format(self, record: logging.LogRecord) -> str:
         return terminal_safe(super().format(record))
+
+
+def _erase() -> str:
+    """What erases the terminal's line: carriage return and ANSI erase-line, or on a terminal that says it
+    has no such codes (TERM=dumb: Emacs's shell, some CI log viewers) a line of spaces between two CRs."""
+    if os.environ.get("TERM") == "dumb":
+        return "\r" + " " * (shutil.get_terminal_size().columns - 1) + "\r"
+    return "\r\033[K"
