@@ -4,6 +4,7 @@
     python configs/regenerate_default.py
 """
 
+import argparse
 from pathlib import Path
 
 import yaml
@@ -32,6 +33,7 @@ def laser_yaml(name: str) -> str:
 
 
 if __name__ == "__main__":
+    argparse.ArgumentParser(description=__doc__.split("\n\n")[0]).parse_args()  # (--help writes nothing)
     (HERE / "default.yaml").write_text(HEADER + dump_config(Config()))
     (HERE / "lasers").mkdir(exist_ok=True)
     for name in PRESETS:
