@@ -57,11 +57,6 @@ SQLITE_MAGIC = b"SQLite format 3\x00"
 SUPPORTED = "a .mcap file, a ROS 1 .bag, a ROS 2 bag directory or a CARMEN log (.clf/.log/.gz)"
 
 
-def detect_bag_dir(p: Path) -> bool:
-    """Whether the directory ``p`` holds a ROS 2 bag: its metadata.yaml, or a .mcap or .db3 file."""
-    return (p / "metadata.yaml").is_file() or any(f.suffix in STORAGE_SUFFIXES for f in p.iterdir())
-
-
 def detect_format(path: str | Path) -> str:
     """Key of :data:`READERS` for ``path`` (content sniffed first, then extension); LogError if none."""
     p = Path(path)
@@ -80,7 +75,7 @@ def detect_format(path: str | Path) -> str:
         raise LogError(f"log '{p}' does not exist", "check the path")
     check_regular(p)
     if p.is_dir():
-        if detect_bag_dir(p):
+        if (p / "metadata.yaml").is_file() or any(f.suffix in STORAGE_SUFFIXES for f in p.iterdir()):
             return "rosbag2"  # (without metadata.yaml: read from its one storage file, logs/rosbag.py)
         raise LogError(
             f"directory '{p}' is not a ROS 2 bag (no metadata.yaml, no .mcap or .db3 file)",

@@ -610,17 +610,7 @@ class RosLogReader:
         (``base_parents``: then ``odom_on_tf``), or the robot has no parent there and the frame is on no
         tf at all (``tf_frames``: the mount's frames and the rest) — the frame a results MCAP hangs ``map``
         from. Not the robot's frame itself, nor ``map`` (the results' own)."""
-        if self._channels[self.odom_topic].count == 0:
-            return
-        dec = self._decoder(self.odom_topic)
-        parent = ""
-        for i, (_, _, data) in enumerate(self.source.raw_messages({self.odom_topic})):
-            if i >= ROBOT_FRAME_MESSAGES or parent:
-                break
-            try:
-                parent = strip_frame(dec.odometry_parent(data))
-            except Exception:  # noqa: BLE001 - bad bytes: messages() counts them; try the next message
-                continue
+        parent = self._first_frame("odometry_parent")
         if parent in ("", self.base_frame, self.odom_frame, "map"):  # ("map": the results MCAP's frame)
             return
         if parent in base_parents or not (base_parents or parent in tf_frames):
@@ -635,18 +625,24 @@ class RosLogReader:
         :data:`ROBOT_FRAME_MESSAGES` nav_msgs/Odometry messages that names a frame other than
         odom_frame: the frame whose pose the odometry gives, the robot's; "" when they leave it empty
         (``input.base_frame`` is taken then)."""
+        return self._first_frame("odometry_frame", self.odom_frame)  # (odom→odom would be no robot at all)
+
+    def _first_frame(self, field: str, other_than: str = "") -> str:
+        """The first frame ('/' stripped) the decoder's ``field`` reader (``odometry_frame``: a
+        child_frame_id, ``odometry_parent``: a header frame_id) names among the odometry topic's first
+        :data:`ROBOT_FRAME_MESSAGES` nav_msgs/Odometry messages, other than ``other_than``; "" if none."""
         if self._channels[self.odom_topic].count == 0:
             return ""
-        dec = self._decoder(self.odom_topic)
+        read = getattr(self._decoder(self.odom_topic), field)
         for i, (_, _, data) in enumerate(self.source.raw_messages({self.odom_topic})):
             if i >= ROBOT_FRAME_MESSAGES:
                 break
             try:
-                child = strip_frame(dec.odometry_frame(data))
+                frame = strip_frame(read(data))
             except Exception:  # noqa: BLE001 - bad bytes: messages() counts them; try the next message
                 continue
-            if child and child != self.odom_frame:  # (odom→odom would be no robot at all)
-                return child
+            if frame and frame != other_than:
+                return frame
         return ""
 
     def odom_tf_problem(self) -> tuple[tuple[str, str], bool] | None:

@@ -364,10 +364,11 @@ def write_results_mcap(
         w = Writer(f)
         w.start(profile="", library=RESULTS_MCAP_LIBRARY)
         used = {key for _, key, _ in msgs}  # a topic with nothing to say is not declared (an unscored run)
+        needed = {TOPIC_SCHEMAS[key] for key in used}
         schema_ids = {
             name: w.register_schema(name, "jsonschema", json.dumps(schema).encode())
             for name, schema in SCHEMAS.items()
-            if any(TOPIC_SCHEMAS[key] == name for key in used)
+            if name in needed
         }
         channels = {
             key: w.register_channel(topic, "json", schema_ids[TOPIC_SCHEMAS[key]])

@@ -109,9 +109,10 @@ def recorded_ground_truth(path: str | Path) -> tuple[str | None, str]:
         s = RunSummary.read(p) if (p / "summary.json").is_file() else None
     except ResultsError as e:  # damaged, cut short: the ground truth it names cannot be read from it
         return None, e.msg  # ("cannot read the run summary '…/summary.json': why")
-    gt = s.accuracy.ground_truth if s is not None and s.accuracy is not None else None
+    acc = s.accuracy if s is not None else None
+    gt = acc.ground_truth if acc is not None else None
     if not gt:
-        rel = s.accuracy.relations_file if s is not None and s.accuracy is not None else None
+        rel = acc.relations_file if acc is not None else None
         why = f"the run was scored against the relations '{rel}'; summary.json does not keep --time-offset"
         return None, why if rel else ""
     if not Path(gt).is_file():
