@@ -366,7 +366,8 @@ def warn_mount(src: Input, cfg: Config) -> None:
         if getattr(src.reader, "laser_frame", None) == "":  # a scan read, its frame empty: no tf names it
             why = f"has scans on '{topic}' with an empty header frame_id, so no tf can place the laser"
         if src.info.format == "carmen":  # no tf to look in, nor a key to turn that off
-            why, keep = f"gives no laser mount (its {topic} lines carry none)", ""
+            why = src.reader.mount_problem or f"gives no laser mount (its {topic} lines carry none)"
+            keep = ""
         src.reader.stats.warn(
             "log '%s' %s: the laser is taken at the built-in default x=0 y=0 yaw=0 on the robot (set "
             "input.laser.x/y/yaw to its mount%s)",

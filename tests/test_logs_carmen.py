@@ -330,3 +330,94 @@ def test_the_probes_damaged_lines_are_refused_in_the_words_of_the_format(tmp_pat
     res = CliRunner().invoke(cli, args, catch_exceptions=False)
     check_error_line(res, ("its only FLASER line cannot be read (line 1: a FLASER line needs at least 10",))
     assert "index" not in res.stderr
+
+
+def _read(p, **kw):
+    log = open_log(p, **kw)
+    scans, odoms = split(log.messages())
+    poses = [(o.stamp, o.x, o.y, o.theta) for o in odoms]
+    return log, [(s.stamp, tuple(s.angles), tuple(s.ranges)) for s in scans], poses
+
+
+@pytest.mark.parametrize("tail", [0, 1])
+def test_lines_ending_at_their_timestamp_or_hostname_read_as_the_standard_ones(tmp_path, tail):
+    """Logs written by older CARMEN versions or by converters end each line with its timestamp (and
+    hostname), without the logger timestamp: each tag's layout is the one most of its lines have, so
+    they give the scans and odometry of the same log with whole lines (they were refused, and ODOM lines
+    so written silently left the run on the laser lines' pose fields); a line with more fields than
+    the standard's stays malformed (a reading count short of its readings, likelier than extra fields)."""
+
+    def cut(line):
+        tok = line.split()
+        return " ".join(tok[: len(tok) - 2 + tail]) + "\n"
+
+    lines = []
+    for i in range(1, 6):
+        t = 1000.0 + i
+        lines += [
+            _odom_line(t, 0.1 * i),
+            _flaser_odom(t + 0.5, 9, 0.1 * i),
+            _robotlaser(t + 0.7, 0.1 * i + 0.2, 0.1 * i),
+        ]
+    whole, short = tmp_path / "whole.log", tmp_path / "short.log"
+    whole.write_text("".join(lines))
+    short.write_text("".join(map(cut, lines)))
+    for topic in ("FLASER", "ROBOTLASER1"):
+        log, scans, odoms = _read(short, scan_topic=topic)
+        assert (scans, odoms) == _read(whole, scan_topic=topic)[1:] and len(scans) == len(odoms) == 5
+        assert log.info().odom_source == "ODOM lines" and log.stats.decode_failed == 0
+    assert open_log(short, scan_topic="ROBOTLASER1").laser_to_base() == pytest.approx((0.2, 0.0, 0.0))
+    extra = tmp_path / "extra.log"
+    extra.write_text("".join(line.replace(" h ", " h x ").replace(" host ", " host x ") for line in lines))
+    with pytest.raises(LogError, match="needs 13 fields after its tag, has 14"):
+        list(open_log(extra, scan_topic="FLASER").messages())
+
+
+def test_the_laser_tag_with_a_few_lines_beside_many_is_not_chosen(tmp_path):
+    """ROBOTLASER1 is preferred (it carries the mount), but not with 3 lines beside 150 FLASER lines: the
+    run had 3 steps; of as many (or at least half as many) it still is."""
+    many = "".join(_flaser_odom(1000.0 + i, 0, 0.1 * i) for i in range(150))
+    few = "".join(_robotlaser(1000.2 + i, 0.1 * i + 0.2, 0.1 * i) for i in range(3))
+    p = tmp_path / "mixed.log"
+    p.write_text(many + few)
+    assert open_log(p).info().scan_topic == "FLASER"
+    half = "".join(_robotlaser(1000.2 + i, 0.1 * i + 0.2, 0.1 * i) for i in range(75))
+    p.write_text(many + half)
+    assert open_log(p).info().scan_topic == "ROBOTLASER1"
+
+
+def test_odometry_from_laser_fields_for_want_of_odom_lines_or_never_moving_is_warned(tmp_path, caplog):
+    p = tmp_path / "a.log"
+    p.write_text("".join(_flaser_odom(1000.0 + i, 0, 0.1 * i) + f"ODOM 1 2 {i}\n" for i in range(4)))
+    with caplog.at_level(logging.WARNING, logger="cornerslam.logs"):
+        log, scans, odoms = _read(p)
+    assert log.info().odom_topic == "FLASER" and len(odoms) == 4
+    assert "none of its 4 ODOM lines is whole" in caplog.text and "never move" not in caplog.text
+    caplog.clear()
+    p.write_text("".join(_flaser_odom(1000.0 + i, 0, 0) for i in range(4)))
+    with caplog.at_level(logging.WARNING, logger="cornerslam.logs"):
+        _read(p)
+    assert "pose fields of its FLASER lines never move: the run has no odometry" in caplog.text
+
+
+def test_robotlaser_poses_that_are_not_one_place_on_the_robot_give_no_mount(tmp_path):
+    """ROBOTLASER1 lines whose laser pose fields hold another trajectory (corrected poses, another origin)
+    than their robot pose fields: their offsets spread over metres, so no mount is taken from them (it
+    was their mean, 4.6 m off, with no word) and the reason is kept for the run's warning; a fixed offset
+    printed to 6 digits is a mount."""
+    p = tmp_path / "a.log"
+    rng = np.random.default_rng(1)
+    p.write_text(  # a fixed 0.3 m mount, to its printed digits
+        "".join(
+            _robotlaser(1000.0 + i, round(0.5 * i + 0.3 + 1e-6 * rng.normal(), 6), 0.5 * i) for i in range(60)
+        )
+    )
+    lines = [line.split() for line in p.read_text().splitlines()]
+    for i, tok in enumerate(lines):  # the laser x field: another trajectory's (4 m ahead, drifting)
+        tok[13] = str(0.5 * i * 1.1 + 4.0)
+    log = open_log(p)
+    assert log.laser_to_base() == pytest.approx((0.3, 0.0, 0.0), abs=1e-5) and not log.mount_problem
+    p.write_text("".join(" ".join(tok) + "\n" for tok in lines))
+    log = open_log(p)
+    assert log.laser_to_base() is None
+    assert "laser poses are not at one place on the robot" in log.mount_problem

@@ -174,6 +174,28 @@ def test_scans_in_a_gap_of_the_odometry_are_skipped_and_counted():
     assert len(warned) == 1 and "1 after the last odometry sample, 198 in gaps of the odometry" in warned[0]
 
 
+@pytest.mark.parametrize("odometry_first", [True, False])
+def test_a_scan_after_a_gap_pairs_with_the_sample_logged_just_after_it(odometry_first):
+    """A CARMEN log whose ODOM lines follow their laser lines, stamped alike, across a 40 s gap of the
+    odometry (radish aces has two): each scan pairs with its own sample whichever is logged first (the
+    scan just after the gap was dropped before its sample was read); a far-future stamp logged in
+    between still counts as waited out and does not make the later scans look late."""
+    stamps = [0.0, 0.5, 1.0, 41.0, 41.5, 42.0]
+    msgs = []
+    for t in stamps:
+        pair = [OdomSample(t, t, 0.0, 0.0), scan(t)]
+        msgs += pair if odometry_first else pair[::-1]
+    st = SyncStats()
+    out = list(synchronise(msgs, st, lambda *a: None))
+    assert [s.scan.stamp for s in out] == stamps
+    assert [s.odom[0] for s in out] == stamps
+    assert st.odom_gap == 0
+    far = msgs[:6] + [scan(1e18)] + msgs[6:]
+    st = SyncStats()
+    assert [s.scan.stamp for s in synchronise(far, st, lambda *a: None)] == [s.scan.stamp for s in out]
+    assert st.odom_gap + st.after_last_odom == 1 and st.scan_time_backwards == 0
+
+
 def _beams_scan(t: float, beams: int = 64) -> Scan:
     r = np.ones(beams)
     return Scan(t, r, np.linspace(-1, 1, beams), np.arange(beams), beams, 0.1, 10.0, 2 / beams)

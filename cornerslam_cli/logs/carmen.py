@@ -10,6 +10,9 @@ and PARAM lines ignored)::
         tv rv forward_safety_dist side_safety_dist turn_axis timestamp hostname logger_timestamp
     ODOM x y theta tv rv accel timestamp hostname logger_timestamp
 
+A log written by an older CARMEN or a converter may end its lines at the timestamp or its hostname: each
+tag's lines are read in the layout most of them have (``TAIL`` fields after the stamp, or fewer).
+
 Conventions (as CARMEN's own ``carmen_string_to_laser_laser_message_orig``):
 
 * FLASER/RLASER angles start at −π/2; the increment is 1° for 180/181 beams, 0.5° for 360/361,
@@ -60,6 +63,12 @@ ROBOTLASER_NAMES = ("start_angle", "fov", "angular_resolution", "maximum_range")
 ROBOTLASER_POSES = tuple((w, n) for w in ("laser", "robot") for n in ("x", "y", "theta"))  # after remissions
 GZIP_MAGIC = b"\x1f\x8b"
 BOM = codecs.BOM_UTF8.decode("latin-1")  # a UTF-8 byte-order mark as read here: 'ï»¿'
+# fields after a line's timestamp: hostname logger_timestamp. Logs written by older or other tools end
+# with the timestamp or its hostname: each tag's layout is the one most of its lines have (CarmenReader)
+TAIL = 2
+# m, rad: ROBOTLASER1 laser poses whose offsets from the robot poses spread wider than this (from their
+# median) are no mount: a laser pose computed from the robot's is the same offset to its printed digits
+MOUNT_SPREAD = (0.1, math.radians(5.0))
 
 
 def flaser_increment(n: int) -> float:
@@ -96,30 +105,28 @@ def _lines(path: Path, stats: ReadStats | None) -> Iterator[str]:
             stats.warn("%s ends early after %d lines: its gzip data is %s", path.name, n, why)
 
 
-def _whole_fields(tag: str, rest: str) -> list[str] | None:
-    """The fields of an ODOM or laser line after its tag, None when the line is not whole: ODOM has 9,
-    a laser line as many as its reading (and remission) counts imply. A line cut short (a recorder
-    that stopped mid-line) would give a velocity or a reading where its timestamp and poses should be."""
-    tok = rest.split()
+def _through_stamp(tag: str, tok: list[str]) -> int:
+    """How many of an ODOM or laser line's fields after its tag (``tok``) run up to its timestamp, that
+    included: ODOM 7, a laser line as many as its reading (and remission) counts imply; -1 when a count
+    is not a whole number >= 0 or the line ends before it."""
     try:
         if tag == ODOM_TAG:
-            want = 9
-        elif tag in ("FLASER", "RLASER"):
+            return 7
+        if tag in ("FLASER", "RLASER"):
             n = int(tok[0])
-            want = n + 10 if n >= 0 else -1
-        else:  # ROBOTLASERx: n readings, n_rem remissions, 14 fields after them
-            n = int(tok[7])
-            want = n + int(tok[8 + n]) + 23 if n >= 0 else -1
+            return n + 8 if n >= 0 else -1
+        n = int(tok[7])  # ROBOTLASERx: n readings, n_rem remissions, 12 fields after them to the stamp
+        n_rem = int(tok[8 + n]) if n >= 0 else -1
+        return n + n_rem + 21 if n_rem >= 0 else -1
     except (ValueError, IndexError):
-        return None
-    return tok if len(tok) == want else None
+        return -1
 
 
-def _odometry_fields(tag: str, tok: list[str]) -> tuple[float, ...] | None:
-    """The robot pose of a whole laser line (its fields after the tag): FLASER/RLASER ``odom_x odom_y
-    odom_theta`` 6th–4th field from the end, ROBOTLASERx ``robot_x robot_y robot_theta`` 11th–9th; None
-    when they are not numbers."""
-    fields = tok[-6:-3] if tag in ("FLASER", "RLASER") else tok[-11:-8]
+def _odometry_fields(tag: str, tok: list[str], through: int) -> tuple[float, ...] | None:
+    """The robot pose of a whole laser line (its fields after the tag, ``through`` of them up to its
+    stamp): FLASER/RLASER ``odom_x odom_y odom_theta`` just before the timestamp, ROBOTLASERx ``robot_x
+    robot_y robot_theta`` 9th–7th before it; None when they are not numbers."""
+    fields = tok[through - 4 : through - 1] if tag in ("FLASER", "RLASER") else tok[through - 9 : through - 6]
     try:
         return tuple(float(v) for v in fields)
     except ValueError:
@@ -134,6 +141,34 @@ class _Laser:
     def __init__(self, stamp, angle_min, angle_increment, range_max, ranges, laser, robot):
         self.stamp, self.angle_min, self.angle_increment = stamp, angle_min, angle_increment
         self.range_max, self.ranges, self.laser, self.robot = range_max, ranges, laser, robot
+
+
+class _Layout:
+    """What the pre-read saw of one tag's whole lines with one number of fields after the stamp."""
+
+    __slots__ = ("lines", "start", "end", "back", "last", "first_pose", "moving")
+
+    def __init__(self):
+        self.lines, self.back = 0, 0  # lines; lines stamped before the line above them
+        self.start, self.end, self.last = math.inf, -math.inf, -math.inf
+        self.first_pose: tuple[float, ...] | None = None
+        self.moving = False  # (laser lines) their odometry fields are not all the same pose
+
+    def see(self, tag: str, tok: list[str], through: int) -> None:
+        try:
+            t = float(tok[through - 1])
+        except ValueError:
+            return
+        self.lines += 1
+        if math.isfinite(t):
+            self.start, self.end = min(self.start, t), max(self.end, t)
+            self.back += t < self.last
+            self.last = t
+        if tag != ODOM_TAG and not self.moving:
+            pose = _odometry_fields(tag, tok, through)
+            if pose is not None:
+                self.first_pose = self.first_pose or pose
+                self.moving = self.first_pose != pose
 
 
 class BadLine(ValueError):
@@ -189,19 +224,21 @@ def _readings(tok: list[str], i: int, n: int) -> np.ndarray:
         raise BadLine("its readings are not all numbers") from None
 
 
-def parse_laser(tok: list[str], max_range: float) -> _Laser:
-    """Fields of a FLASER/RLASER/ROBOTLASERx line split into tokens (raises BadLine)."""
-    if tok[0] in ("FLASER", "RLASER"):  # n, n readings, laser x y theta, odom x y theta, 3 after them
-        n = _count(tok, 1, "reading count", 10)
-        _fields(tok, n + 10, f" of {_many(n, 'reading')}")
+def parse_laser(tok: list[str], max_range: float, tail: int = TAIL) -> _Laser:
+    """Fields of a FLASER/RLASER/ROBOTLASERx line split into tokens, ``tail`` fields after its timestamp
+    (the log's layout: CarmenReader; raises BadLine)."""
+    if tok[0] in ("FLASER", "RLASER"):  # n, n readings, laser x y theta, odom x y theta, the stamp, tail
+        n = _count(tok, 1, "reading count", 8 + tail)
+        _fields(tok, n + 8 + tail, f" of {_many(n, 'reading')}")
         ranges = _readings(tok, 2, n)
         p = [_number(tok, 2 + n + k, name) for k, name in enumerate(POSE_NAMES)]
         stamp = _number(tok, 8 + n, "timestamp")
         return _Laser(stamp, -math.pi / 2, flaser_increment(n), max_range, ranges, tuple(p[:3]), tuple(p[3:]))
-    # ROBOTLASER1 / ROBOTLASER2: 7 laser fields, n, n readings, n_rem, n_rem remissions, 14 after them
-    n = _count(tok, 8, "reading count", 23)
-    n_rem = _count(tok, 9 + n, "remission count", n + 23, f" of {_many(n, 'reading')}")
-    _fields(tok, n + n_rem + 23, f" of {_many(n, 'reading')} and {_many(n_rem, 'remission')}")
+    # ROBOTLASER1 / ROBOTLASER2: 7 laser fields, n, n readings, n_rem, n_rem remissions, 12 after them to
+    # the stamp, tail
+    n = _count(tok, 8, "reading count", 21 + tail)
+    n_rem = _count(tok, 9 + n, "remission count", n + 21 + tail, f" of {_many(n, 'reading')}")
+    _fields(tok, n + n_rem + 21 + tail, f" of {_many(n, 'reading')} and {_many(n_rem, 'remission')}")
     start, _fov, res, rmax = (_number(tok, i, name) for i, name in enumerate(ROBOTLASER_NAMES, 2))
     ranges = _readings(tok, 9, n)
     rest = 10 + n + n_rem
@@ -210,9 +247,10 @@ def parse_laser(tok: list[str], max_range: float) -> _Laser:
     return _Laser(stamp, start, res, rmax, ranges, tuple(p[:3]), tuple(p[3:]))
 
 
-def parse_odom(tok: list[str]) -> tuple[float, float, float, float]:
-    """(timestamp, x, y, theta) of an ODOM line split into tokens (raises BadLine)."""
-    _fields(tok, 9)
+def parse_odom(tok: list[str], tail: int = TAIL) -> tuple[float, float, float, float]:
+    """(timestamp, x, y, theta) of an ODOM line split into tokens, ``tail`` fields after its timestamp
+    (raises BadLine)."""
+    _fields(tok, 7 + tail)
     x, y, th = (_number(tok, i, name) for i, name in enumerate(("x", "y", "theta"), 1))
     return _number(tok, 7, "timestamp"), x, y, th
 
@@ -227,6 +265,7 @@ class CarmenReader:
         self.stats = ReadStats()
         self._counts: dict[str, int] = {}
         self._whole: dict[str, int] = {}  # per laser / ODOM tag: whole lines with a stamp (the rest skipped)
+        self._tail: dict[str, int] = {}  # per laser / ODOM tag: the fields after its stamp (TAIL)
         self._params: dict[str, str] = {}
         self._start: float | None = None
         self._end: float | None = None
@@ -237,10 +276,11 @@ class CarmenReader:
         self.scan_topic, self.odom_topic, self._problems = self._select()
 
     def _prescan(self) -> None:
-        """Count line tags, read PARAMs and the time span (cheap: no number parsing of readings)."""
+        """Count line tags, read PARAMs, each tag's layout (the number of fields after the stamp most of
+        its lines have: a line whose counts disagree with its fields has another) and, on the lines of
+        that layout, the time span (cheap: no number parsing of readings)."""
         name = self.path.name
-        last: dict[str, float] = {}
-        first_pose: dict[str, tuple[float, ...]] = {}
+        layouts: dict[tuple[str, int], _Layout] = {}
         try:
             for line in _lines(self.path, self.stats):
                 tag, rest = (line.split(None, 1) + ["", ""])[:2]
@@ -253,23 +293,12 @@ class CarmenReader:
                     continue
                 self._counts[tag] = self._counts.get(tag, 0) + 1
                 if tag in LASER_TAGS or tag == ODOM_TAG:
-                    tok = _whole_fields(tag, rest)
-                    if tok is None:  # a cut or malformed line: no stamp, no pose (messages() skips it)
-                        continue
-                    try:
-                        t = float(tok[-3])
-                    except ValueError:
-                        continue
-                    self._whole[tag] = self._whole.get(tag, 0) + 1
-                    if math.isfinite(t):
-                        self._start = t if self._start is None else min(self._start, t)
-                        self._end = t if self._end is None else max(self._end, t)
-                        self._back[tag] = self._back.get(tag, 0) + (t < last.get(tag, -math.inf))
-                        last[tag] = t
-                    if tag != ODOM_TAG and tag not in self._moving:
-                        pose = _odometry_fields(tag, tok)
-                        if pose is not None and first_pose.setdefault(tag, pose) != pose:
-                            self._moving.add(tag)
+                    tok = rest.split()
+                    through = _through_stamp(tag, tok)
+                    if 0 <= through <= len(tok) <= through + TAIL:  # (else cut or malformed)
+                        key = (tag, len(tok) - through)
+                        layout = layouts.get(key) or layouts.setdefault(key, _Layout())
+                        layout.see(tag, tok, through)
         except OSError as exc:
             raise LogError(
                 f"cannot read CARMEN log '{name}': {exc.strerror or exc}", "check the file (gzip damaged?)"
@@ -279,6 +308,22 @@ class CarmenReader:
                 f"'{name}' is not a CARMEN log: no FLASER/RLASER/ROBOTLASER1/ODOM lines",
                 "give a CARMEN log (.clf/.log), an .mcap, a .bag or a ROS 2 bag directory",
             )
+        for tag in {tag for tag, _ in layouts}:  # the standard layout, unless another has more lines (two
+            standard = layouts.get((tag, TAIL))  # at least: a log's one cut line is no layout)
+            lines, tail = max(
+                ((n.lines, t) for (g, t), n in layouts.items() if g == tag and t != TAIL and n.lines >= 2),
+                default=(0, TAIL),
+            )
+            self._tail[tag] = tail if lines > (standard.lines if standard else 0) else TAIL
+            layout = layouts.get((tag, self._tail[tag])) or _Layout()
+            if not layout.lines:
+                continue
+            self._whole[tag], self._back[tag] = layout.lines, layout.back
+            if layout.moving:
+                self._moving.add(tag)
+            if layout.start <= layout.end:
+                self._start = min(layout.start, self._start if self._start is not None else math.inf)
+                self._end = max(layout.end, self._end if self._end is not None else -math.inf)
 
     def _select(self) -> tuple[str, str, list[tuple[str, str]]]:
         name = self.path.name
@@ -297,8 +342,9 @@ class CarmenReader:
                         "choose one of them with --scan-topic",
                     )
                 )
-        elif lasers:  # the first in order of preference with a whole line: one damaged line is no laser
-            usable = [t for t in lasers if self._whole.get(t)] or lasers
+        elif lasers:  # the first in order of preference with at least half as many whole lines as the
+            most = max(self._whole.get(t, 0) for t in lasers)  # most: one damaged line is no laser, and
+            usable = [t for t in lasers if 2 * self._whole.get(t, 0) >= most]  # 3 lines beside 150 no scans
             scan = next(t for t in ("ROBOTLASER1", "FLASER", "RLASER", "ROBOTLASER2") if t in usable)
         else:
             problems.append(
@@ -370,6 +416,7 @@ class CarmenReader:
             return DEFAULT_MAX_RANGE
 
     odom_on_tf = False  # CARMEN has no tf
+    mount_problem = ""  # why laser_to_base() found no mount in the laser poses (frontend.warn_mount says it)
 
     def laser_upside_down(self) -> bool | None:  # a CARMEN laser pose is planar: input.laser.upside_down
         return None
@@ -385,7 +432,7 @@ class CarmenReader:
             if not tok or tok[0] != self.scan_topic:
                 continue
             try:
-                las = parse_laser(tok, 0.0)
+                las = parse_laser(tok, 0.0, self._tail.get(self.scan_topic, TAIL))
             except BadLine:
                 continue
             (lx, ly, lt), (rx, ry, rt) = las.laser, las.robot
@@ -399,11 +446,40 @@ class CarmenReader:
         if not offs:
             return None
         a = np.array(offs)
+        mid = np.median(a, axis=0)
+        xy = float(np.hypot(*(a[:, :2] - mid[:2]).T).max())
+        turn = float(np.abs(np.arctan2(np.sin(a[:, 2] - mid[2]), np.cos(a[:, 2] - mid[2]))).max())
+        if xy > MOUNT_SPREAD[0] or turn > MOUNT_SPREAD[1]:  # not one place on the robot: no mount
+            self.mount_problem = (
+                f"gives no laser mount: its {self.scan_topic} laser poses are not at one place on the robot "
+                f"(over its first {len(a)} lines their offsets from the robot poses spread over "
+                f"{xy:.2f} m and {math.degrees(turn):.1f}°: corrected poses in their fields?)"
+            )
+            return None
         return (
             float(a[:, 0].mean()),
             float(a[:, 1].mean()),
             float(np.arctan2(np.sin(a[:, 2]).mean(), np.cos(a[:, 2]).mean())),
         )
+
+    def _warn_odometry(self) -> None:
+        """Warn when the odometry is a laser tag's pose fields for want of whole ODOM lines, or those
+        fields never move (the run then has none: the scans alone)."""
+        odom, n_odom = self.odom_topic, self._counts.get(ODOM_TAG, 0)
+        if odom == ODOM_TAG:
+            return
+        if n_odom and not self._whole.get(ODOM_TAG) and not self._want_odom:
+            self.stats.warn(
+                "%s: none of its %d ODOM lines is whole (their fields do not match the format): the odometry "
+                "is its %s lines' pose fields instead",
+                self.path.name, n_odom, odom,
+            )  # fmt: skip
+        if self._whole.get(odom, 0) > 1 and odom not in self._moving:
+            self.stats.warn(
+                "%s: the odometry pose fields of its %s lines never move: the run has no odometry (the scans "
+                "alone place the robot)",
+                self.path.name, odom,
+            )  # fmt: skip
 
     def messages(self) -> Iterator[Scan | OdomSample]:
         self.check()
@@ -418,6 +494,7 @@ class CarmenReader:
         scan_tag, odom_tag = self.scan_topic, self.odom_topic
         max_range = self._max_range(scan_tag)
         where = self.path.name
+        self._warn_odometry()
         unread, first_unread = 0, ""  # laser lines that could not be read; the first's number and why
         for lineno, line in enumerate(_lines(self.path, st), 1):
             tok = line.split()
@@ -426,13 +503,13 @@ class CarmenReader:
                 continue
             try:
                 if tag == ODOM_TAG:
-                    stamp, x, y, th = parse_odom(tok)
+                    stamp, x, y, th = parse_odom(tok, self._tail.get(ODOM_TAG, TAIL))
                     if st.bad_odometry(f"{where}:{lineno}", stamp, (x, y, th)):
                         continue
                     st.odoms += 1
                     yield OdomSample(stamp, x, y, th)
                     continue
-                las = parse_laser(tok, max_range)
+                las = parse_laser(tok, max_range, self._tail.get(tag, TAIL))
             except BadLine as exc:
                 st.failed("%s:%d: malformed %s line skipped (%s)", where, lineno, tag, exc)
                 if tag == scan_tag:
@@ -460,7 +537,9 @@ class CarmenReader:
             )
             raise LogError(
                 f"CARMEN log '{where}' has no complete laser line: {which} be read ({first_unread})",
-                "a recorder stopped mid-line, or the file is damaged: give a log with whole laser lines",
+                "a recorder stopped mid-line, the file is damaged, or its lines are not CARMEN's (each ends "
+                "with its timestamp, hostname and logger timestamp, or the timestamp alone): give a log with "
+                "whole laser lines",
             )
         st.check_scans_yielded(where, scan_tag)
 

@@ -186,32 +186,41 @@ def synchronise(
                 jumps.popleft()
             yield Synced(scan, pose, jumped, twist)
 
+    def on_scan(msg: Scan) -> Iterator[Synced]:
+        nonlocal last_scan_stamp, waited_out, held
+        if msg.stamp <= last_scan_stamp:
+            st.scan_time_backwards += 1
+            return
+        if last_odom_stamp == -np.inf:  # no odometry yet: a bag's log order is not its stamps' order,
+            last_scan_stamp = msg.stamp  # so it waits for the first sample (its stamp decides)
+            pending.append(msg)
+            while len(pending) > MAX_PENDING or msg.stamp - pending[0].stamp > MAX_GAP:
+                pending.popleft()
+                st.before_first_odom += 1
+            return
+        if msg.stamp - last_odom_stamp > MAX_GAP:  # no odometry near it: it waits for the next message
+            if held is not None:  # (the sample logged just after its scan, at its stamp: a CARMEN laser's
+                waited_out += 1  # pose fields, ODOM lines written after the laser's); counted later
+            held = msg  # and not the reference for "backwards": one far-future stamp would otherwise
+            return  # skip every later scan
+        last_scan_stamp = msg.stamp
+        pending.append(msg)
+        while pending and (len(pending) > MAX_PENDING or msg.stamp - pending[0].stamp > MAX_GAP):
+            # one waiting only for the rest of its velocity's window: synchronised with a shorter one
+            if odom[-1].stamp >= pending[0].stamp:
+                yield from emit_ready(last=True)
+                continue
+            pending.popleft()  # no odometry came for it: dropped now, counted when it is known why
+            waited_out += 1
+
+    held: Scan | None = None  # a scan more than MAX_GAP after the newest sample, waiting one message
     for msg in messages:
         if isinstance(msg, Scan):
             st.scans_in += 1
             st.scan_stamps.see(msg.stamp)
-            if msg.stamp <= last_scan_stamp:
-                st.scan_time_backwards += 1
-                continue
-            if last_odom_stamp == -np.inf:  # no odometry yet: a bag's log order is not its stamps' order,
-                last_scan_stamp = msg.stamp  # so it waits for the first sample (its stamp decides)
-                pending.append(msg)
-                while len(pending) > MAX_PENDING or msg.stamp - pending[0].stamp > MAX_GAP:
-                    pending.popleft()
-                    st.before_first_odom += 1
-                continue
-            if msg.stamp - last_odom_stamp > MAX_GAP:  # no odometry near it: dropped now, counted later
-                waited_out += 1  # and not the reference for "backwards": one far-future stamp
-                continue  # would otherwise skip every later scan
-            last_scan_stamp = msg.stamp
-            pending.append(msg)
-            while len(pending) > MAX_PENDING or msg.stamp - pending[0].stamp > MAX_GAP:
-                # one waiting only for the rest of its velocity's window: synchronised with a shorter one
-                if odom[-1].stamp >= pending[0].stamp:
-                    yield from emit_ready(last=True)
-                    continue
-                pending.popleft()  # no odometry came for it: dropped now, counted when it is known why
-                waited_out += 1
+            if held is not None:  # no sample came for it
+                held, waited_out = None, waited_out + 1
+            yield from on_scan(msg)
         elif isinstance(msg, OdomSample):
             st.odom_stamps.see(msg.stamp)
             if msg.stamp <= last_odom_stamp:
@@ -234,8 +243,12 @@ def synchronise(
                     odom.popleft()
             if len(odom) > MAX_ODOM:
                 odom.popleft()
+            if held is not None:  # a sample came after it: it is judged again against this one
+                scan, held = held, None
+                yield from on_scan(scan)
         yield from emit_ready()
     yield from emit_ready(last=True)
+    waited_out += held is not None
     if last_odom_stamp == -np.inf:  # no odometry at all: every scan was before it
         st.before_first_odom += len(pending)
     else:
