@@ -323,7 +323,13 @@ def run(
 @click.option("--out", type=GivenPath(), help="Output directory (default ./cornerslam_out/LOG_compare).")
 @topic_options
 @reference_options
-@click.option("--jobs", default=1, show_default=True, type=click.IntRange(1, 64), help="Parallel processes.")
+@click.option(
+    "--jobs",
+    default=1,
+    show_default=True,
+    type=click.IntRange(1, 64),
+    help="Parallel processes (the filters' times then include waiting for the CPU: compare times with 1).",
+)
 @span_options
 @verbosity_options
 def compare(
@@ -431,6 +437,8 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
     if log_info.scan_topic and scan is None and unread is None:  # every chunk corrupt: no scan at all
         unread = no_scan_read(log_path, "run has none to process", topics_hint=False, stats=reader.stats)
     preset = None if scan is None else detect_preset(scan.n_beams, scan.angle_increment)
+    if getattr(reader, "mount_problem", ""):  # a CARMEN log's laser poses that are no fixed mount
+        log_info = replace(log_info, notes=(*log_info.notes, f"the log {reader.mount_problem}"))
     upside_down = laser is not None and bool(reader.laser_upside_down())
     frames = None  # the robot's frame (the odometry's child_frame_id, else input.base_frame), the laser's
     if laser is not None and getattr(reader, "laser_frame", None):

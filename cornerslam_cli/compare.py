@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import multiprocessing
+import os
 import signal
 import time
 from collections.abc import Callable, Sequence
@@ -83,6 +84,7 @@ def _run_filters(
     if jobs > 1 and len(assocs) > 1:
         ctx = multiprocessing.get_context("fork")
         workers = min(jobs, len(assocs))
+        _SHARED["src"].filters_at_once = workers  # (the forked workers' summaries say so)
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init)
         try:
             with signals_deferred():  # (the workers fork here: a signal then lands after, in this process)
@@ -98,6 +100,11 @@ def _run_filters(
         for s in summaries:  # the runs' warnings, each said once (the extraction's were already)
             for text in s.warnings:
                 _SHARED["src"].reader.stats.say(text)
+        log.warning(
+            "timings: %d filters ran at once (--jobs %d on %d cores): each one's times include waiting for "
+            "the CPU, and which waited depends on the order of --assoc; to compare them, run with --jobs 1",
+            workers, jobs, os.cpu_count() or 1,
+        )  # fmt: skip
         return summaries
     summaries = []
     for k, (a, d) in enumerate(zip(assocs, dirs, strict=True)):

@@ -126,6 +126,9 @@ class Input:
     # where laser_upside_down came from, which need not be where laser2base did: tf (the log's tf) or
     # config (input.laser.upside_down: a log without tf, input.laser.from_tf off, or a planar CARMEN mount)
     laser_upside_down_source: str = "config"
+    # compare --jobs: the filters running at once over these frames (summary.json timing.concurrent_filters:
+    # their times include waiting for the CPU)
+    filters_at_once: int = 1
 
 
 def open_input(

@@ -249,6 +249,9 @@ class Timing(JsonResult):
     scans_per_second: float
     t_grid: float | None = optional()  # ray tracing and writing the occupancy grid (absent before it)
     t_loop: float | None = optional()  # loop closing and the pose graph (issue 16; absent without submaps)
+    # compare --jobs: the filters that ran at once, this one among them (absent when it ran alone): its
+    # times include waiting for the CPU, so they compare with no other run's
+    concurrent_filters: int | None = optional()
 
 
 @dataclass(frozen=True, kw_only=True)

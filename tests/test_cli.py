@@ -15,7 +15,7 @@ from cornerslam_cli.errors import ConfigError
 from cornerslam_cli.logs.writers import RawScan, write_mcap
 from cornerslam_cli.options import parse_assocs
 from cornerslam_cli.report.ownership import MARKER
-from cornerslam_cli.report.tables import TIMING_COLUMNS, TRAJECTORY_COLUMNS, read_csv
+from cornerslam_cli.report.tables import TIMING_COLUMNS, TRAJECTORY_COLUMNS, best_cells, read_csv
 from cornerslam_cli.types import OdomSample
 
 T0 = 1_700_000_000.0
@@ -668,6 +668,30 @@ def test_compare_runs_every_associator_on_the_same_frames(sim_log, tmp_path):
     assert "scan-matched odometry (the filter's motion input): ATE" in res.output
     for name in ("report.html", "compare_matching.png", "compare_maps.png", "icnn/map.png", "pca/timing.png"):
         assert (out / name).stat().st_size > 1000, name
+    # two filters ran at once: their times include waiting for the CPU — recorded, said, not ranked
+    for a in ("icnn", "pca"):
+        assert json.loads((out / a / "summary.json").read_text())["timing"]["concurrent_filters"] == 2
+    assert res.stderr.count("timings: 2 filters ran at once (--jobs 2 on") == 1, res.stderr
+    page = (out / "report.html").read_text()
+    assert "The 2 filters ran 2 at a time" in page
+
+
+def test_times_are_not_ranked_when_the_runs_shared_the_cpu():
+    cols = {"assoc": np.array(["icnn", "pca"], dtype=object), "t_total": np.array([2.0, 1.0]),
+            "ate_rmse": np.array([0.2, 0.1]), "wall_time": np.array([3.0, 4.0])}  # fmt: skip
+    names = ["assoc", "t_total", "ate_rmse", "wall_time"]
+    assert best_cells(cols, 2, names) == {(1, 1), (1, 2), (0, 3)}
+    assert best_cells(cols, 2, names, timed=False) == {(1, 2)}
+
+
+def test_compare_one_job_records_no_concurrency_and_ranks_the_times(sim_log, tmp_path):
+    out = tmp_path / "cmp"
+    res = invoke("compare", sim_log, "--assoc", "icnn,pca", "--out", out, "--max-scans", "60")
+    assert res.exit_code == 0, res.output
+    for a in ("icnn", "pca"):
+        assert "concurrent_filters" not in json.loads((out / a / "summary.json").read_text())["timing"]
+    assert "filters ran at once" not in res.stderr
+    assert "at a time" not in (out / "report.html").read_text()
 
 
 def test_compare_gives_each_associator_only_its_own_runs_warnings(sim_log, tmp_path, monkeypatch):

@@ -8,7 +8,9 @@ import math
 import numpy as np
 import pytest
 from _log_fixtures import split
+from click.testing import CliRunner
 
+from cornerslam_cli.cli import cli
 from cornerslam_cli.errors import LogError
 from cornerslam_cli.logs import open_log
 from cornerslam_cli.logs.carmen import flaser_increment
@@ -357,16 +359,27 @@ def test_lines_ending_at_their_timestamp_or_hostname_read_as_the_standard_ones(t
         lines += [
             _odom_line(t, 0.1 * i),
             _flaser_odom(t + 0.5, 9, 0.1 * i),
-            _robotlaser(t + 0.7, 0.1 * i + 0.2, 0.1 * i),
+            # (2 remissions; the poses' y apart from their x: each field read where it belongs)
+            f"ROBOTLASER1 0 -0.5 1.0 0.25 9.9 0.01 0 3 1 1 1 2 7 7 {0.1 * i + 0.2} 0.5 0 {0.1 * i} 0.5 0 "
+            f"0 0 0 0 0 {t + 0.7} h {t + 0.7}\n",
         ]
     whole, short = tmp_path / "whole.log", tmp_path / "short.log"
     whole.write_text("".join(lines))
     short.write_text("".join(map(cut, lines)))
     for topic in ("FLASER", "ROBOTLASER1"):
-        log, scans, odoms = _read(short, scan_topic=topic)
-        assert (scans, odoms) == _read(whole, scan_topic=topic)[1:] and len(scans) == len(odoms) == 5
-        assert log.info().odom_source == "ODOM lines" and log.stats.decode_failed == 0
+        for odom in ("", topic):  # ODOM lines, and the laser lines' own robot pose fields
+            log, scans, odoms = _read(short, scan_topic=topic, odom_topic=odom)
+            assert (scans, odoms) == _read(whole, scan_topic=topic, odom_topic=odom)[1:]
+            assert len(scans) == len(odoms) == 5 and log.stats.decode_failed == 0
+            assert log.info().odom_source == ("ODOM lines" if not odom else f"{topic} odometry fields")
+            y = 0.5 if odom == "ROBOTLASER1" else 0.0
+            want = [(0.1 * i, y, 0.0) for i in range(1, 6)]
+            np.testing.assert_allclose([o[1:] for o in odoms], want, atol=1e-12)
     assert open_log(short, scan_topic="ROBOTLASER1").laser_to_base() == pytest.approx((0.2, 0.0, 0.0))
+    # as many lines of each layout: the standard one
+    mixed = tmp_path / "mixed.log"
+    mixed.write_text("".join(lines[:6] + [cut(x) for x in lines[6:12]]))
+    assert [scan[0] for scan in _read(mixed, scan_topic="FLASER")[1]] == [1001.5, 1002.5]
     extra = tmp_path / "extra.log"
     extra.write_text("".join(line.replace(" h ", " h x ").replace(" host ", " host x ") for line in lines))
     with pytest.raises(LogError, match="needs 13 fields after its tag, has 14"):
@@ -397,27 +410,47 @@ def test_odometry_from_laser_fields_for_want_of_odom_lines_or_never_moving_is_wa
     p.write_text("".join(_flaser_odom(1000.0 + i, 0, 0) for i in range(4)))
     with caplog.at_level(logging.WARNING, logger="cornerslam.logs"):
         _read(p)
-    assert "pose fields of its FLASER lines never move: the run has no odometry" in caplog.text
+    assert (
+        "pose fields of its FLASER lines never move: the run takes the robot as standing still" in caplog.text
+    )
+
+
+def _rl(t, laser, robot):
+    """A ROBOTLASER1 line with whole laser and robot poses (x, y, theta)."""
+    poses = " ".join(f"{v:.6f}" for v in (*laser, *robot))
+    return f"ROBOTLASER1 0 -0.5 1.0 0.25 9.9 0.01 0 3 1 1 1 0 {poses} 0 0 0 0 0 {t} h {t}\n"
 
 
 def test_robotlaser_poses_that_are_not_one_place_on_the_robot_give_no_mount(tmp_path):
     """ROBOTLASER1 lines whose laser pose fields hold another trajectory (corrected poses, another origin)
     than their robot pose fields: their offsets spread over metres, so no mount is taken from them (it
-    was their mean, 4.6 m off, with no word) and the reason is kept for the run's warning; a fixed offset
-    printed to 6 digits is a mount."""
+    was their mean, 4.6 m off, with no word) and the reason is kept for the run's warning; so too when
+    only their headings drift apart. A fixed mount on a turning robot, printed to 6 digits, is one, and
+    a line with a glitched pose does not undo it."""
+    from cornerslam_cli.geometry import compose
+
+    mount = np.array([0.3, 0.1, 0.2])
+    robots = [np.array([0.5 * i, 0.2 * i, 0.1 * i]) for i in range(60)]
+    lasers = [compose(r, mount) for r in robots]
     p = tmp_path / "a.log"
-    rng = np.random.default_rng(1)
-    p.write_text(  # a fixed 0.3 m mount, to its printed digits
-        "".join(
-            _robotlaser(1000.0 + i, round(0.5 * i + 0.3 + 1e-6 * rng.normal(), 6), 0.5 * i) for i in range(60)
+
+    def mount_of(lasers):
+        p.write_text(
+            "".join(_rl(1000.0 + i, la, r) for i, (la, r) in enumerate(zip(lasers, robots, strict=True)))
         )
-    )
-    lines = [line.split() for line in p.read_text().splitlines()]
-    for i, tok in enumerate(lines):  # the laser x field: another trajectory's (4 m ahead, drifting)
-        tok[13] = str(0.5 * i * 1.1 + 4.0)
-    log = open_log(p)
-    assert log.laser_to_base() == pytest.approx((0.3, 0.0, 0.0), abs=1e-5) and not log.mount_problem
-    p.write_text("".join(" ".join(tok) + "\n" for tok in lines))
-    log = open_log(p)
-    assert log.laser_to_base() is None
-    assert "laser poses are not at one place on the robot" in log.mount_problem
+        log = open_log(p)
+        return log.laser_to_base(), log.mount_problem
+
+    got, problem = mount_of(lasers)
+    np.testing.assert_allclose(got, mount, atol=1e-5)
+    assert not problem
+    glitch = [la + (3.0, 0, 0) if i == 7 else la for i, la in enumerate(lasers)]
+    np.testing.assert_allclose(mount_of(glitch)[0], mount, atol=1e-5)
+    corrected = [np.array([0.55 * i + 4.0, 0.2 * i, 0.1 * i]) for i in range(60)]  # another trajectory
+    got, problem = mount_of(corrected)
+    assert got is None and "laser poses are not at one place on the robot" in problem
+    res = CliRunner().invoke(cli, ["info", str(p)])  # info says why, beside the laser's line
+    assert res.exit_code == 0 and "note:      the log gives no laser mount: its ROBOTLASER1" in res.output
+    turned = [la + (0, 0, 0.01 * i) for i, la in enumerate(lasers)]  # their headings drift apart only
+    got, problem = mount_of(turned)
+    assert got is None and "spread over 0.00 m and" in problem

@@ -376,3 +376,23 @@ def test_report_compares_the_associators_on_loop_closing_in_a_table_of_its_own(c
     page = Page((single_map[0] / "report.html").read_text(encoding="utf-8"))
     (main,) = [t for t in page.tables if t and t[0] and t[0][0][0] == "assoc"]  # no loop-closing table
     assert [c[0] for c in main[0]] == BEFORE
+
+
+def test_the_landmark_curves_count_the_whole_map_not_the_open_submap(compared, single_map):
+    """Fig 17's and Fig 19's landmark curves: timing.csv's n_landmarks counts the open submap's, so
+    they drew a sawtooth ending at the last submap's count (24 on the simulated office against 177 in
+    map.csv); each closed submap's count is now added to the steps after it — at the end map.csv's rows
+    (each run of a comparison, and a single map's curve as it was)."""
+    for a in ASSOCS:
+        run = load_run(compared[0] / a)
+        total = run.map_landmarks()
+        assert total[-1] == len(run.landmarks["id"]) and np.all(np.diff(total) >= -len(run.landmarks["id"]))
+        assert len(np.unique(run.submap)) > 1 and total[-1] > run.timing["n_landmarks"][-1]
+        closes = np.flatnonzero(np.diff(run.submap)) + 1  # first steps of each later submap
+        want = run.timing["n_landmarks"].copy()
+        for c in closes:  # by hand: a closed submap's last count carried on
+            want[c:] += run.timing["n_landmarks"][c - 1]
+        np.testing.assert_array_equal(total, want)
+    run = load_run(single_map[0] / ASSOCS[0])
+    np.testing.assert_array_equal(run.map_landmarks(), run.timing["n_landmarks"])
+    assert run.map_landmarks()[-1] == len(run.landmarks["id"])

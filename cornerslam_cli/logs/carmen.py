@@ -29,13 +29,16 @@ Conventions (as CARMEN's own ``carmen_string_to_laser_laser_message_orig``):
   each scan, while odometry interpolated between out-of-order ODOM lines is wrong at the scans' times.
   ``odom_topic`` ``ODOM`` keeps the ODOM lines.
 * The laser offset is not in FLASER lines: ``laser_to_base()`` returns the mean laser-minus-robot
-  offset of ROBOTLASER1 lines, None for FLASER logs (configure it).
+  offset of ROBOTLASER1 lines, None for FLASER logs (configure it) and for ROBOTLASER1 lines whose offsets
+  are not one place on the robot (``MOUNT_SPREAD``: corrected poses in the laser pose fields), then
+  saying why in ``mount_problem``.
 
 Over 400 lines because it is one reader of four line formats whose choices (which laser, which
 odometry source, the pre-read's stamps) each depend on the others.
 
-"Topics" are the line tags (``FLASER``, ``ODOM``, ...): ``scan_topic`` selects the laser tag
-(default ROBOTLASER1, else FLASER, else RLASER), ``odom_topic`` ``ODOM`` or a laser tag.
+"Topics" are the line tags (``FLASER``, ``ODOM``, ...): ``scan_topic`` selects the laser tag (default:
+ROBOTLASER1, else FLASER, else RLASER, else ROBOTLASER2, among the tags with at least half as many whole
+lines as the one with the most), ``odom_topic`` ``ODOM`` or a laser tag.
 """
 
 from __future__ import annotations
@@ -69,6 +72,7 @@ TAIL = 2
 # m, rad: ROBOTLASER1 laser poses whose offsets from the robot poses spread wider than this (from their
 # median) are no mount: a laser pose computed from the robot's is the same offset to its printed digits
 MOUNT_SPREAD = (0.1, math.radians(5.0))
+MOUNT_SHARE = 0.9  # ... unless at least this share of them lies within it (the mount: their mean)
 
 
 def flaser_increment(n: int) -> float:
@@ -125,7 +129,7 @@ def _through_stamp(tag: str, tok: list[str]) -> int:
 def _odometry_fields(tag: str, tok: list[str], through: int) -> tuple[float, ...] | None:
     """The robot pose of a whole laser line (its fields after the tag, ``through`` of them up to its
     stamp): FLASER/RLASER ``odom_x odom_y odom_theta`` just before the timestamp, ROBOTLASERx ``robot_x
-    robot_y robot_theta`` 9th–7th before it; None when they are not numbers."""
+    robot_y robot_theta`` 8th–6th before it; None when they are not numbers."""
     fields = tok[through - 4 : through - 1] if tag in ("FLASER", "RLASER") else tok[through - 9 : through - 6]
     try:
         return tuple(float(v) for v in fields)
@@ -229,7 +233,7 @@ def parse_laser(tok: list[str], max_range: float, tail: int = TAIL) -> _Laser:
     (the log's layout: CarmenReader; raises BadLine)."""
     if tok[0] in ("FLASER", "RLASER"):  # n, n readings, laser x y theta, odom x y theta, the stamp, tail
         n = _count(tok, 1, "reading count", 8 + tail)
-        _fields(tok, n + 8 + tail, f" of {_many(n, 'reading')}")
+        _fields(tok, _through_stamp(tok[0], tok[1:]) + tail, f" of {_many(n, 'reading')}")
         ranges = _readings(tok, 2, n)
         p = [_number(tok, 2 + n + k, name) for k, name in enumerate(POSE_NAMES)]
         stamp = _number(tok, 8 + n, "timestamp")
@@ -238,7 +242,8 @@ def parse_laser(tok: list[str], max_range: float, tail: int = TAIL) -> _Laser:
     # the stamp, tail
     n = _count(tok, 8, "reading count", 21 + tail)
     n_rem = _count(tok, 9 + n, "remission count", n + 21 + tail, f" of {_many(n, 'reading')}")
-    _fields(tok, n + n_rem + 21 + tail, f" of {_many(n, 'reading')} and {_many(n_rem, 'remission')}")
+    of = f" of {_many(n, 'reading')} and {_many(n_rem, 'remission')}"
+    _fields(tok, _through_stamp(tok[0], tok[1:]) + tail, of)
     start, _fov, res, rmax = (_number(tok, i, name) for i, name in enumerate(ROBOTLASER_NAMES, 2))
     ranges = _readings(tok, 9, n)
     rest = 10 + n + n_rem
@@ -296,9 +301,7 @@ class CarmenReader:
                     tok = rest.split()
                     through = _through_stamp(tag, tok)
                     if 0 <= through <= len(tok) <= through + TAIL:  # (else cut or malformed)
-                        key = (tag, len(tok) - through)
-                        layout = layouts.get(key) or layouts.setdefault(key, _Layout())
-                        layout.see(tag, tok, through)
+                        layouts.setdefault((tag, len(tok) - through), _Layout()).see(tag, tok, through)
         except OSError as exc:
             raise LogError(
                 f"cannot read CARMEN log '{name}': {exc.strerror or exc}", "check the file (gzip damaged?)"
@@ -308,8 +311,10 @@ class CarmenReader:
                 f"'{name}' is not a CARMEN log: no FLASER/RLASER/ROBOTLASER1/ODOM lines",
                 "give a CARMEN log (.clf/.log), an .mcap, a .bag or a ROS 2 bag directory",
             )
-        for tag in {tag for tag, _ in layouts}:  # the standard layout, unless another has more lines (two
-            standard = layouts.get((tag, TAIL))  # at least: a log's one cut line is no layout)
+        # each tag's layout: the standard one, unless another has more lines (and two at least: a log's
+        # one cut line is no layout)
+        for tag in {tag for tag, _ in layouts}:
+            standard = layouts.get((tag, TAIL))
             lines, tail = max(
                 ((n.lines, t) for (g, t), n in layouts.items() if g == tag and t != TAIL and n.lines >= 2),
                 default=(0, TAIL),
@@ -447,15 +452,17 @@ class CarmenReader:
             return None
         a = np.array(offs)
         mid = np.median(a, axis=0)
-        xy = float(np.hypot(*(a[:, :2] - mid[:2]).T).max())
-        turn = float(np.abs(np.arctan2(np.sin(a[:, 2] - mid[2]), np.cos(a[:, 2] - mid[2]))).max())
-        if xy > MOUNT_SPREAD[0] or turn > MOUNT_SPREAD[1]:  # not one place on the robot: no mount
+        xy = np.hypot(*(a[:, :2] - mid[:2]).T)
+        turn = np.abs(np.arctan2(np.sin(a[:, 2] - mid[2]), np.cos(a[:, 2] - mid[2])))
+        near = (xy <= MOUNT_SPREAD[0]) & (turn <= MOUNT_SPREAD[1])
+        if near.mean() < MOUNT_SHARE:  # not one place on the robot: no mount
             self.mount_problem = (
                 f"gives no laser mount: its {self.scan_topic} laser poses are not at one place on the robot "
                 f"(over its first {len(a)} lines their offsets from the robot poses spread over "
-                f"{xy:.2f} m and {math.degrees(turn):.1f}°: corrected poses in their fields?)"
+                f"{xy.max():.2f} m and {math.degrees(turn.max()):.1f}°: corrected poses in their fields?)"
             )
             return None
+        a = a[near]  # (a line or two with a glitched pose left out)
         return (
             float(a[:, 0].mean()),
             float(a[:, 1].mean()),
@@ -476,8 +483,9 @@ class CarmenReader:
             )  # fmt: skip
         if self._whole.get(odom, 0) > 1 and odom not in self._moving:
             self.stats.warn(
-                "%s: the odometry pose fields of its %s lines never move: the run has no odometry (the scans "
-                "alone place the robot)",
+                "%s: the odometry pose fields of its %s lines never move: the run takes the robot as "
+                "standing still and moves it only as far as its scan matches correct that (give a log with "
+                "odometry)",
                 self.path.name, odom,
             )  # fmt: skip
 
@@ -538,8 +546,8 @@ class CarmenReader:
             raise LogError(
                 f"CARMEN log '{where}' has no complete laser line: {which} be read ({first_unread})",
                 "a recorder stopped mid-line, the file is damaged, or its lines are not CARMEN's (each ends "
-                "with its timestamp, hostname and logger timestamp, or the timestamp alone): give a log with "
-                "whole laser lines",
+                "with its timestamp, hostname and logger timestamp, or the timestamp (and hostname) alone): "
+                "give a log with whole laser lines",
             )
         st.check_scans_yielded(where, scan_tag)
 

@@ -14,8 +14,9 @@ Scans that cannot be interpolated are skipped and counted in :class:`SyncStats`:
 after the last odometry sample, in a gap of the odometry (samples more than MAX_GAP apart around it),
 stamps that go backwards or repeat. "Backwards" is relative to the last scan that could still be
 paired: a scan more than MAX_GAP after the newest sample (one far-future stamp, 1e18; also one logged
-before the first sample, checked when that sample comes) is skipped without becoming the reference, so
-it cannot make the later scans look late.
+before the first sample, checked when that sample comes) does not become the reference, so it cannot
+make the later scans look late; it is judged again as each sample comes until the next scan (a sample
+logged just after it, at its stamp, pairs with it), and else skipped.
 Odometry samples that go back in time are dropped and counted too. One warning sums them up; when no
 scan met the odometry and their stamps lie more than :data:`CLOCKS_APART` apart, it (and the run's
 error) says they are on different clocks (:meth:`SyncStats.other_clocks`).
@@ -145,6 +146,9 @@ def synchronise(
     last_odom_stamp = -np.inf
     first_odom_stamp = np.inf
     waited_out = 0  # scans that waited too long since the last odometry sample
+    # a scan more than MAX_GAP after the newest sample: judged again after each sample until the next
+    # scan comes (then it has waited out) or the log ends (after the last sample)
+    held: Scan | None = None
     # stamps of the odometry samples re-anchored across a jump since the last pair yielded: a pair carries
     # those up to the first sample at or after its stamp (the sample its interpolation ends at)
     jumps: deque[float] = deque()
@@ -198,11 +202,12 @@ def synchronise(
                 pending.popleft()
                 st.before_first_odom += 1
             return
-        if msg.stamp - last_odom_stamp > MAX_GAP:  # no odometry near it: it waits for the next message
-            if held is not None:  # (the sample logged just after its scan, at its stamp: a CARMEN laser's
-                waited_out += 1  # pose fields, ODOM lines written after the laser's); counted later
-            held = msg  # and not the reference for "backwards": one far-future stamp would otherwise
-            return  # skip every later scan
+        if msg.stamp - last_odom_stamp > MAX_GAP:
+            # no odometry near it: it is held (not the reference for "backwards": one far-future stamp
+            # would otherwise skip every later scan), judged again as samples come — the one logged just
+            # after it, at its stamp (a CARMEN laser's pose fields, ODOM lines written after the laser's)
+            held = msg
+            return
         last_scan_stamp = msg.stamp
         pending.append(msg)
         while pending and (len(pending) > MAX_PENDING or msg.stamp - pending[0].stamp > MAX_GAP):
@@ -213,12 +218,11 @@ def synchronise(
             pending.popleft()  # no odometry came for it: dropped now, counted when it is known why
             waited_out += 1
 
-    held: Scan | None = None  # a scan more than MAX_GAP after the newest sample, waiting one message
     for msg in messages:
         if isinstance(msg, Scan):
             st.scans_in += 1
             st.scan_stamps.see(msg.stamp)
-            if held is not None:  # no sample came for it
+            if held is not None:  # no sample near it came before this scan
                 held, waited_out = None, waited_out + 1
             yield from on_scan(msg)
         elif isinstance(msg, OdomSample):

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from ..results import Ate, MapConsistency, RelationError, RunSummary, to_json
 from .plots import COMPARE_FIGURES, RUN_FIGURES, compare_assocs, corrected_label, plot_compare, plot_run
-from .tables import COMPARISON_COLUMNS, COMPARISON_LOOP_COLUMNS, read_csv
+from .tables import COMPARISON_COLUMNS, COMPARISON_LOOP_COLUMNS, best_cells, read_csv
 
 CSS = """
 body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 2em auto; max-width: 1200px;
@@ -50,20 +50,6 @@ CAPTIONS = {
     "compare_timing.png": "Fig 17 — per-step matching time per associator.",
 }
 
-# comparison.csv columns where one direction is better (the best cell is highlighted)
-BETTER: dict[str, Callable[[Iterable[float]], float]] = {
-    "matched_total": max,
-    "t_match_total": min,
-    "t_match_max": min,
-    "t_total": min,
-    "ate_rmse": min,
-    "rpe_trans_per_m": min,
-    "wall_time": min,
-    "budget_hits": min,
-    "online_ate_rmse": min,
-}
-
-
 # summary.json's time totals as the report names them
 TIME_LABELS = {
     "t_extract": "extraction time",
@@ -71,7 +57,7 @@ TIME_LABELS = {
     "t_predict": "prediction time",
     "t_match": "matching time",
     "t_update": "update time",
-    "t_total": "filter time (all stages)",
+    "t_total": "filter time (all stages, summed over the steps)",
     "wall_time": "wall-clock time",
 }
 
@@ -317,31 +303,14 @@ def _run_report(out_dir: Path) -> str:
     return _page(title, body)
 
 
-def best_cells(columns: dict, n_rows: int, names: list[str] = COMPARISON_COLUMNS) -> set[tuple[int, int]]:
-    """(row, col) of the best value in each BETTER column of ``names`` (the table's columns, in
-    order), when the values differ."""
-    best = set()
-    for j, name in enumerate(names):
-        pick = BETTER.get(name)
-        col = columns.get(name)
-        if pick is None or col is None or col.dtype == object:
-            continue
-        vals = [float(v) for v in col]
-        finite = [v for v in vals if math.isfinite(v)]
-        if len(set(finite)) < 2:  # nothing to choose between
-            continue
-        target = pick(finite)
-        best |= {(i, j) for i, v in enumerate(vals) if v == target}
-    return best
-
-
 MAIN_COLUMNS = [c for c in COMPARISON_COLUMNS if c not in COMPARISON_LOOP_COLUMNS]
 
 
-def _comparison_table(columns: dict, n: int, names: list[str], wide: bool = False) -> str:
-    """comparison.csv's ``names`` columns as a table of its ``n`` rows, the best values highlighted."""
+def _comparison_table(columns: dict, n: int, names: list[str], wide: bool = False, timed: bool = True) -> str:
+    """comparison.csv's ``names`` columns as a table of its ``n`` rows, the best values highlighted (the
+    times only when ``timed``: the runs did not share the CPU)."""
     rows = [[columns[c][i] for c in names] for i in range(n)]
-    return table(names, rows, best=best_cells(columns, n, names), wide=wide)
+    return table(names, rows, best=best_cells(columns, n, names, timed), wide=wide)
 
 
 def _loop_comparison(columns: dict, n: int) -> list[str]:
@@ -362,12 +331,20 @@ def _compare_report(out_dir: Path) -> str:
     log = summaries[assocs[0]].input.log if assocs else ""
     log_name = Path(log).name if assocs else out_dir.name
     title = f"cornerslam compare — {log_name} ({', '.join(assocs)})"
+    at_once = max((s.timing.concurrent_filters or 1 for s in summaries.values()), default=1)
+    shared = (
+        f" The {n} filters ran {at_once} at a time (<code>--jobs</code>): each one's times include waiting "
+        "for the CPU, and which waited depends on the order of <code>--assoc</code> — their times are not "
+        "compared here; run with <code>--jobs 1</code> to compare them."
+        if at_once > 1
+        else ""
+    )
     body = [
         f"<h1>{esc(title)}</h1>",
         "<nav>" + "".join(f'<a href="#assoc-{esc(a)}">{esc(a)}</a>' for a in assocs) + "</nav>",
         "<h2>Comparison</h2>",
-        f'<p class="muted">log {esc(log)}; times in seconds; best value per column highlighted.</p>',
-        _comparison_table(columns, n, MAIN_COLUMNS, wide=True),
+        f'<p class="muted">log {esc(log)}; times in seconds; best value per column highlighted.{shared}</p>',
+        _comparison_table(columns, n, MAIN_COLUMNS, wide=True, timed=at_once == 1),
         *_loop_comparison(columns, n),
         "<h2>Figures</h2>",
         *[figure(out_dir / name, name) for name in COMPARE_FIGURES if (out_dir / name).is_file()],

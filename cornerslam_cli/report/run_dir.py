@@ -57,6 +57,19 @@ class RunData:
     def title(self) -> str:
         return f"{self.log_name} — {self.assoc}"
 
+    def map_landmarks(self) -> np.ndarray:
+        """(n,) the landmarks in the whole map after each step: timing.csv's ``n_landmarks`` counts the
+        open submap's, so each closed submap's count at its last step is added to the steps after it (at
+        the end: map.csv's rows)."""
+        n = self.timing["n_landmarks"].astype(np.int64)
+        if self.submap is None or len(self.submap) != len(n) or len(n) == 0:
+            return n
+        s = self.submap
+        last = np.flatnonzero(np.r_[s[1:] != s[:-1], False])  # each submap's last step, but the open one's
+        closed = np.zeros(len(n), dtype=np.int64)
+        closed[last + 1] = n[last]
+        return n + np.cumsum(closed)
+
     def loop_closures(self) -> np.ndarray:
         """(k, 2, 2) the accepted loop closures as segments from submap a's origin to submap b's
         (map frame, on the corrected trajectory: :func:`submap_origins`); (0, 2, 2) without any."""

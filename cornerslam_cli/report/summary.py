@@ -93,7 +93,7 @@ def build_summary(
         ),
         assoc=cfg.association.method,
         counts=run_counts(src, totals, n_landmarks, graph),
-        timing=run_timing(totals, wall0, t_grid, graph),
+        timing=run_timing(totals, wall0, t_grid, graph, src.filters_at_once),
         final_pose=tuple(final_pose.tolist()),
         odometry_model=odometry_model(src.matcher),
         consistency=consistency,
@@ -163,11 +163,16 @@ def odometry_model(matcher) -> OdometryModel | None:
 
 
 def run_timing(
-    totals: Totals, wall0: float, t_grid: float | None = None, graph: HierarchicalSlam | None = None
+    totals: Totals,
+    wall0: float,
+    t_grid: float | None = None,
+    graph: HierarchicalSlam | None = None,
+    at_once: int = 1,
 ) -> Timing:
     """The stage times summed over the steps, the slowest matching step, the wall time since ``wall0``
     and the occupancy grid's time ``t_grid``; with the two-level SLAM ``graph``, the loop closing and
-    graph optimisation (over the steps and at the end, closing the last submap)."""
+    graph optimisation (over the steps and at the end, closing the last submap); ``at_once``: the filters
+    that ran at the same time (compare --jobs), recorded when more than one."""
     times = totals.times
     t_loop = None if graph is None else float(times[5] + graph.t_loop)
     return Timing(
@@ -182,6 +187,7 @@ def run_timing(
         scans_per_second=totals.steps / max(float(times.sum()), 1e-12),
         t_grid=t_grid,
         t_loop=t_loop,
+        concurrent_filters=at_once if at_once > 1 else None,
     )
 
 

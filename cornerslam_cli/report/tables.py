@@ -10,8 +10,9 @@ import csv
 import io
 import json
 import logging
+import math
 import os
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -254,3 +255,40 @@ def _json_default(o):
     if isinstance(o, Path):
         return str(o)
     raise TypeError(f"not JSON serialisable: {type(o)}")
+
+
+# comparison.csv columns where one direction is better (the best cell is highlighted)
+BETTER: dict[str, Callable[[Iterable[float]], float]] = {
+    "matched_total": max,
+    "t_match_total": min,
+    "t_match_max": min,
+    "t_total": min,
+    "ate_rmse": min,
+    "rpe_trans_per_m": min,
+    "wall_time": min,
+    "budget_hits": min,
+    "online_ate_rmse": min,
+}
+
+
+TIMES = {"t_match_total", "t_match_max", "t_total", "wall_time"}  # BETTER's columns that are times
+
+
+def best_cells(
+    columns: dict, n_rows: int, names: list[str] = COMPARISON_COLUMNS, timed: bool = True
+) -> set[tuple[int, int]]:
+    """(row, col) of the best value in each BETTER column of ``names`` (the table's columns, in
+    order), when the values differ; not of the times unless ``timed`` (runs timed apart)."""
+    best = set()
+    for j, name in enumerate(names):
+        pick = BETTER.get(name) if timed or name not in TIMES else None
+        col = columns.get(name)
+        if pick is None or col is None or col.dtype == object:
+            continue
+        vals = [float(v) for v in col]
+        finite = [v for v in vals if math.isfinite(v)]
+        if len(set(finite)) < 2:  # nothing to choose between
+            continue
+        target = pick(finite)
+        best |= {(i, j) for i, v in enumerate(vals) if v == target}
+    return best
