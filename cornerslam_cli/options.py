@@ -345,6 +345,7 @@ def parse_assocs(text: str | None, allow_many: bool, log_path: str | None = None
     is taken whole, spaces around it ignored, and a list given where one is taken (``run``) is a usage
     error pointing to ``compare`` (on ``log_path``, when given)."""
     from .association import associator_class
+    from .errors import ConfigError
 
     if text is None:
         return []
@@ -375,7 +376,10 @@ def parse_assocs(text: str | None, allow_many: bool, log_path: str | None = None
             f"'{text}' must list distinct associators, e.g. icnn,jcbb,pca", param_hint="--assoc"
         )
     for name in names:
-        associator_class(name)
+        try:
+            associator_class(name)
+        except ConfigError as e:  # (named where it was given)
+            raise ConfigError(f"--assoc: {e.msg}", e.hint) from None
     return names
 
 

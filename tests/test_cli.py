@@ -914,11 +914,15 @@ def test_a_usage_error_is_one_line_naming_the_help(args, line, tmp_path, monkeyp
 @pytest.mark.parametrize(
     ("text", "allow_many", "line"),
     [
-        ("icnn,jbcc", True, "unknown associator 'jbcc' (did you mean 'jcbb'? (icnn, jcbb, pca))"),
-        ("icnn,qqqq", True, "unknown associator 'qqqq' (choose one of: icnn, jcbb, pca)"),
-        ("jbcc", False, "unknown associator 'jbcc' (did you mean 'jcbb'? (icnn, jcbb, pca))"),
-        ("pca,", False, "unknown associator 'pca,' (did you mean 'pca'? (icnn, jcbb, pca))"),  # one name
-        ("PCA", False, "unknown associator 'PCA' (choose one of: icnn, jcbb, pca)"),
+        ("icnn,jbcc", True, "--assoc: unknown associator 'jbcc' (did you mean 'jcbb'? (icnn, jcbb, pca))"),
+        ("icnn,qqqq", True, "--assoc: unknown associator 'qqqq' (choose one of: icnn, jcbb, pca)"),
+        ("jbcc", False, "--assoc: unknown associator 'jbcc' (did you mean 'jcbb'? (icnn, jcbb, pca))"),
+        (
+            "pca,",
+            False,
+            "--assoc: unknown associator 'pca,' (did you mean 'pca'? (icnn, jcbb, pca))",
+        ),  # one name
+        ("PCA", False, "--assoc: unknown associator 'PCA' (did you mean 'pca'? (icnn, jcbb, pca))"),
     ],
 )
 def test_parse_assocs_unknown_name_names_the_closest(text, allow_many, line, monkeypatch):
@@ -947,7 +951,9 @@ def test_run_assoc_naming_none_is_a_usage_error(text, sim_log, tmp_path):
 def test_every_command_reports_a_bad_assoc_in_the_same_words(command, sim_log, tmp_path):
     out = ["--out", tmp_path / "o"]
     res = invoke(command, sim_log, "--assoc", "icnn,jbcc" if command != "run" else "jbcc", *out)
-    assert res.stderr == "error: unknown associator 'jbcc' (did you mean 'jcbb'? (icnn, jcbb, pca))\n"
+    assert (
+        res.stderr == "error: --assoc: unknown associator 'jbcc' (did you mean 'jcbb'? (icnn, jcbb, pca))\n"
+    )
     assert res.exit_code == 2 and not (tmp_path / "o").exists()
     if command != "run":
         res = invoke(command, sim_log, "--assoc", "pca,pca", *out)

@@ -37,7 +37,7 @@ def associator_class(method: str) -> type:
     cls = ASSOCIATORS.get(method)
     if cls is None:
         names = ", ".join(ASSOCIATORS)
-        dym = did_you_mean(method, ASSOCIATORS, cutoff=0.3)
+        dym = did_you_mean(method.lower(), ASSOCIATORS, cutoff=0.3)  # ('PCA': 'pca')
         hint = f"{dym} ({names})" if dym else f"choose one of: {names}"
         raise ConfigError(f"unknown associator '{method}'", hint)
     return cls

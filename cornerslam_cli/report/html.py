@@ -46,7 +46,7 @@ CAPTIONS = {
     "timing.png": "Fig 17 — per-step prediction, matching, update and scan-matching time.",
     "corners.png": "Fig 18 — detected vs matched corners per step, and new landmarks.",
     "compare_matching.png": "Fig 19 — cumulative matching time and total landmarks per associator.",
-    "compare_maps.png": "Fig 16 — each associator's map with odometry and ground truth.",
+    "compare_maps.png": "Fig 16 — each associator's map with odometry (and the ground truth when given).",
     "compare_timing.png": "Fig 17 — per-step matching time per associator.",
 }
 
@@ -343,7 +343,8 @@ def _compare_report(out_dir: Path) -> str:
         f"<h1>{esc(title)}</h1>",
         "<nav>" + "".join(f'<a href="#assoc-{esc(a)}">{esc(a)}</a>' for a in assocs) + "</nav>",
         "<h2>Comparison</h2>",
-        f'<p class="muted">log {esc(log)}; times in seconds; best value per column highlighted.{shared}</p>',
+        f'<p class="muted">log {esc(log)}; times in seconds, ATE and relation errors in metres '
+        f"(rpe_trans_per_m per metre), rotations in degrees; best value per column highlighted.{shared}</p>",
         _comparison_table(columns, n, MAIN_COLUMNS, wide=True, timed=at_once == 1),
         *_loop_comparison(columns, n),
         "<h2>Figures</h2>",
