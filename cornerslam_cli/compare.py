@@ -101,9 +101,10 @@ def _run_filters(
             for text in s.warnings:
                 _SHARED["src"].reader.stats.say(text)
         log.warning(
-            "timings: %d filters ran at once (--jobs %d on %d cores): each one's times include waiting for "
-            "the CPU, and which waited depends on the order of --assoc; to compare them, run with --jobs 1",
-            workers, jobs, os.cpu_count() or 1,
+            "timings: %d filters ran at once (--jobs %d, %d cores usable): each one's times depend on what "
+            "ran beside it (the CPU, its caches), and so on the order of --assoc; to compare them, run "
+            "with --jobs 1",
+            workers, jobs, len(os.sched_getaffinity(0)),
         )  # fmt: skip
         return summaries
     summaries = []

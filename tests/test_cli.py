@@ -14,6 +14,7 @@ from cornerslam_cli.cli import cli
 from cornerslam_cli.errors import ConfigError
 from cornerslam_cli.logs.writers import RawScan, write_mcap
 from cornerslam_cli.options import parse_assocs
+from cornerslam_cli.report.html import MAIN_COLUMNS
 from cornerslam_cli.report.ownership import MARKER
 from cornerslam_cli.report.tables import TIMING_COLUMNS, TRAJECTORY_COLUMNS, best_cells, read_csv
 from cornerslam_cli.types import OdomSample
@@ -671,9 +672,12 @@ def test_compare_runs_every_associator_on_the_same_frames(sim_log, tmp_path):
     # two filters ran at once: their times include waiting for the CPU — recorded, said, not ranked
     for a in ("icnn", "pca"):
         assert json.loads((out / a / "summary.json").read_text())["timing"]["concurrent_filters"] == 2
-    assert res.stderr.count("timings: 2 filters ran at once (--jobs 2 on") == 1, res.stderr
+    assert res.stderr.count("timings: 2 filters ran at once (--jobs 2, ") == 1, res.stderr
     page = (out / "report.html").read_text()
     assert "The 2 filters ran 2 at a time" in page
+    main_table = page.split("<h2>Comparison</h2>", 1)[1].split("<h", 1)[0]
+    assert main_table.count('best"') == len(best_cells(rows, 2, MAIN_COLUMNS, timed=False))  # no time ranked
+    assert best_cells(rows, 2, MAIN_COLUMNS) - best_cells(rows, 2, MAIN_COLUMNS, timed=False)  # (there were)
 
 
 def test_times_are_not_ranked_when_the_runs_shared_the_cpu():

@@ -386,7 +386,7 @@ def test_the_landmark_curves_count_the_whole_map_not_the_open_submap(compared, s
     for a in ASSOCS:
         run = load_run(compared[0] / a)
         total = run.map_landmarks()
-        assert total[-1] == len(run.landmarks["id"]) and np.all(np.diff(total) >= -len(run.landmarks["id"]))
+        assert total[-1] == len(run.landmarks["id"]) and np.all(np.diff(total) >= -1)  # (a landmark may go)
         assert len(np.unique(run.submap)) > 1 and total[-1] > run.timing["n_landmarks"][-1]
         closes = np.flatnonzero(np.diff(run.submap)) + 1  # first steps of each later submap
         want = run.timing["n_landmarks"].copy()

@@ -60,7 +60,8 @@ class RunData:
     def map_landmarks(self) -> np.ndarray:
         """(n,) the landmarks in the whole map after each step: timing.csv's ``n_landmarks`` counts the
         open submap's, so each closed submap's count at its last step is added to the steps after it (at
-        the end: map.csv's rows)."""
+        the end map.csv's rows, but for landmarks still tentative, ``ekf.tentative_sightings`` > 1, which
+        the count holds and map.csv does not)."""
         n = self.timing["n_landmarks"].astype(np.int64)
         if self.submap is None or len(self.submap) != len(n) or len(n) == 0:
             return n

@@ -271,7 +271,7 @@ BETTER: dict[str, Callable[[Iterable[float]], float]] = {
 }
 
 
-TIMES = {"t_match_total", "t_match_max", "t_total", "wall_time"}  # BETTER's columns that are times
+TIMES = {k for k in BETTER if k.startswith("t_") or k == "wall_time"}  # BETTER's columns that are times
 
 
 def best_cells(
