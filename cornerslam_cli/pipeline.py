@@ -18,6 +18,7 @@ from .config import Config
 from .errors import OutputError, display_path, printable
 from .frontend import Frame, Input, check_processed, frames, open_input, warn_mount
 from .hierarchy import HierarchicalSlam
+from .ranges import short_text
 from .report.occupancy import ScanStore
 from .report.oserrors import output_errors
 from .report.outdir import StagedDir
@@ -72,6 +73,13 @@ def run(
         ref = load_reference(Path(log_path), ground_truth, relations, time_offset)  # bad files fail first
         src = open_input(log_path, cfg, span, compiling)
         keep_notes(src, notes)
+        if mcap_path and (parent := getattr(src.reader, "odom_frame_parent", None)):
+            src.reader.stats.warn(
+                "log '%s': its tf already has %s → %s (a localiser's?): the results MCAP gives '%s' its own "
+                "parent, map, so with both files open a viewer sees two parents for it (show one file's tf)",
+                Path(log_path).name, short_text(parent), short_text(src.reader.odom_frame),
+                short_text(src.reader.odom_frame),
+            )  # fmt: skip
         scans = ScanStore() if mcap_path else None  # kept for the results MCAP's scans
         summary = run_filter(frames(src, cfg, progress), src, cfg, stage.path, ref, wall0, scans)
         write_extras(stage, plot, mcap_out, mcap_path, ref.gt_path, scans)

@@ -249,3 +249,28 @@ def test_odometry_giving_the_poses_of_two_frames_is_warned(tmp_path):
     with open_log(_turtlebot(tmp_path / "one.mcap", "cdr")) as r:
         list(r.messages())
         assert not any("frames" in w for w in r.stats.warnings)
+
+
+def test_a_results_mcap_beside_a_log_whose_tf_already_has_map_to_odom_is_warned(tmp_path):
+    """A log recorded with a localiser running (amcl, slam_toolbox): its /tf has map → odom, and the results
+    MCAP's own map → odom gives the odom frame a second parent when both files are open in Foxglove —
+    said (it was not); without --mcap-out nothing is said."""
+    scans = [
+        RawScan(100.0 + i, -1.5, 0.01, np.full(301, 3.0, np.float32), 0.05, 20.0, "laser") for i in range(5)
+    ]
+    odoms = [OdomSample(100.0 + i, 0.1 * i, 0.0, 0.0) for i in range(5)]
+    tf = (("map", "odom", 0.3), ("base_footprint", "base_link", -0.5), ("base_link", "laser", 0.6))
+    log = _turtlebot(tmp_path / "tb.mcap", "cdr", scans=scans, odoms=odoms, tf=tf)
+    want = "its tf already has map → odom (a localiser's?): the results MCAP gives 'odom' its own parent"
+    res = CliRunner().invoke(
+        cli, ["run", str(log), "--out", str(tmp_path / "o"), "--mcap-out", str(tmp_path / "r.mcap")]
+    )
+    assert res.exit_code == 0 and want in res.output
+    assert any(want in w for w in json.loads((tmp_path / "o" / "summary.json").read_text())["warnings"])
+    res = CliRunner().invoke(cli, ["run", str(log), "--out", str(tmp_path / "p")])
+    assert res.exit_code == 0 and "already has map" not in res.output
+    plain = _turtlebot(tmp_path / "plain.mcap", "cdr", scans=scans, odoms=odoms)
+    res = CliRunner().invoke(
+        cli, ["run", str(plain), "--out", str(tmp_path / "q"), "--mcap-out", str(tmp_path / "s.mcap")]
+    )
+    assert res.exit_code == 0 and "already has" not in res.output

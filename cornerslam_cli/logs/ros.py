@@ -536,6 +536,9 @@ class RosLogReader:
         untold = self.odom_frame == DEFAULT_ODOM_FRAME and not self.odom_on_tf  # (input.odom_frame not set)
         if self._odom_sel.kind == "odometry" and untold:
             self._take_odometry_parent(base_parents, {f for edge in edges for f in edge})
+        # the odometry frame's parent on tf (a localiser's map → odom): a results MCAP's own map → odom
+        # would be its second (pipeline.py warns)
+        self.odom_frame_parent = next((p for p, c in edges if c == self.odom_frame), None)
         self._laser2base = None if T is None else pose2_from_matrix(T)
         if self._laser2base is not None and not all(math.isfinite(v) for v in self._laser2base):
             self.stats.warn("%s: the tf %s→%s is not finite: ignored", self.path.name, self.base_frame, frame)
