@@ -82,7 +82,7 @@ def run(
             )  # fmt: skip
         scans = ScanStore() if mcap_path else None  # kept for the results MCAP's scans
         summary = run_filter(frames(src, cfg, progress), src, cfg, stage.path, ref, wall0, scans)
-        write_extras(stage, plot, mcap_out, mcap_path, ref.gt_path, scans)
+        write_extras(stage, plot, mcap_out, mcap_path, ref.gt_path, scans, src.stats.anchors)
         summary = summary.with_out_dir(stage.commit())
     return summary
 
@@ -103,10 +103,12 @@ def write_extras(
     mcap_path: Path | None,
     ground_truth: Path | None = None,
     scans: ScanStore | None = None,
+    anchors: Sequence[tuple[float, tuple[float, float, float]]] = (),
 ) -> None:
     """What a run writes besides its tables, staged before the commit: with ``plot`` the figures and
     report.html; the results MCAP into ``mcap_path``, the staged place of ``mcap_out``, with the
-    run's ``scans``. Both draw the ``ground_truth`` file the run was scored against."""
+    run's ``scans`` and its odometry's re-anchorings (``anchors``: SyncStats's). Both draw the
+    ``ground_truth`` file the run was scored against."""
     if plot:
         from .report.html import write_report
         from .report.plots import plot_run
@@ -119,7 +121,7 @@ def write_extras(
         if mcap_path.is_relative_to(stage.path) and mcap_path.exists():
             raise OutputError(f"--mcap-out '{mcap_out}' is a file of the run itself", "give another name")
         with output_errors(mcap_out):
-            write_results_mcap(stage.path, mcap_path, stage.target, ground_truth, scans)
+            write_results_mcap(stage.path, mcap_path, stage.target, ground_truth, scans, anchors)
 
 
 def run_filter(

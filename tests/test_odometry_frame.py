@@ -274,3 +274,51 @@ def test_a_results_mcap_beside_a_log_whose_tf_already_has_map_to_odom_is_warned(
         cli, ["run", str(plain), "--out", str(tmp_path / "q"), "--mcap-out", str(tmp_path / "s.mcap")]
     )
     assert res.exit_code == 0 and "already has" not in res.output
+
+
+def _yaw(q: dict) -> float:
+    return 2.0 * np.arctan2(q["z"], q["w"])
+
+
+def test_after_an_odometry_jump_the_results_map_to_odom_holds_the_log_s_own_odometry(tmp_path):
+    """A reset of the odometry by (−5, +3) m mid-log: the run re-anchors it (trajectory.csv's odom_* go on
+    from where they were), but the input log's odom → base_link is the raw one — so the results MCAP's
+    map → odom must be the corrected pose ∘ the raw odometry⁻¹ for the two files to overlay (it was
+    built from the re-anchored odometry: 5.8 m off after the jump); and its own odom → base_link is the
+    raw odometry too."""
+    from cornerslam_cli.geometry import compose
+
+    scans = [
+        RawScan(100.0 + i, -1.5, 0.01, np.full(301, 3.0, np.float32), 0.05, 20.0, "laser") for i in range(8)
+    ]
+
+    def logged(t):  # 10 Hz odometry, reset by (−5, +3) m at 103.55 s
+        k = round((t - 100.0) * 10)
+        return (0.01 * k, 0.0, 0.002 * k) if t < 103.55 else (0.01 * k - 5.0, 3.0, 0.002 * k)
+
+    odoms = [OdomSample(100.0 + 0.1 * k, *logged(100.0 + 0.1 * k)) for k in range(75)]
+    raw = [logged(100.0 + i) for i in range(8)]
+    log = _turtlebot(tmp_path / "jump.mcap", "cdr", scans=scans, odoms=odoms)
+    res = CliRunner().invoke(
+        cli, ["run", str(log), "--out", str(tmp_path / "o"), "--mcap-out", str(tmp_path / "r.mcap")]
+    )
+    assert res.exit_code == 0 and "odometry jumped by" in res.output, res.output
+    got: dict[str, dict[int, list]] = {
+        "/cornerslam/tf": {},
+        "/cornerslam/pose": {},
+        "/cornerslam/odom_tf": {},
+    }
+    with open(tmp_path / "r.mcap", "rb") as f:
+        for _, channel, msg in make_reader(f).iter_messages(topics=list(got)):
+            m = json.loads(msg.data)
+            if channel.topic == "/cornerslam/pose":
+                p, q = m["pose"]["position"], m["pose"]["orientation"]
+            else:
+                p, q = m["translation"], m["rotation"]
+            got[channel.topic][msg.log_time] = [p["x"], p["y"], _yaw(q)]
+    stamps = sorted(got["/cornerslam/pose"])
+    assert len(stamps) == 8
+    for k, ns in enumerate(stamps):
+        np.testing.assert_allclose(got["/cornerslam/odom_tf"][ns], raw[k], atol=1e-9)
+        overlay = compose(np.array(got["/cornerslam/tf"][ns]), np.array(raw[k]))
+        np.testing.assert_allclose(overlay, got["/cornerslam/pose"][ns], atol=1e-9)

@@ -96,6 +96,9 @@ class SyncStats:
     odom_jumps: int = 0
     scan_stamps: StampRange = field(default_factory=StampRange)  # (not counts: not in as_dict)
     odom_stamps: StampRange = field(default_factory=StampRange)
+    # each re-anchoring (reanchor_odometry): the stamp of the first sample it moved and F, corrected = F ∘
+    # raw from there on (not counts: not in as_dict) — how the results MCAP gets the odometry as logged
+    anchors: list[tuple[float, tuple[float, float, float]]] = field(default_factory=list)
 
     @property
     def scans_skipped(self) -> int:
@@ -115,7 +118,7 @@ class SyncStats:
         return ", ".join(parts)
 
     def as_dict(self) -> dict:
-        d = {k: v for k, v in self.__dict__.items() if not isinstance(v, StampRange)}
+        d = {k: v for k, v in self.__dict__.items() if isinstance(v, int)}
         d["scans_skipped"] = self.scans_skipped
         return d
 
@@ -337,6 +340,7 @@ def reanchor_odometry(
                             moved, np.degrees(turned), msg.stamp - prev.stamp, msg.stamp,
                         )  # fmt: skip
                     fix = compose(compose(fix, a), inverse(raw))
+                    st.anchors.append((msg.stamp, tuple(float(v) for v in fix)))
             prev = msg
             if st.odom_jumps:
                 msg = OdomSample(msg.stamp, *(float(v) for v in compose(fix, raw)), jumped=jumped)

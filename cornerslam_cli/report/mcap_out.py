@@ -24,6 +24,7 @@ topic                                  schema                     messages
 ``/cornerslam/ground_truth_path``      foxglove.PosesInFrame      one, only with ground truth (SE(2)-
                                                                   aligned like the ATE)
 ``/cornerslam/tf``                     foxglove.FrameTransform    one per step: ``map`` → odom frame
+                                                                  (corrected ∘ the odometry as logged⁻¹)
 ``/cornerslam/odom_tf``                foxglove.FrameTransform    one per step, only when the log has no
                                                                   tf odom → base: odom → base frame
                                                                   from the log's odometry
@@ -59,13 +60,14 @@ from __future__ import annotations
 import base64
 import csv
 import json
+from collections.abc import Sequence
 from decimal import Decimal
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import display_path
-from ..geometry import compose_inverse
+from ..geometry import compose, compose_inverse, inverse
 from .occupancy import FREE, OCCUPIED, UNKNOWN, Grid, ScanStore, read_grid
 from .ownership import RESULTS_MCAP_LIBRARY
 from .run_dir import ELLIPSE_SIGMA, ellipse_polygons, load_run
@@ -311,19 +313,24 @@ def write_results_mcap(
     results: Path | None = None,
     ground_truth: str | Path | None = None,
     scans: ScanStore | None = None,
+    anchors: Sequence[tuple[float, tuple[float, float, float]]] = (),
 ) -> Path:
     """Write a run directory's trajectory, landmarks and segment map to ``path`` (MCAP, JSON + Foxglove
     schemas); returns ``path``. See the module docstring for the topics. ``results`` is the name of
     the run directory recorded in the metadata (default ``out_dir``; a staging directory's target);
     ``ground_truth`` the TUM file the run was scored against (default: the one its summary names);
-    ``scans`` the run's scans, one per step (occupancy.ScanStore), published on ``/cornerslam/scan``."""
+    ``scans`` the run's scans, one per step (occupancy.ScanStore), published on ``/cornerslam/scan``;
+    ``anchors`` the run's re-anchorings of its odometry (logs/sync.py SyncStats), taken back out of it."""
     from mcap.writer import Writer
 
     out_dir, path = Path(out_dir), Path(path)
     run = load_run(out_dir, ground_truth)
     stamps_ns = [stamp_to_ns(t) for t in _stamp_texts(out_dir / "trajectory.csv")]
     ns_of_step = dict(zip(run.steps.astype(int).tolist(), stamps_ns, strict=True))
-    odom_raw = read_odom_raw(out_dir)  # odom-frame poses, for the map → odom transform
+    # odom-frame poses as logged, for the map → odom transform
+    odom_raw = as_logged(
+        read_odom_raw(out_dir), [float(t) for t in _stamp_texts(out_dir / "trajectory.csv")], anchors
+    )
     inp = run.summary.config.get("input", {})  # the run's config
     # the frame the odometry gave the poses in (a nav_msgs/Odometry's frame_id), else the config's
     odom_frame = run.summary.input.odom_frame or str(inp.get("odom_frame") or "odom")
@@ -392,8 +399,21 @@ def write_results_mcap(
     return path
 
 
+def as_logged(odom: np.ndarray, stamps: Sequence[float], anchors: Sequence) -> np.ndarray:
+    """The odometry poses ``odom`` (n, 3) at ``stamps`` as the log gave them: each re-anchoring's F (from
+    its stamp on, corrected = F ∘ raw; ``anchors`` in stamp order) taken back out, raw = F⁻¹ ∘ corrected —
+    so that map → odom ∘ the log's own odom → base_link is the corrected pose after an odometry jump too."""
+    if not len(anchors) or not len(odom):
+        return odom
+    at = np.array([a[0] for a in anchors])
+    k = np.searchsorted(at, np.asarray(stamps, dtype=float), side="right") - 1  # the anchor in effect
+    fix = np.vstack((np.zeros(3), np.array([a[1] for a in anchors])))[k + 1]
+    return compose(inverse(fix), odom)
+
+
 def read_odom_raw(out_dir: Path) -> np.ndarray:
-    """Odometry poses (n, 3) in the odom frame, as logged (trajectory.csv odom_* columns)."""
+    """Odometry poses (n, 3) in the odom frame (trajectory.csv odom_* columns: re-anchored across any
+    odometry jump, :func:`as_logged` gives them as logged)."""
     from .tables import read_csv
 
     t = read_csv(Path(out_dir) / "trajectory.csv")
