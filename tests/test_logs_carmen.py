@@ -454,3 +454,22 @@ def test_robotlaser_poses_that_are_not_one_place_on_the_robot_give_no_mount(tmp_
     turned = [la + (0, 0, 0.01 * i) for i, la in enumerate(lasers)]  # their headings drift apart only
     got, problem = mount_of(turned)
     assert got is None and "spread over 0.00 m and" in problem
+
+
+def test_raw_laser_lines_are_said_to_be_unread_not_absent(tmp_path):
+    """RAWLASER1 + ODOM (a raw CARMEN log): "no laser lines (FLASER/ROBOTLASER1)" and, asked for by name,
+    "its 'RAWLASER1' lines are not laser lines (laser lines: none) (choose one of them …)" — false and
+    impossible to follow; now both say cornerslam does not read raw laser lines."""
+    p = tmp_path / "raw.log"
+    p.write_text(
+        "".join(
+            _odom_line(1000.0 + i, 0.1 * i)
+            + f"RAWLASER1 0 -1.57 3.14 0.0175 80 0.01 0 3 1 1 1 {1000.0 + i} h {1000.0 + i}\n"
+            for i in range(3)
+        )
+    )
+    unread = r"its RAWLASER1 lines are raw laser lines, which cornerslam does not read"
+    with pytest.raises(LogError, match=r"has no laser lines \(FLASER/ROBOTLASER1\) \(" + unread):
+        open_log(p).check()
+    with pytest.raises(LogError, match=r"its 'RAWLASER1' lines are raw .* \(give a log with laser lines\)"):
+        open_log(p, scan_topic="RAWLASER1").check()

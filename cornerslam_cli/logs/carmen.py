@@ -341,19 +341,26 @@ class CarmenReader:
             else:
                 want, present = short_text(self._want_scan), self._counts.get(self._want_scan)
                 what = f": its '{want}' lines are not laser lines" if present else f" has no '{want}' lines"
-                problems.append(
-                    (
-                        f"CARMEN log '{name}'{what} (laser lines: {', '.join(lasers) or 'none'})",
-                        "choose one of them with --scan-topic",
-                    )
-                )
+                if present and self._want_scan.startswith("RAWLASER"):  # raw lines: no pose, no angles read
+                    what = f": its '{want}' lines are raw laser lines, which cornerslam does not read"
+                listed = f" (laser lines: {', '.join(lasers)})" if lasers else ""
+                hint = "choose one of them with --scan-topic" if lasers else "give a log with laser lines"
+                problems.append((f"CARMEN log '{name}'{what}{listed}", hint))
         elif lasers:  # the first in order of preference with at least half as many whole lines as the
             most = max(self._whole.get(t, 0) for t in lasers)  # most: one damaged line is no laser, and
             usable = [t for t in lasers if 2 * self._whole.get(t, 0) >= most]  # 3 lines beside 150 no scans
             scan = next(t for t in ("ROBOTLASER1", "FLASER", "RLASER", "ROBOTLASER2") if t in usable)
         else:
+            raw = sorted(t for t in self._counts if t.startswith("RAWLASER"))
+            unread = (
+                f" (its {', '.join(raw)} lines are raw laser lines, which cornerslam does not read)"
+                * bool(raw)
+            )
             problems.append(
-                (f"CARMEN log '{name}' has no laser lines (FLASER/ROBOTLASER1)", "give a log with scans")
+                (
+                    f"CARMEN log '{name}' has no laser lines (FLASER/ROBOTLASER1){unread}",
+                    "give a log with scans",
+                )
             )
         odom = ""
         if self._want_odom:
