@@ -73,18 +73,26 @@ def run(
         ref = load_reference(Path(log_path), ground_truth, relations, time_offset)  # bad files fail first
         src = open_input(log_path, cfg, span, compiling)
         keep_notes(src, notes)
-        if mcap_path and (parent := getattr(src.reader, "odom_frame_parent", None)):
-            src.reader.stats.warn(
-                "log '%s': its tf already has %s → %s (a localiser's?): the results MCAP gives '%s' its own "
-                "parent, map, so with both files open a viewer sees two parents for it (show one file's tf)",
-                Path(log_path).name, short_text(parent), short_text(src.reader.odom_frame),
-                short_text(src.reader.odom_frame),
-            )  # fmt: skip
         scans = ScanStore() if mcap_path else None  # kept for the results MCAP's scans
+        if mcap_path:
+            warn_second_parent(src)
         summary = run_filter(frames(src, cfg, progress), src, cfg, stage.path, ref, wall0, scans)
         write_extras(stage, plot, mcap_out, mcap_path, ref.gt_path, scans, src.stats.anchors)
         summary = summary.with_out_dir(stage.commit())
     return summary
+
+
+def warn_second_parent(src: Input) -> None:
+    """Warn when the log's tf already gives the odometry frame a parent (a localiser's map → odom): the
+    results MCAP's own map → it would be a second transform into it when both files are open."""
+    parent_on_tf = getattr(src.reader, "parent_on_tf", None)  # (a CARMEN log has no tf)
+    odom = src.reader.odom_frame if parent_on_tf else ""
+    if odom and (parent := parent_on_tf(odom)):
+        src.reader.stats.warn(
+            "log '%s': its tf already gives '%s' a parent (%s → %s), and the results MCAP gives it its own "
+            "(map → %s): with both files open a viewer gets two transforms into it (show one file's tf)",
+            src.path.name, short_text(odom), short_text(parent), short_text(odom), short_text(odom),
+        )  # fmt: skip
 
 
 def keep_notes(src: Input, notes: Sequence[str]) -> None:

@@ -261,19 +261,36 @@ def test_a_results_mcap_beside_a_log_whose_tf_already_has_map_to_odom_is_warned(
     odoms = [OdomSample(100.0 + i, 0.1 * i, 0.0, 0.0) for i in range(5)]
     tf = (("map", "odom", 0.3), ("base_footprint", "base_link", -0.5), ("base_link", "laser", 0.6))
     log = _turtlebot(tmp_path / "tb.mcap", "cdr", scans=scans, odoms=odoms, tf=tf)
-    want = "its tf already has map → odom (a localiser's?): the results MCAP gives 'odom' its own parent"
+    want = "its tf already gives 'odom' a parent (map → odom), and the results MCAP gives it its own"
     res = CliRunner().invoke(
         cli, ["run", str(log), "--out", str(tmp_path / "o"), "--mcap-out", str(tmp_path / "r.mcap")]
     )
     assert res.exit_code == 0 and want in res.output
     assert any(want in w for w in json.loads((tmp_path / "o" / "summary.json").read_text())["warnings"])
     res = CliRunner().invoke(cli, ["run", str(log), "--out", str(tmp_path / "p")])
-    assert res.exit_code == 0 and "already has map" not in res.output
+    assert res.exit_code == 0 and "already gives" not in res.output
     plain = _turtlebot(tmp_path / "plain.mcap", "cdr", scans=scans, odoms=odoms)
     res = CliRunner().invoke(
         cli, ["run", str(plain), "--out", str(tmp_path / "q"), "--mcap-out", str(tmp_path / "s.mcap")]
     )
-    assert res.exit_code == 0 and "already has" not in res.output
+    assert res.exit_code == 0 and "already gives" not in res.output
+    # the usual case: odometry on /tf too, a localiser's map → odom on /tf from after the first scan
+    ros, tf = serializer("cdr"), "tf2_msgs/msg/TFMessage"
+    odoms8 = [OdomSample(100.0 + 0.5 * i, 0.05 * i, 0.0, 0.0) for i in range(9)]
+    mount = (("base_footprint", "base_link", -0.5), ("base_link", "laser", 0.6))
+    msgs = [("/tf_static", tf, int(99.9e9), ros.tf(99.9, p, c, x, 0.0, 0.0)) for p, c, x in mount]
+    msgs += [("/scan", "sensor_msgs/msg/LaserScan", int(s.stamp * 1e9), ros.laserscan(s)) for s in scans]
+    for o in odoms8:
+        msgs.append(
+            ("/tf", tf, int(o.stamp * 1e9), ros.tf(o.stamp, "odom", "base_footprint", o.x, o.y, o.theta))
+        )
+    for t in (102.01, 103.01):  # (after the first scan and the first odometry on /tf)
+        msgs.append(("/tf", tf, int(t * 1e9), ros.tf(t, "map", "odom", 0.2, 0.0, 0.0)))
+    late = write_messages_mcap(tmp_path / "amcl.mcap", sorted(msgs, key=lambda m: m[2]), encoding="cdr")
+    res = CliRunner().invoke(
+        cli, ["run", str(late), "--out", str(tmp_path / "r"), "--mcap-out", str(tmp_path / "t.mcap")]
+    )
+    assert res.exit_code == 0 and want in res.output, res.output
 
 
 def _yaw(q: dict) -> float:

@@ -288,3 +288,31 @@ def test_scans_all_stamped_alike_are_refused_not_run_as_one_pose(tmp_path):
     assert res.exit_code == 2, res.output
     assert "only its first scan could be processed: the header stamps of the other 11 repeated" in res.stderr
     assert "fills the header stamps" in res.stderr and not (tmp_path / "o").exists()
+
+
+def test_reanchorings_are_kept_one_per_stretch_of_scans():
+    """SyncStats.anchors (the results MCAP takes each re-anchoring back out of the odometry): every jump
+    between two scans kept, jumps with no scan between them kept as the last one (two publishers on one
+    odometry topic jump at every sample: the list stays as long as the scans, not the samples)."""
+    from cornerslam_cli.geometry import compose
+
+    cfg = OdomJumpConfig()
+    flip = [OdomSample(0.1 * k, 5.0 * (k % 2), 0.0, 0.0) for k in range(1, 200)]  # jumps at every sample
+    st = SyncStats()
+    out = list(reanchor_odometry([scan(0.05), *flip, scan(20.0)], cfg, st, lambda *a: None))
+    assert st.odom_jumps == 198 and len(st.anchors) == 1
+    last = [m for m in out if isinstance(m, OdomSample)][-1]
+    t, fix = st.anchors[0]
+    assert t == flip[-1].stamp and compose(np.array(fix), np.array([5.0 * (199 % 2), 0, 0]))[
+        0
+    ] == pytest.approx(last.x)
+    st = SyncStats()
+    msgs = [
+        OdomSample(0.0, 0, 0, 0),
+        scan(0.05),
+        OdomSample(0.1, 5, 0, 0),
+        scan(0.15),
+        OdomSample(0.2, 0, 0, 0),
+    ]
+    list(reanchor_odometry(msgs, cfg, st, lambda *a: None))
+    assert [a[0] for a in st.anchors] == [0.1, 0.2] and "anchors" not in st.as_dict()

@@ -440,6 +440,20 @@ class RosLogReader:
 
         return Decoder(channel)
 
+    def parent_on_tf(self, frame: str) -> str | None:
+        """The parent the log's tf gives ``frame`` (a localiser's map → odom), else None: every tf message
+        read until one names it a child (a results MCAP that gives it a parent of its own is warned of)."""
+        topics = {t for t in self._topics_of(*TF_TYPES) if self._encoding_problem(t) is None}
+        decs = {t: self._decoder(t) for t in topics}
+        for topic, _, data in self.source.raw_messages(topics):
+            try:
+                parent = next((p for p, c, *_ in decs[topic].transforms(data) if c == frame and p != c), None)
+            except Exception:  # noqa: BLE001 - bad bytes were counted when the run read them
+                continue
+            if parent:
+                return parent
+        return None
+
     def laser_to_base(self) -> Pose2 | None:
         """Pose (x, y, yaw) of the laser in the robot's frame from tf_static/tf, else None. The robot's
         frame is the one the odometry gives the pose of (:meth:`_robot_frame`; ``base_frame`` becomes
@@ -536,9 +550,6 @@ class RosLogReader:
         untold = self.odom_frame == DEFAULT_ODOM_FRAME and not self.odom_on_tf  # (input.odom_frame not set)
         if self._odom_sel.kind == "odometry" and untold:
             self._take_odometry_parent(base_parents, {f for edge in edges for f in edge})
-        # the odometry frame's parent on tf (a localiser's map → odom): a results MCAP's own map → odom
-        # would be its second (pipeline.py warns)
-        self.odom_frame_parent = next((p for p, c in edges if c == self.odom_frame), None)
         self._laser2base = None if T is None else pose2_from_matrix(T)
         if self._laser2base is not None and not all(math.isfinite(v) for v in self._laser2base):
             self.stats.warn("%s: the tf %s→%s is not finite: ignored", self.path.name, self.base_frame, frame)

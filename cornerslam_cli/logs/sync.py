@@ -118,7 +118,7 @@ class SyncStats:
         return ", ".join(parts)
 
     def as_dict(self) -> dict:
-        d = {k: v for k, v in self.__dict__.items() if isinstance(v, int)}
+        d = {k: v for k, v in self.__dict__.items() if not isinstance(v, (StampRange, list))}
         d["scans_skipped"] = self.scans_skipped
         return d
 
@@ -318,7 +318,9 @@ def reanchor_odometry(
         return
     fix = np.zeros(3)  # F: corrected = F ∘ raw
     prev: OdomSample | None = None
+    scan_since = True  # a scan came since the last re-anchoring (else a new one replaces it in st.anchors)
     for msg in messages:
+        scan_since = scan_since or isinstance(msg, Scan)
         if isinstance(msg, OdomSample):
             if prev is not None and msg.stamp <= prev.stamp:
                 yield msg
@@ -340,7 +342,10 @@ def reanchor_odometry(
                             moved, np.degrees(turned), msg.stamp - prev.stamp, msg.stamp,
                         )  # fmt: skip
                     fix = compose(compose(fix, a), inverse(raw))
+                    if not scan_since:  # (no scan to place with the one before: as many as scans at most)
+                        st.anchors.pop()
                     st.anchors.append((msg.stamp, tuple(float(v) for v in fix)))
+                    scan_since = False
             prev = msg
             if st.odom_jumps:
                 msg = OdomSample(msg.stamp, *(float(v) for v in compose(fix, raw)), jumped=jumped)

@@ -325,12 +325,11 @@ def write_results_mcap(
 
     out_dir, path = Path(out_dir), Path(path)
     run = load_run(out_dir, ground_truth)
-    stamps_ns = [stamp_to_ns(t) for t in _stamp_texts(out_dir / "trajectory.csv")]
+    stamp_texts = _stamp_texts(out_dir / "trajectory.csv")
+    stamps_ns = [stamp_to_ns(t) for t in stamp_texts]
     ns_of_step = dict(zip(run.steps.astype(int).tolist(), stamps_ns, strict=True))
     # odom-frame poses as logged, for the map → odom transform
-    odom_raw = as_logged(
-        read_odom_raw(out_dir), [float(t) for t in _stamp_texts(out_dir / "trajectory.csv")], anchors
-    )
+    odom_raw = as_logged(read_odom_raw(out_dir), [float(t) for t in stamp_texts], anchors)
     inp = run.summary.config.get("input", {})  # the run's config
     # the frame the odometry gave the poses in (a nav_msgs/Odometry's frame_id), else the config's
     odom_frame = run.summary.input.odom_frame or str(inp.get("odom_frame") or "odom")
