@@ -473,3 +473,23 @@ def test_raw_laser_lines_are_said_to_be_unread_not_absent(tmp_path):
         open_log(p).check()
     with pytest.raises(LogError, match=r"its 'RAWLASER1' lines are raw .* \(give a log with laser lines\)"):
         open_log(p, scan_topic="RAWLASER1").check()
+
+
+def test_info_names_the_laser_lines_a_run_leaves_unused(tmp_path):
+    """FLASER and RLASER (a front and a rear laser): the run reads FLASER; info said nothing of RLASER."""
+    p = tmp_path / "two.log"
+    p.write_text(
+        "".join(
+            flaser(180, 1000.0 + i) + f"RLASER 3 5 5 5 0 0 0 0 0 0 {1000.0 + i} h {1000.0 + i}\n"
+            for i in range(3)
+        )
+    )
+    info = open_log(p).info()
+    assert info.scan_topic == "FLASER"
+    assert info.notes == ("its RLASER lines (3) are not used (--scan-topic RLASER reads them instead)",)
+    assert open_log(p, scan_topic="RLASER").info().notes == (
+        "its FLASER lines (3) are not used (--scan-topic FLASER reads them instead)",
+    )
+    one = tmp_path / "one.log"
+    one.write_text("".join(flaser(180, 1000.0 + i) for i in range(3)))
+    assert open_log(one).info().notes == ()

@@ -417,6 +417,11 @@ class CarmenReader:
             odom_topic=self.odom_topic,
             odom_source=src,
             problems=tuple(f"{m} ({h})" for m, h in self._problems),
+            notes=tuple(
+                f"its {t} lines ({self._whole[t]}) are not used (--scan-topic {t} reads them instead)"
+                for t in LASER_TAGS
+                if self.scan_topic and t != self.scan_topic and self._whole.get(t)
+            ),
         )
 
     def _max_range(self, tag: str) -> float:
