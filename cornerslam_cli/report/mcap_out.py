@@ -329,7 +329,7 @@ def write_results_mcap(
     stamps_ns = [stamp_to_ns(t) for t in stamp_texts]
     ns_of_step = dict(zip(run.steps.astype(int).tolist(), stamps_ns, strict=True))
     # odom-frame poses as logged, for the map → odom transform
-    odom_raw = as_logged(read_odom_raw(out_dir), [float(t) for t in stamp_texts], anchors)
+    odom_raw = as_logged(read_odom(out_dir), [float(t) for t in stamp_texts], anchors)
     inp = run.summary.config.get("input", {})  # the run's config
     # the frame the odometry gave the poses in (a nav_msgs/Odometry's frame_id), else the config's
     odom_frame = run.summary.input.odom_frame or str(inp.get("odom_frame") or "odom")
@@ -410,7 +410,7 @@ def as_logged(odom: np.ndarray, stamps: Sequence[float], anchors: Sequence) -> n
     return compose(inverse(fix), odom)
 
 
-def read_odom_raw(out_dir: Path) -> np.ndarray:
+def read_odom(out_dir: Path) -> np.ndarray:
     """Odometry poses (n, 3) in the odom frame (trajectory.csv odom_* columns: re-anchored across any
     odometry jump, :func:`as_logged` gives them as logged)."""
     from .tables import read_csv
