@@ -105,6 +105,40 @@ def test_cut_gzip_yields_prefix_with_warning(tmp_path, caplog):
     assert "ends early" in caplog.text
 
 
+@pytest.mark.parametrize(
+    ("head", "said"),
+    [(b"", "damaged before its first line"), (b"PARAM a 1\n" * 20, "damaged after 20 lines")],
+)
+def test_gzip_damaged_before_any_laser_line_says_so(tmp_path, head, said):
+    """gzip data damaged at its start was an internal error (zlib.error escaped the compressed-log check)
+    and, damaged after a few PARAM lines, "not a CARMEN log": now the error says the gzip is damaged."""
+    import gzip
+
+    rng = np.random.default_rng(0)
+    text = head + "".join(flaser(180, float(i), r=round(rng.uniform(1, 5), 3)) for i in range(200)).encode()
+    body = bytearray(gzip.compress(text[len(head) :], mtime=0))  # a second gzip member after the head's
+    body[20:60] = bytes(b ^ 0xFF for b in body[20:60])  # its deflate data damaged
+    p = tmp_path / "x.log.gz"
+    p.write_bytes((gzip.compress(head, mtime=0) if head else b"") + bytes(body))
+    with pytest.raises(LogError, match=f"its gzip data is {said}, before any laser") as err:
+        open_log(p).messages()
+    assert "gzip -t" in err.value.hint
+
+
+def test_a_line_after_nul_padding_is_read_with_a_warning(tmp_path, caplog):
+    """NUL bytes before a line (a crash's padding) made its tag '\\x00…FLASER', the line lost in silence."""
+    text = "".join(flaser(180, float(i), r=2.0 + 0.01 * i) for i in range(5))
+    clean, padded = tmp_path / "a.log", tmp_path / "b.log"
+    clean.write_text(text)
+    padded.write_text(text.replace("\nFLASER", "\n" + "\x00" * 300 + "FLASER", 2))
+    with caplog.at_level(logging.WARNING, logger="cornerslam.logs"):
+        got, _ = split(open_log(padded).messages())
+    want, _ = split(open_log(clean).messages())
+    assert [s.stamp for s in got] == [s.stamp for s in want] == [0, 1, 2, 3, 4]
+    assert all(np.array_equal(a.ranges, b.ranges) for a, b in zip(got, want, strict=True))
+    assert "2 lines began with NUL bytes" in caplog.text
+
+
 @pytest.mark.parametrize("gz", [False, True])
 def test_tab_separated_lines_read_as_space_separated(tmp_path, gz):
     """Fields separated by tabs (or mixed whitespace) are fields: the same messages as with spaces."""
@@ -493,3 +527,14 @@ def test_info_names_the_laser_lines_a_run_leaves_unused(tmp_path):
     one = tmp_path / "one.log"
     one.write_text("".join(flaser(180, 1000.0 + i) for i in range(3)))
     assert open_log(one).info().notes == ()
+
+
+def test_info_says_how_many_of_the_runs_lines_it_skips(tmp_path):
+    """info's topic counts hold a tag's cut and malformed lines; a run skips them, which it did not say."""
+    p = tmp_path / "cut.log"
+    odom = "".join(f"ODOM {0.1 * i} 0 0 0 0 0 {1000.0 + i} h {1000.0 + i}\n" for i in range(4))
+    p.write_text("".join(flaser(180, 1000.0 + i) for i in range(4)) + flaser(180, 1010.0)[:40] + "\n" + odom)
+    assert open_log(p).info().notes == ("1 of its 5 FLASER lines are cut or malformed: a run skips them",)
+    q = tmp_path / "cut_odom.log"
+    q.write_text("".join(flaser(180, 1000.0 + i) for i in range(4)) + odom + "ODOM 1 2\n")
+    assert open_log(q).info().notes == ("1 of its 5 ODOM lines are cut or malformed: a run skips them",)

@@ -17,6 +17,7 @@ import codecs
 import gzip
 import shlex
 import stat
+import zlib
 from collections.abc import Callable
 from pathlib import Path
 
@@ -140,7 +141,7 @@ def _refuse_compressed(p: Path, head: bytes) -> None:
         try:
             with gzip.open(p, "rb") as f:
                 inner = f.read(len(ROSBAG1_MAGIC))
-        except (OSError, EOFError):  # a damaged gzip: the CARMEN reader says so
+        except (OSError, EOFError, zlib.error):  # a damaged gzip: the CARMEN reader says so
             return
         for magic, what in ((MCAP_MAGIC, "MCAP"), (ROSBAG1_MAGIC, "ROS 1 bag")):
             if inner.startswith(magic):

@@ -93,20 +93,34 @@ def _open_text(path: Path) -> io.TextIOBase:
     return open(path, encoding="latin-1")  # noqa: SIM115 - caller closes
 
 
-def _lines(path: Path, stats: ReadStats | None) -> Iterator[str]:
-    """Lines of a (possibly gzip-compressed) text log; a cut/damaged gzip ends the lines with a warning.
+def _lines(path: Path, stats: ReadStats | None, fault: list[str] | None = None) -> Iterator[str]:
+    """Lines of a (possibly gzip-compressed) text log; a cut/damaged gzip ends the lines with a warning
+    (``stats``) and what ended them appended to ``fault`` ("damaged after 12 lines").
     A UTF-8 byte-order mark (an editor saving as 'UTF-8 with BOM') is dropped: it made the first
-    line's tag 'ï»¿FLASER', a topic of its own, and the line was lost without a word."""
-    n = 0
+    line's tag 'ï»¿FLASER', a topic of its own, and the line was lost without a word. So are the NUL
+    bytes a line starts with (the padding a crash leaves where the file system had grown the file), with
+    a warning: the tag was '\\x00…FLASER' and the line lost."""
+    n = nul = 0
     try:
         with _open_text(path) as f:
             for line in f:
                 n += 1
+                if line.startswith("\x00"):
+                    nul += 1
+                    line = line.lstrip("\x00")
                 yield line.removeprefix(BOM) if n == 1 else line
     except (EOFError, gzip.BadGzipFile, zlib.error) as exc:
+        why = "cut short" if isinstance(exc, EOFError) else "damaged"
         if stats is not None:
-            why = "cut short" if isinstance(exc, EOFError) else "damaged"
             stats.warn("%s ends early after %d lines: its gzip data is %s", path.name, n, why)
+        if fault is not None:
+            fault.append(f"{why} after {_many(n, 'line')}" if n else f"{why} before its first line")
+    if nul and stats is not None:
+        stats.warn(
+            "%s: %s began with NUL bytes (a crash's padding?): read without them",
+            path.name,
+            _many(nul, "line"),
+        )
 
 
 def _through_stamp(tag: str, tok: list[str]) -> int:
@@ -286,8 +300,9 @@ class CarmenReader:
         that layout, the time span (cheap: no number parsing of readings)."""
         name = self.path.name
         layouts: dict[tuple[str, int], _Layout] = {}
+        fault: list[str] = []
         try:
-            for line in _lines(self.path, self.stats):
+            for line in _lines(self.path, self.stats, fault):
                 tag, rest = (line.split(None, 1) + ["", ""])[:2]
                 if not tag or tag[0] == "#":
                     continue
@@ -307,6 +322,12 @@ class CarmenReader:
                 f"cannot read CARMEN log '{name}': {exc.strerror or exc}", "check the file (gzip damaged?)"
             ) from exc
         if not any(t in self._counts for t in LASER_TAGS + (ODOM_TAG,)):
+            if fault:  # not "not a CARMEN log": the damage came before any laser or odometry line
+                raise LogError(
+                    f"cannot read CARMEN log '{name}': its gzip data is {fault[0]}, before any laser or "
+                    "odometry line",
+                    "copy the log again from its source (`gzip -t FILE` tests a copy)",
+                )
             raise LogError(
                 f"'{name}' is not a CARMEN log: no FLASER/RLASER/ROBOTLASER1/ODOM lines",
                 "give a CARMEN log (.clf/.log), an .mcap, a .bag or a ROS 2 bag directory",
@@ -417,10 +438,18 @@ class CarmenReader:
             odom_topic=self.odom_topic,
             odom_source=src,
             problems=tuple(f"{m} ({h})" for m, h in self._problems),
-            notes=tuple(
-                f"its {t} lines ({self._whole[t]}) are not used (--scan-topic {t} reads them instead)"
-                for t in LASER_TAGS
-                if self.scan_topic and t != self.scan_topic and self._whole.get(t)
+            notes=(
+                *(
+                    f"its {t} lines ({self._whole[t]}) are not used (--scan-topic {t} reads them instead)"
+                    for t in LASER_TAGS
+                    if self.scan_topic and t != self.scan_topic and self._whole.get(t)
+                ),
+                *(  # the topics' counts above hold them
+                    f"{self._counts[t] - self._whole.get(t, 0)} of its {self._counts[t]} {t} lines are cut "
+                    "or malformed: a run skips them"
+                    for t in dict.fromkeys((self.scan_topic, self.odom_topic))
+                    if self._whole.get(t, 0) < self._counts.get(t, 0)
+                ),
             ),
         )
 
