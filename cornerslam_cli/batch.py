@@ -61,7 +61,7 @@ from .workers import end_children, warnings_kept, warnings_once
 log = logging.getLogger("cornerslam.batch")
 
 BATCH_CSV = "batch.csv"
-TIMING_FIGURES = ("t_match", "t_total", "wall_time")  # differ between runs of the same combination
+TIMING_FIGURES = ("t_match", "t_total", "wall_time", "t_loop")  # differ between runs of the same combination
 STATUSES = ("ok", "failed", "skipped", "pending")
 BATCH_OPTIONS = ("--assoc",)  # of errors.OPTION_OF, the options cornerslam batch takes (the rest by --set)
 

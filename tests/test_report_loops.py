@@ -37,7 +37,7 @@ BEFORE = (
     "rpe_trans_per_m,wall_time,budget_hits,rel_trans_mean,rel_trans_std,rel_rot_mean_deg,"
     "odom_rel_trans_mean,scan_odom_ate_rmse,scan_odom_rel_trans_mean"
 ).split(",")
-LOOPS = ["submaps", "loops_accepted", "loops_rejected", "online_ate_rmse", "refine_factors"]
+LOOPS = ["submaps", "loops_accepted", "loops_rejected", "online_ate_rmse", "refine_factors", "t_loop"]
 
 
 def invoke(*args: str) -> str:
@@ -92,6 +92,8 @@ def test_comparison_csv_appends_each_associators_loop_closing(compared):
         assert int(r["loops_rejected"]) == c["loops_rejected"] == int((loops["accepted"] == 0).sum())
         assert float(r["online_ate_rmse"]) == pytest.approx(s["accuracy"]["online_ate"]["rmse"], abs=1e-9)
         assert r["refine_factors"] == "" and "refine_factors" not in c  # graph.refine off
+        assert float(r["t_loop"]) == pytest.approx(s["timing"]["t_loop"], abs=1e-9)
+        assert s["timing"]["t_loop"] > 0
     assert sum(int(r["loops_accepted"]) for r in rows) > 0  # something to compare
     assert all(int(r["loops_rejected"]) > 0 for r in rows)
 
@@ -365,11 +367,12 @@ def test_report_compares_the_associators_on_loop_closing_in_a_table_of_its_own(c
     page = Page((out / "report.html").read_text(encoding="utf-8"))
     main, loops = [t for t in page.tables if t and t[0] and t[0][0][0] == "assoc"]
     assert [c[0] for c in main[0]] == BEFORE
-    assert [c[0] for c in loops[0]] == ["assoc", *LOOPS[:4]]  # refine_factors: empty without graph.refine
+    assert [c[0] for c in loops[0]] == ["assoc", *LOOPS[:4], "t_loop"]  # refine_factors: empty without refine
     cells = raw_rows(out / "comparison.csv")
     for row, r in zip(loops[1:], cells, strict=True):
         assert [c[0] for c in row[:4]] == [r["assoc"], r["submaps"], r["loops_accepted"], r["loops_rejected"]]
         assert float(row[4][0]) == pytest.approx(float(r["online_ate_rmse"]), rel=1e-3)
+        assert float(row[5][0]) == pytest.approx(float(r["t_loop"]), rel=1e-3, abs=1e-6)
     online = [float(r["online_ate_rmse"]) for r in cells]
     marked = [i for i, row in enumerate(loops[1:]) if "best" in row[4][1]]
     assert marked == ([] if len(set(online)) < 2 else [online.index(min(online))])

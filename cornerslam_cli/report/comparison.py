@@ -58,12 +58,13 @@ def batch_figures(s: RunSummary) -> dict:
 def loop_cells(s: RunSummary) -> list:
     """comparison.csv's loop-closing cells: submaps, closures accepted and refused, the online
     (causal) estimate's ATE RMSE (NaN without ground truth), the dense refinement's factors (empty
-    without graph.refine); empty cells when the run had no submaps."""
-    c, acc = s.counts, s.accuracy or Accuracy()
+    without graph.refine), the loop-closing time; empty cells when the run had no submaps."""
+    c, acc, t = s.counts, s.accuracy or Accuracy(), s.timing
     if c.submaps is None:
-        return [""] * 5
+        return [""] * len(COMPARISON_LOOP_COLUMNS)
     refine = "" if c.refine_factors is None else c.refine_factors
-    return [c.submaps, c.loops_accepted, c.loops_rejected, _or_nan(acc.online_ate, "rmse"), refine]
+    t_loop = NAN if t.t_loop is None else t.t_loop
+    return [c.submaps, c.loops_accepted, c.loops_rejected, _or_nan(acc.online_ate, "rmse"), refine, t_loop]
 
 
 def _or_nan(result: Ate | RelationError | None, name: str) -> float:
