@@ -426,7 +426,7 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
             except LogError:
                 pass  # the error below says what run would refuse
         preset = None if scan is None else detect_preset(scan.n_beams, scan.angle_increment)
-        _echo(info_lines(log_path, replace(log_info, problems=()), None, scan, preset))
+        _echo(info_lines(log_path, replace(log_info, problems=()), None, scan, preset, mount_read=False))
         reader.check()  # the first problem as the error: exit 2, as run
     scan, unread, laser = None, None, None
     try:  # (a topic declared with no message: run refuses it here, info lists the counts first)

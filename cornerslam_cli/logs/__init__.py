@@ -26,7 +26,7 @@ from .base import LogInfo, LogReader, ReadStats, TopicInfo
 from .carmen import GZIP_MAGIC, CarmenReader
 from .mcap import MAGIC as MCAP_MAGIC
 from .mcap import open_mcap
-from .rosbag import STORAGE_SUFFIXES, open_rosbag1, open_rosbag2
+from .rosbag import STORAGE_SUFFIXES, open_rosbag1, open_rosbag2, split_bag_of
 
 __all__ = [
     "READERS",
@@ -191,6 +191,12 @@ def open_log(
     """
     p = Path(path)
     fmt = detect_format(p)
-    return READERS[fmt](
+    reader = READERS[fmt](
         p, scan_topic=scan_topic, odom_topic=odom_topic, odom_frame=odom_frame, base_frame=base_frame
     )
+    if fmt != "carmen" and (bag := split_bag_of(p)) is not None:
+        reader.stats.warn(
+            "%s is one of the %d storage files of the ROS 2 bag '%s': only its messages are read (give the "
+            "bag's directory to read them all)", p.name, bag, p.parent.name or ".",
+        )  # fmt: skip
+    return reader

@@ -144,6 +144,27 @@ def _child_frame(decoder, data: bytes | memoryview) -> str:
         return ""
 
 
+def namespace(topic: str) -> str:
+    """The namespace of a topic: ``/robot1/scan`` → ``/robot1``, ``/scan`` → ``""``."""
+    return topic.rsplit("/", 1)[0]
+
+
+def is_static(topic: str) -> bool:
+    """Whether a tf topic carries static transforms: ``/tf_static``, a robot's ``/robot1/tf_static``."""
+    return topic.rsplit("/", 1)[-1] == "tf_static"
+
+
+def of_robot(topics: list[str], scan_topic: str) -> list[str]:
+    """Of ``topics``, those of the robot whose scans are ``scan_topic``: in its namespace or one above it
+    (``/robot1/scan``: ``/robot1/tf``, ``/tf``, not ``/robot2/tf``, whose frames may be named alike) —
+    all of them when none is (the scans outside the robot's namespace), or no scan topic is chosen."""
+    if not scan_topic:
+        return topics
+    ns = namespace(scan_topic)
+    mine = [t for t in topics if (n := namespace(t)) == ns or ns.startswith(n + "/")]
+    return mine or topics
+
+
 def listing(names: list[str], most: int = 10) -> str:
     """``"/a, /b"`` or ``"none"``, for error messages: long names shortened, at most ``most`` of them."""
     shown = ", ".join(short_text(n) for n in sorted(names)[:most])
@@ -212,8 +233,8 @@ class RosLogReader:
         self._want_odom = odom_topic
         self._channels = {c.topic: c for c in source.channels()}
         self._scan_sel = self._select_scan()
+        self.scan_topic = self._scan_sel[0]  # (the odometry's choice looks at its namespace)
         self._odom_sel = self._select_odom()
-        self.scan_topic = self._scan_sel[0]
         self.odom_topic = self._odom_sel.topic
         self._laser2base: Pose2 | None | bool = False  # False = not computed yet
         self._laser_upside_down = False  # the tf's laser z axis points down (set with _laser2base)
@@ -299,7 +320,7 @@ class RosLogReader:
     def _select_odom(self) -> _OdomSel:
         name = self.path.name
         odoms = self._topics_of(ODOMETRY)
-        tfs = [t for t in self._topics_of(*TF_TYPES) if t != "/tf_static"]
+        tfs = [t for t in self._topics_of(*TF_TYPES) if not is_static(t)]
         if self._want_odom:
             want = short_text(self._want_odom)
             c = self._channels.get(self._want_odom)
@@ -322,9 +343,20 @@ class RosLogReader:
                 f"topic '{want}' of log '{name}' is {mt}, not nav_msgs/Odometry or tf2_msgs/TFMessage",
                 f"choose one with --odom-topic (Odometry: {listing(odoms)}; tf: {listing(tfs)})",
             )
+        if tfs and odoms and all(self._channels[t].count == 0 for t in odoms):  # declared, never published
+            note = f"{listing(odoms)} has no messages: tf odometry taken"
+            logger.info("log '%s': %s", name, note)
+            return _OdomSel(self._tf_odometry_topic(tfs), "tf", note=note)
+        odoms = [t for t in odoms if self._channels[t].count != 0] or odoms  # (None: not known)
         if len(odoms) == 1:
             return _OdomSel(odoms[0], "odometry")
         if len(odoms) > 1:
+            ns = namespace(self.scan_topic)
+            if ns and len(mine := [t for t in odoms if namespace(t) == ns]) == 1:  # several robots' odometry
+                others = listing([t for t in odoms if t != mine[0]])
+                note = f"{len(odoms)} Odometry topics: {mine[0]} taken (the scans' namespace), not {others}"
+                logger.info("log '%s': %s", name, note)
+                return _OdomSel(mine[0], "odometry", note=note)
             if "/odom" in odoms:
                 others = listing([t for t in odoms if t != "/odom"])
                 note = (
@@ -339,7 +371,7 @@ class RosLogReader:
                 "choose one with --odom-topic",
             )
         if tfs:
-            return _OdomSel("/tf" if "/tf" in tfs else tfs[0], "tf")
+            return _OdomSel(self._tf_odometry_topic(tfs), "tf")
         if self._lossy():
             return _OdomSel("", "", *self._lost("no nav_msgs/Odometry topic and no tf topic"))
         return _OdomSel(
@@ -349,6 +381,17 @@ class RosLogReader:
             "select an odometry topic with --odom-topic (nav_msgs/Odometry or tf with "
             f"{short_text(self.odom_frame)}→{short_text(self.base_frame)})",
         )
+
+    def _tf_odometry_topic(self, tfs: list[str]) -> str:
+        """Of the (not static) tf topics ``tfs``, the one tf odometry is read from: the scans' robot's
+        (:func:`of_robot`) — its namespace's ``tf``, else ``/tf``, else the first."""
+        mine = of_robot(tfs, self.scan_topic)
+        own = namespace(self.scan_topic) + "/tf"
+        return own if own in mine else "/tf" if "/tf" in mine else mine[0]
+
+    def _robot_tf_topics(self) -> list[str]:
+        """The log's tf topics the scans' robot's transforms are on (:func:`of_robot`)."""
+        return of_robot(self._topics_of(*TF_TYPES), self.scan_topic)
 
     def _odom_source_label(self) -> str:
         if self._odom_sel.kind == "odometry":
@@ -443,7 +486,7 @@ class RosLogReader:
     def parent_on_tf(self, frame: str) -> str | None:
         """The parent the log's tf gives ``frame`` (a localiser's map → odom), else None: every tf message
         read until one names it a child (a results MCAP that gives it a parent of its own is warned of)."""
-        topics = {t for t in self._topics_of(*TF_TYPES) if self._encoding_problem(t) is None}
+        topics = {t for t in self._robot_tf_topics() if self._encoding_problem(t) is None}
         decs = {t: self._decoder(t) for t in topics}
         for topic, _, data in self.source.raw_messages(topics):
             try:
@@ -469,7 +512,7 @@ class RosLogReader:
             return self._laser2base  # type: ignore[return-value]
         self.check()
         tf_topics = set()
-        for t in self._topics_of(*TF_TYPES):
+        for t in self._robot_tf_topics():
             if self._encoding_problem(t) is None:
                 tf_topics.add(t)
             else:
@@ -482,9 +525,10 @@ class RosLogReader:
         odom_children: set[str] = set()  # odom_frame→child on tf: the robot's motion, not its mount
         base_parents: set[str] = set()  # the robot frame's parents on tf other than /tf_static
         edges: dict[tuple[str, str], np.ndarray] = {}
-        static_left = sum(self._channels[t].count or 0 for t in tf_topics if t == "/tf_static")
-        counts_known = all(self._channels[t].count is not None for t in tf_topics if t == "/tf_static")
-        dynamic = any(t != "/tf_static" for t in tf_topics)  # tf besides /tf_static: mount, odom→base
+        static_left = sum(self._channels[t].count or 0 for t in tf_topics if is_static(t))
+        counts_known = all(self._channels[t].count is not None for t in tf_topics if is_static(t))
+        dynamic = any(not is_static(t) for t in tf_topics)  # tf besides /tf_static: mount, odom→base
+        edge_topic: dict[tuple[str, str], str] = {}  # the tf topic each edge was first read from
         after, linked_at = 0, -1  # messages since the first scan; len(edges) when the link was looked for
         linked = False  # base_frame → the laser's frame through the edges so far
         decs = {t: self._decoder(t) for t in tf_topics | {self.scan_topic}}
@@ -507,7 +551,7 @@ class RosLogReader:
                     if frame is None:
                         frame = strip_frame(decs[topic].laserscan(data)[1])
                     continue
-                static = topic == "/tf_static"
+                static = is_static(topic)
                 static_left -= static
                 for parent, child, _, t, q in decs[topic].transforms(data):
                     if topic == self.odom_topic and len(self._tf_pairs) < 50:
@@ -526,7 +570,11 @@ class RosLogReader:
                             self.path.name, parent, child,
                         )  # fmt: skip
                         continue
-                    edges.setdefault((parent, child), transform_matrix(t, q))
+                    if (parent, child) not in edges:
+                        edges[(parent, child)], edge_topic[(parent, child)] = transform_matrix(t, q), topic
+                    elif edge_topic[(parent, child)] != topic:
+                        self._warn_other_tf(edges[(parent, child)], transform_matrix(t, q), edge_topic, topic,
+                                            (parent, child))  # fmt: skip
             except Exception as exc:  # noqa: BLE001 - bad bytes are counted, never raised
                 logger.debug("laser_to_base: skipping undecodable %s message: %s", topic, exc)
         self.laser_frame = frame
@@ -563,6 +611,21 @@ class RosLogReader:
                 )  # fmt: skip
         return self._laser2base  # type: ignore[return-value]
 
+    def _warn_other_tf(
+        self, first: np.ndarray, other: np.ndarray, edge_topic: dict, topic: str, edge: tuple[str, str]
+    ) -> None:
+        """Warn when a second tf topic gives an edge the first gave (``first``) another transform: two
+        robots' tf with frames named alike, whose scans' namespace did not tell them apart."""
+        with np.errstate(invalid="ignore", over="ignore"):
+            moved = float(np.hypot(*(other[:2, 3] - first[:2, 3])))
+            turned = abs(math.atan2(other[1, 0], other[0, 0]) - math.atan2(first[1, 0], first[0, 0]))
+        if moved > 1e-3 or min(turned, 2 * math.pi - turned) > 1e-3:
+            self.stats.warn(
+                "%s: tf topics '%s' and '%s' both give %s→%s, and differently: the first's is used (two "
+                "robots' tf with frames named alike? a scan topic in a robot's namespace reads its tf only)",
+                self.path.name, edge_topic[edge], topic, *edge,
+            )  # fmt: skip
+
     def _robot_frame(self) -> str:
         """The frame the odometry gives the pose of, which ``base_frame`` becomes (logged when it is
         not the config's): a nav_msgs/Odometry's child_frame_id (:meth:`_odometry_frame`); for tf
@@ -596,7 +659,7 @@ class RosLogReader:
         /tf_static is read beside the odometry topic for the links, its messages not counted."""
         if self._odom_sel.kind != "tf":
             return ""
-        topics = {self.odom_topic} | ({"/tf_static"} & set(self._channels))
+        topics = {self.odom_topic} | {t for t in self._robot_tf_topics() if is_static(t)}
         decs = {t: self._decoder(t) for t in topics if self._encoding_problem(t) is None}
         children, links = set(), {}  # odom_frame's children; the other transforms, as links
         n = 0  # messages of the odometry topic read

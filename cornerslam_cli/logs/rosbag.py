@@ -177,6 +177,19 @@ def open_rosbag2(path: Path, **kw) -> RosLogReader:
     return RosLogReader(source, path, stats=stats, **kw)
 
 
+def split_bag_of(path: Path) -> int | None:
+    """The number of storage files of the ROS 2 bag whose metadata.yaml lists the storage file ``path``
+    (a bag ``ros2 bag record --max-bag-size`` split) when it is more than one, else None."""
+    if path.suffix not in STORAGE_SUFFIXES or not (path.parent / META).is_file():
+        return None
+    try:
+        files = yaml.safe_load((path.parent / META).read_text())["rosbag2_bagfile_information"]
+        files = [Path(str(f)).name for f in files["relative_file_paths"]]
+    except Exception:  # noqa: BLE001 - metadata.yaml is not read when a storage file is given
+        return None
+    return len(files) if len(files) > 1 and path.name in files else None
+
+
 def _sole_storage(path: Path, stats: ReadStats) -> Path:
     """What to read of a ROS 2 bag: its one MCAP file when metadata.yaml says so (mcap storage, one
     file, no file compression); the one storage file of a directory without metadata.yaml (warned);

@@ -251,12 +251,14 @@ def info_lines(
     preset: str | None = None,
     upside_down: bool = False,
     tf_frames: tuple[str, str] | None = None,
+    mount_read: bool = True,
 ) -> list[str]:
     """``cornerslam info``: the log's format, topics with counts and rates, what a run would use
     (``laser``: the laser's (x, y, yaw) in the base frame from tf — ``tf_frames`` names the two,
     e.g. (base_footprint, laser) — a CARMEN log's ROBOTLASER1 laser pose — or None, and
-    ``upside_down`` there; ``scan``: the first scan, its geometry and beam times, with the laser
-    ``preset`` it matches), problems and notes."""
+    ``upside_down`` there; not ``mount_read``: not looked up, the log's problems coming first; ``scan``:
+    the first scan, its geometry and beam times, with the laser ``preset`` it matches), problems and
+    notes."""
     n = "unknown" if i.n_messages is None else i.n_messages
     lines = [f"file:      {display_path(log_path)}", f"format:    {i.format}", f"messages:  {n}"]
     if i.start is not None:
@@ -281,6 +283,8 @@ def info_lines(
         lines.append(f"  laser     x={x:.3f} m y={y:.3f} m yaw={yaw:.3f} rad{flip} ({source})")
     elif not i.scan_topic and i.format != "carmen":  # tf gives the mount of the scan topic's frame: none yet
         lines.append("  laser     - (no scan topic chosen)")
+    elif not mount_read:  # (the robot's frame, from its odometry, is where the mount is looked up from)
+        lines.append("  laser     - (not looked up: the problem below comes first)")
     else:
         where = "not in its laser lines" if i.format == "carmen" else "not on tf"
         lines.append(f"  laser     {where}: from the config's input.laser (built-in default x=0 y=0 yaw=0)")

@@ -1,0 +1,163 @@
+"""Logs of several robots, or of one robot recorded with more than it needs: each robot's topics in its
+namespace (/robot1/scan, /robot1/odom, /robot1/tf, /robot1/tf_static) and its frames named as the others'.
+The mount and the odometry of the scans' robot are read, not the first robot's (a hostile-user probe
+found the other robot's tf_static mount taken without a word: a wrong map, every line saying right)."""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import pytest
+from _log_fixtures import make_odoms, make_scans, write_messages_mcap
+
+from cornerslam_cli.logs import open_log
+from cornerslam_cli.logs.ros import is_static, namespace, of_robot
+from cornerslam_cli.logs.writers import RosSerializer
+
+ROS = RosSerializer("cdr")
+T0 = 1_700_000_000.0
+YAWS = {"/robot1": 0.0, "/robot2": math.pi / 2}  # each robot's laser mount
+
+
+def scans(topic: str) -> list:
+    return [(topic, "sensor_msgs/msg/LaserScan", int(s.stamp * 1e9), ROS.laserscan(s)) for s in make_scans(5)]
+
+
+def odometry(topic: str) -> list:
+    return [(topic, "nav_msgs/msg/Odometry", int(o.stamp * 1e9), ROS.odometry(o, "odom", "base_link"))
+            for o in make_odoms(6)]  # fmt: skip
+
+
+def tf(topic: str, parent: str, child: str, yaw: float, t: float = T0) -> tuple:
+    return (topic, "tf2_msgs/msg/TFMessage", int(t * 1e9), ROS.tf(t, parent, child, 0.2, 0.0, yaw))
+
+
+def tf_odometry(topic: str) -> list:
+    return [tf(topic, "odom", "base_link", 0.03 * i, T0 + 0.1 * i) for i in range(6)]
+
+
+def write(path, messages):
+    return write_messages_mcap(path, sorted(messages, key=lambda m: m[2]))
+
+
+def two_robots(tmp_path, odom=odometry):
+    msgs = []
+    for ns, yaw in YAWS.items():
+        msgs += scans(f"{ns}/scan") + odom(f"{ns}/{'odom' if odom is odometry else 'tf'}")
+        msgs.append(tf(f"{ns}/tf_static", "base_link", "laser", yaw))
+    return write(tmp_path / "two.mcap", msgs)
+
+
+def test_names():
+    assert namespace("/robot1/scan") == "/robot1" and namespace("/scan") == ""
+    assert is_static("/tf_static") and is_static("/robot1/tf_static") and not is_static("/robot1/tf")
+    tfs = ["/robot1/tf", "/robot2/tf", "/tf"]
+    assert of_robot(tfs, "/robot2/scan") == ["/robot2/tf", "/tf"]
+    assert of_robot(tfs, "/a/robot2/scan") == ["/tf"]  # (a namespace above the scans' one)
+    assert of_robot(["/robot1/tf"], "/scan") == ["/robot1/tf"]  # none of the scans' robot: all
+    assert of_robot(tfs, "") == tfs
+
+
+@pytest.mark.parametrize("robot", ["/robot1", "/robot2"])
+def test_the_scans_robot_gives_the_mount_and_the_odometry(tmp_path, robot):
+    log = open_log(two_robots(tmp_path), scan_topic=f"{robot}/scan")
+    assert log.odom_topic == f"{robot}/odom"
+    assert log.info().notes == (
+        f"2 Odometry topics: {robot}/odom taken (the scans' namespace), not "
+        f"{'/robot2' if robot == '/robot1' else '/robot1'}/odom",
+    )
+    x, _, yaw = log.laser_to_base()
+    assert (x, yaw) == pytest.approx((0.2, YAWS[robot]))
+    assert not log.stats.warnings
+
+
+def test_the_scans_robot_gives_the_tf_odometry(tmp_path):
+    log = open_log(two_robots(tmp_path, odom=tf_odometry), scan_topic="/robot2/scan")
+    assert log.odom_topic == "/robot2/tf"
+    assert log.laser_to_base()[2] == pytest.approx(YAWS["/robot2"])
+    odoms = [m for m in log.messages() if not hasattr(m, "ranges")]
+    assert odoms and odoms[-1].theta == pytest.approx(0.15)
+
+
+def test_two_tf_topics_that_disagree_on_a_mount_are_warned_of(tmp_path, caplog):
+    """Scans outside every robot's namespace: the tf topics cannot be told apart — the first read is
+    used, and the disagreement said."""
+    msgs = scans("/scan") + odometry("/odom")
+    msgs += [tf(f"{ns}/tf_static", "base_link", "laser", yaw) for ns, yaw in YAWS.items()]
+    with caplog.at_level(logging.WARNING, logger="cornerslam.logs"):
+        log = open_log(write(tmp_path / "one.mcap", msgs))
+        assert log.laser_to_base() is not None
+    assert (
+        "tf topics '/robot1/tf_static' and '/robot2/tf_static' both give base_link→laser, and differently"
+        in (caplog.text)
+    )
+
+
+def test_an_odometry_topic_never_published_gives_way_to_tf_odometry(tmp_path):
+    """/odom declared with no message beside tf odometry was refused ("has no messages") with a hint that
+    led nowhere; now the tf odometry is read, noted."""
+    from mcap.writer import Writer
+
+    path = tmp_path / "empty_odom.mcap"
+    msgs = sorted(scans("/scan") + tf_odometry("/tf") + [tf("/tf_static", "base_link", "laser", 0.0)],
+                  key=lambda m: m[2])  # fmt: skip
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start(profile="ros2", library="test")
+        sid = w.register_schema(
+            "nav_msgs/msg/Odometry", "ros2msg", ROS.msgdef("nav_msgs/msg/Odometry").encode()
+        )
+        w.register_channel("/odom", "cdr", sid)  # declared, never written
+        chans = {}
+        for topic, typename, t, data in msgs:
+            if topic not in chans:
+                s = w.register_schema(typename, "ros2msg", ROS.msgdef(typename).encode())
+                chans[topic] = w.register_channel(topic, "cdr", s)
+            w.add_message(chans[topic], t, data, t)
+        w.finish()
+    log = open_log(path)
+    assert log.odom_topic == "/tf"
+    assert log.info().notes == ("/odom has no messages: tf odometry taken",)
+    log.check()
+    assert sum(1 for m in log.messages() if not hasattr(m, "ranges")) == 6
+
+
+def test_info_does_not_say_the_mount_is_missing_when_it_did_not_look(tmp_path):
+    """With two Odometry topics to choose from (neither /odom, nor in the scans' namespace), info listed
+    'laser not on tf: from the config's input.laser' though /tf_static holds it: it had not looked."""
+    from click.testing import CliRunner
+
+    from cornerslam_cli.cli import cli
+
+    msgs = scans("/scan") + odometry("/wheels/odom") + odometry("/ekf/odom")
+    log = write(tmp_path / "two_odom.mcap", [*msgs, tf("/tf_static", "base_link", "laser", 0.0)])
+    res = CliRunner().invoke(cli, ["info", str(log)])
+    assert res.exit_code == 2 and "2 Odometry topics" in res.output
+    assert "  laser     - (not looked up: the problem below comes first)" in res.output.splitlines()
+    assert "not on tf" not in res.output
+    res = CliRunner().invoke(cli, ["info", str(log), "--odom-topic", "/ekf/odom"])
+    assert res.exit_code == 0 and "laser     x=0.200 m y=0.000 m yaw=0.000 rad (from tf" in res.output
+
+
+def test_one_storage_file_of_a_split_bag_is_read_with_a_warning(tmp_path, caplog):
+    """`ros2 bag record --max-bag-size` splits a bag into storage files; one given alone ran on its part of
+    the recording, exit 0, with nothing to say the output covers half of it."""
+    import shutil
+
+    import yaml
+    from _log_fixtures import write_log
+
+    bag = write_log("rosbag2-sqlite3", tmp_path)
+    (first,) = bag.glob("*.db3")
+    meta = yaml.safe_load((bag / "metadata.yaml").read_text())
+    assert open_log(first).stats.warnings == []  # one file: the whole bag
+    shutil.copy(first, bag / "second.db3")
+    meta["rosbag2_bagfile_information"]["relative_file_paths"] = [first.name, "second.db3"]
+    (bag / "metadata.yaml").write_text(yaml.safe_dump(meta))
+    with caplog.at_level(logging.WARNING, logger="cornerslam.logs"):
+        assert open_log(first).stats.warnings == [
+            f"{first.name} is one of the 2 storage files of the ROS 2 bag '{bag.name}': only its messages "
+            "are read (give the bag's directory to read them all)"
+        ]
+    assert "only its messages are read" in caplog.text
