@@ -28,6 +28,8 @@ from .results import RunSummary
 from .slam import Slam
 from .span import Span
 
+CLOCK_APART = 1.0  # s: a recorder clock this far from the stamps is another clock (not a delay)
+
 log = logging.getLogger("cornerslam.run")
 
 
@@ -74,10 +76,12 @@ def run(
         src = open_input(log_path, cfg, span, compiling)
         keep_notes(src, notes)
         scans = ScanStore() if mcap_path else None  # kept for the results MCAP's scans
+        offset = 0  # ns: the results MCAP's log times ahead of the stamps (the log's recorder clock's)
         if mcap_path:
             warn_second_parent(src)
+            offset = recorder_clock(src)
         summary = run_filter(frames(src, cfg, progress), src, cfg, stage.path, ref, wall0, scans)
-        write_extras(stage, plot, mcap_out, mcap_path, ref.gt_path, scans, src.stats.anchors)
+        write_extras(stage, plot, mcap_out, mcap_path, ref.gt_path, scans, src.stats.anchors, offset)
         summary = summary.with_out_dir(stage.commit())
     return summary
 
@@ -93,6 +97,23 @@ def warn_second_parent(src: Input) -> None:
             "(map → %s): with both files open a viewer gets two transforms into it (show one file's tf)",
             src.path.name, short_text(odom), short_text(parent), short_text(odom), short_text(odom),
         )  # fmt: skip
+
+
+def recorder_clock(src: Input) -> int:
+    """How far ahead of the scans' header stamps the log's recorder clock is [ns], when more than
+    :data:`CLOCK_APART` (a simulation recorded without use_sim_time: its stamps from 0, its log times
+    the wall clock's), warned; else 0. The results MCAP's log times are then the recorder's, so that a
+    viewer plays it beside the log (its messages keep the header stamps)."""
+    record_offset = getattr(src.reader, "record_offset", None)  # (a CARMEN log has no recorder clock)
+    offset = record_offset() if record_offset else None
+    if offset is None or abs(offset) <= CLOCK_APART * 1e9:
+        return 0
+    src.reader.stats.warn(
+        "log '%s': its recorder's clock is %.1f s %s its scans' header stamps (a simulation recorded without "
+        "use_sim_time?): the results MCAP's log times follow the recorder's, so that it plays beside the log",
+        src.path.name, abs(offset) * 1e-9, "ahead of" if offset > 0 else "behind",
+    )  # fmt: skip
+    return offset
 
 
 def keep_notes(src: Input, notes: Sequence[str]) -> None:
@@ -112,11 +133,13 @@ def write_extras(
     ground_truth: Path | None = None,
     scans: ScanStore | None = None,
     anchors: Sequence[tuple[float, tuple[float, float, float]]] = (),
+    clock_offset: int = 0,
 ) -> None:
     """What a run writes besides its tables, staged before the commit: with ``plot`` the figures and
     report.html; the results MCAP into ``mcap_path``, the staged place of ``mcap_out``, with the
-    run's ``scans`` and its odometry's re-anchorings (``anchors``: SyncStats's). Both draw the
-    ``ground_truth`` file the run was scored against."""
+    run's ``scans``, its odometry's re-anchorings (``anchors``: SyncStats's) and its log times
+    ``clock_offset`` ns ahead of the stamps (:func:`recorder_clock`). Both draw the ``ground_truth``
+    file the run was scored against."""
     if plot:
         from .report.html import write_report
         from .report.plots import plot_run
@@ -129,7 +152,9 @@ def write_extras(
         if mcap_path.is_relative_to(stage.path) and mcap_path.exists():
             raise OutputError(f"--mcap-out '{mcap_out}' is a file of the run itself", "give another name")
         with output_errors(mcap_out):
-            write_results_mcap(stage.path, mcap_path, stage.target, ground_truth, scans, anchors)
+            write_results_mcap(
+                stage.path, mcap_path, stage.target, ground_truth, scans, anchors, clock_offset
+            )
 
 
 def run_filter(

@@ -265,3 +265,49 @@ def test_an_unscored_runs_results_declare_no_ground_truth_topic(sim_log, tmp_pat
     with open(tmp_path / "r.mcap", "rb") as f:
         topics = {c.topic for c in make_reader(f).get_summary().channels.values()}
     assert TOPICS["path"] in topics and TOPICS["ground_truth_path"] not in topics
+
+
+def test_results_play_beside_a_log_recorded_on_another_clock(sim_log, tmp_path):
+    """A simulation recorded without use_sim_time: header stamps from the simulation's clock, log times
+    the wall clock's. The results' log times were the stamps: a Foxglove timeline of both files spanned
+    decades and never played them together. Now they follow the log's recorder clock (its median offset
+    over the first scans), warned; the messages keep their stamps."""
+    from click.testing import CliRunner
+    from mcap.writer import Writer
+
+    from cornerslam_cli.cli import cli
+
+    ahead = 1_000_000 * 10**9  # ns: the recorder's clock ahead of the stamps
+    log = tmp_path / "wallclock.mcap"
+    with open(sim_log, "rb") as f, open(log, "wb") as g:
+        w = Writer(g)
+        w.start(profile="ros2", library="test")
+        ids: dict[int, int] = {}
+        for schema, channel, m in make_reader(f).iter_messages():
+            if channel.id not in ids:
+                sid = w.register_schema(schema.name, schema.encoding, schema.data)
+                ids[channel.id] = w.register_channel(channel.topic, channel.message_encoding, sid)
+            w.add_message(ids[channel.id], m.log_time + ahead, m.data, m.publish_time + ahead)
+        w.finish()
+    out = tmp_path / "o"
+    args = [
+        "run",
+        str(log),
+        "--out",
+        str(out),
+        "-q",
+        "--max-scans",
+        "30",
+        "--mcap-out",
+        str(tmp_path / "r.mcap"),
+    ]
+    assert CliRunner().invoke(cli, args).exit_code == 0
+    with open(tmp_path / "r.mcap", "rb") as f:
+        poses = [(m.log_time, json.loads(m.data)["timestamp"]) for _, c, m in make_reader(f).iter_messages()
+                 if c.topic == TOPICS["pose"]]  # fmt: skip
+    with open(out / "trajectory.csv", newline="") as f:
+        stamps = [stamp_to_ns(row["stamp"]) for row in csv.DictReader(f)]
+    assert [ns(t) for _, t in poses] == stamps  # the messages' own stamps: the log's header stamps
+    assert [t for t, _ in poses] == [s + ahead for s in stamps]
+    warnings = json.loads((out / "summary.json").read_text())["warnings"]
+    assert any("its recorder's clock is 1000000.0 s ahead of its scans' header stamps" in w for w in warnings)

@@ -483,6 +483,21 @@ class RosLogReader:
 
         return Decoder(channel)
 
+    def record_offset(self, n: int = 100) -> int | None:
+        """How far the recorder's clock (the messages' log times) is ahead of the scans' header stamps
+        [ns]: the median over the first ``n`` scans (a Gazebo run recorded without use_sim_time: 1.7e9 s);
+        None without a scan that can be read."""
+        dec, offsets = self._decoder(self.scan_topic), []
+        for _, log_time, data in self.source.raw_messages({self.scan_topic}):
+            try:
+                sec, nsec = dec.laserscan(data).stamp
+            except Exception:  # noqa: BLE001 - bad bytes: the run counts them
+                continue
+            offsets.append(log_time - (sec * 1_000_000_000 + nsec))
+            if len(offsets) >= n:
+                break
+        return sorted(offsets)[len(offsets) // 2] if offsets else None
+
     def parent_on_tf(self, frame: str) -> str | None:
         """The parent the log's tf gives ``frame`` (a localiser's map → odom), else None: every tf message
         read until one names it a child (a results MCAP that gives it a parent of its own is warned of)."""

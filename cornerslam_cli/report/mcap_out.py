@@ -314,13 +314,16 @@ def write_results_mcap(
     ground_truth: str | Path | None = None,
     scans: ScanStore | None = None,
     anchors: Sequence[tuple[float, tuple[float, float, float]]] = (),
+    clock_offset: int = 0,
 ) -> Path:
     """Write a run directory's trajectory, landmarks and segment map to ``path`` (MCAP, JSON + Foxglove
     schemas); returns ``path``. See the module docstring for the topics. ``results`` is the name of
     the run directory recorded in the metadata (default ``out_dir``; a staging directory's target);
     ``ground_truth`` the TUM file the run was scored against (default: the one its summary names);
     ``scans`` the run's scans, one per step (occupancy.ScanStore), published on ``/cornerslam/scan``;
-    ``anchors`` the run's re-anchorings of its odometry (logs/sync.py SyncStats), taken back out of it."""
+    ``anchors`` the run's re-anchorings of its odometry (logs/sync.py SyncStats), taken back out of it;
+    ``clock_offset`` [ns] added to every log and publish time (the log's recorder clock, ahead of the
+    stamps: pipeline.recorder_clock), not to the messages' own timestamps."""
     from mcap.writer import Writer
 
     out_dir, path = Path(out_dir), Path(path)
@@ -383,7 +386,8 @@ def write_results_mcap(
         }
         seq: dict[str, int] = dict.fromkeys(TOPICS, 0)
         for ns, key, payload in msgs:
-            w.add_message(channels[key], ns, json_text(payload, separators=(",", ":")).encode(), ns, seq[key])
+            data = json_text(payload, separators=(",", ":")).encode()
+            w.add_message(channels[key], ns + clock_offset, data, ns + clock_offset, seq[key])
             seq[key] += 1
         w.add_metadata(
             "cornerslam",
