@@ -402,3 +402,22 @@ def test_scans_with_an_empty_frame_id_are_warned_of_as_such(tmp_path, tf_static)
         "to its mount, or input.laser.from_tf=false to keep it)"
     ) in s["warnings"]
     assert not any("has no tf" in w for w in s["warnings"])
+
+
+def test_a_laser_mount_turned_the_wrong_way_is_warned_of(tmp_path):
+    """The mount's yaw off by π: the scans then move against the odometry, and the front end learnt an
+    odometer scale error of 180 % (a hostile-user probe) with no word; now warned."""
+    raw, odoms, mount = _sample_log()
+    log = _write(tmp_path / "log.mcap", raw, odoms, mount, _yaw_q(mount[2]))
+    right = run_cli(log, tmp_path / "a", "submaps.enabled=false")
+    assert not any("disagree on distance" in w for w in right["warnings"])
+    assert abs(right["odometry_model"]["odom_scale_error"]) < 0.05
+    turned = (
+        f"input.laser.x={mount[0]}",
+        f"input.laser.yaw={mount[2] + math.pi}",
+        "input.laser.from_tf=false",
+    )
+    wrong = run_cli(log, tmp_path / "b", "submaps.enabled=false", *turned)
+    assert abs(wrong["odometry_model"]["odom_scale_error"]) > 0.25
+    (said,) = [w for w in wrong["warnings"] if "disagree on distance" in w]
+    assert f"check the laser mount (yaw {mount[2] + math.pi:.3f} rad, from the config's input.laser" in said

@@ -21,6 +21,7 @@ from .. import __version__, fpenv
 from ..errors import display_path
 from ..logs import check_regular
 from ..results import Accuracy, Counts, Hashes, OdometryModel, RunInput, RunSummary, Timing
+from .text import MOUNT_SOURCES
 
 if TYPE_CHECKING:
     from importlib.resources.abc import Traversable
@@ -30,6 +31,9 @@ if TYPE_CHECKING:
     from ..hierarchy import HierarchicalSlam
     from ..results import MapConsistency
     from ..slam import StepRecord
+
+# an odometer scale error past this is no calibration (real logs: 2–3 %): warned (warn_odometry_model)
+MAX_SCALE_ERROR = 0.25
 
 
 @dataclass
@@ -71,6 +75,8 @@ def build_summary(
     the occupancy grid's), accuracy, hashes, versions, map ``consistency``; with the two-level SLAM
     ``graph`` its submaps and loop closures counted and its loop-closing time."""
     info = src.info
+    model = odometry_model(src.matcher)
+    warn_odometry_model(src, model)
     return RunSummary(
         cornerslam_version=__version__,
         mode="slam",
@@ -95,7 +101,7 @@ def build_summary(
         counts=run_counts(src, totals, n_landmarks, graph),
         timing=run_timing(totals, wall0, t_grid, graph, src.filters_at_once),
         final_pose=tuple(final_pose.tolist()),
-        odometry_model=odometry_model(src.matcher),
+        odometry_model=model,
         consistency=consistency,
         warnings=tuple(src.reader.stats.warnings),
         accuracy=accuracy,
@@ -141,6 +147,21 @@ def run_counts(src: Input, totals: Totals, n_landmarks: int, graph: Hierarchical
         refine_registered=graph.refinement.tried if refine else None,
         refine_fit=len(graph.refinement.found) if refine else None,
     )
+
+
+def warn_odometry_model(src: Input, model: OdometryModel | None) -> None:
+    """Warn when the front end learnt an odometer scale error past :data:`MAX_SCALE_ERROR`: the scans and
+    the odometry disagree on how far the robot went by more than any wheel calibration is off — a laser
+    mount turned the wrong way (tf, ``input.laser.yaw``: the scans then move against the odometry), or
+    odometry of another robot or in other units. (Real logs: 2–3 %.)"""
+    if model is not None and abs(model.odom_scale_error) > MAX_SCALE_ERROR:
+        src.reader.stats.warn(
+            "log '%s': the scans and the odometry disagree on distance by %.0f %% (the front end's odometer "
+            "scale error, summary.json odometry_model): check the laser mount (yaw %.3f rad, %s: turned the "
+            "wrong way?) and that the odometry is this robot's, in metres",
+            src.path.name, 100 * abs(model.odom_scale_error), src.laser2base[2],
+            MOUNT_SOURCES.get(src.laser_source, src.laser_source),
+        )  # fmt: skip
 
 
 def odometry_model(matcher) -> OdometryModel | None:
