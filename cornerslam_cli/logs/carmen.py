@@ -123,6 +123,11 @@ def _lines(path: Path, stats: ReadStats | None, fault: list[str] | None = None) 
         )
 
 
+def _rate(n: int, span: tuple[float, float] | None) -> float | None:
+    """Lines a second: ``n`` lines over their ``span`` of stamps; None without one."""
+    return (n - 1) / (span[1] - span[0]) if span and n > 1 and span[1] > span[0] else None
+
+
 def _through_stamp(tag: str, tok: list[str]) -> int:
     """How many of an ODOM or laser line's fields after its tag (``tok``) run up to its timestamp, that
     included: ODOM 7, a laser line as many as its reading (and remission) counts imply; -1 when a count
@@ -286,6 +291,7 @@ class CarmenReader:
         self._whole: dict[str, int] = {}  # per laser / ODOM tag: whole lines with a stamp (the rest skipped)
         self._tail: dict[str, int] = {}  # per laser / ODOM tag: the fields after its stamp (TAIL)
         self._params: dict[str, str] = {}
+        self._span: dict[str, tuple[float, float]] = {}  # per laser / ODOM tag: its whole lines' first, last
         self._start: float | None = None
         self._end: float | None = None
         self._back: dict[str, int] = {}  # per tag: lines stamped before the line of that tag above them
@@ -345,6 +351,7 @@ class CarmenReader:
             if not layout.lines:
                 continue
             self._whole[tag], self._back[tag] = layout.lines, layout.back
+            self._span[tag] = (layout.start, layout.end)
             if layout.moving:
                 self._moving.add(tag)
             if layout.start <= layout.end:
@@ -413,8 +420,8 @@ class CarmenReader:
 
     def info(self) -> LogInfo:
         dur = (self._end - self._start) if self._start is not None else 0.0
-        topics = tuple(
-            TopicInfo(tag, f"carmen/{tag}", n, (n - 1) / dur if n > 1 and dur > 0 else None, "carmen")
+        topics = tuple(  # rates over each tag's own span, of its whole lines (NEFF, PARAM… are not read)
+            TopicInfo(tag, f"carmen/{tag}", n, _rate(self._whole.get(tag, 0), self._span.get(tag)), "carmen")
             for tag, n in sorted(self._counts.items())
         )
         src = ""

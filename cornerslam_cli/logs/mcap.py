@@ -38,7 +38,7 @@ from .ros import RosLogReader
 
 MAGIC = b"\x89MCAP0\r\n"
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK = 0x01, 0x02, 0x03, 0x04, 0x05, 0x06
-OP_CHUNK_INDEX, OP_STATISTICS, OP_DATA_END = 0x08, 0x0B, 0x0F
+OP_MESSAGE_INDEX, OP_CHUNK_INDEX, OP_STATISTICS, OP_DATA_END = 0x07, 0x08, 0x0B, 0x0F
 FOOTER_LEN = 1 + 8 + 20  # opcode, length, summary_start, summary_offset_start, summary_crc
 
 _REC = struct.Struct("<BQ")
@@ -129,6 +129,9 @@ class _Index:
     n_messages: int = 0
     # from the summary's chunk indexes: (message_start_time, offset, length, channel ids or empty)
     chunks: list[tuple[int, int, int, frozenset[int]]] = field(default_factory=list)
+    # ... and (message_start_time, message_end_time, {channel id: its message index record's offset})
+    message_indexes: list[tuple[int, int, dict[int, int]]] = field(default_factory=list)
+    spans: dict[int, tuple[int, int]] = field(default_factory=dict)  # a scan's: channel id -> first, last
 
 
 class McapSource:
@@ -357,9 +360,10 @@ class McapSource:
                     if n:
                         idx.start, idx.end = t0, t1
                 elif op == OP_CHUNK_INDEX:
-                    t0, _, pos, length = struct.unpack_from("<QQQQ", body, 0)
+                    t0, t1, pos, length = struct.unpack_from("<QQQQ", body, 0)
                     offsets, _ = _u16_u64_map(body, 32)
                     idx.chunks.append((t0, pos, length, frozenset(offsets)))
+                    idx.message_indexes.append((t0, t1, offsets))
         except (struct.error, McapFormatError):
             return None
         if not stats_seen:
@@ -367,7 +371,7 @@ class McapSource:
         if len(idx.channels) < n_channels or len(idx.schemas) < n_schemas:
             return None  # channels not repeated in the summary (a writer's option): found by the scan
         if len(idx.chunks) != n_chunks or any(not 8 <= c[1] < summary_start for c in idx.chunks):
-            idx.chunks = []  # an index that does not cover the chunks: read in file order
+            idx.chunks, idx.message_indexes = [], []  # an index that does not cover the chunks: file order
         self._summary_start = summary_start
         # the data section ends at the DataEnd record, which precedes the summary
         self.summary_ok = True
@@ -382,6 +386,8 @@ class McapSource:
                 idx.n_messages += 1
                 idx.start = t if idx.start is None else min(idx.start, t)
                 idx.end = t if idx.end is None else max(idx.end, t)
+                first, last = idx.spans.get(cid, (t, t))
+                idx.spans[cid] = (min(first, t), max(last, t))
         return idx
 
     # ---------------------------------------------------------------- RawSource
@@ -404,6 +410,48 @@ class McapSource:
         if self.index.start is None or self.index.end is None:
             return None
         return self.index.start, self.index.end
+
+    def topic_spans(self) -> dict[str, tuple[int, int]]:
+        """Each topic's first and last log time [ns], where the file tells them cheaply: from the scan of
+        a file without a summary, else from the message indexes of the chunks that can hold its first
+        and last message (a topic whose chunks have none is left out)."""
+        spans = dict(self.index.spans)
+        for cid in self.index.channels if not spans else ():
+            held = [
+                (t0, t1, offsets[cid]) for t0, t1, offsets in self.index.message_indexes if cid in offsets
+            ]
+            first = last = None
+            for t0, _, at in sorted(held):  # the chunks that may hold an earlier message than found
+                if first is not None and t0 >= first:
+                    break
+                if times := self._index_times(at, cid):
+                    first = min(min(times), first if first is not None else min(times))
+            for _, t1, at in sorted(held, key=lambda h: -h[1]):  # ... a later one
+                if last is not None and t1 <= last:
+                    break
+                if times := self._index_times(at, cid):
+                    last = max(max(times), last if last is not None else max(times))
+            if first is not None and last is not None:
+                spans[cid] = (first, last)
+        out: dict[str, tuple[int, int]] = {}
+        for cid, (first, last) in spans.items():  # (a topic's channels together)
+            topic = self.index.channels.get(cid, ("",))[0]
+            a, b = out.get(topic, (first, last))
+            out[topic] = (min(a, first), max(b, last))
+        return out
+
+    def _index_times(self, at: int, cid: int) -> tuple[int, ...]:
+        """The log times of a message index record (at byte ``at``) of channel ``cid``; none if it is not
+        one (a damaged file)."""
+        self._f.seek(at)
+        hdr = self._f.read(9)
+        if len(hdr) < 9 or hdr[0] != OP_MESSAGE_INDEX:
+            return ()
+        body = self._f.read(min(_REC.unpack(hdr)[1], self.size - at))
+        if len(body) < 6 or _U16.unpack_from(body, 0)[0] != cid:
+            return ()
+        n = min(_U32.unpack_from(body, 2)[0], len(body) - 6) // 16
+        return struct.unpack_from(f"<{2 * n}Q", body, 6)[::2]
 
     def raw_messages(self, topics: set[str]) -> Iterator[tuple[str, int, memoryview]]:
         """Messages of ``topics`` in log-time order (see :meth:`_merged`). Warns at the end if some

@@ -185,6 +185,10 @@ class RawSource(Protocol):
         """(first, last) log time in ns, None if the log has no messages."""
         ...
 
+    def topic_spans(self) -> dict[str, tuple[int, int]]:
+        """(first, last) log time in ns of each topic the log tells cheaply (its index), others left out."""
+        ...
+
     def raw_messages(self, topics: set[str]) -> Iterator[tuple[str, int, bytes | memoryview]]:
         """(topic, log_time_ns, data) of the given topics in log-time order, streaming."""
         ...
@@ -447,11 +451,13 @@ class RosLogReader:
         tr = self.source.time_range()
         start, end = (tr[0] * 1e-9, tr[1] * 1e-9) if tr else (None, None)
         duration = (end - start) if tr else 0.0
+        spans = self.source.topic_spans()  # (a /map latched 120 s before the robot started: not its rate)
         topics = []
         for c in sorted(self._channels.values(), key=lambda c: c.topic):
             rate = None
-            if c.count is not None and c.count > 1 and duration > 0:
-                rate = (c.count - 1) / duration
+            span = (spans[c.topic][1] - spans[c.topic][0]) * 1e-9 if c.topic in spans else duration
+            if c.count is not None and c.count > 1 and span > 0:
+                rate = (c.count - 1) / span
             topics.append(TopicInfo(c.topic, normalize_msgtype(c.msgtype), c.count, rate, c.encoding))
         problems = tuple(f"{p} ({h})" for p, h in self._problems())
         counts = [c.count for c in self._channels.values()]

@@ -19,6 +19,7 @@ killed recorder's, an edited bag's) are taken as unknown, warned, not as an empt
 from __future__ import annotations
 
 import os
+import urllib.parse
 from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
@@ -137,6 +138,19 @@ class RosbagSource:
     def channels(self) -> list[Channel]:
         return self._channels
 
+    def topic_spans(self) -> dict[str, tuple[int, int]]:
+        """Each topic's first and last log time [ns]: a ROS 1 bag's from its index (read at open), a ROS 2
+        bag's in sqlite3 storage from its files' timestamp index (:func:`sqlite_spans`); none else."""
+        if self.format == "rosbag2":
+            return sqlite_spans(_sqlite_files(self.path))
+        out: dict[str, tuple[int, int]] = {}
+        for c in self._reader.connections:
+            index = self._reader.indexes.get(c.id)
+            if index:
+                a, b = out.get(c.topic, (index[0].time, index[-1].time))
+                out[c.topic] = (min(a, index[0].time), max(b, index[-1].time))
+        return out
+
     def time_range(self) -> tuple[int, int] | None:
         r = self._reader
         if not r.message_count:
@@ -175,6 +189,45 @@ def open_rosbag2(path: Path, **kw) -> RosLogReader:
     source = mcap_source(storage, stats, f"ROS 2 bag '{path.name}': {storage.name}", "check the bag")
     source.format = "rosbag2"
     return RosLogReader(source, path, stats=stats, **kw)
+
+
+def _sqlite_files(path: Path) -> list[Path]:
+    """The sqlite3 storage files of a ROS 2 bag (a directory, or a ``.db3`` alone): none when its storage
+    is compressed or not sqlite3, or its metadata.yaml cannot be read."""
+    if path.suffix == ".db3":
+        return [path]
+    try:
+        info = yaml.safe_load((path / META).read_text())["rosbag2_bagfile_information"]
+        if info["storage_identifier"] != "sqlite3" or info.get("compression_format"):
+            return []
+        return [path / str(f) for f in info["relative_file_paths"]]
+    except Exception:  # noqa: BLE001 - rosbags read the bag; what this cannot read gives no spans
+        return []
+
+
+def sqlite_spans(files: list[Path]) -> dict[str, tuple[int, int]]:
+    """Each topic's first and last timestamp [ns] in sqlite3 storage ``files``: the messages' timestamp
+    index walked from either end to the topic's first message (a topic recorded all along: a few rows);
+    {} if a file cannot be read so."""
+    out: dict[str, tuple[int, int]] = {}
+    first = "SELECT timestamp FROM messages WHERE topic_id = ? ORDER BY timestamp LIMIT 1"
+    last = first.replace("timestamp LIMIT", "timestamp DESC LIMIT")
+    try:
+        for f in files:
+            uri = f"file:{urllib.parse.quote(str(f))}?immutable=1"
+            conn = apsw.Connection(uri, flags=apsw.SQLITE_OPEN_READONLY | apsw.SQLITE_OPEN_URI)
+            try:
+                for tid, name in list(conn.execute("SELECT id, name FROM topics")):
+                    lo = conn.execute(first, (tid,)).fetchone()
+                    hi = conn.execute(last, (tid,)).fetchone()
+                    if lo and hi:
+                        a, b = out.get(name, (lo[0], hi[0]))
+                        out[name] = (min(a, lo[0]), max(b, hi[0]))
+            finally:
+                conn.close()
+    except apsw.Error:
+        return {}
+    return out
 
 
 def split_bag_of(path: Path) -> int | None:
