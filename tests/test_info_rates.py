@@ -82,3 +82,30 @@ def test_carmen_rates_are_each_tags_over_its_own_stamps(tmp_path):
     p.write_text(odom + laser + "NEFF 1 2 3\nNEFF 4 5 6\n")
     r = rates(p)
     assert r["ODOM"] == pytest.approx(20.0) and r["FLASER"] == pytest.approx(2.0) and r["NEFF"] is None
+
+
+def test_a_topic_named_almost_right_gets_a_suggestion(tmp_path):
+    """--scan-topic scan (no slash), --odom-topic /odm: "did you mean '/scan'?" (a probe's nits)."""
+    from cornerslam_cli.errors import LogError
+
+    log = write_log("mcap-cdr", tmp_path)
+    for kw, said in (({"scan_topic": "scan"}, "/scan"), ({"odom_topic": "/odm"}, "/odom")):
+        with pytest.raises(LogError) as err:
+            open_log(log, **kw).check()
+        assert f"did you mean '{said}'?" in err.value.hint
+    with pytest.raises(LogError) as err:
+        open_log(log, scan_topic="/nothing_alike").check()
+    assert "did you mean" not in err.value.hint
+
+
+def test_info_columns_line_up_under_a_long_type_name(tmp_path):
+    from dataclasses import replace
+
+    from cornerslam_cli.report.text import info_lines
+
+    p = prelude_log(tmp_path / "p.mcap")
+    info = open_log(p).info()
+    long = replace(info.topics[0], msgtype="geometry_msgs/PoseWithCovarianceStamped")
+    lines = info_lines(p, replace(info, topics=(long, *info.topics[1:])), None)
+    rows = [line for line in lines if " msgs" in line]
+    assert len({line.index(" msgs") for line in rows}) == 1  # the counts' column the same on every row

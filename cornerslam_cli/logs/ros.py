@@ -9,6 +9,7 @@ selection, decoding and tf steps share the reader's state.
 
 from __future__ import annotations
 
+import difflib
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -38,6 +39,7 @@ from .unreadable import damage_problem
 LASERSCAN = "sensor_msgs/LaserScan"
 ODOMETRY = "nav_msgs/Odometry"
 TF_TYPES = ("tf2_msgs/TFMessage", "tf/tfMessage")
+INFO_LISTS = "`cornerslam info LOG` lists the topics"
 MAX_TILT = 5.0  # degrees: a laser tilted more than this from level (upright or upside down) is warned about
 
 
@@ -277,6 +279,14 @@ class RosLogReader:
             return " before the cut (the file is truncated)"
         return " in its readable parts (some of the file is damaged)" if self.stats.damaged else ""
 
+    def _close_to(self, want: str) -> str:
+        """ ", did you mean '/scan'?" when the log has a topic close to ``want`` (a missing leading slash, a
+        namespace left out, a typo), else ""."""
+        names = list(self._channels)
+        close = [t for t in names if t.lstrip("/") == want.lstrip("/") or t.endswith("/" + want.lstrip("/"))]
+        close = close or difflib.get_close_matches(want, names, n=1, cutoff=0.75)
+        return f", did you mean '{short_text(close[0])}'?" if close else ""
+
     def _select_scan(self) -> tuple[str, str, str]:
         """(topic, problem, hint)."""
         name = self.path.name
@@ -289,14 +299,16 @@ class RosLogReader:
                     "",
                     f"log '{name}' has no topic '{want}'{self._cut_note()} "
                     f"(LaserScan topics: {listing(scans)})",
-                    "check --scan-topic; `cornerslam info LOG` lists the topics",
+                    f"check --scan-topic{self._close_to(self._want_scan)}; {INFO_LISTS}",
                 )
             if normalize_msgtype(c.msgtype) != LASERSCAN:
                 return (
                     "",
                     f"topic '{want}' of log '{name}' is {normalize_msgtype(c.msgtype)}, "
                     "not sensor_msgs/LaserScan",
-                    f"choose a LaserScan topic with --scan-topic ({listing(scans)})",
+                    f"choose a LaserScan topic with --scan-topic ({listing(scans)})"
+                    if scans
+                    else "it has no LaserScan topic: cornerslam reads the laser as sensor_msgs/LaserScan",
                 )
             return self._want_scan, "", ""
         if not scans and self._lossy():
@@ -334,7 +346,7 @@ class RosLogReader:
                     "",
                     f"log '{name}' has no topic '{want}'{self._cut_note()} "
                     f"(Odometry topics: {listing(odoms)}; tf topics: {listing(tfs)})",
-                    "check --odom-topic; `cornerslam info LOG` lists the topics",
+                    f"check --odom-topic{self._close_to(self._want_odom)}; {INFO_LISTS}",
                 )
             mt = normalize_msgtype(c.msgtype)
             if mt == ODOMETRY:

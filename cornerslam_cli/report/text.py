@@ -265,12 +265,15 @@ def info_lines(
         lines.append(f"start:     {i.start:.3f} s")
         lines.append(f"duration:  {i.duration:.2f} s")
     lines.append("topics:")
-    for t in i.topics:  # names and types as the log has them, control characters escaped (short_text)
+    # names and types as the log has them, control characters escaped (short_text); the columns as wide as
+    # the longest (geometry_msgs/PoseWithCovarianceStamped) up to 60
+    names = [(short_text(t.name, 200), short_text(t.msgtype, 200)) for t in i.topics]
+    wide = [min(max([least, *(len(n[k]) for n in names)]), 60) for k, least in ((0, 28), (1, 30))]
+    for t, (name, msgtype) in zip(i.topics, names, strict=True):
         count = "?" if t.count is None else str(t.count)
         rate = f"{t.rate_hz:8.2f} Hz" if t.rate_hz else ""
         note = f" [{t.encoding_note}]" if t.encoding_note else ""
-        name, msgtype = short_text(t.name, 200), short_text(t.msgtype, 200)
-        lines.append(f"  {name:<28} {msgtype:<30} {count:>8} msgs {rate}{note}")
+        lines.append(f"  {name:<{wide[0]}} {msgtype:<{wide[1]}} {count:>8} msgs {rate}{note}")
     lines.append("run would use:")
     lines.append(f"  scans     {short_text(i.scan_topic, 200) or '-'}")
     lines.append(f"  odometry  {short_text(i.odom_topic, 200) or '-'} ({i.odom_source or _no_odometry(i)})")
