@@ -18,6 +18,7 @@ from .config import Config
 from .errors import OutputError, display_path, printable
 from .frontend import Frame, Input, check_processed, frames, open_input, warn_mount
 from .hierarchy import HierarchicalSlam
+from .logs.ros import CLOCK_APART
 from .ranges import short_text
 from .report.occupancy import ScanStore
 from .report.oserrors import output_errors
@@ -27,8 +28,6 @@ from .report.run_writer import Reference, RunWriter, find_ground_truth, load_ref
 from .results import RunSummary
 from .slam import Slam
 from .span import Span
-
-CLOCK_APART = 1.0  # s: a recorder clock this far from the stamps is another clock (not a delay)
 
 log = logging.getLogger("cornerslam.run")
 

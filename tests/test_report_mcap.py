@@ -311,3 +311,8 @@ def test_results_play_beside_a_log_recorded_on_another_clock(sim_log, tmp_path):
     assert [t for t, _ in poses] == [s + ahead for s in stamps]
     warnings = json.loads((out / "summary.json").read_text())["warnings"]
     assert any("its recorder's clock is 1000000.0 s ahead of its scans' header stamps" in w for w in warnings)
+    from cornerslam_cli.logs import open_log
+
+    (note,) = open_log(log).info().notes  # info's start and duration are the recorder's: it says so
+    assert note.startswith("its scans' header stamps are 1000000.0 s behind its record times")
+    assert open_log(sim_log).info().notes == ()

@@ -40,6 +40,7 @@ LASERSCAN = "sensor_msgs/LaserScan"
 ODOMETRY = "nav_msgs/Odometry"
 TF_TYPES = ("tf2_msgs/TFMessage", "tf/tfMessage")
 INFO_LISTS = "`cornerslam info LOG` lists the topics"
+CLOCK_APART = 1.0  # s: a recorder clock this far from the scans' header stamps is another clock (not a delay)
 MAX_TILT = 5.0  # degrees: a laser tilted more than this from level (upright or upside down) is warned about
 
 
@@ -486,7 +487,7 @@ class RosLogReader:
             odom_topic=self.odom_topic,
             odom_source=self._odom_source_label(),
             problems=problems,
-            notes=(self._odom_sel.note,) if self._odom_sel.note else (),
+            notes=tuple(n for n in (self._odom_sel.note, self._clock_note()) if n),
         )
 
     # ---------------------------------------------------------------- decoding
@@ -500,6 +501,18 @@ class RosLogReader:
         from .cdr import Decoder
 
         return Decoder(channel)
+
+    def _clock_note(self) -> str:
+        """info's note when the scans' header stamps are another clock than the recorder's (the log's
+        start and duration are the recorder's; a run's stamps, --start and the outputs are the headers')."""
+        offset = self.record_offset() if self.scan_topic and not self._scan_problems() else None
+        if offset is None or abs(offset) <= CLOCK_APART * 1e9:
+            return ""
+        way = "behind" if offset > 0 else "ahead of"
+        return (
+            f"its scans' header stamps are {abs(offset) * 1e-9:.1f} s {way} its record times (start and "
+            "duration above are the recorder's; a run's stamps, --start/--end and its outputs, the headers')"
+        )
 
     def record_offset(self, n: int = 100) -> int | None:
         """How far the recorder's clock (the messages' log times) is ahead of the scans' header stamps
