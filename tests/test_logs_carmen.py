@@ -538,3 +538,23 @@ def test_info_says_how_many_of_the_runs_lines_it_skips(tmp_path):
     q = tmp_path / "cut_odom.log"
     q.write_text("".join(flaser(180, 1000.0 + i) for i in range(4)) + odom + "ODOM 1 2\n")
     assert open_log(q).info().notes == ("1 of its 5 ODOM lines are cut or malformed: a run skips them",)
+
+
+@pytest.mark.parametrize("encoding", ["utf-16", "utf-16-be"])
+def test_a_utf16_log_is_named_so_with_the_command_that_converts_it(tmp_path, encoding):
+    """A CARMEN log saved as UTF-16 by a Windows editor was "not a CARMEN log", after warning that every
+    line began with NUL bytes; now the error says what it is and how to convert it (which reads)."""
+    import codecs
+    import subprocess
+
+    text = "".join(flaser(180, float(i), r=2.0 + 0.01 * i) for i in range(5))
+    bom = codecs.BOM_UTF16_BE if encoding.endswith("be") else b""
+    p = tmp_path / "x.log"
+    p.write_bytes(bom + text.encode(encoding))
+    with pytest.raises(LogError, match="log 'x.log' is UTF-16 text") as err:
+        open_log(p)
+    command = err.value.hint.split("first: ", 1)[1]
+    assert command == f"iconv -f UTF-16 -t UTF-8 {p} > {tmp_path / 'x-utf8.log'}"
+    subprocess.run(command, shell=True, check=True)
+    scans, _ = split(open_log(tmp_path / "x-utf8.log").messages())
+    assert [s.stamp for s in scans] == [0, 1, 2, 3, 4]

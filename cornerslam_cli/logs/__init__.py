@@ -96,6 +96,13 @@ def detect_format(path: str | Path) -> str:
     if head.startswith(ROSBAG1_MAGIC):
         return "rosbag1"
     _refuse_compressed(p, head)
+    if head.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):  # a CARMEN log saved by a Windows editor
+        shown = Path(display_path(p))
+        utf8 = shlex.quote(str(shown.with_name(f"{shown.stem}-utf8{shown.suffix}")))
+        raise LogError(
+            f"log '{p.name}' is UTF-16 text",
+            f"convert it to plain text first: iconv -f UTF-16 -t UTF-8 {shlex.quote(str(shown))} > {utf8}",
+        )
     suffix = p.suffix.lower()
     if head.startswith(SQLITE_MAGIC) and suffix == ".db3":  # (another SQLite file: unsupported, below)
         return "rosbag2"
