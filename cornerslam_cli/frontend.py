@@ -147,7 +147,7 @@ def open_input(
         base_frame=inp.base_frame,
     )
     reader.check()
-    info = reader.info()
+    info = reader.info(inspect=False)  # (a run needs its topics, not its rates)
     laser2base, source, upside_down, upside_down_source = _laser_mount(reader, cfg)
     matcher = ScanMatcher(cfg.scan_match, odometry_noise(cfg)) if cfg.scan_match.enabled else None
     if matcher is not None and cfg.submaps.enabled and cfg.graph.recalibrate:  # (before any use)

@@ -109,3 +109,28 @@ def test_info_columns_line_up_under_a_long_type_name(tmp_path):
     lines = info_lines(p, replace(info, topics=(long, *info.topics[1:])), None)
     rows = [line for line in lines if " msgs" in line]
     assert len({line.index(" msgs") for line in rows}) == 1  # the counts' column the same on every row
+
+
+@pytest.mark.parametrize("zeroed", [(0, 8), (8,)])  # the start and end times' offsets; the end times' only
+def test_mcap_rates_when_the_chunk_index_times_are_zero(tmp_path, zeroed):
+    """Some writers leave a chunk's start and end times 0 (the reader trusts them nowhere): the first and
+    last chunk by those times were the wrong ones (/scan at 39 Hz on 4 chunks, none on 28); now every
+    chunk holding the topic is read."""
+    import struct
+
+    data = bytearray(prelude_log(tmp_path / "p.mcap", 2000).read_bytes())
+    (summary_start,) = struct.unpack_from("<Q", data, len(data) - 8 - 20)  # the footer's
+    for start, end, op in ((summary_start, len(data) - 8, 0x08), (8, summary_start, 0x06)):  # indexes, chunks
+        pos = start
+        while pos < end:
+            code, length = struct.unpack_from("<BQ", data, pos)
+            if code == op:
+                for at in zeroed:
+                    struct.pack_into("<Q", data, pos + 9 + at, 0)
+            pos += 9 + length
+    zero = tmp_path / "zero.mcap"
+    zero.write_bytes(bytes(data))
+    log = open_log(zero)
+    assert len(log.source.index.chunks) > 3
+    r = {t.name: t.rate_hz for t in log.info().topics}
+    assert r["/scan"] == pytest.approx(10.0) and r["/odom"] == pytest.approx(10.0)

@@ -251,7 +251,7 @@ class LogReader(Protocol):
     odom_topic: str
     odom_on_tf: bool  # the log's tf carries odom→base (seen by laser_to_base())
 
-    def info(self) -> LogInfo: ...
+    def info(self, inspect: bool = True) -> LogInfo: ...  # inspect: as `cornerslam info` shows (reads more)
 
     def laser_to_base(self) -> Pose2 | None: ...
 

@@ -418,7 +418,7 @@ class CarmenReader:
         if self._problems:
             raise LogError(*self._problems[0])
 
-    def info(self) -> LogInfo:
+    def info(self, inspect: bool = True) -> LogInfo:  # (the pre-read has every figure: inspect costs nothing)
         dur = (self._end - self._start) if self._start is not None else 0.0
         topics = tuple(  # rates over each tag's own span, of its whole lines (NEFF, PARAM… are not read)
             TopicInfo(tag, f"carmen/{tag}", n, _rate(self._whole.get(tag, 0), self._span.get(tag)), "carmen")

@@ -34,7 +34,7 @@ from pathlib import Path
 from ..errors import LogError
 from ..ranges import short_text
 from .base import Channel, ReadStats
-from .ros import RosLogReader
+from .ros import RosLogReader, merged
 
 MAGIC = b"\x89MCAP0\r\n"
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK = 0x01, 0x02, 0x03, 0x04, 0x05, 0x06
@@ -386,8 +386,7 @@ class McapSource:
                 idx.n_messages += 1
                 idx.start = t if idx.start is None else min(idx.start, t)
                 idx.end = t if idx.end is None else max(idx.end, t)
-                first, last = idx.spans.get(cid, (t, t))
-                idx.spans[cid] = (min(first, t), max(last, t))
+                idx.spans[cid] = merged(idx.spans.get(cid), (t, t))
         return idx
 
     # ---------------------------------------------------------------- RawSource
@@ -414,30 +413,31 @@ class McapSource:
     def topic_spans(self) -> dict[str, tuple[int, int]]:
         """Each topic's first and last log time [ns], where the file tells them cheaply: from the scan of
         a file without a summary, else from the message indexes of the chunks that can hold its first
-        and last message (a topic whose chunks have none is left out)."""
+        and last message — every chunk's when the chunk index's times are not to be trusted (some writers
+        leave them 0) — a topic whose chunks have none left out. (``cornerslam info``'s rates.)"""
         spans = dict(self.index.spans)
+        trusted = all(0 < t0 <= t1 for t0, t1, _ in self.index.message_indexes)
         for cid in self.index.channels if not spans else ():
             held = [
                 (t0, t1, offsets[cid]) for t0, t1, offsets in self.index.message_indexes if cid in offsets
             ]
-            first = last = None
+            span = None
             for t0, _, at in sorted(held):  # the chunks that may hold an earlier message than found
-                if first is not None and t0 >= first:
+                if trusted and span is not None and t0 >= span[0]:
                     break
                 if times := self._index_times(at, cid):
-                    first = min(min(times), first if first is not None else min(times))
-            for _, t1, at in sorted(held, key=lambda h: -h[1]):  # ... a later one
-                if last is not None and t1 <= last:
+                    span = merged(span, (min(times), max(times)))
+            for _, t1, at in sorted(held, key=lambda h: -h[1]) if trusted else ():  # ... a later one
+                if span is not None and t1 <= span[1]:
                     break
                 if times := self._index_times(at, cid):
-                    last = max(max(times), last if last is not None else max(times))
-            if first is not None and last is not None:
-                spans[cid] = (first, last)
+                    span = merged(span, (min(times), max(times)))
+            if span is not None:
+                spans[cid] = span
         out: dict[str, tuple[int, int]] = {}
-        for cid, (first, last) in spans.items():  # (a topic's channels together)
+        for cid, span in spans.items():  # (a topic's channels together)
             topic = self.index.channels.get(cid, ("",))[0]
-            a, b = out.get(topic, (first, last))
-            out[topic] = (min(a, first), max(b, last))
+            out[topic] = merged(out.get(topic), span)
         return out
 
     def _index_times(self, at: int, cid: int) -> tuple[int, ...]:

@@ -147,6 +147,11 @@ def _child_frame(decoder, data: bytes | memoryview) -> str:
         return ""
 
 
+def merged(span: tuple[int, int] | None, other: tuple[int, int]) -> tuple[int, int]:
+    """The (first, last) span holding ``span`` (None: none yet) and ``other``: a topic's over its parts."""
+    return other if span is None else (min(span[0], other[0]), max(span[1], other[1]))
+
+
 def namespace(topic: str) -> str:
     """The namespace of a topic: ``/robot1/scan`` → ``/robot1``, ``/scan`` → ``""``."""
     return topic.rsplit("/", 1)[0]
@@ -460,11 +465,14 @@ class RosLogReader:
         return [p] if p else []
 
     # ---------------------------------------------------------------- info
-    def info(self) -> LogInfo:
+    def info(self, inspect: bool = True) -> LogInfo:
+        """What the log holds and what a run would use; with ``inspect`` (``cornerslam info``) also what
+        takes more reading: each topic's rate over its own span (else over the log's), the clock note."""
         tr = self.source.time_range()
         start, end = (tr[0] * 1e-9, tr[1] * 1e-9) if tr else (None, None)
         duration = (end - start) if tr else 0.0
-        spans = self.source.topic_spans()  # (a /map latched 120 s before the robot started: not its rate)
+        # (a /map latched 120 s before the robot started: not the laser's rate)
+        spans = self.source.topic_spans() if inspect else {}
         topics = []
         for c in sorted(self._channels.values(), key=lambda c: c.topic):
             rate = None
@@ -487,7 +495,7 @@ class RosLogReader:
             odom_topic=self.odom_topic,
             odom_source=self._odom_source_label(),
             problems=problems,
-            notes=tuple(n for n in (self._odom_sel.note, self._clock_note()) if n),
+            notes=tuple(n for n in (self._odom_sel.note, self._clock_note() if inspect else "") if n),
         )
 
     # ---------------------------------------------------------------- decoding

@@ -36,7 +36,7 @@ from ..errors import LogError
 from ..ranges import short_text
 from .base import Channel, ReadStats
 from .mcap import mcap_source
-from .ros import RosLogReader
+from .ros import RosLogReader, merged
 
 STORAGE_SUFFIXES = (".mcap", ".db3")  # a ROS 2 bag's storage files
 DEFINITION_COLUMNS = ("topic_type", "encoding", "encoded_message_definition", "type_description_hash")
@@ -145,10 +145,8 @@ class RosbagSource:
             return sqlite_spans(_sqlite_files(self.path))
         out: dict[str, tuple[int, int]] = {}
         for c in self._reader.connections:
-            index = self._reader.indexes.get(c.id)
-            if index:
-                a, b = out.get(c.topic, (index[0].time, index[-1].time))
-                out[c.topic] = (min(a, index[0].time), max(b, index[-1].time))
+            if index := self._reader.indexes.get(c.id):
+                out[c.topic] = merged(out.get(c.topic), (index[0].time, index[-1].time))
         return out
 
     def time_range(self) -> tuple[int, int] | None:
@@ -206,23 +204,21 @@ def _sqlite_files(path: Path) -> list[Path]:
 
 
 def sqlite_spans(files: list[Path]) -> dict[str, tuple[int, int]]:
-    """Each topic's first and last timestamp [ns] in sqlite3 storage ``files``: the messages' timestamp
-    index walked from either end to the topic's first message (a topic recorded all along: a few rows);
-    {} if a file cannot be read so."""
+    """Each topic's first and last timestamp [ns] in sqlite3 storage ``files`` (one pass over the messages'
+    rows, not their data: 0.35 s for a 620 MB file of 30 topics, where walking the timestamp index per
+    topic took 13 s); {} if a file cannot be read so."""
     out: dict[str, tuple[int, int]] = {}
-    first = "SELECT timestamp FROM messages WHERE topic_id = ? ORDER BY timestamp LIMIT 1"
-    last = first.replace("timestamp LIMIT", "timestamp DESC LIMIT")
+    query = (
+        "SELECT topics.name, MIN(messages.timestamp), MAX(messages.timestamp) FROM messages "
+        "JOIN topics ON messages.topic_id = topics.id GROUP BY messages.topic_id"
+    )
     try:
         for f in files:
             uri = f"file:{urllib.parse.quote(str(f))}?immutable=1"
             conn = apsw.Connection(uri, flags=apsw.SQLITE_OPEN_READONLY | apsw.SQLITE_OPEN_URI)
             try:
-                for tid, name in list(conn.execute("SELECT id, name FROM topics")):
-                    lo = conn.execute(first, (tid,)).fetchone()
-                    hi = conn.execute(last, (tid,)).fetchone()
-                    if lo and hi:
-                        a, b = out.get(name, (lo[0], hi[0]))
-                        out[name] = (min(a, lo[0]), max(b, hi[0]))
+                for name, lo, hi in conn.execute(query):
+                    out[name] = merged(out.get(name), (lo, hi))
             finally:
                 conn.close()
     except apsw.Error:
