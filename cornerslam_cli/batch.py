@@ -52,7 +52,7 @@ from .report.comparison import BATCH_FIGURES as FIGURES
 from .report.comparison import BATCH_MORE_FIGURES as MORE_FIGURES
 from .report.comparison import batch_figures
 from .report.oserrors import output_errors
-from .report.outdir import staged_write
+from .report.outdir import alone_in, staged_write
 from .report.ownership import claim_dir, files_intact, other_log_error
 from .results import Hashes, RunSummary
 from .sweep import Combo
@@ -135,10 +135,23 @@ def _run_claimed(
     config_path: str | None = None,
 ) -> list[dict]:
     """:func:`_run_batch` once the Dask ``client`` (None: local processes) is connected."""
+    claim_dir(out, "batch")  # refuses a directory that is not a batch's, before any work
+    with alone_in(out, display_path(out)):  # a second batch (or compare) into it is refused
+        return _run_alone(combos, out, jobs, client, progress, config_path)
+
+
+def _run_alone(
+    combos: Sequence[Combo],
+    out: Path,
+    jobs: int | None,
+    client,  # dask.distributed.Client | None
+    progress: Callable[[BatchState], None] | None,
+    config_path: str | None,
+) -> list[dict]:
+    """:func:`_run_claimed` in the claimed directory ``out``, its only writer."""
     from .config import Config, from_dict
     from .report.summary import code_hash, config_hash, input_hash
 
-    claim_dir(out, "batch")  # refuses a directory that is not a batch's, before any work
     columns = batch_columns([k for k, _ in combos[0].sweep] if combos else [])
     rows = [_row(c, "pending") for c in combos]
     state = BatchState(len(combos))

@@ -342,6 +342,45 @@ def batch_row_dir_not_ours(w: World) -> Case:
     return Case(["batch", w.log, "--assoc", "pca", "--out", out, "--jobs", "1"], after=after)
 
 
+@fault(2, f"another cornerslam process (pid {os.getpid()}) is writing", "wait for it to finish")
+def batch_into_a_batch_being_written(w: World) -> Case:
+    """a batch into the directory another live batch is writing (its `.NAME.running-HOST-PID` mark):
+    refused, naming its pid, nothing written (before: both ran, and the last to write batch.csv won —
+    the other's failed row lost, or rows describing runs the other had replaced)"""
+    out = w.tmp / "batch"
+    out.mkdir()
+    mark_output(out, "batch")  # an earlier batch's, being resumed by the live one
+    (w.tmp / f".batch.running-{HOST}-{os.getpid()}").touch()
+
+    def after():
+        assert not (out / "batch.csv").exists() and [p.name for p in out.iterdir()] == [MARKER]
+
+    return Case(["batch", w.log, "--assoc", "pca", "--out", out, "--jobs", "1"], after=after)
+
+
+@fault(2, f"another cornerslam process (pid {os.getpid()}) is writing", "wait for it to finish")
+def run_into_a_place_a_batch_is_writing(w: World) -> Case:
+    """a run into a place a live batch is writing (its mark): refused like a second staged run"""
+    out = w.tmp / "out"
+    (w.tmp / f".out.running-{HOST}-{os.getpid()}").touch()
+    return Case(["run", w.log, "--out", out], out)
+
+
+@fault(0)
+def mark_of_a_killed_batch(w: World) -> Case:
+    """the mark of a batch that was killed (its process gone): cleared, the batch runs and leaves no
+    mark"""
+    out = w.tmp / "batch"
+    stale = w.tmp / f".batch.running-{HOST}-{dead_pid()}"
+    stale.touch()
+
+    def after():
+        assert [r["status"] for r in _read_batch(out)] == ["ok"]
+        assert not stale.exists() and not [p for p in w.tmp.iterdir() if ".running-" in p.name]
+
+    return Case(["batch", w.log, "--assoc", "pca", "--out", out, "--jobs", "1"], after=after)
+
+
 def _read_batch(out: Path) -> list[dict]:
     from cornerslam_cli.batch import read_batch
 

@@ -14,8 +14,12 @@ same place: refused, exit 2. Names over 200 bytes are shortened in these sibling
 plus a hash), so a legal 255-byte name still stages. Directories are created with the permissions
 the umask gives (``mkdtemp`` alone would give 0700).
 
+A directory written in place (a batch's) is marked by a hidden ``.NAME.running-HOST-PID`` beside it
+while it is written (:func:`alone_in`): a second writer is refused the same way.
+
 Which places may be replaced: report/ownership.py; environment faults as one-line errors:
-report/oserrors.py.
+report/oserrors.py. Over 400 lines because the staging, the locks and the leftovers' clearing share the
+sibling names and must agree on them.
 """
 
 from __future__ import annotations
@@ -42,7 +46,7 @@ from .ownership import MARKER, check_replaceable, check_same_log, is_within, mar
 _NAME_KEEP = 200  # bytes of a name kept in its sibling names (+ at most 45 of suffix: within 255)
 HOST = hashlib.sha1(socket.gethostname().encode()).hexdigest()[:8]  # leftovers are judged on their host
 LOCK_MARK = b"cornerslam output lock\n"  # what a lock file holds (an empty one: being created)
-_SIBLING = re.compile(r"(partial|old)-([0-9a-f]{8})-(\d+)(?:-.+)?")
+_SIBLING = re.compile(r"(partial|old|running)-([0-9a-f]{8})-(\d+)(?:-.+)?")
 _BOOKKEEPING = re.compile(rf"\..+\.(lock|{_SIBLING.pattern})")  # a lock's name, a staging sibling's
 
 
@@ -104,11 +108,38 @@ def clear_stale(target: Path) -> None:
 
 
 def live_writer(target: Path) -> int | None:
-    """The pid of a live process on this host staging ``target``, if any."""
+    """The pid of a live process on this host staging ``target`` or writing in it (:func:`alone_in`), if
+    any."""
     for _, what, host, pid in _siblings(target):
-        if what == "partial" and host == HOST and _alive(pid):
+        if what in ("partial", "running") and host == HOST and _alive(pid):
             return pid
     return None
+
+
+def _refuse_live_writer(target: Path, shown: str | Path) -> None:
+    """OutputError when a live process on this host writes ``target`` (called under its lock)."""
+    clear_stale(target)
+    if (pid := live_writer(target)) is not None:
+        raise OutputError(
+            f"another cornerslam process (pid {pid}) is writing '{shown}'",
+            "wait for it to finish, or give another output directory",
+        )
+
+
+@contextmanager
+def alone_in(target: Path, shown: str | Path) -> Iterator[None]:
+    """Write in the directory ``target`` in place over the ``with`` block (a batch's, resumed, never
+    staged whole) as its only writer: a hidden ``.NAME.running-HOST-PID`` beside it, made under its lock,
+    marks it; another live writer's mark or staging refuses (OutputError, exit 2), as a staged output's
+    does, and a staged output refuses this mark. Removed at the end; a killed process's is cleared."""
+    with target_lock(target):
+        _refuse_live_writer(target, shown)
+        mark = target.parent / _sibling(target, "running")
+        mark.touch()
+    try:
+        yield
+    finally:
+        mark.unlink(missing_ok=True)
 
 
 def _umask() -> int:
@@ -263,13 +294,7 @@ class StagedDir:
         """The hidden staging directory beside the target, made under the target's lock."""
         _check_name(self.target, self.shown)
         with target_lock(self.target):
-            clear_stale(self.target)
-            pid = live_writer(self.target)
-            if pid is not None:
-                raise OutputError(
-                    f"another cornerslam process (pid {pid}) is writing '{self.shown}'",
-                    "wait for it to finish, or give another output directory",
-                )
+            _refuse_live_writer(self.target, self.shown)
             prefix = _sibling(self.target, "partial") + "-"
             path = Path(tempfile.mkdtemp(prefix=prefix, dir=self.target.parent))
         try:
