@@ -125,18 +125,27 @@ def test_gzip_damaged_before_any_laser_line_says_so(tmp_path, head, said):
     assert "gzip -t" in err.value.hint
 
 
-def test_a_line_after_nul_padding_is_read_with_a_warning(tmp_path, caplog):
-    """NUL bytes before a line (a crash's padding) made its tag '\\x00…FLASER', the line lost in silence."""
-    text = "".join(flaser(180, float(i), r=2.0 + 0.01 * i) for i in range(5))
-    clean, padded = tmp_path / "a.log", tmp_path / "b.log"
-    clean.write_text(text)
-    padded.write_text(text.replace("\nFLASER", "\n" + "\x00" * 300 + "FLASER", 2))
+@pytest.mark.parametrize("bom", ["", "\ufeff"])
+def test_a_line_after_nul_padding_is_read_with_a_warning(tmp_path, caplog, bom):
+    """NUL bytes before a line (a crash's padding) made its tag '\\x00…FLASER', the line lost in silence;
+    padding is block-aligned, so it usually starts mid-line: the line after it was glued to the cut one
+    before and lost with it (a review's case). A run of NULs now ends a line; a BOM before them goes too."""
+    lines = [flaser(180, float(i), r=2.0 + 0.01 * i) for i in range(6)]
+    clean, padded, glued = tmp_path / "a.log", tmp_path / "b.log", tmp_path / "c.log"
+    clean.write_text("".join(lines))
+    padded.write_text(
+        bom + "\x00" * 300 + "".join(lines).replace("\nFLASER", "\n" + "\x00" * 300 + "FLASER", 1)
+    )
+    glued.write_text("".join(lines[:2]) + lines[2][:40] + "\x00" * 500 + "".join(lines[3:]))  # line 2 cut
     with caplog.at_level(logging.WARNING, logger="cornerslam.logs"):
         got, _ = split(open_log(padded).messages())
+        cut, _ = split(open_log(glued).messages())
     want, _ = split(open_log(clean).messages())
-    assert [s.stamp for s in got] == [s.stamp for s in want] == [0, 1, 2, 3, 4]
+    assert [s.stamp for s in got] == [s.stamp for s in want] == [0, 1, 2, 3, 4, 5]
     assert all(np.array_equal(a.ranges, b.ranges) for a, b in zip(got, want, strict=True))
-    assert "2 lines began with NUL bytes" in caplog.text
+    assert [s.stamp for s in cut] == [0, 1, 3, 4, 5]  # (the cut line 2 is malformed, skipped and said)
+    assert "NUL bytes in 2 lines (a crash's padding?): each run of them read as a line break" in caplog.text
+    assert "malformed FLASER line skipped" in caplog.text
 
 
 @pytest.mark.parametrize("gz", [False, True])
@@ -534,10 +543,10 @@ def test_info_says_how_many_of_the_runs_lines_it_skips(tmp_path):
     p = tmp_path / "cut.log"
     odom = "".join(f"ODOM {0.1 * i} 0 0 0 0 0 {1000.0 + i} h {1000.0 + i}\n" for i in range(4))
     p.write_text("".join(flaser(180, 1000.0 + i) for i in range(4)) + flaser(180, 1010.0)[:40] + "\n" + odom)
-    assert open_log(p).info().notes == ("1 of its 5 FLASER lines are cut or malformed: a run skips them",)
+    assert open_log(p).info().notes == ("1 of its 5 FLASER lines is cut or malformed: a run skips them",)
     q = tmp_path / "cut_odom.log"
     q.write_text("".join(flaser(180, 1000.0 + i) for i in range(4)) + odom + "ODOM 1 2\n")
-    assert open_log(q).info().notes == ("1 of its 5 ODOM lines are cut or malformed: a run skips them",)
+    assert open_log(q).info().notes == ("1 of its 5 ODOM lines is cut or malformed: a run skips them",)
 
 
 @pytest.mark.parametrize("encoding", ["utf-16", "utf-16-be"])

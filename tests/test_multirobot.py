@@ -161,3 +161,82 @@ def test_one_storage_file_of_a_split_bag_is_read_with_a_warning(tmp_path, caplog
             "are read (give the bag's directory to read them all)"
         ]
     assert "only its messages are read" in caplog.text
+
+
+def test_a_namespaced_robots_static_tf_links_its_tf_odometry_to_the_mount(tmp_path):
+    """nav2 in a namespace: odom→base_footprint on /robot1/tf, base_footprint→base_link and the mount on
+    /robot1/tf_static. The robot's frame is found through its own tf_static (a namespaced tf_static is
+    static too): its odometry is read and the mount chained from base_footprint."""
+    msgs = scans("/robot1/scan") + [
+        tf("/robot1/tf", "odom", "base_footprint", 0.03 * i, T0 + 0.1 * i) for i in range(6)
+    ]
+    msgs += [
+        tf("/robot1/tf_static", "base_footprint", "base_link", 0.0),
+        tf("/robot1/tf_static", "base_link", "laser", 0.5),
+    ]
+    msgs += scans("/robot2/scan") + [
+        tf("/robot2/tf", "odom", "base_link", 0.0, T0 + 0.1 * i) for i in range(6)
+    ]
+    log = open_log(write(tmp_path / "nav2.mcap", msgs), scan_topic="/robot1/scan")
+    assert log.odom_topic == "/robot1/tf"
+    x, _, yaw = log.laser_to_base()
+    assert log.base_frame == "base_footprint" and (x, yaw) == pytest.approx((0.4, 0.5))  # 0.2 + 0.2 along x
+    odoms = [m for m in log.messages() if not hasattr(m, "ranges")]
+    assert len(odoms) == 6 and odoms[-1].theta == pytest.approx(0.15)
+
+
+def test_the_second_parent_check_reads_the_scans_robots_tf_only(tmp_path):
+    """--mcap-out's check for a parent of 'odom' already on tf: another robot's localiser (map → odom on
+    /robot2/tf) is not this robot's."""
+    msgs = (
+        scans("/robot1/scan")
+        + odometry("/robot1/odom")
+        + [tf("/robot1/tf_static", "base_link", "laser", 0.0)]
+    )
+    msgs += (
+        scans("/robot2/scan") + odometry("/robot2/odom") + [tf("/robot2/tf", "map", "odom", 0.0, T0 + 0.3)]
+    )
+    path = write(tmp_path / "loc.mcap", msgs)
+    assert open_log(path, scan_topic="/robot1/scan").parent_on_tf("odom") is None
+    assert open_log(path, scan_topic="/robot2/scan").parent_on_tf("odom") == "map"
+
+
+def test_the_odometry_of_scans_in_a_namespace(tmp_path):
+    """The nearest namespace's Odometry with messages (/robot1/front/scan: /robot1/odom, not /robot2's);
+    its robot's own empty one gives way to its tf odometry, not to another robot's Odometry; another
+    robot's, the only odometry there is, is taken with a warning (a review's cases)."""
+    nested = (
+        scans("/robot1/front/scan") + odometry("/robot1/odom") + odometry("/robot2/odom") + odometry("/odom")
+    )
+    log = open_log(write(tmp_path / "nested.mcap", nested), scan_topic="/robot1/front/scan")
+    assert log.odom_topic == "/robot1/odom"
+    assert log.info().notes == (
+        "3 Odometry topics: /robot1/odom taken (the scans' namespace), not /odom, /robot2/odom",
+    )
+    only = open_log(
+        write(tmp_path / "r2.mcap", scans("/robot1/scan") + odometry("/robot2/odom")),
+        scan_topic="/robot1/scan",
+    )
+    assert only.odom_topic == "/robot2/odom"
+    assert only.stats.warnings == [
+        "log 'r2.mcap': odometry '/robot2/odom' taken, the only one, though outside the scans' namespace "
+        "/robot1 (choose another with --odom-topic)"
+    ]
+    own_tf = scans("/robot1/scan") + tf_odometry("/robot1/tf") + odometry("/robot2/odom")
+    log = open_log(write(tmp_path / "tf.mcap", own_tf), scan_topic="/robot1/scan")
+    assert log.odom_topic == "/robot1/tf"
+    assert log.info().notes == ("no Odometry topic in /robot1 or above it: tf odometry taken",)
+
+
+def test_a_scan_topic_of_another_type_in_a_log_with_no_laserscan(tmp_path):
+    """--scan-topic naming a PointCloud2 in a log with no LaserScan: the hint said "choose a LaserScan
+    topic with --scan-topic (none)"."""
+    from cornerslam_cli.errors import LogError
+
+    log = write(
+        tmp_path / "cloud.mcap",
+        odometry("/odom") + [("/points", "nav_msgs/msg/Odometry", int(T0 * 1e9), b"")],
+    )
+    with pytest.raises(LogError) as err:
+        open_log(log, scan_topic="/odom").check()
+    assert err.value.hint == "it has no LaserScan topic: cornerslam reads the laser as sensor_msgs/LaserScan"

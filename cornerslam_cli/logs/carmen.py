@@ -47,6 +47,7 @@ import codecs
 import gzip
 import io
 import math
+import re
 import zlib
 from collections.abc import Iterator
 from pathlib import Path
@@ -75,6 +76,9 @@ MOUNT_SPREAD = (0.1, math.radians(5.0))
 MOUNT_SHARE = 0.9  # ... unless at least this share of them lies within it (the mount: their mean)
 
 
+NULS = re.compile("\x00+")  # a run of NUL bytes: a crash's padding, read as a line break (_lines)
+
+
 def flaser_increment(n: int) -> float:
     """Angle between beams of an old-style FLASER/RLASER line of n beams (CARMEN's guess)."""
     if n in (180, 181):
@@ -97,18 +101,21 @@ def _lines(path: Path, stats: ReadStats | None, fault: list[str] | None = None) 
     """Lines of a (possibly gzip-compressed) text log; a cut/damaged gzip ends the lines with a warning
     (``stats``) and what ended them appended to ``fault`` ("damaged after 12 lines").
     A UTF-8 byte-order mark (an editor saving as 'UTF-8 with BOM') is dropped: it made the first
-    line's tag 'ï»¿FLASER', a topic of its own, and the line was lost without a word. So are the NUL
-    bytes a line starts with (the padding a crash leaves where the file system had grown the file), with
-    a warning: the tag was '\\x00…FLASER' and the line lost."""
+    line's tag 'ï»¿FLASER', a topic of its own, and the line was lost without a word. Runs of NUL bytes
+    (the padding a crash leaves where the file system had grown the file: block-aligned, mid-line) end a
+    line, with a warning: a line after them was '\\x00…FLASER', lost, or glued to the cut one before."""
     n = nul = 0
     try:
         with _open_text(path) as f:
             for line in f:
                 n += 1
-                if line.startswith("\x00"):
+                if n == 1:
+                    line = line.removeprefix(BOM)
+                if "\x00" in line:
                     nul += 1
-                    line = line.lstrip("\x00")
-                yield line.removeprefix(BOM) if n == 1 else line
+                    yield from (part for part in NULS.split(line) if part.strip())
+                else:
+                    yield line
     except (EOFError, gzip.BadGzipFile, zlib.error) as exc:
         why = "cut short" if isinstance(exc, EOFError) else "damaged"
         if stats is not None:
@@ -117,7 +124,7 @@ def _lines(path: Path, stats: ReadStats | None, fault: list[str] | None = None) 
             fault.append(f"{why} after {_many(n, 'line')}" if n else f"{why} before its first line")
     if nul and stats is not None:
         stats.warn(
-            "%s: %s began with NUL bytes (a crash's padding?): read without them",
+            "%s: NUL bytes in %s (a crash's padding?): each run of them read as a line break",
             path.name,
             _many(nul, "line"),
         )
@@ -452,10 +459,10 @@ class CarmenReader:
                     if self.scan_topic and t != self.scan_topic and self._whole.get(t)
                 ),
                 *(  # the topics' counts above hold them
-                    f"{self._counts[t] - self._whole.get(t, 0)} of its {self._counts[t]} {t} lines are cut "
-                    "or malformed: a run skips them"
+                    f"{bad} of its {self._counts[t]} {t} lines {'is' if bad == 1 else 'are'} cut or "
+                    "malformed: a run skips them"
                     for t in dict.fromkeys((self.scan_topic, self.odom_topic))
-                    if self._whole.get(t, 0) < self._counts.get(t, 0)
+                    if (bad := self._counts.get(t, 0) - self._whole.get(t, 0)) > 0
                 ),
             ),
         )

@@ -12,7 +12,7 @@ from __future__ import annotations
 import difflib
 import math
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Protocol
 
@@ -162,15 +162,16 @@ def is_static(topic: str) -> bool:
     return topic.rsplit("/", 1)[-1] == "tf_static"
 
 
-def of_robot(topics: list[str], scan_topic: str) -> list[str]:
+def of_robot(topics: list[str], scan_topic: str, strict: bool = False) -> list[str]:
     """Of ``topics``, those of the robot whose scans are ``scan_topic``: in its namespace or one above it
     (``/robot1/scan``: ``/robot1/tf``, ``/tf``, not ``/robot2/tf``, whose frames may be named alike) —
-    all of them when none is (the scans outside the robot's namespace), or no scan topic is chosen."""
+    all of them when none is (the scans outside the robot's namespace; ``strict``: none), or no scan
+    topic is chosen."""
     if not scan_topic:
         return topics
     ns = namespace(scan_topic)
     mine = [t for t in topics if (n := namespace(t)) == ns or ns.startswith(n + "/")]
-    return mine or topics
+    return mine if mine or strict else topics
 
 
 def listing(names: list[str], most: int = 10) -> str:
@@ -285,13 +286,14 @@ class RosLogReader:
             return " before the cut (the file is truncated)"
         return " in its readable parts (some of the file is damaged)" if self.stats.damaged else ""
 
-    def _close_to(self, want: str) -> str:
-        """ ", did you mean '/scan'?" when the log has a topic close to ``want`` (a missing leading slash, a
-        namespace left out, a typo), else ""."""
-        names = list(self._channels)
-        close = [t for t in names if t.lstrip("/") == want.lstrip("/") or t.endswith("/" + want.lstrip("/"))]
+    @staticmethod
+    def _close_to(want: str, names: list[str]) -> str:
+        """ ", did you mean '/scan'?" when a topic of ``names`` (those of the type wanted) is close to
+        ``want`` — a missing leading slash, a namespace left out (each such topic named), a typo — else ""."""
+        bare = want.lstrip("/")
+        close = [t for t in names if t.lstrip("/") == bare or t.endswith("/" + bare)]
         close = close or difflib.get_close_matches(want, names, n=1, cutoff=0.75)
-        return f", did you mean '{short_text(close[0])}'?" if close else ""
+        return f", did you mean {' or '.join(repr(short_text(t)) for t in close[:3])}?" if close else ""
 
     def _select_scan(self) -> tuple[str, str, str]:
         """(topic, problem, hint)."""
@@ -305,7 +307,7 @@ class RosLogReader:
                     "",
                     f"log '{name}' has no topic '{want}'{self._cut_note()} "
                     f"(LaserScan topics: {listing(scans)})",
-                    f"check --scan-topic{self._close_to(self._want_scan)}; {INFO_LISTS}",
+                    f"check --scan-topic{self._close_to(self._want_scan, scans)}; {INFO_LISTS}",
                 )
             if normalize_msgtype(c.msgtype) != LASERSCAN:
                 return (
@@ -352,7 +354,7 @@ class RosLogReader:
                     "",
                     f"log '{name}' has no topic '{want}'{self._cut_note()} "
                     f"(Odometry topics: {listing(odoms)}; tf topics: {listing(tfs)})",
-                    f"check --odom-topic{self._close_to(self._want_odom)}; {INFO_LISTS}",
+                    f"check --odom-topic{self._close_to(self._want_odom, odoms + tfs)}; {INFO_LISTS}",
                 )
             mt = normalize_msgtype(c.msgtype)
             if mt == ODOMETRY:
@@ -365,20 +367,16 @@ class RosLogReader:
                 f"topic '{want}' of log '{name}' is {mt}, not nav_msgs/Odometry or tf2_msgs/TFMessage",
                 f"choose one with --odom-topic (Odometry: {listing(odoms)}; tf: {listing(tfs)})",
             )
-        if tfs and odoms and all(self._channels[t].count == 0 for t in odoms):  # declared, never published
+        if namespace(self.scan_topic):  # a robot in its namespace (several in the log, perhaps)
+            return self._robot_odom(odoms, tfs)
+        live = [t for t in odoms if self._channels[t].count != 0]  # (None: not known)
+        if tfs and odoms and not live:  # declared, never published
             note = f"{listing(odoms)} has no messages: tf odometry taken"
-            logger.info("log '%s': %s", name, note)
-            return _OdomSel(self._tf_odometry_topic(tfs), "tf", note=note)
-        odoms = [t for t in odoms if self._channels[t].count != 0] or odoms  # (None: not known)
+            return self._noted(_OdomSel(self._tf_odometry_topic(tfs), "tf"), note)
+        odoms = live or odoms
         if len(odoms) == 1:
             return _OdomSel(odoms[0], "odometry")
         if len(odoms) > 1:
-            ns = namespace(self.scan_topic)
-            if ns and len(mine := [t for t in odoms if namespace(t) == ns]) == 1:  # several robots' odometry
-                others = listing([t for t in odoms if t != mine[0]])
-                note = f"{len(odoms)} Odometry topics: {mine[0]} taken (the scans' namespace), not {others}"
-                logger.info("log '%s': %s", name, note)
-                return _OdomSel(mine[0], "odometry", note=note)
             if "/odom" in odoms:
                 others = listing([t for t in odoms if t != "/odom"])
                 note = (
@@ -403,6 +401,49 @@ class RosLogReader:
             "select an odometry topic with --odom-topic (nav_msgs/Odometry or tf with "
             f"{short_text(self.odom_frame)}→{short_text(self.base_frame)})",
         )
+
+    def _robot_odom(self, odoms: list[str], tfs: list[str]) -> _OdomSel:
+        """The odometry of scans in a namespace (``/robot1/scan``): the Odometry topic with messages in the
+        nearest of its namespace and those above it (``/robot1/odom`` before ``/odom``); else its robot's
+        tf odometry; else, noted, an Odometry topic of another namespace when it is the only one."""
+        name, ns = self.path.name, namespace(self.scan_topic)
+        own = of_robot(odoms, self.scan_topic, strict=True)
+        live = [t for t in own if self._channels[t].count != 0]
+        if live:
+            nearest = max(len(namespace(t)) for t in live)
+            picked = [t for t in live if len(namespace(t)) == nearest]
+            if len(picked) > 1:
+                problem = f"log '{name}' has {len(picked)} Odometry topics: {listing(picked)}"
+                return _OdomSel("", "", problem, "choose one with --odom-topic")
+            others = listing([t for t in odoms if t != picked[0]])
+            note = f"{len(odoms)} Odometry topics: {picked[0]} taken (the scans' namespace), not {others}"
+            return self._noted(_OdomSel(picked[0], "odometry"), note if len(odoms) > 1 else "")
+        if robot_tfs := of_robot(tfs, self.scan_topic, strict=True):
+            why = f"{listing(own)} has no messages" if own else f"no Odometry topic in {ns} or above it"
+            note = f"{why}: tf odometry taken" if odoms else ""
+            return self._noted(_OdomSel(self._tf_odometry_topic(robot_tfs), "tf"), note)
+        if own:  # declared, never published, and no tf: a run says so (check)
+            return _OdomSel(own[0], "odometry")
+        live = [t for t in odoms if self._channels[t].count != 0] or odoms
+        if len(live) == 1:  # another robot's, as likely as this one's named oddly: said
+            self.stats.warn(
+                "log '%s': odometry '%s' taken, the only one, though outside the scans' namespace %s (choose "
+                "another with --odom-topic)", name, live[0], ns,
+            )  # fmt: skip
+            return _OdomSel(live[0], "odometry")
+        problem = (
+            f"log '{name}' has no odometry in the scans' namespace {ns} and {len(live)} Odometry topics "
+            f"elsewhere: {listing(live)}"
+        )
+        if not live:
+            problem = f"log '{name}' has no odometry: no nav_msgs/Odometry topic and no tf topic"
+        return _OdomSel("", "", problem, "choose one with --odom-topic")
+
+    def _noted(self, sel: _OdomSel, note: str) -> _OdomSel:
+        """``sel`` with ``note``, why it was chosen (none when empty), logged: info lists it."""
+        if note:
+            logger.info("log '%s': %s", self.path.name, note)
+        return replace(sel, note=note)
 
     def _tf_odometry_topic(self, tfs: list[str]) -> str:
         """Of the (not static) tf topics ``tfs``, the one tf odometry is read from: the scans' robot's
@@ -783,10 +824,15 @@ class RosLogReader:
         self.laser_to_base()
         if self._odom_sel.kind != "tf" or self.odom_on_tf:
             return None
-        problem = missing_odom_tf(
-            self.path.name, self.odom_topic, self.odom_frame, self.base_frame, self._tf_pairs
+        return self._no_odom_tf(self._tf_pairs), self._tf_read_all
+
+    def _no_odom_tf(self, seen: set[tuple[str, str]]) -> tuple[str, str]:
+        """:func:`missing_odom_tf` of the tf odometry topic, with why it was chosen (an Odometry topic that
+        has no messages: the error must not be only of the tf's)."""
+        problem, hint = missing_odom_tf(
+            self.path.name, self.odom_topic, self.odom_frame, self.base_frame, seen
         )
-        return problem, self._tf_read_all
+        return (f"{problem}; {self._odom_sel.note}" if self._odom_sel.note else problem), hint
 
     def laser_upside_down(self) -> bool:
         """Whether the tf mounts the laser upside down (its z axis down: its scans are mirrored,
@@ -849,9 +895,7 @@ class RosLogReader:
             except Exception as exc:  # noqa: BLE001 - undecodable message: count, warn, go on
                 st.failed("%s: cannot decode a %s message at %d ns: %s", self.path.name, topic, log_time, exc)
         if is_tf and n_tf_match == 0:
-            raise LogError(
-                *missing_odom_tf(self.path.name, odom_t, self.odom_frame, self.base_frame, tf_seen)
-            )
+            raise LogError(*self._no_odom_tf(tf_seen))
         if st.decode_failed > 5:
             what = "messages could not be decoded or held unusable values"
             st.warn("%s: %d %s in total", self.path.name, st.decode_failed, what)
