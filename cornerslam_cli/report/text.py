@@ -142,7 +142,8 @@ def deskew_lines(inp: RunInput) -> list[str]:
 def comparison_lines(summaries: list[RunSummary]) -> list[str]:
     """``cornerslam compare``: one row per associator (accuracy columns when any run has a
     reference, loop-closing columns when any run had submaps), then the scan-matched odometry's
-    accuracy, the same for every associator."""
+    accuracy, the same for every associator, and, when the filters ran at once (--jobs), that their
+    times do not compare (the warning said so before the figures, scrolled away by their progress)."""
     head = (
         f"{'assoc':<6} {'steps':>6} {'landmarks':>9} {'matched':>8} "
         f"{'t_match s':>10} {'max ms':>8} {'t_total s':>10}"
@@ -181,6 +182,10 @@ def comparison_lines(summaries: list[RunSummary]) -> list[str]:
         if a.scan_odom_relations is not None:
             parts.append(f"relations {mean_std(a.scan_odom_relations)} m")
         lines.append("scan-matched odometry (the filter's motion input): " + ", ".join(parts))
+    if (at_once := max((s.timing.concurrent_filters or 1 for s in summaries), default=1)) > 1:  # --jobs
+        lines.append(
+            f"times: the filters ran {at_once} at a time: they compare with no other run's (--jobs 1)"
+        )
     return lines
 
 
