@@ -77,9 +77,9 @@ def _run_filters(
     n = len(_SHARED["frames"])
     total = n * len(assocs)
 
-    def report(done: int) -> None:
+    def report(done: int, doing: str) -> None:
         if progress is not None:
-            progress(done, total, "filter steps")
+            progress(done, total, "filter steps", doing)
 
     if jobs > 1 and len(assocs) > 1:
         ctx = multiprocessing.get_context("fork")
@@ -90,7 +90,7 @@ def _run_filters(
             with signals_deferred():  # (the workers fork here: a signal then lands after, in this process)
                 futures = [pool.submit(_run_one, a, d, None, True) for a, d in zip(assocs, dirs, strict=True)]
             for k, _ in enumerate(as_completed(futures), 1):
-                report(k * n)
+                report(k * n, f"{workers} at a time")
             summaries = [f.result() for f in futures]
         except BaseException:  # interrupted (Ctrl-C, SIGTERM) or failed: its workers end with it, now
             end_children()
@@ -109,7 +109,7 @@ def _run_filters(
         return summaries
     summaries = []
     for k, (a, d) in enumerate(zip(assocs, dirs, strict=True)):
-        summaries.append(_run_one(a, d, lambda i, k=k: report(k * n + i)))
+        summaries.append(_run_one(a, d, lambda i, k=k, a=a: report(k * n + i, a)))
     return summaries
 
 

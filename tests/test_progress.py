@@ -68,6 +68,18 @@ def test_compare_shows_progress_after_extraction(sim_log, tmp_path, monkeypatch)
     n = re.search(r"(\d+)/(\d+) filter steps", filter_lines[-1]).groups()
     assert n[0] == n[1] and int(n[1]) == 2 * 20  # both associators' steps, to the end
     assert len(filter_lines) >= 20  # after every step when run one after another
+    # which associator runs (a probe: on a long log nothing said which was slow), the rate not restarted
+    doing = [re.search(r"filter steps \((\w+)\)", line)[1] for line in filter_lines]
+    assert doing == sorted(doing) and set(doing) == {"icnn", "pca"}
+
+
+def test_what_runs_now_is_shown_without_restarting_the_rate():
+    clock = FakeClock()
+    p = Progress("log", True, clock)
+    for done, doing in ((0, "icnn"), (10, "icnn"), (20, "pca")):
+        p(done, 40, "filter steps", doing)
+        clock.t += 1.0
+    assert p.eta(40) == "   2s"  # 20 left at 10 a second: the rate spans both
 
 
 def test_verbose_prints_more_than_the_default(sim_log, tmp_path):

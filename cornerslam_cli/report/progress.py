@@ -92,7 +92,9 @@ class Progress(StatusLine):
         self.unit = "scans"
         self.recent: deque[tuple[float, int]] = deque()  # (time, done) over the last ETA_WINDOW s
 
-    def __call__(self, done: int, total: int, unit: str = "scans") -> None:
+    def __call__(self, done: int, total: int, unit: str = "scans", doing: str = "") -> None:
+        """``doing``: what of the stage runs now (compare's associator), shown beside the unit without
+        starting a new rate."""
         if not self.enabled:
             return
         now = self.clock()
@@ -104,6 +106,7 @@ class Progress(StatusLine):
         if total > 0:
             frac = min(done / total, 1.0)
             bar = "#" * int(30 * frac)
+            unit += f" ({doing})" if doing else ""
             self._draw(f"{self.label} [{bar:<30}] {done}/{total} {unit} {el:5.0f}s eta {self.eta(total):>5}")
         else:
             self._draw(f"{self.label} {done} {unit} {el:5.0f}s")
