@@ -52,7 +52,7 @@ from .report.comparison import BATCH_FIGURES as FIGURES
 from .report.comparison import BATCH_MORE_FIGURES as MORE_FIGURES
 from .report.comparison import batch_figures
 from .report.oserrors import output_errors
-from .report.outdir import alone_in, staged_write
+from .report.outdir import alone_in, clear_stale, staged_write
 from .report.ownership import claim_dir, files_intact, other_log_error
 from .results import Hashes, RunSummary
 from .sweep import Combo
@@ -207,6 +207,11 @@ def _run_alone(
             _run_dask(tasks, client, finished)
         elif tasks:
             _run_local(tasks, jobs or os.cpu_count() or 1, finished)
+    except BaseException:  # interrupted: a worker killed after end_children's grace (a loaded machine)
+        if client is None:  # left its staging directory; its process is gone now
+            for task in tasks:
+                clear_stale(Path(task[3]))
+        raise
     finally:
         writer.write(rows)
     return rows
