@@ -135,8 +135,9 @@ def _run_claimed(
     config_path: str | None = None,
 ) -> list[dict]:
     """:func:`_run_batch` once the Dask ``client`` (None: local processes) is connected."""
-    claim_dir(out, "batch")  # refuses a directory that is not a batch's, before any work
-    with alone_in(out, display_path(out)):  # a second batch (or compare) into it is refused
+    target = claim_dir(out, "batch")  # refuses a directory that is not a batch's, before any work
+    with alone_in(target, display_path(out)):  # a second batch (or compare) into it is refused (resolved:
+        # `--out .` marks it beside itself, and any spelling of it finds the mark)
         return _run_alone(combos, out, jobs, client, progress, config_path)
 
 

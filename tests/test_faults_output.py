@@ -342,7 +342,7 @@ def batch_row_dir_not_ours(w: World) -> Case:
     return Case(["batch", w.log, "--assoc", "pca", "--out", out, "--jobs", "1"], after=after)
 
 
-@fault(2, f"another cornerslam process (pid {os.getpid()}) is writing", "wait for it to finish")
+@fault(2, f"another cornerslam process (pid {os.getppid()}) is writing", "wait for it to finish")
 def batch_into_a_batch_being_written(w: World) -> Case:
     """a batch into the directory another live batch is writing (its `.NAME.running-HOST-PID` mark):
     refused, naming its pid, nothing written (before: both ran, and the last to write batch.csv won —
@@ -350,7 +350,7 @@ def batch_into_a_batch_being_written(w: World) -> Case:
     out = w.tmp / "batch"
     out.mkdir()
     mark_output(out, "batch")  # an earlier batch's, being resumed by the live one
-    (w.tmp / f".batch.running-{HOST}-{os.getpid()}").touch()
+    (w.tmp / f".batch.running-{HOST}-{os.getppid()}").touch()  # (a live process: this one's parent)
 
     def after():
         assert not (out / "batch.csv").exists() and [p.name for p in out.iterdir()] == [MARKER]
@@ -358,11 +358,11 @@ def batch_into_a_batch_being_written(w: World) -> Case:
     return Case(["batch", w.log, "--assoc", "pca", "--out", out, "--jobs", "1"], after=after)
 
 
-@fault(2, f"another cornerslam process (pid {os.getpid()}) is writing", "wait for it to finish")
+@fault(2, f"another cornerslam process (pid {os.getppid()}) is writing", "wait for it to finish")
 def run_into_a_place_a_batch_is_writing(w: World) -> Case:
     """a run into a place a live batch is writing (its mark): refused like a second staged run"""
     out = w.tmp / "out"
-    (w.tmp / f".out.running-{HOST}-{os.getpid()}").touch()
+    (w.tmp / f".out.running-{HOST}-{os.getppid()}").touch()
     return Case(["run", w.log, "--out", out], out)
 
 
@@ -1413,3 +1413,31 @@ def test_enoent_is_a_user_error_only_where_the_directory_creates_no_files(tmp_pa
     fail_writes_under(monkeypatch, proc, errno.ENOENT)
     refused = OSError(errno.ENOENT, "No such file or directory", str(proc / "foo"))
     assert "its directory accepts no new files" in str(output_error(refused, proc / "foo"))
+
+
+def test_a_second_batch_into_a_running_batchs_directory_is_refused_however_it_is_named(tmp_path):
+    """Batch A runs with `--out .` (from inside its directory); batch B names the same directory by its
+    absolute path: refused, naming A's pid (the mark is beside the resolved directory, not inside it as
+    `..running-…` where no other spelling finds it). A leftover mark carrying this process's own pid (a
+    killed process's, its pid reused: pid 1 in a container) refuses nothing."""
+    log = write_mcap(tmp_path / "long.mcap", make_scans(600), make_odoms(601))
+    out = tmp_path / "out"
+    out.mkdir()
+    a = subprocess.Popen([*CMD, "batch", str(log), "--assoc", "icnn", "--jobs", "1", "--out", ".", "-q"],
+                         cwd=out, stderr=subprocess.PIPE)  # fmt: skip
+    try:
+        wait_for(lambda: any(".running-" in p.name for p in tmp_path.iterdir()), a, "batch A's mark")
+        assert not [p for p in out.iterdir() if ".running-" in p.name]
+        res = invoke("batch", log, "--assoc", "pca", "--jobs", "1", "--out", out)
+        assert res.exit_code == 2 and f"another cornerslam process (pid {a.pid}) is writing" in res.stderr
+        assert a.poll() is None, "batch A finished too soon: the check raced nothing"
+    finally:
+        a.kill()
+        a.communicate()
+    mine = tmp_path / f".out.running-{HOST}-{os.getpid()}"
+    mine.touch()  # (A's, SIGKILLed, is cleared as its process is gone)
+    from cornerslam_cli.report.outdir import alone_in
+
+    with alone_in(out, "out"):
+        pass
+    assert not [p for p in tmp_path.iterdir() if ".running-" in p.name]

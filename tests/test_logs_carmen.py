@@ -144,8 +144,16 @@ def test_a_line_after_nul_padding_is_read_with_a_warning(tmp_path, caplog, bom):
     assert [s.stamp for s in got] == [s.stamp for s in want] == [0, 1, 2, 3, 4, 5]
     assert all(np.array_equal(a.ranges, b.ranges) for a, b in zip(got, want, strict=True))
     assert [s.stamp for s in cut] == [0, 1, 3, 4, 5]  # (the cut line 2 is malformed, skipped and said)
-    assert "NUL bytes in 2 lines (a crash's padding?): each run of them read as a line break" in caplog.text
+    assert (
+        "NUL bytes in 2 lines (a crash's padding?): dropped, a run of them before a tag read as a line break"
+        in caplog.text
+    )
     assert "malformed FLASER line skipped" in caplog.text
+    inside = tmp_path / "d.log"  # a NUL inside a field (the hostname): dropped, the line read
+    inside.write_text("".join(lines).replace(" host ", " ho\x00st ", 3))
+    assert inside.read_text().count("\x00") == 3
+    assert [s.stamp for s in split(open_log(inside).messages())[0]] == [0, 1, 2, 3, 4, 5]
+    assert {t.name for t in open_log(inside).info().topics} == {"FLASER"}  # no phantom tag
 
 
 @pytest.mark.parametrize("gz", [False, True])

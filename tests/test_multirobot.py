@@ -97,25 +97,8 @@ def test_two_tf_topics_that_disagree_on_a_mount_are_warned_of(tmp_path, caplog):
 def test_an_odometry_topic_never_published_gives_way_to_tf_odometry(tmp_path):
     """/odom declared with no message beside tf odometry was refused ("has no messages") with a hint that
     led nowhere; now the tf odometry is read, noted."""
-    from mcap.writer import Writer
-
-    path = tmp_path / "empty_odom.mcap"
-    msgs = sorted(scans("/scan") + tf_odometry("/tf") + [tf("/tf_static", "base_link", "laser", 0.0)],
-                  key=lambda m: m[2])  # fmt: skip
-    with open(path, "wb") as f:
-        w = Writer(f)
-        w.start(profile="ros2", library="test")
-        sid = w.register_schema(
-            "nav_msgs/msg/Odometry", "ros2msg", ROS.msgdef("nav_msgs/msg/Odometry").encode()
-        )
-        w.register_channel("/odom", "cdr", sid)  # declared, never written
-        chans = {}
-        for topic, typename, t, data in msgs:
-            if topic not in chans:
-                s = w.register_schema(typename, "ros2msg", ROS.msgdef(typename).encode())
-                chans[topic] = w.register_channel(topic, "cdr", s)
-            w.add_message(chans[topic], t, data, t)
-        w.finish()
+    msgs = scans("/scan") + tf_odometry("/tf") + [tf("/tf_static", "base_link", "laser", 0.0)]
+    path = write_with_empty(tmp_path / "empty_odom.mcap", msgs, "/odom")
     log = open_log(path)
     assert log.odom_topic == "/tf"
     assert log.info().notes == ("/odom has no messages: tf odometry taken",)
@@ -201,31 +184,113 @@ def test_the_second_parent_check_reads_the_scans_robots_tf_only(tmp_path):
     assert open_log(path, scan_topic="/robot2/scan").parent_on_tf("odom") == "map"
 
 
-def test_the_odometry_of_scans_in_a_namespace(tmp_path):
-    """The nearest namespace's Odometry with messages (/robot1/front/scan: /robot1/odom, not /robot2's);
-    its robot's own empty one gives way to its tf odometry, not to another robot's Odometry; another
-    robot's, the only odometry there is, is taken with a warning (a review's cases)."""
-    nested = (
-        scans("/robot1/front/scan") + odometry("/robot1/odom") + odometry("/robot2/odom") + odometry("/odom")
-    )
-    log = open_log(write(tmp_path / "nested.mcap", nested), scan_topic="/robot1/front/scan")
-    assert log.odom_topic == "/robot1/odom"
-    assert log.info().notes == (
-        "3 Odometry topics: /robot1/odom taken (the scans' namespace), not /odom, /robot2/odom",
-    )
-    only = open_log(
-        write(tmp_path / "r2.mcap", scans("/robot1/scan") + odometry("/robot2/odom")),
-        scan_topic="/robot1/scan",
-    )
-    assert only.odom_topic == "/robot2/odom"
-    assert only.stats.warnings == [
-        "log 'r2.mcap': odometry '/robot2/odom' taken, the only one, though outside the scans' namespace "
-        "/robot1 (choose another with --odom-topic)"
-    ]
-    own_tf = scans("/robot1/scan") + tf_odometry("/robot1/tf") + odometry("/robot2/odom")
-    log = open_log(write(tmp_path / "tf.mcap", own_tf), scan_topic="/robot1/scan")
+def write_with_empty(path, messages, empty: str):
+    """An MCAP of ``messages`` with the Odometry topic ``empty`` declared and never published."""
+    from mcap.writer import Writer
+
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start(profile="ros2", library="test")
+        sid = w.register_schema(
+            "nav_msgs/msg/Odometry", "ros2msg", ROS.msgdef("nav_msgs/msg/Odometry").encode()
+        )
+        w.register_channel(empty, "cdr", sid)
+        chans = {}
+        for topic, typename, t, data in sorted(messages, key=lambda m: m[2]):
+            if topic not in chans:
+                s = w.register_schema(typename, "ros2msg", ROS.msgdef(typename).encode())
+                chans[topic] = w.register_channel(topic, "cdr", s)
+            w.add_message(chans[topic], t, data, t)
+        w.finish()
+    return path
+
+
+@pytest.mark.parametrize(
+    ("name", "messages", "scan", "want"),
+    [
+        # the nearest namespace of several (/robot1/front/scan: /robot1/odom, not /odom nor /robot2/odom)
+        (
+            "nested",
+            scans("/robot1/front/scan")
+            + odometry("/robot1/odom")
+            + odometry("/robot2/odom")
+            + odometry("/odom"),
+            "/robot1/front/scan",
+            "/robot1/odom",
+        ),
+        # a robot's own odometry below its namespace (a namespaced TurtleBot 2; ros2_control's topic)
+        (
+            "tb2",
+            scans("/robot1/scan")
+            + odometry("/robot1/mobile_base/odom")
+            + [tf("/tf", "base_link", "laser", 0)],
+            "/robot1/scan",
+            "/robot1/mobile_base/odom",
+        ),
+        (
+            "sensor_ns",
+            scans("/front/scan") + odometry("/mobile_base/odom"),
+            "/front/scan",
+            "/mobile_base/odom",
+        ),
+        (
+            "controllers",
+            [
+                m
+                for r in ("/robot1", "/robot2")
+                for m in scans(f"{r}/scan") + odometry(f"{r}/diff_drive_controller/odom")
+            ],
+            "/robot1/scan",
+            "/robot1/diff_drive_controller/odom",
+        ),
+        # scans in a sensor namespace with /odom and a filtered one at the root: /odom, as at the root
+        (
+            "filtered",
+            scans("/laser/scan") + odometry("/odom") + odometry("/odom_filtered"),
+            "/laser/scan",
+            "/odom",
+        ),
+        # the only Odometry, outside the scans' namespace and no other robot's scans there: taken
+        ("outside", scans("/robot1/scan") + odometry("/robot2/odom"), "/robot1/scan", "/robot2/odom"),
+    ],
+)
+def test_the_odometry_of_scans_in_a_namespace(tmp_path, name, messages, scan, want):
+    """A review's cases: sub-namespaces and sensor namespaces are the robot's own; only another robot's
+    (a namespace with its own LaserScan) is set aside; several at the root level: /odom."""
+    log = open_log(write(tmp_path / f"{name}.mcap", messages), scan_topic=scan)
+    assert log.odom_topic == want
+    log.check()
+    assert not log.stats.warnings
+
+
+def test_another_robots_odometry_is_set_aside(tmp_path):
+    """Two robots: robot1's Odometry declared and empty, its tf odometry there — robot2's live Odometry is
+    not taken (an empty /robot1/odom had let it in without a word); with no tf odometry of its own either,
+    the only Odometry there is, another robot's, is taken with a warning."""
+    two = scans("/robot1/scan") + scans("/robot2/scan") + odometry("/robot2/odom")
+    log = open_log(write_with_empty(tmp_path / "a.mcap", two + tf_odometry("/robot1/tf"), "/robot1/odom"),
+                   scan_topic="/robot1/scan")  # fmt: skip
     assert log.odom_topic == "/robot1/tf"
-    assert log.info().notes == ("no Odometry topic in /robot1 or above it: tf odometry taken",)
+    assert log.info().notes == ("/robot1/odom has no messages: tf odometry taken",)
+    log = open_log(write(tmp_path / "b.mcap", two), scan_topic="/robot1/scan")
+    assert log.odom_topic == "/robot2/odom"
+    assert log.stats.warnings == [
+        "log 'b.mcap': odometry '/robot2/odom' taken, the only one, though another robot's scans are in its "
+        "namespace (choose another with --odom-topic)"
+    ]
+
+
+def test_an_empty_odometry_topic_is_named_when_tf_has_no_odometry_either(tmp_path):
+    """/odom declared and empty, /tf with the mount and a localiser's map → odom only: the error was of the
+    tf alone, though the Odometry topic is why tf was read."""
+    from cornerslam_cli.errors import LogError
+
+    msgs = scans("/scan") + [tf("/tf", "base_link", "laser", 0.0), tf("/tf", "map", "odom", 0.0, T0 + 0.3)]
+    log = open_log(write_with_empty(tmp_path / "e.mcap", msgs, "/odom"))
+    with pytest.raises(
+        LogError, match=r"has no odom→base_link transform .*; /odom has no messages: tf odometry"
+    ):
+        list(log.messages())
 
 
 def test_a_scan_topic_of_another_type_in_a_log_with_no_laserscan(tmp_path):
@@ -240,3 +305,19 @@ def test_a_scan_topic_of_another_type_in_a_log_with_no_laserscan(tmp_path):
     with pytest.raises(LogError) as err:
         open_log(log, scan_topic="/odom").check()
     assert err.value.hint == "it has no LaserScan topic: cornerslam reads the laser as sensor_msgs/LaserScan"
+
+
+def test_did_you_mean_names_topics_of_the_wanted_type_every_equal_one(tmp_path):
+    """--scan-topic /scan: an Odometry topic /scans is no suggestion (it led to a second exit 2), and two
+    robots' scans are both named, not the first found."""
+    from cornerslam_cli.errors import LogError
+
+    def hint(messages, **kw) -> str:
+        with pytest.raises(LogError) as err:
+            open_log(write(tmp_path / "h.mcap", messages), **kw).check()
+        return err.value.hint
+
+    assert "did you mean" not in hint(scans("/base_scan") + odometry("/scans"), scan_topic="/scan")
+    two = scans("/robot1/scan") + scans("/robot2/scan") + odometry("/odom")
+    assert "did you mean '/robot1/scan' or '/robot2/scan'?" in hint(two, scan_topic="scan")
+    assert "did you mean '/odom'?" in hint(scans("/scan") + odometry("/odom"), odom_topic="odom")

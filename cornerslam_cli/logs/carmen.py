@@ -76,7 +76,8 @@ MOUNT_SPREAD = (0.1, math.radians(5.0))
 MOUNT_SHARE = 0.9  # ... unless at least this share of them lies within it (the mount: their mean)
 
 
-NULS = re.compile("\x00+")  # a run of NUL bytes: a crash's padding, read as a line break (_lines)
+# a run of NUL bytes before a tag (FLASER, ODOM, #…): a crash's padding, where a line starts (_lines)
+NULS = re.compile("\x00+(?=[A-Z][A-Z0-9_]*[ \t]|#)")
 
 
 def flaser_increment(n: int) -> float:
@@ -101,9 +102,10 @@ def _lines(path: Path, stats: ReadStats | None, fault: list[str] | None = None) 
     """Lines of a (possibly gzip-compressed) text log; a cut/damaged gzip ends the lines with a warning
     (``stats``) and what ended them appended to ``fault`` ("damaged after 12 lines").
     A UTF-8 byte-order mark (an editor saving as 'UTF-8 with BOM') is dropped: it made the first
-    line's tag 'ï»¿FLASER', a topic of its own, and the line was lost without a word. Runs of NUL bytes
-    (the padding a crash leaves where the file system had grown the file: block-aligned, mid-line) end a
-    line, with a warning: a line after them was '\\x00…FLASER', lost, or glued to the cut one before."""
+    line's tag 'ï»¿FLASER', a topic of its own, and the line was lost without a word. A run of NUL bytes
+    before a tag (the padding a crash leaves where the file system had grown the file: block-aligned,
+    from mid-line) ends a line, with a warning: a line after it was '\\x00…FLASER', lost, or glued to the
+    cut one before; NULs elsewhere (inside a field, before the rest of a line) are dropped."""
     n = nul = 0
     try:
         with _open_text(path) as f:
@@ -111,9 +113,10 @@ def _lines(path: Path, stats: ReadStats | None, fault: list[str] | None = None) 
                 n += 1
                 if n == 1:
                     line = line.removeprefix(BOM)
-                if "\x00" in line:
+                if "\x00" in line:  # the padding ends a line before a tag; other NULs are dropped
                     nul += 1
-                    yield from (part for part in NULS.split(line) if part.strip())
+                    parts = (part.replace("\x00", "") for part in NULS.split(line))
+                    yield from (part for part in parts if part.strip())
                 else:
                     yield line
     except (EOFError, gzip.BadGzipFile, zlib.error) as exc:
@@ -124,7 +127,8 @@ def _lines(path: Path, stats: ReadStats | None, fault: list[str] | None = None) 
             fault.append(f"{why} after {_many(n, 'line')}" if n else f"{why} before its first line")
     if nul and stats is not None:
         stats.warn(
-            "%s: NUL bytes in %s (a crash's padding?): each run of them read as a line break",
+            "%s: NUL bytes in %s (a crash's padding?): dropped, a run of them before a tag read as a line "
+            "break",
             path.name,
             _many(nul, "line"),
         )

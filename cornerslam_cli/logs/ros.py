@@ -10,6 +10,7 @@ selection, decoding and tf steps share the reader's state.
 from __future__ import annotations
 
 import difflib
+import itertools
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass, replace
@@ -367,31 +368,29 @@ class RosLogReader:
                 f"topic '{want}' of log '{name}' is {mt}, not nav_msgs/Odometry or tf2_msgs/TFMessage",
                 f"choose one with --odom-topic (Odometry: {listing(odoms)}; tf: {listing(tfs)})",
             )
-        if namespace(self.scan_topic):  # a robot in its namespace (several in the log, perhaps)
-            return self._robot_odom(odoms, tfs)
-        live = [t for t in odoms if self._channels[t].count != 0]  # (None: not known)
-        if tfs and odoms and not live:  # declared, never published
-            note = f"{listing(odoms)} has no messages: tf odometry taken"
-            return self._noted(_OdomSel(self._tf_odometry_topic(tfs), "tf"), note)
-        odoms = live or odoms
-        if len(odoms) == 1:
+        mine = [t for t in odoms if not self._other_robots(t)]  # (several robots: another's set aside)
+        live = [t for t in mine if self._channels[t].count != 0]  # (None: not known)
+        robot_tfs = of_robot(tfs, self.scan_topic)
+        if live or (mine and not robot_tfs):  # (only empty ones and no tf: a run says so, check)
+            sel = self._nearest_odom(live or mine, len(odoms))
+            if sel.topic and not sel.note and len(mine) < len(odoms):  # other robots' set aside
+                others = listing([t for t in odoms if t != sel.topic])
+                note = f"{len(odoms)} Odometry topics: {sel.topic} taken (the scans' namespace), not {others}"
+                sel = self._noted(sel, note)
+            return sel
+        if robot_tfs:
+            why = f"{listing(mine)} has no messages" if mine else "the Odometry topics are other robots'"
+            note = f"{why}: tf odometry taken" if odoms else ""
+            return self._noted(_OdomSel(self._tf_odometry_topic(robot_tfs), "tf"), note)
+        if len(odoms) == 1:  # only another robot's
+            self.stats.warn(
+                "log '%s': odometry '%s' taken, the only one, though another robot's scans are in its "
+                "namespace (choose another with --odom-topic)", name, odoms[0],
+            )  # fmt: skip
             return _OdomSel(odoms[0], "odometry")
-        if len(odoms) > 1:
-            if "/odom" in odoms:
-                others = listing([t for t in odoms if t != "/odom"])
-                note = (
-                    f"{len(odoms)} Odometry topics: /odom taken, not {others} (choose one with --odom-topic)"
-                )
-                logger.info("log '%s': %s", name, note)
-                return _OdomSel("/odom", "odometry", note=note)
-            return _OdomSel(
-                "",
-                "",
-                f"log '{name}' has {len(odoms)} Odometry topics: {listing(odoms)}",
-                "choose one with --odom-topic",
-            )
-        if tfs:
-            return _OdomSel(self._tf_odometry_topic(tfs), "tf")
+        if odoms:
+            return _OdomSel("", "", f"log '{name}' has {len(odoms)} Odometry topics, all of other robots': "
+                            f"{listing(odoms)}", "choose one with --odom-topic")  # fmt: skip
         if self._lossy():
             return _OdomSel("", "", *self._lost("no nav_msgs/Odometry topic and no tf topic"))
         return _OdomSel(
@@ -402,42 +401,41 @@ class RosLogReader:
             f"{short_text(self.odom_frame)}→{short_text(self.base_frame)})",
         )
 
-    def _robot_odom(self, odoms: list[str], tfs: list[str]) -> _OdomSel:
-        """The odometry of scans in a namespace (``/robot1/scan``): the Odometry topic with messages in the
-        nearest of its namespace and those above it (``/robot1/odom`` before ``/odom``); else its robot's
-        tf odometry; else, noted, an Odometry topic of another namespace when it is the only one."""
-        name, ns = self.path.name, namespace(self.scan_topic)
-        own = of_robot(odoms, self.scan_topic, strict=True)
-        live = [t for t in own if self._channels[t].count != 0]
-        if live:
-            nearest = max(len(namespace(t)) for t in live)
-            picked = [t for t in live if len(namespace(t)) == nearest]
-            if len(picked) > 1:
-                problem = f"log '{name}' has {len(picked)} Odometry topics: {listing(picked)}"
-                return _OdomSel("", "", problem, "choose one with --odom-topic")
-            others = listing([t for t in odoms if t != picked[0]])
-            note = f"{len(odoms)} Odometry topics: {picked[0]} taken (the scans' namespace), not {others}"
-            return self._noted(_OdomSel(picked[0], "odometry"), note if len(odoms) > 1 else "")
-        if robot_tfs := of_robot(tfs, self.scan_topic, strict=True):
-            why = f"{listing(own)} has no messages" if own else f"no Odometry topic in {ns} or above it"
-            note = f"{why}: tf odometry taken" if odoms else ""
-            return self._noted(_OdomSel(self._tf_odometry_topic(robot_tfs), "tf"), note)
-        if own:  # declared, never published, and no tf: a run says so (check)
-            return _OdomSel(own[0], "odometry")
-        live = [t for t in odoms if self._channels[t].count != 0] or odoms
-        if len(live) == 1:  # another robot's, as likely as this one's named oddly: said
-            self.stats.warn(
-                "log '%s': odometry '%s' taken, the only one, though outside the scans' namespace %s (choose "
-                "another with --odom-topic)", name, live[0], ns,
-            )  # fmt: skip
-            return _OdomSel(live[0], "odometry")
-        problem = (
-            f"log '{name}' has no odometry in the scans' namespace {ns} and {len(live)} Odometry topics "
-            f"elsewhere: {listing(live)}"
+    def _other_robots(self, topic: str) -> bool:
+        """Whether ``topic`` is in the namespace of another LaserScan topic's robot (``/robot2/odom``
+        beside ``/robot2/scan``, the scans being ``/robot1/scan``) and not in the scans' own: a log of
+        several robots, whose topics are told apart by namespace only then (a TurtleBot's
+        ``/mobile_base/odom`` beside ``/scan`` is its own)."""
+        ns, other = namespace(self.scan_topic), namespace(topic)
+        robots = {namespace(t) for t in self._topics_of(LASERSCAN) if t != self.scan_topic}
+        return any(
+            r and r != ns and not ns.startswith(r + "/") and (other == r or other.startswith(r + "/"))
+            for r in robots
         )
-        if not live:
-            problem = f"log '{name}' has no odometry: no nav_msgs/Odometry topic and no tf topic"
-        return _OdomSel("", "", problem, "choose one with --odom-topic")
+
+    def _nearest_odom(self, candidates: list[str], n_odoms: int) -> _OdomSel:
+        """Of several Odometry topics, the one whose namespace shares most with the scans'
+        (``/robot1/front/scan``: ``/robot1/odom`` before ``/odom``), ties to ``<namespace>/odom`` then
+        ``/odom``, noted; several still: a problem (choose one)."""
+        if len(candidates) == 1:
+            return _OdomSel(candidates[0], "odometry")
+        ns = namespace(self.scan_topic).split("/")
+
+        def shared(topic: str) -> int:  # namespace levels in common with the scans'
+            pairs = zip(ns, namespace(topic).split("/"), strict=False)
+            return sum(1 for _ in itertools.takewhile(lambda p: p[0] == p[1], pairs))
+
+        best = max(map(shared, candidates))
+        top = [t for t in candidates if shared(t) == best]
+        preferred = ("/".join(ns) + "/odom", "/odom")
+        pick = top[0] if len(top) == 1 else next((t for t in preferred if t in top), "")
+        if not pick:
+            problem = f"log '{self.path.name}' has {len(top)} Odometry topics: {listing(top)}"
+            return _OdomSel("", "", problem, "choose one with --odom-topic")
+        others = listing([t for t in candidates if t != pick])
+        why = " (the scans' namespace)" if len(top) == 1 else ""
+        note = f"{n_odoms} Odometry topics: {pick} taken{why}, not {others} (choose one with --odom-topic)"
+        return self._noted(_OdomSel(pick, "odometry"), note)
 
     def _noted(self, sel: _OdomSel, note: str) -> _OdomSel:
         """``sel`` with ``note``, why it was chosen (none when empty), logged: info lists it."""

@@ -110,8 +110,10 @@ def clear_stale(target: Path) -> None:
 def live_writer(target: Path) -> int | None:
     """The pid of a live process on this host staging ``target`` or writing in it (:func:`alone_in`), if
     any."""
-    for _, what, host, pid in _siblings(target):
-        if what in ("partial", "running") and host == HOST and _alive(pid):
+    for _, what, host, pid in _siblings(target):  # (a batch's mark of this process's own pid: a killed
+        # batch's that a later one got the pid of — pid 1 in a container — not another writer)
+        mine = what == "running" and pid == os.getpid()
+        if what in ("partial", "running") and host == HOST and not mine and _alive(pid):
             return pid
     return None
 
