@@ -140,7 +140,7 @@ class RosbagSource:
 
     def topic_spans(self) -> dict[str, tuple[int, int]]:
         """Each topic's first and last log time [ns]: a ROS 1 bag's from its index (read at open), a ROS 2
-        bag's in sqlite3 storage from its files' timestamp index (:func:`sqlite_spans`); none else."""
+        bag's in sqlite3 storage from its files' message rows (:func:`sqlite_spans`); none else."""
         if self.format == "rosbag2":
             return sqlite_spans(_sqlite_files(self.path))
         out: dict[str, tuple[int, int]] = {}
