@@ -189,18 +189,27 @@ def open_rosbag2(path: Path, **kw) -> RosLogReader:
     return RosLogReader(source, path, stats=stats, **kw)
 
 
+def _bag_info(directory: Path) -> tuple[str, bool, list[str]] | None:
+    """(storage identifier, file-compressed, storage file names) from the metadata.yaml in ``directory``;
+    None when there is none or it cannot be read so (rosbags, which reads the bag, says what is wrong)."""
+    try:
+        info = yaml.safe_load((directory / META).read_text())["rosbag2_bagfile_information"]
+        files = info["relative_file_paths"]
+        storage, compressed = str(info["storage_identifier"]), bool(info.get("compression_format"))
+    except Exception:  # noqa: BLE001 - any unreadable metadata: no answer here
+        return None
+    return (storage, compressed, [str(f) for f in files]) if isinstance(files, list) else None
+
+
 def _sqlite_files(path: Path) -> list[Path]:
     """The sqlite3 storage files of a ROS 2 bag (a directory, or a ``.db3`` alone): none when its storage
     is compressed or not sqlite3, or its metadata.yaml cannot be read."""
     if path.suffix == ".db3":
         return [path]
-    try:
-        info = yaml.safe_load((path / META).read_text())["rosbag2_bagfile_information"]
-        if info["storage_identifier"] != "sqlite3" or info.get("compression_format"):
-            return []
-        return [path / str(f) for f in info["relative_file_paths"]]
-    except Exception:  # noqa: BLE001 - rosbags read the bag; what this cannot read gives no spans
+    info = _bag_info(path)
+    if info is None or info[0] != "sqlite3" or info[1]:
         return []
+    return [path / f for f in info[2]]
 
 
 def sqlite_spans(files: list[Path]) -> dict[str, tuple[int, int]]:
@@ -229,13 +238,8 @@ def sqlite_spans(files: list[Path]) -> dict[str, tuple[int, int]]:
 def split_bag_of(path: Path) -> int | None:
     """The number of storage files of the ROS 2 bag whose metadata.yaml lists the storage file ``path``
     (a bag ``ros2 bag record --max-bag-size`` split) when it is more than one, else None."""
-    if path.suffix not in STORAGE_SUFFIXES or not (path.parent / META).is_file():
-        return None
-    try:
-        files = yaml.safe_load((path.parent / META).read_text())["rosbag2_bagfile_information"]
-        files = [Path(str(f)).name for f in files["relative_file_paths"]]
-    except Exception:  # noqa: BLE001 - metadata.yaml is not read when a storage file is given
-        return None
+    info = _bag_info(path.parent) if path.suffix in STORAGE_SUFFIXES else None
+    files = [Path(f).name for f in info[2]] if info else []
     return len(files) if len(files) > 1 and path.name in files else None
 
 
@@ -259,14 +263,9 @@ def _sole_storage(path: Path, stats: ReadStats) -> Path:
             )
         stats.warn("%s has no metadata.yaml: its one storage file %s is read alone", name, files[0].name)
         return files[0]
-    try:
-        info = yaml.safe_load(metadata.read_text())["rosbag2_bagfile_information"]
-        files = info["relative_file_paths"]
-        storage, compressed = info["storage_identifier"], info.get("compression_format")
-    except Exception:  # noqa: BLE001 - unreadable metadata: rosbags says what is wrong with it
-        return path
-    if storage == "mcap" and not compressed and isinstance(files, list) and len(files) == 1:
-        sole = path / str(files[0])
+    info = _bag_info(path)
+    if info is not None and info[0] == "mcap" and not info[1] and len(info[2]) == 1:
+        sole = path / info[2][0]
         if sole.suffix == ".mcap" and sole.is_file():
             return sole
     return path
