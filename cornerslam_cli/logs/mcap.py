@@ -414,7 +414,8 @@ class McapSource:
         """Each topic's first and last log time [ns], where the file tells them cheaply: from the scan of
         a file without a summary, else from the message indexes of the chunks that can hold its first
         and last message — every chunk's when the chunk index's times are not to be trusted (some writers
-        leave them 0) — a topic whose chunks have none left out. (``cornerslam info``'s rates.)"""
+        leave them 0) — a topic whose chunks have none left out. (``cornerslam info``'s rates; it seeks the
+        file, so not while a :meth:`raw_messages` read is under way.)"""
         spans = dict(self.index.spans)
         trusted = all(0 < t0 <= t1 for t0, t1, _ in self.index.message_indexes)
         for cid in self.index.channels if not spans else ():
