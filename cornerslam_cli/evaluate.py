@@ -239,10 +239,13 @@ def relations_notes(r: np.ndarray) -> list[str]:
     return notes
 
 
-def overlap_problem(est_t: np.ndarray, gt_t: np.ndarray, gt_name: str) -> tuple[str, str] | None:
+def overlap_problem(
+    est_t: np.ndarray, gt_t: np.ndarray, gt_name: str, est_name: str = "the trajectory"
+) -> tuple[str, str] | None:
     """Why ``gt_name`` (stamps ``gt_t``, sorted) cannot score a trajectory with stamps ``est_t``, and
     what to do about it, or None: ATE and RPE need at least two trajectory poses within the ground
-    truth's time span."""
+    truth's time span. Stamps in nanoseconds (micro-, milli-) on either side are named so: a ROS
+    exporter's, the trajectory's too (``est_name``: an ``evaluate`` of a file a user brings)."""
     if len(est_t) < 2:  # not a matter of overlap: "1 of its 1 poses fall within" read as a contradiction
         why = f"the trajectory has a single pose: ATE and RPE against {gt_name} need two or more"
         return why, "process more scans"
@@ -264,6 +267,12 @@ def overlap_problem(est_t: np.ndarray, gt_t: np.ndarray, gt_name: str) -> tuple[
             why = (  # a ROS exporter's integer stamps: TUM's are seconds
                 f"{gt_name} has its stamps in {unit}, not seconds ({gt_t[0]:.0f} to {gt_t[-1]:.0f}; "
                 f"the trajectory {est_t[0]:.3f} to {est_t[-1]:.3f} s)"
+            )
+            return why, "write its stamps in seconds"
+        if np.count_nonzero((est_t / scale >= gt_t[0]) & (est_t / scale <= gt_t[-1])) >= 2:
+            why = (
+                f"{est_name} has its stamps in {unit}, not seconds ({est_t[0]:.0f} to {est_t[-1]:.0f}; "
+                f"{gt_name} {gt_t[0]:.3f} to {gt_t[-1]:.3f} s)"
             )
             return why, "write its stamps in seconds"
     why = (
@@ -293,7 +302,7 @@ def evaluate_files(
     out: dict = {}  # Accuracy's fields
     if ground_truth:
         gt_t, gt = read_tum(ground_truth, "ground truth")
-        problem = overlap_problem(t, gt_t, f"ground truth '{ground_truth}'")
+        problem = overlap_problem(t, gt_t, f"ground truth '{ground_truth}'", f"trajectory '{trajectory}'")
         if problem:
             raise LogError(*problem)
         out.update(ground_truth=display_path(ground_truth), ate=ate(t, est, gt_t, gt, correct_scale))

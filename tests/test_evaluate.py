@@ -240,17 +240,20 @@ def test_a_single_pose_trajectory_is_refused_as_such_not_as_no_overlap(files):
     assert "overlap" not in res.stderr and "this log's ground truth" not in res.stderr
 
 
-def test_ground_truth_stamped_in_nanoseconds_is_named_as_such(files):
-    """A ROS exporter's integer nanosecond stamps in a TUM file: said, not "does not overlap"."""
+@pytest.mark.parametrize("which", ["ground truth", "trajectory"])
+def test_a_file_stamped_in_nanoseconds_is_named_as_such(files, which):
+    """A ROS exporter's integer nanosecond stamps in a TUM file: said, not "does not overlap" — of the
+    trajectory too (a probe: the error blamed the ground truth, "is it this log's ground truth?")."""
     est, gt = files
 
     def in_ns(rows):
         return [f"{round(float(r.split()[0]) * 1e9)} {' '.join(r.split()[1:])}" for r in rows]
 
-    rewrite(gt, in_ns)
+    rewrite(gt if which == "ground truth" else est, in_ns)
     res = evaluate(est, "--ground-truth", gt)
     assert res.exit_code == 2 and "\n" not in res.stderr.strip(), res.output
-    assert "has its stamps in nanoseconds, not seconds" in res.stderr
+    named = gt if which == "ground truth" else est
+    assert f"{which} '{named}' has its stamps in nanoseconds, not seconds" in res.stderr
     assert "(write its stamps in seconds)" in res.stderr and "overlap" not in res.stderr
 
 

@@ -321,3 +321,21 @@ def test_did_you_mean_names_topics_of_the_wanted_type_every_equal_one(tmp_path):
     two = scans("/robot1/scan") + scans("/robot2/scan") + odometry("/odom")
     assert "did you mean '/robot1/scan' or '/robot2/scan'?" in hint(two, scan_topic="scan")
     assert "did you mean '/odom'?" in hint(scans("/scan") + odometry("/odom"), odom_topic="odom")
+
+
+def test_scans_of_two_frames_on_one_topic_are_warned_of(tmp_path):
+    """Two lasers published on /scan (or a driver restarted with another frame_id): every scan is placed
+    with the first frame's mount — a probe's second laser, upside down, gave 10× the error with no word."""
+    from dataclasses import replace
+
+    raw = [replace(s, frame_id="laser_b") if i % 2 else s for i, s in enumerate(make_scans(6))]
+    msgs = [("/scan", "sensor_msgs/msg/LaserScan", int(s.stamp * 1e9), ROS.laserscan(s)) for s in raw]
+    log = open_log(write(tmp_path / "two.mcap", msgs + odometry("/odom")))
+    assert len([m for m in log.messages() if hasattr(m, "ranges")]) == 6
+    assert log.stats.warnings == [
+        "two.mcap: scans on '/scan' come from frame 'laser_b' besides 'laser' (two lasers on one topic, or a "
+        "driver restarted with another frame_id): every scan is placed with the mount of 'laser'"
+    ]
+    one = open_log(write(tmp_path / "one.mcap", scans("/scan") + odometry("/odom")))
+    list(one.messages())
+    assert not one.stats.warnings
