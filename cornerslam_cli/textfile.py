@@ -118,7 +118,9 @@ def read_number_rows(
             cut_last(f"{name} ends mid-line (line {lineno}: {len(v)} of {n} values, no newline): left out")
             continue
         if len(v) < n or (len(v) > n and not more_ok):
-            raise error(f"{name} line {lineno} has {len(v)} values", f"expected {n}: {layout}")
+            kitti = "; 12 values: a KITTI pose file, which has no stamps? write it as TUM"
+            hint = f"expected {n}: {layout}{kitti if (len(v), n) == (12, 8) else ''}"
+            raise error(f"{name} line {lineno} has {len(v)} values", hint)
         if not all(map(math.isfinite, v[:n])):
             raise error(f"{name} line {lineno} has a value that is not finite", f"expected: {layout}")
         rows.append(v[:n])

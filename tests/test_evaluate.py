@@ -659,6 +659,16 @@ def test_a_cut_inside_a_number_is_a_cut_too_and_a_line_ending_in_cr_is_not(files
     assert res.exit_code == 2 and "has 3 values" in res.stderr
 
 
+def test_a_kitti_pose_file_is_named_as_one(files, tmp_path):
+    """12 values a line (a 3×4 pose matrix, no stamp: KITTI's format): said, as evo users bring them."""
+    est, _ = files
+    kitti = tmp_path / "kitti.txt"
+    kitti.write_text("1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 1 0 1 0 0 0 0 1 0\n")
+    res = evaluate(est, "--ground-truth", kitti)
+    assert res.exit_code == 2 and "line 1 has 12 values" in res.stderr
+    assert "a KITTI pose file, which has no stamps? write it as TUM" in res.stderr
+
+
 def test_rpe_leaves_out_the_pairs_across_a_hole_of_the_ground_truth():
     """A pair of scored poses with unscored ones between them (in a hole of the ground truth) is no step
     the reference saw: it counted as one, the RPE per step ~6× too large (a hostile-user probe). Checked
