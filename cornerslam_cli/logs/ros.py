@@ -858,7 +858,7 @@ class RosLogReader:
         n_tf_match = 0
         tf_seen: set[tuple[str, str]] = set()  # (parent, child) on the odometry tf topic
         children: dict[str, int] = {}  # nav_msgs/Odometry messages by child_frame_id
-        scan_frames: dict[str, int] = {}  # the scans' header frame_ids ('/' stripped): one laser's, one
+        scan_frames: dict[str, int] = {}  # the scans' frame_ids ('/' stripped), counted: one laser has one
         for topic, log_time, data in self.source.raw_messages({scan_t, odom_t} if odometry else {scan_t}):
             try:
                 if topic == scan_t:
