@@ -163,16 +163,15 @@ def is_static(topic: str) -> bool:
     return topic.rsplit("/", 1)[-1] == "tf_static"
 
 
-def of_robot(topics: list[str], scan_topic: str, strict: bool = False) -> list[str]:
+def of_robot(topics: list[str], scan_topic: str) -> list[str]:
     """Of ``topics``, those of the robot whose scans are ``scan_topic``: in its namespace or one above it
     (``/robot1/scan``: ``/robot1/tf``, ``/tf``, not ``/robot2/tf``, whose frames may be named alike) —
-    all of them when none is (the scans outside the robot's namespace; ``strict``: none), or no scan
-    topic is chosen."""
+    all of them when none is (the scans outside the robot's namespace), or no scan topic is chosen."""
     if not scan_topic:
         return topics
     ns = namespace(scan_topic)
     mine = [t for t in topics if (n := namespace(t)) == ns or ns.startswith(n + "/")]
-    return mine if mine or strict else topics
+    return mine or topics
 
 
 def listing(names: list[str], most: int = 10) -> str:
@@ -444,11 +443,10 @@ class RosLogReader:
         return replace(sel, note=note)
 
     def _tf_odometry_topic(self, tfs: list[str]) -> str:
-        """Of the (not static) tf topics ``tfs``, the one tf odometry is read from: the scans' robot's
-        (:func:`of_robot`) — its namespace's ``tf``, else ``/tf``, else the first."""
-        mine = of_robot(tfs, self.scan_topic)
+        """Of the scans' robot's (not static) tf topics ``tfs`` (:func:`of_robot`), the one tf odometry is
+        read from: its namespace's ``tf``, else ``/tf``, else the first."""
         own = namespace(self.scan_topic) + "/tf"
-        return own if own in mine else "/tf" if "/tf" in mine else mine[0]
+        return own if own in tfs else "/tf" if "/tf" in tfs else tfs[0]
 
     def _robot_tf_topics(self) -> list[str]:
         """The log's tf topics the scans' robot's transforms are on (:func:`of_robot`)."""
@@ -666,8 +664,8 @@ class RosLogReader:
                     if (parent, child) not in edges:
                         edges[(parent, child)], edge_topic[(parent, child)] = transform_matrix(t, q), topic
                     elif edge_topic[(parent, child)] != topic:
-                        self._warn_other_tf(edges[(parent, child)], transform_matrix(t, q), edge_topic, topic,
-                                            (parent, child))  # fmt: skip
+                        self._warn_other_tf(edges[(parent, child)], transform_matrix(t, q),
+                                            edge_topic[(parent, child)], topic, (parent, child))  # fmt: skip
             except Exception as exc:  # noqa: BLE001 - bad bytes are counted, never raised
                 logger.debug("laser_to_base: skipping undecodable %s message: %s", topic, exc)
         self.laser_frame = frame
@@ -705,10 +703,10 @@ class RosLogReader:
         return self._laser2base  # type: ignore[return-value]
 
     def _warn_other_tf(
-        self, first: np.ndarray, other: np.ndarray, edge_topic: dict, topic: str, edge: tuple[str, str]
+        self, first: np.ndarray, other: np.ndarray, first_topic: str, topic: str, edge: tuple[str, str]
     ) -> None:
-        """Warn when a second tf topic gives an edge the first gave (``first``) another transform: two
-        robots' tf with frames named alike, whose scans' namespace did not tell them apart."""
+        """Warn when tf topic ``topic`` gives an edge that ``first_topic`` gave (``first``) another
+        transform: two robots' tf with frames named alike, whose scans' namespace did not tell them apart."""
         with np.errstate(invalid="ignore", over="ignore"):
             moved = float(np.hypot(*(other[:2, 3] - first[:2, 3])))
             turned = abs(math.atan2(other[1, 0], other[0, 0]) - math.atan2(first[1, 0], first[0, 0]))
@@ -716,7 +714,7 @@ class RosLogReader:
             self.stats.warn(
                 "%s: tf topics '%s' and '%s' both give %s→%s, and differently: the first's is used (two "
                 "robots' tf with frames named alike? a scan topic in a robot's namespace reads its tf only)",
-                self.path.name, edge_topic[edge], topic, *edge,
+                self.path.name, first_topic, topic, *edge,
             )  # fmt: skip
 
     def _robot_frame(self) -> str:
@@ -858,7 +856,7 @@ class RosLogReader:
         n_tf_match = 0
         tf_seen: set[tuple[str, str]] = set()  # (parent, child) on the odometry tf topic
         children: dict[str, int] = {}  # nav_msgs/Odometry messages by child_frame_id
-        scan_frames: dict[str, int] = {}  # the scans' frame_ids ('/' stripped), counted: one laser has one
+        scan_frames: dict[str, None] = {}  # the scans' frame_ids ('/' stripped), in order: one laser has one
         for topic, log_time, data in self.source.raw_messages({scan_t, odom_t} if odometry else {scan_t}):
             try:
                 if topic == scan_t:
@@ -902,12 +900,14 @@ class RosLogReader:
         self._warn_children(children)
         st.check_scans_yielded(self.path.name, scan_t)
 
-    def _see_frame(self, seen: dict[str, int], frame: str, topic: str) -> None:
-        """Count a scan's frame; warn at the first scan of a frame other than the first one's: two lasers
+    def _see_frame(self, seen: dict[str, None], frame: str, topic: str) -> None:
+        """Note a scan's frame; warn at the first scan of a frame other than the first one's: two lasers
         published on one topic (or a driver restarted with another frame_id) — every scan is placed with
         the first frame's mount (a probe: a second laser mounted upside down, 10× the error, no word)."""
-        seen[frame] = seen.get(frame, 0) + 1
-        if len(seen) > 1 and seen[frame] == 1:
+        if frame in seen:
+            return
+        seen[frame] = None
+        if len(seen) > 1:
             first = next(iter(seen))
             self.stats.warn(
                 "%s: scans on '%s' come from frame '%s' besides '%s' (two lasers on one topic, or a driver "
