@@ -2,6 +2,7 @@
 
 import json
 import math
+import tempfile
 from pathlib import Path
 
 import click
@@ -608,11 +609,12 @@ def test_an_internal_error_exits_1_with_the_traceback_saved(tmp_path, sim_log, m
         raise ZeroDivisionError("synthetic bug")
 
     monkeypatch.setattr(Slam, "step", boom)
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))  # not a file left in the system's /tmp
     res = invoke("run", sim_log, "--out", tmp_path / "o")
     assert res.exit_code == 1
     assert "internal error: ZeroDivisionError" in res.stderr and "traceback saved to" in res.stderr
     saved = res.stderr.split("traceback saved to ")[1].strip().rstrip(")")
-    assert "synthetic bug" in Path(saved).read_text()
+    assert Path(saved).parent == tmp_path and "synthetic bug" in Path(saved).read_text()
     assert not (tmp_path / "o").exists()
 
 
