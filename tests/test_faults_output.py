@@ -1434,10 +1434,35 @@ def test_a_second_batch_into_a_running_batchs_directory_is_refused_however_it_is
     finally:
         a.kill()
         a.communicate()
-    mine = tmp_path / f".out.running-{HOST}-{os.getpid()}"
+    from cornerslam_cli.report.outdir import _sibling, alone_in
+
+    mine = tmp_path / (_sibling(out, "running") + "0")  # this pid, another start time (where /proc tells)
     mine.touch()  # (A's, SIGKILLed, is cleared as its process is gone)
-    from cornerslam_cli.report.outdir import alone_in
 
     with alone_in(out, "out"):
         pass
     assert not [p for p in tmp_path.iterdir() if ".running-" in p.name]
+
+
+@pytest.mark.skipif(not Path(f"/proc/{os.getpid()}/stat").is_file(), reason="needs /proc")
+def test_a_killed_runs_staging_under_a_pid_that_came_back_is_cleared(tmp_path, sim_log):
+    """A run SIGKILLed in a container (pid 1, the same host name after a restart) left its staging
+    directory; the next run there is pid 1 again: it was refused for ever as "another cornerslam process
+    (pid 1) is writing". The names carry the process's start time: a leftover of this pid that started at
+    another time is a dead process's, cleared; one of this process's own start time is a live writer's."""
+    from cornerslam_cli.report.outdir import _sibling, _start_time
+
+    me, started = os.getpid(), _start_time(os.getpid())
+    assert _sibling(tmp_path / "out", "partial").endswith(f"-{me}-s{started}")
+    out = tmp_path / "out"
+    before = tmp_path / f".out.partial-{HOST}-{me}-s{int(started) - 1}-abcd1234"
+    before.mkdir()
+    (before / "trajectory.csv").write_text("step\n0\n")
+    res = invoke("run", sim_log, "--out", out, "-q")
+    assert res.exit_code == 0, res.output
+    assert not before.exists() and (out / "trajectory.csv").is_file()
+    live = tmp_path / f".out.partial-{HOST}-{me}-s{started}-abcd1234"
+    live.mkdir()
+    res = invoke("run", sim_log, "--out", out, "-q")
+    assert res.exit_code == 2 and f"another cornerslam process (pid {me}) is writing" in res.stderr
+    assert live.is_dir()
