@@ -85,11 +85,15 @@ def test_carmen_rates_are_each_tags_over_its_own_stamps(tmp_path):
 
 
 def test_a_topic_named_almost_right_gets_a_suggestion(tmp_path):
-    """--scan-topic scan (no slash), --odom-topic /odm: "did you mean '/scan'?" (a probe's nits)."""
+    """--scan-topic /sacn, --odom-topic /odm: "did you mean '/scan'?" (a probe's nits); a relative name
+    (`--scan-topic scan`, as ROS 1 users give it: `rostopic echo scan`) is the root namespace's topic."""
     from cornerslam_cli.errors import LogError
 
     log = write_log("mcap-cdr", tmp_path)
-    for kw, said in (({"scan_topic": "scan"}, "/scan"), ({"odom_topic": "/odm"}, "/odom")):
+    relative = open_log(log, scan_topic="scan", odom_topic="odom")
+    relative.check()
+    assert (relative.scan_topic, relative.odom_topic) == ("/scan", "/odom")
+    for kw, said in (({"scan_topic": "/sacn"}, "/scan"), ({"odom_topic": "/odm"}, "/odom")):
         with pytest.raises(LogError) as err:
             open_log(log, **kw).check()
         assert f"did you mean '{said}'?" in err.value.hint

@@ -320,7 +320,7 @@ def test_did_you_mean_names_topics_of_the_wanted_type_every_equal_one(tmp_path):
     assert "did you mean" not in hint(scans("/base_scan") + odometry("/scans"), scan_topic="/scan")
     two = scans("/robot1/scan") + scans("/robot2/scan") + odometry("/odom")
     assert "did you mean '/robot1/scan' or '/robot2/scan'?" in hint(two, scan_topic="scan")
-    assert "did you mean '/odom'?" in hint(scans("/scan") + odometry("/odom"), odom_topic="odom")
+    assert "did you mean '/odom'?" in hint(scans("/scan") + odometry("/odom"), odom_topic="odm")
 
 
 def test_scans_of_two_frames_on_one_topic_are_warned_of(tmp_path):

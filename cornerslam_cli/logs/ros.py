@@ -242,9 +242,9 @@ class RosLogReader:
         self.base_frame = strip_frame(base_frame)  # the robot's frame: the config's until resolved
         self.config_base_frame = self.base_frame
         self._robot_resolved = False  # _robot_frame() has set base_frame to the odometry's frame
-        self._want_scan = scan_topic
-        self._want_odom = odom_topic
         self._channels = {c.topic: c for c in source.channels()}
+        self._want_scan = self._resolved(scan_topic)
+        self._want_odom = self._resolved(odom_topic)
         self._scan_sel = self._select_scan()
         self.scan_topic = self._scan_sel[0]  # (the odometry's choice looks at its namespace)
         self._odom_sel = self._select_odom()
@@ -285,6 +285,13 @@ class RosLogReader:
         if self.stats.truncated:
             return " before the cut (the file is truncated)"
         return " in its readable parts (some of the file is damaged)" if self.stats.damaged else ""
+
+    def _resolved(self, want: str) -> str:
+        """``want`` as ROS tools resolve a relative name in the root namespace: ``base_scan`` is
+        ``/base_scan`` when the log has that topic and none named ``base_scan`` itself."""
+        if want and not want.startswith("/") and want not in self._channels and f"/{want}" in self._channels:
+            return f"/{want}"
+        return want
 
     @staticmethod
     def _close_to(want: str, names: list[str]) -> str:
