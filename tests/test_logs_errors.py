@@ -430,3 +430,67 @@ def test_a_log_whose_scans_were_none_of_them_read_says_so_not_that_the_stamps_ar
     none = error([])
     assert "found none of the scan messages its index lists: reindex it" in none
     assert "overlap in time" not in none
+
+
+@pytest.mark.parametrize("encoding", ["ros1", "cdr"])
+def test_a_modified_copy_of_a_standard_message_is_named_as_one(encoding):
+    """The definitions the writers record (rosbags' standard ones) say nothing; a vendor's LaserScan with a
+    field added, one left out or ranges as float64, and an Odometry without twist, are named."""
+    from cornerslam_cli.logs.base import Channel
+    from cornerslam_cli.logs.cdr import definition_note
+
+    fmt = "ros1msg" if encoding == "ros1" else "ros2msg"
+    ros = RosSerializer(encoding)
+    scan_def, odom_def = (ros.msgdef(f"{t}") for t in ("sensor_msgs/msg/LaserScan", "nav_msgs/msg/Odometry"))
+
+    def note(msgdef, msgtype="sensor_msgs/LaserScan", fmt=fmt):
+        return definition_note(Channel("/scan", msgtype, encoding, None, msgdef, fmt))
+
+    assert note(scan_def) == "" and note(odom_def, "nav_msgs/Odometry") == ""
+    assert note("") == "" and note("garbage {", fmt="ros2idl") == ""  # nothing recorded, or IDL: no verdict
+    added = scan_def.replace("float32 range_max", "float32 range_max\nuint8 quality  # 0-255")
+    assert "is not the standard message: fields added: 'quality'" in note(added)
+    assert "missing: 'intensities'" in note(scan_def.replace("float32[] intensities", "# gone"))
+    assert "'ranges' is float64[]" in note(scan_def.replace("float32[] ranges", "float64[] ranges"))
+    assert "missing: 'twist'" in note(
+        odom_def.replace("TwistWithCovariance twist", "# none"), "nav_msgs/Odometry"
+    )
+    constant = scan_def.replace("float32 angle_min", "uint8 FRONT=1\nfloat32 angle_min")
+    assert note(constant) == ""  # a constant is no field
+
+
+def test_a_bag_of_a_modified_laserscan_says_so(tmp_path):
+    """A ROS 1 bag whose LaserScan connection records a vendor's copy with a field added (its md5 not the
+    standard's): every scan fails to decode; the error said "ranges overrun the message", now also why."""
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    ros = RosSerializer("ros1")
+    scan_def = ros.msgdef("sensor_msgs/msg/LaserScan")
+    custom = scan_def.replace("float32 range_max", "float32 range_max\nuint8 quality")
+    store = get_typestore(Stores.EMPTY)
+    store.register(get_types_from_msg(custom, "sensor_msgs/msg/LaserScan"))
+    scans, odoms = make_scans(6), make_odoms(7)
+    path = tmp_path / "vendor.bag"
+    with Writer(path) as w:
+        conn = w.add_connection("/scan", "sensor_msgs/msg/LaserScan", msgdef=custom, md5sum="0" * 32)
+        odom = w.add_connection("/odom", "nav_msgs/msg/Odometry", typestore=ros.store)
+        for s in scans:
+            t = store.types
+            sec, nsec = int(s.stamp), int(round((s.stamp % 1) * 1e9))
+            header = t["std_msgs/msg/Header"](
+                seq=0, stamp=t["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec), frame_id="laser"
+            )
+            msg = t["sensor_msgs/msg/LaserScan"](
+                header=header, angle_min=s.angle_min, angle_max=s.angle_max,
+                angle_increment=s.angle_increment, time_increment=0.0, scan_time=0.1, range_min=0.1,
+                range_max=30.0, quality=1,
+                ranges=np.asarray(s.ranges, dtype=np.float32), intensities=np.zeros(0, np.float32),
+            )  # fmt: skip
+            w.write(conn, int(s.stamp * 1e9), store.serialize_ros1(msg, "sensor_msgs/msg/LaserScan"))
+        for o in odoms:
+            w.write(odom, int(o.stamp * 1e9), ros.odometry(o, "odom", "base_link"))
+    res = CliRunner().invoke(cli, ["run", str(path), "--out", str(tmp_path / "o")])
+    assert res.exit_code == 2
+    said = "(its recorded sensor_msgs/LaserScan is not the standard message: fields added: 'quality')"
+    assert said in res.stderr.splitlines()[-1]

@@ -220,6 +220,50 @@ def ensure_type(channel: Channel) -> str:
     return name
 
 
+# the standard messages' fields, in order, as the hand decoders above read them (ROS 1 and ROS 2 alike)
+STANDARD_FIELDS = {
+    "sensor_msgs/LaserScan": (
+        "header", "angle_min", "angle_max", "angle_increment", "time_increment", "scan_time",
+        "range_min", "range_max", "ranges", "intensities",
+    ),
+    "nav_msgs/Odometry": ("header", "child_frame_id", "pose", "twist"),
+}  # fmt: skip
+# the types of LaserScan's numeric fields (the decoders read them as 4-byte floats)
+FLOAT_TYPES = {n: "float32" for n in STANDARD_FIELDS["sensor_msgs/LaserScan"][1:8]} | {
+    "ranges": "float32[]",
+    "intensities": "float32[]",
+}
+
+
+def definition_note(channel: Channel) -> str:
+    """Why a message of ``channel`` may not decode: " (its recorded sensor_msgs/LaserScan is not the
+    standard message: fields added: 'quality')" when the definition the log recorded (``ros1msg`` /
+    ``ros2msg`` text) has other fields, or LaserScan's numbers in other types, than the standard message
+    the decoders read — a vendor's modified copy under the standard name — else "" (the same fields, no
+    definition recorded, or one in IDL)."""
+    msgtype = normalize_msgtype(channel.msgtype)
+    want = STANDARD_FIELDS.get(msgtype)
+    if want is None or not channel.msgdef or channel.msgdef_format == "ros2idl":
+        return ""
+    fields = {}  # name: type, in order
+    for line in channel.msgdef.split("\n"):
+        if line.startswith("==="):  # the definitions of the types it uses follow
+            break
+        words = line.split("#", 1)[0].split()
+        if len(words) >= 2 and "=" not in words[1] and (len(words) < 3 or words[2] != "="):  # not a constant
+            fields[words[1]] = words[0]
+    names = tuple(fields)
+    retyped = [f"{n!r} is {t}" for n, t in fields.items() if FLOAT_TYPES.get(n, t) != t]
+    if names == want and not retyped:
+        return ""
+    added = [repr(n) for n in names if n not in want]
+    lost = [repr(n) for n in want if n not in names]
+    said = [f"{label} {', '.join(them)}" for label, them in (("fields added:", added), ("missing:", lost))]
+    said = [text for text, them in zip(said, (added, lost), strict=True) if them]
+    what = "; ".join(said + retyped) or "its fields in another order"
+    return f" (its recorded {msgtype} is not the standard message: {what})"
+
+
 class Decoder:
     """Decodes the messages of one channel (topic) into plain tuples."""
 

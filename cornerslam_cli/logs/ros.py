@@ -898,7 +898,17 @@ class RosLogReader:
             except LogError:
                 raise
             except Exception as exc:  # noqa: BLE001 - undecodable message: count, warn, go on
-                st.failed("%s: cannot decode a %s message at %d ns: %s", self.path.name, topic, log_time, exc)
+                from .cdr import definition_note  # (local: keeps `import cornerslam_cli.logs` light)
+
+                note = definition_note(self._channels[topic]) if topic in self._channels else ""
+                st.failed(
+                    "%s: cannot decode a %s message at %d ns%s: %s",
+                    self.path.name,
+                    topic,
+                    log_time,
+                    note,
+                    exc,
+                )
         if is_tf and n_tf_match == 0:
             raise LogError(*self._no_odom_tf(tf_seen))
         if st.decode_failed > 5:
