@@ -575,3 +575,34 @@ def test_a_utf16_log_is_named_so_with_the_command_that_converts_it(tmp_path, enc
     subprocess.run(command, shell=True, check=True)
     scans, _ = split(open_log(tmp_path / "x-utf8.log").messages())
     assert [s.stamp for s in scans] == [0, 1, 2, 3, 4]
+
+
+def test_a_log_whose_timestamps_never_change_is_read_on_its_logger_timestamps(tmp_path, caplog):
+    """A converter that wrote 0 for every line's timestamp, with the logger's beside it: every scan but the
+    first was dropped as going back in time (exit 2 "check that the laser driver fills the header
+    stamps"); now the logger timestamps are read, every tag alike, warned. One tag whose timestamps move
+    keeps the message timestamps for all (two clocks are never mixed)."""
+
+    def lines(stamp_of):
+        out = ""
+        for i in range(6):
+            t = 100.0 + 0.5 * i
+            pose = (0.1 * i, 0, 0)
+            odom = " ".join(map(str, pose))
+            out += f"ODOM {odom} 0 0 0 {stamp_of('ODOM', t)} host {t}\n"
+            out += flaser(181, t, pose=pose).replace(f" {t} host", f" {stamp_of('FLASER', t)} host")
+        return out
+
+    zero = tmp_path / "zero.log"
+    zero.write_text(lines(lambda tag, t: 0.0))
+    with caplog.at_level(logging.WARNING):
+        scans, odoms = split(open_log(zero).messages())
+    assert [s.stamp for s in scans] == [o.stamp for o in odoms] == [100.0 + 0.5 * i for i in range(6)]
+    said = "the timestamps of its FLASER and ODOM lines never change: read on their logger timestamps"
+    assert said in caplog.text
+    info = open_log(zero).info()
+    assert (info.start, info.duration) == (100.0, 2.5)
+    half = tmp_path / "half.log"  # the laser's timestamps move, 1 s from the logger's: the laser's clock kept
+    half.write_text(lines(lambda tag, t: t + 1.0 if tag == "FLASER" else 0.0))
+    scans, _ = split(open_log(half).messages())
+    assert [s.stamp for s in scans] == [101.0 + 0.5 * i for i in range(6)]

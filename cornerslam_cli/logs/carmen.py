@@ -21,7 +21,9 @@ Conventions (as CARMEN's own ``carmen_string_to_laser_laser_message_orig``):
 * Max range: ROBOTLASER1 maximum_range; FLASER/RLASER the ``robot_front_laser_max`` /
   ``robot_rear_laser_max`` PARAM if the log has one, else 81.83 m (the SICK "no return" value of the
   classic Radish logs). Readings >= max range are no-return and dropped.
-* Stamps: the message timestamp field (sensor time), not the logger timestamp; lines in file order.
+* Stamps: the message timestamp field (sensor time), not the logger timestamp; lines in file order. A log
+  whose every laser and ODOM tag has one timestamp on all its lines (0: a converter that wrote none) and
+  logger timestamps that move is read on its logger timestamps, every tag alike, warned.
 * Odometry: ODOM lines when the log has any; otherwise the odometry pose fields of the laser lines (FLASER
   odom_x/y/theta, ROBOTLASER1 robot_x/y/theta), yielded just before their scan. Also those fields when ODOM
   lines go back in time more often than the laser lines do (a merged or re-stamped log: intel.gfs.log's 1,498
@@ -180,13 +182,15 @@ class _Laser:
 class _Layout:
     """What the pre-read saw of one tag's whole lines with one number of fields after the stamp."""
 
-    __slots__ = ("lines", "start", "end", "back", "last", "first_pose", "moving")
+    __slots__ = ("lines", "start", "end", "back", "last", "first_pose", "moving", "logger")
 
-    def __init__(self):
+    def __init__(self, logger: bool = False):
         self.lines, self.back = 0, 0  # lines; lines stamped before the line above them
         self.start, self.end, self.last = math.inf, -math.inf, -math.inf
         self.first_pose: tuple[float, ...] | None = None
         self.moving = False  # (laser lines) their odometry fields are not all the same pose
+        # the same of the logger timestamps (a layout with them), for a log whose timestamps never move
+        self.logger = None if logger else _Layout(logger=True)
 
     def see(self, tag: str, tok: list[str], through: int) -> None:
         try:
@@ -194,15 +198,34 @@ class _Layout:
         except ValueError:
             return
         self.lines += 1
-        if math.isfinite(t):
-            self.start, self.end = min(self.start, t), max(self.end, t)
-            self.back += t < self.last
-            self.last = t
+        self._span(t)
+        if self.logger is not None and len(tok) == through + TAIL:
+            try:
+                self.logger._span(float(tok[-1]))
+                self.logger.lines += 1
+            except ValueError:
+                pass
         if tag != ODOM_TAG and not self.moving:
             pose = _odometry_fields(tag, tok, through)
             if pose is not None:
                 self.first_pose = self.first_pose or pose
                 self.moving = self.first_pose != pose
+
+    def _span(self, t: float) -> None:
+        if math.isfinite(t):
+            self.start, self.end = min(self.start, t), max(self.end, t)
+            self.back += t < self.last
+            self.last = t
+
+
+def _stamps_stand_still(layouts: dict[str, _Layout]) -> bool:
+    """Whether a log is read on its logger timestamps: each laser and ODOM tag of two lines or more has
+    one timestamp on all of them (a converter's 0), a logger timestamp on every one, and those move."""
+    many = [n for n in layouts.values() if n.lines >= 2]
+    return bool(many) and all(
+        n.start == n.end and (g := n.logger) is not None and n.lines == g.lines and g.start < g.end
+        for n in many
+    )
 
 
 class BadLine(ValueError):
@@ -307,6 +330,7 @@ class CarmenReader:
         self._end: float | None = None
         self._back: dict[str, int] = {}  # per tag: lines stamped before the line of that tag above them
         self._moving: set[str] = set()  # laser tags whose odometry fields are not all the same pose
+        self._logger_stamps = False  # every tag's timestamps stand still: the logger timestamps are read
         self._prescan()
         self._want_scan, self._want_odom = scan_topic, odom_topic
         self.scan_topic, self.odom_topic, self._problems = self._select()
@@ -351,6 +375,7 @@ class CarmenReader:
             )
         # each tag's layout: the standard one, unless another has more lines (and two at least: a log's
         # one cut line is no layout)
+        chosen = {}
         for tag in {tag for tag, _ in layouts}:
             standard = layouts.get((tag, TAIL))
             lines, tail = max(
@@ -358,9 +383,16 @@ class CarmenReader:
                 default=(0, TAIL),
             )
             self._tail[tag] = tail if lines > (standard.lines if standard else 0) else TAIL
-            layout = layouts.get((tag, self._tail[tag])) or _Layout()
-            if not layout.lines:
-                continue
+            if (layout := layouts.get((tag, self._tail[tag]))) and layout.lines:
+                chosen[tag] = layout
+        self._logger_stamps = _stamps_stand_still(chosen)
+        for tag, layout in chosen.items():
+            if self._logger_stamps:  # (its spans and order: the logger timestamps')
+                layout.start, layout.end, layout.back = (
+                    layout.logger.start,
+                    layout.logger.end,
+                    layout.logger.back,
+                )
             self._whole[tag], self._back[tag] = layout.lines, layout.back
             self._span[tag] = (layout.start, layout.end)
             if layout.moving:
@@ -548,6 +580,18 @@ class CarmenReader:
                 self.path.name, odom,
             )  # fmt: skip
 
+    def _stamps_note(self) -> str:
+        """What is said of a log read on its logger timestamps (``_logger_stamps``)."""
+        tags = " and ".join(t for t in (*LASER_TAGS, ODOM_TAG) if self._whole.get(t, 0) >= 2)
+        return f"the timestamps of its {tags} lines never change: read on their logger timestamps instead"
+
+    @staticmethod
+    def _logger_stamp(tok: list[str]) -> float:
+        """A whole line's logger timestamp (its last field; a line read on it has all TAIL fields)."""
+        if len(tok) < 3:  # (a line of another layout: no logger timestamp)
+            raise BadLine("it has no logger timestamp")
+        return _number(tok, len(tok) - 1, "logger timestamp")
+
     def messages(self) -> Iterator[Scan | OdomSample]:
         self.check()
         return self._iter()
@@ -562,6 +606,8 @@ class CarmenReader:
         max_range = self._max_range(scan_tag)
         where = self.path.name
         self._warn_odometry()
+        if self._logger_stamps:
+            st.warn("%s: %s", where, self._stamps_note())
         unread, first_unread = 0, ""  # laser lines that could not be read; the first's number and why
         for lineno, line in enumerate(_lines(self.path, st), 1):
             tok = line.split()
@@ -571,12 +617,14 @@ class CarmenReader:
             try:
                 if tag == ODOM_TAG:
                     stamp, x, y, th = parse_odom(tok, self._tail.get(ODOM_TAG, TAIL))
+                    stamp = self._logger_stamp(tok) if self._logger_stamps else stamp
                     if st.bad_odometry(f"{where}:{lineno}", stamp, (x, y, th)):
                         continue
                     st.odoms += 1
                     yield OdomSample(stamp, x, y, th)
                     continue
                 las = parse_laser(tok, max_range, self._tail.get(tag, TAIL))
+                las.stamp = self._logger_stamp(tok) if self._logger_stamps else las.stamp
             except BadLine as exc:
                 st.failed("%s:%d: malformed %s line skipped (%s)", where, lineno, tag, exc)
                 if tag == scan_tag:
