@@ -606,3 +606,13 @@ def test_a_log_whose_timestamps_never_change_is_read_on_its_logger_timestamps(tm
     half.write_text(lines(lambda tag, t: t + 1.0 if tag == "FLASER" else 0.0))
     scans, _ = split(open_log(half).messages())
     assert [s.stamp for s in scans] == [101.0 + 0.5 * i for i in range(6)]
+    laser_zero = tmp_path / "laser_zero.log"  # the odometry moves: not read on the logger; refused
+    laser_zero.write_text(lines(lambda tag, t: 0.0 if tag == "FLASER" else t))
+    res = CliRunner().invoke(cli, ["run", str(laser_zero), "--out", str(tmp_path / "o"), "-q"])
+    assert res.exit_code == 2 and "their timestamps increase" in res.stderr and "header" not in res.stderr
+    alone = tmp_path / "alone.log"  # no ODOM lines: the laser lines' own odometry, their stamps all 0
+    flasers = [line.rsplit(" ", 1)[0] for line in lines(lambda tag, t: 0.0).splitlines() if "FLASER" in line]
+    alone.write_text("".join(f"{line} 0.0\n" for line in flasers))  # (the logger's too)
+    res = CliRunner().invoke(cli, ["run", str(alone), "--out", str(tmp_path / "o"), "-q"])
+    assert res.exit_code == 2 and "the timestamps of the other 5 repeated or went backwards" in res.stderr
+    assert "check the laser lines' timestamp field" in res.stderr and "header" not in res.stderr
