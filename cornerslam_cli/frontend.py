@@ -256,15 +256,12 @@ def check_processed(src: Input, n_frames: int, n_points: int) -> None:
             f"log '{src.path}': every beam of every scan is invalid (NaN, inf, zero or out of range)",
             "check the scan topic, range_min/range_max and input.max_range",
         )
+    stamps = "timestamps" if (carmen := src.reader.format == "carmen") else "header stamps"  # (no header)
     if n_frames == 1 and stats.scans_in > 1 and stats.scan_time_backwards >= stats.scans_in - 1:
-        carmen = src.reader.format == "carmen"  # (its lines' timestamps, no header)
-        stamps = "timestamps" if carmen else "header stamps"
         raise LogError(  # one pose is no trajectory: every scan's header stamp is the first one's (zero?)
             f"log '{src.path}': only its first scan could be processed: the {stamps} of the other "
             f"{stats.scan_time_backwards} repeated or went backwards",
-            "check the laser lines' timestamp field"
-            if carmen
-            else "check that the laser driver fills the header stamps",
+            "check the laser lines' timestamp field" if carmen else "check that the laser driver fills them",
         )
     if n_frames == 0:
         rs = src.reader.stats
@@ -277,9 +274,7 @@ def check_processed(src: Input, n_frames: int, n_points: int) -> None:
         skipped = f"; skipped: {why}" if (why := stats.skipped_why()) else ""
         raise LogError(
             f"log '{src.path}': no scan could be processed ({stats.scans_in} scans read{skipped})",
-            "check that the scan and odometry topics overlap in time and that their "
-            + ("timestamps" if src.reader.format == "carmen" else "header stamps")
-            + " increase",
+            f"check that the scan and odometry topics overlap in time and that their {stamps} increase",
         )
 
 
