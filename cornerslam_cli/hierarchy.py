@@ -12,7 +12,9 @@ GTSAM) with loop closures verified by the configured associator (graph/loops.py)
   marginal) under the graph's estimate (nearest first, at most ``max_candidates``); each is verified
   without a pose prior (graph/loops.py) — or, with too few corners in common or a corner pose the
   points refute, on its points around the graph's prediction (graph/points.py) —, its covariance scaled
-  by the front end's learnt scale of ICP covariances, then gated against the graph's prediction and its
+  by the front end's learnt scale of ICP covariances and, as a relation of the two origins, the filter's
+  covariances of the two submaps' overlap poses added (graph/submap.origin_covariance; the keyframe graph
+  takes the fit's own where the submaps overlap), then gated against the graph's prediction and its
   joint marginal (``loops.gate``, χ²₃); closures that disagree about where the submap is, beyond the
   graph's uncertainty between the submaps they come from, are all refused (perceptual aliasing).
   Accepted closures enter the graph under a robust kernel.
@@ -20,6 +22,9 @@ GTSAM) with loop closures verified by the configured associator (graph/loops.py)
   step* ∘ the filter's local pose. :meth:`finish` solves a keyframe graph (graph/smooth.py: closures
   act where the submaps overlap); :meth:`final_poses` hang from its nodes — the smoothed trajectory.
   Landmarks stay one per submap, linked across closures (map.csv ``linked_to``), not merged.
+
+Over 400 lines because the two levels' bookkeeping (closing a submap, its loop decisions, the final
+smoothing and the outputs read from it) shares one state; the verification itself is in graph/.
 """
 
 from __future__ import annotations
@@ -49,6 +54,7 @@ from .graph.submap import (
     keyframe_factors,
     keyframe_nodes,
     landmark_frames,
+    origin_covariance,
     place_table,
 )
 from .slam import Slam, StepRecord, globalise
@@ -77,6 +83,7 @@ class LoopRecord:
     chi2: float = float("nan")  # the match against the graph's prediction (Mahalanobis², 3 dof)
     factor: int = -1  # the graph's loop factor index when accepted
     on_points: bool = False  # searched on points around the graph's prediction (graph/points.py)
+    origin_cov: np.ndarray | None = None  # the match's covariance as a relation of the origins (online graph)
 
     def row(self, inlier: bool | None) -> dict:
         """loops.csv's row (report/tables.py ``LOOP_COLUMNS``)."""
@@ -141,7 +148,7 @@ class HierarchicalSlam:
         sub = self._open
         sensor = compose(r.pose, self.laser2base)
         pts = None if frame.points is None else transform_points(frame.points.astype(float), sensor)
-        sub.add(r.pose, self.slam.step_cov, pts, self.cfg.submaps.voxel)
+        sub.add(r.pose, self.slam.step_cov, pts, self.cfg.submaps.voxel, self.slam.ekf.P[:3, :3].copy())
         self.step_submap.append(sub.index)
         self.local_poses.extend(r.pose)
         origin, origin_cov = self.graph.pose(sub.index), self._origin_cov
@@ -252,6 +259,7 @@ class HierarchicalSlam:
             node=sub.node,
             step_nodes=step_nodes,
             anchor_poses=anchor_poses,
+            pose_covs=np.array(sub.pose_covs).reshape(-1, 3, 3),
         )
         self.closed.append(closed)
         self.tables.append({**table, "id": ids})
@@ -273,12 +281,13 @@ class HierarchicalSlam:
                 found_on_points = match_points(a, b, *pred, cfg, self.cfg.scan_match, self.local_maps)
                 m = replace(found_on_points, n_corners=kept)
             m = replace(m, cov=m.cov * self._match_scale)
-            d2 = chi2(*pred, m.pose, m.cov) if m.accepted else float("nan")
+            cov = origin_covariance(a, b, m.pose, m.cov) if m.accepted else None
+            d2 = chi2(*pred, m.pose, cov) if m.accepted else float("nan")
             reason = m.reason or ("" if d2 <= cfg.gate else f"disagrees with the graph (chi2 {d2:.1f})")
             ok = not reason
             if ok and on_points:
                 reason = POINTS
-            found.append(LoopRecord(step, a.index, b.index, m, ok, reason, d2, on_points=on_points))
+            found.append(LoopRecord(step, a.index, b.index, m, ok, reason, d2, -1, on_points, cov))
             if sum(r.accepted for r in found) >= cfg.max_closures:
                 break
         # (corner-verified ones only: a match found on points around the graph's own prediction is no
@@ -305,7 +314,7 @@ class HierarchicalSlam:
             if r.accepted:
                 try:
                     r = replace(
-                        r, factor=self.graph.add_loop(r.submap_from, r.submap_to, r.match.pose, r.match.cov)
+                        r, factor=self.graph.add_loop(r.submap_from, r.submap_to, r.match.pose, r.origin_cov)
                     )
                     added = True
                 except ValueError:  # a degenerate ICP fit (a featureless corridor): no usable covariance
@@ -323,7 +332,7 @@ class HierarchicalSlam:
             for r2 in closures[i + 1 :]:
                 if agree([self.placed(r1), self.placed(r2)]):
                     continue
-                pose, cov = compose_inverse_cov(r1.match.pose, r1.match.cov, r2.match.pose, r2.match.cov)
+                pose, cov = compose_inverse_cov(r1.match.pose, r1.origin_cov, r2.match.pose, r2.origin_cov)
                 pred, pred_cov = self.graph.relative(r1.submap_from, r2.submap_from)
                 if chi2(pred, pred_cov, pose, cov) > self.cfg.loops.pair_gate:
                     return False

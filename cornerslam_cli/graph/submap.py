@@ -47,6 +47,7 @@ class Submap:
     node: int = 0  # its origin's node in the pose graph
     step_nodes: np.ndarray | None = None  # (s,) the graph node each step hangs from (its anchor) …
     anchor_poses: np.ndarray | None = None  # (s, 3) … and that node's pose in this submap's frame
+    pose_covs: np.ndarray | None = None  # (s, 3, 3) the filter's covariance of each of ``poses`` (Σ_rr)
 
     # What loop closing reads of a submap's corners for every candidate pair it is in, computed at the
     # first (a closed submap does not change; read-only, so no caller can change them either).
@@ -158,6 +159,7 @@ class OpenSubmap:
         self.node = node  # its origin's node in the keyframe graph (graph/smooth.py)
         self.poses: list[np.ndarray] = []
         self.covs: list[np.ndarray] = []  # each step's motion noise (Slam.step_noise)
+        self.pose_covs: list[np.ndarray] = []  # each step's pose covariance in the submap's frame (Σ_rr)
         self.points: list[np.ndarray] = []
         # each step's points too, for graph.refine (graph/refine.py Refinement; None: not kept): raw
         # until the submap closes, so bounded by submaps.max_steps
@@ -165,13 +167,23 @@ class OpenSubmap:
         self.n_points = 0
         self.travelled = 0.0
 
-    def add(self, pose: np.ndarray, cov: np.ndarray, points: np.ndarray | None, voxel: float) -> None:
-        """One step: its local pose, motion noise and scan points (global frame). ``travelled`` sums the
-        moves between the submap's steps, not the one from its origin (SubmapConfig.max_distance)."""
+    def add(
+        self,
+        pose: np.ndarray,
+        cov: np.ndarray,
+        points: np.ndarray | None,
+        voxel: float,
+        pose_cov: np.ndarray | None = None,
+    ) -> None:
+        """One step: its local pose, motion noise, scan points (global frame) and the pose's covariance
+        (Σ_rr; None: not kept). ``travelled`` sums the moves between the submap's steps, not the one from
+        its origin (SubmapConfig.max_distance)."""
         if self.poses:
             self.travelled += math.hypot(*(pose[:2] - self.poses[-1][:2]))
         self.poses.append(pose)
         self.covs.append(cov)
+        if pose_cov is not None:
+            self.pose_covs.append(pose_cov)
         if self.step_points is not None:
             self.step_points.append(points)
         if points is not None and len(points):
@@ -195,6 +207,27 @@ def overlap_steps(a: Submap, b: Submap, pose: np.ndarray) -> tuple[int, int]:
     d2 = ((a.poses[:, None, :2] - pb[None, :, :]) ** 2).sum(axis=-1)
     i, j = np.unravel_index(int(np.argmin(d2)), d2.shape)
     return int(i), int(j)
+
+
+def origin_covariance(a: Submap, b: Submap, pose: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """The covariance of a loop match a→b (``pose``, b's origin in a's frame; ``cov``, the fit's, of the
+    points) as a relation of the two submaps' *origins*: the points where the submaps overlap were placed
+    in each submap's frame by the filter's poses there, uncertain relative to its origin (their Σ_rr,
+    ``pose_covs``), so a→b holds those two covariances besides the fit's — first order, at the closest
+    pair of robot positions (:func:`overlap_steps`); the two submaps' filters are independent. A pose of a
+    off by δ (additive, a's frame) moves a's points and so the match by the same rigid motion (δθ about that
+    pose); one of b's moves it by the inverse of that motion carried into a's frame. ``cov`` unchanged
+    when a submap kept no pose covariances."""
+    if a.pose_covs is None or b.pose_covs is None:
+        return cov
+    i, j = overlap_steps(a, b, pose)
+    t = np.asarray(pose, dtype=float)
+    pa = a.poses[i, :2]
+    q = transform_points(b.poses[j : j + 1, :2], t)[0]  # b's overlap pose in a's frame
+    c, s = math.cos(t[2]), math.sin(t[2])
+    ja = np.array([[1.0, 0.0, -(t[1] - pa[1])], [0.0, 1.0, t[0] - pa[0]], [0.0, 0.0, 1.0]])
+    jb = np.array([[-c, s, t[1] - q[1]], [-s, -c, -(t[0] - q[0])], [0.0, 0.0, -1.0]])
+    return cov + ja @ a.pose_covs[i] @ ja.T + jb @ b.pose_covs[j] @ jb.T
 
 
 def keyframe_nodes(poses: np.ndarray, spacing: float, angle: float) -> np.ndarray:
