@@ -419,7 +419,9 @@ def test_a_log_whose_scans_were_none_of_them_read_says_so_not_that_the_stamps_ar
 
     def error(warnings: list[str]) -> str:
         rs = ReadStats(warnings=list(warnings))
-        src = SimpleNamespace(path=Path("x.bag"), stats=SyncStats(), reader=SimpleNamespace(stats=rs))
+        src = SimpleNamespace(
+            path=Path("x.bag"), stats=SyncStats(), reader=SimpleNamespace(stats=rs, format="rosbag1")
+        )
         with pytest.raises(LogError) as e:
             check_processed(src, 0, 0)
         return str(e.value)
