@@ -587,9 +587,8 @@ class CarmenReader:
 
     @staticmethod
     def _logger_stamp(tok: list[str]) -> float:
-        """A whole line's logger timestamp (its last field; a line read on it has all TAIL fields)."""
-        if len(tok) < 3:  # (a line of another layout: no logger timestamp)
-            raise BadLine("it has no logger timestamp")
+        """A line's logger timestamp: its last field (a log is read on them only when its layouts have
+        all TAIL fields, and a line of another layout fails to parse before this)."""
         return _number(tok, len(tok) - 1, "logger timestamp")
 
     def messages(self) -> Iterator[Scan | OdomSample]:

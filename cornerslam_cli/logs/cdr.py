@@ -258,8 +258,8 @@ def definition_note(channel: Channel) -> str:
         return ""
     added = [repr(n) for n in names if n not in want]
     lost = [repr(n) for n in want if n not in names]
-    said = [f"{label} {', '.join(them)}" for label, them in (("fields added:", added), ("missing:", lost))]
-    said = [text for text, them in zip(said, (added, lost), strict=True) if them]
+    parts = (("fields added:", added), ("missing:", lost))
+    said = [f"{label} {', '.join(them)}" for label, them in parts if them]
     what = "; ".join(said + retyped) or "its fields in another order"
     return f" (its recorded {msgtype} is not the standard message: {what})"
 
