@@ -444,12 +444,12 @@ def staging_left_by_a_killed_run(w: World) -> Case:
     return Case(["run", w.log, "--out", out], after=after)
 
 
-@fault(2, f"another cornerslam process (pid {os.getpid()}) is writing", "wait for it to finish")
+@fault(2, f"another cornerslam process (pid {os.getppid()}) is writing", "wait for it to finish")
 def staging_of_a_live_run(w: World) -> Case:
     """another run is writing the same `--out` (its staging directory's process is alive): refused,
     naming its pid"""
     out = w.tmp / "out"
-    (w.tmp / f".out.partial-{HOST}-{os.getpid()}-abcd1234").mkdir()
+    (w.tmp / f".out.partial-{HOST}-{os.getppid()}-abcd1234").mkdir()  # (a live process: this one's parent)
     return Case(["run", w.log, "--out", out], out)
 
 
@@ -1434,35 +1434,26 @@ def test_a_second_batch_into_a_running_batchs_directory_is_refused_however_it_is
     finally:
         a.kill()
         a.communicate()
-    from cornerslam_cli.report.outdir import _sibling, alone_in
+    from cornerslam_cli.report.outdir import alone_in
 
-    mine = tmp_path / (_sibling(out, "running") + "0")  # this pid, another start time (where /proc tells)
-    mine.touch()  # (A's, SIGKILLed, is cleared as its process is gone)
-
-    with alone_in(out, "out"):
+    with alone_in(out, "out"):  # (A's mark, SIGKILLed, is cleared as its process is gone)
         pass
     assert not [p for p in tmp_path.iterdir() if ".running-" in p.name]
 
 
-@pytest.mark.skipif(not Path(f"/proc/{os.getpid()}/stat").is_file(), reason="needs /proc")
-def test_a_killed_runs_staging_under_a_pid_that_came_back_is_cleared(tmp_path, sim_log):
-    """A run SIGKILLed in a container (pid 1, the same host name after a restart) left its staging
-    directory; the next run there is pid 1 again: it was refused for ever as "another cornerslam process
-    (pid 1) is writing". The names carry the process's start time: a leftover of this pid that started at
-    another time is a dead process's, cleared; one of this process's own start time is a live writer's."""
-    from cornerslam_cli.report.outdir import _sibling, _start_time
-
-    me, started = os.getpid(), _start_time(os.getpid())
-    assert _sibling(tmp_path / "out", "partial").endswith(f"-{me}-s{started}")
+@pytest.mark.parametrize("what", ["partial", "running"])
+def test_a_leftover_of_this_processs_own_pid_is_refused_naming_it(tmp_path, sim_log, what):
+    """A staging directory or a batch's mark carrying this process's own pid is not this process's (it
+    stages nothing before its check): a container's before a restart (pid 1 again, the same host name) —
+    or another container's, live, sharing the host name, whose staging a run must not delete (a review
+    showed a start-time rule deleting it). Refused, saying so and naming the path to remove if nothing else
+    writes there (session 40 let a batch ignore such a mark: two containers' batches would both write)."""
     out = tmp_path / "out"
-    before = tmp_path / f".out.partial-{HOST}-{me}-s{int(started) - 1}-abcd1234"
-    before.mkdir()
-    (before / "trajectory.csv").write_text("step\n0\n")
-    res = invoke("run", sim_log, "--out", out, "-q")
-    assert res.exit_code == 0, res.output
-    assert not before.exists() and (out / "trajectory.csv").is_file()
-    live = tmp_path / f".out.partial-{HOST}-{me}-s{started}-abcd1234"
-    live.mkdir()
-    res = invoke("run", sim_log, "--out", out, "-q")
-    assert res.exit_code == 2 and f"another cornerslam process (pid {me}) is writing" in res.stderr
-    assert live.is_dir()
+    left = tmp_path / (f".out.{what}-{HOST}-{os.getpid()}" + ("-abcd1234" if what == "partial" else ""))
+    left.mkdir() if what == "partial" else left.touch()
+    for cmd in (["run", sim_log], ["batch", sim_log, "--assoc", "icnn", "--jobs", "1"]):
+        res = invoke(*cmd, "--out", out, "-q")
+        assert res.exit_code == 2, res.output
+        assert f"another writer of '{out}' has this process's pid {os.getpid()} ('{left.name}'" in res.stderr
+        assert f"if no other cornerslam writes '{out}', remove '{left}'" in res.stderr
+        assert left.exists() and not (out / "summary.json").exists()

@@ -1,14 +1,12 @@
 """Writing an output atomically: staged beside its place, committed by rename.
 
-:class:`StagedDir` builds the directory in a hidden sibling ``.NAME.partial-HOST-PID-sSTART-XXXX``
-(HOST: 8 hex digits of the host name's hash; PID: the writing process; START: when it started, where
-/proc tells — a pid comes back, pid 1 in every container, and a leftover of a killed process whose pid
-a live one has now is told from that one's by it) and renames it onto NAME in
+:class:`StagedDir` builds the directory in a hidden sibling ``.NAME.partial-HOST-PID-XXXX``
+(HOST: 8 hex digits of the host name's hash; PID: the writing process) and renames it onto NAME in
 :meth:`StagedDir.commit`; a file committed with it outside the directory (``--mcap-out``) is written
-as a hidden ``.FILE.partial-HOST-PID-sSTART-XXXX`` beside its target and renamed in the same commit. The
+as a hidden ``.FILE.partial-HOST-PID-XXXX`` beside its target and renamed in the same commit. The
 commit holds an exclusive ``flock`` on ``.NAME.lock`` beside the target (deleted on release), checks
 the target again under it, and defers SIGINT/SIGTERM across its renames; an existing directory is
-first renamed to ``.NAME.old-HOST-PID-sSTART-XXXX`` and deleted after. Before staging, under the same lock,
+first renamed to ``.NAME.old-HOST-PID-XXXX`` and deleted after. Before staging, under the same lock,
 the leftovers of dead processes on this host are cleared (a SIGKILLed run's staging directory is
 removed; a ``.old`` one is renamed back if the target is missing — the kill fell between the two
 renames — else removed), and a staging directory of a live process means another run is writing the
@@ -16,7 +14,7 @@ same place: refused, exit 2. Names over 200 bytes are shortened in these sibling
 plus a hash), so a legal 255-byte name still stages. Directories are created with the permissions
 the umask gives (``mkdtemp`` alone would give 0700).
 
-A directory written in place (a batch's) is marked by a hidden ``.NAME.running-HOST-PID-sSTART`` beside it
+A directory written in place (a batch's) is marked by a hidden ``.NAME.running-HOST-PID`` beside it
 while it is written (:func:`alone_in`): a second writer is refused the same way.
 
 Which places may be replaced: report/ownership.py; environment faults as one-line errors:
@@ -45,10 +43,10 @@ from ..workers import signals_deferred
 from .oserrors import output_error, output_errors, resolved
 from .ownership import MARKER, check_replaceable, check_same_log, is_within, mark_output, refuse_special_file
 
-_NAME_KEEP = 200  # bytes of a name kept in its sibling names (+ at most 50 of suffix: within 255)
+_NAME_KEEP = 200  # bytes of a name kept in its sibling names (+ at most 45 of suffix: within 255)
 HOST = hashlib.sha1(socket.gethostname().encode()).hexdigest()[:8]  # leftovers are judged on their host
 LOCK_MARK = b"cornerslam output lock\n"  # what a lock file holds (an empty one: being created)
-_SIBLING = re.compile(r"(partial|old|running)-([0-9a-f]{8})-(\d+)(?:-s(\d+))?(?:-.+)?")
+_SIBLING = re.compile(r"(partial|old|running)-([0-9a-f]{8})-(\d+)(?:-.+)?")
 _BOOKKEEPING = re.compile(rf"\..+\.(lock|{_SIBLING.pattern})")  # a lock's name, a staging sibling's
 
 
@@ -62,29 +60,11 @@ def _stem(name: str) -> str:
 
 
 def _sibling(target: Path, what: str) -> str:
-    """The start of a hidden sibling's name owned by this process: ``.NAME.WHAT-HOST-PID-sSTART``
-    (``-sSTART`` left out where the start time cannot be read)."""
-    pid = os.getpid()
-    start = _start_time(pid)
-    return f".{_stem(target.name)}.{what}-{HOST}-{pid}" + ("" if start is None else f"-s{start}")
+    """The start of a hidden sibling's name owned by this process: ``.NAME.WHAT-HOST-PID``."""
+    return f".{_stem(target.name)}.{what}-{HOST}-{os.getpid()}"
 
 
-def _start_time(pid: int) -> str | None:
-    """When process ``pid`` started, in clock ticks since boot (the 22nd field of /proc/PID/stat), or None
-    where that cannot be read (no such process, no /proc)."""
-    try:
-        with open(f"/proc/{pid}/stat", "rb") as f:
-            fields = f.read().rsplit(b")", 1)[1].split()  # (after "PID (COMM)": the name may hold anything)
-        return fields[19].decode()
-    except (OSError, IndexError, UnicodeDecodeError):
-        return None
-
-
-def _alive(pid: int, start: str | None = None) -> bool:
-    """Whether the process that wrote a sibling named with ``pid`` (and ``start``, its start time, when the
-    name has it) still runs: a live process of that pid that started at another time is another process."""
-    if start is not None and (now := _start_time(pid)) is not None:
-        return now == start
+def _alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -94,9 +74,8 @@ def _alive(pid: int, start: str | None = None) -> bool:
     return True
 
 
-def _siblings(target: Path) -> Iterator[tuple[Path, str, str, int, str | None]]:
-    """(path, "partial", "old" or "running", host hash, pid, start time or None) of each sibling beside
-    ``target``."""
+def _siblings(target: Path) -> Iterator[tuple[Path, str, str, int]]:
+    """(path, "partial" or "old", host hash, pid) of each staging leftover beside ``target``."""
     prefix = f".{_stem(target.name)}."
     try:
         names = os.listdir(target.parent)
@@ -105,7 +84,7 @@ def _siblings(target: Path) -> Iterator[tuple[Path, str, str, int, str | None]]:
     for name in names:
         m = _SIBLING.fullmatch(name[len(prefix) :]) if name.startswith(prefix) else None
         if m is not None:
-            yield target.parent / name, m[1], m[2], int(m[3]), m[4]
+            yield target.parent / name, m[1], m[2], int(m[3])
 
 
 def _remove(path: Path) -> None:
@@ -119,8 +98,8 @@ def clear_stale(target: Path) -> None:
     """Clear the staging leftovers of dead processes on this host beside ``target`` (a ``.old``
     directory comes back as ``target`` when that is missing). Those of live processes, or of other
     hosts (a shared file system), are left alone."""
-    for path, what, host, pid, start in _siblings(target):
-        if host != HOST or _alive(pid, start):
+    for path, what, host, pid in _siblings(target):
+        if host != HOST or _alive(pid):
             continue
         if what == "old" and not os.path.lexists(target):
             os.rename(path, target)
@@ -128,35 +107,44 @@ def clear_stale(target: Path) -> None:
             _remove(path)
 
 
-def live_writer(target: Path) -> int | None:
-    """The pid of a live process on this host staging ``target`` or writing in it (:func:`alone_in`), if
-    any."""
-    for _, what, host, pid, start in _siblings(target):  # (a batch's mark of this process's own pid: a
-        # killed batch's that a later one got the pid of — pid 1 in a container — not another writer;
-        # with a start time, _alive tells the two apart)
-        mine = what == "running" and pid == os.getpid()
-        if what in ("partial", "running") and host == HOST and not mine and _alive(pid, start):
-            return pid
+def live_writer(target: Path) -> tuple[int, Path] | None:
+    """The pid of a live process on this host staging ``target`` or writing in it (:func:`alone_in`), and
+    its sibling there, if any. A pid is all a name says of its process: one that runs now may be another
+    process with that pid (a container restarted: pid 1 again) or a live one in another pid namespace
+    (two containers sharing the host name) — the first's leftover could go, the second's must not, and
+    nothing here tells them apart, so both are taken as live (:func:`_refuse_live_writer` says which to
+    remove if it is the first)."""
+    for path, what, host, pid in _siblings(target):
+        if what in ("partial", "running") and host == HOST and _alive(pid):
+            return pid, path
     return None
 
 
 def _refuse_live_writer(target: Path, shown: str | Path) -> None:
     """OutputError when a live process on this host writes ``target`` (called under its lock)."""
     clear_stale(target)
-    if (pid := live_writer(target)) is not None:
+    if (found := live_writer(target)) is None:
+        return
+    pid, path = found
+    if pid == os.getpid():  # not this process's (it stages nothing before this check): another's
         raise OutputError(
-            f"another cornerslam process (pid {pid}) is writing '{shown}'",
-            "wait for it to finish, or give another output directory",
+            f"another writer of '{shown}' has this process's pid {pid} ('{path.name}' beside it): a "
+            "container's killed before a restart gave this one its pid, or a live one's in another container",
+            f"if no other cornerslam writes '{shown}', remove '{path}'; else give another output directory",
         )
+    raise OutputError(
+        f"another cornerslam process (pid {pid}) is writing '{shown}'",
+        f"wait for it to finish, or give another output directory (if pid {pid} is no cornerslam, remove "
+        f"'{path}')",
+    )
 
 
 @contextmanager
 def alone_in(target: Path, shown: str | Path) -> Iterator[None]:
     """Write in the directory ``target`` in place over the ``with`` block (a batch's, resumed, never
-    staged whole) as its only writer: a hidden ``.NAME.running-HOST-PID-sSTART`` beside it, made under
-    its lock, marks it; another live writer's mark or staging refuses (OutputError, exit 2), as a staged
-    output's does, and a staged output refuses this mark. Removed at the end; a killed process's is
-    cleared."""
+    staged whole) as its only writer: a hidden ``.NAME.running-HOST-PID`` beside it, made under its lock,
+    marks it; another live writer's mark or staging refuses (OutputError, exit 2), as a staged output's
+    does, and a staged output refuses this mark. Removed at the end; a killed process's is cleared."""
     with target_lock(target):
         _refuse_live_writer(target, shown)
         mark = target.parent / _sibling(target, "running")
