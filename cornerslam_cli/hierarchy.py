@@ -84,6 +84,7 @@ class LoopRecord:
     factor: int = -1  # the graph's loop factor index when accepted
     on_points: bool = False  # searched on points around the graph's prediction (graph/points.py)
     origin_cov: np.ndarray | None = None  # the match's covariance as a relation of the origins (online graph)
+    a_side_cov: np.ndarray | None = None  # ... without b's share: b's closures compared (it cancels there)
 
     def row(self, inlier: bool | None) -> dict:
         """loops.csv's row (report/tables.py ``LOOP_COLUMNS``)."""
@@ -282,12 +283,13 @@ class HierarchicalSlam:
                 m = replace(found_on_points, n_corners=kept)
             m = replace(m, cov=m.cov * self._match_scale)
             cov = origin_covariance(a, b, m.pose, m.cov) if m.accepted else None
+            a_side = origin_covariance(a, b, m.pose, m.cov, b_side=False) if m.accepted else None
             d2 = chi2(*pred, m.pose, cov) if m.accepted else float("nan")
             reason = m.reason or ("" if d2 <= cfg.gate else f"disagrees with the graph (chi2 {d2:.1f})")
             ok = not reason
             if ok and on_points:
                 reason = POINTS
-            found.append(LoopRecord(step, a.index, b.index, m, ok, reason, d2, -1, on_points, cov))
+            found.append(LoopRecord(step, a.index, b.index, m, ok, reason, d2, -1, on_points, cov, a_side))
             if sum(r.accepted for r in found) >= cfg.max_closures:
                 break
         # (corner-verified ones only: a match found on points around the graph's own prediction is no
@@ -332,7 +334,7 @@ class HierarchicalSlam:
             for r2 in closures[i + 1 :]:
                 if agree([self.placed(r1), self.placed(r2)]):
                     continue
-                pose, cov = compose_inverse_cov(r1.match.pose, r1.origin_cov, r2.match.pose, r2.origin_cov)
+                pose, cov = compose_inverse_cov(r1.match.pose, r1.a_side_cov, r2.match.pose, r2.a_side_cov)
                 pred, pred_cov = self.graph.relative(r1.submap_from, r2.submap_from)
                 if chi2(pred, pred_cov, pose, cov) > self.cfg.loops.pair_gate:
                     return False

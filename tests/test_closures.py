@@ -231,3 +231,45 @@ def test_the_online_graph_with_closures_is_as_sure_as_its_errors(tmp_path):
             nees.append(e @ np.linalg.solve(cov, e))
     assert sum(r.factor >= 0 for r in hs.loops) >= 10 and len(nees) >= 40
     assert 1.0 < np.mean(nees) < 6.0, np.mean(nees)
+
+
+def test_two_closures_of_one_submap_compared_leave_out_its_own_share():
+    """hierarchy.consistent compares two closures of b by the pose a1→a2 they imply (m1∘m2⁻¹): b's
+    overlap pose error cancels there (both closures saw b's points placed by it), so each enters with its
+    a side only (``b_side=False``). Against Monte Carlo of the exact compositions with b's error shared; a
+    review found b's share counted twice, the pair's covariance 5.7× too large, its gate too lenient."""
+    from types import SimpleNamespace
+
+    from cornerslam_cli.geometry import compose, compose_inverse_cov, inverse
+    from cornerslam_cli.graph.submap import origin_covariance
+
+    rng = np.random.default_rng(5)
+    b = SimpleNamespace(poses=np.array([[2.0, 1.0, 0.3]]), pose_covs=np.array([np.diag([4e-3, 2e-3, 1e-3])]))
+    a1 = SimpleNamespace(poses=np.array([[3.0, 0.5, 0.2]]), pose_covs=np.array([np.diag([1e-3, 5e-4, 2e-4])]))
+    a2 = SimpleNamespace(
+        poses=np.array([[1.0, 2.0, -0.4]]), pose_covs=np.array([np.diag([6e-4, 9e-4, 3e-4])])
+    )
+    t1 = compose(a1.poses[0], inverse(b.poses[0]))  # b's origin in a1's frame, b's pose on a1's
+    t2 = compose(a2.poses[0], inverse(b.poses[0]))
+    fit = np.diag([1e-5, 2e-5, 1e-6])
+    n = 200_000
+
+    def moved(p, cov):  # a submap's points displaced by its overlap pose's error, in its frame
+        return compose(p + rng.multivariate_normal(np.zeros(3), cov, n), inverse(p))
+
+    db = moved(b.poses[0], b.pose_covs[0])  # one error of b, shared by both closures
+    m1 = compose(compose(moved(a1.poses[0], a1.pose_covs[0]), t1), inverse(db))
+    m2 = compose(compose(moved(a2.poses[0], a2.pose_covs[0]), t2), inverse(db))
+    m1 = m1 + rng.multivariate_normal(np.zeros(3), fit, n)
+    m2 = m2 + rng.multivariate_normal(np.zeros(3), fit, n)
+    pair = compose(m1, inverse(m2))
+    want, _ = compose_inverse_cov(t1, fit, t2, fit)
+    err = pair - want
+    err[:, 2] = wrap_angle(err[:, 2])
+    mc = np.cov(err.T)
+    side = [origin_covariance(a, b, t, fit, b_side=False) for a, t in ((a1, t1), (a2, t2))]
+    _, got = compose_inverse_cov(t1, side[0], t2, side[1])
+    assert np.allclose(got, mc, rtol=0.05, atol=2e-6), (got, mc)
+    full = [origin_covariance(a, b, t, fit) for a, t in ((a1, t1), (a2, t2))]
+    _, doubled = compose_inverse_cov(t1, full[0], t2, full[1])
+    assert np.trace(doubled) > 1.5 * np.trace(mc)  # (b's share counted twice: far too lenient)

@@ -292,7 +292,16 @@ def test_closures_placing_a_submap_apart_agree_within_the_uncertainty_between_th
     b = np.array([5.0, 1.0, 0.3])
     cov = np.diag([closure_sigma**2, closure_sigma**2, 1e-5])
     rows = [
-        LoopRecord(9, a, 5, LoopMatch(relative(origin, b), cov, 6, 0.9, True, ""), True, "", origin_cov=cov)
+        LoopRecord(
+            9,
+            a,
+            5,
+            LoopMatch(relative(origin, b), cov, 6, 0.9, True, ""),
+            True,
+            "",
+            origin_cov=cov,
+            a_side_cov=cov,
+        )
         for a, origin in ((0, np.zeros(3)), (1, true_a2))
     ]
     hs = HierarchicalSlam.__new__(HierarchicalSlam)

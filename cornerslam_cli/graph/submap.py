@@ -209,12 +209,15 @@ def overlap_steps(a: Submap, b: Submap, pose: np.ndarray) -> tuple[int, int]:
     return int(i), int(j)
 
 
-def origin_covariance(a: Submap, b: Submap, pose: np.ndarray, cov: np.ndarray) -> np.ndarray:
+def origin_covariance(
+    a: Submap, b: Submap, pose: np.ndarray, cov: np.ndarray, b_side: bool = True
+) -> np.ndarray:
     """The covariance of a loop match a→b (``pose``, b's origin in a's frame; ``cov``, the fit's, of the
     points) as a relation of the two submaps' *origins*: the points where the submaps overlap were placed
     in each submap's frame by the filter's poses there, uncertain relative to its origin (their Σ_rr,
     ``pose_covs``), so a→b holds those two covariances besides the fit's — first order, at the closest
-    pair of robot positions (:func:`overlap_steps`); the two submaps' filters are independent. A pose of a
+    pair of robot positions (:func:`overlap_steps`); the two submaps' filters are independent (``b_side``
+    False: a's alone — two closures of b compared with each other share b's, which cancels). A pose of a
     off by δ (additive, a's frame) moves a's points and so the match by the same rigid motion (δθ about that
     pose); one of b's moves it by the inverse of that motion carried into a's frame. ``cov`` unchanged
     when a submap kept no pose covariances."""
@@ -227,7 +230,7 @@ def origin_covariance(a: Submap, b: Submap, pose: np.ndarray, cov: np.ndarray) -
     c, s = math.cos(t[2]), math.sin(t[2])
     ja = np.array([[1.0, 0.0, -(t[1] - pa[1])], [0.0, 1.0, t[0] - pa[0]], [0.0, 0.0, 1.0]])
     jb = np.array([[-c, s, t[1] - q[1]], [-s, -c, -(t[0] - q[0])], [0.0, 0.0, -1.0]])
-    return cov + ja @ a.pose_covs[i] @ ja.T + jb @ b.pose_covs[j] @ jb.T
+    return cov + ja @ a.pose_covs[i] @ ja.T + (jb @ b.pose_covs[j] @ jb.T if b_side else 0.0)
 
 
 def keyframe_nodes(poses: np.ndarray, spacing: float, angle: float) -> np.ndarray:
