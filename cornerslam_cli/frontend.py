@@ -261,7 +261,7 @@ def check_processed(src: Input, n_frames: int, n_points: int) -> None:
         raise LogError(  # one pose is no trajectory: every scan's header stamp is the first one's (zero?)
             f"log '{src.path}': only its first scan could be processed: the {stamps} of the other "
             f"{stats.scan_time_backwards} repeated or went backwards",
-            "check the laser lines' timestamp field" if carmen else "check that the laser driver fills them",
+            src.reader.stamp_hint if carmen else "check that the laser driver fills them",
         )
     if n_frames == 0:
         rs = src.reader.stats

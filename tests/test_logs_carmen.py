@@ -616,3 +616,11 @@ def test_a_log_whose_timestamps_never_change_is_read_on_its_logger_timestamps(tm
     res = CliRunner().invoke(cli, ["run", str(alone), "--out", str(tmp_path / "o"), "-q"])
     assert res.exit_code == 2 and "the timestamps of the other 5 repeated or went backwards" in res.stderr
     assert "check the laser lines' timestamp field" in res.stderr and "header" not in res.stderr
+    back = tmp_path / "back.log"  # read on logger timestamps that go back: the hint names them
+    flasers = [line.rsplit(" ", 1)[0] for line in lines(lambda tag, t: 0.0).splitlines() if "FLASER" in line]
+    back.write_text("".join(f"{line} {51.0 if k == 0 else 50.0}\n" for k, line in enumerate(flasers)))
+    res = CliRunner().invoke(cli, ["run", str(back), "--out", str(tmp_path / "o"), "-q"])
+    assert (
+        res.exit_code == 2
+        and "check the laser lines' logger timestamps (their timestamps never" in res.stderr
+    )

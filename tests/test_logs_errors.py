@@ -457,8 +457,9 @@ def test_a_modified_copy_of_a_standard_message_is_named_as_one(encoding):
     assert "missing: 'twist'" in note(
         odom_def.replace("TwistWithCovariance twist", "# none"), "nav_msgs/Odometry"
     )
-    constant = scan_def.replace("float32 angle_min", "uint8 FRONT=1\nfloat32 angle_min")
-    assert note(constant) == ""  # a constant is no field
+    for const in ("uint8 FRONT=1", "uint8 FRONT =1", "uint8 FRONT = 1"):
+        assert note(scan_def.replace("float32 angle_min", f"{const}\nfloat32 angle_min")) == ""  # no field
+    assert note(scan_def.replace("float32[] ranges", "float32[<=2048] ranges")) == ""  # a bounded sequence
 
 
 def test_a_bag_of_a_modified_laserscan_says_so(tmp_path):
@@ -473,9 +474,11 @@ def test_a_bag_of_a_modified_laserscan_says_so(tmp_path):
     store = get_typestore(Stores.EMPTY)
     store.register(get_types_from_msg(custom, "sensor_msgs/msg/LaserScan"))
     scans, odoms = make_scans(6), make_odoms(7)
-    path = tmp_path / "vendor.bag"
+    path = tmp_path / "2021-06-14-10-22-33_warehouse_run3.bag"  # (a long name and topic: the note kept whole)
     with Writer(path) as w:
-        conn = w.add_connection("/scan", "sensor_msgs/msg/LaserScan", msgdef=custom, md5sum="0" * 32)
+        conn = w.add_connection(
+            "/sensors/lidar/front/scan", "sensor_msgs/msg/LaserScan", msgdef=custom, md5sum="0" * 32
+        )
         odom = w.add_connection("/odom", "nav_msgs/msg/Odometry", typestore=ros.store)
         for s in scans:
             t = store.types

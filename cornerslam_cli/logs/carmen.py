@@ -580,6 +580,13 @@ class CarmenReader:
                 self.path.name, odom,
             )  # fmt: skip
 
+    @property
+    def stamp_hint(self) -> str:
+        """What to check when the scans' stamps repeat or go back: the field they are read from."""
+        if self._logger_stamps:
+            return "check the laser lines' logger timestamps (their timestamps never change)"
+        return "check the laser lines' timestamp field"
+
     def _stamps_note(self) -> str:
         """What is said of a log read on its logger timestamps (``_logger_stamps``)."""
         tags = " and ".join(t for t in (*LASER_TAGS, ODOM_TAG) if self._whole.get(t, 0) >= 2)

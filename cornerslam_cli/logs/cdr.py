@@ -17,6 +17,7 @@ encapsulation header. ROS 1: little endian, strings without NUL, no alignment.
 
 from __future__ import annotations
 
+import re
 import struct
 from functools import lru_cache
 from typing import NamedTuple
@@ -250,8 +251,8 @@ def definition_note(channel: Channel) -> str:
         if line.startswith("==="):  # the definitions of the types it uses follow
             break
         words = line.split("#", 1)[0].split()
-        if len(words) >= 2 and "=" not in words[1] and (len(words) < 3 or words[2] != "="):  # not a constant
-            fields[words[1]] = words[0]
+        if len(words) >= 2 and "=" not in "".join(words[1:]):  # (a constant: 'uint8 FRONT=1', 'A = 1')
+            fields[words[1]] = re.sub(r"\[<=\d+\]$", "[]", words[0])  # (a bounded sequence reads as one)
     names = tuple(fields)
     retyped = [f"{n!r} is {t}" for n, t in fields.items() if FLOAT_TYPES.get(n, t) != t]
     if names == want and not retyped:

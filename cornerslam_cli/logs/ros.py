@@ -902,11 +902,11 @@ class RosLogReader:
 
                 note = definition_note(self._channels[topic]) if topic in self._channels else ""
                 st.failed(
-                    "%s: cannot decode a %s message at %d ns%s: %s",
+                    "%s: cannot decode a %s message%s at %d ns: %s",
                     self.path.name,
                     topic,
-                    log_time,
                     note,
+                    log_time,
                     exc,
                 )
         if is_tf and n_tf_match == 0:
