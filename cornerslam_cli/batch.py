@@ -120,6 +120,8 @@ def _run_batch(
 ) -> list[dict]:
     client = _connect(scheduler) if scheduler else None  # before the output: a wrong address writes nothing
     try:
+        if client is not None:  # (and workers of another build write nothing either)
+            _check_workers(client)
         return _run_claimed(combos, Path(out_dir), jobs, client, progress, config_path)
     finally:
         if client is not None:
@@ -202,7 +204,18 @@ def _run_alone(
 
     todo.sort(key=lambda i: -_size(combos[i].log))  # biggest logs first: a shorter tail on N workers
     picked = [(i, combos[i]) for i in todo]
-    tasks = [(i, c.log, c.config, str((out / c.name).resolve()), c.notes, config_path) for i, c in picked]
+    # (on Dask the logs resolved too: a worker started in another directory reads them by absolute path)
+    tasks = [
+        (
+            i,
+            str(Path(c.log).resolve()) if client else c.log,
+            c.config,
+            str((out / c.name).resolve()),
+            c.notes,
+            config_path,
+        )
+        for i, c in picked
+    ]
     try:
         if client is not None:
             _run_dask(tasks, client, finished)
@@ -398,6 +411,38 @@ def _connect(scheduler: str):
     except (OSError, TimeoutError, ValueError) as e:
         problem = f"cannot connect to the Dask scheduler at '{scheduler}': {' '.join(str(e).split())}"
         raise CornerslamError(problem, hint) from None
+
+
+def _worker_build() -> str | None:
+    """The code hash of the build a Dask worker runs (:func:`_check_workers`)."""
+    from .report.summary import code_hash
+
+    return code_hash()
+
+
+def _check_workers(client) -> None:
+    """CornerslamError when the cluster's workers cannot import cornerslam, or run another build of it
+    than this one (workers started before the code changed keep the code they imported: their rows would
+    mix two builds, and a resume would never take them for this build's). Workers that join later are not
+    checked (an adaptive cluster may have none yet)."""
+    from .report.summary import code_hash
+
+    here = code_hash()
+    try:
+        theirs = client.run(_worker_build)
+    except Exception as e:  # noqa: BLE001 - a worker without cornerslam_cli (its deserialisation fails)
+        raise CornerslamError(
+            f"the Dask workers cannot run cornerslam: {one_line(e)}",
+            "install this cornerslam where the workers run (pip install) and restart them",
+        ) from None
+    other = sorted({h for h in theirs.values() if h != here} - {None})
+    if here is not None and other:
+        n = sum(h != here for h in theirs.values())
+        raise CornerslamError(
+            f"{n} of the {len(theirs)} Dask workers run another build of cornerslam (code {other[0][:8]}, "
+            f"here {here[:8]}): their rows would mix two builds",
+            "restart the workers (`dask worker …`) so they import this build",
+        )
 
 
 def _run_dask(tasks: list[tuple], client, finished: Callable[[int, dict], None]) -> None:

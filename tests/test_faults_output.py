@@ -1457,3 +1457,21 @@ def test_a_leftover_of_this_processs_own_pid_is_refused_naming_it(tmp_path, sim_
         assert f"another writer of '{out}' has this process's pid {os.getpid()} ('{left.name}'" in res.stderr
         assert f"if no other cornerslam writes '{out}', remove '{left}'" in res.stderr
         assert left.exists() and not (out / "summary.json").exists()
+
+
+@pytest.mark.parametrize("err", [errno.EROFS, errno.ENOSPC])
+def test_a_batch_resumed_on_a_read_only_or_full_disk_is_a_one_line_error(tmp_path, sim_log, monkeypatch, err):
+    """Resuming a batch whose directory's file system became read-only (or full): its lock file could not
+    be made and the batch ended in "internal error: OSError: [Errno 30] Read-only file system:
+    '.b.lock'", exit 1 (a probe), where run and compare say "cannot write …", exit 2."""
+    out = tmp_path / "b"
+    assert invoke("batch", sim_log, "--assoc", "icnn", "--jobs", "1", "--out", out, "-q").exit_code == 0
+    from cornerslam_cli.report import outdir
+
+    def refused(path):
+        raise OSError(err, os.strerror(err), str(path))
+
+    monkeypatch.setattr(outdir, "_open_lock", refused)
+    res = invoke("batch", sim_log, "--assoc", "icnn", "--jobs", "1", "--out", out, "-q")
+    assert res.exit_code == 2 and "internal error" not in res.stderr, res.output
+    assert res.stderr.startswith(f"error: cannot write '{out}'"), res.stderr

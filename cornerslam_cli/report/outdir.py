@@ -145,7 +145,7 @@ def alone_in(target: Path, shown: str | Path) -> Iterator[None]:
     staged whole) as its only writer: a hidden ``.NAME.running-HOST-PID`` beside it, made under its lock,
     marks it; another live writer's mark or staging refuses (OutputError, exit 2), as a staged output's
     does, and a staged output refuses this mark. Removed at the end; a killed process's is cleared."""
-    with target_lock(target):
+    with output_errors(shown), target_lock(target):  # (a read-only or full disk: its one-line error)
         _refuse_live_writer(target, shown)
         mark = target.parent / _sibling(target, "running")
         mark.touch()
