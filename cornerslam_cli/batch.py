@@ -456,8 +456,26 @@ def _run_dask(tasks: list[tuple], client, finished: Callable[[int, dict], None])
             try:
                 result = fut.result()
             except Exception as e:  # the worker died (KilledWorker) or the task could not be sent
-                result = _failed(e)
+                result = _dask_failed(e)
             finished(index[fut.key], result)
+
+
+SCHEDULER_LOST = "the connection to the Dask scheduler was lost (run the same command again to resume)"
+
+
+def _dask_failed(e: Exception) -> dict:
+    """A Dask task's failure row: a worker the cluster gave up on (killed, out of memory: Dask's
+    KilledWorker) as the local pool's dead worker, the scheduler gone as that — neither a bug — else
+    :func:`_failed`'s."""
+    from concurrent.futures import CancelledError
+
+    from distributed import KilledWorker
+
+    if isinstance(e, KilledWorker):
+        return {"status": "failed", "error": WORKER_DIED}
+    if isinstance(e, CancelledError) and "connection-lost" in str(e):
+        return {"status": "failed", "error": SCHEDULER_LOST}
+    return _failed(e)
 
 
 class _CsvWriter:

@@ -643,7 +643,7 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
 
 
 def _batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, quiet):
-    from .batch import BATCH_CSV, WORKER_DIED, run_batch
+    from .batch import BATCH_CSV, SCHEDULER_LOST, WORKER_DIED, run_batch
     from .report.ownership import check_claimable
     from .sweep import plan
 
@@ -687,12 +687,14 @@ def _batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, q
         word = "internal error" if bugs else "error"
         which = [f"{bugs} by an internal error: a bug, traceback saved"] if bugs else []
         which += [f"{died} whose worker process died (killed? out of memory?)"] if died else []
+        lost = sum(r["error"] == SCHEDULER_LOST for r in rows)  # the cluster, not the input
+        which += [f"{lost} cut off from the Dask scheduler: run again to resume"] if lost else []
         which = f" ({'; '.join(which)})" if which else ""
         click.echo(
             f"{word}: {failed} of {len(rows)} combinations failed{which}: see {Path(out) / BATCH_CSV}",
             err=True,
         )
-        raise click.exceptions.Exit(1 if bugs or died else 2)
+        raise click.exceptions.Exit(1 if bugs or died or lost else 2)
 
 
 @cli.command("config")

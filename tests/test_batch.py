@@ -802,3 +802,19 @@ def test_dask_workers_of_another_build_or_directory(logs, tmp_path, monkeypatch)
     assert res.exit_code == 2, res.output
     assert "1 of the 1 Dask workers run another build of cornerslam" in res.output
     assert "restart the workers" in res.output and not (tmp_path / "stale" / "batch.csv").exists()
+
+
+def test_a_dask_worker_given_up_on_or_the_scheduler_lost_is_no_bug():
+    """Dask's KilledWorker (a worker over its memory limit, killed four times) and a task cancelled when
+    the scheduler went away were rows "internal error: … (traceback saved)" counted as bugs (a probe); they
+    are the local pool's dead worker and a lost connection to resume from."""
+    distributed = pytest.importorskip("distributed")
+    from distributed.client import FutureCancelledError
+
+    from cornerslam_cli.batch import SCHEDULER_LOST, WORKER_DIED, _dask_failed
+
+    killed = distributed.KilledWorker("run_one-1", None, 3)
+    assert _dask_failed(killed) == {"status": "failed", "error": WORKER_DIED}
+    lost = FutureCancelledError("run_one-2", reason="scheduler-connection-lost")
+    assert _dask_failed(lost) == {"status": "failed", "error": SCHEDULER_LOST}
+    assert _dask_failed(ZeroDivisionError("bug"))["internal"] is True
