@@ -239,7 +239,7 @@ def build_grid(store: ScanStore, resolution: float, max_cells: int, warn: Callab
     if store.stride > 1:
         warn(
             f"occupancy grid: {store.n_seen} beams are more than {store.max_points}: "
-            f"every {store.stride}th beam of each scan traced"
+            f"one beam in {store.stride} of each scan traced"
         )
     box = extent(store, parts)
     if box is None:
