@@ -670,9 +670,10 @@ def _batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, q
     except KeyboardInterrupt as e:
         progress.close()
         word, code = _signal_word(e)
+        wait = "once the runs the cluster's workers had begun have ended (they go on) " if scheduler else ""
         click.echo(
             f"{word}: {Path(out) / BATCH_CSV} lists the finished combinations (the rest 'pending'); "
-            "run the same command again to resume",
+            f"run the same command again {wait}to resume",
             err=True,
         )
         raise click.exceptions.Exit(code) from None

@@ -818,3 +818,20 @@ def test_a_dask_worker_given_up_on_or_the_scheduler_lost_is_no_bug():
     lost = FutureCancelledError("run_one-2", reason="scheduler-connection-lost")
     assert _dask_failed(lost) == {"status": "failed", "error": SCHEDULER_LOST}
     assert _dask_failed(ZeroDivisionError("bug"))["internal"] is True
+
+
+@pytest.mark.parametrize("scheduler", [None, "tcp://127.0.0.1:1"])
+def test_an_interrupted_batch_on_a_cluster_says_its_runs_go_on(logs, tmp_path, monkeypatch, scheduler):
+    """Ctrl-C on a Dask batch ends the client, not the runs the workers had begun: they go on and commit
+    later, and a resume straight away failed them as another process writing (a probe). The message says
+    to resume once they have ended; a local batch's (its workers end with it) is as before."""
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("cornerslam_cli.batch.run_batch", interrupted)
+    args = ["batch", str(logs[0]), "--assoc", "icnn", "--out", str(tmp_path / "b")]
+    res = CliRunner().invoke(cli, args + (["--scheduler", scheduler] if scheduler else []))
+    assert res.exit_code == 130, res.output
+    said = "run the same command again once the runs the cluster's workers had begun have ended (they go on)"
+    assert (said in res.stderr) == bool(scheduler) and "to resume" in res.stderr
