@@ -13,7 +13,7 @@ GTSAM) with loop closures verified by the configured associator (graph/loops.py)
   without a pose prior (graph/loops.py) — or, with too few corners in common or a corner pose the
   points refute, on its points around the graph's prediction (graph/points.py) —, its covariance scaled
   by the front end's learnt scale of ICP covariances and, as a relation of the two origins, the filter's
-  covariances of the two submaps' overlap poses added (graph/submap.origin_covariance; the keyframe graph
+  covariances of the two submaps' overlap poses added (graph/submap.overlap_covariances; the keyframe graph
   takes the fit's own where the submaps overlap), then gated against the graph's prediction and its
   joint marginal (``loops.gate``, χ²₃); closures that disagree about where the submap is, beyond the
   graph's uncertainty between the submaps they come from, are all refused (perceptual aliasing).
@@ -54,7 +54,7 @@ from .graph.submap import (
     keyframe_factors,
     keyframe_nodes,
     landmark_frames,
-    origin_covariance,
+    overlap_covariances,
     place_table,
 )
 from .slam import Slam, StepRecord, globalise
@@ -149,7 +149,7 @@ class HierarchicalSlam:
         sub = self._open
         sensor = compose(r.pose, self.laser2base)
         pts = None if frame.points is None else transform_points(frame.points.astype(float), sensor)
-        sub.add(r.pose, self.slam.step_cov, pts, self.cfg.submaps.voxel, self.slam.ekf.P[:3, :3].copy())
+        sub.add(r.pose, self.slam.step_cov, self.slam.ekf.P[:3, :3].copy(), pts, self.cfg.submaps.voxel)
         self.step_submap.append(sub.index)
         self.local_poses.extend(r.pose)
         origin, origin_cov = self.graph.pose(sub.index), self._origin_cov
@@ -282,8 +282,9 @@ class HierarchicalSlam:
                 found_on_points = match_points(a, b, *pred, cfg, self.cfg.scan_match, self.local_maps)
                 m = replace(found_on_points, n_corners=kept)
             m = replace(m, cov=m.cov * self._match_scale)
-            cov = origin_covariance(a, b, m.pose, m.cov) if m.accepted else None
-            a_side = origin_covariance(a, b, m.pose, m.cov, b_side=False) if m.accepted else None
+            shares = overlap_covariances(a, b, m.pose) if m.accepted else None  # (as relations of origins)
+            a_side = None if shares is None else m.cov + shares[0]
+            cov = None if a_side is None else a_side + shares[1]
             d2 = chi2(*pred, m.pose, cov) if m.accepted else float("nan")
             reason = m.reason or ("" if d2 <= cfg.gate else f"disagrees with the graph (chi2 {d2:.1f})")
             ok = not reason

@@ -171,7 +171,7 @@ def test_a_closures_origin_covariance_holds_the_overlap_poses_against_monte_carl
     from types import SimpleNamespace
 
     from cornerslam_cli.geometry import compose, inverse
-    from cornerslam_cli.graph.submap import origin_covariance
+    from cornerslam_cli.graph.submap import overlap_covariances
 
     rng = np.random.default_rng(4)
     a = SimpleNamespace(
@@ -187,7 +187,7 @@ def test_a_closures_origin_covariance_holds_the_overlap_poses_against_monte_carl
     t = compose(a.poses[1], inverse(b.poses[1])) + [0.2, -0.1, 0.05]  # b's origin in a's frame: b's second
     # pose lands by a's second (their closest pair)
     fit = np.diag([2e-5, 1e-5, 1e-6])
-    got = origin_covariance(a, b, t, fit)
+    got = fit + sum(overlap_covariances(a, b, t))
     n = 200_000
     pa, pb = a.poses[1], b.poses[1]
     da = rng.multivariate_normal(np.zeros(3), a.pose_covs[1], n)
@@ -200,7 +200,7 @@ def test_a_closures_origin_covariance_holds_the_overlap_poses_against_monte_carl
     mc = np.cov(err.T)
     assert np.allclose(got, mc, rtol=0.03, atol=3e-6), (got, mc)
     assert np.trace(got[:2, :2]) > 30 * np.trace(fit[:2, :2])  # (the fit's alone: far too sure)
-    assert origin_covariance(SimpleNamespace(pose_covs=None), b, t, fit) is fit  # none kept: the fit's
+    assert not any(s.any() for s in overlap_covariances(SimpleNamespace(pose_covs=None), b, t))  # the fit's
 
 
 def test_the_online_graph_with_closures_is_as_sure_as_its_errors(tmp_path):
@@ -241,7 +241,7 @@ def test_two_closures_of_one_submap_compared_leave_out_its_own_share():
     from types import SimpleNamespace
 
     from cornerslam_cli.geometry import compose, compose_inverse_cov, inverse
-    from cornerslam_cli.graph.submap import origin_covariance
+    from cornerslam_cli.graph.submap import overlap_covariances
 
     rng = np.random.default_rng(5)
     b = SimpleNamespace(poses=np.array([[2.0, 1.0, 0.3]]), pose_covs=np.array([np.diag([4e-3, 2e-3, 1e-3])]))
@@ -267,9 +267,9 @@ def test_two_closures_of_one_submap_compared_leave_out_its_own_share():
     err = pair - want
     err[:, 2] = wrap_angle(err[:, 2])
     mc = np.cov(err.T)
-    side = [origin_covariance(a, b, t, fit, b_side=False) for a, t in ((a1, t1), (a2, t2))]
+    side = [fit + overlap_covariances(a, b, t)[0] for a, t in ((a1, t1), (a2, t2))]
     _, got = compose_inverse_cov(t1, side[0], t2, side[1])
     assert np.allclose(got, mc, rtol=0.05, atol=2e-6), (got, mc)
-    full = [origin_covariance(a, b, t, fit) for a, t in ((a1, t1), (a2, t2))]
+    full = [fit + sum(overlap_covariances(a, b, t)) for a, t in ((a1, t1), (a2, t2))]
     _, doubled = compose_inverse_cov(t1, full[0], t2, full[1])
     assert np.trace(doubled) > 1.5 * np.trace(mc)  # (b's share counted twice: far too lenient)

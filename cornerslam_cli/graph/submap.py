@@ -168,22 +168,16 @@ class OpenSubmap:
         self.travelled = 0.0
 
     def add(
-        self,
-        pose: np.ndarray,
-        cov: np.ndarray,
-        points: np.ndarray | None,
-        voxel: float,
-        pose_cov: np.ndarray | None = None,
+        self, pose: np.ndarray, cov: np.ndarray, pose_cov: np.ndarray, points: np.ndarray | None, voxel: float
     ) -> None:
-        """One step: its local pose, motion noise, scan points (global frame) and the pose's covariance
-        (Σ_rr; None: not kept). ``travelled`` sums the moves between the submap's steps, not the one from
-        its origin (SubmapConfig.max_distance)."""
+        """One step: its local pose, motion noise, the pose's covariance (Σ_rr) and scan points (global
+        frame). ``travelled`` sums the moves between the submap's steps, not the one from its origin
+        (SubmapConfig.max_distance)."""
         if self.poses:
             self.travelled += math.hypot(*(pose[:2] - self.poses[-1][:2]))
         self.poses.append(pose)
         self.covs.append(cov)
-        if pose_cov is not None:
-            self.pose_covs.append(pose_cov)
+        self.pose_covs.append(pose_cov)
         if self.step_points is not None:
             self.step_points.append(points)
         if points is not None and len(points):
@@ -209,20 +203,18 @@ def overlap_steps(a: Submap, b: Submap, pose: np.ndarray) -> tuple[int, int]:
     return int(i), int(j)
 
 
-def origin_covariance(
-    a: Submap, b: Submap, pose: np.ndarray, cov: np.ndarray, b_side: bool = True
-) -> np.ndarray:
-    """The covariance of a loop match a→b (``pose``, b's origin in a's frame; ``cov``, the fit's, of the
-    points) as a relation of the two submaps' *origins*: the points where the submaps overlap were placed
-    in each submap's frame by the filter's poses there, uncertain relative to its origin (their Σ_rr,
-    ``pose_covs``), so a→b holds those two covariances besides the fit's — first order, at the closest
-    pair of robot positions (:func:`overlap_steps`); the two submaps' filters are independent (``b_side``
-    False: a's alone — two closures of b compared with each other share b's, which cancels). A pose of a
-    off by δ (additive, a's frame) moves a's points and so the match by the same rigid motion (δθ about that
-    pose); one of b's moves it by the inverse of that motion carried into a's frame. ``cov`` unchanged
-    when a submap kept no pose covariances."""
+def overlap_covariances(a: Submap, b: Submap, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """What a loop match a→b (``pose``, b's origin in a's frame) holds besides its fit's covariance as a
+    relation of the two submaps' *origins*: a's share and b's (3, 3), in a's frame. The points where the
+    submaps overlap were placed in each submap's frame by the filter's poses there, uncertain relative to
+    its origin (their Σ_rr, ``pose_covs``) — first order, at the closest pair of robot positions
+    (:func:`overlap_steps`); the two submaps' filters are independent, so the shares add (two closures of b
+    compared with each other share b's, which cancels: a's alone there). A pose of a off by δ (additive,
+    a's frame) moves a's points and so the match by the same rigid motion (δθ about that pose); one of
+    b's moves it by the inverse of that motion carried into a's frame. Zero when a submap kept no pose
+    covariances."""
     if a.pose_covs is None or b.pose_covs is None:
-        return cov
+        return np.zeros((3, 3)), np.zeros((3, 3))
     i, j = overlap_steps(a, b, pose)
     t = np.asarray(pose, dtype=float)
     pa = a.poses[i, :2]
@@ -230,7 +222,7 @@ def origin_covariance(
     c, s = math.cos(t[2]), math.sin(t[2])
     ja = np.array([[1.0, 0.0, -(t[1] - pa[1])], [0.0, 1.0, t[0] - pa[0]], [0.0, 0.0, 1.0]])
     jb = np.array([[-c, s, t[1] - q[1]], [-s, -c, -(t[0] - q[0])], [0.0, 0.0, -1.0]])
-    return cov + ja @ a.pose_covs[i] @ ja.T + (jb @ b.pose_covs[j] @ jb.T if b_side else 0.0)
+    return ja @ a.pose_covs[i] @ ja.T, jb @ b.pose_covs[j] @ jb.T
 
 
 def keyframe_nodes(poses: np.ndarray, spacing: float, angle: float) -> np.ndarray:

@@ -387,19 +387,14 @@ class CarmenReader:
                 chosen[tag] = layout
         self._logger_stamps = _stamps_stand_still(chosen)
         for tag, layout in chosen.items():
-            if self._logger_stamps:  # (its spans and order: the logger timestamps')
-                layout.start, layout.end, layout.back = (
-                    layout.logger.start,
-                    layout.logger.end,
-                    layout.logger.back,
-                )
-            self._whole[tag], self._back[tag] = layout.lines, layout.back
-            self._span[tag] = (layout.start, layout.end)
+            stamps = layout.logger if self._logger_stamps else layout  # (spans and order: those read)
+            self._whole[tag], self._back[tag] = layout.lines, stamps.back
+            self._span[tag] = (stamps.start, stamps.end)
             if layout.moving:
                 self._moving.add(tag)
-            if layout.start <= layout.end:
-                self._start = min(layout.start, self._start if self._start is not None else math.inf)
-                self._end = max(layout.end, self._end if self._end is not None else -math.inf)
+            if stamps.start <= stamps.end:
+                self._start = min(stamps.start, self._start if self._start is not None else math.inf)
+                self._end = max(stamps.end, self._end if self._end is not None else -math.inf)
 
     def _select(self) -> tuple[str, str, list[tuple[str, str]]]:
         name = self.path.name
