@@ -322,3 +322,24 @@ def test_an_unknown_mplbackend_does_not_end_a_plot(sim_log, tmp_path):
     res = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr
     assert png.stat().st_size > 0
+
+
+def test_characters_the_font_lacks_are_one_warning_in_our_words(tmp_path, caplog):
+    """A log named in CJK: matplotlib warned once per character and figure (UserWarning, shown under
+    -q too); now one warning names them, once per process."""
+    import warnings
+
+    from cornerslam_cli.report import plots
+
+    plt = plots.pyplot()
+    plots._glyphs_noted.clear()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        plots.agg_backend()  # (its filter, as the commands install it)
+        for i in range(2):
+            fig, ax = plt.subplots()
+            ax.set_title("办公室.mcap · é")
+            plots._save(fig, tmp_path / f"f{i}.png")
+    assert not [w for w in caught if "Glyph" in str(w.message)]
+    said = [r.getMessage() for r in caplog.records if "glyph" in r.getMessage()]
+    assert said == ["the figures' font (DejaVuSans) has no glyph for 公 办 室: drawn as boxes"]

@@ -30,6 +30,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 
@@ -38,6 +39,8 @@ import numpy as np
 from ..results import RunSummary
 from .run_dir import RunData, ellipse_polygons, load_run
 from .tables import COMPARISON_COLUMNS, read_csv
+
+log = logging.getLogger(__name__)
 
 DPI = 120
 COLORS = {
@@ -65,6 +68,8 @@ def agg_backend() -> None:
     whatever the variable says."""
     os.environ["MPLBACKEND"] = "agg"
     logging.getLogger("matplotlib").addFilter(_config_dir_unwritable)  # once: skips one it has
+    # said once, in our words, by _note_missing_glyphs (matplotlib warns per character and figure, -q or not)
+    warnings.filterwarnings("ignore", message=r"Glyph \d+ .*missing from font", category=UserWarning)
     import matplotlib
 
     matplotlib.use("Agg")
@@ -108,9 +113,35 @@ def _limits_widened(record: logging.LogRecord) -> bool:
 def _save(fig, path: Path) -> Path:
     import matplotlib.pyplot as plt
 
+    _note_missing_glyphs(fig)
     fig.savefig(path, dpi=DPI)
     plt.close(fig)
     return path
+
+
+_glyphs_noted: set[str] = set()  # characters already said to be missing (a warning once per process)
+
+
+def _note_missing_glyphs(fig) -> None:
+    """One warning for the characters of the figure's texts its font has no glyph for (a log named in
+    CJK): drawn as boxes. matplotlib's own warnings, one per character and figure, are filtered
+    (:func:`agg_backend`)."""
+    from matplotlib import font_manager
+    from matplotlib.ft2font import FT2Font
+    from matplotlib.text import Text
+
+    chars = {c for t in fig.findobj(Text) for c in t.get_text() if ord(c) > 127} - _glyphs_noted
+    if not chars:
+        return
+    font = font_manager.findfont(font_manager.FontProperties())
+    missing = sorted(c for c in chars if FT2Font(font).get_char_index(ord(c)) == 0)
+    _glyphs_noted.update(chars)
+    if missing:
+        log.warning(
+            "the figures' font (%s) has no glyph for %s: drawn as boxes",
+            Path(font).stem,
+            " ".join(missing[:10]) + (" …" if len(missing) > 10 else ""),
+        )
 
 
 def _draw_segments(ax, lines: dict[str, np.ndarray], **kwargs) -> None:
