@@ -424,7 +424,7 @@ def _check_workers(client) -> None:
     """CornerslamError when the cluster's workers cannot import cornerslam, or run another build of it
     than this one (workers started before the code changed keep the code they imported: their rows would
     mix two builds, and a resume would never take them for this build's). Workers that join later are not
-    checked (an adaptive cluster may have none yet)."""
+    checked (an adaptive cluster may have none yet: said, as the batch waits for them without a sign)."""
     from .report.summary import code_hash
 
     here = code_hash()
@@ -435,6 +435,12 @@ def _check_workers(client) -> None:
             f"the Dask workers cannot run cornerslam: {one_line(e)}",
             "install this cornerslam where the workers run (pip install) and restart them",
         ) from None
+    if not theirs:
+        log.warning(
+            "the Dask scheduler at %s has no workers yet: the batch waits for them (`dask worker %s`)",
+            client.scheduler.address,
+            client.scheduler.address,
+        )
     other = sorted({h for h in theirs.values() if h != here} - {None})
     if here is not None and other:
         n = sum(h != here for h in theirs.values())

@@ -4,6 +4,7 @@ equal results whatever the parallelism (1 or 2 processes, a Dask cluster), and r
 from __future__ import annotations
 
 import json
+import logging
 import os
 import re
 import sys
@@ -835,3 +836,23 @@ def test_an_interrupted_batch_on_a_cluster_says_its_runs_go_on(logs, tmp_path, m
     assert res.exit_code == 130, res.output
     said = "run the same command again once the runs the cluster's workers had begun have ended (they go on)"
     assert (said in res.stderr) == bool(scheduler) and "to resume" in res.stderr
+
+
+def test_a_dask_scheduler_without_workers_is_said(caplog):
+    """A scheduler with no worker yet (an adaptive cluster's start, or workers not started): the batch
+    waited without a sign (a probe); it says so, and waits."""
+    from types import SimpleNamespace
+
+    from cornerslam_cli.batch import _check_workers
+
+    caplog.set_level(logging.WARNING, logger="cornerslam.batch")  # (-q in a test before set it higher)
+    client = SimpleNamespace(run=lambda f: {}, scheduler=SimpleNamespace(address="tcp://10.0.0.5:8786"))
+    _check_workers(client)
+    said = [r.getMessage() for r in caplog.records if r.name == "cornerslam.batch"]
+    assert said == [
+        "the Dask scheduler at tcp://10.0.0.5:8786 has no workers yet: the batch waits for them "
+        "(`dask worker tcp://10.0.0.5:8786`)"
+    ]
+    caplog.clear()
+    _check_workers(SimpleNamespace(run=lambda f: {"w": f()}, scheduler=client.scheduler))
+    assert not [r for r in caplog.records if r.name == "cornerslam.batch"]
