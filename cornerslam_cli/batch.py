@@ -192,6 +192,10 @@ def _run_alone(
     if progress is not None:
         progress(state)
 
+    def tick() -> None:  # between finished combinations: the status line's clock and ETA go on
+        if progress is not None:
+            progress(state)
+
     def finished(i: int, result: dict) -> None:
         name = display_path(combos[i].log)  # which log a warning is of (as batch.csv's log), unless it says
         for text in result.pop("warnings", ()):
@@ -218,9 +222,9 @@ def _run_alone(
     ]
     try:
         if client is not None:
-            _run_dask(tasks, client, finished)
+            _run_dask(tasks, client, finished, tick)
         elif tasks:
-            _run_local(tasks, jobs or os.cpu_count() or 1, finished)
+            _run_local(tasks, jobs or os.cpu_count() or 1, finished, tick=tick)
     except BaseException:  # interrupted: a worker killed after end_children's grace (a loaded machine)
         if client is None:  # left its staging directory; its process is gone now
             for task in tasks:
@@ -317,7 +321,11 @@ def _failed(e: BaseException) -> dict:
 
 
 def _run_local(
-    tasks: list[tuple], jobs: int, finished: Callable[[int, dict], None], work: Callable = run_one
+    tasks: list[tuple],
+    jobs: int,
+    finished: Callable[[int, dict], None],
+    work: Callable = run_one,
+    tick: Callable[[], None] = lambda: None,
 ) -> None:
     """The tasks (index, ``work``'s arguments…) on ``jobs`` local worker processes. A worker that dies
     (killed, out of memory) breaks its pool and every combination not yet finished with it: those run
@@ -325,7 +333,7 @@ def _run_local(
     died"), then in parallel again."""
     pending, alone = tasks, False
     while pending:
-        broken = _run_pool(pending, 1 if alone else jobs, finished, work)
+        broken = _run_pool(pending, 1 if alone else jobs, finished, work, tick)
         if broken and alone:  # one at a time, in order: the first not finished was running
             finished(broken[0][0], {"status": "failed", "error": WORKER_DIED})
             broken = broken[1:]
@@ -333,15 +341,21 @@ def _run_local(
 
 
 WORKER_DIED = "its worker process died while running it (killed? out of memory?)"
+TICK = 1.0  # s: the status line is redrawn this often between finished combinations (its clock, its ETA)
+POLL = 0.1  # s between looks at a Dask batch's finished tasks
 
 
 def _run_pool(
-    tasks: list[tuple], jobs: int, finished: Callable[[int, dict], None], work: Callable
+    tasks: list[tuple],
+    jobs: int,
+    finished: Callable[[int, dict], None],
+    work: Callable,
+    tick: Callable[[], None],
 ) -> list[tuple]:
-    """Run ``tasks`` on a pool of ``jobs`` spawned workers, each result to ``finished``; the tasks a
-    broken pool did not finish (a worker died), in the order given."""
+    """Run ``tasks`` on a pool of ``jobs`` spawned workers, each result to ``finished`` (``tick`` every
+    ``TICK`` s without one); the tasks a broken pool did not finish (a worker died), in the order given."""
     import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
 
     broken = []
@@ -354,15 +368,20 @@ def _run_pool(
         )
         try:
             futures = {pool.submit(work, *task[1:]): k for k, task in enumerate(tasks)}
-            for fut in as_completed(futures):
-                try:
-                    result = fut.result()
-                except BrokenProcessPool:  # a worker died: run again (_run_local)
-                    broken.append(futures[fut])
-                    continue
-                except Exception as e:  # the task could not be sent or its result not returned
-                    result = _failed(e)
-                finished(tasks[futures[fut]][0], result)
+            waiting = set(futures)
+            while waiting:
+                done, waiting = wait(waiting, timeout=TICK, return_when=FIRST_COMPLETED)
+                if not done:
+                    tick()
+                for fut in sorted(done, key=futures.__getitem__):  # (in the tasks' order: deterministic)
+                    try:
+                        result = fut.result()
+                    except BrokenProcessPool:  # a worker died: run again (_run_local)
+                        broken.append(futures[fut])
+                        continue
+                    except Exception as e:  # the task could not be sent or its result not returned
+                        result = _failed(e)
+                    finished(tasks[futures[fut]][0], result)
         except BaseException:  # the batch ends (Ctrl-C, SIGTERM, batch.csv unwritable): so do its workers
             end_children()
             raise
@@ -451,19 +470,28 @@ def _check_workers(client) -> None:
         )
 
 
-def _run_dask(tasks: list[tuple], client, finished: Callable[[int, dict], None]) -> None:
+def _run_dask(
+    tasks: list[tuple], client, finished: Callable[[int, dict], None], tick: Callable[[], None]
+) -> None:
+    """:func:`_run_pool` on a Dask cluster's workers (none dies for us: the cluster runs a task again)."""
     from dask.distributed import as_completed
 
     if tasks:
         idx, *columns = (list(t) for t in zip(*tasks, strict=True))
         futures = client.map(run_one, *columns, pure=False)
         index = {f.key: i for f, i in zip(futures, idx, strict=True)}
-        for fut in as_completed(futures, loop=client.loop):
-            try:
-                result = fut.result()
-            except Exception as e:  # the worker died (KilledWorker) or the task could not be sent
-                result = _dask_failed(e)
-            finished(index[fut.key], result)
+        done = as_completed(futures, loop=client.loop)
+        while not done.is_empty():
+            ready = done.next_batch(block=False)
+            if not ready:
+                tick()
+                time.sleep(POLL)
+            for fut in sorted(ready, key=lambda f: index[f.key]):
+                try:
+                    result = fut.result()
+                except Exception as e:  # the worker died (KilledWorker) or the task could not be sent
+                    result = _dask_failed(e)
+                finished(index[fut.key], result)
 
 
 SCHEDULER_LOST = "the connection to the Dask scheduler was lost (run the same command again to resume)"

@@ -713,6 +713,17 @@ def test_a_worker_that_dies_fails_only_the_combination_it_ran(tmp_path):
     assert all(r["status"] == "ok" for r in results.values()) and os.path.exists(flag)
 
 
+def test_the_status_line_goes_on_between_finished_combinations(tmp_path):
+    """The status line was redrawn only when a combination finished: on long logs its clock and ETA stood
+    still for minutes, and a CI log showed nothing (a probe). The pool ticks every TICK seconds between."""
+    from _batch_work import work
+
+    ticks, results = [], {}
+    batch_mod._run_local([(0, "slow 3.5")], 1, results.__setitem__, work, tick=lambda: ticks.append(1))
+    assert results == {0: {"status": "ok", "error": "slow 3.5"}}
+    assert len(ticks) >= 2  # ~3 (the worker's start takes its share)
+
+
 def test_outputs_inside_other_outputs_are_refused(logs, tmp_path):
     """A batch into a comparison's directory, a run or comparison into a run's were accepted, and the
     outer one could no longer be run again ("holds 'sub', which cornerslam did not write"; a hostile-user
