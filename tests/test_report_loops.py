@@ -144,8 +144,8 @@ def test_summary_and_comparison_lines_with_submaps():
     acc = Accuracy(ground_truth="gt.tum", ate=ate(0.0123), odom_ate=ate(1.4249), online_ate=ate(0.0456))
     s = make_summary(accuracy=acc, submaps=12, loops_accepted=3, loops_rejected=17)
     s = replace(s, timing=replace(s.timing, t_loop=0.4567))
-    assert summary_lines(s)[3] == "submaps: 12, loop closures 3 accepted, 17 refused, loop time 0.46s"
-    assert summary_lines(s)[4].startswith("ATE RMSE 0.012 m")
+    assert summary_lines(s)[4] == "submaps: 12, loop closures 3 accepted, 17 refused, loop time 0.46s"
+    assert summary_lines(s)[5].startswith("ATE RMSE 0.012 m")
     single = make_summary("icnn", accuracy=replace(acc, online_ate=None))
     assert not any(line.startswith("submaps") for line in summary_lines(single))
     assert comparison_lines([single, s]) == [

@@ -56,6 +56,7 @@ def test_summary_lines_without_reference():
     assert summary_lines(s) == [
         "logs/office.mcap: 500 steps (502 scans, 2 skipped, 7 between keyframes), 88 landmarks, "
         "2777 matches with pca",
+        "topics: scans /scan, odometry /odom (odometry)",
         "laser mount: x=0.000 m y=0.000 m yaw=0.000 rad (the built-in default: not on the log's tf, "
         "not in the config)",
         "time: extract 1.23s scan match 0.00s predict 0.04s match 0.50s update 0.38s (118 steps/s), "
@@ -63,9 +64,9 @@ def test_summary_lines_without_reference():
         "wrote out/office_pca",
     ]
     tf = replace(s, input=replace(s.input, laser_to_base=(0.1, 0.0, 0.0), laser_to_base_source="tf"))
-    assert summary_lines(tf)[1] == "laser mount: x=0.100 m y=0.000 m yaw=0.000 rad (from the log's tf)"
+    assert summary_lines(tf)[2] == "laser mount: x=0.100 m y=0.000 m yaw=0.000 rad (from the log's tf)"
     skewed = replace(s, input=replace(s.input, beam_times="log", beam_time=0.1 / 1024))
-    assert summary_lines(skewed)[2] == "deskewed: beams 97.66 µs apart (the log's time_increment)"
+    assert summary_lines(skewed)[3] == "deskewed: beams 97.66 µs apart (the log's time_increment)"
     for no in ("none", "off"):  # nothing said when the scans were used as recorded
         assert summary_lines(replace(s, input=replace(s.input, beam_times=no))) == summary_lines(s)
     for preset, line in (
@@ -74,7 +75,7 @@ def test_summary_lines_without_reference():
         ("none", "none (input.laser_preset: none; the config's sensor model)"),
     ):
         config = {**s.config, "input": {"laser_preset": preset}}
-        assert summary_lines(replace(s, config=config))[2] == f"laser preset: {line}"
+        assert summary_lines(replace(s, config=config))[3] == f"laser preset: {line}"
 
 
 def test_mount_line_names_the_upside_down_flag_s_own_source():
@@ -94,7 +95,7 @@ def test_mount_line_names_the_upside_down_flag_s_own_source():
             laser_upside_down=down,
             laser_upside_down_source=flag,
         )
-        return summary_lines(replace(s, input=inp))[1]
+        return summary_lines(replace(s, input=inp))[2]
 
     assert line("default", "config") == (
         f"{at} (the built-in default: not on the log's tf, not in the config), {by_config}"
@@ -110,7 +111,7 @@ def test_mount_line_names_the_upside_down_flag_s_own_source():
 def test_summary_lines_with_ground_truth_and_relations():
     acc = accuracy(scan_odom_relations=REL)
     lines = summary_lines(summary(accuracy=acc))
-    assert lines[3:] == [
+    assert lines[4:] == [
         "ATE RMSE 0.012 m (odometry 1.425 m, scan-matched 0.082 m) against gt.tum",
         "relations: translation 0.123 ± 0.046 m, rotation 1.23 ± 0.50 deg (3/4 relations)",
         "  odometry: no relation falls inside the trajectory's time span (check --time-offset)",
@@ -119,7 +120,7 @@ def test_summary_lines_with_ground_truth_and_relations():
     ]
     acc = dataclasses.replace(acc, scan_odom_ate=None, scan_odom_relations=None)
     lines = summary_lines(summary(accuracy=acc))
-    assert lines[3] == "ATE RMSE 0.012 m (odometry 1.425 m) against gt.tum"
+    assert lines[4] == "ATE RMSE 0.012 m (odometry 1.425 m) against gt.tum"
     assert not any("scan-matched" in line for line in lines)
 
 
@@ -273,3 +274,19 @@ def test_a_dumb_terminals_status_line_is_erased_without_escape_codes(monkeypatch
     assert "\033" not in dumb and dumb.startswith("\r") and dumb.endswith("\r") and dumb.strip() == ""
     monkeypatch.setenv("TERM", "xterm-256color")
     assert progress._erase() == "\r\033[K"
+
+
+def test_the_run_says_what_it_read_of_the_log():
+    """Which scan topic and odometry the run took was said only with -v (info says it; run chose among
+    several by rules a ROS user may not expect): a line of the summary now."""
+    s = make_summary()
+    tf = replace(s.input, odom_topic="/tf", odom_source="tf odom→base_footprint")
+    assert (
+        summary_lines(replace(s, input=tf))[1] == "topics: scans /scan, odometry /tf (tf odom→base_footprint)"
+    )
+    carmen = replace(
+        s.input, format="carmen", scan_topic="FLASER", odom_topic="ODOM", odom_source="ODOM lines"
+    )
+    assert summary_lines(replace(s, input=carmen))[1] == "read: FLASER lines, odometry from ODOM lines"
+    none = replace(s.input, odom_topic="", odom_source="")
+    assert summary_lines(replace(s, input=none))[1] == "topics: scans /scan, odometry -"

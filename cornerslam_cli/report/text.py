@@ -49,6 +49,7 @@ def summary_lines(s: RunSummary) -> list[str]:
         f"{s.input.log}: {c.steps} steps ({c.scans_in} scans, {c.scans_skipped} skipped, "
         f"{c.keyframes_skipped} between keyframes{unusable_scans(c)}), {c.landmarks} landmarks, "
         f"{c.matched_total} matches with {s.assoc}",
+        topics_line(s.input),
         mount_line(s.input),
         *preset_lines(s.config),
         *deskew_lines(s.input),
@@ -96,6 +97,15 @@ CARMEN_DEFAULT_SOURCE = "the built-in default: not in the log's laser lines, not
 
 
 UPSIDE_DOWN_SOURCES = {"tf": "from the log's tf", "config": "from the config's input.laser.upside_down"}
+
+
+def topics_line(inp: RunInput) -> str:
+    """What the run read of the log: its scan topic and odometry (a CARMEN log's kinds of line)."""
+    odom = short_text(inp.odom_topic or "-", 200)
+    if inp.format == "carmen":
+        return f"read: {short_text(inp.scan_topic, 200)} lines, odometry from {inp.odom_source or odom}"
+    source = f" ({inp.odom_source})" if inp.odom_source else ""
+    return f"topics: scans {short_text(inp.scan_topic, 200)}, odometry {odom}{source}"
 
 
 def mount_line(inp: RunInput) -> str:
