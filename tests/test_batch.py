@@ -3,6 +3,7 @@ equal results whatever the parallelism (1 or 2 processes, a Dask cluster), and r
 
 from __future__ import annotations
 
+import errno
 import json
 import logging
 import os
@@ -867,3 +868,30 @@ def test_a_dask_scheduler_without_workers_is_said(caplog):
     caplog.clear()
     _check_workers(SimpleNamespace(run=lambda f: {"w": f()}, scheduler=client.scheduler))
     assert not [r for r in caplog.records if r.name == "cornerslam.batch"]
+
+
+def test_a_marker_cut_short_by_a_full_disk_does_not_refuse_the_next_batch(logs, tmp_path, monkeypatch):
+    """A batch claiming a new --out on a full disk left a 0-byte marker there, and the next batch (the
+    space freed) was refused: "'b' is not empty and was not written by cornerslam" (a probe). The marker
+    is written whole or not at all, and a directory holding nothing but a marker never written whole (an
+    older version's 0-byte one) is taken as empty."""
+    out = tmp_path / "b"
+    real = Path.write_text
+
+    def full(self, *a, **k):
+        if self.name.startswith(MARKER):
+            with open(self, "w") as f:  # (what a full disk leaves: the file created, nothing in it)
+                f.flush()
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(self))
+        return real(self, *a, **k)
+
+    args = ["batch", str(logs[0]), "--assoc", "icnn", "--out", str(out), "-q"]
+    with monkeypatch.context() as mp:
+        mp.setattr(Path, "write_text", full)
+        res = CliRunner().invoke(cli, args)
+    assert res.exit_code == 2 and "no space left on device" in res.stderr, res.output
+    assert list(out.iterdir()) == []  # nothing half written left
+    (out / MARKER).touch()  # as an older version left it
+    res = CliRunner().invoke(cli, args)
+    assert res.exit_code == 0, res.output
+    assert read_batch(out / "batch.csv")[0]["status"] == "ok"

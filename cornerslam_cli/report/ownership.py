@@ -33,6 +33,7 @@ from ..logs.mcap import RESULTS_MCAP_LIBRARY, header_library
 from .oserrors import output_errors, resolved
 
 MARKER = ".cornerslam-output"
+_MARKER_PARTIAL = MARKER + ".partial"  # the marker being written (renamed onto MARKER: never half written)
 _GROUPS = {"compare": "comparison", "batch": "batch"}  # outputs made of runs
 KINDS = ("run", "compare", "batch")
 _LEGACY = (  # outputs written before the marker: (file, how it begins, kind)
@@ -79,7 +80,12 @@ def mark_output(path: Path, kind: str, log: Path | None = None) -> None:
         entries = list(_entries(path))
         marker["files"] = [rel for rel, _ in entries]
         marker["sizes"] = {rel: e.stat().st_size for rel, e in entries if e.is_file() and not e.is_symlink()}
-    (path / MARKER).write_text(json.dumps(marker, indent=1) + "\n")
+    partial = path / _MARKER_PARTIAL
+    try:  # (a disk full mid-write left a 0-byte marker, "not written by cornerslam" to the next command)
+        partial.write_text(json.dumps(marker, indent=1) + "\n")
+        os.replace(partial, path / MARKER)
+    finally:
+        partial.unlink(missing_ok=True)
 
 
 def files_intact(run_dir: Path) -> bool:
@@ -188,7 +194,7 @@ def _refuse_foreign(target: Path, kind: str, shown: Path) -> None:
         return
     if not target.is_dir():
         raise OutputError(f"'{shown}' is a file, not a directory", "give a new directory")
-    if not any(target.iterdir()):
+    if _unused(target):
         return  # an empty directory may be used
     owner = output_kind(target)
     if owner is None:
@@ -201,6 +207,13 @@ def _refuse_foreign(target: Path, kind: str, shown: Path) -> None:
             f"'{shown}' holds a cornerslam {owner} output, not a {kind} output",
             "give another directory, or remove it yourself",
         )
+
+
+def _unused(target: Path) -> bool:
+    """Whether the directory ``target`` holds nothing but, at most, a marker never written whole (a
+    disk full as a command claimed it: a partial one, or an older version's 0-byte one): as empty."""
+    names = {e.name for e in target.iterdir()}
+    return names <= {MARKER, _MARKER_PARTIAL} and read_marker(target) is None
 
 
 def _batch_runs(out: Path) -> set[str]:
