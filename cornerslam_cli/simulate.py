@@ -32,7 +32,7 @@ from .geometry import compose, relative, wrap_angle
 from .logs.mcap import header_library
 from .logs.writers import RawScan, write_mcap
 from .logs.writers.mcap import LIBRARY as LOG_LIBRARY
-from .report.outdir import clear_stale, staged_file
+from .report.outdir import staged_files
 from .report.ownership import refuse_special_file
 from .report.tables import write_tum
 from .simworld import OFFICE_LOOP, World, office_world, raycast, true_corners
@@ -268,11 +268,10 @@ def simulate_log(
             raise OutputError(f"'{there}' exists and is not part of a log cornerslam simulate wrote", why)
     out.parent.mkdir(parents=True, exist_ok=True)  # as --out and --mcap-out do
     gt_path, corners_path = paths[1:]
-    for path in paths:
-        clear_stale(path)  # hidden files of a killed simulate
-    # written beside, renamed when all are written; made now, so an unwritable place fails before the work
-    staged = {path: staged_file(path) for path in paths}
-    try:
+    # written beside (a killed simulate's hidden files cleared first), renamed when all are written; made
+    # now, so an unwritable place fails before the work; Ctrl-C or a full disk: no partial log, and an
+    # earlier log is kept whole
+    with staged_files(paths) as staged:
         t_scan, gt, scans, odoms = _cast(world, waypoints, laps, p, seed, sweep, progress)
         t0 = time.perf_counter()
         write_tum(staged[gt_path], t_scan, gt)
@@ -283,9 +282,6 @@ def simulate_log(
         with signals_deferred():  # the three renamed as one: Ctrl-C now would leave a mixed set
             for path, tmp in staged.items():
                 os.replace(tmp, path)
-    finally:  # Ctrl-C or a full disk: no partial log, and an earlier log is kept whole
-        for tmp in staged.values():
-            tmp.unlink(missing_ok=True)
     log.info("wrote the log, ground truth and corners in %.1f s", time.perf_counter() - t0)
     return {
         "log": str(out),

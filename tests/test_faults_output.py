@@ -39,7 +39,8 @@ from cornerslam_cli.logs.writers import write_mcap
 # has patched them to `interrupt` — html would keep the patch for every later test in this process (a
 # later report, test_results.py's, was then "interrupted")
 from cornerslam_cli.report import html  # noqa: F401, I001
-from cornerslam_cli.report.outdir import HOST, StagedDir, clear_stale, target_lock
+from cornerslam_cli.report.liveness import HOST
+from cornerslam_cli.report.outdir import StagedDir, clear_stale, target_lock
 from cornerslam_cli.report.ownership import MARKER, mark_output
 
 CMD = [sys.executable, "-c", "from cornerslam_cli.cli import main; main()"]
@@ -1443,11 +1444,13 @@ def test_a_second_batch_into_a_running_batchs_directory_is_refused_however_it_is
 
 @pytest.mark.parametrize("what", ["partial", "running"])
 def test_a_leftover_of_this_processs_own_pid_is_refused_naming_it(tmp_path, sim_log, what):
-    """A staging directory or a batch's mark carrying this process's own pid is not this process's (it
-    stages nothing before its check): a container's before a restart (pid 1 again, the same host name) —
-    or another container's, live, sharing the host name, whose staging a run must not delete (a review
-    showed a start-time rule deleting it). Refused, saying so and naming the path to remove if nothing else
-    writes there (session 40 let a batch ignore such a mark: two containers' batches would both write)."""
+    """A staging directory or a batch's mark carrying this process's own pid, named as a cornerslam before
+    the flocks names them (no ``-flock``: tests/test_liveness.py for this version's), is not this
+    process's (it stages nothing before its check): a container's before a restart (pid 1 again, the same
+    host name) — or another container's, live, sharing the host name, whose staging a run must not delete
+    (a review showed a start-time rule deleting it). Refused, saying so and naming the path to remove if
+    nothing else writes there (session 40 let a batch ignore such a mark: two containers' batches would
+    both write)."""
     out = tmp_path / "out"
     left = tmp_path / (f".out.{what}-{HOST}-{os.getpid()}" + ("-abcd1234" if what == "partial" else ""))
     left.mkdir() if what == "partial" else left.touch()

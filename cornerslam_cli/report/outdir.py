@@ -1,37 +1,32 @@
 """Writing an output atomically: staged beside its place, committed by rename.
 
-:class:`StagedDir` builds the directory in a hidden sibling ``.NAME.partial-HOST-PID-XXXX``
+:class:`StagedDir` builds the directory in a hidden sibling ``.NAME.partial-HOST-PID-flock-XXXX``
 (HOST: 8 hex digits of the host name's hash; PID: the writing process) and renames it onto NAME in
 :meth:`StagedDir.commit`; a file committed with it outside the directory (``--mcap-out``) is written
-as a hidden ``.FILE.partial-HOST-PID-XXXX`` beside its target and renamed in the same commit. The
-commit holds an exclusive ``flock`` on ``.NAME.lock`` beside the target (deleted on release), checks
-the target again under it, and defers SIGINT/SIGTERM across its renames; an existing directory is
-first renamed to ``.NAME.old-HOST-PID-XXXX`` and deleted after. Before staging, under the same lock,
-the leftovers of dead processes on this host are cleared (a SIGKILLed run's staging directory is
-removed; a ``.old`` one is renamed back if the target is missing — the kill fell between the two
-renames — else removed), and a staging directory of a live process means another run is writing the
-same place: refused, exit 2. Names over 200 bytes are shortened in these sibling names (their start
-plus a hash), so a legal 255-byte name still stages. Directories are created with the permissions
-the umask gives (``mkdtemp`` alone would give 0700).
+as a hidden ``.FILE.partial-HOST-PID-flock-XXXX`` beside its target and renamed in the same commit.
+The writer holds an flock on each such sibling while it writes it, and so is told from a leftover
+(report/liveness.py: the names, and who is alive). The commit holds an exclusive ``flock`` on
+``.NAME.lock`` beside the target (deleted on release), checks the target again under it, and defers
+SIGINT/SIGTERM across its renames; an existing directory is first renamed to
+``.NAME.old-HOST-PID-flock-XXXX`` and deleted after. Before staging, under the same lock, the
+leftovers of dead writers on this host are cleared (a SIGKILLed run's staging directory is removed; a
+``.old`` one is renamed back if the target is missing — the kill fell between the two renames — else
+removed), and a staging directory of a live writer means another run is writing the same place:
+refused, exit 2. Directories are created with the permissions the umask gives (``mkdtemp`` alone would
+give 0700).
 
-A directory written in place (a batch's) is marked by a hidden ``.NAME.running-HOST-PID`` beside it
-while it is written (:func:`alone_in`): a second writer is refused the same way.
+A directory written in place (a batch's) is marked by a hidden ``.NAME.running-HOST-PID-flock``
+beside it while it is written (:func:`alone_in`): a second writer is refused the same way.
 
 Which places may be replaced: report/ownership.py; environment faults as one-line errors:
-report/oserrors.py. Over 400 lines because the staging, the locks and the leftovers' clearing share the
-sibling names and must agree on them.
+report/oserrors.py.
 """
 
 from __future__ import annotations
 
-import errno
 import fcntl
-import hashlib
 import os
-import re
 import secrets
-import shutil
-import socket
 import stat
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
@@ -40,119 +35,44 @@ from pathlib import Path
 
 from ..errors import OutputError
 from ..workers import signals_deferred
+from .liveness import (
+    BOOKKEEPING,
+    NO_FLOCK,
+    clear_stale,
+    hold,
+    make_held,
+    refuse_live_writer,
+    release,
+    remove,
+    sibling_name,
+    stem,
+)
 from .oserrors import output_error, output_errors, resolved
 from .ownership import MARKER, check_replaceable, check_same_log, is_within, mark_output, refuse_special_file
 
-_NAME_KEEP = 200  # bytes of a name kept in its sibling names (+ at most 45 of suffix: within 255)
-HOST = hashlib.sha1(socket.gethostname().encode()).hexdigest()[:8]  # leftovers are judged on their host
 LOCK_MARK = b"cornerslam output lock\n"  # what a lock file holds (an empty one: being created)
-_SIBLING = re.compile(r"(partial|old|running)-([0-9a-f]{8})-(\d+)(?:-.+)?")
-_BOOKKEEPING = re.compile(rf"\..+\.(lock|{_SIBLING.pattern})")  # a lock's name, a staging sibling's
-
-
-# ---------------------------------------------------------------------------- sibling names
-def _stem(name: str) -> str:
-    """``name`` as it appears in its sibling names: shortened (start + hash) when it is long."""
-    raw = os.fsencode(name)
-    if len(raw) <= _NAME_KEEP:
-        return name
-    return os.fsdecode(raw[: _NAME_KEEP - 9]) + "~" + hashlib.sha1(raw).hexdigest()[:8]
-
-
-def _sibling(target: Path, what: str) -> str:
-    """The start of a hidden sibling's name owned by this process: ``.NAME.WHAT-HOST-PID``."""
-    return f".{_stem(target.name)}.{what}-{HOST}-{os.getpid()}"
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True  # someone else's process
-    return True
-
-
-def _siblings(target: Path) -> Iterator[tuple[Path, str, str, int]]:
-    """(path, "partial" or "old", host hash, pid) of each staging leftover beside ``target``."""
-    prefix = f".{_stem(target.name)}."
-    try:
-        names = os.listdir(target.parent)
-    except OSError:
-        return
-    for name in names:
-        m = _SIBLING.fullmatch(name[len(prefix) :]) if name.startswith(prefix) else None
-        if m is not None:
-            yield target.parent / name, m[1], m[2], int(m[3])
-
-
-def _remove(path: Path) -> None:
-    if path.is_dir() and not path.is_symlink():
-        shutil.rmtree(path, ignore_errors=True)
-    else:
-        path.unlink(missing_ok=True)
-
-
-def clear_stale(target: Path) -> None:
-    """Clear the staging leftovers of dead processes on this host beside ``target`` (a ``.old``
-    directory comes back as ``target`` when that is missing). Those of live processes, or of other
-    hosts (a shared file system), are left alone."""
-    for path, what, host, pid in _siblings(target):
-        if host != HOST or _alive(pid):
-            continue
-        if what == "old" and not os.path.lexists(target):
-            os.rename(path, target)
-        else:
-            _remove(path)
-
-
-def live_writer(target: Path) -> tuple[int, Path] | None:
-    """The pid of a live process on this host staging ``target`` or writing in it (:func:`alone_in`), and
-    its sibling there, if any. A pid is all a name says of its process: one that runs now may be another
-    process with that pid (a container restarted: pid 1 again) or a live one in another pid namespace
-    (two containers sharing the host name) — the first's leftover could go, the second's must not, and
-    nothing here tells them apart, so both are taken as live (:func:`_refuse_live_writer` says which to
-    remove if it is the first)."""
-    for path, what, host, pid in _siblings(target):
-        if what in ("partial", "running") and host == HOST and _alive(pid):
-            return pid, path
-    return None
-
-
-def _refuse_live_writer(target: Path, shown: str | Path) -> None:
-    """OutputError when a live process on this host writes ``target`` (called under its lock)."""
-    clear_stale(target)
-    if (found := live_writer(target)) is None:
-        return
-    pid, path = found
-    if pid == os.getpid():  # not this process's (it stages nothing before this check): another's
-        raise OutputError(
-            f"another writer of '{shown}' has this process's pid {pid} ('{path.name}' beside it): a "
-            "container's killed before a restart gave this one its pid, or a live one's in another container",
-            f"if no other cornerslam writes '{shown}', remove '{path}'; else give another output directory",
-        )
-    raise OutputError(
-        f"another cornerslam process (pid {pid}) is writing '{shown}'",
-        f"wait for it to finish, or give another output directory (if pid {pid} is no cornerslam, remove "
-        f"'{path}')",
-    )
 
 
 @contextmanager
 def alone_in(target: Path, shown: str | Path) -> Iterator[None]:
     """Write in the directory ``target`` in place over the ``with`` block (a batch's, resumed, never
-    staged whole) as its only writer: a hidden ``.NAME.running-HOST-PID`` beside it, made under its lock,
-    marks it; another live writer's mark or staging refuses (OutputError, exit 2), as a staged output's
-    does, and a staged output refuses this mark. Removed at the end; a killed process's is cleared."""
+    staged whole) as its only writer: a hidden ``.NAME.running-HOST-PID-flock`` beside it, made and held
+    under its lock, marks it; another live writer's mark or staging refuses (OutputError, exit 2), as a
+    staged output's does, and a staged output refuses this mark. Removed at the end; a killed process's
+    is cleared."""
     with output_errors(shown), target_lock(target):  # (a read-only or full disk: its one-line error)
-        _refuse_live_writer(target, shown)
-        mark = target.parent / _sibling(target, "running")
-        mark.touch()
+        refuse_live_writer(target, shown)
+        mark, fd = make_held(target, "running", lambda start: _new_file(target.parent / start))
     try:
         yield
     finally:
         mark.unlink(missing_ok=True)
+        release(fd)
+
+
+def _new_file(path: Path) -> Path:
+    os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o666))
+    return path
 
 
 def _umask() -> int:
@@ -166,31 +86,53 @@ def _umask() -> int:
         return mask
 
 
-def staged_file(dest: Path) -> Path:
-    """A new empty hidden file beside ``dest`` to write it in, before renaming it onto ``dest``
-    (with the mode the umask gives a new file; ``mkstemp`` alone gives 0600)."""
-    fd, tmp = tempfile.mkstemp(prefix=_sibling(dest, "partial") + "-", dir=dest.parent)
-    try:
-        os.fchmod(fd, 0o666 & ~_umask())
-    finally:
-        os.close(fd)
+def _temp_file(parent: Path, start: str) -> Path:
+    fd, tmp = tempfile.mkstemp(prefix=start + "-", dir=parent)
+    os.close(fd)
     return Path(tmp)
+
+
+def _staged_file(dest: Path) -> tuple[Path, int | None]:
+    """A new empty hidden file beside ``dest`` to write it in, before renaming it onto ``dest`` (with the
+    mode the umask gives a new file; ``mkstemp`` alone gives 0600), and the fd holding its flock."""
+    tmp, fd = make_held(dest, "partial", lambda start: _temp_file(dest.parent, start))
+    try:
+        os.chmod(tmp, 0o666 & ~_umask())
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        release(fd)
+        raise
+    return tmp, fd
+
+
+@contextmanager
+def staged_files(dests: Sequence[Path]) -> Iterator[dict[Path, Path]]:
+    """A new hidden file beside each of ``dests`` to write it in (leftovers of killed writers cleared
+    first; made before any work: an unwritable place fails at once), for the block to rename onto its
+    ``dest``; what is left of them is removed, and their flocks released, when the block ends."""
+    staged: dict[Path, tuple[Path, int | None]] = {}
+    try:
+        for dest in dests:
+            clear_stale(dest)
+            staged[dest] = _staged_file(dest)
+        yield {dest: tmp for dest, (tmp, _) in staged.items()}
+    finally:
+        for tmp, fd in staged.values():
+            tmp.unlink(missing_ok=True)
+            release(fd)
 
 
 @contextmanager
 def staged_write(dest: Path) -> Iterator[Path]:
-    """A hidden file beside ``dest`` to write the whole of it in (:func:`staged_file`; leftovers of
-    killed writers cleared first), renamed onto ``dest`` when the block ends, with the mode of the file
-    it replaces; removed when the block raises (an error, Ctrl-C): ``dest`` is never seen half written."""
-    clear_stale(dest)
-    tmp = staged_file(dest)
-    try:
+    """A hidden file beside ``dest`` to write the whole of it in (:func:`staged_files`), renamed onto
+    ``dest`` when the block ends, with the mode of the file it replaces; removed when the block raises
+    (an error, Ctrl-C): ``dest`` is never seen half written."""
+    with staged_files([dest]) as staged:
+        tmp = staged[dest]
         yield tmp
         if dest.is_file():
             os.chmod(tmp, stat.S_IMODE(os.stat(dest).st_mode))
         os.replace(tmp, dest)
-    finally:
-        tmp.unlink(missing_ok=True)
 
 
 def _open_lock(path: Path) -> int:
@@ -215,7 +157,7 @@ def target_lock(target: Path) -> Iterator[None]:
     """Hold an exclusive lock on ``.NAME.lock`` beside ``target`` (waiting for another holder);
     the lock file, marked ``LOCK_MARK``, is deleted on release — one that is not cornerslam's is
     refused (:func:`_open_lock`). File systems without flock go unlocked."""
-    path = target.parent / f".{_stem(target.name)}.lock"
+    path = target.parent / f".{stem(target.name)}.lock"
     while True:
         fd = _open_lock(path)
         try:
@@ -225,7 +167,7 @@ def target_lock(target: Path) -> Iterator[None]:
         except FileNotFoundError:
             pass  # deleted by the holder we waited for: lock the next file
         except OSError as exc:
-            if exc.errno not in (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS):
+            if exc.errno not in NO_FLOCK:
                 os.close(fd)
                 raise
             break
@@ -291,6 +233,7 @@ class StagedDir:
         self.own_log_only = own_log_only  # the default place: refuse another log's output there
         self.inside = inside  # the kind of output this one is part of (a batch's run), or None
         self.files: list[tuple[Path, Path]] = []  # (staged, final) files renamed by commit()
+        self.held: list[int | None] = []  # the fds holding the flocks of the staging directory and files
         self.committed = False
         with output_errors(self.shown):
             self._check_replaceable()
@@ -307,15 +250,24 @@ class StagedDir:
         """The hidden staging directory beside the target, made under the target's lock."""
         _check_name(self.target, self.shown)
         with target_lock(self.target):
-            _refuse_live_writer(self.target, self.shown)
-            prefix = _sibling(self.target, "partial") + "-"
-            path = Path(tempfile.mkdtemp(prefix=prefix, dir=self.target.parent))
+            refuse_live_writer(self.target, self.shown)
+            path, fd = make_held(self.target, "partial", self._temp_dir)
+        self.held.append(fd)
         try:
             os.chmod(path, 0o777 & ~_umask())
         except BaseException:
-            _remove(path)
+            remove(path)
+            self._release()
             raise
         return path
+
+    def _temp_dir(self, start: str) -> Path:
+        return Path(tempfile.mkdtemp(prefix=start + "-", dir=self.target.parent))
+
+    def _release(self) -> None:
+        """Release the flocks of what this output staged (committed or removed)."""
+        while self.held:
+            release(self.held.pop())
 
     def _unmake(self) -> None:
         """Take away the directories above the target this output made (``made``), deepest first; one
@@ -335,12 +287,15 @@ class StagedDir:
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
-        if not self.committed:
-            _remove(self.path)
-            for staged, _ in self.files:
-                _remove(staged)
-            self._unmake()
-        elif isinstance(exc, KeyboardInterrupt):
+        try:
+            if not self.committed:
+                remove(self.path)
+                for staged, _ in self.files:
+                    remove(staged)
+                self._unmake()
+        finally:
+            self._release()
+        if self.committed and isinstance(exc, KeyboardInterrupt):
             exc.output_written = self.shown  # type: ignore[attr-defined]  # the CLI says so
         if isinstance(exc, OSError) and self._ours(exc.filename):
             err = output_error(exc, self._public(exc.filename))
@@ -371,7 +326,7 @@ class StagedDir:
         refuse_directory_name(dest)
         final = resolved(shown)
         with output_errors(shown):
-            if final.name == MARKER or _BOOKKEEPING.fullmatch(final.name):
+            if final.name == MARKER or BOOKKEEPING.fullmatch(final.name):
                 why = "give another file name"
                 raise OutputError(f"'{shown}' is a name cornerslam uses for its own bookkeeping", why)
             if is_within(final, self.target):
@@ -388,7 +343,8 @@ class StagedDir:
                 raise OutputError(f"'{shown}' exists and is not a results file cornerslam wrote", why)
             final.parent.mkdir(parents=True, exist_ok=True)
             clear_stale(final)
-            staged = staged_file(final)
+            staged, fd = _staged_file(final)
+        self.held.append(fd)
         self.files.append((staged, final))
         return staged
 
@@ -398,25 +354,37 @@ class StagedDir:
         with target_lock(self.target):
             self._check_replaceable()  # it may have changed
             mark_output(self.path, self.kind, self.log)
-            with signals_deferred():
-                old = self._swap()
-                for staged, final in self.files:
-                    os.replace(staged, final)
-                self.committed = True
-            if old is not None:
-                _remove(old)
+            old, held = None, None
+            try:
+                with signals_deferred():
+                    old, held = self._swap()
+                    for staged, final in self.files:
+                        os.replace(staged, final)
+                    self.committed = True
+                if old is not None:
+                    remove(old)
+            finally:
+                release(held)
+        self._release()  # (the renames kept the inodes: held until now)
         return self.target
 
-    def _swap(self) -> Path | None:
-        """The staging directory onto the target; returns where a replaced directory went."""
+    def _swap(self) -> tuple[Path | None, int | None]:
+        """The staging directory onto the target; returns where a replaced directory went, and the fd
+        holding its flock (None: none held)."""
         if not os.path.lexists(self.target) or not any(self.target.iterdir()):
             os.rename(self.path, self.target)  # new, or over an empty directory
-            return None
-        old = self.target.parent / f"{_sibling(self.target, 'old')}-{secrets.token_hex(4)}"
-        os.rename(self.target, old)
+            return None, None
+        held = hold(self.target)
+        start = sibling_name(self.target, "old", held=held is not None)
+        old = self.target.parent / f"{start}-{secrets.token_hex(4)}"
         try:
-            os.rename(self.path, self.target)
+            os.rename(self.target, old)
+            try:
+                os.rename(self.path, self.target)
+            except BaseException:
+                os.rename(old, self.target)
+                raise
         except BaseException:
-            os.rename(old, self.target)
+            release(held)
             raise
-        return old
+        return old, held
