@@ -405,10 +405,14 @@ def _init_worker(level: int) -> None:
     stopped_by_parent()
 
 
+CONNECT_TIMEOUT = 10.0  # s: for the scheduler to answer, and to greet as a Dask scheduler does
+
+
 def _connect(scheduler: str):
     """A Dask client of the scheduler at ``scheduler``; CornerslamError when Dask is not installed, the
     address names no transport Dask has (``http://…``: its client would hang 20 s on exit) or no port
-    (``tcp://host``: likewise), or nothing answers there within 10 s."""
+    (``tcp://host``: likewise), nothing answers there within 10 s, or what answers is no Dask scheduler
+    (:func:`_greets_as_dask`)."""
     try:
         from dask.distributed import Client
         from distributed.comm.addressing import parse_address, parse_host_port
@@ -423,13 +427,37 @@ def _connect(scheduler: str):
         get_backend(scheme)
         if scheme in ("tcp", "tls"):  # host:port checked here: a client that fails on it hangs 20 s too
             try:
-                parse_host_port(where)
+                host, port = parse_host_port(where)
             except ValueError:
                 raise ValueError(f"no port in '{where}' (tcp://host:port)") from None
-        return Client(scheduler, timeout=10, set_as_default=False)
+            if scheme == "tcp":  # (TLS greets after its own handshake)
+                _greets_as_dask(host, port, scheduler)
+        return Client(scheduler, timeout=CONNECT_TIMEOUT, set_as_default=False)
     except (OSError, TimeoutError, ValueError) as e:
         problem = f"cannot connect to the Dask scheduler at '{scheduler}': {' '.join(str(e).split())}"
         raise CornerslamError(problem, hint) from None
+
+
+def _greets_as_dask(host: str, port: int, scheduler: str) -> None:
+    """CornerslamError unless what listens at ``host:port`` speaks first, as a Dask scheduler does (its
+    handshake, the moment a connection is made): a dashboard's port, an HTTP server, waits for a request,
+    and distributed's client waited on it for ever, without a word (its timeout does not cover the
+    handshake; a probe). OSError when nothing answers (:func:`_connect` says so)."""
+    import socket
+
+    with socket.create_connection((host, port), timeout=CONNECT_TIMEOUT) as s:
+        s.settimeout(CONNECT_TIMEOUT)
+        try:
+            greeted = bool(s.recv(1))
+        except TimeoutError:
+            greeted = False
+    if not greeted:
+        raise CornerslamError(
+            f"what answers at '{scheduler}' is not a Dask scheduler (it said nothing in "
+            f"{CONNECT_TIMEOUT:.0f} s, or hung up): the dashboard's port?",
+            "give the scheduler's address: `dask scheduler` prints it as 'Scheduler at: tcp://…', "
+            "port 8786 unless set",
+        )
 
 
 def _worker_build() -> str | None:

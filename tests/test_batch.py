@@ -895,3 +895,46 @@ def test_a_marker_cut_short_by_a_full_disk_does_not_refuse_the_next_batch(logs, 
     res = CliRunner().invoke(cli, args)
     assert res.exit_code == 0, res.output
     assert read_batch(out / "batch.csv")[0]["status"] == "ok"
+
+
+@pytest.mark.parametrize("server", ["http", "hangs up"])
+def test_a_scheduler_address_where_no_dask_scheduler_answers_is_refused(logs, tmp_path, monkeypatch, server):
+    """--scheduler at the dashboard's port (8787 for 8786) or any server that waits for a request: the
+    client waited for its handshake for ever, without a word (a probe); one that hangs up likewise fails.
+    Refused, exit 2, nothing written."""
+    pytest.importorskip("dask.distributed")
+    import http.server
+    import socket
+    import threading
+
+    monkeypatch.setattr(batch_mod, "CONNECT_TIMEOUT", 1.0)
+    if server == "http":
+        httpd = http.server.HTTPServer(("127.0.0.1", 0), http.server.SimpleHTTPRequestHandler)
+        port, serve, stop = httpd.server_address[1], httpd.serve_forever, httpd.shutdown
+    else:
+        sock = socket.create_server(("127.0.0.1", 0))
+        port, done = sock.getsockname()[1], threading.Event()
+
+        def serve():
+            while not done.is_set():
+                sock.settimeout(0.2)
+                try:
+                    sock.accept()[0].close()
+                except TimeoutError:
+                    pass
+
+        def stop():
+            done.set()
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    try:
+        args = ["batch", str(logs[0]), "--assoc", "pca", "--out", str(tmp_path / "out"), "-q"]
+        started = time.monotonic()
+        res = CliRunner().invoke(cli, [*args, "--scheduler", f"tcp://127.0.0.1:{port}"])
+    finally:
+        stop()
+        thread.join()
+    assert res.exit_code == 2, res.output
+    assert f"what answers at 'tcp://127.0.0.1:{port}' is not a Dask scheduler" in res.output
+    assert time.monotonic() - started < 10 and not (tmp_path / "out").exists()
