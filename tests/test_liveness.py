@@ -160,6 +160,7 @@ def test_a_run_and_a_batch_beside_a_held_sibling_of_their_own_pid_exit_2(tmp_pat
             "(wait for it to finish, or give another output directory)"
         )
         assert theirs.exists() and not (out / "summary.json").exists() and not (out / "batch.csv").exists()
+        assert not out.exists()  # (a refused batch left its new --out, empty but for its marker)
 
 
 # ---------------------------------------------------------------------------- the pid rule, kept

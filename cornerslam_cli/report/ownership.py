@@ -20,6 +20,7 @@ output: report/outdir.py.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import os
@@ -378,6 +379,14 @@ def claim_dir(path: str | Path, kind: str) -> Path:
         if read_marker(target) is None:
             mark_output(target, kind)
     return target
+
+
+def unclaim(target: Path) -> None:
+    """Take back :func:`claim_dir` of a directory it made: its marker removed, then the directory if that
+    leaves it empty (anything else come into it since is left, with the directory)."""
+    (target / MARKER).unlink(missing_ok=True)
+    with contextlib.suppress(OSError):
+        target.rmdir()
 
 
 FIGURE_CREATOR = "cornerslam extract"  # extract --plot's figures name it in their metadata
