@@ -487,7 +487,7 @@ def _check_workers(client) -> None:
     """CornerslamError when the cluster's workers cannot import cornerslam, or run another build of it
     than this one (workers started before the code changed keep the code they imported: their rows would
     mix two builds, and a resume would never take them for this build's). Workers that join later are not
-    checked (an adaptive cluster may have none yet: said, as the batch waits for them without a sign)."""
+    checked (an adaptive cluster may have none yet: that is said, while the batch waits for them)."""
     from .report.summary import code_hash
 
     here = code_hash()
