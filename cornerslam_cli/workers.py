@@ -99,11 +99,16 @@ def warnings_once() -> Iterator[None]:
 
 @contextmanager
 def warnings_kept() -> Iterator[list[str]]:
-    """Within it, warnings are kept, in the order logged, in the list it gives instead of being
-    printed (a worker's run returns them for the batch to say once); other levels pass."""
+    """Within it, this thread's warnings are kept, in the order logged, in the list it gives instead of
+    being printed (a worker's run returns them for the batch to say once); other levels pass, and other
+    threads' warnings (a Dask worker runs two combinations at once in its threads: each keeps its own;
+    one kept them all, credited to the other's log)."""
     kept: list[str] = []
+    me = threading.get_ident()
 
     def keep(record: logging.LogRecord) -> bool:
+        if record.thread != me:
+            return True  # (another thread's own warnings_kept, if any, decides it)
         kept.append(record.getMessage())
         return False
 

@@ -165,6 +165,37 @@ def test_a_kept_warning_does_not_reach_a_handlers_earlier_filters():
     assert kept == ["kept for the batch"] and seen == []
 
 
+def test_two_threads_keep_their_own_warnings():
+    """A Dask worker with two threads runs two combinations at once: one of them kept both runs'
+    warnings, so a warning was said as the other log's (a probe)."""
+    import threading
+
+    from cornerslam_cli.workers import warnings_kept
+
+    logger = logging.getLogger("test_batch.threads")
+    logger.setLevel(logging.WARNING)  # (its own level: earlier tests' -q leaves others')
+    both_in, first_said = threading.Barrier(2), threading.Event()
+    kept = {}
+
+    def run(name: str) -> None:
+        with warnings_kept() as mine:
+            both_in.wait()
+            if name == "b":
+                first_said.wait()
+            logger.warning("of %s", name)
+            if name == "a":
+                first_said.set()
+            both_in.wait()
+        kept[name] = mine
+
+    threads = [threading.Thread(target=run, args=(n,)) for n in "ab"]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    assert kept == {"a": ["of a"], "b": ["of b"]}
+
+
 def test_plan_resolves_each_config_as_run_does():
     from cornerslam_cli.lasers import resolve_config
 
