@@ -263,13 +263,21 @@ def overlap_problem(
         )
         return why, "give a ground truth with poses throughout the trajectory"
     for unit, scale in (("nanoseconds", 1e9), ("microseconds", 1e6), ("milliseconds", 1e3)):
-        if np.count_nonzero((est_t >= gt_t[0] / scale) & (est_t <= gt_t[-1] / scale)) >= 2:
+        # (only where the stamps so read come no faster than FASTEST_POSES: seconds since 1970 read as
+        # microseconds land inside a half-hour ground truth from 0, 1 µs apart — two clocks, below)
+        if (
+            np.count_nonzero((est_t >= gt_t[0] / scale) & (est_t <= gt_t[-1] / scale)) >= 2
+            and _spacing(gt_t) / scale >= FASTEST_POSES
+        ):
             why = (  # a ROS exporter's integer stamps: TUM's are seconds
                 f"{gt_name} has its stamps in {unit}, not seconds ({gt_t[0]:.0f} to {gt_t[-1]:.0f}; "
                 f"the trajectory {est_t[0]:.3f} to {est_t[-1]:.3f} s)"
             )
             return why, "write its stamps in seconds"
-        if np.count_nonzero((est_t / scale >= gt_t[0]) & (est_t / scale <= gt_t[-1])) >= 2:
+        if (
+            np.count_nonzero((est_t / scale >= gt_t[0]) & (est_t / scale <= gt_t[-1])) >= 2
+            and _spacing(est_t) / scale >= FASTEST_POSES
+        ):
             why = (
                 f"{est_name} has its stamps in {unit}, not seconds ({est_t[0]:.0f} to {est_t[-1]:.0f}; "
                 f"{gt_name} {gt_t[0]:.3f} to {gt_t[-1]:.3f} s)"
@@ -280,7 +288,21 @@ def overlap_problem(
         f"ground truth's time span ({gt_t[0]:.3f} to {gt_t[-1]:.3f} s; trajectory {est_t[0]:.3f} to "
         f"{est_t[-1]:.3f} s)"
     )
+    if (est_t[0] >= EPOCH_STAMPS) != (gt_t[0] >= EPOCH_STAMPS):  # one on a wall clock, one from ~0
+        wall, other = (est_name, gt_name) if est_t[0] >= EPOCH_STAMPS else (gt_name, est_name)
+        why += f": {wall} is stamped in wall-clock time (seconds since 1970), {other} is not — two clocks"
     return why, "is it this log's ground truth? Its stamps must use the log's clock"
+
+
+FASTEST_POSES = 1e-3  # s: the closest spacing a trajectory or ground truth's stamps are taken to have
+EPOCH_STAMPS = 1e8  # s: stamps from here on (1973) are read as wall-clock time
+
+
+def _spacing(t: np.ndarray) -> float:
+    """The median spacing of the sorted stamps ``t`` (0 when none differ)."""
+    d = np.diff(t)
+    d = d[d > 0]
+    return float(np.median(d)) if len(d) else 0.0
 
 
 def evaluate_files(

@@ -759,3 +759,28 @@ def test_evaluate_without_a_reference_names_the_relations_the_run_was_scored_aga
         f"the run was scored against the relations '{rel}'; summary.json does not keep --time-offset"
         in res.stderr
     )
+
+
+@pytest.mark.parametrize("which", ["ground truth", "trajectory"])
+def test_two_clocks_are_not_taken_for_microseconds(files, which):
+    """A log stamped in seconds since 1970 against a half-hour ground truth stamped from 0 (or the other
+    way round): the stamps ÷ 10⁶ fall inside the other's span, and the error said "has its stamps in
+    microseconds, not seconds (write its stamps in seconds)" of stamps that were seconds (a new-user
+    probe). Read so they would come 1 µs apart: two clocks, said so."""
+    est, gt = files
+
+    t0 = float(est.read_text().split()[0])
+
+    def epoch(rows):
+        return [f"{1262304212.0 + float(r.split()[0]) - t0:.6f} {' '.join(r.split()[1:])}" for r in rows]
+
+    def stretched(rows):  # stamped from 21 s, its span holding 1262 s
+        return [f"{21.0 + (float(r.split()[0]) - t0) * 100.0:.6f} {' '.join(r.split()[1:])}" for r in rows]
+
+    rewrite(est if which == "trajectory" else gt, epoch)
+    rewrite(gt if which == "trajectory" else est, stretched)
+    res = evaluate(est, "--ground-truth", gt)
+    assert res.exit_code == 2 and "\n" not in res.stderr.strip(), res.output
+    assert "microseconds" not in res.stderr and "does not overlap the trajectory" in res.stderr
+    wall = f"trajectory '{est}'" if which == "trajectory" else f"ground truth '{gt}'"
+    assert f"{wall} is stamped in wall-clock time (seconds since 1970)" in res.stderr

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import shutil
 import struct
@@ -331,6 +332,7 @@ def test_characters_the_font_lacks_are_one_warning_in_our_words(tmp_path, caplog
 
     from cornerslam_cli.report import plots
 
+    caplog.set_level(logging.WARNING, logger=plots.log.name)  # (an earlier test's -q set it higher)
     plt = plots.pyplot()
     plots._glyphs_noted.clear()
     with warnings.catch_warnings(record=True) as caught:
