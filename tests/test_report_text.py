@@ -290,3 +290,27 @@ def test_the_run_says_what_it_read_of_the_log():
     assert summary_lines(replace(s, input=carmen))[1] == "read: FLASER lines, odometry from ODOM lines"
     none = replace(s.input, odom_topic="", odom_source="")
     assert summary_lines(replace(s, input=none))[1] == "topics: scans /scan, odometry -"
+
+
+def test_the_run_says_how_well_its_map_agrees_with_itself():
+    """A figure that needs no ground truth (summary.json `consistency`) was only in summary.json and
+    report.html: on a log without a reference (the Mines bags) the run printed no quality figure (a
+    new-user probe)."""
+    from cornerslam_cli.results import MapConsistency
+
+    c = MapConsistency(
+        cell=0.05, scans=304, points=83688, occupied_cells=5868, odom_occupied_cells=8808,
+        cells_vs_odom=0.6662, revisit_mean=0.0861, revisit_share=0.42, odom_revisit_mean=0.1134,
+        odom_revisit_share=0.35,
+    )  # fmt: skip
+    s = make_summary()
+    assert summary_lines(replace(s, consistency=c))[-2] == (
+        "map consistency: revisit misalignment 8.6 cm on 42 % of points (odometry 11.3 cm), "
+        "map cells 0.67× the odometry's"
+    )
+    never = replace(c, revisit_mean=None, revisit_share=0.0, odom_revisit_mean=None, odom_revisit_share=0.0)
+    assert summary_lines(replace(s, consistency=never))[-2] == (
+        "map consistency: map cells 0.67× the odometry's; the run never comes back to a place (no revisit "
+        "misalignment)"
+    )
+    assert not any(line.startswith("map consistency") for line in summary_lines(s))

@@ -16,7 +16,7 @@ from ..ranges import short_text
 
 if TYPE_CHECKING:
     from ..logs.base import LogInfo
-    from ..results import Accuracy, RelationError, RunInput, RunSummary
+    from ..results import Accuracy, MapConsistency, RelationError, RunInput, RunSummary
     from ..types import Scan
 
 
@@ -76,6 +76,8 @@ def summary_lines(s: RunSummary) -> list[str]:
             + f") against {acc.ground_truth}"
             + (f" ({acc.ate.in_holes} poses in its gaps not scored)" if acc.ate.in_holes else "")
         )
+    if s.consistency is not None:
+        lines.append(consistency_line(s.consistency))
     if acc is not None and acc.relations is not None:
         lines.append(f"relations: {relation_text(acc.relations)}")
         lines.append(f"  odometry: {relation_text(acc.odom_relations)}")
@@ -97,6 +99,16 @@ CARMEN_DEFAULT_SOURCE = "the built-in default: not in the log's laser lines, not
 
 
 UPSIDE_DOWN_SOURCES = {"tf": "from the log's tf", "config": "from the config's input.laser.upside_down"}
+
+
+def consistency_line(c: MapConsistency) -> str:
+    """How well the map agrees with itself (summary.json ``consistency``): a figure without ground truth."""
+    cells = f"map cells {c.cells_vs_odom:.2f}× the odometry's"
+    if not c.revisit_share:
+        return f"map consistency: {cells}; the run never comes back to a place (no revisit misalignment)"
+    revisit = f"revisit misalignment {100 * c.revisit_mean:.1f} cm on {100 * c.revisit_share:.0f} % of points"
+    odom = f"odometry {100 * c.odom_revisit_mean:.1f} cm" if c.odom_revisit_share else "odometry never back"
+    return f"map consistency: {revisit} ({odom}), {cells}"
 
 
 def topics_line(inp: RunInput) -> str:
