@@ -401,7 +401,7 @@ def _say_compiling(quiet: bool) -> bool:
 @cli.command()
 @click.argument("log_path", metavar="LOG", type=GivenPath())
 @topic_options
-@verbosity_options
+@verbosity_options(progress=False, steps=False)
 def info(log_path, scan_topic, odom_topic, verbose, quiet):
     """Show what is in LOG: format, topics, types, counts, rates, and what `run` would use."""
     from dataclasses import replace
@@ -466,7 +466,7 @@ RESULTS_MCAP_NOTE = (
 @click.option("--rate", default=10.0, show_default=True, help="Scan rate, Hz.")
 @click.option("--beams", default=1081, show_default=True, help="Beams per scan (over 270°).")
 @click.option("--speed", default=0.5, show_default=True, help="Robot speed, m/s.")
-@verbosity_options
+@verbosity_options(steps=False)
 def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
     """Write a synthetic indoor log OUT.mcap with ground truth OUT.gt.tum and true corners.
 
@@ -508,7 +508,7 @@ def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
     help="ATE after the best similarity (as evo's -s), and its scale: a check of the ranges' scale "
     "against the ground truth's, not the ATE of a 2-D laser (its scale comes from the ranges).",
 )
-@verbosity_options
+@verbosity_options(progress=False, steps=False)
 def evaluate(out_dir, ground_truth, relations, time_offset, correct_scale, verbose, quiet):
     """Accuracy of a run's trajectory.tum against ground truth or relations (without either: the TUM ground
     truth the run was scored against, when the file its summary.json names holds those poses here;
@@ -548,7 +548,7 @@ def evaluate(out_dir, ground_truth, relations, time_offset, correct_scale, verbo
 )
 @config_options
 @topic_options
-@verbosity_options
+@verbosity_options(progress=False, steps=False)
 def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_topic, verbose, quiet):
     """Print the segments and corners of one scan (and draw them with 3σ ellipses).
 
@@ -707,7 +707,7 @@ def _batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, q
     type=PRESET,
     help="Laser preset under the config: auto (chosen from LOG's scans), none, or a preset's name.",
 )
-@verbosity_options
+@verbosity_options(progress=False, steps=False)
 def config_command(log_path, config_path, overrides, preset, verbose, quiet):
     """Print the fully resolved config as YAML: built-in defaults < laser preset < --config < --set.
 

@@ -1243,3 +1243,14 @@ def test_the_configs_warnings_are_in_summary_json_too(tmp_path):
     assert len(summaries) == 4
     for s in summaries:
         assert len(mismatch(json.loads(s.read_text())["warnings"])) == 1, s
+
+
+def test_verbosity_help_says_only_what_the_command_has():
+    """info, evaluate, extract and config draw no progress bar and run no filter: their -q/-v help said
+    "no progress bar" and "-vv every filter step" (a new-user walkthrough)."""
+    for cmd in ("info", "evaluate", "extract", "config", "simulate"):
+        text = invoke(cmd, "--help").output
+        assert "filter step" not in text and ("progress bar" in text) == (cmd == "simulate"), cmd
+    for cmd in ("run", "compare", "batch"):
+        text = invoke(cmd, "--help").output
+        assert "no progress bar" in text and "every filter step" in text, cmd
