@@ -1254,3 +1254,10 @@ def test_verbosity_help_says_only_what_the_command_has():
     for cmd in ("run", "compare", "batch"):
         text = invoke(cmd, "--help").output
         assert "no progress bar" in text and "every filter step" in text, cmd
+
+
+def test_extract_counts_read_in_the_singular_for_one():
+    """extract's text and figure title read "1 corners" (a new-user walkthrough)."""
+    from cornerslam_cli.report.extract_plot import _counted
+
+    assert [_counted(n, "corner") for n in (0, 1, 2)] == ["0 corners", "1 corner", "2 corners"]

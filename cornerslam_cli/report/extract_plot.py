@@ -15,7 +15,7 @@ KIND_NAMES = {1: "I  intersection", 2: "II end point"}
 
 def format_extraction(segments: Segments, corners: Corners) -> str:
     """A readable table of the segments (r, α, σ, end points) and corners (x, y, φ, σ) of one scan."""
-    lines = [f"{len(segments)} segments (sensor frame; σ from the covariance)"]
+    lines = [f"{_counted(len(segments), 'segment')} (sensor frame; σ from the covariance)"]
     lines.append(
         f"{'#':>3} {'r [m]':>8} {'α [deg]':>9} {'σr [mm]':>8} {'σα [deg]':>9} {'n':>5} {'length':>7}"
         "   p1 → p2 [m]"
@@ -30,7 +30,7 @@ def format_extraction(segments: Segments, corners: Corners) -> str:
             f"({p1[0]:6.2f}, {p1[1]:6.2f}) → ({p2[0]:6.2f}, {p2[1]:6.2f})"
         )
     lines.append("")
-    lines.append(f"{len(corners)} corners")
+    lines.append(_counted(len(corners), "corner"))
     lines.append(
         f"{'#':>3} {'type':<16} {'x [m]':>8} {'y [m]':>8} {'φ [deg]':>8} {'σx [mm]':>8} {'σy [mm]':>8} "
         f"{'σφ [deg]':>9}  segments"
@@ -84,7 +84,9 @@ def plot_extraction(
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x [m] (sensor frame)")
     ax.set_ylabel("y [m]")
-    ax.set_title(title or f"{len(segments)} segments, {len(corners)} corners (3σ ellipses)")
+    ax.set_title(
+        title or f"{_counted(len(segments), 'segment')}, {_counted(len(corners), 'corner')} (3σ ellipses)"
+    )
     ax.grid(True, lw=0.3)
     ax.legend(loc="best", fontsize=8)
     fig.tight_layout()
@@ -92,3 +94,8 @@ def plot_extraction(
     fmt = fmt or Path(path).suffix[1:].lower()  # (the format: of the name, unless given)
     fig.savefig(Path(path), dpi=120, format=fmt, **figure_mark(fmt))
     plt.close(fig)
+
+
+def _counted(n: int, what: str) -> str:
+    """``n`` and ``what``, plural unless one: "1 corner", "3 corners"."""
+    return f"{n} {what}" + ("" if n == 1 else "s")
