@@ -364,7 +364,7 @@ def plot_timing(run: RunData, path: Path) -> Path:
     ax.grid(True, which="both", lw=0.3, alpha=0.5)
     ax.set_title(f"Per-step time of the filter stages and scan matching (Fig 17) — {run.title}")
     ax2.plot(t["step"], run.map_landmarks(), color=COLORS["landmark"], lw=1.0)
-    ax2.set_ylabel("landmarks in the map")
+    ax2.set_ylabel("landmarks\nin the map")  # (one line overran the short axes)
     ax2.set_xlabel("step")
     ax2.grid(True, lw=0.3, alpha=0.5)
     return _save(fig, path)
@@ -467,7 +467,7 @@ def _plot_compare_matching(runs: list[RunData], log_name: str, path: Path) -> Pa
         ax2.plot(r.timing["step"], r.map_landmarks(), color=color, lw=1.3, label=r.assoc)
     ax.set_ylabel("cumulative matching time [s]")
     ax.set_title("Cumulative matching time")
-    ax2.set_ylabel("landmarks in the map")
+    ax2.set_ylabel("landmarks\nin the map")  # (one line overran the short axes)
     ax2.set_title("Total landmarks")
     for a in (ax, ax2):
         a.set_xlabel("step")
