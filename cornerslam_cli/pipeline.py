@@ -79,7 +79,12 @@ def run(
         if mcap_path:
             warn_second_parent(src)
             offset = recorder_clock(src)
-        summary = run_filter(frames(src, cfg, progress), src, cfg, stage.path, ref, wall0, scans)
+        say = getattr(progress, "finishing", None) or (lambda what: None)  # (the CLI's Progress says it)
+        summary = run_filter(
+            frames(src, cfg, progress), src, cfg, stage.path, ref, wall0, scans, finishing=say
+        )
+        if plot or mcap_path:
+            say(" and ".join(w for w, on in (("the figures", plot), ("the results MCAP", mcap_path)) if on))
         write_extras(stage, plot, mcap_out, mcap_path, ref.gt_path, scans, src.stats.anchors, offset)
         summary = summary.with_out_dir(stage.commit())
     return summary
@@ -165,9 +170,11 @@ def run_filter(
     wall0: float,
     scans: ScanStore | None = None,
     stepped: Callable[[int], None] | None = None,
+    finishing: Callable[[str], None] = lambda what: None,
 ) -> RunSummary:
     """The filter over the front end's frames, a run's files written into the (staging) directory
-    ``dest`` (the scans kept in ``scans`` when given); ``stepped(n)`` after each of its n steps;
+    ``dest`` (the scans kept in ``scans`` when given); ``stepped(n)`` after each of its n steps,
+    ``finishing(what)`` as each stage after the last step begins (their work has no count to show);
     returns the summary."""
     slam = (
         HierarchicalSlam(cfg, src.laser2base)
@@ -201,11 +208,13 @@ def run_filter(
         check_processed(src, slam.n_steps, writer.totals.points)
         warn_mount(src, cfg)
         if graph is not None:
+            finishing("the last loop closing and the smoothing")
             learnt = src.matcher is not None and cfg.graph.recalibrate
             graph.finish(src.matcher.fusion.carry_back if learnt else None)
             for warning in (graph.solver_warning(), graph.refinement.solver_warning()):
                 if warning:
                     src.reader.stats.warn(warning)
+        finishing("the map and the tables")
         summary = writer.finish(slam.landmark_table(), src, cfg, ref, wall0, graph)
     c = summary.counts
     log.info(

@@ -73,6 +73,22 @@ def test_compare_shows_progress_after_extraction(sim_log, tmp_path, monkeypatch)
     assert doing == sorted(doing) and set(doing) == {"icnn", "pca"}
 
 
+def test_a_run_says_what_it_does_after_its_last_step(sim_log, tmp_path, monkeypatch):
+    """After the last scan the bar stood at its count while the run closed loops, smoothed, wrote the
+    map and drew the figures: on a long log seconds without a sign (a new-user walkthrough). Each stage
+    is said as it begins."""
+    monkeypatch.setattr(progress_module, "SHOW_AFTER", 0.0)
+    args = ["run", str(sim_log), "--out", str(tmp_path / "r"), "--max-scans", "20", "--plot"]
+    res = CliRunner().invoke(cli, args)
+    assert res.exit_code == 0, res.output
+    said = [
+        re.search(r"finishing: (.*?) +\d+s$", line)[1]
+        for line in res.stderr.splitlines()
+        if "finishing" in line
+    ]
+    assert said == ["the last loop closing and the smoothing", "the map and the tables", "the figures"]
+
+
 def test_what_runs_now_is_shown_without_restarting_the_rate():
     clock = FakeClock()
     p = Progress("log", True, clock)

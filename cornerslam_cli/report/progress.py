@@ -111,6 +111,19 @@ class Progress(StatusLine):
         else:
             self._draw(f"{self.label} {done} {unit} {el:5.0f}s")
 
+    def finishing(self, what: str) -> None:
+        """Say what the command does after its last step (work with no count): drawn at once, in place
+        of the bar, which stood at its last count while the run closed loops, smoothed and wrote (a
+        long log: seconds without a sign)."""
+        if not self.enabled:
+            return
+        now = self.clock()
+        el = now - self.t0
+        if el < SHOW_AFTER:
+            return
+        self.last = now
+        self._draw(f"{self.label} finishing: {what} {el:5.0f}s")
+
     def _sample(self, now: float, done: int, unit: str) -> None:
         if unit != self.unit:
             self.unit = unit
