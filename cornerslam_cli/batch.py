@@ -42,27 +42,18 @@ import logging
 import os
 import time
 from collections.abc import Callable, Sequence
-from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 
 from . import __version__
 from .blas import single_threaded_blas, single_threaded_blas_env
-from .errors import (
-    CornerslamError,
-    OutputError,
-    ResultsError,
-    display_path,
-    for_command,
-    one_line,
-    save_traceback,
-)
+from .errors import CornerslamError, ResultsError, display_path, for_command, one_line, save_traceback
 from .report.comparison import BATCH_FIGURES as FIGURES
 from .report.comparison import BATCH_MORE_FIGURES as MORE_FIGURES
 from .report.comparison import batch_figures
 from .report.oserrors import output_errors
 from .report.outdir import alone_in, clear_stale, staged_write
-from .report.ownership import claim_dir, files_intact, other_log_error, unclaim
+from .report.ownership import claim_dir, files_intact, other_log_error
 from .results import Hashes, RunSummary
 from .sweep import Combo
 from .workers import end_children, warnings_kept, warnings_once
@@ -146,16 +137,9 @@ def _run_claimed(
     config_path: str | None = None,
 ) -> list[dict]:
     """:func:`_run_batch` once the Dask ``client`` (None: local processes) is connected."""
-    made = not os.path.lexists(out)
     target = claim_dir(out, "batch")  # refuses a directory that is not a batch's, before any work
-    with ExitStack() as stack:
-        try:  # a second batch (or compare) into it is refused (resolved: `--out .` marks it beside itself,
-            # and any spelling of it finds the mark)
-            stack.enter_context(alone_in(target, display_path(out)))
-        except OutputError:
-            if made:  # (not left behind, empty but for its marker)
-                unclaim(target)
-            raise
+    with alone_in(target, display_path(out)):  # a second batch (or compare) into it is refused (resolved:
+        # `--out .` marks it beside itself, and any spelling of it finds the mark)
         return _run_alone(combos, out, jobs, client, progress, config_path)
 
 
@@ -469,8 +453,8 @@ def _greets_as_dask(host: str, port: int, scheduler: str) -> None:
             greeted = False
     if not greeted:
         raise CornerslamError(
-            f"what answers at '{scheduler}' is not a Dask scheduler (it said nothing in "
-            f"{CONNECT_TIMEOUT:.0f} s, or hung up): the dashboard's port?",
+            f"what answers at '{scheduler}' is not a Dask scheduler, or one too busy to answer (it said "
+            f"nothing in {CONNECT_TIMEOUT:.0f} s, or hung up): the dashboard's port?",
             "give the scheduler's address: `dask scheduler` prints it as 'Scheduler at: tcp://…', "
             "port 8786 unless set",
         )

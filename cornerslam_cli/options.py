@@ -22,14 +22,13 @@ CONFIG_COPIES = "config_copies"  # ctx.meta: temporary copy of a piped --config 
 
 
 def verbosity_options(f=None, *, progress: bool = True, steps: bool = True):
-    """``-v`` (repeatable) and ``-q``; their help says only what the command has: a progress bar
-    (``progress``), filter steps to log (``steps``). ``@verbosity_options`` or
-    ``@verbosity_options(progress=False, steps=False)``."""
+    """``-v`` (repeatable) and ``-q``, their help saying only what the command has: a progress bar
+    (``progress``), filter steps to log (``steps``). ``@verbosity_options(progress=False, ...)`` too."""
     if f is None:
         return lambda g: verbosity_options(g, progress=progress, steps=steps)
     more = "-v what is read and each stage's totals, -vv every filter step" if steps else "-v what is read"
     f = click.option("-v", "--verbose", count=True, help=f"More log output: {more}.")(f)
-    quiet = "Only errors; no warnings, no progress bar." if progress else "Only errors; no warnings."
+    quiet = "Only errors; no warnings" + (", no progress bar." if progress else ".")
     f = click.option("-q", "--quiet", is_flag=True, help=quiet)(f)
     return f
 

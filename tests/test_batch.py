@@ -928,6 +928,25 @@ def test_a_marker_cut_short_by_a_full_disk_does_not_refuse_the_next_batch(logs, 
     assert read_batch(out / "batch.csv")[0]["status"] == "ok"
 
 
+@pytest.mark.parametrize("what", ["a directory of that name", "another file of the partial's name"])
+def test_only_a_marker_cut_short_makes_a_directory_count_as_empty(logs, tmp_path, what):
+    """A directory holding only entries named as the marker is taken as empty only when they are a
+    marker cut short (a review: a directory named .cornerslam-output with a user's file in it, or a
+    .partial holding the user's JSON, was replaced by a run, the file deleted)."""
+    out = tmp_path / "out"
+    if what == "a directory of that name":
+        (out / MARKER).mkdir(parents=True)
+        (out / MARKER / "thesis.tex").write_text("precious\n")
+    else:
+        out.mkdir()
+        (out / f"{MARKER}.partial").write_text('{"my": "settings"}\n')
+    res = CliRunner().invoke(cli, ["run", str(logs[0]), "--out", str(out), "-q"])
+    assert res.exit_code == 2 and "not empty and was not written by cornerslam" in res.output, res.output
+    assert sorted(p.name for p in out.rglob("*")) == sorted(
+        ["thesis.tex", MARKER] if what == "a directory of that name" else [f"{MARKER}.partial"]
+    )
+
+
 @pytest.mark.parametrize("server", ["http", "hangs up"])
 def test_a_scheduler_address_where_no_dask_scheduler_answers_is_refused(logs, tmp_path, monkeypatch, server):
     """--scheduler at the dashboard's port (8787 for 8786) or any server that waits for a request: the

@@ -784,3 +784,19 @@ def test_two_clocks_are_not_taken_for_microseconds(files, which):
     assert "microseconds" not in res.stderr and "does not overlap the trajectory" in res.stderr
     wall = f"trajectory '{est}'" if which == "trajectory" else f"ground truth '{gt}'"
     assert f"{wall} is stamped in wall-clock time (seconds since 1970)" in res.stderr
+
+
+def test_a_nanosecond_ground_truth_at_1_khz_is_still_named_as_such():
+    """Nanoseconds since 1970 read as float64 are 256 ns apart at best: a 1 kHz ground truth's spacing
+    came out at 0.000999936 s, under the 1 ms the units reading first asked (a review), and the error
+    said "does not overlap" instead of naming the nanoseconds."""
+    from cornerslam_cli.evaluate import overlap_problem
+
+    t0 = 1_700_000_000.0
+    est = t0 + np.arange(0.0, 60.0, 0.1)
+    gt = np.array([float(int(t0 * 1e9) + k * 1_000_000) for k in range(60_000)])
+    why, hint = overlap_problem(est, gt, "gt.tum")
+    assert (
+        why.startswith("gt.tum has its stamps in nanoseconds, not seconds")
+        and hint == "write its stamps in seconds"
+    )

@@ -160,7 +160,6 @@ def test_a_run_and_a_batch_beside_a_held_sibling_of_their_own_pid_exit_2(tmp_pat
             "(wait for it to finish, or give another output directory)"
         )
         assert theirs.exists() and not (out / "summary.json").exists() and not (out / "batch.csv").exists()
-        assert not out.exists()  # (a refused batch left its new --out, empty but for its marker)
 
 
 # ---------------------------------------------------------------------------- the pid rule, kept
@@ -289,3 +288,40 @@ def test_a_replaced_directory_is_held_while_it_is_aside(tmp_path, monkeypatch):
     monkeypatch.setattr("cornerslam_cli.report.outdir.remove", cleared_first)
     writes(out, "partial")
     assert seen == [True] and siblings(tmp_path) == []
+
+
+def test_a_commit_does_not_wait_on_a_users_flock_of_the_output(tmp_path):
+    """`flock OUT cornerslam run … --out OUT` (a job-serialising pattern): the commit waited for ever for
+    a shared flock on the output it replaces, its SIGINT and SIGTERM deferred — only SIGKILL ended it (a
+    review). Now it does not wait: the replaced directory goes aside untagged, judged by its pid."""
+    out = tmp_path / "out"
+    writes(out, "partial")
+    holder = subprocess.Popen(
+        [sys.executable, "-c", HOLD_EX, str(out)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL
+    )
+    try:
+        assert holder.stdout.readline() == b"held\n"
+        done = subprocess.run(
+            [sys.executable, "-c", WRITE_AGAIN, str(out)], capture_output=True, text=True, timeout=60
+        )
+    finally:
+        holder.kill()
+        holder.communicate()
+    assert done.returncode == 0, done.stderr
+    assert (out / "a.csv").read_text() == "y\n" and siblings(tmp_path) == []
+
+
+HOLD_EX = """
+import fcntl, os, sys, time
+fcntl.flock(os.open(sys.argv[1], os.O_RDONLY), fcntl.LOCK_EX)
+print("held", flush=True)
+time.sleep(120)
+"""
+WRITE_AGAIN = """
+import sys
+from pathlib import Path
+from cornerslam_cli.report.outdir import StagedDir
+with StagedDir(Path(sys.argv[1])) as st:
+    (st.path / "a.csv").write_text("y\\n")
+    st.commit()
+"""

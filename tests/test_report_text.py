@@ -305,7 +305,7 @@ def test_the_run_says_how_well_its_map_agrees_with_itself():
     )  # fmt: skip
     s = make_summary()
     assert summary_lines(replace(s, consistency=c))[-2] == (
-        "map consistency: revisit misalignment 8.6 cm on 42 % of points (odometry 11.3 cm), "
+        "map consistency: revisit misalignment 8.6 cm on 42 % of points (odometry 11.3 cm on 35 %), "
         "map cells 0.67× the odometry's"
     )
     never = replace(c, revisit_mean=None, revisit_share=0.0, odom_revisit_mean=None, odom_revisit_share=0.0)

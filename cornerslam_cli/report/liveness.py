@@ -123,19 +123,20 @@ def make_held(target: Path, what: str, make: Callable[[str], Path]) -> tuple[Pat
 
 
 def hold(path: Path) -> int | None:
-    """An fd holding a shared flock on the directory ``path`` (this process's, about to be renamed to
-    a sibling under the target's lock), or None when it cannot be held."""
+    """An fd holding a shared flock on the directory ``path`` (the output a commit replaces, about to
+    be renamed to a sibling under the target's lock), or None when it cannot be held — without
+    waiting: another process may hold an exclusive flock on a user's directory for as long as it likes
+    (``flock DIR cmd``), and a commit waiting on it, its signals deferred, could not be interrupted."""
     try:
         fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW)
     except OSError:
         return None
     try:
-        if _lock_shared(fd):
-            return fd
-    except OSError:
-        pass
-    os.close(fd)
-    return None
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        return fd
+    except OSError:  # held exclusively by someone (BlockingIOError), or no flock there
+        os.close(fd)
+        return None
 
 
 # ---------------------------------------------------------------------------- others' siblings

@@ -20,7 +20,6 @@ output: report/outdir.py.
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import json
 import os
@@ -212,9 +211,28 @@ def _refuse_foreign(target: Path, kind: str, shown: Path) -> None:
 
 def _unused(target: Path) -> bool:
     """Whether the directory ``target`` holds nothing but, at most, a marker never written whole (a
-    disk full as a command claimed it: a partial one, or an older version's 0-byte one): as empty."""
-    names = {e.name for e in target.iterdir()}
-    return names <= {MARKER, _MARKER_PARTIAL} and read_marker(target) is None
+    disk full as a command claimed it: a partial one, or an older version's 0-byte one): as empty.
+    Such a file is a regular one holding nothing or the start of a marker; anything else is not ours."""
+    entries = list(target.iterdir())
+    if not {e.name for e in entries} <= {MARKER, _MARKER_PARTIAL} or read_marker(target) is not None:
+        return False
+    return all(_marker_cut_short(e) for e in entries)
+
+
+_MARKER_START = b'{\n "cornerslam": '  # how mark_output's JSON begins
+
+
+def _marker_cut_short(path: Path) -> bool:
+    """Whether ``path`` is a regular file holding nothing or a cut-short start of a marker."""
+    try:
+        st = os.lstat(path)
+        if not stat.S_ISREG(st.st_mode) or st.st_size > 1 << 16:
+            return False
+        with open(path, "rb") as f:
+            head = f.read(len(_MARKER_START))
+    except OSError:
+        return False
+    return _MARKER_START.startswith(head)
 
 
 def _batch_runs(out: Path) -> set[str]:
@@ -379,14 +397,6 @@ def claim_dir(path: str | Path, kind: str) -> Path:
         if read_marker(target) is None:
             mark_output(target, kind)
     return target
-
-
-def unclaim(target: Path) -> None:
-    """Take back :func:`claim_dir` of a directory it made: its marker removed, then the directory if that
-    leaves it empty (anything else come into it since is left, with the directory)."""
-    (target / MARKER).unlink(missing_ok=True)
-    with contextlib.suppress(OSError):
-        target.rmdir()
 
 
 FIGURE_CREATOR = "cornerslam extract"  # extract --plot's figures name it in their metadata

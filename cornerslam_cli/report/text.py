@@ -107,7 +107,11 @@ def consistency_line(c: MapConsistency) -> str:
     if not c.revisit_share:
         return f"map consistency: {cells}; the run never comes back to a place (no revisit misalignment)"
     revisit = f"revisit misalignment {100 * c.revisit_mean:.1f} cm on {100 * c.revisit_share:.0f} % of points"
-    odom = f"odometry {100 * c.odom_revisit_mean:.1f} cm" if c.odom_revisit_share else "odometry never back"
+    odom = (
+        f"odometry {100 * c.odom_revisit_mean:.1f} cm on {100 * c.odom_revisit_share:.0f} %"
+        if c.odom_revisit_share
+        else "odometry never back"
+    )
     return f"map consistency: {revisit} ({odom}), {cells}"
 
 
