@@ -243,24 +243,28 @@ def test_the_flocks_are_released_when_the_writing_ends(tmp_path, sim_log):
     """One close-on-exec fd per sibling while it is written, none after: committed, failed, interrupted;
     a batch holds only its mark's (its spawned workers each hold the run they stage)."""
     out = tmp_path / "out"
-    before = _fds()
+
+    def ours() -> dict[int, str]:  # (another test's fd, closed by the garbage collector meanwhile, is not)
+        return {fd: what for fd, what in _fds().items() if str(tmp_path) in what}
+
+    before = ours()
     with StagedDir(out) as st:
         mc = st.stage_file(tmp_path / "r.mcap")
-        fds = [fd for fd, what in _fds().items() if ".partial-" in what]
+        fds = [fd for fd, what in ours().items() if ".partial-" in what]
         assert len(fds) == 2 and not any(os.get_inheritable(fd) for fd in fds)
         mc.write_text("x")
         st.commit()
-    assert _fds() == before
+    assert ours() == before
     for stop in (RuntimeError, KeyboardInterrupt):
         with pytest.raises(stop), StagedDir(out) as st:
             st.stage_file(tmp_path / "r.mcap")
             raise stop
-        assert _fds() == before and siblings(tmp_path) == []
+        assert ours() == before and siblings(tmp_path) == []
     with staged_write(tmp_path / "f.csv") as tmp:
         tmp.write_text("x\n")
     with pytest.raises(RuntimeError), staged_files([tmp_path / "g", tmp_path / "h"]):
         raise RuntimeError
-    assert _fds() == before
+    assert ours() == before
     assert invoke("run", sim_log, "--out", out, "--mcap-out", tmp_path / "s.mcap", "-q").exit_code == 0
     assert (
         invoke(
@@ -268,7 +272,7 @@ def test_the_flocks_are_released_when_the_writing_ends(tmp_path, sim_log):
         ).exit_code
         == 0
     )
-    assert _fds() == before and siblings(tmp_path) == []
+    assert ours() == before and siblings(tmp_path) == []
 
 
 def test_a_replaced_directory_is_held_while_it_is_aside(tmp_path, monkeypatch):
