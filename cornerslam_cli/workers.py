@@ -163,13 +163,20 @@ def _warnings_to(decide: Callable[[logging.LogRecord], bool]) -> Iterator[None]:
         return getattr(record, mark)
 
     handlers = list(logging.getLogger().handlers) or [h for h in (logging.lastResort,) if h is not None]
-    for h in handlers:  # first: a filter that writes (the status line's clearing) must not see a dropped one
-        h.filters.insert(0, only_if)
+    # each list replaced, not changed in place: another thread's emit iterating the old one sees it whole
+    # (an insert or a remove under its iteration skipped a filter: a warning escaped about once in 20,000)
+    with _FILTERS_CHANGED:
+        for h in handlers:  # first: a filter that writes (the status line's clearing) sees no dropped one
+            h.filters = [only_if, *h.filters]
     try:
         yield
     finally:
-        for h in handlers:
-            h.removeFilter(only_if)
+        with _FILTERS_CHANGED:
+            for h in handlers:
+                h.filters = [f for f in h.filters if f is not only_if]
+
+
+_FILTERS_CHANGED = threading.Lock()  # one thread at a time replaces the handlers' filter lists
 
 
 @contextmanager
