@@ -380,7 +380,8 @@ def compare(
         progress.close()
     if not quiet:
         _echo(comparison_lines(summaries))
-        click.echo(f"wrote {out_dir} (report: {out_dir / 'report.html'})")
+        done = out_dir.resolve()  # (as run says it: the whole path, to copy)
+        click.echo(f"wrote {done} (report: {done / 'report.html'})")
 
 
 COMPILED_NOTE = "(the wall time includes compiling the numerical kernels: once, later runs use the cache)"
@@ -680,7 +681,7 @@ def _batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, q
     progress.close()
     if not quiet:
         _echo(batch_lines(rows, [k for k, _ in combos[0].sweep]))
-        click.echo(f"wrote {Path(out) / BATCH_CSV}")
+        click.echo(f"wrote {Path(out).resolve() / BATCH_CSV}")  # (as run says it: the whole path)
     failed, _ = batch_counts(rows)
     if failed:  # as make: a batch with a failed combination is no success (1: a bug or a dead worker; else 2)
         bugs = sum(bool(r["internal"]) for r in rows)

@@ -1261,3 +1261,15 @@ def test_extract_counts_read_in_the_singular_for_one():
     from cornerslam_cli.report.extract_plot import _counted
 
     assert [_counted(n, "corner") for n in (0, 1, 2)] == ["0 corners", "1 corner", "2 corners"]
+
+
+def test_compare_and_batch_say_the_whole_path_they_wrote_as_run_does(sim_log, tmp_path, monkeypatch):
+    """run printed `wrote /abs/path`, compare and batch the path as given (a new-user walkthrough)."""
+    monkeypatch.chdir(tmp_path)
+    res = invoke("compare", sim_log, "--assoc", "icnn", "--out", "c", "--max-scans", "8")
+    assert (
+        res.exit_code == 0
+        and f"wrote {tmp_path / 'c'} (report: {tmp_path / 'c' / 'report.html'})" in res.output
+    )
+    res = invoke("batch", sim_log, "--assoc", "icnn", "--out", "b", "--jobs", "1")
+    assert res.exit_code == 0 and f"wrote {tmp_path / 'b' / 'batch.csv'}" in res.output, res.output
