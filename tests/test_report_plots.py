@@ -345,3 +345,32 @@ def test_characters_the_font_lacks_are_one_warning_in_our_words(tmp_path, caplog
     assert not [w for w in caught if "Glyph" in str(w.message)]
     said = [r.getMessage() for r in caplog.records if "glyph" in r.getMessage()]
     assert said == ["the figures' font (DejaVuSans) has no glyph for 公 办 室: drawn as boxes"]
+
+
+def test_a_character_a_fallback_font_has_is_not_said_to_be_missing(caplog, monkeypatch):
+    """matplotlib falls back through the fonts of the family list (a matplotlibrc naming a CJK font after
+    DejaVu Sans): only the first was asked, and CJK drawn by the second was said to be boxes (a review)."""
+    import matplotlib.ft2font
+    from matplotlib import font_manager
+
+    from cornerslam_cli.report import plots
+
+    class Font:  # the second font has every glyph, the first none
+        def __init__(self, path):
+            self.path = str(path)
+
+        def get_char_index(self, code):
+            return 1 if self.path.endswith("second.ttf") else 0
+
+    caplog.set_level(logging.WARNING, logger=plots.log.name)
+    plt = plots.pyplot()
+    plots._glyphs_noted.clear()
+    monkeypatch.setattr(matplotlib.ft2font, "FT2Font", Font)
+    monkeypatch.setattr(
+        font_manager.fontManager, "_find_fonts_by_props", lambda props: ["a/first.ttf", "b/second.ttf"]
+    )
+    fig, ax = plt.subplots()
+    ax.set_title("办公室")
+    plots._note_missing_glyphs(fig)
+    plt.close(fig)
+    assert not [r for r in caplog.records if "glyph" in r.getMessage()]

@@ -123,9 +123,10 @@ _glyphs_noted: set[str] = set()  # characters already said to be missing (a warn
 
 
 def _note_missing_glyphs(fig) -> None:
-    """One warning for the characters of the figure's texts its font has no glyph for (a log named in
-    CJK): drawn as boxes. matplotlib's own warnings, one per character and figure, are filtered
-    (:func:`agg_backend`)."""
+    """One warning for the characters of the figure's texts none of its fonts has a glyph for (a log
+    named in CJK): drawn as boxes. The fonts are those matplotlib falls back through (the family list of
+    the user's matplotlibrc, where it has one). matplotlib's own warnings, one per character and figure,
+    are filtered (:func:`agg_backend`)."""
     from matplotlib import font_manager
     from matplotlib.ft2font import FT2Font
     from matplotlib.text import Text
@@ -133,13 +134,16 @@ def _note_missing_glyphs(fig) -> None:
     chars = {c for t in fig.findobj(Text) for c in t.get_text() if ord(c) > 127} - _glyphs_noted
     if not chars:
         return
-    font = font_manager.findfont(font_manager.FontProperties())
-    missing = sorted(c for c in chars if FT2Font(font).get_char_index(ord(c)) == 0)
+    props = font_manager.FontProperties()
+    find = getattr(font_manager.fontManager, "_find_fonts_by_props", None)  # (matplotlib ≥ 3.6's fallback)
+    paths = [os.fspath(f) for f in find(props)] if find else [font_manager.findfont(props)]
+    fonts = [FT2Font(path) for path in paths]
+    missing = sorted(c for c in chars if all(f.get_char_index(ord(c)) == 0 for f in fonts))
     _glyphs_noted.update(chars)
     if missing:
         log.warning(
             "the figures' font (%s) has no glyph for %s: drawn as boxes",
-            Path(font).stem,
+            ", ".join(Path(path).stem for path in paths),
             " ".join(missing[:10]) + (" …" if len(missing) > 10 else ""),
         )
 
