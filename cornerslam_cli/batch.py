@@ -189,12 +189,12 @@ def _run_alone(
             todo.append(i)
     writer = _CsvWriter(out / BATCH_CSV, columns)
     writer.write(rows)
-    if progress is not None:
-        progress(state)
 
-    def tick() -> None:  # between finished combinations: the status line's clock and ETA go on
+    def tick() -> None:  # the counts to the status line (between finished combinations: its clock, its ETA)
         if progress is not None:
             progress(state)
+
+    tick()
 
     def finished(i: int, result: dict) -> None:
         name = display_path(combos[i].log)  # which log a warning is of (as batch.csv's log), unless it says
@@ -203,8 +203,7 @@ def _run_alone(
         rows[i] = _row(combos[i], **result)
         setattr(state, result["status"], getattr(state, result["status"]) + 1)
         writer.write(rows, throttle=True)
-        if progress is not None:
-            progress(state)
+        tick()
 
     todo.sort(key=lambda i: -_size(combos[i].log))  # biggest logs first: a shorter tail on N workers
     picked = [(i, combos[i]) for i in todo]

@@ -300,6 +300,7 @@ def run(
             span=span,
             compiling=lambda: compiled.append(_say_compiling(quiet)),
             notes=notes,
+            finishing=progress.finishing,
         )
     finally:
         progress.close()

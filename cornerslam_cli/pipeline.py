@@ -53,6 +53,7 @@ def run(
     compiling: Callable[[], None] | None = None,
     inside: str | None = None,
     notes: Sequence[str] = (),
+    finishing: Callable[[str], None] = lambda what: None,
 ) -> RunSummary:
     """Run corner EKF-SLAM on one log and write the output directory atomically: the tables, with
     ``plot`` the figures and report.html, and ``mcap_out`` beside it, all committed at once.
@@ -62,7 +63,8 @@ def run(
     ``config_path`` — are never written over; ``span``: the part of the log to process (span.py);
     ``compiling``: frontend.open_input's; ``inside="batch"``: a batch's run, written inside its
     directory (any other output there is refused); ``notes``: warnings already said about the config
-    (workers.warnings_copied), kept for summary.json's list.
+    (workers.warnings_copied), kept for summary.json's list; ``finishing(what)``: as each stage after the
+    last step begins (the CLI's Progress.finishing).
     Returns the summary (also written to summary.json) with ``out_dir``, the committed directory.
     """
     wall0 = time.perf_counter()
@@ -79,12 +81,12 @@ def run(
         if mcap_path:
             warn_second_parent(src)
             offset = recorder_clock(src)
-        say = getattr(progress, "finishing", None) or (lambda what: None)  # (the CLI's Progress says it)
         summary = run_filter(
-            frames(src, cfg, progress), src, cfg, stage.path, ref, wall0, scans, finishing=say
+            frames(src, cfg, progress), src, cfg, stage.path, ref, wall0, scans, finishing=finishing
         )
         if plot or mcap_path:
-            say(" and ".join(w for w, on in (("the figures", plot), ("the results MCAP", mcap_path)) if on))
+            extras = (("the figures", plot), ("the results MCAP", mcap_path))
+            finishing(" and ".join(what for what, made in extras if made))
         write_extras(stage, plot, mcap_out, mcap_path, ref.gt_path, scans, src.stats.anchors, offset)
         summary = summary.with_out_dir(stage.commit())
     return summary
