@@ -318,7 +318,7 @@ class HierarchicalSlam:
         it is the fallback for those, and the dearest verification (a correlative search or two)."""
         cfg, searched = self.cfg.loops, 0
         for i, r in enumerate(found):
-            if searched >= cfg.point_searches or sum(f.accepted for f in found) >= cfg.max_closures:
+            if searched >= cfg.point_searches or sum(r.accepted for r in found) >= cfg.max_closures:
                 return
             a = self.closed[r.submap_from]
             if r.match.reason not in TO_POINTS or not searchable(a, b):  # (one that cannot run spends none)
