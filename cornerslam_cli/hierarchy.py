@@ -11,8 +11,7 @@ GTSAM) with loop closures verified by the configured associator (graph/loops.py)
   within ``loops.candidate_distance`` + ``candidate_sigmas`` σ of the closed submap's (its global
   marginal) under the graph's estimate (nearest first, at most ``max_candidates``); each is verified
   without a pose prior (graph/loops.py) — or, with too few corners in common or a corner pose the
-  points refute, on its points around the graph's prediction (graph/points.py), when no candidate
-  placed the submap on corners —, its covariance scaled
+  points refute, on its points around the graph's prediction (graph/points.py) —, its covariance scaled
   by the front end's learnt scale of ICP covariances and, as a relation of the two origins, the filter's
   covariances of the two submaps' overlap poses added (graph/submap.overlap_covariances; the keyframe graph
   takes the fit's own where the submaps overlap), then gated against the graph's prediction and its
@@ -271,14 +270,29 @@ class HierarchicalSlam:
     def _close_loops(self, b: Submap, step: int) -> None:
         """Verify the candidates for submap ``b``, gate them, add the accepted ones to the graph."""
         cfg = self.cfg.loops
-        found: list[LoopRecord] = []
+        found, searched = [], 0
         for a in self.candidates(b):
             m = match_submaps(a, b, cfg, self.loop_associate, self.cfg.scan_match, self.local_maps)
-            found.append(self._judged(a, b, step, m))
+            on_points = cfg.point_search and searched < cfg.point_searches and m.reason in TO_POINTS
+            on_points = on_points and searchable(a, b)  # (one that cannot run spends no search)
+            searched += on_points
+            pred = self.graph.relative(a.index, b.index) if on_points or m.accepted else None
+            if on_points:
+                kept = 0 if m.reason == LOW_FITNESS else m.n_corners  # (0: the points refuted their pose)
+                found_on_points = match_points(a, b, *pred, cfg, self.cfg.scan_match, self.local_maps)
+                m = replace(found_on_points, n_corners=kept)
+            m = replace(m, cov=m.cov * self._match_scale)
+            shares = overlap_covariances(a, b, m.pose) if m.accepted else None  # (as relations of origins)
+            a_side = None if shares is None else m.cov + shares[0]
+            cov = None if a_side is None else a_side + shares[1]
+            d2 = chi2(*pred, m.pose, cov) if m.accepted else float("nan")
+            reason = m.reason or ("" if d2 <= cfg.gate else f"disagrees with the graph (chi2 {d2:.1f})")
+            ok = not reason
+            if ok and on_points:
+                reason = POINTS
+            found.append(LoopRecord(step, a.index, b.index, m, ok, reason, d2, -1, on_points, cov, a_side))
             if sum(r.accepted for r in found) >= cfg.max_closures:
                 break
-        if cfg.point_search and not any(r.accepted for r in found):
-            self._search_points(b, step, found)
         # (corner-verified ones only: a match found on points around the graph's own prediction is no
         # evidence against it)
         gated = [
@@ -311,42 +325,6 @@ class HierarchicalSlam:
             self.loops.append(r)
         if added:
             self._optimize(self.graph)
-
-    def _search_points(self, b: Submap, step: int, found: list[LoopRecord]) -> None:
-        """The point search (graph/points.py) for the nearest ``loops.point_searches`` candidates the
-        corners could not verify, in place in ``found``: only for a submap the corners placed nowhere —
-        it is the fallback for those, and the dearest verification (a correlative search or two)."""
-        cfg, searched = self.cfg.loops, 0
-        for i, r in enumerate(found):
-            if searched >= cfg.point_searches or sum(r.accepted for r in found) >= cfg.max_closures:
-                return
-            a = self.closed[r.submap_from]
-            if r.match.reason not in TO_POINTS or not searchable(a, b):  # (one that cannot run spends none)
-                continue
-            searched += 1
-            pred = self.graph.relative(a.index, b.index)
-            kept = 0 if r.match.reason == LOW_FITNESS else r.match.n_corners  # (0: the points refuted it)
-            m = match_points(a, b, *pred, cfg, self.cfg.scan_match, self.local_maps)
-            found[i] = self._judged(a, b, step, replace(m, n_corners=kept), pred)
-
-    def _judged(self, a: Submap, b: Submap, step: int, m: LoopMatch, pred: tuple | None = None) -> LoopRecord:
-        """A verified pair's record: the match's covariance scaled by the front end's learnt scale and
-        made a relation of the two origins, and, when verified, gated against the graph's prediction
-        ``pred`` (asked of the graph when not given; given: found on points around it)."""
-        on_points = pred is not None
-        if m.accepted and pred is None:
-            pred = self.graph.relative(a.index, b.index)
-        m = replace(m, cov=m.cov * self._match_scale)
-        shares = overlap_covariances(a, b, m.pose) if m.accepted else None  # (as relations of origins)
-        a_side = None if shares is None else m.cov + shares[0]
-        cov = None if a_side is None else a_side + shares[1]
-        d2 = chi2(*pred, m.pose, cov) if m.accepted else float("nan")
-        gated = d2 <= self.cfg.loops.gate
-        reason = m.reason or ("" if gated else f"disagrees with the graph (chi2 {d2:.1f})")
-        ok = not reason
-        if ok and on_points:
-            reason = POINTS
-        return LoopRecord(step, a.index, b.index, m, ok, reason, d2, -1, on_points, cov, a_side)
 
     def consistent(self, closures: list[LoopRecord]) -> bool:
         """Whether one submap's closures agree on where it is, two at a time: placed within AGREE_XY /

@@ -377,18 +377,10 @@ def test_pairs_the_corners_cannot_verify_are_verified_on_points(
         hs.finish()
         assert hs.loops
         if enabled and on_points:
-            searched = [r for r in hs.loops if r.on_points]
-            assert priors and len(searched) == len(priors)
-            assert all(r.accepted and r.reason == "verified on points" for r in searched)
-            # the nearest candidates, until max_closures of them are accepted; the rest as the corners said
-            for b, n in Counter(r.submap_to for r in hs.loops).items():
-                rows = [r for r in hs.loops if r.submap_to == b]
-                k = min(n, cfg.loops.max_closures)
-                assert all(r.on_points for r in rows[:k]) and not any(r.on_points for r in rows[k:])
-                assert all(r.reason == corner_reason for r in rows[k:])
+            assert priors and all(r.accepted and r.reason == "verified on points" for r in hs.loops)
             # the corners' count is kept for loops.csv, unless the points refuted the corners' pose
             kept = 0 if corner_reason == "low fitness" else 2
-            assert all(r.match.n_corners == kept for r in searched)
+            assert all(r.match.n_corners == kept for r in hs.loops)
         else:
             assert not priors and not any(r.accepted for r in hs.loops)
             assert all(r.reason == corner_reason for r in hs.loops)
@@ -431,34 +423,6 @@ def test_points_are_searched_for_the_nearest_candidates_only(sim_log, monkeypatc
     assert all(searched[b] == 1 for b in per_submap)
     for b in per_submap:  # the nearest (first) candidate was the one searched
         assert next(r for r in hs.loops if r.submap_to == b).reason == "ambiguous"
-
-
-def test_points_are_searched_only_for_a_submap_the_corners_placed_nowhere(sim_log, monkeypatch):
-    # the point search is the fallback for a submap no corner closure placed: one placed on corners (a
-    # closure inside the gate) spends none, even when a nearer candidate had too few corners
-    placed = {}
-
-    class Corners(FakeVerifier):
-        def __call__(self, a, b, cfg, associate, icp, maps=None):
-            if placed.setdefault(b.index, b.index % 2 == 0) and a.index == b.index - 3:
-                return super().__call__(a, b, cfg, associate, icp, maps)
-            return LoopMatch(np.full(3, np.nan), np.full((3, 3), np.nan), 2, 0.0, False, "few corners")
-
-    searched = []
-
-    def points(a, b, prior, prior_cov, cfg, icp, maps=None):
-        searched.append(b.index)
-        return LoopMatch(compose(prior, (0.01, 0.0, 0.0)), np.diag([1e-4, 1e-4, 1e-5]), 0, 0.9, True, "")
-
-    monkeypatch.setattr(hierarchy, "match_points", points)
-    hs = run_with_verifier(sim_log, monkeypatch, Corners(np.zeros(3)), "loops.point_searches=1")
-    on_corners = {r.submap_to for r in hs.loops if r.accepted and not r.on_points}
-    candidates = {r.submap_to for r in hs.loops}
-    assert on_corners and candidates - on_corners, "the fixture should place some submaps on corners, not all"
-    assert sorted(searched) == sorted(candidates - on_corners)  # one search each, for the others only
-    for b in on_corners:  # its nearer candidates, too few corners, stayed so
-        assert not any(r.on_points for r in hs.loops if r.submap_to == b)
-        assert any(r.reason == "few corners" for r in hs.loops if r.submap_to == b)
 
 
 def test_a_step_in_the_global_frame_carries_the_lever_arm_of_its_origins_heading():

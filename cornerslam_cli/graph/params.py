@@ -64,9 +64,9 @@ class LoopConfig:
     # point_distinct × its own (not a corridor),
     # and no pose of the window away from it scores point_distinct × as well (not a repeated structure)
     point_search: bool = True
-    # ... for at most this many candidates per closed submap (nearest first), and only for one no
-    # candidate placed on corners (the search is their fallback): each costs a correlative search or
-    # two, 5–15 ms; at 8 a close, loop closing made infinite-corridor's last 10 % of steps 2.6× its first
+    # ... for at most this many candidates per closed submap (nearest first): each costs a correlative
+    # search or two, ~15–25 ms; at 8 a close, loop closing made infinite-corridor's last 10 % of steps 2.6×
+    # its first
     point_searches: int = num(1, ge=0, le=1000)
     # m, and at most 25 cells of the point search's grid (graph/points.py: 2 × scan_match.search_resolution,
     # 5 m). 5 (was 2): the window must cover the prediction's ±3σ for "no other pose scores as well" to
