@@ -76,9 +76,9 @@ def split(msgs) -> tuple[list[Scan], list[OdomSample]]:
     return [m for m in msgs if isinstance(m, Scan)], [m for m in msgs if isinstance(m, OdomSample)]
 
 
-def write_messages_mcap(path: Path, messages, encoding: str = "cdr") -> Path:
+def write_messages_mcap(path: Path, messages, encoding: str = "cdr", declared=()) -> Path:
     """MCAP with arbitrary topics: messages = [(topic, typename, log_time_ns, data)]; ``encoding`` cdr,
-    ros1 (schemas from rosbags) or json."""
+    ros1 (schemas from rosbags) or json; ``declared``: (topic, typename) channels with no message."""
     from mcap.writer import CompressionType, Writer
 
     from cornerslam_cli.logs.writers import serializer
@@ -88,6 +88,9 @@ def write_messages_mcap(path: Path, messages, encoding: str = "cdr") -> Path:
         w = Writer(f, compression=CompressionType.NONE)
         w.start(profile="ros2", library="test")
         chans = {}
+        for topic, typename in declared:
+            sid = w.register_schema(typename, ros.schema_encoding, ros.msgdef(typename).encode())
+            chans[topic] = w.register_channel(topic, ros.message_encoding, sid)
         for topic, typename, t, data in messages:
             if topic not in chans:
                 sid = w.register_schema(typename, ros.schema_encoding, ros.msgdef(typename).encode())

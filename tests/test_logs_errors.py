@@ -211,7 +211,7 @@ def test_several_laserscans_listed(tmp_path):
     p = write_messages_mcap(
         tmp_path / "two.mcap", scan_messages("/scan") + scan_messages("/scan2") + odom_messages()
     )
-    with pytest.raises(LogError, match="2 LaserScan topics: /scan, /scan2") as err:
+    with pytest.raises(LogError, match=r"2 LaserScan topics: /scan, /scan2 \(choose") as err:
         open_log(p).messages()
     assert "--scan-topic" in err.value.hint
     scans, odoms = split(open_log(p, scan_topic="/scan2").messages())
@@ -221,6 +221,27 @@ def test_several_laserscans_listed(tmp_path):
     res = CliRunner().invoke(cli, ["info", str(p)])
     assert res.exit_code == 2 and "2 LaserScan topics" in res.stderr
     assert "  laser     - (no scan topic chosen)" in res.stdout.splitlines() and "not on tf" not in res.stdout
+
+
+def test_a_laserscan_topic_declared_but_never_published_gives_way(tmp_path):
+    """`ros2 bag record -a` declares every topic, a laser that never published too: the one LaserScan
+    topic with messages is taken, and info says why (it asked for --scan-topic: a ROS-user probe)."""
+    empty = [("/scan_rear", "sensor_msgs/msg/LaserScan")]
+    p = write_messages_mcap(tmp_path / "rec.mcap", scan_messages("/scan") + odom_messages(), declared=empty)
+    log = open_log(p)
+    scans, odoms = split(log.messages())
+    assert len(scans) == 5 and log.scan_topic == "/scan"
+    assert "/scan_rear has no messages: LaserScan topic /scan taken" in log.info().notes
+    # two with messages: the user chooses, and the empty one is named apart
+    p = write_messages_mcap(
+        tmp_path / "two.mcap",
+        scan_messages("/scan") + scan_messages("/scan2") + odom_messages(),
+        declared=empty,
+    )
+    with pytest.raises(
+        LogError, match=r"2 LaserScan topics: /scan, /scan2 \(and /scan_rear with no messages\)"
+    ):
+        open_log(p).messages()
 
 
 def test_a_bags_metadata_file_is_told_to_give_its_directory(tmp_path):

@@ -245,6 +245,7 @@ class RosLogReader:
         self._channels = {c.topic: c for c in source.channels()}
         self._want_scan = self._resolved(scan_topic)
         self._want_odom = self._resolved(odom_topic)
+        self._scan_note = ""  # why the scan topic was chosen among several (info's notes)
         self._scan_sel = self._select_scan()
         self.scan_topic = self._scan_sel[0]  # (the odometry's choice looks at its namespace)
         self._odom_sel = self._select_odom()
@@ -340,10 +341,18 @@ class RosLogReader:
                 f"log '{name}' has no sensor_msgs/LaserScan topic",
                 "record the laser as sensor_msgs/LaserScan; `cornerslam info LOG` lists the topics",
             )
+        live = [t for t in scans if self._channels[t].count != 0]  # (None: not known)
+        if len(scans) > 1 and len(live) == 1:  # the others declared, never published (`ros2 bag record -a`)
+            empty = [t for t in scans if t not in live]
+            self._scan_note = f"{listing(empty)} has no messages: LaserScan topic {live[0]} taken"
+            logger.info("log '%s': %s", name, self._scan_note)
+            return live[0], "", ""
         if len(scans) > 1:
+            listed, empty = live or scans, [t for t in scans if t not in live]
+            also = f" (and {listing(empty)} with no messages)" if live and empty else ""
             return (
                 "",
-                f"log '{name}' has {len(scans)} LaserScan topics: {listing(scans)}",
+                f"log '{name}' has {len(listed)} LaserScan topics: {listing(listed)}{also}",
                 "choose one with --scan-topic",
             )
         return scans[0], "", ""
@@ -539,7 +548,9 @@ class RosLogReader:
             odom_topic=self.odom_topic,
             odom_source=self._odom_source_label(),
             problems=problems,
-            notes=tuple(n for n in (self._odom_sel.note, self._clock_note() if inspect else "") if n),
+            notes=tuple(
+                n for n in (self._scan_note, self._odom_sel.note, self._clock_note() if inspect else "") if n
+            ),
         )
 
     # ---------------------------------------------------------------- decoding
