@@ -267,14 +267,13 @@ def overlap_problem(
         )
         return why, "give a ground truth with poses throughout the trajectory"
     for unit, scale in (("nanoseconds", 1e9), ("microseconds", 1e6), ("milliseconds", 1e3)):
-        # (so read, stamps ≥ FASTEST_POSES apart: seconds since 1970 as µs fall in a half-hour span from 0)
-        if _within(est_t, gt_t / scale) >= 2 and _spacing(gt_t / scale) >= FASTEST_POSES:
+        if _reads_as(gt_t / scale, est_t):
             why = (  # a ROS exporter's integer stamps: TUM's are seconds
                 f"{gt_name} has its stamps in {unit}, not seconds ({gt_t[0]:.0f} to {gt_t[-1]:.0f}; "
                 f"the trajectory {est_t[0]:.3f} to {est_t[-1]:.3f} s)"
             )
             return why, "write its stamps in seconds"
-        if _within(est_t / scale, gt_t) >= 2 and _spacing(est_t / scale) >= FASTEST_POSES:
+        if _reads_as(est_t / scale, gt_t):
             why = (
                 f"{est_name} has its stamps in {unit}, not seconds ({est_t[0]:.0f} to {est_t[-1]:.0f}; "
                 f"{gt_name} {gt_t[0]:.3f} to {gt_t[-1]:.3f} s)"
@@ -293,6 +292,18 @@ def overlap_problem(
 
 FASTEST_POSES = 1e-5  # s: the closest spacing stamps are taken to have (ns since 1970 as floats: 256 ns)
 EPOCH_STAMPS = 1e8  # s: stamps from here on (1973) are read as wall-clock time
+SPAN_RATIO = 20.0  # two files' time spans, one read in other units, at most this many times apart
+
+
+def _reads_as(scaled: np.ndarray, other: np.ndarray) -> bool:
+    """Whether stamps ``scaled`` (one file's, divided by a unit's scale) read as the same clock as
+    ``other``'s: two or more within its span, ≥ FASTEST_POSES apart (seconds since 1970 as µs fall in a
+    half-hour span from 0), and the two spans of comparable length (a ground truth stamped from 0 against
+    a log's 1000–1118 s: read as ms, the log's 118 s became 0.118 s inside it — two clocks, not units)."""
+    if _within(scaled, other) < 2 or _spacing(scaled) < FASTEST_POSES:
+        return False
+    a, b = float(scaled[-1] - scaled[0]), float(other[-1] - other[0])
+    return max(a, b) <= SPAN_RATIO * min(a, b)
 
 
 def _within(t: np.ndarray, span: np.ndarray) -> int:

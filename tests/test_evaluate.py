@@ -800,3 +800,23 @@ def test_a_nanosecond_ground_truth_at_1_khz_is_still_named_as_such():
         why.startswith("gt.tum has its stamps in nanoseconds, not seconds")
         and hint == "write its stamps in seconds"
     )
+
+
+@pytest.mark.parametrize("gt_first", [True, False])
+def test_a_ground_truth_stamped_from_0_is_not_taken_for_milliseconds(gt_first):
+    """A log stamped 1000–1118 s against its ground truth exported from 0 (0–118 s): the log's stamps
+    ÷ 1000 fall inside the ground truth's span, and the error said the trajectory — cornerslam's own
+    output — "has its stamps in milliseconds" (an evo-user probe). Read so, 118 s became 0.118 s: two
+    clocks, not units. A real unit error keeps the spans alike, and is still named."""
+    from cornerslam_cli.evaluate import overlap_problem
+
+    log = 1000.0 + np.arange(0.0, 118.0, 0.5)
+    gt = log - 1000.0
+    est_t, gt_t = (log, gt) if gt_first else (gt, log)
+    why, hint = overlap_problem(est_t, gt_t, "gt.tum")
+    assert "milliseconds" not in why and why.startswith("gt.tum does not overlap the trajectory"), why
+    assert "Its stamps must use the log's clock" in hint
+    why, hint = overlap_problem(log, log * 1e3, "gt.tum")  # the same span in ms: named
+    assert why.startswith("gt.tum has its stamps in milliseconds, not seconds") and "seconds" in hint
+    why, _ = overlap_problem(log, log[:20] * 1e3, "gt.tum")  # a ground truth of a tenth of the run, in ms
+    assert why.startswith("gt.tum has its stamps in milliseconds, not seconds")
