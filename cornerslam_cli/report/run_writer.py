@@ -32,7 +32,7 @@ from ..results import Accuracy, RunSummary
 from .consistency import store_consistency
 from .occupancy import ScanStore, build_grid, draw_grid, write_grid
 from .odom_frame import in_odom_frame, landmarks_in_odom_frame
-from .summary import Totals, build_summary, reference_hash
+from .summary import Totals, build_summary, reference_hash, warn_still_odometry
 from .tables import (
     LINES_COLUMNS,
     LOOP_COLUMNS,
@@ -194,6 +194,7 @@ class RunWriter:
         write_tum(self.dest / "odometry.tum", stamps, odoms)
         if motions is not None:
             write_tum(self.dest / "scan_matched.tum", stamps, motions)
+        warn_still_odometry(src, odoms, motions)
         accuracy, notes = accuracy_of(stamps, poses, odoms, ref, motions, None if graph is None else online)
         for text in notes:
             src.reader.stats.warn(text)

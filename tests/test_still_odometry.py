@@ -1,0 +1,71 @@
+"""Odometry whose pose never moves (a base driver that fills only the twist; an odom→base_link tf left
+at identity) is warned about: the run took the robot as standing still, with no word of it (a ROS-user
+probe: 3.7 m ATE against 0.04)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from cornerslam_cli.cli import cli
+
+
+def with_still_odometry(src: Path, dest: Path) -> Path:
+    """``src`` (an MCAP of nav_msgs/Odometry on /odom) with every odometry pose at the origin, its twist
+    kept (a driver that fills only the twist)."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    with open(src, "rb") as f, open(dest, "wb") as g:
+        w = Writer(g)
+        w.start(profile="ros2", library="test")
+        schemas, channels = {}, {}
+        for schema, channel, message in make_reader(f).iter_messages(log_time_order=True):
+            if schema.id not in schemas:
+                schemas[schema.id] = w.register_schema(schema.name, schema.encoding, schema.data)
+            if channel.id not in channels:
+                channels[channel.id] = w.register_channel(
+                    channel.topic, channel.message_encoding, schemas[schema.id]
+                )
+            data = message.data
+            if channel.topic == "/odom":
+                msg = ts.deserialize_cdr(data, "nav_msgs/msg/Odometry")
+                p = msg.pose.pose
+                p.position.x = p.position.y = p.position.z = 0.0
+                p.orientation.x = p.orientation.y = p.orientation.z = 0.0
+                p.orientation.w = 1.0
+                data = bytes(ts.serialize_cdr(msg, "nav_msgs/msg/Odometry"))
+            w.add_message(channels[channel.id], message.log_time, data, message.publish_time)
+        w.finish()
+    return dest
+
+
+def warnings_of(out: Path) -> list[str]:
+    return json.loads((out / "summary.json").read_text())["warnings"]
+
+
+@pytest.mark.parametrize("moved", [True, False])
+def test_odometry_that_never_moves_is_warned_of_when_the_scans_moved(sim_log, tmp_path, moved):
+    log = with_still_odometry(sim_log, tmp_path / "still.mcap")
+    out = tmp_path / "run"
+    args = ["run", str(log), "--out", str(out), "-q"] + ([] if moved else ["--max-scans", "2"])
+    res = CliRunner().invoke(cli, args)
+    assert res.exit_code == 0, res.output
+    said = [w for w in warnings_of(out) if "never moves over the run" in w]
+    if moved:  # the scans went metres: said, with how far, and what to check
+        assert len(said) == 1, warnings_of(out)
+        assert "odometry (/odom, nav_msgs/Odometry) never moves over the run, while its scans say" in said[0]
+        assert "fills only the twist" in said[0]
+    else:  # two scans, hardly apart: a robot standing still has odometry that does not move
+        assert not said
+
+
+def test_moving_odometry_is_not_warned_of(sim_log, tmp_path):
+    out = tmp_path / "run"
+    assert CliRunner().invoke(cli, ["run", str(sim_log), "--out", str(out), "-q"]).exit_code == 0
+    assert not [w for w in warnings_of(out) if "never moves" in w]
