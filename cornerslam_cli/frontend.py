@@ -29,7 +29,7 @@ from .geometry import matrix_from_pose, transform_points
 from .lasers import mount_source
 from .logs import ReadStats, open_log
 from .logs.deskew import deskew
-from .logs.sync import CLOCKS_HINT, Synced, SyncStats, reanchor_odometry, select_keyframes, synchronise
+from .logs.sync import Synced, SyncStats, clocks_hint, reanchor_odometry, select_keyframes, synchronise
 from .logs.unreadable import damaged_error, no_scan_read, raise_if_undecoded
 from .motion import ScanMatcher
 from .motion.fusion import BiasTaken, OdometryFusion
@@ -270,7 +270,7 @@ def check_processed(src: Input, n_frames: int, n_points: int) -> None:
             raise damaged_error(src.path, rs, what) if rs.damaged else no_scan_read(src.path, what, stats=rs)
         raise_if_undecoded(src.path, rs)
         if clocks := stats.other_clocks():
-            raise LogError(f"log '{src.path}': no scan could be processed: {clocks}", CLOCKS_HINT)
+            raise LogError(f"log '{src.path}': no scan could be processed: {clocks}", clocks_hint(stats))
         skipped = f"; skipped: {why}" if (why := stats.skipped_why()) else ""
         raise LogError(
             f"log '{src.path}': no scan could be processed ({stats.scans_in} scans read{skipped})",

@@ -520,3 +520,25 @@ def test_a_bag_of_a_modified_laserscan_says_so(tmp_path):
     assert res.exit_code == 2
     said = "(its recorded sensor_msgs/LaserScan is not the standard message: fields added: 'quality')"
     assert said in res.stderr.splitlines()[-1]
+
+
+def test_scans_whose_driver_leaves_every_header_stamp_at_0_are_named_so(tmp_path):
+    """Every LaserScan stamped 0 (a driver that does not fill the header), the odometry fine: info said
+    the headers were 1.7e9 s "behind" the record times and a run blamed two clocks and use_sim_time (a
+    ROS-user probe). Both now say the scans' stamps are all the same, and whose they are to fill."""
+    from dataclasses import replace
+
+    ros = RosSerializer("cdr")
+    scans = [
+        ("/scan", "sensor_msgs/msg/LaserScan", int(s.stamp * 1e9), ros.laserscan(replace(s, stamp=0.0)))
+        for s in make_scans(12)
+    ]
+    p = write_messages_mcap(tmp_path / "zero.mcap", scans + odom_messages(n=12))
+    res = CliRunner().invoke(cli, ["info", str(p)])
+    assert "the header stamp of its first 12 scans is 0.000 s, every one: the laser driver" in res.stdout
+    assert "behind its record times" not in res.stdout
+    res = CliRunner().invoke(cli, ["run", str(p), "--out", str(tmp_path / "out"), "-q"])
+    assert res.exit_code == 2 and not (tmp_path / "out" / "summary.json").exists()
+    assert "no scan could be processed: every one of its 12 scans is stamped 0.000 s" in res.stderr
+    assert "make the laser driver fill each scan's header stamp" in res.stderr
+    assert "use_sim_time" not in res.stderr

@@ -568,7 +568,15 @@ class RosLogReader:
     def _clock_note(self) -> str:
         """info's note when the scans' header stamps are another clock than the recorder's (the log's
         start and duration are the recorder's; a run's stamps, --start and the outputs are the headers')."""
-        offset = self.record_offset() if self.scan_topic and not self._scan_problems() else None
+        if not self.scan_topic or self._scan_problems():
+            return ""
+        stamps, _ = self._first_scan_stamps()
+        if len(stamps) >= 2 and min(stamps) == max(stamps):  # (not another clock: none)
+            return (
+                f"the header stamp of its first {len(stamps)} scans is {stamps[0] * 1e-9:.3f} s, every "
+                "one: the laser driver does not fill it (a run needs each scan's time: check the driver)"
+            )
+        offset = self.record_offset()
         if offset is None or abs(offset) <= CLOCK_APART * 1e9:
             return ""
         way = "behind" if offset > 0 else "ahead of"
@@ -581,16 +589,23 @@ class RosLogReader:
         """How far the recorder's clock (the messages' log times) is ahead of the scans' header stamps
         [ns]: the median over the first ``n`` scans (a Gazebo run recorded without use_sim_time: 1.7e9 s);
         None without a scan that can be read."""
-        dec, offsets = self._decoder(self.scan_topic), []
+        stamps, log_times = self._first_scan_stamps(n)
+        offsets = sorted(t - s for s, t in zip(stamps, log_times, strict=True))
+        return offsets[len(offsets) // 2] if offsets else None
+
+    def _first_scan_stamps(self, n: int = 100) -> tuple[list[int], list[int]]:
+        """The header stamps and the log times [ns] of the first ``n`` scans that can be read."""
+        dec, stamps, log_times = self._decoder(self.scan_topic), [], []
         for _, log_time, data in self.source.raw_messages({self.scan_topic}):
             try:
                 sec, nsec = dec.laserscan(data).stamp
             except Exception:  # noqa: BLE001 - bad bytes: the run counts them
                 continue
-            offsets.append(log_time - (sec * 1_000_000_000 + nsec))
-            if len(offsets) >= n:
+            stamps.append(sec * 1_000_000_000 + nsec)
+            log_times.append(log_time)
+            if len(stamps) >= n:
                 break
-        return sorted(offsets)[len(offsets) // 2] if offsets else None
+        return stamps, log_times
 
     def parent_on_tf(self, frame: str) -> str | None:
         """The parent the log's tf gives ``frame`` (a localiser's map → odom), else None: every tf message

@@ -122,6 +122,10 @@ class SyncStats:
         d["scans_skipped"] = self.scans_skipped
         return d
 
+    def unstamped_scans(self) -> bool:
+        """Whether two or more scans came and all had the same stamp (a driver that does not fill it)."""
+        return self.scans_in >= 2 and self.scan_stamps.lo == self.scan_stamps.hi
+
     def other_clocks(self) -> str:
         """Why no scan met the odometry, when their stamps are on different clocks (their spans do not
         overlap and lie more than CLOCKS_APART apart), naming both spans; else ""."""
@@ -129,10 +133,22 @@ class SyncStats:
         apart = max(o.lo - s.hi, s.lo - o.hi)  # inf with either unseen
         if self.scans_out or not CLOCKS_APART < apart < np.inf:
             return ""
+        if self.unstamped_scans():
+            return (
+                f"every one of its {self.scans_in} scans is stamped {s.lo:.3f} s (the odometry {o.text()}): "
+                "the laser driver does not fill the scans' header stamps"
+            )
         return (
             f"the scans are stamped {s.text()} and the odometry {o.text()}, {apart:.4g} s apart: "
             "their stamps are on different clocks"
         )
+
+
+def clocks_hint(stats: SyncStats) -> str:
+    """What to check when :meth:`SyncStats.other_clocks` says why no scan met the odometry."""
+    if stats.unstamped_scans():
+        return "make the laser driver fill each scan's header stamp: it writes one stamp for all"
+    return CLOCKS_HINT
 
 
 def synchronise(
@@ -291,7 +307,7 @@ def _warn_skipped(st: SyncStats, warn: Callable[..., None]) -> None:
         f"{n_odom} odometry sample{'s' if n_odom != 1 else ''} whose {_stamps(n_odom)}" if n_odom else "",
     ]
     clocks = st.other_clocks()
-    warn("skipped %s%s", "; ".join(s for s in said if s), f" ({clocks}: {CLOCKS_HINT})" if clocks else "")
+    warn("skipped %s%s", "; ".join(s for s in said if s), f" ({clocks}: {clocks_hint(st)})" if clocks else "")
 
 
 def _stamps(n: int) -> str:
