@@ -26,7 +26,7 @@ from .features import extract, load_kernels
 from .filter import load_kernels as load_filter_kernels
 from .filter.models import increment_noise
 from .geometry import matrix_from_pose, transform_points
-from .lasers import mount_source
+from .lasers import invalid_beams, mount_source
 from .logs import ReadStats, open_log
 from .logs.deskew import deskew
 from .logs.sync import Synced, SyncStats, clocks_hint, reanchor_odometry, select_keyframes, synchronise
@@ -252,10 +252,8 @@ def check_processed(src: Input, n_frames: int, n_points: int) -> None:
     ``n_frames`` frames): the synchroniser's counts say why."""
     stats = src.stats
     if n_frames > 0 and n_points == 0:
-        raise LogError(
-            f"log '{src.path}': every beam of every scan is invalid (NaN, inf, zero or out of range)",
-            "check the scan topic, range_min/range_max and input.max_range",
-        )
+        why, hint = invalid_beams(src.reader)
+        raise LogError(f"log '{src.path}': every beam of every scan is invalid{why}", hint)
     stamps = "timestamps" if (carmen := src.reader.format == "carmen") else "header stamps"  # (no header)
     if n_frames == 1 and stats.scans_in > 1 and stats.scan_time_backwards >= stats.scans_in - 1:
         raise LogError(  # one pose is no trajectory: every scan's header stamp is the first one's (zero?)

@@ -113,6 +113,27 @@ def first_scan(reader) -> Scan | None:
     return next(iter(reader.scans()), None)
 
 
+def invalid_beams(reader) -> tuple[str, str]:
+    """Why every beam of a log read as invalid — said more closely when its first scan shows it (its
+    ``range_max`` at or below its ``range_min``: a driver's parameter; input.max_range can only lower it)
+    — and what to check. The reader's warnings are silenced (the run has said them)."""
+    reader_log = logging.getLogger("cornerslam.logs")
+    level = reader_log.level
+    reader_log.setLevel(logging.ERROR)
+    try:
+        scan = first_scan(reader)
+    finally:
+        reader_log.setLevel(level)
+    why = " (NaN, inf, zero or out of range)"
+    if scan is not None and scan.range_max <= scan.range_min:
+        return (
+            f"{why}: its scans' range_max ({scan.range_max:.3f} m) is at or below their range_min "
+            f"({scan.range_min:.3f} m), so every reading counts as no return",
+            "set the laser driver's range_max to the laser's range; input.max_range can only lower it",
+        )
+    return why, "check the scan topic, range_min/range_max and input.max_range"
+
+
 def first_scan_geometry(log_path: str | Path, cfg: Config) -> tuple[int, float] | None:
     """(beams, angle increment) of the log's first scan, None when it has none.
 

@@ -542,3 +542,23 @@ def test_scans_whose_driver_leaves_every_header_stamp_at_0_are_named_so(tmp_path
     assert "no scan could be processed: every one of its 12 scans is stamped 0.000 s" in res.stderr
     assert "make the laser driver fill each scan's header stamp" in res.stderr
     assert "use_sim_time" not in res.stderr
+
+
+def test_a_range_max_at_or_below_range_min_is_named(tmp_path):
+    """LaserScan range_max 0 (a driver's parameter left unset): every beam is invalid, and the error said
+    "check … input.max_range", a key that can only lower range_max (a ROS-user probe). It now names
+    the two limits and whose they are; info marks them."""
+    from dataclasses import replace
+
+    ros = RosSerializer("cdr")
+    scans = [
+        ("/scan", "sensor_msgs/msg/LaserScan", int(s.stamp * 1e9), ros.laserscan(replace(s, range_max=0.0)))
+        for s in make_scans(12)
+    ]
+    p = write_messages_mcap(tmp_path / "r0.mcap", scans + odom_messages(n=12))
+    res = CliRunner().invoke(cli, ["info", str(p)])
+    assert "range_max at or below range_min: every reading counts as no return" in res.stdout
+    res = CliRunner().invoke(cli, ["run", str(p), "--out", str(tmp_path / "out"), "-q"])
+    assert res.exit_code == 2 and "\n" not in res.stderr.strip()
+    assert "its scans' range_max (0.000 m) is at or below their range_min" in res.stderr
+    assert "set the laser driver's range_max" in res.stderr

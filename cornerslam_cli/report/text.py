@@ -344,6 +344,8 @@ def scan_lines(scan: Scan, preset: str | None) -> list[str]:
     which = f"preset {preset}" if preset else "no laser preset matches (the config's sensor model)"
     spread = f"over {fov:.1f}° ({inc:.3f}° apart)" if scan.n_beams > 1 else "(a single beam)"
     lines = [f"  beams     {scan.n_beams} {spread}, {scan.range_min:.3f}–{scan.range_max:.3f} m: {which}"]
+    if scan.range_max <= scan.range_min:  # (a driver's parameter: a run refuses the log)
+        lines[0] += " — range_max at or below range_min: every reading counts as no return"
     if scan.time_increment:
         sweep = 1e3 * abs(scan.time_increment) * max(scan.n_beams - 1, 0)
         lines.append(
