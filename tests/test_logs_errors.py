@@ -522,18 +522,22 @@ def test_a_bag_of_a_modified_laserscan_says_so(tmp_path):
     assert said in res.stderr.splitlines()[-1]
 
 
+def scans_changed(**fields) -> list:
+    """make_scans(12)'s LaserScan messages on /scan, each with ``fields`` changed, logged at its stamp."""
+    from dataclasses import replace
+
+    ros = RosSerializer("cdr")
+    return [
+        ("/scan", "sensor_msgs/msg/LaserScan", int(s.stamp * 1e9), ros.laserscan(replace(s, **fields)))
+        for s in make_scans(12)
+    ]
+
+
 def test_scans_whose_driver_leaves_every_header_stamp_at_0_are_named_so(tmp_path):
     """Every LaserScan stamped 0 (a driver that does not fill the header), the odometry fine: info said
     the headers were 1.7e9 s "behind" the record times and a run blamed two clocks and use_sim_time (a
     ROS-user probe). Both now say the scans' stamps are all the same, and whose they are to fill."""
-    from dataclasses import replace
-
-    ros = RosSerializer("cdr")
-    scans = [
-        ("/scan", "sensor_msgs/msg/LaserScan", int(s.stamp * 1e9), ros.laserscan(replace(s, stamp=0.0)))
-        for s in make_scans(12)
-    ]
-    p = write_messages_mcap(tmp_path / "zero.mcap", scans + odom_messages(n=12))
+    p = write_messages_mcap(tmp_path / "zero.mcap", scans_changed(stamp=0.0) + odom_messages(n=12))
     res = CliRunner().invoke(cli, ["info", str(p)])
     assert "the header stamp of its first 12 scans is 0.000 s, every one: the laser driver" in res.stdout
     assert "behind its record times" not in res.stdout
@@ -548,14 +552,7 @@ def test_a_range_max_at_or_below_range_min_is_named(tmp_path):
     """LaserScan range_max 0 (a driver's parameter left unset): every beam is invalid, and the error said
     "check … input.max_range", a key that can only lower range_max (a ROS-user probe). It now names
     the two limits and whose they are; info marks them."""
-    from dataclasses import replace
-
-    ros = RosSerializer("cdr")
-    scans = [
-        ("/scan", "sensor_msgs/msg/LaserScan", int(s.stamp * 1e9), ros.laserscan(replace(s, range_max=0.0)))
-        for s in make_scans(12)
-    ]
-    p = write_messages_mcap(tmp_path / "r0.mcap", scans + odom_messages(n=12))
+    p = write_messages_mcap(tmp_path / "r0.mcap", scans_changed(range_max=0.0) + odom_messages(n=12))
     res = CliRunner().invoke(cli, ["info", str(p)])
     assert "range_max at or below range_min: every reading counts as no return" in res.stdout
     res = CliRunner().invoke(cli, ["run", str(p), "--out", str(tmp_path / "out"), "-q"])
