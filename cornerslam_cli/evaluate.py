@@ -290,6 +290,29 @@ def overlap_problem(
     return why, "is it this log's ground truth? Its stamps must use the log's clock"
 
 
+def mirror_problem(
+    est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray, gt_name: str
+) -> tuple[str, str] | None:
+    """Why ``gt_name`` cannot score the trajectory when it is in a mirrored frame — z down (NED/FRD, as
+    PX4/MAVROS and many motion-capture setups write it): its y and yaw the negative of a z-up frame's —, and
+    what to do; else None. No rotation in the plane undoes a mirror, and its ATE came out hundreds of times
+    evo's, whose 3-D fit turns it over (an evo-user probe). Said when, mirrored, it fits the trajectory
+    ``MIRRORED`` times better than as it is, and by more than ``MIRROR_GAIN`` (a straight path fits both)."""
+    a = ate(est_t, est, gt_t, gt)
+    m = ate(est_t, est, gt_t, gt * np.array([1.0, -1.0, -1.0]))
+    if not (a.rmse > MIRRORED * m.rmse and a.rmse - m.rmse > MIRROR_GAIN):
+        return None
+    why = (
+        f"{gt_name} is in a mirrored frame (z down: NED/FRD?): with its y and yaw negated it fits the "
+        f"trajectory to {m.rmse:.3f} m, as it is to {a.rmse:.3f} m (ATE)"
+    )
+    return why, "convert it to a z-up frame (x forward, y left: ROS REP 103) by negating its y and yaw"
+
+
+MIRRORED, MIRROR_GAIN = (
+    3.0,
+    0.05,
+)  # times better, and m better, a ground truth must fit mirrored to be so read
 FASTEST_POSES = 1e-5  # s: the closest spacing stamps are taken to have (ns since 1970 as floats: 256 ns)
 EPOCH_STAMPS = 1e8  # s: stamps from here on (1973) are read as wall-clock time
 SPAN_RATIO = 20.0  # two files' time spans, one read in other units, at most this many times apart
@@ -336,7 +359,10 @@ def evaluate_files(
     out: dict = {}  # Accuracy's fields
     if ground_truth:
         gt_t, gt = read_tum(ground_truth, "ground truth")
-        problem = overlap_problem(t, gt_t, f"ground truth '{ground_truth}'", f"trajectory '{trajectory}'")
+        name = f"ground truth '{ground_truth}'"
+        problem = overlap_problem(t, gt_t, name, f"trajectory '{trajectory}'") or mirror_problem(
+            t, est, gt_t, gt, name
+        )
         if problem:
             raise LogError(*problem)
         out.update(ground_truth=display_path(ground_truth), ate=ate(t, est, gt_t, gt, correct_scale))

@@ -1,5 +1,7 @@
 """ATE/RPE/relation metrics against hand-computed values on tiny trajectories."""
 
+import json
+
 import numpy as np
 import pytest
 from scipy import optimize
@@ -820,3 +822,42 @@ def test_a_ground_truth_stamped_from_0_is_not_taken_for_milliseconds(gt_first):
     assert why.startswith("gt.tum has its stamps in milliseconds, not seconds") and "seconds" in hint
     why, _ = overlap_problem(log, log[:20] * 1e3, "gt.tum")  # a ground truth of a tenth of the run, in ms
     assert why.startswith("gt.tum has its stamps in milliseconds, not seconds")
+
+
+def mirrored(rows: list[str]) -> list[str]:
+    """TUM rows in a z-down frame (NED/FRD): y and the yaw negated (qx, qy, qz, qw of a pure yaw)."""
+    out = []
+    for r in rows:
+        if not r.strip() or r.startswith("#"):
+            out.append(r)
+            continue
+        t, x, y, z, qx, qy, qz, qw = (float(v) for v in r.split())
+        out.append(f"{t:.6f} {x} {-y} {-z} {qx} {qy} {-qz} {qw}")
+    return out
+
+
+def test_a_ground_truth_in_a_mirrored_frame_is_refused_not_scored(files, sim_log, tmp_path):
+    """A z-down ground truth (NED/FRD: PX4/MAVROS, motion capture) scored 300× evo's ATE with no word,
+    as evo_ape -a (an evo-user probe): no rotation in the plane undoes a mirror. evaluate refuses it
+    naming the fit it has mirrored; a run warns and scores nothing; a right one is scored as before."""
+    from click.testing import CliRunner
+
+    from cornerslam_cli.cli import cli
+
+    est, gt = files
+    rewrite(gt, mirrored)
+    res = evaluate(est, "--ground-truth", gt)
+    assert res.exit_code == 2 and "\n" not in res.stderr.strip(), res.output
+    assert f"ground truth '{gt}' is in a mirrored frame (z down: NED/FRD?)" in res.stderr
+    assert "negating its y and yaw" in res.stderr
+    rewrite(gt, mirrored)  # (back as it was)
+    assert evaluate(est, "--ground-truth", gt).exit_code == 0
+    log = tmp_path / "sim.mcap"
+    log.write_bytes(sim_log.read_bytes())
+    log.with_suffix(".gt.tum").write_bytes(sim_log.with_suffix(".gt.tum").read_bytes())
+    rewrite(log.with_suffix(".gt.tum"), mirrored)
+    res = CliRunner().invoke(cli, ["run", str(log), "--out", str(tmp_path / "out"), "-q"])
+    assert res.exit_code == 0, res.output
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["accuracy"] is None
+    assert any("is in a mirrored frame" in w and "no ATE/RPE" in w for w in summary["warnings"])

@@ -26,7 +26,16 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import CornerslamError, display_path
-from ..evaluate import ate, coverage_note, overlap_problem, read_relations, relation_error, rpe, sparse_note
+from ..evaluate import (
+    ate,
+    coverage_note,
+    mirror_problem,
+    overlap_problem,
+    read_relations,
+    relation_error,
+    rpe,
+    sparse_note,
+)
 from ..geometry import compose, compose_inverse
 from ..results import Accuracy, RunSummary
 from .consistency import store_consistency
@@ -320,7 +329,10 @@ def accuracy_of(
     the causal estimate when ``poses`` were smoothed (two-level SLAM), scored beside them."""
     acc: dict = {}  # Accuracy's fields
     notes = list(ref.notes)
-    problem = ref.gt is not None and overlap_problem(stamps, ref.gt[0], f"ground truth '{ref.gt_path}'")
+    name = f"ground truth '{ref.gt_path}'"
+    problem = ref.gt is not None and (
+        overlap_problem(stamps, ref.gt[0], name) or mirror_problem(stamps, poses, *ref.gt, name)
+    )
     if problem:
         notes.append(f"{problem[0]}: no ATE/RPE")
     elif ref.gt is not None:
