@@ -370,7 +370,10 @@ def evaluate_files(
             log.warning("%s", note)
         if note := sparse_note(f"ground truth '{ground_truth}'", gt_t, t, "trajectory"):
             log.warning("%s", note)
-        out.update(vars(rpe(t, est, gt_t, gt)))
+        scaled = (
+            est if out["ate"].scale is None else est * np.array([out["ate"].scale, out["ate"].scale, 1.0])
+        )
+        out.update(vars(rpe(t, scaled, gt_t, gt)))  # (scale corrected too, as evo_rpe -as)
     if relations:
         e = relation_error(t, est, read_relations(relations), time_offset)
         if e.n == 0:

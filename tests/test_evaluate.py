@@ -861,3 +861,23 @@ def test_a_ground_truth_in_a_mirrored_frame_is_refused_not_scored(files, sim_log
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["accuracy"] is None
     assert any("is in a mirrored frame" in w and "no ATE/RPE" in w for w in summary["warnings"])
+
+
+def test_correct_scale_scales_the_rpe_too(files, tmp_path):
+    """`evaluate --correct-scale` scaled the ATE's trajectory and not the RPE's: a trajectory in mm gave
+    its RPE in mm beside a scale-corrected ATE (an evo-user probe; evo_rpe -as scales both). A trajectory
+    at half size, corrected, scores the RPE of the whole-size one."""
+    from cornerslam_cli.evaluate import evaluate_files
+    from cornerslam_cli.report.tables import read_tum, write_tum
+
+    est, gt = files
+    t, poses = read_tum(est)
+    half = tmp_path / "half.tum"
+    write_tum(half, t, poses * np.array([0.5, 0.5, 1.0]))
+    whole = evaluate_files(est, gt, correct_scale=True)
+    corrected = evaluate_files(half, gt, correct_scale=True)
+    assert corrected.ate.scale == pytest.approx(2.0 * whole.ate.scale, rel=1e-9)
+    assert corrected.rpe_step_rmse == pytest.approx(whole.rpe_step_rmse, rel=1e-6)
+    assert evaluate_files(half, gt).rpe_step_rmse > 2.0 * whole.rpe_step_rmse  # (not corrected: half size)
+    res = evaluate(half, "--ground-truth", gt, "--correct-scale")
+    assert "per metre" in res.stdout and "(scale corrected ×" in res.stdout.splitlines()[1]

@@ -369,7 +369,8 @@ def evaluation_lines(res: Accuracy) -> list[str]:
         lines.append(
             f"ATE  rmse {a.rmse:.4f} m  mean {a.mean:.4f} m  max {a.max:.4f} m  (n={a.n}{scaled}{holes})"
         )
-        lines.append(f"RPE  per step {res.rpe_step_rmse:.4f} m  per metre {per_m} m/m")
+        rescaled = "" if a.scale is None else f" (scale corrected ×{a.scale:.5f}, as evo_rpe -as)"
+        lines.append(f"RPE  per step {res.rpe_step_rmse:.4f} m  per metre {per_m} m/m{rescaled}")
     if res.relations is not None:
         lines.append(f"relations: {relation_text(res.relations)}")
     return lines
