@@ -306,13 +306,35 @@ def mirror_problem(
         f"{gt_name} is in a mirrored frame (z down: NED/FRD?): with its y and yaw negated it fits the "
         f"trajectory to {m.rmse:.3f} m, as it is to {a.rmse:.3f} m (ATE)"
     )
-    return why, "convert it to a z-up frame (x forward, y left: ROS REP 103) by negating its y and yaw"
+    return why, "convert it to a z-up frame by negating its y and yaw: ROS REP 103's, x forward and y left"
 
 
-MIRRORED, MIRROR_GAIN = (
-    3.0,
-    0.05,
-)  # times better, and m better, a ground truth must fit mirrored to be so read
+def units_problem(
+    est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray, gt_name: str
+) -> tuple[str, str] | None:
+    """Why ``gt_name`` cannot score the trajectory when one of the two is in centimetres or millimetres
+    (its path over the same stamps 100 or 1000 times the other's, within UNITS_TOLERANCE), and what to do;
+    else None. A ground truth in mm scored an ATE of 18 km with no word (an evo-user probe); a run that went
+    nowhere against a moving ground truth is no unit and is not said to be one."""
+    inside, g = interpolate_inside(gt_t, gt, est_t)
+    ours, theirs = (float(np.hypot(*np.diff(p[:, :2], axis=0).T).sum()) for p in (est[inside], g))
+    if min(ours, theirs) <= 0.0:
+        return None
+    for unit, factor in (("millimetres", 1e3), ("centimetres", 1e2)):
+        for far, near, a, b in (("the ground truth", "the trajectory", theirs, ours), ("the trajectory",
+                                "the ground truth", ours, theirs)):  # fmt: skip
+            if abs(np.log10(a / b / factor)) <= UNITS_TOLERANCE:
+                why = (
+                    f"{gt_name} and the trajectory are in different units: over the same stamps {far} goes "
+                    f"{a / b:.4g} times as far as {near} ({a:.4g} against {b:.4g}) — {unit}?"
+                )
+                return why, "write both in metres, or score with evaluate --correct-scale"
+    return None
+
+
+UNITS_TOLERANCE = 0.15  # decades: a path 100 or 1000 times the other's within ×1.4 is read as cm or mm
+# a ground truth is read as mirrored when, mirrored, it fits this many times better and by this much (m)
+MIRRORED, MIRROR_GAIN = 3.0, 0.05
 FASTEST_POSES = 1e-5  # s: the closest spacing stamps are taken to have (ns since 1970 as floats: 256 ns)
 EPOCH_STAMPS = 1e8  # s: stamps from here on (1973) are read as wall-clock time
 SPAN_RATIO = 20.0  # two files' time spans, one read in other units, at most this many times apart
@@ -360,8 +382,10 @@ def evaluate_files(
     if ground_truth:
         gt_t, gt = read_tum(ground_truth, "ground truth")
         name = f"ground truth '{ground_truth}'"
-        problem = overlap_problem(t, gt_t, name, f"trajectory '{trajectory}'") or mirror_problem(
-            t, est, gt_t, gt, name
+        problem = (
+            overlap_problem(t, gt_t, name, f"trajectory '{trajectory}'")
+            or mirror_problem(t, est, gt_t, gt, name)
+            or (None if correct_scale else units_problem(t, est, gt_t, gt, name))
         )
         if problem:
             raise LogError(*problem)

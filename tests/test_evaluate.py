@@ -881,3 +881,26 @@ def test_correct_scale_scales_the_rpe_too(files, tmp_path):
     assert evaluate_files(half, gt).rpe_step_rmse > 2.0 * whole.rpe_step_rmse  # (not corrected: half size)
     res = evaluate(half, "--ground-truth", gt, "--correct-scale")
     assert "per metre" in res.stdout and "(scale corrected ×" in res.stdout.splitlines()[1]
+
+
+@pytest.mark.parametrize("factor, unit", [(1000.0, "millimetres"), (100.0, "centimetres")])
+def test_a_ground_truth_in_other_units_is_refused_unless_scale_is_corrected(files, factor, unit):
+    """A ground truth in millimetres scored an ATE of 18 km with no word (an evo-user probe): its path
+    over the trajectory's stamps is 1000 times as long. Refused naming the unit; with --correct-scale
+    (asked for) it is scored. A trajectory that went nowhere is no unit: not said to be one."""
+    from cornerslam_cli.evaluate import units_problem
+    from cornerslam_cli.report.tables import read_tum, write_tum
+
+    est, gt = files
+    t, poses = read_tum(gt)
+    write_tum(gt, t, poses * np.array([factor, factor, 1.0]))
+    res = evaluate(est, "--ground-truth", gt)
+    assert res.exit_code == 2 and "\n" not in res.stderr.strip(), res.output
+    assert "the ground truth goes" in res.stderr and f"— {unit}?" in res.stderr
+    assert evaluate(est, "--ground-truth", gt, "--correct-scale").exit_code == 0
+    e_t, e = read_tum(est)
+    still = np.zeros_like(e) + e[0]
+    assert units_problem(e_t, still, t, poses * factor, "gt") is None
+    assert units_problem(e_t, e * np.array([factor, factor, 1.0]), t, poses, "gt")[0].startswith(
+        "gt and the trajectory are in different units: over the same stamps the trajectory goes"
+    )

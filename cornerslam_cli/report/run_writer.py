@@ -35,6 +35,7 @@ from ..evaluate import (
     relation_error,
     rpe,
     sparse_note,
+    units_problem,
 )
 from ..geometry import compose, compose_inverse
 from ..results import Accuracy, RunSummary
@@ -331,7 +332,9 @@ def accuracy_of(
     notes = list(ref.notes)
     name = f"ground truth '{ref.gt_path}'"
     problem = ref.gt is not None and (
-        overlap_problem(stamps, ref.gt[0], name) or mirror_problem(stamps, poses, *ref.gt, name)
+        overlap_problem(stamps, ref.gt[0], name)
+        or mirror_problem(stamps, poses, *ref.gt, name)
+        or units_problem(stamps, poses, *ref.gt, name)
     )
     if problem:
         notes.append(f"{problem[0]}: no ATE/RPE")
