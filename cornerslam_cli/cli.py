@@ -46,6 +46,7 @@ from .options import (  # noqa: E402
     check_option_agrees,
     check_sweep_not_set,
     check_time_offset,
+    chosen_ground_truth,
     command_config,
     config_options,
     parse_assocs,
@@ -256,6 +257,7 @@ def run(
     scan_topic,
     odom_topic,
     ground_truth,
+    no_ground_truth,
     relations,
     time_offset,
     plot,
@@ -278,6 +280,7 @@ def run(
     setup_logging(verbose, quiet)
     names = parse_assocs(assoc, allow_many=False, log_path=log_path)
     check_time_offset(relations, time_offset)
+    ground_truth = chosen_ground_truth(ground_truth, no_ground_truth)
     span = parse_span(start, end, max_scans)
     with warnings_copied() as notes:  # the config's (a preset not the log's laser): summary.json's too
         cfg = command_config(
@@ -342,6 +345,7 @@ def compare(
     scan_topic,
     odom_topic,
     ground_truth,
+    no_ground_truth,
     relations,
     time_offset,
     jobs,
@@ -364,6 +368,7 @@ def compare(
     setup_logging(verbose, quiet)
     names = parse_assocs(assocs, allow_many=True)
     check_time_offset(relations, time_offset)
+    ground_truth = chosen_ground_truth(ground_truth, no_ground_truth)
     span = parse_span(start, end, max_scans)
     ignored = {"association.method": (f"compare runs each associator of --assoc ({','.join(names)})", names)}
     with warnings_copied() as notes:  # the config's: each run's summary.json's too

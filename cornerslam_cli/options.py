@@ -5,6 +5,9 @@ Decorators add an option group to a command (``config_options``: ``--config`` / 
 ``verbosity_options``). ``parse_assocs`` reads every command's ``--assoc``, ``parse_sweeps`` batch's
 ``--sweep``; ``command_config`` resolves a command's config from the options as ``run`` does. A bad
 value is a click usage error or a ConfigError, which ``cli.py``'s error boundary prints.
+
+Over 400 lines because every command's options and their value types are here, once, so that a command
+and its help cannot disagree with another's on what an option means.
 """
 
 from __future__ import annotations
@@ -183,9 +186,20 @@ def reference_options(f):
         help="Kümmerle et al. 2009 .relations file to score against.",
     )(f)
     f = click.option(
+        "--no-ground-truth", is_flag=True, help="Score against no ground truth, not even LOG.gt.tum."
+    )(f)
+    f = click.option(
         "--ground-truth", type=GivenPath(dir_okay=False), help="TUM ground truth (default: LOG.gt.tum)."
     )(f)
     return f
+
+
+def chosen_ground_truth(ground_truth, no_ground_truth: bool):
+    """``--ground-truth`` as given, None (LOG.gt.tum if there is one) or, with ``--no-ground-truth``,
+    False: none at all — a LOG.gt.tum a run refuses, in a folder the user cannot rename it in."""
+    if ground_truth and no_ground_truth:
+        raise click.UsageError("--ground-truth and --no-ground-truth contradict each other: give one")
+    return False if no_ground_truth else ground_truth
 
 
 class _SpanBound(click.ParamType):

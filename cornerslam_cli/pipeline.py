@@ -42,7 +42,7 @@ def run(
     log_path: str | Path,
     cfg: Config,
     out: str | Path | None = None,
-    ground_truth: str | Path | None = None,
+    ground_truth: str | Path | None | bool = None,
     progress: Callable[[int, int], None] | None = None,
     relations: str | Path | None = None,
     time_offset: float = 0.0,
@@ -59,17 +59,18 @@ def run(
     ``plot`` the figures and report.html, and ``mcap_out`` beside it, all committed at once.
 
     The output places are checked before any work (report/ownership.py); the run's inputs — the log,
-    the ground truth (also LOG.gt.tum found beside the log), the relations, the config file
-    ``config_path`` — are never written over; ``span``: the part of the log to process (span.py);
-    ``compiling``: frontend.open_input's; ``inside="batch"``: a batch's run, written inside its
-    directory (any other output there is refused); ``notes``: warnings already said about the config
+    the ground truth (also LOG.gt.tum found beside the log, unless ``ground_truth`` is False), the
+    relations, the config file ``config_path`` — are never written over; ``span``: the part of the log
+    to process (span.py); ``compiling``: frontend.open_input's; ``inside="batch"``: a batch's run,
+    written inside its directory (any other output there is refused); ``notes``: warnings already said
+    about the config
     (workers.warnings_copied), kept for summary.json's list; ``finishing(what)``: as each stage after the
     last step begins (the CLI's Progress.finishing).
     Returns the summary (also written to summary.json) with ``out_dir``, the committed directory.
     """
     wall0 = time.perf_counter()
     out_dir = Path(out) if out else default_out_dir(Path(log_path), cfg.association.method)
-    gt = ground_truth or find_ground_truth(Path(log_path))
+    gt = None if ground_truth is False else ground_truth or find_ground_truth(Path(log_path))
     inputs = [p for p in (log_path, gt, relations, config_path) if p]
     with StagedDir(out_dir, "run", inputs, log_path, own_log_only=not out, inside=inside) as stage:
         mcap_path = stage.stage_file(mcap_out, ours=is_results_mcap) if mcap_out else None

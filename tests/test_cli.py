@@ -410,12 +410,19 @@ def test_a_damaged_ground_truth_beside_the_log_says_why_it_was_read(command, tmp
     one_line_error(
         res,
         f"ground truth '{gt}' line 1 is not a TUM pose (expected: stamp x y z qx qy qz qw; read as the "
-        "log's ground truth for lying beside it: fix it, or rename it to run without it)",
+        "log's ground truth for lying beside it: fix it, or give --no-ground-truth)",
     )
     res = invoke(command, log, "--out", tmp_path / "o", "--ground-truth", gt)  # given: no such note
     one_line_error(res, "line 1 is not a TUM pose")
     assert res.stderr.endswith("(expected: stamp x y z qx qy qz qw)\n")
     assert not (tmp_path / "o").exists()
+    # --no-ground-truth: scored against none (the folder may be read-only: an evo-user probe)
+    res = invoke(command, log, "--out", tmp_path / "o", "--no-ground-truth", "-q")
+    assert res.exit_code == 0, res.output
+    summary = next((tmp_path / "o").rglob("summary.json"))
+    assert json.loads(summary.read_text())["accuracy"] is None
+    res = invoke(command, log, "--out", tmp_path / "o2", "--no-ground-truth", "--ground-truth", gt)
+    assert res.exit_code == 2 and "--ground-truth and --no-ground-truth contradict each other" in res.stderr
 
 
 def test_extract_keeps_the_beams_a_run_keeps(tmp_path):

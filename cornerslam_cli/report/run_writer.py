@@ -288,14 +288,18 @@ class Reference:
 
 def load_reference(
     log_path: Path,
-    ground_truth: str | Path | None = None,
+    ground_truth: str | Path | None | bool = None,
     relations: str | Path | None = None,
     time_offset: float = 0.0,
 ) -> Reference:
-    """The given ground truth, else LOG.gt.tum if present; the given relations file, if any. A
-    LOG.gt.tum that cannot be read says in its error that it was read for lying beside the log (the
-    user gave no ground truth, and the error named a file they had not asked for)."""
-    gt_path = Path(ground_truth) if ground_truth else find_ground_truth(log_path)
+    """The given ground truth, else LOG.gt.tum if present (none when ``ground_truth`` is False:
+    --no-ground-truth); the given relations file, if any. A LOG.gt.tum that cannot be read says in its
+    error that it was read for lying beside the log (the user gave no ground truth, and the error named a
+    file they had not asked for), and how to run without it."""
+    if ground_truth is False:
+        gt_path = None
+    else:
+        gt_path = Path(ground_truth) if ground_truth else find_ground_truth(log_path)
     rel_path = Path(relations) if relations else None
     notes: list[str] = []
     try:
@@ -303,7 +307,7 @@ def load_reference(
     except CornerslamError as e:
         if ground_truth:
             raise
-        why = "read as the log's ground truth for lying beside it: fix it, or rename it to run without it"
+        why = "read as the log's ground truth for lying beside it: fix it, or give --no-ground-truth"
         raise type(e)(e.msg, f"{e.hint}; {why}" if e.hint else why) from None
     return Reference(
         gt_path,
