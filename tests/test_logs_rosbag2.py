@@ -199,3 +199,23 @@ def test_a_split_mcap_bag_with_an_unknown_definition_names_it(bags):
     ) as err:
         open_log(mc)
     assert "'unknown'" in str(err.value) and "one at a time" in err.value.hint
+
+
+@pytest.mark.parametrize("storage", ["mcap", "db3"])
+def test_a_split_bag_whose_last_file_is_cut_names_that_file(bags, storage):
+    """A recorder killed mid-file leaves a split bag's last storage file cut: rosbags refused the whole
+    bag with "File end magic is invalid. (check the bag)", naming no file (a ROS-user probe). The error
+    now names the file and says to give the others one at a time."""
+    sq, mc, _ = bags
+    bag = sq if storage == "db3" else mc
+    f = next(bag.glob(f"*.{storage}"))
+    first, cut = bag / f"a.{storage}", bag / f"b.{storage}"
+    f.rename(first)
+    data = first.read_bytes()
+    cut.write_bytes(data[: len(data) // 2])
+    meta = yaml.safe_load((bag / "metadata.yaml").read_text())
+    meta["rosbag2_bagfile_information"]["relative_file_paths"] = [first.name, cut.name]
+    (bag / "metadata.yaml").write_text(yaml.safe_dump(meta))
+    with pytest.raises(LogError, match=rf"its storage file 'b\.{storage}' cannot be read") as err:
+        open_log(bag)
+    assert "one at a time" in err.value.hint

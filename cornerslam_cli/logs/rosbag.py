@@ -103,6 +103,15 @@ class RosbagSource:
             elif (isinstance(exc, TypeError) or "NoneType" in problem) and (self.path / META).is_file():
                 problem = f"a field of its metadata.yaml or storage is missing or mistyped ({problem})"
                 hint = "restore its metadata.yaml (`ros2 bag reindex` writes one), or give its storage file"
+            elif ros2 and (bad := _unreadable_storage(self.path)):  # (a split bag's last file, cut)
+                problem = f"its storage file '{bad}' cannot be read ({problem})"
+                hint = (
+                    "give the bag's storage files one at a time: the others read alone, and a .mcap cut "
+                    "short is read up to its cut; `mcap recover` repairs it"
+                    if bad.endswith(".mcap")
+                    else "give the bag's other storage files one at a time, each reads alone; sqlite3's "
+                    "`.recover` may save the damaged one"
+                )
             raise LogError(f"cannot read {kind} '{self.path.name}': {problem}", hint) from exc
         merged: dict[str, Channel] = {}
         for c in self._reader.connections:
@@ -187,6 +196,25 @@ def open_rosbag2(path: Path, **kw) -> RosLogReader:
     source = mcap_source(storage, stats, f"ROS 2 bag '{path.name}': {storage.name}", "check the bag")
     source.format = "rosbag2"
     return RosLogReader(source, path, stats=stats, **kw)
+
+
+def _unreadable_storage(directory: Path) -> str | None:
+    """Of a split ROS 2 bag (a directory whose metadata.yaml names several storage files), the first
+    file rosbags cannot open alone (a recorder killed mid-file leaves the last one cut), else None:
+    rosbags refuses the whole bag naming none (a ROS-user probe)."""
+    info = _bag_info(directory) if directory.is_dir() else None
+    if info is None or len(info[2]) < 2:
+        return None
+    for name in info[2]:
+        if not (directory / name).is_file():  # (a missing one: rosbags names it)
+            continue
+        try:
+            reader = _Reader2(directory / name)
+            reader.open()
+            reader.close()
+        except Exception:  # noqa: BLE001 - rosbags raises many types for a bad file
+            return name
+    return None
 
 
 def _bag_info(directory: Path) -> tuple[str, bool, list[str]] | None:
