@@ -122,6 +122,13 @@ def test_summary_lines_with_ground_truth_and_relations():
     lines = summary_lines(summary(accuracy=acc))
     assert lines[4] == "ATE RMSE 0.012 m (odometry 1.425 m) against gt.tum"
     assert not any("scan-matched" in line for line in lines)
+    # a ground truth of part of the run: the line says over how many poses (a warning alone said it)
+    part = dataclasses.replace(acc, ate=dataclasses.replace(acc.ate, n=200, in_holes=7))
+    lines = summary_lines(summary(accuracy=part))
+    assert lines[4] == (
+        "ATE RMSE 0.012 m (odometry 1.425 m) against gt.tum, over 200 of the 500 poses "
+        "(7 in its gaps not scored)"
+    )
 
 
 def test_comparison_lines_columns_follow_the_references():

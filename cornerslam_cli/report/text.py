@@ -74,7 +74,8 @@ def summary_lines(s: RunSummary) -> list[str]:
             f"ATE RMSE {acc.ate.rmse:.3f} m (odometry {acc.odom_ate.rmse:.3f} m"
             + (f", scan-matched {acc.scan_odom_ate.rmse:.3f} m" if acc.scan_odom_ate else "")
             + f") against {acc.ground_truth}"
-            + (f" ({acc.ate.in_holes} poses in its gaps not scored)" if acc.ate.in_holes else "")
+            + (f", over {acc.ate.n} of the {s.counts.steps} poses" if acc.ate.n < s.counts.steps else "")
+            + (f" ({acc.ate.in_holes} in its gaps not scored)" if acc.ate.in_holes else "")
         )
     if s.consistency is not None:
         lines.append(consistency_line(s.consistency))
