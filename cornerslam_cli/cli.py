@@ -548,15 +548,18 @@ def evaluate(out_dir, ground_truth, relations, time_offset, correct_scale, verbo
 @cli.command()
 @click.argument("log_path", metavar="LOG", type=GivenPath())
 @click.option(
-    "--step", default=0, show_default=True, type=click.IntRange(min=0), help="Index of the scan (0 = first)."
+    "--step",
+    type=click.IntRange(min=0),
+    help="Index of the scan in the log (0 = first, the default; a run's steps skip scans: see --at).",
 )
+@click.option("--at", type=FINITE, help="The scan of this stamp, s (a run's step: trajectory.csv's stamp).")
 @click.option(
     "--plot", "plot_path", type=FIGURE_PATH, help="Draw the scan and features to a PNG (or .pdf, .svg)."
 )
 @config_options
 @topic_options
 @verbosity_options(progress=False, steps=False)
-def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_topic, verbose, quiet):
+def extract(log_path, step, at, plot_path, config_path, overrides, scan_topic, odom_topic, verbose, quiet):
     """Print the segments and corners of one scan (and draw them with 3σ ellipses).
 
     \b
@@ -568,11 +571,15 @@ def extract(log_path, step, plot_path, config_path, overrides, scan_topic, odom_
     from .report.extract_plot import format_extraction, plot_extraction
 
     setup_logging(verbose, quiet)
+    if step is not None and at is not None:
+        raise click.UsageError(
+            "--step (the log's scan index) and --at (a stamp) contradict each other: give one"
+        )
     cfg = command_config(config_path, overrides, None, scan_topic, odom_topic, log_path)
     target = _figure_target(plot_path) if plot_path else None  # refused before any work
     # the beams a run keeps (input.skip_beams_*, input.max_range), in the sensor frame (not mirrored)
-    scan, segments, corners = extract_step(
-        log_path, step, cfg, lambda r: scans_prepared(r, cfg, msgs=r.scans())
+    step, scan, segments, corners = extract_step(
+        log_path, 0 if step is None else step, cfg, lambda r: scans_prepared(r, cfg, msgs=r.scans()), at
     )
     click.echo(scan_heading(step, scan))
     click.echo(format_extraction(segments, corners))

@@ -359,7 +359,7 @@ def test_extract_step_is_the_steps_scan_and_its_features(tmp_path):
     room = np.concatenate([np.full(91, 3.0), np.linspace(3.0, 1.5, 90)])  # a wall meeting a slanted one
     log = small_log(tmp_path / "s.mcap", n=6, ranges=room)
     cfg = load_config(None, [])
-    scan, segments, corners = extract_step(log, 4, cfg)
+    _, scan, segments, corners = extract_step(log, 4, cfg)
     assert scan.stamp == pytest.approx(T0 + 0.45)
     ref_segments, ref_corners = extract(scan, cfg.sensor, cfg.lines, cfg.corners)
     assert len(segments) == len(ref_segments) > 0 and np.array_equal(corners.z, ref_corners.z)
@@ -371,6 +371,21 @@ def test_extract_step_is_the_steps_scan_and_its_features(tmp_path):
     assert invoke("extract", log, "--step", 9).stderr == (
         f"error: --step 9 is past the end of '{log}' (6 scans) (use 0..5)\n"
     )
+
+
+def test_extract_at_a_stamp_is_a_runs_step(tmp_path):
+    """A run's step numbers skip scans (between keyframes, before the odometry, a stamp that went back):
+    `extract --step 295` showed the scan the run skipped, not its step 295 (an evo-user probe). --at takes
+    a stamp of trajectory.csv and shows that scan, with its index in the log; a stamp no scan has names
+    the scans' span; --at with --step is a usage error."""
+    log = small_log(tmp_path / "s.mcap", n=6)
+    res = invoke("extract", log, "--at", f"{T0 + 0.4505:.4f}")  # (within 1 ms of the 5th scan's)
+    assert res.exit_code == 0 and res.stdout.startswith("scan 4 at 1700000000.450 s:"), res.output
+    res = invoke("extract", log, "--at", "12.5")
+    assert res.exit_code == 2 and "no scan of" in res.stderr and "is stamped --at 12.500000" in res.stderr
+    assert "trajectory.csv stamp column" in res.stderr
+    res = invoke("extract", log, "--at", f"{T0 + 0.45}", "--step", "1")
+    assert res.exit_code == 2 and "contradict each other" in res.stderr
 
 
 def test_extract_from_a_log_with_no_readable_scan_names_no_range(tmp_path):
