@@ -393,6 +393,11 @@ def parse_assocs(text: str | None, allow_many: bool, log_path: str | None = None
         try:
             associator_class(name)
         except ConfigError as e:  # (named where it was given)
+            if len(name.split()) > 1:  # 'icnn jcbb': a list with spaces ("did you mean 'jcbb'?" misled)
+                sep = ",".join(name.split())
+                raise ConfigError(
+                    f"--assoc: '{name}' is not an associator", f"separate them with commas: {sep}"
+                ) from None
             raise ConfigError(f"--assoc: {e.msg}", e.hint) from None
     return names
 

@@ -870,6 +870,14 @@ def test_compare_rejects_unknown_and_repeated_associators(sim_log, tmp_path):
     assert not (tmp_path / "c").exists()
 
 
+@pytest.mark.parametrize("allow_many", [True, False])
+def test_parse_assocs_names_separated_by_spaces_are_told_to_use_commas(allow_many):
+    """`--assoc 'icnn jcbb'` was answered "did you mean 'jcbb'?" (an evo-user probe)."""
+    with pytest.raises(ConfigError) as e:
+        parse_assocs("icnn jcbb", allow_many=allow_many)
+    assert str(e.value) == "--assoc: 'icnn jcbb' is not an associator (separate them with commas: icnn,jcbb)"
+
+
 def test_parse_assocs_good_names():
     assert parse_assocs("icnn,jcbb,pca", allow_many=True) == ["icnn", "jcbb", "pca"]
     assert parse_assocs(" pca , icnn", allow_many=True) == ["pca", "icnn"]  # spaces dropped
