@@ -133,15 +133,17 @@ class GivenPath(click.Path):
 class _PresetName(click.ParamType):
     """``config --preset``: ``auto``, ``none`` or a laser preset's name. ``''`` (an unset shell variable,
     ``--preset "$P"``) is refused naming the choices: it was taken as not given, the automatic choice,
-    without a word. Another unknown name is the config's to refuse, as the key's value."""
+    without a word; another unknown name too, as --preset's (the config named its key
+    input.laser_preset, which the user had not written: an evo-user probe)."""
 
     name = "NAME"
 
     def convert(self, value, param, ctx):
-        if value == "":
-            from .lasers import PRESETS
+        from .lasers import PRESETS
 
-            self.fail(f"'' names no laser preset (choices: auto, none, {', '.join(PRESETS)})", param, ctx)
+        if value not in ("auto", "none", *PRESETS):
+            what = "names no laser preset" if value == "" else "is not a laser preset"
+            self.fail(f"'{value}' {what} (choices: auto, none, {', '.join(PRESETS)})", param, ctx)
         return value
 
 

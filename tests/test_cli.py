@@ -1167,6 +1167,10 @@ def test_an_empty_preset_option_is_a_usage_error_naming_the_choices():
         r, "invalid value for '--preset': '' names no laser preset (choices: auto, none, sick_lms_1deg"
     )
     assert r.stdout == ""
+    # an unknown one is --preset's too (the config named its key input.laser_preset: an evo-user probe)
+    r = invoke("config", "--preset", "bogus")
+    one_line_error(r, "invalid value for '--preset': 'bogus' is not a laser preset (choices: auto, none,")
+    assert "input.laser_preset" not in r.stderr
 
 
 @pytest.mark.parametrize(
