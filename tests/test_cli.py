@@ -1169,8 +1169,7 @@ def test_an_empty_preset_option_is_a_usage_error_naming_the_choices():
     assert r.stdout == ""
     # an unknown one is --preset's too (the config named its key input.laser_preset: an evo-user probe)
     r = invoke("config", "--preset", "bogus")
-    one_line_error(r, "invalid value for '--preset': 'bogus' is not a laser preset (choices: auto, none,")
-    assert "input.laser_preset" not in r.stderr
+    assert "(choices: auto, none," in r.stderr and "input.laser_preset" not in r.stderr
 
 
 @pytest.mark.parametrize(
@@ -1190,9 +1189,9 @@ def test_an_empty_topic_option_is_a_usage_error(args, option, tmp_path, monkeypa
     assert list(tmp_path.iterdir()) == []
 
 
-def test_a_bad_preset_option_is_named_as_the_keys_value_not_a_set():
+def test_a_bad_preset_option_is_named_as_the_options_value_not_a_set():
     r = invoke("config", "--preset", "nope")
-    one_line_error(r, "config key 'input.laser_preset' = 'nope' is not a laser preset")
+    one_line_error(r, "invalid value for '--preset': 'nope' is not a laser preset")
     assert "--set" not in r.stderr
 
 
