@@ -559,3 +559,14 @@ def test_a_range_max_at_or_below_range_min_is_named(tmp_path):
     assert res.exit_code == 2 and "\n" not in res.stderr.strip()
     assert "its scans' range_max (0.000 m) is at or below their range_min" in res.stderr
     assert "set the laser driver's range_max" in res.stderr
+
+
+def test_a_log_with_poses_but_no_odometry_names_the_pose_topics(tmp_path):
+    """A log whose robot pose is a geometry_msgs/PoseStamped topic: "no nav_msgs/Odometry topic and no
+    tf topic" said nothing of it (a ROS-user probe)."""
+    pose = [("/robot_pose", "geometry_msgs/msg/PoseStamped")]
+    p = write_messages_mcap(tmp_path / "poses.mcap", scan_messages("/scan"), declared=pose)
+    with pytest.raises(
+        LogError, match=r"no tf topic \(/robot_pose: geometry_msgs poses, not read as odometry\)"
+    ):
+        open_log(p).messages()

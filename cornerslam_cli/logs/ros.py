@@ -205,6 +205,10 @@ class RawSource(Protocol):
     def close(self) -> None: ...
 
 
+# pose topics a log may hold instead of odometry (named when it has none cornerslam reads)
+POSE_TYPES = ("geometry_msgs/PoseStamped", "geometry_msgs/PoseWithCovarianceStamped")
+
+
 @dataclass(frozen=True)
 class _OdomSel:
     topic: str  # "" if none
@@ -408,10 +412,12 @@ class RosLogReader:
                             f"{listing(odoms)}", "choose one with --odom-topic")  # fmt: skip
         if self._lossy():
             return _OdomSel("", "", *self._lost("no nav_msgs/Odometry topic and no tf topic"))
+        poses = [t for t, c in self._channels.items() if normalize_msgtype(c.msgtype) in POSE_TYPES]
+        of_poses = f" ({listing(sorted(poses))}: geometry_msgs poses, not read as odometry)" if poses else ""
         return _OdomSel(
             "",
             "",
-            f"log '{name}' has no odometry: no nav_msgs/Odometry topic and no tf topic",
+            f"log '{name}' has no odometry: no nav_msgs/Odometry topic and no tf topic{of_poses}",
             "select an odometry topic with --odom-topic (nav_msgs/Odometry or tf with "
             f"{short_text(self.odom_frame)}→{short_text(self.base_frame)})",
         )
