@@ -1,6 +1,6 @@
 """Odometry whose pose never moves (a base driver that fills only the twist; an odom→base_link tf left
 at identity) is warned about: the run took the robot as standing still, with no word of it (a ROS-user
-probe: 3.7 m ATE against 0.04)."""
+probe: 3.7 m ATE against 0.04); so is a long run of steps with no valid beam."""
 
 from __future__ import annotations
 
@@ -69,3 +69,33 @@ def test_moving_odometry_is_not_warned_of(sim_log, tmp_path):
     out = tmp_path / "run"
     assert CliRunner().invoke(cli, ["run", str(sim_log), "--out", str(out), "-q"]).exit_code == 0
     assert not [w for w in warnings_of(out) if "never moves" in w]
+
+
+def test_a_long_run_of_blind_steps_is_warned_of():
+    """20 scans in a row with no valid beam (a covered laser, a driver writing NaN) went unsaid but for
+    beams_invalid (a ROS-user probe): the longest such run of steps, BLIND_STEPS or more, is warned of
+    with its stamps; a shorter one, or a log blind throughout (refused by the run), is not."""
+    from types import SimpleNamespace
+
+    from cornerslam_cli.report.summary import BLIND_STEPS, Totals, warn_blind
+
+    def totals(points):
+        t = Totals()
+        zero = dict.fromkeys(("t_extract", "t_predict", "t_match", "t_update", "t_scan_match", "t_loop"), 0)
+        for k, n in enumerate(points):
+            t.add(SimpleNamespace(stamp=100.0 + 0.5 * k, n_points=n, budget_hit=0, n_matched=0, **zero))
+        return t
+
+    said = []
+    src = SimpleNamespace(path=Path("b.mcap"), reader=SimpleNamespace(stats=SimpleNamespace(
+        warn=lambda fmt, *a: said.append(fmt % a))))  # fmt: skip
+    blind = [100] * 5 + [0] * 3 + [100] * 4 + [0] * BLIND_STEPS + [100] * 6  # two runs: 3 and BLIND_STEPS
+    warn_blind(src, totals(blind))
+    assert said == [
+        f"log 'b.mcap': {BLIND_STEPS} steps in a row had no valid beam (106.000 to 110.500 s, 4.5 s): the "
+        "robot went on its odometry alone there (a laser covered or blinded? a driver writing NaN or inf?)"
+    ]
+    said.clear()
+    warn_blind(src, totals([100] * 5 + [0] * (BLIND_STEPS - 1) + [100]))
+    warn_blind(src, totals([0] * 30))
+    assert not said

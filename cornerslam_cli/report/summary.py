@@ -8,6 +8,7 @@ import functools
 import hashlib
 import importlib.resources
 import json
+import math
 import os
 import platform
 import time
@@ -36,6 +37,7 @@ if TYPE_CHECKING:
 MAX_SCALE_ERROR = 0.25
 # the odometry's pose "never moves" within these (m, rad) over the run, while the scans went this far (m)
 STILL_XY, STILL_THETA, STILL_SCANS_WENT = 1e-6, 1e-6, 1.0
+BLIND_STEPS = 10  # steps in a row with no valid beam, warned of
 
 
 @dataclass
@@ -50,6 +52,9 @@ class Totals:
     budget_hits: int = 0  # steps where the associator ran out of its search budget
     matched: int = 0  # corners matched to a landmark
     points: int = 0  # valid beams
+    blind: int = 0  # steps in a row with no valid beam, up to the last one added
+    blind_from: float = math.nan  # ... the stamp of the first of them
+    blind_longest: tuple[int, float, float] = (0, math.nan, math.nan)  # the longest such run: steps, stamps
 
     def add(self, r: StepRecord) -> None:
         self.steps += 1
@@ -58,6 +63,11 @@ class Totals:
         self.budget_hits += r.budget_hit
         self.matched += r.n_matched
         self.points += r.n_points
+        self.blind = self.blind + 1 if r.n_points == 0 else 0
+        if self.blind == 1:
+            self.blind_from = r.stamp
+        if self.blind > self.blind_longest[0]:
+            self.blind_longest = (self.blind, self.blind_from, r.stamp)
 
 
 def build_summary(
@@ -79,6 +89,7 @@ def build_summary(
     info = src.info
     model = odometry_model(src.matcher)
     warn_odometry_model(src, model)
+    warn_blind(src, totals)
     return RunSummary(
         cornerslam_version=__version__,
         mode="slam",
@@ -163,6 +174,19 @@ def warn_odometry_model(src: Input, model: OdometryModel | None) -> None:
             "wrong way?) and that the odometry is this robot's, in metres",
             src.path.name, 100 * abs(model.odom_scale_error), src.laser2base[2],
             MOUNT_SOURCES.get(src.laser_source, src.laser_source),
+        )  # fmt: skip
+
+
+def warn_blind(src: Input, totals: Totals) -> None:
+    """Warn when ``BLIND_STEPS`` or more steps in a row had no valid beam (a laser covered or blinded, a
+    driver writing NaN): the robot went on its odometry alone there, which only ``beams_invalid`` told (a
+    ROS-user probe: 20 blind scans in a row, no word)."""
+    n, first, last = totals.blind_longest
+    if n >= BLIND_STEPS and n < totals.steps:  # (every step blind: the run refuses the log)
+        src.reader.stats.warn(
+            "log '%s': %d steps in a row had no valid beam (%.3f to %.3f s, %.1f s): the robot went on its "
+            "odometry alone there (a laser covered or blinded? a driver writing NaN or inf?)",
+            src.path.name, n, first, last, last - first,
         )  # fmt: skip
 
 
