@@ -411,7 +411,9 @@ def test_tf_quaternions_in_json_normalised_or_ignored(tmp_path):
         got = [m for m in log.messages() if not hasattr(m, "ranges")]
         assert log.laser_to_base() is None
         assert any(
-            "base_link→laser has a zero-length rotation quaternion: ignored" in w for w in log.stats.warnings
+            "base_link→laser has a zero-length rotation quaternion, no rotation (tf2 refuses it): the "
+            "transform is not used" in w
+            for w in log.stats.warnings
         )
     assert [g.theta for g in got] == pytest.approx([o.theta for o in odoms], abs=1e-12)
 

@@ -696,7 +696,8 @@ class RosLogReader:
                         continue
                     if sum(v * v for v in q) < 1e-12:  # no rotation at all: not a transform
                         self.stats.warn(
-                            "%s: tf %s→%s has a zero-length rotation quaternion: ignored",
+                            "%s: tf %s→%s has a zero-length rotation quaternion, no rotation (tf2 refuses "
+                            "it): the transform is not used, its translation neither (write w=1 for none)",
                             self.path.name, parent, child,
                         )  # fmt: skip
                         continue
