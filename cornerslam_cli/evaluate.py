@@ -313,17 +313,23 @@ def units_problem(
     est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray, gt_name: str
 ) -> tuple[str, str] | None:
     """Why ``gt_name`` cannot score the trajectory when one of the two is in centimetres or millimetres
-    (its path over the same stamps 100 or 1000 times the other's, within UNITS_TOLERANCE), and what to do;
-    else None. A ground truth in mm scored an ATE of 18 km with no word (an evo-user probe); a run that went
-    nowhere against a moving ground truth is no unit and is not said to be one."""
+    (over the same stamps its path, and the extent of its poses, 100 or 1000 times the other's, within
+    UNITS_TOLERANCE), and what to do; else None. A ground truth in mm scored an ATE of 18 km with no word
+    (an evo-user probe). The extent too: the jitter of a robot standing still makes paths of any ratio, and
+    a run that went nowhere against a moving ground truth is no unit."""
     inside, g = interpolate_inside(gt_t, gt, est_t)
-    ours, theirs = (float(np.hypot(*np.diff(p[:, :2], axis=0).T).sum()) for p in (est[inside], g))
-    if min(ours, theirs) <= 0.0:
+    e = est[inside]
+    ours, theirs = (float(np.hypot(*np.diff(p[:, :2], axis=0).T).sum()) for p in (e, g))
+    our_extent, their_extent = (float(np.hypot(*np.ptp(p[:, :2], axis=0))) for p in (e, g))
+    if min(ours, theirs, our_extent, their_extent) <= 0.0:
         return None
+    sides = (  # (the one that goes farther, the other, their paths, the ratio of their extents)
+        ("the ground truth", "the trajectory", theirs, ours, their_extent / our_extent),
+        ("the trajectory", "the ground truth", ours, theirs, our_extent / their_extent),
+    )
     for unit, factor in (("millimetres", 1e3), ("centimetres", 1e2)):
-        for far, near, a, b in (("the ground truth", "the trajectory", theirs, ours), ("the trajectory",
-                                "the ground truth", ours, theirs)):  # fmt: skip
-            if abs(np.log10(a / b / factor)) <= UNITS_TOLERANCE:
+        for far, near, a, b, extent in sides:
+            if max(abs(np.log10(a / b / factor)), abs(np.log10(extent / factor))) <= UNITS_TOLERANCE:
                 why = (
                     f"{gt_name} and the trajectory are in different units: over the same stamps {far} goes "
                     f"{a / b:.4g} times as far as {near} ({a:.4g} against {b:.4g}) — {unit}?"

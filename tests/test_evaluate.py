@@ -904,3 +904,12 @@ def test_a_ground_truth_in_other_units_is_refused_unless_scale_is_corrected(file
     assert units_problem(e_t, e * np.array([factor, factor, 1.0]), t, poses, "gt")[0].startswith(
         "gt and the trajectory are in different units: over the same stamps the trajectory goes"
     )
+    # a robot standing still: the ground truth's jitter back and forth over 1 mm, the trajectory's over
+    # two steps of the unit's times that: the paths in the unit's ratio, the extents not so: no unit
+    n = len(e_t)
+    still = np.zeros((n, 3))
+    still[1::2, 0] = 1e-3
+    wander = np.zeros((n, 3))
+    wander[:, 0] = np.array([0.0, 1.0, 2.0, 1.0] * n)[:n] * 1e-3 * factor
+    assert units_problem(e_t, wander, e_t, still, "gt") is None
+    assert units_problem(e_t, still * factor, e_t, still, "gt") is not None  # (the same shape: a unit)
