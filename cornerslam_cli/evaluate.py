@@ -291,47 +291,54 @@ def overlap_problem(
 
 
 def mirror_problem(
-    est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray, gt_name: str
+    est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray, gt_name: str, est_name: str
 ) -> tuple[str, str] | None:
-    """Why ``gt_name`` cannot score the trajectory when it is in a mirrored frame — z down (NED/FRD, as
+    """Why ``gt_name`` cannot score ``est_name`` when it is in a mirrored frame — z down (NED/FRD, as
     PX4/MAVROS and many motion-capture setups write it): its y and yaw the negative of a z-up frame's —, and
     what to do; else None. No rotation in the plane undoes a mirror, and its ATE came out hundreds of times
-    evo's, whose 3-D fit turns it over (an evo-user probe). Said when, mirrored, it fits the trajectory
-    ``MIRRORED`` times better than as it is, and by more than ``MIRROR_GAIN`` (a straight path fits both)."""
-    a = ate(est_t, est, gt_t, gt)
-    m = ate(est_t, est, gt_t, gt * np.array([1.0, -1.0, -1.0]))
-    if not (a.rmse > MIRRORED * m.rmse and a.rmse - m.rmse > MIRROR_GAIN):
+    evo's, whose 3-D fit turns it over (an evo-user probe). Told by the turns, step by step: a mirror
+    turns the other way at every step, a heading drift only adds to each (a review: a drifting estimate
+    fitted a bent corridor better mirrored). Said when, over MIRROR_TURNS rad of the ground truth's turns
+    or more, the steps' turns agree MIRRORED times better negated than as they are."""
+    inside, g = interpolate_inside(gt_t, gt, est_t)
+    ours, theirs = (wrap_angle(np.diff(p[:, 2])) for p in (est[inside], g))
+    if np.abs(theirs).sum() < MIRROR_TURNS:
+        return None
+    as_is, mirrored = float(np.mean((ours - theirs) ** 2)), float(np.mean((ours + theirs) ** 2))
+    if not as_is > MIRRORED * mirrored:
         return None
     why = (
-        f"{gt_name} is in a mirrored frame (z down: NED/FRD?): with its y and yaw negated it fits the "
-        f"trajectory to {m.rmse:.3f} m, as it is to {a.rmse:.3f} m (ATE)"
+        f"{gt_name} is in a mirrored frame (z down: NED/FRD?): {est_name} turns the other way at its steps "
+        f"(their turns differ by {np.degrees(np.sqrt(as_is)):.2f}° RMS, negated by "
+        f"{np.degrees(np.sqrt(mirrored)):.2f}°)"
     )
     return why, "convert it to a z-up frame by negating its y and yaw: ROS REP 103's, x forward and y left"
 
 
 def units_problem(
-    est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray, gt_name: str
+    est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray, gt_name: str, est_name: str
 ) -> tuple[str, str] | None:
     """Why ``gt_name`` cannot score the trajectory when one of the two is in centimetres or millimetres
     (over the same stamps its path, and the extent of its poses, 100 or 1000 times the other's, within
     UNITS_TOLERANCE), and what to do; else None. A ground truth in mm scored an ATE of 18 km with no word
-    (an evo-user probe). The extent too: the jitter of a robot standing still makes paths of any ratio, and
-    a run that went nowhere against a moving ground truth is no unit."""
+    (an evo-user probe). The extent too: the jitter of a robot standing still makes paths of any ratio; and
+    the shorter path UNITS_MIN_PATH or more: a run stuck in place against a moving ground truth is no unit
+    (a review)."""
     inside, g = interpolate_inside(gt_t, gt, est_t)
     e = est[inside]
     ours, theirs = (float(np.hypot(*np.diff(p[:, :2], axis=0).T).sum()) for p in (e, g))
     our_extent, their_extent = (float(np.hypot(*np.ptp(p[:, :2], axis=0))) for p in (e, g))
-    if min(ours, theirs, our_extent, their_extent) <= 0.0:
+    if min(ours, theirs) < UNITS_MIN_PATH or min(our_extent, their_extent) <= 0.0:
         return None
     sides = (  # (the one that goes farther, the other, their paths, the ratio of their extents)
-        ("the ground truth", "the trajectory", theirs, ours, their_extent / our_extent),
-        ("the trajectory", "the ground truth", ours, theirs, our_extent / their_extent),
+        ("the ground truth", est_name, theirs, ours, their_extent / our_extent),
+        (est_name, "the ground truth", ours, theirs, our_extent / their_extent),
     )
     for unit, factor in (("millimetres", 1e3), ("centimetres", 1e2)):
         for far, near, a, b, extent in sides:
             if max(abs(np.log10(a / b / factor)), abs(np.log10(extent / factor))) <= UNITS_TOLERANCE:
                 why = (
-                    f"{gt_name} and the trajectory are in different units: over the same stamps {far} goes "
+                    f"{gt_name} and {est_name} are in different units: over the same stamps {far} goes "
                     f"{a / b:.4g} times as far as {near} ({a:.4g} against {b:.4g}) — {unit}?"
                 )
                 return why, "write both in metres, or score with evaluate --correct-scale"
@@ -339,8 +346,10 @@ def units_problem(
 
 
 UNITS_TOLERANCE = 0.15  # decades: a path 100 or 1000 times the other's within ×1.4 is read as cm or mm
-# a ground truth is read as mirrored when, mirrored, it fits this many times better and by this much (m)
-MIRRORED, MIRROR_GAIN = 3.0, 0.05
+# a ground truth is read as mirrored when, over this many rad of its turns, the steps' turns agree this many
+# times better (mean square) negated than as they are
+MIRROR_TURNS, MIRRORED = 1.0, 3.0
+UNITS_MIN_PATH = 0.5  # m: the shorter path of the two at least (a run stuck in place is no unit)
 FASTEST_POSES = 1e-5  # s: the closest spacing stamps are taken to have (ns since 1970 as floats: 256 ns)
 EPOCH_STAMPS = 1e8  # s: stamps from here on (1973) are read as wall-clock time
 SPAN_RATIO = 20.0  # two files' time spans, one read in other units, at most this many times apart
@@ -390,8 +399,8 @@ def evaluate_files(
         name = f"ground truth '{ground_truth}'"
         problem = (
             overlap_problem(t, gt_t, name, f"trajectory '{trajectory}'")
-            or mirror_problem(t, est, gt_t, gt, name)
-            or (None if correct_scale else units_problem(t, est, gt_t, gt, name))
+            or mirror_problem(t, est, gt_t, gt, name, "the trajectory")
+            or (None if correct_scale else units_problem(t, est, gt_t, gt, name, "the trajectory"))
         )
         if problem:
             raise LogError(*problem)

@@ -900,16 +900,54 @@ def test_a_ground_truth_in_other_units_is_refused_unless_scale_is_corrected(file
     assert evaluate(est, "--ground-truth", gt, "--correct-scale").exit_code == 0
     e_t, e = read_tum(est)
     still = np.zeros_like(e) + e[0]
-    assert units_problem(e_t, still, t, poses * factor, "gt") is None
-    assert units_problem(e_t, e * np.array([factor, factor, 1.0]), t, poses, "gt")[0].startswith(
-        "gt and the trajectory are in different units: over the same stamps the trajectory goes"
-    )
-    # a robot standing still: the ground truth's jitter back and forth over 1 mm, the trajectory's over
+    assert units_problem(e_t, still, t, poses * factor, "gt", "the trajectory") is None
+    assert units_problem(e_t, e * np.array([factor, factor, 1.0]), t, poses, "gt", "the trajectory")[
+        0
+    ].startswith("gt and the trajectory are in different units: over the same stamps the trajectory goes")
+    # a robot standing still: the ground truth's jitter back and forth over 1 cm, the trajectory's over
     # two steps of the unit's times that: the paths in the unit's ratio, the extents not so: no unit
     n = len(e_t)
-    still = np.zeros((n, 3))
-    still[1::2, 0] = 1e-3
+    jitter = np.zeros((n, 3))
+    jitter[1::2, 0] = 1e-2
     wander = np.zeros((n, 3))
-    wander[:, 0] = np.array([0.0, 1.0, 2.0, 1.0] * n)[:n] * 1e-3 * factor
-    assert units_problem(e_t, wander, e_t, still, "gt") is None
-    assert units_problem(e_t, still * factor, e_t, still, "gt") is not None  # (the same shape: a unit)
+    wander[:, 0] = np.array([0.0, 1.0, 2.0, 1.0] * n)[:n] * 1e-2 * factor
+    assert units_problem(e_t, wander, e_t, jitter, "gt", "the trajectory") is None
+    assert units_problem(
+        e_t, jitter * factor, e_t, jitter, "gt", "the trajectory"
+    )  # (the same shape: a unit)
+
+
+@pytest.mark.parametrize("drift", [-1.1, -0.7, 0.0, 0.7])
+def test_a_drifting_estimate_is_scored_not_taken_for_a_mirrored_ground_truth(drift):
+    """A review: a corridor bending 0.4 rad left over 30 m, the estimate drifting in heading (rad over the
+    run) fitted the ground truth better mirrored, and was refused as "in a mirrored frame". The turns
+    tell: a drift adds to each step's turn, a mirror negates it."""
+    from cornerslam_cli.evaluate import mirror_problem
+
+    n = 300
+    t = np.arange(n) * 0.1
+    heading = 0.4 * np.arange(n) / n + 1.2 * np.sin(np.arange(n) / 40.0)  # (turns enough to tell)
+
+    def integrate(theta):
+        xy = np.cumsum(0.1 * np.column_stack((np.cos(theta), np.sin(theta))), axis=0)
+        return np.column_stack((xy, theta))
+
+    gt = integrate(heading)
+    est = integrate(heading + drift * np.arange(n) / n)
+    assert mirror_problem(t, est, t, gt, "gt", "the trajectory") is None
+    mirrored = gt * np.array([1.0, -1.0, -1.0])
+    assert mirror_problem(t, est, t, mirrored, "gt", "the trajectory")[0].startswith(
+        "gt is in a mirrored frame"
+    )
+
+
+def test_a_run_stuck_in_place_is_not_taken_for_a_ground_truth_in_millimetres():
+    """A review: an estimate that jittered 2 cm in all against a ground truth going 18 m read as a ground
+    truth "in millimetres" — the failure a stuck run is, named as the reference's."""
+    from cornerslam_cli.evaluate import units_problem
+
+    t = np.arange(600) * 0.1
+    gt = np.column_stack((0.03 * np.arange(600), np.zeros(600), np.zeros(600)))
+    stuck = np.zeros((600, 3))
+    stuck[:, 0] = 1e-5 * np.cumsum(np.random.default_rng(2).choice([-1.0, 1.0], 600))
+    assert units_problem(t, stuck, t, gt, "gt", "the trajectory") is None

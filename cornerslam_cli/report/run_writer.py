@@ -337,8 +337,10 @@ def accuracy_of(
     name = f"ground truth '{ref.gt_path}'"
     problem = ref.gt is not None and (
         overlap_problem(stamps, ref.gt[0], name)
-        or mirror_problem(stamps, poses, *ref.gt, name)
-        or units_problem(stamps, poses, *ref.gt, name)
+        # (on the log's odometry: what the log says, the same for every associator of a compare, and
+        # not the estimate's failure — a stuck or drifting run is scored, not taken for a bad reference)
+        or mirror_problem(stamps, odoms, *ref.gt, name, "the log's odometry")
+        or units_problem(stamps, odoms, *ref.gt, name, "the log's odometry")
     )
     if problem:
         notes.append(f"{problem[0]}: no ATE/RPE")
