@@ -321,3 +321,11 @@ def test_the_run_says_how_well_its_map_agrees_with_itself():
         "misalignment)"
     )
     assert not any(line.startswith("map consistency") for line in summary_lines(s))
+
+
+def test_comparison_lines_with_one_run_scored_and_another_not():
+    """A review: a compare whose runs got different verdicts on the ground truth (one scored, one not)
+    failed on the unscored one's accuracy (None) after every run had finished: '-' cells instead."""
+    lines = comparison_lines([summary("pca", accuracy(scan_odom_relations=REL)), summary("icnn")])
+    assert "0.012" in lines[1] and "1.425" in lines[1]
+    assert lines[2].split()[-4:] == ["-", "-", "-", "-"], lines

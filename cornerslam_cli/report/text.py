@@ -193,11 +193,11 @@ def comparison_lines(summaries: list[RunSummary]) -> list[str]:
             f"{s.assoc:<6} {c.steps:>6} {c.landmarks:>9} {c.matched_total:>8} "
             f"{t.t_match:>10.3f} {1000 * t.t_match_max:>8.1f} {t.t_total:>10.2f}"
         )
-        a = s.accuracy
+        a = s.accuracy  # (one run scored and another not: '-' cells, not a crash)
         if has_gt:
-            line += f" {a.ate.rmse:>8.3f} {a.odom_ate.rmse:>10.3f}"
+            line += f" {a.ate.rmse:>8.3f} {a.odom_ate.rmse:>10.3f}" if a and a.ate else f" {'-':>8} {'-':>10}"
         if has_rel:
-            line += f" {mean_std(a.relations):>16} {mean_std(a.odom_relations):>18}"
+            line += f" {mean_std(a and a.relations):>16} {mean_std(a and a.odom_relations):>18}"
         if has_loops:
             line += _loop_columns(s, has_gt)
         lines.append(line)
