@@ -266,7 +266,12 @@ def overlap_problem(
             "where it is not interpolated"
         )
         return why, "give a ground truth with poses throughout the trajectory"
-    for unit, scale in (("nanoseconds", 1e9), ("microseconds", 1e6), ("milliseconds", 1e3)):
+    units = (
+        ()
+        if _same_unit(est_t, gt_t)
+        else (("nanoseconds", 1e9), ("microseconds", 1e6), ("milliseconds", 1e3))
+    )
+    for unit, scale in units:
         if _reads_as(gt_t / scale, est_t):
             why = (  # a ROS exporter's integer stamps: TUM's are seconds
                 f"{gt_name} has its stamps in {unit}, not seconds ({gt_t[0]:.0f} to {gt_t[-1]:.0f}; "
@@ -352,18 +357,23 @@ MIRROR_TURNS, MIRRORED = 1.0, 3.0
 UNITS_MIN_PATH = 0.5  # m: the shorter path of the two at least (a run stuck in place is no unit)
 FASTEST_POSES = 1e-5  # s: the closest spacing stamps are taken to have (ns since 1970 as floats: 256 ns)
 EPOCH_STAMPS = 1e8  # s: stamps from here on (1973) are read as wall-clock time
-SPAN_RATIO = 20.0  # two files' time spans, one read in other units, at most this many times apart
+SAME_SPAN = 2.0  # two files' time spans this close in length are in one unit
 
 
 def _reads_as(scaled: np.ndarray, other: np.ndarray) -> bool:
     """Whether stamps ``scaled`` (one file's, divided by a unit's scale) read as the same clock as
     ``other``'s: two or more within its span, ≥ FASTEST_POSES apart (seconds since 1970 as µs fall in a
-    half-hour span from 0), and the two spans of comparable length (a ground truth stamped from 0 against
-    a log's 1000–1118 s: read as ms, the log's 118 s became 0.118 s inside it — two clocks, not units)."""
-    if _within(scaled, other) < 2 or _spacing(scaled) < FASTEST_POSES:
-        return False
-    a, b = float(scaled[-1] - scaled[0]), float(other[-1] - other[0])
-    return max(a, b) <= SPAN_RATIO * min(a, b)
+    half-hour span from 0)."""
+    return _within(scaled, other) >= 2 and _spacing(scaled) >= FASTEST_POSES
+
+
+def _same_unit(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two files' time spans, as they are, are of about one length (within SAME_SPAN): then their
+    stamps are in one unit, and not overlapping is two clocks (a ground truth stamped from 0 against a
+    log's 1000–1118 s: read as ms, the log's 118 s fell inside it). A run of part of the log, or a ground
+    truth of part of it, may be far shorter: only then is a unit read (a review)."""
+    x, y = float(a[-1] - a[0]), float(b[-1] - b[0])
+    return 0.0 < min(x, y) and max(x, y) <= SAME_SPAN * min(x, y)
 
 
 def _within(t: np.ndarray, span: np.ndarray) -> int:

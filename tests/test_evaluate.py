@@ -822,6 +822,13 @@ def test_a_ground_truth_stamped_from_0_is_not_taken_for_milliseconds(gt_first):
     assert why.startswith("gt.tum has its stamps in milliseconds, not seconds") and "seconds" in hint
     why, _ = overlap_problem(log, log[:20] * 1e3, "gt.tum")  # a ground truth of a tenth of the run, in ms
     assert why.startswith("gt.tum has its stamps in milliseconds, not seconds")
+    # a review: a run of 30 s of a 600 s log against its whole ground truth in ns (and a ground truth of
+    # 1/30 of the run in ms) were said not to overlap once the spans had to be alike: named again
+    whole = 1.7e9 + np.arange(0.0, 600.0, 0.1)
+    why, _ = overlap_problem(whole[:300], whole * 1e9, "gt.tum")
+    assert why.startswith("gt.tum has its stamps in nanoseconds, not seconds"), why
+    why, _ = overlap_problem(whole, whole[:200] * 1e3, "gt.tum")
+    assert why.startswith("gt.tum has its stamps in milliseconds, not seconds"), why
 
 
 def mirrored(rows: list[str]) -> list[str]:
