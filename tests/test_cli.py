@@ -425,7 +425,8 @@ def test_a_damaged_ground_truth_beside_the_log_says_why_it_was_read(command, tmp
     one_line_error(
         res,
         f"ground truth '{gt}' line 1 is not a TUM pose (expected: stamp x y z qx qy qz qw; read as the "
-        "log's ground truth for lying beside it: fix it, or give --no-ground-truth)",
+        "log's ground truth for lying beside it: fix it, or run without it: --no-ground-truth for run and "
+        "compare, renamed for batch)",
     )
     res = invoke(command, log, "--out", tmp_path / "o", "--ground-truth", gt)  # given: no such note
     one_line_error(res, "line 1 is not a TUM pose")

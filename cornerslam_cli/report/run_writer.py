@@ -307,7 +307,10 @@ def load_reference(
     except CornerslamError as e:
         if ground_truth:
             raise
-        why = "read as the log's ground truth for lying beside it: fix it, or give --no-ground-truth"
+        why = (
+            "read as the log's ground truth for lying beside it: fix it, or run without it: "
+            "--no-ground-truth for run and compare, renamed for batch"
+        )
         raise type(e)(e.msg, f"{e.hint}; {why}" if e.hint else why) from None
     return Reference(
         gt_path,
