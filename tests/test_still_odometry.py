@@ -13,9 +13,9 @@ from click.testing import CliRunner
 from cornerslam_cli.cli import cli
 
 
-def with_still_odometry(src: Path, dest: Path) -> Path:
+def with_still_odometry(src: Path, dest: Path, heading: bool = False) -> Path:
     """``src`` (an MCAP of nav_msgs/Odometry on /odom) with every odometry pose at the origin, its twist
-    kept (a driver that fills only the twist)."""
+    kept (a driver that fills only the twist); with ``heading`` its orientation kept (an IMU's yaw)."""
     from mcap.reader import make_reader
     from mcap.writer import Writer
     from rosbags.typesys import Stores, get_typestore
@@ -37,8 +37,9 @@ def with_still_odometry(src: Path, dest: Path) -> Path:
                 msg = ts.deserialize_cdr(data, "nav_msgs/msg/Odometry")
                 p = msg.pose.pose
                 p.position.x = p.position.y = p.position.z = 0.0
-                p.orientation.x = p.orientation.y = p.orientation.z = 0.0
-                p.orientation.w = 1.0
+                if not heading:
+                    p.orientation.x = p.orientation.y = p.orientation.z = 0.0
+                    p.orientation.w = 1.0
                 data = bytes(ts.serialize_cdr(msg, "nav_msgs/msg/Odometry"))
             w.add_message(channels[channel.id], message.log_time, data, message.publish_time)
         w.finish()
@@ -59,10 +60,24 @@ def test_odometry_that_never_moves_is_warned_of_when_the_scans_moved(sim_log, tm
     said = [w for w in warnings_of(out) if "never moves over the run" in w]
     if moved:  # the scans went metres: said, with how far, and what to check
         assert len(said) == 1, warnings_of(out)
-        assert "odometry (/odom, nav_msgs/Odometry) never moves over the run, while its scans say" in said[0]
+        assert (
+            "odometry's position (/odom, nav_msgs/Odometry) never moves over the run, while its scans"
+            in said[0]
+        )
         assert "fills only the twist" in said[0]
     else:  # two scans, hardly apart: a robot standing still has odometry that does not move
         assert not said
+
+
+def test_a_still_position_with_a_moving_heading_is_warned_of_but_not_without_scan_matching(sim_log, tmp_path):
+    """A review: an odometry whose heading moves (an IMU's yaw) while its position stays at 0 is the same
+    failure, and was not warned of; with scan matching off nothing tells a parked robot from a still
+    odometry, and the warning (which spoke of scan matches) was given."""
+    log = with_still_odometry(sim_log, tmp_path / "yaw.mcap", heading=True)
+    for sets, warned in (([], True), (["--set", "scan_match.enabled=false"], False)):
+        out = tmp_path / f"run{len(sets)}"
+        assert CliRunner().invoke(cli, ["run", str(log), "--out", str(out), "-q", *sets]).exit_code == 0
+        assert any("never moves over the run" in w for w in warnings_of(out)) == warned
 
 
 def test_moving_odometry_is_not_warned_of(sim_log, tmp_path):

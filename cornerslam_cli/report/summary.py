@@ -35,8 +35,8 @@ if TYPE_CHECKING:
 
 # an odometer scale error past this is no calibration (real logs: 2–3 %): warned (warn_odometry_model)
 MAX_SCALE_ERROR = 0.25
-# the odometry's pose "never moves" within these (m, rad) over the run, while the scans went this far (m)
-STILL_XY, STILL_THETA, STILL_SCANS_WENT = 1e-6, 1e-6, 1.0
+# the odometry's position "never moves" within this (m) over the run, while the scans went this far across
+STILL_XY, STILL_SCANS_WENT = 1e-6, 0.3
 BLIND_STEPS = 10  # steps in a row with no valid beam, warned of
 
 
@@ -191,24 +191,25 @@ def warn_blind(src: Input, totals: Totals) -> None:
 
 
 def warn_still_odometry(src: Input, odoms: np.ndarray, motions: np.ndarray | None) -> None:
-    """Warn when the odometry's pose never moves over the run while the scans say the robot went a
-    metre or more (``motions``: the scan-matched chain; without scan matching, whenever the odometry
-    never moves): a base driver that fills only the twist, an odom→base_link tf left at identity. The run
-    then takes the robot as standing still and moves it only as far as its scan matches correct that,
-    with no word of it (a ROS-user probe: 3.7 m ATE against 0.04). CARMEN logs say so as they are read."""
-    if src.info.format == "carmen" or len(odoms) < 2:
+    """Warn when the odometry's position never moves over the run while the scans say the robot went
+    STILL_SCANS_WENT or more across (``motions``: the scan-matched chain, the span of its positions; without scan matching
+    nothing tells a parked robot from a still odometry: no word): a base driver that fills only the twist,
+    or only the heading (an IMU's yaw), an odom→base_link tf left at identity. The run then takes the robot
+    as standing still and moves it only as far as its scan matches correct that, with no word of it (a
+    ROS-user probe: 3.7 m ATE against 0.04). CARMEN logs say so as they are read."""
+    if src.info.format == "carmen" or len(odoms) < 2 or motions is None:
         return
-    if np.ptp(odoms[:, :2], axis=0).max() > STILL_XY or np.ptp(np.unwrap(odoms[:, 2])) > STILL_THETA:
+    if np.ptp(odoms[:, :2], axis=0).max() > STILL_XY:
         return
-    went = None if motions is None else float(np.hypot(*np.diff(motions[:, :2], axis=0).T).sum())
-    if went is not None and went < STILL_SCANS_WENT:
-        return  # (the robot stood still: the odometry is right)
-    said = "" if went is None else f", while its scans say the robot went {went:.1f} m"
+    went = float(np.hypot(*np.ptp(motions[:, :2], axis=0)))
+    if went < STILL_SCANS_WENT:
+        return  # (the robot stood still, or its scans jittered: the odometry is right)
     src.reader.stats.warn(
-        "log '%s': its odometry (%s, %s) never moves over the run%s: the run takes the robot as standing "
-        "still and moves it only as far as its scan matches correct that (a base driver that fills only "
-        "the twist? an odom→base_link tf left at identity? give odometry whose pose moves)",
-        src.path.name, src.info.odom_topic, src.info.odom_source, said,
+        "log '%s': its odometry's position (%s, %s) never moves over the run, while its scans say the robot "
+        "went %.1f m across: the run takes the robot as standing still and moves it only as far as its scan "
+        "matches correct that (a base driver that fills only the twist? an odom→base_link tf left at "
+        "identity? give odometry whose position moves)",
+        src.path.name, src.info.odom_topic, src.info.odom_source, went,
     )  # fmt: skip
 
 
