@@ -139,11 +139,14 @@ class _PresetName(click.ParamType):
     name = "NAME"
 
     def convert(self, value, param, ctx):
+        from .errors import did_you_mean
         from .lasers import PRESETS
 
-        if value not in ("auto", "none", *PRESETS):
+        names = ("auto", "none", *PRESETS)
+        if value not in names:
             what = "names no laser preset" if value == "" else "is not a laser preset"
-            self.fail(f"'{value}' {what} (choices: auto, none, {', '.join(PRESETS)})", param, ctx)
+            close = did_you_mean(value, names, then=" ") if value else ""
+            self.fail(f"'{value}' {what} ({close}choices: {', '.join(names)})", param, ctx)
         return value
 
 

@@ -1171,6 +1171,8 @@ def test_an_empty_preset_option_is_a_usage_error_naming_the_choices():
     # an unknown one is --preset's too (the config named its key input.laser_preset: an evo-user probe)
     r = invoke("config", "--preset", "bogus")
     assert "(choices: auto, none," in r.stderr and "input.laser_preset" not in r.stderr
+    r = invoke("config", "--preset", "hokuyo_270")  # (the closest still offered: a review)
+    assert "is not a laser preset (did you mean 'hokuyo_270deg'? choices: auto, none," in r.stderr
 
 
 @pytest.mark.parametrize(

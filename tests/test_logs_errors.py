@@ -564,9 +564,24 @@ def test_a_range_max_at_or_below_range_min_is_named(tmp_path):
 def test_a_log_with_poses_but_no_odometry_names_the_pose_topics(tmp_path):
     """A log whose robot pose is a geometry_msgs/PoseStamped topic: "no nav_msgs/Odometry topic and no
     tf topic" said nothing of it (a ROS-user probe)."""
-    pose = [("/robot_pose", "geometry_msgs/msg/PoseStamped")]
-    p = write_messages_mcap(tmp_path / "poses.mcap", scan_messages("/scan"), declared=pose)
+    ros = RosSerializer("cdr")
+    T, kind = ros.store.types, "geometry_msgs/msg/PoseStamped"
+    still = T["geometry_msgs/msg/Pose"](
+        position=T["geometry_msgs/msg/Point"](x=0.0, y=0.0, z=0.0),
+        orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+    )
+    poses = [
+        (
+            "/robot_pose",
+            kind,
+            int(t * 1e9),
+            ros.serialize(T[kind](header=ros.header(t, "map"), pose=still), kind),
+        )
+        for t in 1_700_000_000.0 + 0.1 * np.arange(5)
+    ]
+    nav2 = [("/goal_pose", kind), ("/initialpose", "geometry_msgs/msg/PoseWithCovarianceStamped")]
+    p = write_messages_mcap(tmp_path / "poses.mcap", scan_messages("/scan") + poses, declared=nav2)
     with pytest.raises(
         LogError, match=r"no tf topic \(/robot_pose: geometry_msgs poses, not read as odometry\)"
     ):
-        open_log(p).messages()
+        open_log(p).messages()  # (nav2's goal and initial pose, in every `record -a`, not named)

@@ -219,3 +219,21 @@ def test_a_split_bag_whose_last_file_is_cut_names_that_file(bags, storage):
     with pytest.raises(LogError, match=rf"its storage file 'b\.{storage}' cannot be read") as err:
         open_log(bag)
     assert "one at a time" in err.value.hint
+
+
+def test_a_file_compressed_split_bag_names_no_file_it_cannot_open_alone(bags):
+    """A review: in a file-compressed split bag (.db3.zstd) no file opens alone, so the first, good one
+    was named as the cut one. Such a bag names none (rosbags' own error stands)."""
+    from cornerslam_cli.logs.rosbag import _unreadable_storage
+
+    sq, _, _ = bags
+    meta = yaml.safe_load((sq / "metadata.yaml").read_text())
+    info = meta["rosbag2_bagfile_information"]
+    info["relative_file_paths"], info["compression_format"] = ["a.db3.zstd", "b.db3.zstd"], "zstd"
+    (sq / "metadata.yaml").write_text(yaml.safe_dump(meta))
+    (sq / "a.db3.zstd").write_bytes(b"\x28\xb5\x2f\xfd")
+    (sq / "b.db3.zstd").write_bytes(b"")
+    assert _unreadable_storage(sq) is None
+    info["compression_format"] = ""  # (the same names, not compressed: the first is named)
+    (sq / "metadata.yaml").write_text(yaml.safe_dump(meta))
+    assert _unreadable_storage(sq) == "a.db3.zstd"

@@ -207,6 +207,7 @@ class RawSource(Protocol):
 
 # pose topics a log may hold instead of odometry (named when it has none cornerslam reads)
 POSE_TYPES = ("geometry_msgs/PoseStamped", "geometry_msgs/PoseWithCovarianceStamped")
+NOT_POSES = ("goal_pose", "initialpose")  # ... but not these (navigation's goal, a localiser's start)
 
 
 @dataclass(frozen=True)
@@ -412,7 +413,13 @@ class RosLogReader:
                             f"{listing(odoms)}", "choose one with --odom-topic")  # fmt: skip
         if self._lossy():
             return _OdomSel("", "", *self._lost("no nav_msgs/Odometry topic and no tf topic"))
-        poses = [t for t, c in self._channels.items() if normalize_msgtype(c.msgtype) in POSE_TYPES]
+        poses = [  # (with messages, and not nav2's goal and initial pose, in every `record -a`: a review)
+            t
+            for t, c in self._channels.items()
+            if normalize_msgtype(c.msgtype) in POSE_TYPES
+            and c.count != 0
+            and t.rsplit("/", 1)[-1] not in NOT_POSES
+        ]
         of_poses = f" ({listing(sorted(poses))}: geometry_msgs poses, not read as odometry)" if poses else ""
         return _OdomSel(
             "",

@@ -203,7 +203,7 @@ def _unreadable_storage(directory: Path) -> str | None:
     file rosbags cannot open alone (a recorder killed mid-file leaves the last one cut), else None:
     rosbags refuses the whole bag naming none (a ROS-user probe)."""
     info = _bag_info(directory) if directory.is_dir() else None
-    if info is None or len(info[2]) < 2:
+    if info is None or info[1] or len(info[2]) < 2:  # (file-compressed: none opens alone; a review)
         return None
     for name in info[2]:
         if not (directory / name).is_file():  # (a missing one: rosbags names it)
