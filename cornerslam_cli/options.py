@@ -395,16 +395,33 @@ def parse_assocs(text: str | None, allow_many: bool, log_path: str | None = None
             f"'{text}' must list distinct associators, e.g. icnn,jcbb,pca", param_hint="--assoc"
         )
     for name in names:
+        words = name.split()  # 'icnn jcbb': a list with spaces ("did you mean 'jcbb'?" misled)
+        bad = next((w for w in words if not _is_associator(w)), None) if len(words) > 1 else name
+        if bad is None:
+            sep = ",".join(words)
+            log = shlex.quote(log_path) if log_path else "LOG"
+            hint = (
+                f"separate them with commas: {sep}"
+                if allow_many
+                else f"run takes one; cornerslam compare {log} --assoc {sep} runs several"
+            )
+            raise ConfigError(f"--assoc: '{name}' is not an associator", hint)
         try:
-            associator_class(name)
-        except ConfigError as e:  # (named where it was given)
-            if len(name.split()) > 1:  # 'icnn jcbb': a list with spaces ("did you mean 'jcbb'?" misled)
-                sep = ",".join(name.split())
-                raise ConfigError(
-                    f"--assoc: '{name}' is not an associator", f"separate them with commas: {sep}"
-                ) from None
+            associator_class(bad)
+        except ConfigError as e:  # (named where it was given; of a list with spaces, its unknown word)
             raise ConfigError(f"--assoc: {e.msg}", e.hint) from None
     return names
+
+
+def _is_associator(name: str) -> bool:
+    from .association import associator_class
+    from .errors import ConfigError
+
+    try:
+        associator_class(name)
+    except ConfigError:
+        return False
+    return True
 
 
 def parse_sweeps(texts) -> dict[str, list[str]]:

@@ -873,10 +873,19 @@ def test_compare_rejects_unknown_and_repeated_associators(sim_log, tmp_path):
 
 @pytest.mark.parametrize("allow_many", [True, False])
 def test_parse_assocs_names_separated_by_spaces_are_told_to_use_commas(allow_many):
-    """`--assoc 'icnn jcbb'` was answered "did you mean 'jcbb'?" (an evo-user probe)."""
+    """`--assoc 'icnn jcbb'` was answered "did you mean 'jcbb'?" (an evo-user probe); run, which takes
+    one, is pointed at compare, and an unknown word among them is named with the closest (a review)."""
     with pytest.raises(ConfigError) as e:
-        parse_assocs("icnn jcbb", allow_many=allow_many)
-    assert str(e.value) == "--assoc: 'icnn jcbb' is not an associator (separate them with commas: icnn,jcbb)"
+        parse_assocs("icnn jcbb", allow_many=allow_many, log_path="a b.mcap")
+    hint = (
+        "separate them with commas: icnn,jcbb"
+        if allow_many
+        else "run takes one; cornerslam compare 'a b.mcap' --assoc icnn,jcbb runs several"
+    )
+    assert str(e.value) == f"--assoc: 'icnn jcbb' is not an associator ({hint})"
+    with pytest.raises(ConfigError) as e:
+        parse_assocs("icnn jbcc", allow_many=allow_many)
+    assert str(e.value).startswith("--assoc: unknown associator 'jbcc' (did you mean 'jcbb'?")
 
 
 def test_parse_assocs_good_names():
