@@ -38,7 +38,7 @@ def extract_step(
         scans = reader.scans() if prepare is None else prepare(reader)
         for scan in scans:  # odometry is not needed for one scan's features
             first, last = scan.stamp if first is None else first, scan.stamp
-            if n == step if at is None else abs(scan.stamp - at) <= AT_WITHIN:
+            if (n == step) if at is None else (abs(scan.stamp - at) <= AT_WITHIN):
                 return (n, scan, *extract(scan, cfg.sensor, cfg.lines, cfg.corners))
             n += 1
     if n == 0:

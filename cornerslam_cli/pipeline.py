@@ -24,7 +24,7 @@ from .report.occupancy import ScanStore
 from .report.oserrors import output_errors
 from .report.outdir import StagedDir
 from .report.ownership import is_results_mcap
-from .report.run_writer import Reference, RunWriter, find_ground_truth, load_reference
+from .report.run_writer import Reference, RunWriter, ground_truth_path, load_reference
 from .results import RunSummary
 from .slam import Slam
 from .span import Span
@@ -70,7 +70,7 @@ def run(
     """
     wall0 = time.perf_counter()
     out_dir = Path(out) if out else default_out_dir(Path(log_path), cfg.association.method)
-    gt = None if ground_truth is False else ground_truth or find_ground_truth(Path(log_path))
+    gt = ground_truth_path(Path(log_path), ground_truth)
     inputs = [p for p in (log_path, gt, relations, config_path) if p]
     with StagedDir(out_dir, "run", inputs, log_path, own_log_only=not out, inside=inside) as stage:
         mcap_path = stage.stage_file(mcap_out, ours=is_results_mcap) if mcap_out else None

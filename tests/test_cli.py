@@ -1116,7 +1116,7 @@ def test_config_prints_the_resolved_config_that_run_uses(tmp_path):
     assert yaml.safe_load(res.stdout)["input"]["laser_preset"] == "hokuyo_urg04lx"
     one_line_error(
         invoke("config", "--preset", "hokuyo"),
-        "config key 'input.laser_preset' = 'hokuyo' is not a laser preset",
+        "invalid value for '--preset': 'hokuyo' is not a laser preset",
         "hokuyo_urg04lx",
     )
     one_line_error(invoke("config", "--set", "ekf.alpha1=nan"), "ekf.alpha1")

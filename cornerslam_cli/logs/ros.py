@@ -219,6 +219,12 @@ class _OdomSel:
     note: str = ""  # a choice among several, for ``info``'s notes
 
 
+def _median_offset(stamps: list[int], log_times: list[int]) -> int | None:
+    """The median of the log times less the stamps [ns], None without any."""
+    offsets = sorted(t - s for s, t in zip(stamps, log_times, strict=True))
+    return offsets[len(offsets) // 2] if offsets else None
+
+
 class RosLogReader:
     """A :class:`LogReader` over any :class:`RawSource` (MCAP, ROS 1 bag, ROS 2 bag).
 
@@ -583,13 +589,13 @@ class RosLogReader:
         start and duration are the recorder's; a run's stamps, --start and the outputs are the headers')."""
         if not self.scan_topic or self._scan_problems():
             return ""
-        stamps, _ = self._first_scan_stamps()
+        stamps, log_times = self._first_scan_stamps()
         if len(stamps) >= 2 and min(stamps) == max(stamps):  # (not another clock: none)
             return (
                 f"the header stamp of its first {len(stamps)} scans is {stamps[0] * 1e-9:.3f} s, every "
                 "one: the laser driver does not fill it (a run needs each scan's time: check the driver)"
             )
-        offset = self.record_offset()
+        offset = _median_offset(stamps, log_times)  # (the same scans: read once)
         if offset is None or abs(offset) <= CLOCK_APART * 1e9:
             return ""
         way = "behind" if offset > 0 else "ahead of"
@@ -602,9 +608,7 @@ class RosLogReader:
         """How far the recorder's clock (the messages' log times) is ahead of the scans' header stamps
         [ns]: the median over the first ``n`` scans (a Gazebo run recorded without use_sim_time: 1.7e9 s);
         None without a scan that can be read."""
-        stamps, log_times = self._first_scan_stamps(n)
-        offsets = sorted(t - s for s, t in zip(stamps, log_times, strict=True))
-        return offsets[len(offsets) // 2] if offsets else None
+        return _median_offset(*self._first_scan_stamps(n))
 
     def _first_scan_stamps(self, n: int = 100) -> tuple[list[int], list[int]]:
         """The header stamps and the log times [ns] of the first ``n`` scans that can be read."""

@@ -286,6 +286,14 @@ class Reference:
     notes: tuple[str, ...] = ()  # warnings from reading them (ground truth out of time order)
 
 
+def ground_truth_path(log_path: Path, ground_truth: str | Path | None | bool) -> Path | None:
+    """The ground truth a run reads: ``ground_truth`` as given, LOG.gt.tum beside the log when it is None
+    (:func:`find_ground_truth`), none when it is False (--no-ground-truth)."""
+    if ground_truth is False:
+        return None
+    return Path(ground_truth) if ground_truth else find_ground_truth(Path(log_path))
+
+
 def load_reference(
     log_path: Path,
     ground_truth: str | Path | None | bool = None,
@@ -296,10 +304,7 @@ def load_reference(
     --no-ground-truth); the given relations file, if any. A LOG.gt.tum that cannot be read says in its
     error that it was read for lying beside the log (the user gave no ground truth, and the error named a
     file they had not asked for), and how to run without it."""
-    if ground_truth is False:
-        gt_path = None
-    else:
-        gt_path = Path(ground_truth) if ground_truth else find_ground_truth(log_path)
+    gt_path = ground_truth_path(log_path, ground_truth)
     rel_path = Path(relations) if relations else None
     notes: list[str] = []
     try:
