@@ -363,7 +363,8 @@ def warn_mount(src: Input, cfg: Config) -> None:
     sets it, so true was the user's). Called once the run has its frames, so that a log that fails
     gives its one-line error alone."""
     if src.laser_source == "default":
-        why, keep = f"has no tf {_tf_text(src, cfg)}", ", or input.laser.from_tf=false to keep it"
+        why = f"has no tf {_tf_text(src, cfg)}{getattr(src.reader, 'near_frames', '')}"
+        keep = ", or input.laser.from_tf=false to keep it"
         topic = short_text(src.info.scan_topic)
         if getattr(src.reader, "laser_frame", None) == "":  # a scan read, its frame empty: no tf names it
             why = f"has scans on '{topic}' with an empty header frame_id, so no tf can place the laser"

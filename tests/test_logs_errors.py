@@ -585,3 +585,27 @@ def test_a_log_with_poses_but_no_odometry_names_the_pose_topics(tmp_path):
         LogError, match=r"no tf topic \(/robot_pose: geometry_msgs poses, not read as odometry\)"
     ):
         open_log(p).messages()  # (nav2's goal and initial pose, in every `record -a`, not named)
+
+
+def test_a_laser_frame_named_unlike_the_tfs_is_hinted_at(tmp_path):
+    """Scans in frame 'laser_link', the tf's mount to 'laser': the default-mount warning said nothing of
+    the frame named alike (a ROS-user probe). It now names it."""
+    ros = RosSerializer("cdr")
+    t0 = 1_700_000_000.0  # (make_scans' first stamp less 0.05 s)
+    mount = [
+        (
+            "/tf_static",
+            "tf2_msgs/msg/TFMessage",
+            int(t0 * 1e9),
+            ros.tf(t0, "base_link", "laser", 0.1, 0.0, 0.0),
+        )
+    ]
+    p = write_messages_mcap(
+        tmp_path / "f.mcap", mount + scans_changed(frame_id="laser_link") + odom_messages(n=12)
+    )
+    res = CliRunner().invoke(cli, ["run", str(p), "--out", str(tmp_path / "out")])
+    assert res.exit_code == 0, res.output
+    assert (
+        "has no tf base_link→laser_link (its tf has 'laser': the scans' frame_id 'laser_link' misnamed?)"
+        in res.stderr
+    )

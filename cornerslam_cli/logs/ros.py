@@ -219,6 +219,13 @@ class _OdomSel:
     note: str = ""  # a choice among several, for ``info``'s notes
 
 
+def _alike_frames(a: str, b: str) -> bool:
+    """Whether two tf frames are named alike: one the other with a suffix (``laser``, ``laser_link``,
+    ``laser_frame``), the namespace aside."""
+    a, b = a.rsplit("/", 1)[-1], b.rsplit("/", 1)[-1]
+    return a != b and (a.startswith(b + "_") or b.startswith(a + "_"))
+
+
 def _median_offset(stamps: list[int], log_times: list[int]) -> int | None:
     """The median of the log times less the stamps [ns], None without any."""
     offsets = sorted(t - s for s, t in zip(stamps, log_times, strict=True))
@@ -267,6 +274,7 @@ class RosLogReader:
         self.odom_on_tf = False  # laser_to_base() saw tf odom_frame→base_frame (a results MCAP need not)
         self._tf_pairs: set[tuple[str, str]] = set()  # (parent, child) laser_to_base() saw on odom_topic
         self._tf_read_all = False  # laser_to_base() read every tf message (not stopped at 2,000)
+        self.near_frames = ""  # ": its tf has 'laser'?" when no tf links the scans' frame (laser_to_base)
 
     # ---------------------------------------------------------------- selection
     def _topics_of(self, *types: str) -> list[str]:
@@ -741,6 +749,10 @@ class RosLogReader:
         if self._odom_sel.kind == "odometry" and untold:
             self._take_odometry_parent(base_parents, {f for edge in edges for f in edge})
         self._laser2base = None if T is None else pose2_from_matrix(T)
+        if T is None:  # a frame of the tf named like the scans' ('laser' for 'laser_link': a ROS-user probe)
+            alike = sorted({f for edge in edges for f in edge if f != frame and _alike_frames(f, frame)})
+            if alike:
+                self.near_frames = f" (its tf has '{alike[0]}': the scans' frame_id '{frame}' misnamed?)"
         if self._laser2base is not None and not all(math.isfinite(v) for v in self._laser2base):
             self.stats.warn("%s: the tf %s→%s is not finite: ignored", self.path.name, self.base_frame, frame)
             self._laser2base = None
