@@ -63,9 +63,8 @@ def run(
     relations, the config file ``config_path`` — are never written over; ``span``: the part of the log
     to process (span.py); ``compiling``: frontend.open_input's; ``inside="batch"``: a batch's run,
     written inside its directory (any other output there is refused); ``notes``: warnings already said
-    about the config
-    (workers.warnings_copied), kept for summary.json's list; ``finishing(what)``: as each stage after the
-    last step begins (the CLI's Progress.finishing).
+    about the config (workers.warnings_copied), kept for summary.json's list; ``finishing(what)``: as
+    each stage after the last step begins (the CLI's Progress.finishing).
     Returns the summary (also written to summary.json) with ``out_dir``, the committed directory.
     """
     wall0 = time.perf_counter()
