@@ -417,6 +417,7 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
     from .logs import open_log
     from .logs.unreadable import no_scan_read
     from .report.ownership import is_results_mcap
+    from .report.run_writer import find_ground_truth
 
     setup_logging(verbose, quiet)
     reader = open_log(Path(log_path), scan_topic=scan_topic or "", odom_topic=odom_topic or "")
@@ -446,6 +447,9 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
     preset = None if scan is None else detect_preset(scan.n_beams, scan.angle_increment)
     if getattr(reader, "mount_problem", ""):  # a CARMEN log's laser poses that are no fixed mount
         log_info = replace(log_info, notes=(*log_info.notes, f"the log {reader.mount_problem}"))
+    if gt := find_ground_truth(Path(log_path)):  # (what run and compare will score against, unasked)
+        found = f"ground truth {display_path(gt)} beside it: run and compare score against it"
+        log_info = replace(log_info, notes=(*log_info.notes, found))
     upside_down = laser is not None and bool(reader.laser_upside_down())
     frames = None  # the robot's frame (the odometry's child_frame_id, else input.base_frame), the laser's
     if laser is not None and getattr(reader, "laser_frame", None):

@@ -159,6 +159,16 @@ def test_info_names_the_topics_run_would_use(sim_log):
     assert "scans     /scan" in res.output and "odometry  /odom" in res.output
 
 
+def test_info_notes_the_ground_truth_a_run_would_score_against(sim_log, tmp_path):
+    """run and compare score against LOG.gt.tum unasked; info said nothing of it (an evo-user probe)."""
+    res = invoke("info", sim_log)
+    gt = sim_log.with_suffix(".gt.tum")
+    assert f"ground truth {gt} beside it: run and compare score against it" in res.stdout
+    alone = tmp_path / "alone.mcap"
+    alone.write_bytes(sim_log.read_bytes())
+    assert "ground truth" not in invoke("info", alone).stdout
+
+
 def test_info_shows_the_first_scans_beams_preset_and_beam_times(sim_log, tmp_path):
     """The simulated log: 541 beams over 270° (no preset has them), no time_increment (scans as
     recorded); 181 SICK-like beams with time_increment: the SICK preset, the beam times and sweep."""
