@@ -378,7 +378,7 @@ def _same_unit(a: np.ndarray, b: np.ndarray) -> bool:
 
 def _within(t: np.ndarray, span: np.ndarray) -> int:
     """How many of the stamps ``t`` fall within the span of the sorted stamps ``span``."""
-    return int(np.count_nonzero((t >= span[0]) & (t <= span[-1])))
+    return int(np.count_nonzero(inside_span(span, t)))
 
 
 def _spacing(t: np.ndarray) -> float:

@@ -16,7 +16,8 @@ import dataclasses
 import logging
 import math
 import os
-from collections.abc import Collection, Mapping, Sequence
+from collections.abc import Collection, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -80,6 +81,7 @@ PRESETS: dict[str, LaserPreset] = {
         {"sensor": {"model": "piecewise", "sigma_r_near": 0.03, "near_range": 1.0, "sigma_r_rel": 0.03}},
     ),
 }
+PRESET_CHOICES = ("auto", "none", *PRESETS)  # what input.laser_preset may name
 
 
 def mount_source(cfg: Config) -> str:
@@ -108,6 +110,11 @@ def spaced_as(p: LaserPreset, angle_increment: float) -> bool:
     return abs(math.degrees(abs(angle_increment)) - p.increment_deg) <= 0.02 * p.increment_deg
 
 
+def preset_choices() -> str:
+    """What ``input.laser_preset`` (and ``config --preset``) may name, as its refusals list it."""
+    return f"choices: {', '.join(PRESET_CHOICES)}"
+
+
 def first_scan(reader) -> Scan | None:
     """The first scan a log reader (logs/base.py) gives, None when it has none."""
     return next(iter(reader.scans()), None)
@@ -117,13 +124,8 @@ def invalid_beams(reader) -> tuple[str, str]:
     """Why every beam of a log read as invalid — said more closely when its first scan shows it (its
     ``range_max`` at or below its ``range_min``: a driver's parameter; input.max_range can only lower it)
     — and what to check. The reader's warnings are silenced (the run has said them)."""
-    reader_log = logging.getLogger("cornerslam.logs")
-    level = reader_log.level
-    reader_log.setLevel(logging.ERROR)
-    try:
+    with _reader_quiet():
         scan = first_scan(reader)
-    finally:
-        reader_log.setLevel(level)
     why = " (NaN, inf, zero or out of range)"
     if scan is not None and scan.range_max <= scan.range_min:
         return (
@@ -140,19 +142,28 @@ def first_scan_geometry(log_path: str | Path, cfg: Config) -> tuple[int, float] 
     The reader's warnings are silenced here: the run reads the log again and reports them once.
     """
     inp = cfg.input
-    reader_log = logging.getLogger("cornerslam.logs")
-    level = reader_log.level
-    reader_log.setLevel(logging.ERROR)
-    try:
-        with open_log(
+    with (
+        _reader_quiet(),
+        open_log(
             Path(log_path),
             scan_topic=inp.scan_topic,
             odom_topic=inp.odom_topic,
             odom_frame=inp.odom_frame,
             base_frame=inp.base_frame,
-        ) as reader:
-            scan = first_scan(reader)
-        return None if scan is None else (scan.n_beams, scan.angle_increment)
+        ) as reader,
+    ):
+        scan = first_scan(reader)
+    return None if scan is None else (scan.n_beams, scan.angle_increment)
+
+
+@contextmanager
+def _reader_quiet() -> Iterator[None]:
+    """The log readers' warnings silenced for a glance at a log the run reads (and warns of) again."""
+    reader_log = logging.getLogger("cornerslam.logs")
+    level = reader_log.level
+    reader_log.setLevel(logging.ERROR)
+    try:
+        yield
     finally:
         reader_log.setLevel(level)
 
@@ -223,7 +234,7 @@ def resolve_config(
         hint = did_you_mean(choice[:100], PRESETS, then=" ")
         e = ConfigError(
             f"config key 'input.laser_preset' = '{short_text(choice)}' is not a laser preset",
-            f"{hint}choices: auto, none, {', '.join(PRESETS)}",
+            f"{hint}{preset_choices()}",
         )
         raise located(e, data, overrides)
     cfg = config_from(data, overrides, base=PRESETS[name].config)

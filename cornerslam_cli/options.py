@@ -140,13 +140,12 @@ class _PresetName(click.ParamType):
 
     def convert(self, value, param, ctx):
         from .errors import did_you_mean
-        from .lasers import PRESETS
+        from .lasers import PRESET_CHOICES, preset_choices
 
-        names = ("auto", "none", *PRESETS)
-        if value not in names:
+        if value not in PRESET_CHOICES:
             what = "names no laser preset" if value == "" else "is not a laser preset"
-            close = did_you_mean(value, names, then=" ") if value else ""
-            self.fail(f"'{value}' {what} ({close}choices: {', '.join(names)})", param, ctx)
+            close = did_you_mean(value, PRESET_CHOICES, then=" ") if value else ""
+            self.fail(f"'{value}' {what} ({close}{preset_choices()})", param, ctx)
         return value
 
 
@@ -363,7 +362,7 @@ def parse_assocs(text: str | None, allow_many: bool, log_path: str | None = None
     distinct associators, none empty (``pca,,icnn``: a usage error, as a ``--sweep`` value); a single name
     is taken whole, spaces around it ignored, and a list given where one is taken (``run``) is a usage
     error pointing to ``compare`` (on ``log_path``, when given)."""
-    from .association import associator_class
+    from .association import ASSOCIATORS, associator_class
     from .errors import ConfigError
 
     if text is None:
@@ -396,7 +395,7 @@ def parse_assocs(text: str | None, allow_many: bool, log_path: str | None = None
         )
     for name in names:
         words = name.split()  # 'icnn jcbb': a list with spaces ("did you mean 'jcbb'?" misled)
-        bad = next((w for w in words if not _is_associator(w)), None) if len(words) > 1 else name
+        bad = next((w for w in words if w not in ASSOCIATORS), None) if len(words) > 1 else name
         if bad is None:
             sep = ",".join(words)
             log = shlex.quote(log_path) if log_path else "LOG"
@@ -411,17 +410,6 @@ def parse_assocs(text: str | None, allow_many: bool, log_path: str | None = None
         except ConfigError as e:  # (named where it was given; of a list with spaces, its unknown word)
             raise ConfigError(f"--assoc: {e.msg}", e.hint) from None
     return names
-
-
-def _is_associator(name: str) -> bool:
-    from .association import associator_class
-    from .errors import ConfigError
-
-    try:
-        associator_class(name)
-    except ConfigError:
-        return False
-    return True
 
 
 def parse_sweeps(texts) -> dict[str, list[str]]:

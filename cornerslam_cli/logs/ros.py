@@ -361,13 +361,13 @@ class RosLogReader:
                 "record the laser as sensor_msgs/LaserScan; `cornerslam info LOG` lists the topics",
             )
         live = [t for t in scans if self._channels[t].count != 0]  # (None: not known)
+        empty = [t for t in scans if t not in live]
         if len(scans) > 1 and len(live) == 1:  # the others declared, never published (`ros2 bag record -a`)
-            empty = [t for t in scans if t not in live]
             self._scan_note = f"{listing(empty)} has no messages: LaserScan topic {live[0]} taken"
             logger.info("log '%s': %s", name, self._scan_note)
             return live[0], "", ""
         if len(scans) > 1:
-            listed, empty = live or scans, [t for t in scans if t not in live]
+            listed = live or scans
             also = f" (and {listing(empty)} with no messages)" if live and empty else ""
             return (
                 "",

@@ -194,10 +194,9 @@ def warn_still_odometry(src: Input, odoms: np.ndarray, motions: np.ndarray | Non
     """Warn when the odometry's position never moves over the run while the scans say the robot went
     STILL_SCANS_WENT or more across (``motions``: the scan-matched chain, the span of its positions;
     without scan matching nothing tells a parked robot from a still odometry: no word): a base driver
-    that fills only the twist,
-    or only the heading (an IMU's yaw), an odom→base_link tf left at identity. The run then takes the robot
-    as standing still and moves it only as far as its scan matches correct that, with no word of it (a
-    ROS-user probe: 3.7 m ATE against 0.04). CARMEN logs say so as they are read."""
+    that fills only the twist, or only the heading (an IMU's yaw), an odom→base_link tf left at identity.
+    The run then takes the robot as standing still and moves it only as far as its scan matches correct
+    that, with no word of it (a ROS-user probe: 3.7 m ATE against 0.04). CARMEN logs say so as read."""
     if src.info.format == "carmen" or len(odoms) < 2 or motions is None:
         return
     if np.ptp(odoms[:, :2], axis=0).max() > STILL_XY:
