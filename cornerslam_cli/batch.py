@@ -96,10 +96,12 @@ def run_batch(
     scheduler: str | None = None,
     progress: Callable[[BatchState], None] | None = None,
     config_path: str | None = None,
+    ground_truth: bool = True,
 ) -> list[dict]:
     """Run every combination into ``out_dir/<name>/``; write ``out_dir/batch.csv``; return its rows.
     ``config_path``: the config file the combinations were planned from, an input of each run (a run
-    whose directory holds it is refused, not written over).
+    whose directory holds it is refused, not written over). ``ground_truth``: whether each run scores
+    against the LOG.gt.tum beside its log, as ``run`` does (False: --no-ground-truth).
 
     One failing combination (bad log, numerical failure, a bug) never stops the others: its row has
     status ``failed`` and the error line. ``jobs`` local worker processes (default ``os.cpu_count()``),
@@ -107,7 +109,7 @@ def run_batch(
     are said as each combination finishes, each distinct text once.
     """
     with warnings_once():
-        return _run_batch(combos, out_dir, jobs, scheduler, progress, config_path)
+        return _run_batch(combos, out_dir, jobs, scheduler, progress, config_path, ground_truth)
 
 
 def _run_batch(
@@ -117,12 +119,13 @@ def _run_batch(
     scheduler: str | None,
     progress: Callable[[BatchState], None] | None,
     config_path: str | None = None,
+    ground_truth: bool = True,
 ) -> list[dict]:
     client = _connect(scheduler) if scheduler else None  # before the output: a wrong address writes nothing
     try:
         if client is not None:  # (and workers of another build write nothing either)
             _check_workers(client)
-        return _run_claimed(combos, Path(out_dir), jobs, client, progress, config_path)
+        return _run_claimed(combos, Path(out_dir), jobs, client, progress, config_path, ground_truth)
     finally:
         if client is not None:
             client.close()
@@ -135,12 +138,13 @@ def _run_claimed(
     client,  # dask.distributed.Client | None (Dask is optional)
     progress: Callable[[BatchState], None] | None,
     config_path: str | None = None,
+    ground_truth: bool = True,
 ) -> list[dict]:
     """:func:`_run_batch` once the Dask ``client`` (None: local processes) is connected."""
     target = claim_dir(out, "batch")  # refuses a directory that is not a batch's, before any work
     with alone_in(target, display_path(out)):  # a second batch (or compare) into it is refused (resolved:
         # `--out .` marks it beside itself, and any spelling of it finds the mark)
-        return _run_alone(combos, out, jobs, client, progress, config_path)
+        return _run_alone(combos, out, jobs, client, progress, config_path, ground_truth)
 
 
 def _run_alone(
@@ -150,6 +154,7 @@ def _run_alone(
     client,  # dask.distributed.Client | None
     progress: Callable[[BatchState], None] | None,
     config_path: str | None,
+    ground_truth: bool,
 ) -> list[dict]:
     """:func:`_run_claimed` in the claimed directory ``out``, its only writer."""
     from .config import Config, from_dict
@@ -167,7 +172,7 @@ def _run_alone(
                 log_hashes[c.log] = input_hash(Path(c.log))
             except (OSError, CornerslamError):
                 log_hashes[c.log] = None  # the run reports the unreadable log (or pipe)
-            gt_hashes[c.log] = _ground_truth_hash(c.log)
+            gt_hashes[c.log] = _ground_truth_hash(c.log) if ground_truth else None
         error = c.error
         if not error and log_hashes[c.log] is not None:  # (an unreadable log's run says why)
             other = other_log_error(out / c.name, Path(c.log), c.name, log_hashes[c.log], "batch")
@@ -216,6 +221,7 @@ def _run_alone(
             str((out / c.name).resolve()),
             c.notes,
             config_path,
+            ground_truth,
         )
         for i, c in picked
     ]
@@ -283,11 +289,17 @@ def _resumable(run_dir: Path, expect: Hashes) -> dict | None:
 
 
 def run_one(
-    log: str, config: dict, out_dir: str, notes: tuple[str, ...] = (), config_path: str | None = None
+    log: str,
+    config: dict,
+    out_dir: str,
+    notes: tuple[str, ...] = (),
+    config_path: str | None = None,
+    ground_truth: bool = True,
 ) -> dict:
     """Run one combination (in a worker): ``{"status": "ok", "figures": ...}`` or the failure line;
     ``notes``: its config's warnings, said when the batch planned it, kept for its summary.json;
-    ``config_path``: the config file it was planned from (an input of the run: never written over).
+    ``config_path``: the config file it was planned from (an input of the run: never written over);
+    ``ground_truth``: False scores against none, not even LOG.gt.tum.
 
     Module-level and importing the package lazily, so spawn and Dask workers can unpickle it by name
     and set the BLAS thread count before numpy is first imported. The run's warnings are not printed
@@ -300,7 +312,15 @@ def run_one(
             from .pipeline import run
 
             cfg = from_dict(Config, config)
-            summary = run(log, cfg, out_dir, inside="batch", notes=notes, config_path=config_path)
+            summary = run(
+                log,
+                cfg,
+                out_dir,
+                ground_truth=None if ground_truth else False,
+                inside="batch",
+                notes=notes,
+                config_path=config_path,
+            )
             result = {"status": "ok", "figures": batch_figures(summary)}
         except SystemExit:  # the batch was interrupted and ended us (workers.stopped_by_parent)
             os._exit(143)  # the staging is removed: end here, not in the combination queued to us next

@@ -640,8 +640,13 @@ def _figure_target(plot_path: str) -> Path:
 @click.option(
     "--scheduler", default=None, metavar="tcp://HOST:PORT", help="Run on this Dask scheduler instead."
 )
+@click.option(
+    "--no-ground-truth", is_flag=True, help="Score against no ground truth, not even each LOG.gt.tum."
+)
 @verbosity_options
-def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, verbose, quiet):
+def batch(
+    logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, no_ground_truth, verbose, quiet
+):
     """Run every LOG × associator × swept config value into OUT/<name>/ and tabulate in OUT/batch.csv.
 
     A bad log fails its rows without stopping the batch; rerunning the same command skips the
@@ -657,10 +662,10 @@ def batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ve
 
     setup_logging(verbose, quiet)
     with warnings_once():  # a warning of every combination's config, or of every run: said once
-        _batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, quiet)
+        _batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, not no_ground_truth, quiet)
 
 
-def _batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, quiet):
+def _batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, ground_truth, quiet):
     from .batch import BATCH_CSV, SCHEDULER_LOST, WORKER_DIED, run_batch
     from .report.ownership import check_claimable
     from .sweep import plan
@@ -684,7 +689,8 @@ def _batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, q
     if not scheduler:  # (a cluster's workers compile where they run)
         _say_compiling(quiet)
     try:
-        rows = run_batch(combos, out, jobs, scheduler, progress, str(config_path) if config_path else None)
+        config_file = str(config_path) if config_path else None
+        rows = run_batch(combos, out, jobs, scheduler, progress, config_file, ground_truth)
     except KeyboardInterrupt as e:
         progress.close()
         word, code = _signal_word(e)

@@ -630,7 +630,7 @@ def test_exit_code_says_whether_every_combination_succeeded(monkeypatch, tmp_pat
         "died": {"status": "failed", "error": batch_mod.WORKER_DIED},
     }
 
-    def fake_run_batch(combos, out, jobs, scheduler, progress, config_path=None):
+    def fake_run_batch(combos, out, jobs, scheduler, progress, config_path=None, ground_truth=True):
         return [batch_mod._row(c, **results[s]) for c, s in zip(combos, statuses, strict=True)]
 
     monkeypatch.setattr(batch_mod, "run_batch", fake_run_batch)

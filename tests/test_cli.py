@@ -424,20 +424,29 @@ def test_a_gzipped_carmen_log_finds_its_ground_truth(tmp_path):
     assert find_ground_truth(tmp_path / "orebro.log") == tmp_path / "orebro.log.gt.tum"
 
 
-@pytest.mark.parametrize("command", ["run", "compare"])
+@pytest.mark.parametrize("command", ["run", "compare", "batch"])
 def test_a_damaged_ground_truth_beside_the_log_says_why_it_was_read(command, tmp_path):
     """LOG.gt.tum beside the log, not readable: the error named a file the user had not given, without
-    saying why it was read or how to run without it."""
+    saying why it was read or how to run without it (batch too, which had no --no-ground-truth)."""
     log = small_log(tmp_path / "s.mcap", n=6)
     gt = tmp_path / "s.gt.tum"
     gt.write_text("garbage line\n")
-    res = invoke(command, log, "--out", tmp_path / "o")
-    one_line_error(
-        res,
+    jobs = ("--jobs", 1) if command == "batch" else ()
+    res = invoke(command, log, "--out", tmp_path / "o", *jobs)
+    error = (
         f"ground truth '{gt}' line 1 is not a TUM pose (expected: stamp x y z qx qy qz qw; read as the "
-        "log's ground truth for lying beside it: fix it, or run without it: --no-ground-truth for run and "
-        "compare, renamed for batch)",
+        "log's ground truth for lying beside it: fix it, or run without it: --no-ground-truth)"
     )
+    if command == "batch":  # its row failed (the batch goes on), the line in batch.csv
+        assert res.exit_code == 2
+        (row,) = read_csv(tmp_path / "o" / "batch.csv")["error"]
+        assert row == error
+        res = invoke(command, log, "--out", tmp_path / "o", "--no-ground-truth", "-q", *jobs)
+        assert res.exit_code == 0, res.output
+        summary = next((tmp_path / "o").rglob("summary.json"))
+        assert json.loads(summary.read_text())["accuracy"] is None
+        return
+    one_line_error(res, error)
     res = invoke(command, log, "--out", tmp_path / "o", "--ground-truth", gt)  # given: no such note
     one_line_error(res, "line 1 is not a TUM pose")
     assert res.stderr.endswith("(expected: stamp x y z qx qy qz qw)\n")
@@ -722,6 +731,12 @@ def test_times_are_not_ranked_when_the_runs_shared_the_cpu():
     names = ["assoc", "t_total", "ate_rmse", "wall_time"]
     assert best_cells(cols, 2, names) == {(1, 1), (1, 2), (0, 3)}
     assert best_cells(cols, 2, names, timed=False) == {(1, 2)}
+
+
+def test_the_most_matches_are_not_called_best():
+    """An associator that takes wrong matches matches most: matched_total is shown, not ranked."""
+    cols = {"matched_total": np.array([900.0, 700.0]), "ate_rmse": np.array([0.5, 0.1])}
+    assert best_cells(cols, 2, ["matched_total", "ate_rmse"]) == {(1, 1)}
 
 
 def test_compare_one_job_records_no_concurrency_and_ranks_the_times(sim_log, tmp_path):

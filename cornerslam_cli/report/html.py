@@ -344,7 +344,8 @@ def _compare_report(out_dir: Path) -> str:
         "<nav>" + "".join(f'<a href="#assoc-{esc(a)}">{esc(a)}</a>' for a in assocs) + "</nav>",
         "<h2>Comparison</h2>",
         f'<p class="muted">log {esc(log)}; times in seconds, ATE and relation errors in metres '
-        f"(rpe_trans_per_m per metre), rotations in degrees; best value per column highlighted.{shared}</p>",
+        "(rpe_trans_per_m per metre), rotations in degrees; best value per column highlighted (not "
+        f"matched_total's: more matches is better only when they are right, the ATE tells).{shared}</p>",
         _comparison_table(columns, n, MAIN_COLUMNS, wide=True, timed=at_once == 1),
         *_loop_comparison(columns, n),
         "<h2>Figures</h2>",

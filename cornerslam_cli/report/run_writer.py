@@ -313,8 +313,7 @@ def load_reference(
         if ground_truth:
             raise
         why = (
-            "read as the log's ground truth for lying beside it: fix it, or run without it: "
-            "--no-ground-truth for run and compare, renamed for batch"
+            "read as the log's ground truth for lying beside it: fix it, or run without it: --no-ground-truth"
         )
         raise type(e)(e.msg, f"{e.hint}; {why}" if e.hint else why) from None
     return Reference(

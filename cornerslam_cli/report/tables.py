@@ -265,9 +265,9 @@ def _json_default(o):
     raise TypeError(f"not JSON serialisable: {type(o)}")
 
 
-# comparison.csv columns where one direction is better (the best cell is highlighted)
+# comparison.csv columns where one direction is better (the best cell is highlighted). Not matched_total:
+# more matches is better only when they are right (an associator that takes wrong ones matches most)
 BETTER: dict[str, Callable[[Iterable[float]], float]] = {
-    "matched_total": max,
     "t_match_total": min,
     "t_match_max": min,
     "t_total": min,
