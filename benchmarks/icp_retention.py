@@ -18,7 +18,7 @@ Beside it, the heading error of the end from the reference pose itself (δ = 0; 
 the truth looks better than it is). Deterministic.
 
 The several starts are not in the package: they were tried in the front end (docs/results/patches/
-headstarts.patch, its ``register_starts``; README, "ICP from several headings") and not adopted. This
+headstarts.patch, its ``register_starts``; experiments.md, "ICP from several headings") and not adopted. This
 script does the same with motion/icp.py's ``register`` (:func:`best_of_starts`), so it runs on main.
 """
 

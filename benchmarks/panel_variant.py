@@ -19,13 +19,13 @@ moved this log", and judge a change by the whole table.
 ``--perturb submaps`` samples that larger spread instead: the K copies are the log itself run with
 ``submaps.max_distance`` moved by ±5 %, ±10 %, … of its default (K = 2: 9.5 and 10.5 m beside 10), in both
 builds. Where a submap ends decides which closures pass and how the submaps' errors add up between them
-(README: infinite-corridor 0.659 / 0.383 / 0.361 m at 9.5 / 10 / 10.5 with identical chains), so a
+(experiments.md: infinite-corridor 0.659 / 0.383 / 0.361 m at 9.5 / 10 / 10.5 with identical chains), so a
 change's verdict on such a log under the 1 µm copies is mostly which side of that spread it lands on.
 ``--perturb kernel`` samples the front end's own chaos, which the others hardly reach (their chains move
 on few logs): the K copies run with ``scan_match.robust_scale`` (ICP's Cauchy kernel, 0.05 m)
 moved by ±0.2 %, ±0.4 %, … — far below anything a user would tune. On edmonton that moves the scan-matched
 chain 0.307 → 0.135–0.307 m and the ATE 0.352 → 0.162–0.352 m (docs/results/panel_spread_kernel.md;
-README, "The front end's own chaos"):
+docs/results/experiments.md, "The front end's own chaos"):
 ICP's along-track pose in a weakly constrained stretch moves by centimetres when its input moves by a
 millimetre, and the bias and closures learnt downstream carry it. A variant that sets the perturbed key
 itself (``--set scan_match.robust_scale=0.1 --perturb kernel``) has its copies moved by the same relative
