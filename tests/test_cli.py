@@ -2,6 +2,7 @@
 
 import json
 import math
+import re
 import tempfile
 from pathlib import Path
 
@@ -722,6 +723,9 @@ def test_compare_runs_every_associator_on_the_same_frames(sim_log, tmp_path):
     assert "The 2 filters ran 2 at a time" in page
     main_table = page.split("<h2>Comparison</h2>", 1)[1].split("<h", 1)[0]
     assert main_table.count('best"') == len(best_cells(rows, 2, MAIN_COLUMNS, timed=False))  # no time ranked
+    loop_table = page.split("<h3>Loop closing</h3>", 1)[1].split("<h", 1)[0]  # nor loop closing's t_loop
+    names = re.findall(r"<th[^>]*>([^<]*)</th>", loop_table)
+    assert "t_loop" in names and loop_table.count('best"') == len(best_cells(rows, 2, names, timed=False))
     assert best_cells(rows, 2, MAIN_COLUMNS) - best_cells(rows, 2, MAIN_COLUMNS, timed=False)  # (there were)
 
 
@@ -733,10 +737,13 @@ def test_times_are_not_ranked_when_the_runs_shared_the_cpu():
     assert best_cells(cols, 2, names, timed=False) == {(1, 2)}
 
 
-def test_the_most_matches_are_not_called_best():
-    """An associator that takes wrong matches matches most: matched_total is shown, not ranked."""
-    cols = {"matched_total": np.array([900.0, 700.0]), "ate_rmse": np.array([0.5, 0.1])}
-    assert best_cells(cols, 2, ["matched_total", "ate_rmse"]) == {(1, 1)}
+def test_the_most_matches_are_not_called_best_and_the_relation_metric_is_ranked():
+    """An associator that takes wrong matches matches most: matched_total is shown, not ranked; the
+    relation metric (--relations: Intel's accuracy figure) is ranked as the ATE is."""
+    cols = {"matched_total": np.array([900.0, 700.0]), "ate_rmse": np.array([0.5, 0.1]),
+            "rel_trans_mean": np.array([0.0909, 0.0908]), "rel_rot_mean_deg": np.array([2.0, 3])}  # fmt: skip
+    names = ["matched_total", "ate_rmse", "rel_trans_mean", "rel_rot_mean_deg"]
+    assert best_cells(cols, 2, names) == {(1, 1), (1, 2), (0, 3)}
 
 
 def test_compare_one_job_records_no_concurrency_and_ranks_the_times(sim_log, tmp_path):

@@ -207,6 +207,33 @@ def _flaser_odom(t, laser_x, odom_x):
     return f"FLASER 3 1 1 1 {laser_x} 0 0 {odom_x} 0 0 {t} host {t}\n"
 
 
+@pytest.mark.parametrize(
+    ("odom_times", "want"),
+    [
+        (range(0, 31), "ODOM"),  # the scans' 30 s covered
+        (range(0, 10), "FLASER"),  # ODOM lines stop at 9 s (cut, or unreadable from there): 2/3 left out
+        (range(20, 31), "FLASER"),  # ... or start at 20 s
+        (range(0, 30), "ODOM"),  # the last second left out: under a tenth (the last scan is dropped)
+    ],
+)
+def test_odometry_from_laser_poses_when_odom_lines_leave_the_scans_out(tmp_path, odom_times, want):
+    """ODOM lines that stop early (a probe: intel_cut with the ODOM lines after line 200 deleted, or
+    written with decimal commas past a point) made a run drop two thirds of the scans, exit 0, while the
+    FLASER lines carried odometry for all of them."""
+    lines = [_odom_line(float(t), 10.0 * t) for t in odom_times]
+    lines += [_flaser_odom(t + 0.5, laser_x=t, odom_x=t) for t in range(30)]
+    p = tmp_path / "o.log"
+    p.write_text("".join(sorted(lines, key=lambda line: float(line.split()[-1]))))
+    info = open_log(p).info()
+    assert info.odom_topic == want
+    if want == "FLASER":
+        assert (
+            "; the whole ODOM lines span " in info.odom_source
+            and "of the FLASER lines' 29.0 s" in info.odom_source
+        )
+    assert open_log(p, odom_topic="ODOM").info().odom_topic == "ODOM"  # the user's choice is kept
+
+
 def _robotlaser(t, laser_x, robot_x):
     poses = f"{laser_x} 0 0 {robot_x} 0 0"
     return f"ROBOTLASER1 0 -0.5 1.0 0.25 9.9 0.01 0 3 1 1 1 0 {poses} 0 0 0 0 0 {t} h {t}\n"
@@ -624,3 +651,26 @@ def test_a_log_whose_timestamps_never_change_is_read_on_its_logger_timestamps(tm
         res.exit_code == 2
         and "check the laser lines' logger timestamps (their timestamps never" in res.stderr
     )
+
+
+def test_a_laser_line_of_no_readings_is_warned_and_unusable_scans_are_named_in_carmen_words(tmp_path, caplog):
+    """A `FLASER 0 …` line was counted as an unusable scan ("see the warnings") but no warning named it;
+    a log whose every ROBOTLASER1 line gives its angles in degrees was told to check the LaserScans'
+    angle_min/angle_increment, ROS fields a CARMEN log does not have (probes)."""
+    p = tmp_path / "zero.log"
+    p.write_text(flaser(181, 1.0) + "FLASER 0 0 0 0 0 0 0 2.0 host 2.0\n" + flaser(181, 3.0))
+    with caplog.at_level(logging.WARNING, logger="cornerslam"):
+        scans, _ = split(open_log(p).messages())
+    assert len(scans) == 2 and "zero.log:2: scan at 2.000 has no beams: skipped" in caplog.text
+    degrees = tmp_path / "deg.log"  # fov 180 and resolution 0.5: degrees, 361 readings over 28 turns
+    poses, readings = "0 0 0 0 0 0", " ".join(["1"] * 361)
+    degrees.write_text(
+        "".join(
+            f"ROBOTLASER1 0 -90 180 0.5 9.9 0.01 0 361 {readings} 0 {poses} 0 0 0 0 0 {t} h {t}\n"
+            for t in (1, 2)
+        )
+    )
+    with pytest.raises(LogError) as e:
+        split(open_log(degrees).messages())
+    assert "ROBOTLASER1 lines' start_angle/angular_resolution, in radians" in e.value.hint
+    assert "LaserScan" not in e.value.hint

@@ -184,6 +184,14 @@ def test_batch_lines_table_failures_and_totals():
         "/data/office.mcap",
         "/other/office.mcap",
     ]
+    # two swept keys of one last part: the columns named whole (both were "max_distance")
+    keys = ["submaps.max_distance", "scan_match.max_distance"]
+    swept = [{**r, keys[0]: 10, keys[1]: 1} for r in rows[:1]]
+    assert batch_lines(swept, keys)[0].split()[2:4] == keys
+    assert batch_lines(swept, keys[:1] + ["association.pca.group_size"])[0].split()[2:4] == [
+        "max_distance",
+        "group_size",
+    ]
 
 
 def test_info_lines():

@@ -230,14 +230,17 @@ class ReadStats:
         self.odoms += 1
         return OdomSample(stamp, *pose)
 
-    def check_scans_yielded(self, name: str, topic: str) -> None:
-        """Raise LogError at the end of a read in which scans were seen but none was usable."""
+    def check_scans_yielded(
+        self, name: str, topic: str, fields: str = "the LaserScans' angle_min/angle_increment"
+    ) -> None:
+        """Raise LogError at the end of a read in which scans were seen but none was usable; ``fields``:
+        what of the messages to check, in the log format's words."""
         if self.scans == 0 and self.scans_skipped > 0:
             raise LogError(
                 f"log '{name}': all {self.scans_skipped} scans on '{short_text(topic)}' were skipped "
                 "(angle_increment 0 or not finite, beams over more than a full turn, no beams, "
                 "or no valid stamp)",
-                "check the LaserScans' angle_min/angle_increment: the warnings give the first ones' values",
+                f"check {fields}: the warnings give the first ones' values",
             )
 
 
@@ -342,6 +345,8 @@ def make_scan(
             )
     if n == 0:
         stats.scans_skipped += 1
+        if stats.scans_skipped <= 3:
+            stats.warn("%s: scan at %.3f has no beams: skipped", where, stamp)
         return None
     lo = range_min if math.isfinite(range_min) else 0.0
     hi = range_max if not math.isnan(range_max) else math.inf

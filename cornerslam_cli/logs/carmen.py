@@ -28,7 +28,9 @@ Conventions (as CARMEN's own ``carmen_string_to_laser_laser_message_orig``):
   odom_x/y/theta, ROBOTLASER1 robot_x/y/theta), yielded just before their scan. Also those fields when ODOM
   lines go back in time more often than the laser lines do (a merged or re-stamped log: intel.gfs.log's 1,498
   of 14,541 ODOM lines, 4 of 910 laser lines) and those fields move: they are the pose the logger stamped with
-  each scan, while odometry interpolated between out-of-order ODOM lines is wrong at the scans' times.
+  each scan, while odometry interpolated between out-of-order ODOM lines is wrong at the scans' times. Also
+  when the whole ODOM lines stop well before the laser lines do, or start well after (``ODOM_UNCOVERED``:
+  lines cut, or unreadable past a point), where the run would drop the scans they leave out.
   ``odom_topic`` ``ODOM`` keeps the ODOM lines.
 * The laser offset is not in FLASER lines: ``laser_to_base()`` returns the mean laser-minus-robot
   offset of ROBOTLASER1 lines, None for FLASER logs (configure it) and for ROBOTLASER1 lines whose offsets
@@ -63,6 +65,9 @@ from .base import LogInfo, Pose2, ReadStats, TopicInfo, make_scan
 
 LASER_TAGS = ("ROBOTLASER1", "FLASER", "RLASER", "ROBOTLASER2")
 ODOM_TAG = "ODOM"
+# ODOM lines that leave more than this share of the laser lines' span (and this many seconds) without
+# odometry at its ends give way to the laser lines' own poses (the run would drop those scans)
+ODOM_UNCOVERED, ODOM_UNCOVERED_S = 0.1, 1.0
 DEFAULT_MAX_RANGE = 81.83
 POSE_NAMES = ("x", "y", "theta", "odom_x", "odom_y", "odom_theta")  # FLASER's after its readings
 ROBOTLASER_NAMES = ("start_angle", "fov", "angular_resolution", "maximum_range")  # its 2nd–5th fields
@@ -447,10 +452,25 @@ class CarmenReader:
             problems.append((f"CARMEN log '{name}' has no odometry", "select one with --odom-topic"))
         return scan, odom, problems
 
-    def _odom_lines_worse(self, scan: str) -> bool:
-        """Whether the ODOM lines go back in time more often than the ``scan`` lines, whose own robot
-        poses move (a log whose lines are merely out of order together keeps its ODOM lines)."""
-        return scan in self._moving and self._back.get(ODOM_TAG, 0) > self._back.get(scan, 0)
+    def _odom_lines_worse(self, scan: str) -> str:
+        """Why the ``scan`` lines' own robot poses, which move, are a better odometry than the ODOM lines,
+        or "": the ODOM lines go back in time more often than the scan lines (a log whose lines are merely
+        out of order together keeps its ODOM lines), or overlap the scans' time span but leave more than
+        ``ODOM_UNCOVERED`` of it without odometry at its ends (ODOM lines that stop early or, past a point,
+        cannot be read: the run would drop those scans)."""
+        if scan not in self._moving:
+            return ""
+        if self._back.get(ODOM_TAG, 0) > self._back.get(scan, 0):
+            return f"ODOM lines go back in time: {self._back[ODOM_TAG]} of {self._counts[ODOM_TAG]}"
+        (s0, s1), (o0, o1) = self._span[scan], self._span[ODOM_TAG]
+        uncovered = max(0.0, o0 - s0) + max(0.0, s1 - o1)
+        overlap = o0 < s1 and s0 < o1  # (spans apart: two clocks, or stamps that never move, said elsewhere)
+        if overlap and uncovered > max(ODOM_UNCOVERED * (s1 - s0), ODOM_UNCOVERED_S):
+            return (
+                f"the whole ODOM lines span {max(0.0, min(o1, s1) - max(o0, s0)):.1f} s of the "
+                f"{scan} lines' {s1 - s0:.1f} s"
+            )
+        return ""
 
     def check(self) -> None:
         if self._problems:
@@ -470,7 +490,7 @@ class CarmenReader:
             if not self._want_odom and not self._whole.get(ODOM_TAG, 0) and self._counts.get(ODOM_TAG):
                 src += f"; no ODOM line is whole: {self._counts[ODOM_TAG]} skipped"
             elif not self._want_odom and self._counts.get(ODOM_TAG):
-                src += f"; ODOM lines go back in time: {self._back[ODOM_TAG]} of {self._counts[ODOM_TAG]}"
+                src += f"; {self._odom_lines_worse(self.scan_topic)}"
         return LogInfo(
             format=self.format,
             path=str(self.path),
@@ -657,7 +677,12 @@ class CarmenReader:
                 "with its timestamp, hostname and logger timestamp, or the timestamp (and hostname) alone): "
                 "give a log with whole laser lines",
             )
-        st.check_scans_yielded(where, scan_tag)
+        fields = (  # (a FLASER/RLASER line's angles are the laser preset's: only its count can be off)
+            f"the {scan_tag} lines' start_angle/angular_resolution, in radians, and reading counts"
+            if scan_tag.startswith("ROBOTLASER")
+            else f"the {scan_tag} lines' reading counts and timestamps"
+        )
+        st.check_scans_yielded(where, scan_tag, fields)
 
     def close(self) -> None:
         pass

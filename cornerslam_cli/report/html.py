@@ -313,14 +313,15 @@ def _comparison_table(columns: dict, n: int, names: list[str], wide: bool = Fals
     return table(names, rows, best=best_cells(columns, n, names, timed), wide=wide)
 
 
-def _loop_comparison(columns: dict, n: int) -> list[str]:
+def _loop_comparison(columns: dict, n: int, timed: bool = True) -> list[str]:
     """The associators on loop closing (comparison.csv's appended columns) as a table of their own —
-    the main one is as wide as a page — when the runs had submaps."""
+    the main one is as wide as a page — when the runs had submaps; its times ranked only when ``timed``
+    (the runs timed apart), as the main table's."""
     numeric = [c for c in COMPARISON_LOOP_COLUMNS if c in columns and columns[c].dtype != object]
     if any(c not in numeric for c in COMPARISON_LOOP_COLUMNS[:4]):  # no submaps (empty cells), or older
         return []
     # (refine_factors: empty without graph.refine, then left out)
-    return ["<h3>Loop closing</h3>", _comparison_table(columns, n, ["assoc", *numeric])]
+    return ["<h3>Loop closing</h3>", _comparison_table(columns, n, ["assoc", *numeric], timed=timed)]
 
 
 def _compare_report(out_dir: Path) -> str:
@@ -347,7 +348,7 @@ def _compare_report(out_dir: Path) -> str:
         "(rpe_trans_per_m per metre), rotations in degrees; best value per column highlighted (not "
         f"matched_total's: more matches is better only when they are right, the ATE tells).{shared}</p>",
         _comparison_table(columns, n, MAIN_COLUMNS, wide=True, timed=at_once == 1),
-        *_loop_comparison(columns, n),
+        *_loop_comparison(columns, n, timed=at_once == 1),
         "<h2>Figures</h2>",
         *[figure(out_dir / name, name) for name in COMPARE_FIGURES if (out_dir / name).is_file()],
     ]

@@ -277,6 +277,8 @@ BETTER: dict[str, Callable[[Iterable[float]], float]] = {
     "budget_hits": min,
     "online_ate_rmse": min,
     "t_loop": min,
+    "rel_trans_mean": min,  # the relation metric (--relations): Intel's accuracy figure
+    "rel_rot_mean_deg": min,
 }
 
 

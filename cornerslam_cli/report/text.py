@@ -230,12 +230,14 @@ def _loop_columns(s: RunSummary, has_gt: bool) -> str:
 
 def batch_lines(rows: list[dict], keys: list[str]) -> list[str]:
     """``cornerslam batch``: a table of the combinations (a column per swept key, by its last dotted
-    part), each distinct failure once with its count, and the totals."""
+    part, or whole when two keys share it), each distinct failure once with its count, and the totals."""
 
     def num(v, fmt):
         return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, fmt)  # nan: no ATE
 
-    head = ["log", "assoc", *(k.rsplit(".", 1)[-1] for k in keys), "status", "steps", "landmarks", "ATE m"]
+    last = [k.rsplit(".", 1)[-1] for k in keys]  # (submaps.max_distance and scan_match.max_distance: whole)
+    head = ["log", "assoc", *(s if last.count(s) == 1 else k for s, k in zip(last, keys, strict=True))]
+    head += ["status", "steps", "landmarks", "ATE m"]
     logs_named: dict[str, set] = {}  # a log by its file name, unless two folders hold logs of that name
     for r in rows:
         logs_named.setdefault(Path(r["log"]).name, set()).add(r["log"])
