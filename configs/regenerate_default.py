@@ -9,8 +9,8 @@ from pathlib import Path
 
 import yaml
 
-from cornerslam_cli.config import Config, dump_config
-from cornerslam_cli.lasers import PRESETS
+from cornerslam_cli.config import Config
+from cornerslam_cli.lasers import PRESET_NOTE, PRESETS, dump_for_any_laser
 
 HERE = Path(__file__).resolve().parent
 HEADER = """\
@@ -34,7 +34,7 @@ def laser_yaml(name: str) -> str:
 
 if __name__ == "__main__":
     argparse.ArgumentParser(description=__doc__.split("\n\n")[0]).parse_args()  # (--help writes nothing)
-    (HERE / "default.yaml").write_text(HEADER + dump_config(Config()))
+    (HERE / "default.yaml").write_text(HEADER + PRESET_NOTE + dump_for_any_laser(Config()))
     (HERE / "lasers").mkdir(exist_ok=True)
     for name in PRESETS:
         (HERE / "lasers" / f"{name}.yaml").write_text(laser_yaml(name))

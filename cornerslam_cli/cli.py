@@ -14,6 +14,7 @@ import errno
 import io
 import logging
 import os
+import re
 import signal
 import sys
 import threading
@@ -41,6 +42,7 @@ from .options import (  # noqa: E402
     FIGURE_PATH,
     FINITE,
     PRESET,
+    SETTING,
     GivenPath,
     check_method_not_set,
     check_option_agrees,
@@ -186,6 +188,9 @@ def usage_line(e: click.exceptions.UsageError) -> str:
     on four lines."""
     msg = " ".join(e.format_message().split()).replace(". (Did you mean", " (did you mean")
     msg = (msg[:1].lower() + msg[1:]).removesuffix(".")
+    extra = re.fullmatch(r"got unexpected extra arguments? \((.*)\)", msg)
+    if extra and any(SETTING.match(a) for a in extra[1].split()):  # `--set a.b=1 c.d=2`
+        msg += ": give --set before each KEY=VALUE"
     where = e.ctx.command_path if e.ctx is not None else "cornerslam"
     return f"{msg} (see '{where} --help')"
 
@@ -760,7 +765,12 @@ def config_command(log_path, config_path, overrides, preset, verbose, quiet):
         if by_option is None or not e.msg.startswith(override_place(by_option)):
             raise
         raise replaced_place(e, by_option) from None
-    click.echo(dump_config(cfg), nl=False)
+    if log_path is None and cfg.input.laser_preset == "auto":  # each log's preset left to it, as said
+        from .lasers import PRESET_NOTE, dump_for_any_laser
+
+        click.echo(PRESET_NOTE + dump_for_any_laser(cfg), nl=False)
+    else:
+        click.echo(dump_config(cfg), nl=False)
 
 
 main = cli  # the console-script entry point

@@ -22,7 +22,8 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 from .config import Config
-from .frontend import Frame, Input, frames, open_input, warn_mount
+from .frontend import Frame, Input, frames, open_input
+from .lasers import warn_mount
 from .pipeline import keep_notes, run_filter
 from .report.comparison import write_comparison
 from .report.outdir import StagedDir

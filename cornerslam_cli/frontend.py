@@ -26,7 +26,7 @@ from .features import extract, load_kernels
 from .filter import load_kernels as load_filter_kernels
 from .filter.models import increment_noise
 from .geometry import matrix_from_pose, transform_points
-from .lasers import invalid_beams, mount_source
+from .lasers import invalid_beams, laser_mount
 from .logs import ReadStats, open_log
 from .logs.deskew import deskew
 from .logs.sync import Synced, SyncStats, clocks_hint, reanchor_odometry, select_keyframes, synchronise
@@ -148,7 +148,7 @@ def open_input(
     )
     reader.check()
     info = reader.info(inspect=False)  # (a run needs its topics, not its rates)
-    laser2base, source, upside_down, upside_down_source = _laser_mount(reader, cfg)
+    laser2base, source, upside_down, upside_down_source = laser_mount(reader, cfg)
     matcher = ScanMatcher(cfg.scan_match, odometry_noise(cfg)) if cfg.scan_match.enabled else None
     if matcher is not None and cfg.submaps.enabled and cfg.graph.recalibrate:  # (before any use)
         matcher.fusion = OdometryFusion(cfg.scan_match, whole_run=True)  # keeps every sample
@@ -338,58 +338,6 @@ def scans_prepared(reader, cfg: Config, upside_down: bool = False, msgs=None):
             "'%s': processed without beams (odometry only)",
             lo, hi, emptied, short_text(reader.scan_topic),
         )  # fmt: skip
-
-
-def _laser_mount(reader, cfg: Config) -> tuple[tuple[float, float, float], str, bool, str]:
-    """The laser's pose on the robot and where it came from, whether it is upside down and where that
-    came from: tf when the log has it, else the config's ``input.laser`` (:func:`lasers.mount_source`);
-    upside down from the config (``config``) when the log's mount cannot say (a CARMEN ROBOTLASER1
-    offset is planar), so the two sources can differ."""
-    mount = cfg.input.laser
-    if mount.from_tf:
-        tf = reader.laser_to_base()
-        if tf is not None:
-            flip = reader.laser_upside_down()
-            upside_down, flip_source = (mount.upside_down, "config") if flip is None else (flip, "tf")
-            return (float(tf[0]), float(tf[1]), float(tf[2])), "tf", upside_down, flip_source
-    x, y, yaw = (0.0 if v is None else v for v in (mount.x, mount.y, mount.yaw))  # None: not set
-    return (x, y, yaw), mount_source(cfg), mount.upside_down, "config"
-
-
-def warn_mount(src: Input, cfg: Config) -> None:
-    """Warn (into summary.json too) when the laser mount is the built-in default: the log has no tf
-    for it and the config does not set it; and when the config's ``input.laser.upside_down: true`` is
-    overruled by a tf that mounts the laser upright (the key's default is false and no laser preset
-    sets it, so true was the user's). Called once the run has its frames, so that a log that fails
-    gives its one-line error alone."""
-    if src.laser_source == "default":
-        why = f"has no tf {_tf_text(src, cfg)}{getattr(src.reader, 'near_frames', '')}"
-        keep = ", or input.laser.from_tf=false to keep it"
-        topic = short_text(src.info.scan_topic)
-        if getattr(src.reader, "laser_frame", None) == "":  # a scan read, its frame empty: no tf names it
-            why = f"has scans on '{topic}' with an empty header frame_id, so no tf can place the laser"
-        if src.info.format == "carmen":  # no tf to look in, nor a key to turn that off
-            why = src.reader.mount_problem or f"gives no laser mount (its {topic} lines carry none)"
-            keep = ""
-        src.reader.stats.warn(
-            "log '%s' %s: the laser is taken at the built-in default x=0 y=0 yaw=0 on the robot (set "
-            "input.laser.x/y/yaw to its mount%s)",
-            src.path.name, why, keep,
-        )  # fmt: skip
-    if cfg.input.laser.upside_down and src.laser_upside_down_source == "tf" and not src.laser_upside_down:
-        src.reader.stats.warn(
-            "log '%s': its tf %s mounts the laser upright, and the tf's orientation is used: "
-            "input.laser.upside_down=true is ignored (set input.laser.from_tf=false to use the config's "
-            "mount instead, with input.laser.x/y/yaw)",
-            src.path.name, _tf_text(src, cfg),
-        )  # fmt: skip
-
-
-def _tf_text(src: Input, cfg: Config) -> str:
-    """``base→laser`` as the log names them: the reader's base frame (``/`` stripped) and the frame
-    of its scans (``laser`` when the reader has none: no scan read, an empty frame_id)."""
-    base = getattr(src.reader, "base_frame", None) or cfg.input.base_frame
-    return f"{short_text(base)}→{short_text(getattr(src.reader, 'laser_frame', None) or 'laser')}"
 
 
 def _scan_count(info) -> int:

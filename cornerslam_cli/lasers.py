@@ -8,6 +8,9 @@ recorded in the saved config (``input.laser_preset``).
 
 The same presets are written as YAML to ``configs/lasers/`` (``configs/regenerate_default.py``) so
 they can be read, copied and edited; tests check the two agree.
+
+Also the laser's mount on the robot (:func:`laser_mount`: the log's tf, else ``input.laser``) and the
+warnings about it (:func:`warn_mount`).
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .config import Config, config_from, located, read_config_file, warn_ignored
+from .config import Config, config_from, dump_config, located, read_config_file, warn_ignored
 from .errors import ConfigError, did_you_mean
 from .logs import open_log
 from .logs.params import LaserMountConfig
@@ -82,6 +85,44 @@ PRESETS: dict[str, LaserPreset] = {
     ),
 }
 PRESET_CHOICES = ("auto", "none", *PRESETS)  # what input.laser_preset may name
+
+
+def _leaves(tree: Mapping, prefix: str = "") -> Iterator[tuple[str, Any]]:
+    """(dotted key, value) of each leaf of a nested config mapping."""
+    for k, v in tree.items():
+        if isinstance(v, Mapping):
+            yield from _leaves(v, f"{prefix}{k}.")
+        else:
+            yield f"{prefix}{k}", v
+
+
+PRESET_KEYS = frozenset(k for p in PRESETS.values() for k, _ in _leaves(p.config))  # keys a preset may set
+PRESET_NOTE = """\
+# The keys commented out are set by the laser preset chosen for each log's scans (input.laser_preset:
+# auto; configs/lasers/): their built-in defaults are shown. Set one and it replaces the preset's (a
+# warning says so); `cornerslam config LOG` prints what a run of that log uses.
+"""
+
+
+def dump_for_any_laser(cfg: Config) -> str:
+    """``dump_config(cfg)`` of a config resolved without a log (no preset chosen), the lines of the keys a
+    laser preset sets commented out where they hold the built-in defaults: a file's keys are layered over
+    the preset's, so that YAML as --config leaves each log its preset (configs/default.yaml, `cornerslam
+    config` without LOG)."""
+    default = dict(_leaves(dataclasses.asdict(Config())))
+    ours = dict(_leaves(dataclasses.asdict(cfg)))
+    quiet = {k for k in PRESET_KEYS if ours[k] == default[k]}
+    out, section = [], ""
+    for line in dump_config(cfg).splitlines():
+        if not line.startswith(" "):
+            section = line.split(":", 1)[0]
+        elif not line.startswith("   ") and f"{section}.{line.strip().split(':', 1)[0]}" in quiet:
+            line = f"  # {line.strip()}"
+        out.append(line)
+    return "\n".join(out) + "\n"
+
+
+MOUNT_SAME = 1e-6  # m or rad: input.laser.x/y/yaw within this of the tf's mount are the same mount
 
 
 def mount_source(cfg: Config) -> str:
@@ -237,5 +278,91 @@ def resolve_config(
             f"{hint}{preset_choices()}",
         )
         raise located(e, data, overrides)
+    if over := overruled_by_file(data, name):
+        log.warning(
+            "config file '%s' sets %s over the laser preset '%s' of this log's scans, and the file's %s used "
+            "(leave %s out of the file for the preset's, or set input.laser_preset: none)",
+            Path(config_path).name, ", ".join(over), name, "value is" if len(over) == 1 else "values are",
+            "it" if len(over) == 1 else "them",
+        )  # fmt: skip
     cfg = config_from(data, overrides, base=PRESETS[name].config)
     return dataclasses.replace(cfg, input=dataclasses.replace(cfg.input, laser_preset=name))
+
+
+def overruled_by_file(data: Mapping, name: str) -> list[str]:
+    """The dotted keys of the preset ``name`` that a config file's mapping ``data`` sets to other values:
+    the file is layered over the preset, so a full dump (configs/default.yaml before 2026-12-06, `cornerslam
+    config` without a log) silently replaced a SICK log's sensor model with the built-in Hokuyo one."""
+    own = dict(_leaves(PRESETS[name].config))
+    given = dict(_leaves(data))
+
+    def same(a, b) -> bool:
+        numbers = all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in (a, b))
+        return math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-12) if numbers else a == b
+
+    return [k for k, v in own.items() if k in given and not same(given[k], v)]
+
+
+def laser_mount(reader, cfg: Config) -> tuple[tuple[float, float, float], str, bool, str]:
+    """The laser's pose on the robot and where it came from, whether it is upside down and where that
+    came from: tf when the log has it, else the config's ``input.laser`` (:func:`lasers.mount_source`);
+    upside down from the config (``config``) when the log's mount cannot say (a CARMEN ROBOTLASER1
+    offset is planar), so the two sources can differ."""
+    mount = cfg.input.laser
+    if mount.from_tf:
+        tf = reader.laser_to_base()
+        if tf is not None:
+            flip = reader.laser_upside_down()
+            upside_down, flip_source = (mount.upside_down, "config") if flip is None else (flip, "tf")
+            return (float(tf[0]), float(tf[1]), float(tf[2])), "tf", upside_down, flip_source
+    x, y, yaw = (0.0 if v is None else v for v in (mount.x, mount.y, mount.yaw))  # None: not set
+    return (x, y, yaw), mount_source(cfg), mount.upside_down, "config"
+
+
+def warn_mount(src, cfg: Config) -> None:
+    """Warn (into summary.json too) when the laser mount is the built-in default: the log has no tf
+    for it and the config does not set it; when the config's ``input.laser.upside_down: true`` is
+    overruled by a tf that mounts the laser upright (the key's default is false and no laser preset
+    sets it, so true was the user's); and when the config's ``input.laser.x/y/yaw`` (default null: not
+    set) are overruled by the tf's mount elsewhere. ``src``: the run's opened input (frontend.Input).
+    Called once the run has its frames, so that a log that fails gives its one-line error alone."""
+    if src.laser_source == "default":
+        why = f"has no tf {_tf_text(src, cfg)}{getattr(src.reader, 'near_frames', '')}"
+        keep = ", or input.laser.from_tf=false to keep it"
+        topic = short_text(src.info.scan_topic)
+        if getattr(src.reader, "laser_frame", None) == "":  # a scan read, its frame empty: no tf names it
+            why = f"has scans on '{topic}' with an empty header frame_id, so no tf can place the laser"
+        if src.info.format == "carmen":  # no tf to look in, nor a key to turn that off
+            why = src.reader.mount_problem or f"gives no laser mount (its {topic} lines carry none)"
+            keep = ""
+        src.reader.stats.warn(
+            "log '%s' %s: the laser is taken at the built-in default x=0 y=0 yaw=0 on the robot (set "
+            "input.laser.x/y/yaw to its mount%s)",
+            src.path.name, why, keep,
+        )  # fmt: skip
+    given = {k: v for k, v in zip("xy", (cfg.input.laser.x, cfg.input.laser.y), strict=True) if v is not None}
+    if cfg.input.laser.yaw is not None:
+        given["yaw"] = cfg.input.laser.yaw
+    tf = dict(zip(("x", "y", "yaw"), src.laser2base, strict=True))
+    if src.laser_source == "tf" and any(abs(v - tf[k]) > MOUNT_SAME for k, v in given.items()):
+        keys = " ".join(f"input.laser.{k}={v:g}" for k, v in given.items())
+        src.reader.stats.warn(
+            "log '%s': its tf %s mounts the laser at x=%.3f y=%.3f yaw=%.3f, and the tf's mount is used: "
+            "%s ignored (set input.laser.from_tf=false to use the config's mount instead)",
+            src.path.name, _tf_text(src, cfg), *src.laser2base,
+            keys + (" is" if len(given) == 1 else " are"),
+        )  # fmt: skip
+    if cfg.input.laser.upside_down and src.laser_upside_down_source == "tf" and not src.laser_upside_down:
+        src.reader.stats.warn(
+            "log '%s': its tf %s mounts the laser upright, and the tf's orientation is used: "
+            "input.laser.upside_down=true is ignored (set input.laser.from_tf=false to use the config's "
+            "mount instead, with input.laser.x/y/yaw)",
+            src.path.name, _tf_text(src, cfg),
+        )  # fmt: skip
+
+
+def _tf_text(src, cfg: Config) -> str:
+    """``base→laser`` as the log names them: the reader's base frame (``/`` stripped) and the frame
+    of its scans (``laser`` when the reader has none: no scan read, an empty frame_id)."""
+    base = getattr(src.reader, "base_frame", None) or cfg.input.base_frame
+    return f"{short_text(base)}→{short_text(getattr(src.reader, 'laser_frame', None) or 'laser')}"

@@ -15,6 +15,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import re
 import shlex
 import stat
 import tempfile
@@ -122,12 +123,19 @@ FINITE = _Finite()
 class GivenPath(click.Path):
     """A file or directory name that is not ``''`` (an unset shell variable, ``--config "$CFG"``): as a
     path ``''`` is ``.``, the working directory, which the error then named; as an option's value it
-    was taken as not given, the option silently ignored (``--mcap-out ''`` wrote no MCAP)."""
+    was taken as not given, the option silently ignored (``--mcap-out ''`` wrote no MCAP). A name that
+    is no file but reads as a config key's ``KEY=VALUE`` is a second setting given one ``--set`` (``--set
+    a.b=1 c.d=2``: the second was taken as the LOG, said not to exist)."""
 
     def convert(self, value, param, ctx):
         if value == "":
             self.fail("'' names no file (an unset shell variable?)", param, ctx)
+        if isinstance(value, str) and SETTING.match(value) and not os.path.lexists(value):
+            self.fail(f"'{value}' is no file but a setting: give --set before each KEY=VALUE", param, ctx)
         return super().convert(value, param, ctx)
+
+
+SETTING = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)+=")  # a dotted config key and its '=' (no file name)
 
 
 class _PresetName(click.ParamType):

@@ -16,8 +16,9 @@ from pathlib import Path
 
 from .config import Config
 from .errors import OutputError, display_path, printable
-from .frontend import Frame, Input, check_processed, frames, open_input, warn_mount
+from .frontend import Frame, Input, check_processed, frames, open_input
 from .hierarchy import HierarchicalSlam
+from .lasers import warn_mount
 from .logs.ros import CLOCK_APART
 from .ranges import short_text
 from .report.occupancy import ScanStore

@@ -1,5 +1,6 @@
 """The CLI through click's CliRunner: every command, exit codes, and the bad-input table."""
 
+import dataclasses
 import json
 import math
 import re
@@ -1127,7 +1128,8 @@ def test_config_of_a_log_that_does_not_exist_exits_2(preset, tmp_path):
 def test_config_prints_the_resolved_config_that_run_uses(tmp_path):
     """`cornerslam config LOG --set ...` prints what `run LOG --set ...` resolves (preset chosen from
     the log's scans); fed back as --config it gives the same config (the same hash), and without a
-    log it is configs/default.yaml without its comments."""
+    log it is configs/default.yaml without its first comments (the keys a laser preset sets commented
+    out: as --config it leaves each log its preset)."""
     import yaml
 
     from cornerslam_cli.config import Config, dump_config
@@ -1143,7 +1145,12 @@ def test_config_prints_the_resolved_config_that_run_uses(tmp_path):
     assert direct.exit_code == 0 and via_file.exit_code == 0, (direct.output, via_file.output)
     hashes = [json.loads((tmp_path / d / "summary.json").read_text())["hashes"]["config"] for d in "ab"]
     assert hashes[0] == hashes[1]
-    assert invoke("config").stdout == dump_config(Config())
+    default = (Path(__file__).resolve().parents[1] / "configs" / "default.yaml").read_text()
+    assert default.endswith(invoke("config").stdout)
+    assert "\n  # model: piecewise\n" in default and yaml.safe_load(default)["sensor"] is None
+    assert invoke("config", "--set", "sensor.model=linear").stdout.count("\n  model: linear\n") == 1
+    none = Config(input=dataclasses.replace(Config().input, laser_preset="none"))
+    assert invoke("config", "--preset", "none").stdout == dump_config(none)  # (no preset: every key)
     res = invoke("config", "--preset", "hokuyo_urg04lx")
     assert yaml.safe_load(res.stdout)["input"]["laser_preset"] == "hokuyo_urg04lx"
     one_line_error(
@@ -1350,3 +1357,17 @@ def test_compare_and_batch_say_the_whole_path_they_wrote_as_run_does(sim_log, tm
     )
     res = invoke("batch", sim_log, "--assoc", "icnn", "--out", "b", "--jobs", "1")
     assert res.exit_code == 0 and f"wrote {tmp_path / 'b' / 'batch.csv'}" in res.output, res.output
+
+
+def test_two_settings_after_one_set_are_told_to_take_a_set_each(sim_log, tmp_path):
+    """`--set a.b=1 c.d=2` (as the README itself once wrote): run said only "unexpected extra arguments",
+    config took c.d=2 for the LOG and said it did not exist (a probe). A real file named like a setting
+    is still a log."""
+    res = invoke("run", sim_log, "--set", "input.laser.x=0.1", "input.laser.y=0", "--out", tmp_path / "o")
+    one_line_error(res, "got unexpected extra argument (input.laser.y=0): give --set before each KEY=VALUE")
+    res = invoke("config", "--set", "scan_match.window=5", "ekf.alpha1=0.1")
+    one_line_error(res, "'ekf.alpha1=0.1' is no file but a setting: give --set before each KEY=VALUE")
+    named = tmp_path / "ekf.alpha1=0.1"
+    named.write_bytes(Path(sim_log).read_bytes())
+    assert invoke("config", named).exit_code == 0
+    assert not (tmp_path / "o").exists()

@@ -421,3 +421,18 @@ def test_a_laser_mount_turned_the_wrong_way_is_warned_of(tmp_path):
     assert abs(wrong["odometry_model"]["odom_scale_error"]) > 0.25
     (said,) = [w for w in wrong["warnings"] if "disagree on distance" in w]
     assert f"check the laser mount (yaw {mount[2] + math.pi:.3f} rad, from the config's input.laser" in said
+
+
+def test_a_config_mount_the_tf_overrules_is_warned_of(tmp_path):
+    """`--set input.laser.x=0.3` on a log whose tf mounts the laser at x=0.1: the tf's was used without a
+    word, summary.json holding both (a probe); now warned, naming the keys and how to use them instead.
+    The same values as the tf's, or none given, are no news."""
+    raw, odoms, mount = _sample_log()
+    log = _write(tmp_path / "log.mcap", raw[:20], odoms, mount, _yaw_q(mount[2]))
+    other = run_cli(log, tmp_path / "a", "submaps.enabled=false", f"input.laser.x={mount[0] + 0.2:g}")
+    (said,) = [w for w in other["warnings"] if "mounts the laser at" in w]
+    assert f"x={mount[0]:.3f}" in said and f"input.laser.x={mount[0] + 0.2:g} is ignored" in said
+    assert "set input.laser.from_tf=false to use the config's mount instead" in said
+    for same in ((f"input.laser.x={mount[0]!r}", f"input.laser.yaw={mount[2]!r}"), ()):
+        s = run_cli(log, tmp_path / f"b{len(same)}", "submaps.enabled=false", *same)
+        assert not any("mounts the laser at" in w for w in s["warnings"])

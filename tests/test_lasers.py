@@ -137,3 +137,26 @@ def test_a_pinned_preset_is_not_warned_about_for_its_own_laser_cropped(tmp_path,
     with caplog.at_level("WARNING"):
         resolve_config(log, None, ["input.laser_preset=hokuyo_270deg"])
     assert not [r for r in caplog.records if r.levelname == "WARNING"]
+
+
+def test_a_config_file_over_the_preset_is_warned_of_and_the_default_file_is_not_over_it(tmp_path, caplog):
+    """configs/default.yaml listed every key, the sensor model's among them, and a file is layered over
+    the laser preset: `--config configs/default.yaml` on a SICK log ran the Hokuyo model while saying the
+    SICK preset was used (a probe: 358 → 306 landmarks on aces). Now that file leaves the preset's keys
+    commented out, and a file that sets one to another value than the preset's is warned of."""
+    import logging
+
+    log = SAMPLES / "intel_cut.clf"  # sick_lms_1deg
+    with caplog.at_level(logging.WARNING, logger="cornerslam"):
+        assert resolve_config(log, ROOT / "configs" / "default.yaml") == resolve_config(log, None)
+    assert "over the laser preset" not in caplog.text
+    mine = tmp_path / "mine.yaml"
+    mine.write_text("sensor:\n  model: piecewise\n  a: 0.01\nlines:\n  min_points: 6\nekf:\n  alpha1: 0.2\n")
+    with caplog.at_level(logging.WARNING, logger="cornerslam"):
+        cfg = resolve_config(log, mine)
+    assert cfg.sensor.model == "piecewise" and cfg.lines.min_points == 6  # the file's, as before
+    assert (
+        "config file 'mine.yaml' sets sensor.model, lines.min_points over the laser preset 'sick_lms_1deg' "
+        "of this log's scans, and the file's values are used (leave them out of the file for the preset's, "
+        "or set input.laser_preset: none)"
+    ) in caplog.text  # (sensor.a: the preset's own value, no news)
