@@ -99,8 +99,12 @@ def _to_plain(v: Any) -> Any:
 def _closest(key: str, cls: type, prefix: str) -> str:
     """The hint for an unknown key ``key`` of the section ``cls`` (at ``prefix``): the keys further down
     whose last part is ``key`` (``refine`` → ``graph.refine``), else the closest of the section's own
-    keys, else them all."""
+    keys, else them all; a dotted key that is one (``scan_match.window: 5`` in a file), how to nest it."""
     valid = [f.name for f in dataclasses.fields(cls)]
+    if "." in key and key in _dotted_keys(cls):  # (--set takes the dotted form; a file nests it)
+        *sections, leaf = key.split(".")
+        under = " under ".join(f"'{s}:'" for s in reversed(sections))
+        return f"in a file, nest it: '{leaf}:' indented under {under}"
     deeper = [k for k in _dotted_keys(cls) if "." in k and k.rpartition(".")[2] == key]
     if deeper:
         named = " or ".join(f"'{prefix}{k}'" for k in deeper)
@@ -153,6 +157,20 @@ def _unpadded(value: Any) -> str | None:
         return None
     sign = "-" if value.startswith("-") else ""
     return f"write it without leading zeros ({sign}{value.lstrip('+-').replace('_', '').lstrip('0') or '0'})"
+
+
+def _integer_hint(value: Any) -> str | None:
+    """The hint for a value an integer key refuses: a leading zero's (:func:`_unpadded`), or the whole
+    number a float or an exponent means (``1e7``, which YAML 1.1 reads as text; ``300.0``), else None."""
+    if hint := _unpadded(value):
+        return hint
+    if isinstance(value, str) and not _number_text(value):
+        return None
+    try:
+        number = float(value)
+    except (TypeError, ValueError, OverflowError):
+        return None
+    return f"write it as a whole number: {int(number)}" if number.is_integer() else None
 
 
 def _as_float(value: int | float) -> float:
@@ -209,7 +227,7 @@ def _coerce(value: Any, tp: Any, key: str, allowed: Range | None = None) -> Any:
         return value
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"config key '{key}' must be an integer, got {got}", _unpadded(value))
+            raise ConfigError(f"config key '{key}' must be an integer, got {got}", _integer_hint(value))
         return value
     if tp is float:
         if isinstance(value, str) and _number_text(value):
@@ -219,7 +237,11 @@ def _coerce(value: Any, tp: Any, key: str, allowed: Range | None = None) -> Any:
         return _as_float(value)
     if tp is str:
         if isinstance(value, bool):  # YAML 1.1: yes/no/on/off are booleans
-            raise ConfigError(f"config key '{key}' must be a string, got {got}", "quote it: 'on', 'no'")
+            word = "yes" if value else "no"  # (YAML 1.1 reads yes/no/on/off/true/false as booleans)
+            raise ConfigError(
+                f"config key '{key}' must be a string, got {got}",
+                f"quote it: '{word}' in a file, --set \"{key}='{word}'\" on a command line",
+            )
         if not isinstance(value, str):
             raise ConfigError(f"config key '{key}' must be a string, got {got}")
         return value

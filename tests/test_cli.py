@@ -1371,3 +1371,16 @@ def test_two_settings_after_one_set_are_told_to_take_a_set_each(sim_log, tmp_pat
     named.write_bytes(Path(sim_log).read_bytes())
     assert invoke("config", named).exit_code == 0
     assert not (tmp_path / "o").exists()
+
+
+def test_a_given_out_holding_another_logs_output_says_it_is_replaced(tmp_path):
+    """The default --out refuses another log's output (two logs of one stem); a given --out replaced it
+    without a word (a probe). Now said once, before any work; the same log's output is no news."""
+    a, b, out = small_log(tmp_path / "a.mcap", n=6), small_log(tmp_path / "b.mcap", n=6), tmp_path / "o"
+    assert invoke("run", a, "--out", out, "-q").exit_code == 0
+    res = invoke("run", b, "--out", out)
+    assert res.exit_code == 0, res.output
+    said = f"'{out}' holds the output of '{a}': it is replaced by this run's of '{b}' (give another --out"
+    assert res.stderr.count(said) == 1, res.stderr
+    assert json.loads((out / "summary.json").read_text())["input"]["log"] == str(b)
+    assert "holds the output of" not in invoke("run", b, "--out", out).stderr

@@ -485,3 +485,25 @@ def test_a_set_mapping_key_yaml_reads_as_no_string_is_an_unknown_key(mapping, ke
     with pytest.raises(ConfigError) as e:
         load_config(None, [text])
     assert str(e.value).startswith(f"--set '{text}': unknown config key '{key}'")
+
+
+@pytest.mark.parametrize(
+    ("value", "hint"), [("1e7", "10000000"), ("300.0", "300"), ("3.5", None), ("ab", None)]
+)
+def test_an_integer_key_given_a_float_says_the_whole_number_to_write(value, hint):
+    """`--set grid.max_cells=1e7` said "must be an integer, got '1e7'", as if the user had typed a word
+    (YAML 1.1 reads 1e7 as text; a probe): a whole number written as a float is named as one."""
+    with pytest.raises(ConfigError) as e:
+        load_config(None, [f"grid.max_cells={value}"])
+    assert "config key 'grid.max_cells' must be an integer" in e.value.msg
+    assert e.value.hint == (f"write it as a whole number: {hint}" if hint else None)
+
+
+def test_a_dotted_key_in_a_file_is_told_to_nest(tmp_path):
+    """`scan_match.window: 5` in a file (the --set form) was an unknown key "did you mean 'scan_match'?"."""
+    p = tmp_path / "c.yaml"
+    p.write_text("association.pca.group_size: 4\n")
+    with pytest.raises(ConfigError) as e:
+        load_config(p)
+    assert "unknown config key 'association.pca.group_size'" in e.value.msg
+    assert e.value.hint == "in a file, nest it: 'group_size:' indented under 'pca:' under 'association:'"

@@ -71,10 +71,16 @@ def test_seconds_past_any_log_are_no_internal_error(sim_log, tmp_path, command, 
 
 
 def test_run_by_scan_index_and_count_records_the_span(sim_log, tmp_path):
+    """… and says it on the run's summary and in its report (before: in summary.json only, a run over a
+    slice reading like the whole log's; a probe)."""
     full, part = tmp_path / "full", tmp_path / "part"
-    assert invoke("run", sim_log, "--out", full, "-q").exit_code == 0
-    res = invoke("run", sim_log, "--out", part, "-q", "--start", "#10", "--max-scans", "20")
+    res = invoke("run", sim_log, "--out", full)
+    assert res.exit_code == 0 and "span:" not in res.output
+    res = invoke("run", sim_log, "--out", part, "--start", "#10", "--max-scans", "20", "--plot")
     assert res.exit_code == 0, res.output
+    said = "--start #10 --max-scans 20: scans #10–#29 of the log, "
+    assert f"\nspan: {said}" in res.stdout and "s from its first scan: part of the log only\n" in res.stdout
+    assert f"part of the log</th><td>{said}" in (part / "report.html").read_text()
     assert "span" not in summary(full)["input"]  # a whole-log run's summary.json is unchanged
     span = summary(part)["input"]["span"]
     assert span["options"] == "--start #10 --max-scans 20"
@@ -97,11 +103,13 @@ def test_run_by_seconds_keeps_scans_inside(sim_log, tmp_path):
 
 def test_compare_on_part_of_the_log(sim_log, tmp_path):
     out = tmp_path / "cmp"
-    res = invoke("compare", sim_log, "--assoc", "icnn,pca", "--out", out, "-q", "--end", "#25")
+    res = invoke("compare", sim_log, "--assoc", "icnn,pca", "--out", out, "--end", "#25")
     assert res.exit_code == 0, res.output
     for assoc in ("icnn", "pca"):
         span = summary(out / assoc)["input"]["span"]
         assert (span["first_index"], span["last_index"], span["options"]) == (0, 24, "--end #25")
+    said = "--end #25: scans #0–#24 of the log, "  # said under the table and in the report
+    assert res.stdout.count(f"\nspan: {said}") == 1 and f"({said}" in (out / "report.html").read_text()
 
 
 @pytest.mark.parametrize(

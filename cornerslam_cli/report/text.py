@@ -42,6 +42,18 @@ def unusable_scans(c) -> str:
     return f"; {n} more scan{'s' if n != 1 else ''} unusable, not read: see the warnings" if n else ""
 
 
+def span_lines(i) -> list[str]:
+    """The part of the log a run processed, when not all of it (``--start``/``--end``/``--max-scans``):
+    a run's figures over a slice read like the whole log's otherwise."""
+    if i.span is None:
+        return []
+    p = i.span
+    return [
+        f"span: {p.options}: scans #{p.first_index}–#{p.last_index} of the log, "
+        f"{p.first_time:.3f}–{p.last_time:.3f} s from its first scan: part of the log only"
+    ]
+
+
 def summary_lines(s: RunSummary) -> list[str]:
     """``cornerslam run``: counts, stage times, accuracy when there is a reference, the output."""
     c, t = s.counts, s.timing
@@ -49,6 +61,7 @@ def summary_lines(s: RunSummary) -> list[str]:
         f"{s.input.log}: {c.steps} steps ({c.scans_in} scans, {c.scans_skipped} skipped, "
         f"{c.keyframes_skipped} between keyframes{unusable_scans(c)}), {c.landmarks} landmarks, "
         f"{c.matched_total} matches with {s.assoc}",
+        *span_lines(s.input),
         topics_line(s.input),
         mount_line(s.input),
         *preset_lines(s.config),
@@ -169,8 +182,9 @@ def deskew_lines(inp: RunInput) -> list[str]:
 def comparison_lines(summaries: list[RunSummary]) -> list[str]:
     """``cornerslam compare``: one row per associator (accuracy columns when any run has a
     reference, loop-closing columns when any run had submaps), then the scan-matched odometry's
-    accuracy, the same for every associator, and, when the filters ran at once (--jobs), that their
-    times do not compare (the warning said so before the figures, scrolled away by their progress)."""
+    accuracy, the same for every associator, the part of the log when not all of it, and, when the
+    filters ran at once (--jobs), that their times do not compare (the warning said so before the
+    figures, scrolled away by their progress)."""
     head = (
         f"{'assoc':<6} {'steps':>6} {'landmarks':>9} {'matched':>8} "
         f"{'t_match s':>10} {'max ms':>8} {'t_total s':>10}"
@@ -209,6 +223,7 @@ def comparison_lines(summaries: list[RunSummary]) -> list[str]:
         if a.scan_odom_relations is not None:
             parts.append(f"relations {mean_std(a.scan_odom_relations)} m")
         lines.append("scan-matched odometry (the filter's motion input): " + ", ".join(parts))
+    lines += span_lines(summaries[0].input) if summaries else []  # (one span for all)
     if (at_once := max((s.timing.concurrent_filters or 1 for s in summaries), default=1)) > 1:  # --jobs
         lines.append(
             f"times: the filters ran {at_once} at a time: they compare with no other run's (--jobs 1)"
