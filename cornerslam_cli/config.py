@@ -53,7 +53,8 @@ log = logging.getLogger("cornerslam.config")
 TWO_PI = 2.0 * math.pi
 MAX_CONFIG_BYTES = 1 << 20  # configs/default.yaml, every key, is 2.5 KB
 MAX_YAML_NODES = 10_000  # nodes of a config document with every alias expanded (default.yaml: ~250)
-CONFIG_FILE = "a YAML config file, e.g. configs/default.yaml"
+# (pip installs no configs/: the source tree's; `cornerslam config` writes one anywhere)
+CONFIG_FILE = "a YAML config file, e.g. what `cornerslam config > my.yaml` writes; configs/ is the source's"
 SUMMARY_MARK = "cornerslam_version"  # summary.json's first field (results.RunSummary): a run's summary
 
 

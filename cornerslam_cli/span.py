@@ -24,6 +24,9 @@ from .types import Scan
 INDEX_DIGITS = 100  # a '#INDEX' of more digits is refused (past any log; int() stops at 4,300 anyway)
 
 
+STAMP_NEAR = 3600.0  # s: a bound within the stamps of a log not stamped from 0, or this near: a stamp
+
+
 def seconds(t: float) -> str:
     """``t`` to the microsecond, without float noise: compared in an error with a bound given to more
     digits than one, "907.7" beside a "--end 907.7" it is past said nothing."""
@@ -189,7 +192,8 @@ def select(
         )
     if used.scans == 0:
         extent = f"{i + 1} scan{'s' if i else ''} over {seconds(t)} s" if t0 is not None else "no scans"
-        raise CornerslamError(
-            f"{span.describe()} selects no scan of log '{log_name}' ({extent})",
-            "choose a span inside the log: seconds from its first scan, or #INDEX",
-        )
+        hint = "choose a span inside the log: seconds from its first scan, or #INDEX"
+        given = [b for b in (span.start, span.end) if b is not None and not b.index]
+        if t0 is not None and t0 > STAMP_NEAR and any(abs(b.value - t0) <= t + STAMP_NEAR for b in given):
+            hint = f"its first scan is stamped {t0:.3f}: {hint}"  # a stamp given for seconds from it
+        raise CornerslamError(f"{span.describe()} selects no scan of log '{log_name}' ({extent})", hint)

@@ -197,3 +197,12 @@ def test_beam_counts_are_the_spans_scans(tmp_path, span):
     assert counts["scans_in"] == 10
     assert counts["beams_total"] == sum(len(s.ranges) for s in kept) == 1810
     assert counts["beams_invalid"] == sum(int((~v).sum()) for v in valid) > 0
+
+
+def test_a_stamp_given_for_seconds_is_shown_the_logs_first_stamp(sim_log, tmp_path):
+    """`--start 1700000000` (the log's stamp, where seconds from its first scan are meant) said only that
+    it selects no scan (a probe): the first scan's stamp is shown."""
+    res = invoke("run", sim_log, "--start", "1700000000", "--out", tmp_path / "o")
+    assert res.exit_code == 2 and "(its first scan is stamped 1700000000.006: choose a span" in res.stderr
+    res = invoke("run", sim_log, "--start", "500", "--out", tmp_path / "o")
+    assert res.exit_code == 2 and "stamped" not in res.stderr
