@@ -42,7 +42,6 @@ from .options import (  # noqa: E402
     FIGURE_PATH,
     FINITE,
     PRESET,
-    SETTING,
     GivenPath,
     check_method_not_set,
     check_option_agrees,
@@ -51,6 +50,7 @@ from .options import (  # noqa: E402
     chosen_ground_truth,
     command_config,
     config_options,
+    is_setting,
     parse_assocs,
     parse_span,
     parse_sweeps,
@@ -189,7 +189,7 @@ def usage_line(e: click.exceptions.UsageError) -> str:
     msg = " ".join(e.format_message().split()).replace(". (Did you mean", " (did you mean")
     msg = (msg[:1].lower() + msg[1:]).removesuffix(".")
     extra = re.fullmatch(r"got unexpected extra arguments? \((.*)\)", msg)
-    if extra and any(SETTING.match(a) for a in extra[1].split()):  # `--set a.b=1 c.d=2`
+    if extra and any(is_setting(a) for a in extra[1].split()):  # `--set a.b=1 c.d=2`
         msg += ": give --set before each KEY=VALUE"
     where = e.ctx.command_path if e.ctx is not None else "cornerslam"
     return f"{msg} (see '{where} --help')"
@@ -243,7 +243,7 @@ def cli() -> None:
 
 
 @cli.command()
-@click.argument("log_path", metavar="LOG", type=GivenPath())
+@click.argument("log_path", metavar="LOG", type=GivenPath(log=True))
 @config_options
 @click.option("--assoc", default=None, help="Associator: icnn, jcbb or pca (default: config, pca).")
 @click.option("--out", type=GivenPath(), help="Output directory (default ./cornerslam_out/LOG_ASSOC).")
@@ -324,7 +324,7 @@ def run(
 
 
 @cli.command()
-@click.argument("log_path", metavar="LOG", type=GivenPath())
+@click.argument("log_path", metavar="LOG", type=GivenPath(log=True))
 @click.option(
     "--assoc", "assocs", default="icnn,jcbb,pca", show_default=True, help="Comma-separated associators."
 )
@@ -411,7 +411,7 @@ def _say_compiling(quiet: bool) -> bool:
 
 
 @cli.command()
-@click.argument("log_path", metavar="LOG", type=GivenPath())
+@click.argument("log_path", metavar="LOG", type=GivenPath(log=True))
 @topic_options
 @verbosity_options(progress=False, steps=False)
 def info(log_path, scan_topic, odom_topic, verbose, quiet):
@@ -555,7 +555,7 @@ def evaluate(out_dir, ground_truth, relations, time_offset, correct_scale, verbo
 
 
 @cli.command()
-@click.argument("log_path", metavar="LOG", type=GivenPath())
+@click.argument("log_path", metavar="LOG", type=GivenPath(log=True))
 @click.option(
     "--step",
     type=click.IntRange(min=0),
@@ -626,7 +626,7 @@ def _figure_target(plot_path: str) -> Path:
 
 
 @cli.command()
-@click.argument("logs", metavar="LOGS...", nargs=-1, required=True, type=GivenPath())
+@click.argument("logs", metavar="LOGS...", nargs=-1, required=True, type=GivenPath(log=True))
 @click.option(
     "--assoc", "assocs", default=None, help="Comma-separated associators (default: the config's, pca)."
 )
@@ -728,7 +728,7 @@ def _batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, g
 
 
 @cli.command("config")
-@click.argument("log_path", metavar="[LOG]", required=False, type=GivenPath())
+@click.argument("log_path", metavar="[LOG]", required=False, type=GivenPath(log=True))
 @config_options
 @click.option(
     "--preset",
@@ -741,8 +741,9 @@ def config_command(log_path, config_path, overrides, preset, verbose, quiet):
     """Print the fully resolved config as YAML: built-in defaults < laser preset < --config < --set.
 
     With LOG, the laser preset is chosen from its first scan, as `run` would; --preset picks it instead,
-    as `--set input.laser_preset=NAME` would (over a --config file's choice). The output is a valid
-    --config file.
+    as `--set input.laser_preset=NAME` would (over a --config file's choice). Without LOG, --preset or
+    --config, the keys a laser preset sets are commented out (but for those --set gives): as --config the
+    output leaves each log its preset. The output is a valid --config file.
 
     \b
     Example:
@@ -765,10 +766,12 @@ def config_command(log_path, config_path, overrides, preset, verbose, quiet):
         if by_option is None or not e.msg.startswith(override_place(by_option)):
             raise
         raise replaced_place(e, by_option) from None
-    if log_path is None and cfg.input.laser_preset == "auto":  # each log's preset left to it, as said
+    if log_path is None and config_path is None and cfg.input.laser_preset == "auto":  # each log's preset
+        from .config import set_leaves  # left to it, but for what --set gave (a file's: warned when run)
         from .lasers import PRESET_NOTE, dump_for_any_laser
 
-        click.echo(PRESET_NOTE + dump_for_any_laser(cfg), nl=False)
+        given = {leaf for _, leaf, _ in set_leaves(overrides)}
+        click.echo(PRESET_NOTE + dump_for_any_laser(cfg, given), nl=False)
     else:
         click.echo(dump_config(cfg), nl=False)
 

@@ -102,11 +102,11 @@ def _closest(key: str, cls: type, prefix: str) -> str:
     whose last part is ``key`` (``refine`` → ``graph.refine``), else the closest of the section's own
     keys, else them all; a dotted key that is one (``scan_match.window: 5`` in a file), how to nest it."""
     valid = [f.name for f in dataclasses.fields(cls)]
-    if "." in key and key in _dotted_keys(cls):  # (--set takes the dotted form; a file nests it)
+    if "." in key and key in dotted_keys(cls):  # (--set takes the dotted form; a file nests it)
         *sections, leaf = key.split(".")
         under = " under ".join(f"'{s}:'" for s in reversed(sections))
         return f"in a file, nest it: '{leaf}:' indented under {under}"
-    deeper = [k for k in _dotted_keys(cls) if "." in k and k.rpartition(".")[2] == key]
+    deeper = [k for k in dotted_keys(cls) if "." in k and k.rpartition(".")[2] == key]
     if deeper:
         named = " or ".join(f"'{prefix}{k}'" for k in deeper)
         return f"did you mean {named}?"
@@ -114,14 +114,14 @@ def _closest(key: str, cls: type, prefix: str) -> str:
     return close or f"valid keys: {', '.join(sorted(valid))}"
 
 
-def _dotted_keys(cls: type) -> list[str]:
+def dotted_keys(cls: type) -> list[str]:
     """Every key of the dataclass ``cls`` and of its sections, dotted (``graph``, ``graph.refine``, …)."""
     hints = typing.get_type_hints(cls)
     keys = []
     for f in dataclasses.fields(cls):
         keys.append(f.name)
         if dataclasses.is_dataclass(hints[f.name]):
-            keys += [f"{f.name}.{k}" for k in _dotted_keys(hints[f.name])]
+            keys += [f"{f.name}.{k}" for k in dotted_keys(hints[f.name])]
     return keys
 
 
@@ -165,7 +165,7 @@ def _integer_hint(value: Any) -> str | None:
     number a float or an exponent means (``1e7``, which YAML 1.1 reads as text; ``300.0``), else None."""
     if hint := _unpadded(value):
         return hint
-    if isinstance(value, str) and not _number_text(value):
+    if isinstance(value, bool) or (isinstance(value, str) and not _number_text(value)):
         return None
     try:
         number = float(value)
@@ -238,10 +238,9 @@ def _coerce(value: Any, tp: Any, key: str, allowed: Range | None = None) -> Any:
         return _as_float(value)
     if tp is str:
         if isinstance(value, bool):  # YAML 1.1: yes/no/on/off are booleans
-            word = "yes" if value else "no"  # (YAML 1.1 reads yes/no/on/off/true/false as booleans)
-            raise ConfigError(
+            raise ConfigError(  # (YAML 1.1 reads yes/no/on/off/true/false as booleans)
                 f"config key '{key}' must be a string, got {got}",
-                f"quote it: '{word}' in a file, --set \"{key}='{word}'\" on a command line",
+                f"quote it: 'on' or 'no' in a file, --set \"{key}='on'\" on a command line",
             )
         if not isinstance(value, str):
             raise ConfigError(f"config key '{key}' must be a string, got {got}")

@@ -25,8 +25,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .config import Config, config_from, dump_config, located, read_config_file, warn_ignored
+from .config import Config, config_from, dump_config, located, read_config_file, set_leaves, warn_ignored
 from .errors import ConfigError, did_you_mean
+from .geometry import wrap_angle
 from .logs import open_log
 from .logs.params import LaserMountConfig
 from .ranges import short_text
@@ -104,14 +105,12 @@ PRESET_NOTE = """\
 """
 
 
-def dump_for_any_laser(cfg: Config) -> str:
-    """``dump_config(cfg)`` of a config resolved without a log (no preset chosen), the lines of the keys a
-    laser preset sets commented out where they hold the built-in defaults: a file's keys are layered over
-    the preset's, so that YAML as --config leaves each log its preset (configs/default.yaml, `cornerslam
-    config` without LOG)."""
-    default = dict(_leaves(dataclasses.asdict(Config())))
-    ours = dict(_leaves(dataclasses.asdict(cfg)))
-    quiet = {k for k in PRESET_KEYS if ours[k] == default[k]}
+def dump_for_any_laser(cfg: Config, given: Collection[str] = ()) -> str:
+    """``dump_config(cfg)`` of a config resolved without a log (no preset chosen) and without a config
+    file, the lines of the keys a laser preset sets commented out but for those ``given`` (--set): a
+    file's keys are layered over the preset's, so that YAML as --config leaves each log its preset but
+    for what the user set (configs/default.yaml, `cornerslam config` without LOG)."""
+    quiet = PRESET_KEYS - set(given)
     out, section = [], ""
     for line in dump_config(cfg).splitlines():
         if not line.startswith(" "):
@@ -122,7 +121,7 @@ def dump_for_any_laser(cfg: Config) -> str:
     return "\n".join(out) + "\n"
 
 
-MOUNT_SAME = 1e-6  # m or rad: input.laser.x/y/yaw within this of the tf's mount are the same mount
+MOUNT_SAME = 1e-4  # m or rad: input.laser.x/y/yaw within this of the log's mount are the same mount
 
 
 def mount_source(cfg: Config) -> str:
@@ -278,12 +277,16 @@ def resolve_config(
             f"{hint}{preset_choices()}",
         )
         raise located(e, data, overrides)
-    if over := overruled_by_file(data, name):
+    given = {leaf for _, leaf, _ in set_leaves(overrides)}  # (a --set's value wins over the file's)
+    if over := [k for k in overruled_by_file(data, name) if k not in given]:
+        lines = getattr(data, "lines", {})
+        keys = ", ".join(f"{k} (line {lines[k]})" if k in lines else k for k in over)
         log.warning(
-            "config file '%s' sets %s over the laser preset '%s' of this log's scans, and the file's %s used "
-            "(leave %s out of the file for the preset's, or set input.laser_preset: none)",
-            Path(config_path).name, ", ".join(over), name, "value is" if len(over) == 1 else "values are",
-            "it" if len(over) == 1 else "them",
+            "%s sets %s over the laser preset '%s'%s, and the file's %s used (leave %s out of the file for "
+            "the preset's, or set input.laser_preset: none)",
+            getattr(data, "where", "the config file"), keys, name,
+            " chosen for this log's scans" if choice == "auto" else "", "value is" if len(over) == 1 else
+            "values are", "it" if len(over) == 1 else "them",
         )  # fmt: skip
     cfg = config_from(data, overrides, base=PRESETS[name].config)
     return dataclasses.replace(cfg, input=dataclasses.replace(cfg.input, laser_preset=name))
@@ -340,17 +343,19 @@ def warn_mount(src, cfg: Config) -> None:
             "input.laser.x/y/yaw to its mount%s)",
             src.path.name, why, keep,
         )  # fmt: skip
-    given = {k: v for k, v in zip("xy", (cfg.input.laser.x, cfg.input.laser.y), strict=True) if v is not None}
-    if cfg.input.laser.yaw is not None:
-        given["yaw"] = cfg.input.laser.yaw
-    tf = dict(zip(("x", "y", "yaw"), src.laser2base, strict=True))
-    if src.laser_source == "tf" and any(abs(v - tf[k]) > MOUNT_SAME for k, v in given.items()):
+    mount = cfg.input.laser
+    given = {k: v for k, v in (("x", mount.x), ("y", mount.y), ("yaw", mount.yaw)) if v is not None}
+    log_mount = dict(zip(("x", "y", "yaw"), src.laser2base, strict=True))
+    off = [abs(wrap_angle(v - log_mount[k]) if k == "yaw" else v - log_mount[k]) for k, v in given.items()]
+    if src.laser_source == "tf" and max(off, default=0.0) > MOUNT_SAME:
         keys = " ".join(f"input.laser.{k}={v:g}" for k, v in given.items())
+        whose = (
+            "ROBOTLASER1 lines place" if src.info.format == "carmen" else f"tf {_tf_text(src, cfg)} mounts"
+        )
         src.reader.stats.warn(
-            "log '%s': its tf %s mounts the laser at x=%.3f y=%.3f yaw=%.3f, and the tf's mount is used: "
-            "%s ignored (set input.laser.from_tf=false to use the config's mount instead)",
-            src.path.name, _tf_text(src, cfg), *src.laser2base,
-            keys + (" is" if len(given) == 1 else " are"),
+            "log '%s': its %s the laser at x=%.3f y=%.3f yaw=%.3f, and that mount is used: %s ignored (set "
+            "input.laser.from_tf=false to use the config's mount instead)",
+            src.path.name, whose, *src.laser2base, keys + (" is" if len(given) == 1 else " are"),
         )  # fmt: skip
     if cfg.input.laser.upside_down and src.laser_upside_down_source == "tf" and not src.laser_upside_down:
         src.reader.stats.warn(

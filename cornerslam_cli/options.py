@@ -15,7 +15,6 @@ from __future__ import annotations
 import logging
 import math
 import os
-import re
 import shlex
 import stat
 import tempfile
@@ -123,19 +122,29 @@ FINITE = _Finite()
 class GivenPath(click.Path):
     """A file or directory name that is not ``''`` (an unset shell variable, ``--config "$CFG"``): as a
     path ``''`` is ``.``, the working directory, which the error then named; as an option's value it
-    was taken as not given, the option silently ignored (``--mcap-out ''`` wrote no MCAP). A name that
-    is no file but reads as a config key's ``KEY=VALUE`` is a second setting given one ``--set`` (``--set
-    a.b=1 c.d=2``: the second was taken as the LOG, said not to exist)."""
+    was taken as not given, the option silently ignored (``--mcap-out ''`` wrote no MCAP). With
+    ``log``, a log to read: one that is no file but a config key's ``KEY=VALUE`` is a second setting
+    given one ``--set`` (``--set a.b=1 c.d=2``: the second was taken as the LOG, said not to exist)."""
+
+    def __init__(self, *args, log: bool = False, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.log = log
 
     def convert(self, value, param, ctx):
         if value == "":
             self.fail("'' names no file (an unset shell variable?)", param, ctx)
-        if isinstance(value, str) and SETTING.match(value) and not os.path.lexists(value):
-            self.fail(f"'{value}' is no file but a setting: give --set before each KEY=VALUE", param, ctx)
+        if self.log and isinstance(value, str) and is_setting(value) and not os.path.lexists(value):
+            options = "--set or --sweep" if ctx is not None and ctx.info_name == "batch" else "--set"
+            self.fail(f"'{value}' is no file but a setting: give {options} before each KEY=VALUE", param, ctx)
         return super().convert(value, param, ctx)
 
 
-SETTING = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)+=")  # a dotted config key and its '=' (no file name)
+def is_setting(text: str) -> bool:
+    """Whether ``text`` is ``KEY=VALUE`` of a config key (``scan_match.window=5``), as a --set takes."""
+    from .config import Config, dotted_keys
+
+    key, eq, _ = text.partition("=")
+    return bool(eq) and "." in key and key in dotted_keys(Config)
 
 
 class _PresetName(click.ParamType):

@@ -1149,6 +1149,9 @@ def test_config_prints_the_resolved_config_that_run_uses(tmp_path):
     assert default.endswith(invoke("config").stdout)
     assert "\n  # model: piecewise\n" in default and yaml.safe_load(default)["sensor"] is None
     assert invoke("config", "--set", "sensor.model=linear").stdout.count("\n  model: linear\n") == 1
+    given = invoke("config", "--set", "sensor.model=piecewise", "--set", "lines.min_points=6").stdout
+    assert "\n  model: piecewise\n" in given and "\n  min_points: 6\n" in given  # given: kept, if defaults
+    assert "\n  # a: 0.01\n" in given
     none = Config(input=dataclasses.replace(Config().input, laser_preset="none"))
     assert invoke("config", "--preset", "none").stdout == dump_config(none)  # (no preset: every key)
     res = invoke("config", "--preset", "hokuyo_urg04lx")
@@ -1367,10 +1370,15 @@ def test_two_settings_after_one_set_are_told_to_take_a_set_each(sim_log, tmp_pat
     one_line_error(res, "got unexpected extra argument (input.laser.y=0): give --set before each KEY=VALUE")
     res = invoke("config", "--set", "scan_match.window=5", "ekf.alpha1=0.1")
     one_line_error(res, "'ekf.alpha1=0.1' is no file but a setting: give --set before each KEY=VALUE")
+    res = invoke("batch", sim_log, "--sweep", "ekf.alpha1=0.1,0.2", "ekf.alpha2=0.1", "--out", tmp_path / "b")
+    one_line_error(res, "'ekf.alpha2=0.1' is no file but a setting: give --set or --sweep before each")
     named = tmp_path / "ekf.alpha1=0.1"
     named.write_bytes(Path(sim_log).read_bytes())
     assert invoke("config", named).exit_code == 0
-    assert not (tmp_path / "o").exists()
+    assert not (tmp_path / "o").exists() and not (tmp_path / "b").exists()
+    # outputs named like a setting are names (a review: --out scan_match.window=5 was refused)
+    out = tmp_path / "scan_match.window=5"
+    assert invoke("run", sim_log, "--max-scans", 5, "--out", out, "-q").exit_code == 0 and out.is_dir()
 
 
 def test_a_given_out_holding_another_logs_output_says_it_is_replaced(tmp_path):

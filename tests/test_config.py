@@ -488,7 +488,7 @@ def test_a_set_mapping_key_yaml_reads_as_no_string_is_an_unknown_key(mapping, ke
 
 
 @pytest.mark.parametrize(
-    ("value", "hint"), [("1e7", "10000000"), ("300.0", "300"), ("3.5", None), ("ab", None)]
+    ("value", "hint"), [("1e7", "10000000"), ("300.0", "300"), ("3.5", None), ("ab", None), ("yes", None)]
 )
 def test_an_integer_key_given_a_float_says_the_whole_number_to_write(value, hint):
     """`--set grid.max_cells=1e7` said "must be an integer, got '1e7'", as if the user had typed a word

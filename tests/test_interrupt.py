@@ -127,4 +127,10 @@ def test_a_signal_while_the_interpreter_shuts_down_after_the_command_changes_not
     )
     res = subprocess.run([sys.executable, "-c", code, "config"], capture_output=True, text=True, timeout=60)
     assert res.returncode == 0, (res.returncode, res.stderr)
-    assert res.stderr == "" and res.stdout.startswith("input:\n")
+    import dataclasses
+
+    import yaml
+
+    from cornerslam_cli.config import Config
+
+    assert res.stderr == "" and yaml.safe_load(res.stdout).keys() == dataclasses.asdict(Config()).keys()

@@ -433,6 +433,7 @@ def test_a_config_mount_the_tf_overrules_is_warned_of(tmp_path):
     (said,) = [w for w in other["warnings"] if "mounts the laser at" in w]
     assert f"x={mount[0]:.3f}" in said and f"input.laser.x={mount[0] + 0.2:g} is ignored" in said
     assert "set input.laser.from_tf=false to use the config's mount instead" in said
-    for same in ((f"input.laser.x={mount[0]!r}", f"input.laser.yaw={mount[2]!r}"), ()):
+    turned = f"input.laser.yaw={mount[2] + 2 * math.pi!r}"  # the same yaw a turn on (a review)
+    for same in ((f"input.laser.x={mount[0] + 5e-5!r}", f"input.laser.yaw={mount[2]!r}"), (turned,), ()):
         s = run_cli(log, tmp_path / f"b{len(same)}", "submaps.enabled=false", *same)
         assert not any("mounts the laser at" in w for w in s["warnings"])

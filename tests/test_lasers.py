@@ -156,7 +156,15 @@ def test_a_config_file_over_the_preset_is_warned_of_and_the_default_file_is_not_
         cfg = resolve_config(log, mine)
     assert cfg.sensor.model == "piecewise" and cfg.lines.min_points == 6  # the file's, as before
     assert (
-        "config file 'mine.yaml' sets sensor.model, lines.min_points over the laser preset 'sick_lms_1deg' "
-        "of this log's scans, and the file's values are used (leave them out of the file for the preset's, "
-        "or set input.laser_preset: none)"
+        f"config file '{mine}' sets sensor.model (line 2), lines.min_points (line 5) over the laser preset "
+        "'sick_lms_1deg' chosen for this log's scans, and the file's values are used (leave them out of "
+        "the file for the preset's, or set input.laser_preset: none)"
     ) in caplog.text  # (sensor.a: the preset's own value, no news)
+    caplog.clear()  # a --set of the key wins over the file: only the other is the file's
+    with caplog.at_level(logging.WARNING, logger="cornerslam"):
+        cfg = resolve_config(log, mine, ["sensor.model=linear", "input.laser_preset=sick_lms_1deg"])
+    assert cfg.sensor.model == "linear"
+    assert (
+        "sets lines.min_points (line 5) over the laser preset 'sick_lms_1deg', and the file's value is"
+        in (caplog.text)
+    )

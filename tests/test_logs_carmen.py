@@ -212,11 +212,12 @@ def _flaser_odom(t, laser_x, odom_x):
     [
         (range(0, 31), "ODOM"),  # the scans' 30 s covered
         (range(0, 10), "FLASER"),  # ODOM lines stop at 9 s (cut, or unreadable from there): 2/3 left out
-        (range(20, 31), "FLASER"),  # ... or start at 20 s
+        (range(20, 31), "ODOM"),  # ... not ODOM lines starting late: the laser lines' odometry fields may
+        # hold placeholders until the odometry starts (0 0 0: taken as poses, a jump of metres; a review)
         (range(0, 30), "ODOM"),  # the last second left out: under a tenth (the last scan is dropped)
     ],
 )
-def test_odometry_from_laser_poses_when_odom_lines_leave_the_scans_out(tmp_path, odom_times, want):
+def test_odometry_from_laser_poses_when_odom_lines_stop_early(tmp_path, odom_times, want):
     """ODOM lines that stop early (a probe: intel_cut with the ODOM lines after line 200 deleted, or
     written with decimal commas past a point) made a run drop two thirds of the scans, exit 0, while the
     FLASER lines carried odometry for all of them."""
@@ -226,10 +227,9 @@ def test_odometry_from_laser_poses_when_odom_lines_leave_the_scans_out(tmp_path,
     p.write_text("".join(sorted(lines, key=lambda line: float(line.split()[-1]))))
     info = open_log(p).info()
     assert info.odom_topic == want
-    if want == "FLASER":
-        assert (
-            "; the whole ODOM lines span " in info.odom_source
-            and "of the FLASER lines' 29.0 s" in info.odom_source
+    if want == "FLASER":  # (ODOM to 9 s: the FLASER lines from 10.5 s on, 20 of 30)
+        assert info.odom_source.endswith(
+            "; the whole ODOM lines end at 9.000 s, before 20 of the 30 FLASER lines"
         )
     assert open_log(p, odom_topic="ODOM").info().odom_topic == "ODOM"  # the user's choice is kept
 

@@ -109,14 +109,15 @@ class GraphConfig:
     # the smoothed trajectory's keyframe chain gets, at the steps before the front end first took a bias
     # term out, that term as fitted on the whole run (motion/fusion.py carry_back: only terms the whole run
     # holds and the learner never dropped once taken), each increment moved by the share of the odometry
-    # in it (graph/smooth.py recalibrated); the online estimate and the closures stay as they were (README
-    # "The smoothed chain, recalibrated": every exact-odometry log unchanged; edmonton 0.352 -> 0.316 at the
-    # default submaps, but its mean over submaps.max_distance 9.5/10/10.5 m 0.295 -> 0.354: off)
+    # in it (graph/smooth.py recalibrated); the online estimate and the closures stay as they were
+    # (docs/results/README.md, "The smoothed chain, recalibrated": every exact-odometry log unchanged;
+    # edmonton 0.352 -> 0.316 at the default submaps, but its mean over submaps.max_distance 9.5/10/10.5 m
+    # 0.295 -> 0.354: off)
     recalibrate: bool = False
-    # dense refinement (graph/refine.py; off: README "Dense refinement"): as the run goes, each node's
-    # scan registered against its refine_neighbours nearest earlier nodes within refine_radius m that lie
-    # refine_min_path m of path back (each with its chain neighbours' points, those as far back), kept
-    # when the fit reaches refine_min_fitness; after the keyframe graph is solved, those that move their
+    # dense refinement (graph/refine.py; off: docs/results/README.md, "Dense refinement"): as the run goes,
+    # each node's scan registered against its refine_neighbours nearest earlier nodes within refine_radius m
+    # that lie refine_min_path m of path back (each with its chain neighbours' points, those as far back),
+    # kept when the fit reaches refine_min_fitness; after the keyframe graph is solved, those that move their
     # pair at most refine_max_xy m / refine_max_theta rad from it become factors, and it is solved again
     refine: bool = False
     refine_radius: float = num(5.0, gt=0.0, le=1e6)

@@ -28,7 +28,7 @@ log's length — on a robot's tenth lap its nodes register against the first lap
 grows with the log is the registrations kept for the end (a relative pose and its covariance each, at most
 ``refine_neighbours`` per node), as the keyframe graph's own factors do.
 
-What it does on the panel: README "Dense refinement".
+What it does on the panel: docs/results/README.md, "Dense refinement".
 """
 
 from __future__ import annotations

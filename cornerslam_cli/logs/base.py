@@ -49,6 +49,7 @@ logger = logging.getLogger("cornerslam.logs")
 
 ENCODINGS = ("cdr", "ros1", "json")  # message encodings the ROS-message readers decode
 MAX_ODOM_XY = 1e9  # metres: odometry in UTM or ECEF coordinates stays below 1e7
+LASERSCAN_FIELDS = "the LaserScans' angle_min/angle_increment"  # what to check of unusable scans
 
 Pose2 = tuple[float, float, float]
 
@@ -140,6 +141,12 @@ class ReadStats:
     said: set[str] = field(default_factory=set)  # every text logged: a summary's list may be reset, not this
     quiet: bool = False  # keep warnings, do not log them (compare's workers: the parent says them)
 
+    def skip_scan(self, msg: str, *args: object) -> None:
+        """Count a scan skipped (``scans_skipped``) and warn why, for the first three; None, the scan."""
+        self.scans_skipped += 1
+        if self.scans_skipped <= 3:
+            self.warn(msg, *args)
+
     def warn(self, msg: str, *args: object) -> None:
         """Log a warning and keep it (first 100) so summaries can report it.
 
@@ -230,16 +237,13 @@ class ReadStats:
         self.odoms += 1
         return OdomSample(stamp, *pose)
 
-    def check_scans_yielded(
-        self, name: str, topic: str, fields: str = "the LaserScans' angle_min/angle_increment"
-    ) -> None:
+    def check_scans_yielded(self, name: str, topic: str, fields: str = LASERSCAN_FIELDS) -> None:
         """Raise LogError at the end of a read in which scans were seen but none was usable; ``fields``:
         what of the messages to check, in the log format's words."""
         if self.scans == 0 and self.scans_skipped > 0:
             raise LogError(
                 f"log '{name}': all {self.scans_skipped} scans on '{short_text(topic)}' were skipped "
-                "(angle_increment 0 or not finite, beams over more than a full turn, no beams, "
-                "or no valid stamp)",
+                "(angle_increment 0 or not finite, beams over more than a full turn, no beams, or no stamp)",
                 f"check {fields}: the warnings give the first ones' values",
             )
 
@@ -311,27 +315,21 @@ def make_scan(
     n = len(ranges)
     last_angle = angle_min + max(n - 1, 0) * angle_increment  # inf for absurd increments (1e308)
     if not (math.isfinite(angle_increment) and angle_increment != 0 and math.isfinite(last_angle)):
-        stats.scans_skipped += 1
-        if stats.scans_skipped <= 3:
-            stats.warn(
-                "%s: scan at %.3f has angle_min %r, angle_increment %r: skipped",
-                where, stamp, angle_min, angle_increment,
-            )  # fmt: skip
-        return None
+        return stats.skip_scan(
+            "%s: scan at %.3f has angle_min %r, angle_increment %r: skipped",
+            where,
+            stamp,
+            angle_min,
+            angle_increment,
+        )
     step = abs(angle_increment)
     if (n - 1) * step > 2.0 * math.pi + step:  # (one more: a 360° scan's repeated beam)
-        stats.scans_skipped += 1
-        if stats.scans_skipped <= 3:
-            stats.warn(
-                "%s: scan at %.3f has %d beams of angle_increment %r, %.1f turns (degrees?): skipped",
-                where, stamp, n, angle_increment, (n - 1) * step / (2.0 * math.pi),
-            )  # fmt: skip
-        return None
+        return stats.skip_scan(
+            "%s: scan at %.3f has %d beams of angle_increment %r, %.1f turns (degrees?): skipped",
+            where, stamp, n, angle_increment, (n - 1) * step / (2.0 * math.pi),
+        )  # fmt: skip
     if not math.isfinite(stamp):
-        stats.scans_skipped += 1
-        if stats.scans_skipped <= 3:
-            stats.warn("%s: scan with stamp %r: skipped", where, stamp)
-        return None
+        return stats.skip_scan("%s: scan with stamp %r: skipped", where, stamp)
     if angle_max is not None and (implied := _size_disagreement(n, angle_min, angle_max, angle_increment)):
         stats.size_mismatch += 1
         if stats.size_mismatch <= 3:
@@ -344,10 +342,7 @@ def make_scan(
                 n,
             )
     if n == 0:
-        stats.scans_skipped += 1
-        if stats.scans_skipped <= 3:
-            stats.warn("%s: scan at %.3f has no beams: skipped", where, stamp)
-        return None
+        return stats.skip_scan("%s: scan at %.3f has no beams: skipped", where, stamp)
     lo = range_min if math.isfinite(range_min) else 0.0
     hi = range_max if not math.isnan(range_max) else math.inf
     with np.errstate(invalid="ignore"):  # a signalling NaN (damaged bytes) raises "invalid" in the cast

@@ -29,8 +29,8 @@ Conventions (as CARMEN's own ``carmen_string_to_laser_laser_message_orig``):
   lines go back in time more often than the laser lines do (a merged or re-stamped log: intel.gfs.log's 1,498
   of 14,541 ODOM lines, 4 of 910 laser lines) and those fields move: they are the pose the logger stamped with
   each scan, while odometry interpolated between out-of-order ODOM lines is wrong at the scans' times. Also
-  when the whole ODOM lines stop well before the laser lines do, or start well after (``ODOM_UNCOVERED``:
-  lines cut, or unreadable past a point), where the run would drop the scans they leave out.
+  when the whole ODOM lines stop well before the laser lines do (``ODOM_UNCOVERED``: lines cut, or
+  unreadable past a point), where the run would drop the scans after them.
   ``odom_topic`` ``ODOM`` keeps the ODOM lines.
 * The laser offset is not in FLASER lines: ``laser_to_base()`` returns the mean laser-minus-robot
   offset of ROBOTLASER1 lines, None for FLASER logs (configure it) and for ROBOTLASER1 lines whose offsets
@@ -53,6 +53,7 @@ import io
 import math
 import re
 import zlib
+from array import array
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -65,8 +66,8 @@ from .base import LogInfo, Pose2, ReadStats, TopicInfo, make_scan
 
 LASER_TAGS = ("ROBOTLASER1", "FLASER", "RLASER", "ROBOTLASER2")
 ODOM_TAG = "ODOM"
-# ODOM lines that leave more than this share of the laser lines' span (and this many seconds) without
-# odometry at its ends give way to the laser lines' own poses (the run would drop those scans)
+# ODOM lines that end more than this many seconds before more than this share of the laser lines give
+# way to the laser lines' own poses (the run would drop those scans)
 ODOM_UNCOVERED, ODOM_UNCOVERED_S = 0.1, 1.0
 DEFAULT_MAX_RANGE = 81.83
 POSE_NAMES = ("x", "y", "theta", "odom_x", "odom_y", "odom_theta")  # FLASER's after its readings
@@ -187,11 +188,12 @@ class _Laser:
 class _Layout:
     """What the pre-read saw of one tag's whole lines with one number of fields after the stamp."""
 
-    __slots__ = ("lines", "start", "end", "back", "last", "first_pose", "moving", "logger")
+    __slots__ = ("lines", "start", "end", "back", "last", "first_pose", "moving", "logger", "times")
 
     def __init__(self, logger: bool = False):
         self.lines, self.back = 0, 0  # lines; lines stamped before the line above them
         self.start, self.end, self.last = math.inf, -math.inf, -math.inf
+        self.times = array("d")  # the finite stamps, in file order (how many lines lie past a time)
         self.first_pose: tuple[float, ...] | None = None
         self.moving = False  # (laser lines) their odometry fields are not all the same pose
         # the same of the logger timestamps (a layout with them), for a log whose timestamps never move
@@ -218,6 +220,7 @@ class _Layout:
 
     def _span(self, t: float) -> None:
         if math.isfinite(t):
+            self.times.append(t)
             self.start, self.end = min(self.start, t), max(self.end, t)
             self.back += t < self.last
             self.last = t
@@ -331,6 +334,7 @@ class CarmenReader:
         self._tail: dict[str, int] = {}  # per laser / ODOM tag: the fields after its stamp (TAIL)
         self._params: dict[str, str] = {}
         self._span: dict[str, tuple[float, float]] = {}  # per laser / ODOM tag: its whole lines' first, last
+        self._times: dict[str, np.ndarray] = {}  # ... and every stamp of them, in file order
         self._start: float | None = None
         self._end: float | None = None
         self._back: dict[str, int] = {}  # per tag: lines stamped before the line of that tag above them
@@ -395,6 +399,7 @@ class CarmenReader:
             stamps = layout.logger if self._logger_stamps else layout  # (spans and order: those read)
             self._whole[tag], self._back[tag] = layout.lines, stamps.back
             self._span[tag] = (stamps.start, stamps.end)
+            self._times[tag] = np.frombuffer(stamps.times, dtype=np.float64)
             if layout.moving:
                 self._moving.add(tag)
             if stamps.start <= stamps.end:
@@ -455,21 +460,21 @@ class CarmenReader:
     def _odom_lines_worse(self, scan: str) -> str:
         """Why the ``scan`` lines' own robot poses, which move, are a better odometry than the ODOM lines,
         or "": the ODOM lines go back in time more often than the scan lines (a log whose lines are merely
-        out of order together keeps its ODOM lines), or overlap the scans' time span but leave more than
-        ``ODOM_UNCOVERED`` of it without odometry at its ends (ODOM lines that stop early or, past a point,
-        cannot be read: the run would drop those scans)."""
+        out of order together keeps its ODOM lines), or end before more than ``ODOM_UNCOVERED`` of the scan
+        lines (ODOM lines cut, or unreadable past a point: the run would drop those scans). Not ODOM lines
+        that start late: before a robot's odometry starts, its laser lines' odometry fields hold
+        placeholders (0 0 0), which taken as poses jump the robot metres. Counted in lines, not seconds:
+        one laser line stamped far in the future is one line."""
         if scan not in self._moving:
             return ""
         if self._back.get(ODOM_TAG, 0) > self._back.get(scan, 0):
             return f"ODOM lines go back in time: {self._back[ODOM_TAG]} of {self._counts[ODOM_TAG]}"
         (s0, s1), (o0, o1) = self._span[scan], self._span[ODOM_TAG]
-        uncovered = max(0.0, o0 - s0) + max(0.0, s1 - o1)
         overlap = o0 < s1 and s0 < o1  # (spans apart: two clocks, or stamps that never move, said elsewhere)
-        if overlap and uncovered > max(ODOM_UNCOVERED * (s1 - s0), ODOM_UNCOVERED_S):
-            return (
-                f"the whole ODOM lines span {max(0.0, min(o1, s1) - max(o0, s0)):.1f} s of the "
-                f"{scan} lines' {s1 - s0:.1f} s"
-            )
+        times = self._times[scan]  # (lines counted: one stamped far in the future is one line, not a span)
+        after = int(np.count_nonzero(times > o1 + ODOM_UNCOVERED_S))
+        if overlap and after > ODOM_UNCOVERED * len(times):
+            return f"the whole ODOM lines end at {o1:.3f} s, before {after} of the {len(times)} {scan} lines"
         return ""
 
     def check(self) -> None:
@@ -527,7 +532,7 @@ class CarmenReader:
             return DEFAULT_MAX_RANGE
 
     odom_on_tf = False  # CARMEN has no tf
-    mount_problem = ""  # why laser_to_base() found no mount in the laser poses (frontend.warn_mount says it)
+    mount_problem = ""  # why laser_to_base() found no mount in the laser poses (lasers.warn_mount says it)
 
     def laser_upside_down(self) -> bool | None:  # a CARMEN laser pose is planar: input.laser.upside_down
         return None

@@ -132,7 +132,7 @@ def _summary_section(summary: RunSummary, run_dir: Path) -> list[str]:
     inp, counts, timing = summary.input, summary.counts, summary.timing
     pairs: list[tuple[str, object]] = [
         ("log", inp.log),
-        *[("part of the log", line.removeprefix("span: ")) for line in span_lines(inp)],
+        *[("span", line.removeprefix("span: ")) for line in span_lines(inp)],
         ("format", inp.format),
         ("scan topic", inp.scan_topic),
         ("odometry", f"{inp.odom_topic} ({inp.odom_source})"),

@@ -25,7 +25,6 @@ report/oserrors.py.
 from __future__ import annotations
 
 import fcntl
-import logging
 import os
 import secrets
 import stat
@@ -49,18 +48,7 @@ from .liveness import (
     stem,
 )
 from .oserrors import output_error, output_errors, resolved
-from .ownership import (
-    MARKER,
-    check_replaceable,
-    check_same_log,
-    is_within,
-    mark_output,
-    other_log_error,
-    recorded_log,
-    refuse_special_file,
-)
-
-log = logging.getLogger("cornerslam.output")
+from .ownership import MARKER, check_replaceable, check_same_log, is_within, mark_output, refuse_special_file
 
 LOCK_MARK = b"cornerslam output lock\n"  # what a lock file holds (an empty one: being created)
 
@@ -243,7 +231,7 @@ class StagedDir:
         self.inputs = [Path(p) for p in inputs]
         self.log = None if log is None else Path(log)  # recorded in the marker
         self.own_log_only = own_log_only  # the default place: refuse another log's output there
-        self.said_other = False  # a given place's output of another log has been warned of
+        self.said_other = False  # a given place's output of another log has been said to be replaced
         self.inside = inside  # the kind of output this one is part of (a batch's run), or None
         self.files: list[tuple[Path, Path]] = []  # (staged, final) files renamed by commit()
         self.held: list[int | None] = []  # the fds holding the flocks of the staging directory and files
@@ -292,22 +280,9 @@ class StagedDir:
                 break
 
     def _check_replaceable(self) -> None:
-        """Refuse a target that is not ours to replace; at the default place an output of another log
-        too; at a given one that is said (before any work: a Ctrl-C keeps it)."""
         check_replaceable(self.target, self.kind, self.inputs, self.shown, self.inside)
-        if self.own_log_only and self.log is not None:
-            check_same_log(self.target, self.log, self.shown)
-        elif (
-            self.log is not None
-            and not self.said_other
-            and other_log_error(self.target, self.log, self.shown)
-        ):
-            self.said_other = True  # (checked again at the commit)
-            log.warning(
-                "'%s' holds the output of '%s': it is replaced by this %s's of '%s' "
-                "(give another --out to keep it)",
-                self.shown, recorded_log(self.target), self.kind, self.log,
-            )  # fmt: skip
+        if self.log is not None and not self.said_other:  # (checked again at the commit: said once)
+            self.said_other = check_same_log(self.target, self.log, self.shown, self.kind, self.own_log_only)
 
     def __enter__(self) -> StagedDir:
         return self

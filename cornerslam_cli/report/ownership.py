@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import csv
 import json
+import logging
 import os
 import stat
 from collections.abc import Iterator, Sequence
@@ -337,11 +338,19 @@ def _summary_field(summary: Path, section: str, key: str):
         return None
 
 
-def check_same_log(target: Path, log: Path, shown: Path) -> None:
+def check_same_log(target: Path, log: Path, shown: Path, kind: str = "run", refuse: bool = True) -> bool:
     """Refuse (OutputError) to replace at ``target`` an output made from another log than ``log``:
-    for the default place, named after the log's stem, which two logs may share."""
-    if e := other_log_error(target, log, shown):
+    for the default place, named after the log's stem, which two logs may share; at a place the user
+    gave (not ``refuse``), say it is replaced, before any work (a Ctrl-C keeps it). Whether it was said."""
+    if not (e := other_log_error(target, log, shown)):
+        return False
+    if refuse:
         raise e
+    logging.getLogger("cornerslam.output").warning(
+        "'%s' holds the output of '%s': it is replaced by this %s's of '%s' (give another --out to keep it)",
+        shown, recorded_log(target), kind, log,
+    )  # fmt: skip
+    return True
 
 
 def other_log_error(

@@ -3,6 +3,9 @@
 Each function takes a result — a run's ``RunSummary`` (summary.json), a comparison's summaries, a
 batch's rows, a log's ``LogInfo``, ``evaluate_files``' ``Accuracy`` — and returns the lines, without a
 trailing newline, so the wording and the column layout are tested without a terminal.
+
+Over 400 lines because every command's printed text is here, one wording for all (a run's lines are
+compare's and the report's too).
 """
 
 from __future__ import annotations
@@ -43,14 +46,15 @@ def unusable_scans(c) -> str:
 
 
 def span_lines(i) -> list[str]:
-    """The part of the log a run processed, when not all of it (``--start``/``--end``/``--max-scans``):
-    a run's figures over a slice read like the whole log's otherwise."""
+    """The part of the log a run processed, when ``--start``/``--end``/``--max-scans`` chose it (all of
+    it, perhaps: the line gives the scans): a run's figures over a slice read like the whole log's
+    otherwise."""
     if i.span is None:
         return []
     p = i.span
     return [
         f"span: {p.options}: scans #{p.first_index}–#{p.last_index} of the log, "
-        f"{p.first_time:.3f}–{p.last_time:.3f} s from its first scan: part of the log only"
+        f"{p.first_time:.3f}–{p.last_time:.3f} s from its first scan"
     ]
 
 
