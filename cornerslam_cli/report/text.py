@@ -45,7 +45,7 @@ def unusable_scans(c) -> str:
     return f"; {n} more scan{'s' if n != 1 else ''} unusable, not read: see the warnings" if n else ""
 
 
-def span_lines(i) -> list[str]:
+def span_lines(i: RunInput) -> list[str]:
     """The part of the log a run processed, when ``--start``/``--end``/``--max-scans`` chose it (all of
     it, perhaps: the line gives the scans): a run's figures over a slice read like the whole log's
     otherwise."""
