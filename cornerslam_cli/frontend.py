@@ -29,7 +29,8 @@ from .geometry import matrix_from_pose, transform_points
 from .lasers import invalid_beams, laser_mount
 from .logs import ReadStats, open_log
 from .logs.deskew import deskew
-from .logs.sync import Synced, SyncStats, clocks_hint, reanchor_odometry, select_keyframes, synchronise
+from .logs.keyframes import select_keyframes
+from .logs.sync import Synced, SyncStats, clocks_hint, reanchor_odometry, synchronise
 from .logs.unreadable import damaged_error, no_scan_read, raise_if_undecoded
 from .motion import ScanMatcher
 from .motion.fusion import BiasTaken, OdometryFusion

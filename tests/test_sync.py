@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 from fault_corpus import peak_bytes
 
+from cornerslam_cli.logs.keyframes import faster_than, select_keyframes
 from cornerslam_cli.logs.params import KeyframeConfig, OdomJumpConfig
-from cornerslam_cli.logs.sync import Synced, SyncStats, reanchor_odometry, select_keyframes, synchronise
+from cornerslam_cli.logs.sync import Synced, SyncStats, reanchor_odometry, synchronise
 from cornerslam_cli.types import OdomSample, Scan
 
 
@@ -316,3 +317,19 @@ def test_reanchorings_are_kept_one_per_stretch_of_scans():
     ]
     list(reanchor_odometry(msgs, cfg, st, lambda *a: None))
     assert [a[0] for a in st.anchors] == [0.1, 0.2] and "anchors" not in st.as_dict()
+
+
+def test_a_fast_laser_is_thinned_and_a_jittery_10_hz_one_is_not():
+    """keyframes.min_interval (0.08 s): a 40 Hz laser keeps a scan every 0.1 s (the front end's bias
+    learner spans a window of keyframes: at 20–100 Hz too little travel to learn an odometer's scale
+    error; benchmarks/scan_rate.py); a 10 Hz laser whose stamps jitter, some scans 5 ms apart (the Mines
+    logs), keeps every scan, as does any laser with min_interval 0."""
+    fast = [Synced(scan(0.025 * i), np.array([0.01 * i, 0.0, 0.0])) for i in range(41)]
+    kept = list(select_keyframes(fast, KeyframeConfig()))
+    assert [round(s.scan.stamp, 3) for s in kept] == [round(0.1 * k, 3) for k in range(11)]
+    assert len(list(select_keyframes(fast, KeyframeConfig(min_interval=0.0)))) == 41
+    rng = np.random.default_rng(0)
+    t = np.cumsum(np.where(rng.random(60) < 0.15, 0.005, rng.normal(0.098, 0.01, 60)))
+    jittery = [Synced(scan(float(s)), np.array([0.03 * i, 0.0, 0.0])) for i, s in enumerate(t)]
+    assert faster_than(list(t), 1.0) and not faster_than(list(t), 0.08)
+    assert len(list(select_keyframes(jittery, KeyframeConfig()))) == 60

@@ -40,6 +40,12 @@ class KeyframeConfig:
     linear_update: float = num(0.0, ge=0.0, le=1000.0)  # metres; 0 with angular_update 0 = every scan
     angular_update: float = num(0.0, ge=0.0, le=TWO_PI)  # radians
     max_interval: float = num(0.0, ge=0.0, le=1e6)  # seconds; 0 = no time-based keyframes
+    # seconds: a laser faster than this (the median interval of its first RATE_SCANS scans) is thinned to a
+    # scan at most this often — the front end learns the odometry's bias over a window of keyframes, and
+    # at 20–100 Hz that window spans so little travel that an odometer's scale error went unlearnt
+    # (benchmarks/scan_rate.py); a ~10 Hz laser, whose stamps jitter (Mines: 5 ms apart at times), is not
+    # touched. 0 = off
+    min_interval: float = num(0.08, ge=0.0, le=1e6)
 
     def __post_init__(self) -> None:
         check_ranges(self)

@@ -1,4 +1,4 @@
-"""Scan/odometry synchronisation and keyframe selection.
+"""Scan/odometry synchronisation (keyframe selection: keyframes.py).
 
 ``synchronise(messages)`` turns the time-ordered stream of :class:`Scan` and :class:`OdomSample`
 from a log reader into :class:`Synced` pairs (scan, odometry pose), the odometry interpolated at the
@@ -27,14 +27,14 @@ from __future__ import annotations
 import logging
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..geometry import compose, interpolate, inverse, relative, wrap_angle
 from ..types import OdomSample, Scan
 from .deskew import velocity
-from .params import KeyframeConfig, OdomJumpConfig
+from .params import OdomJumpConfig
 
 log = logging.getLogger(__name__)
 
@@ -366,35 +366,3 @@ def reanchor_odometry(
             if st.odom_jumps:
                 msg = OdomSample(msg.stamp, *(float(v) for v in compose(fix, raw)), jumped=jumped)
         yield msg
-
-
-def select_keyframes(
-    pairs: Iterable[Synced], cfg: KeyframeConfig, stats: SyncStats | None = None
-) -> Iterator[Synced]:
-    """Keep a scan when the robot moved ``linear_update`` metres or turned ``angular_update`` radians
-    since the last kept one (gmapping's linearUpdate/angularUpdate), or ``max_interval`` seconds
-    passed. The first scan is always kept; with all three at 0 every scan is kept. A kept pair carries
-    the odometry jumps of the pairs skipped before it."""
-    every = cfg.linear_update <= 0.0 and cfg.angular_update <= 0.0 and cfg.max_interval <= 0.0
-    last: np.ndarray | None = None
-    last_t = 0.0
-    jumped = False
-    for pair in pairs:
-        scan, pose = pair.scan, pair.odom
-        jumped |= pair.odom_jump
-        if every or last is None:
-            keep = True
-        else:
-            moved = float(np.hypot(pose[0] - last[0], pose[1] - last[1]))
-            turned = abs(float(wrap_angle(pose[2] - last[2])))
-            keep = (
-                (cfg.linear_update > 0.0 and moved >= cfg.linear_update)
-                or (cfg.angular_update > 0.0 and turned >= cfg.angular_update)
-                or (cfg.max_interval > 0.0 and scan.stamp - last_t >= cfg.max_interval)
-            )
-        if keep:
-            last, last_t = pose, scan.stamp
-            yield replace(pair, odom_jump=jumped)
-            jumped = False
-        elif stats is not None:
-            stats.keyframes_skipped += 1
