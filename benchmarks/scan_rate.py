@@ -70,7 +70,8 @@ def main() -> None:
         f"`python benchmarks/scan_rate.py` (see its docstring), commit {commit.stdout.strip()}: `cornerslam "
         "simulate --rate R --seed S` (one office lap, 1,081 beams over 270°, odometry +2 % scale and a "
         "heading drift), each run with the default config and with every scan processed. ATE RMSE (m) "
-        "against the simulated truth of the output and of the scan-matched chain; wall time on a shared 2-core VM.",
+        "against the simulated truth of the output and of the scan-matched chain; wall time on a shared "
+        "2-core VM.",
         "",
         "| rate (Hz) | seed | keyframes | steps | ATE | scan-matched chain | odometry | wall (s) |",
         "|---:|---:|---|---:|---:|---:|---:|---:|",
