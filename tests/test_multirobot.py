@@ -5,6 +5,7 @@ found the other robot's tf_static mount taken without a word: a wrong map, every
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 
@@ -339,3 +340,35 @@ def test_scans_of_two_frames_on_one_topic_are_warned_of(tmp_path):
     one = open_log(write(tmp_path / "one.mcap", scans("/scan") + odometry("/odom")))
     list(one.messages())
     assert not one.stats.warnings
+
+
+@pytest.mark.parametrize("shared", [False, True])
+def test_tf_odometry_in_a_robots_prefixed_frames_is_found(tmp_path, shared):
+    """robot2/odom → robot2/base_link on /robot2/tf, or both robots' prefixed frames on one /tf: refused
+    with the default input.odom_frame/base_frame (a probe), though the same prefixed frames were found
+    for nav_msgs/Odometry. The scans' robot's prefixed frames are taken, the mount chained from them,
+    and the odometry read, as with the frames set by hand."""
+    msgs = []
+    for ns, yaw in YAWS.items():
+        r = ns.strip("/")
+        topic = "/tf" if shared else f"{ns}/tf"
+        laser = [dataclasses.replace(s, frame_id=f"{r}/laser") for s in make_scans(5)]
+        msgs += [
+            (f"{ns}/scan", "sensor_msgs/msg/LaserScan", int(s.stamp * 1e9), ROS.laserscan(s)) for s in laser
+        ]
+        msgs += [
+            tf(topic, f"{r}/odom", f"{r}/base_link", 0.03 * i * (r == "robot2"), T0 + 0.1 * i)
+            for i in range(6)
+        ]
+        msgs.append(tf(f"{ns}/tf_static", f"{r}/base_link", f"{r}/laser", yaw))
+    path = write(tmp_path / "prefixed.mcap", msgs)
+    log = open_log(path, scan_topic="/robot2/scan")
+    x, _, yaw = log.laser_to_base()
+    assert (x, yaw) == pytest.approx((0.2, YAWS["/robot2"]))
+    assert (log.odom_frame, log.base_frame) == ("robot2/odom", "robot2/base_link")
+    odoms = [m for m in log.messages() if not hasattr(m, "ranges")]
+    assert len(odoms) == 6 and odoms[-1].theta == pytest.approx(0.15)  # robot2's, not robot1's (still)
+    by_hand = open_log(
+        path, scan_topic="/robot2/scan", odom_frame="robot2/odom", base_frame="robot2/base_link"
+    )
+    assert [o.theta for o in by_hand.messages() if not hasattr(o, "ranges")] == [o.theta for o in odoms]

@@ -810,29 +810,55 @@ class RosLogReader:
         base_frame rides on it (nav2's odom→base_footprint, base_footprint→base_link on /tf_static);
         "" otherwise — base_frame a child of odom_frame, several or no children, or a base_frame the tf
         does not link to it (a typo as likely as another tree: the read then says what the topic has).
-        /tf_static is read beside the odometry topic for the links, its messages not counted."""
+        /tf_static is read beside the odometry topic for the links, its messages not counted. With
+        ``odom_frame`` left at its default and no transform from it, a robot's prefixed frames
+        (``robot2/odom → robot2/base_link``: :meth:`_prefixed_odom_frame`) are odom_frame and the robot's."""
         if self._odom_sel.kind != "tf":
             return ""
         topics = {self.odom_topic} | {t for t in self._robot_tf_topics() if is_static(t)}
         decs = {t: self._decoder(t) for t in topics if self._encoding_problem(t) is None}
-        children, links = set(), {}  # odom_frame's children; the other transforms, as links
+        kids: dict[str, set[str]] = {}  # each parent frame's children on the odometry topic
+        links = {}  # every transform, as links
         n = 0  # messages of the odometry topic read
         for topic, _, data in self.source.raw_messages(set(decs)):
             n += topic == self.odom_topic
-            if n > ROBOT_FRAME_MESSAGES or self.base_frame in children:
+            if n > ROBOT_FRAME_MESSAGES or self.base_frame in kids.get(self.odom_frame, ()):
                 break
             try:
                 for parent, child, *_ in decs[topic].transforms(data):
-                    if parent == self.odom_frame:
-                        children.add(child)
-                    elif parent != child:
+                    if topic == self.odom_topic:
+                        kids.setdefault(parent, set()).add(child)
+                    if parent != child:
                         links[(parent, child)] = np.eye(4)  # (only whether frames are linked is asked)
             except Exception:  # noqa: BLE001 - bad bytes: messages() counts them
                 continue
+        if self.odom_frame not in kids and self.odom_frame == DEFAULT_ODOM_FRAME:
+            if prefixed := self._prefixed_odom_frame(kids):
+                logger.info(
+                    "%s: tf odometry '%s' has no %s→ transform but %s→: the scans' robot's frames taken",
+                    self.path.name, self.odom_topic, self.odom_frame, prefixed,
+                )  # fmt: skip
+                self.odom_frame = prefixed
+                own = prefixed.removesuffix(DEFAULT_ODOM_FRAME) + self.base_frame  # robot2/base_link
+                if own in kids[prefixed]:
+                    return own
+        children = kids.get(self.odom_frame, set())
         if self.base_frame in children or len(children) != 1:
             return ""
         robot = children.pop()
         return robot if chain_transform(links, robot, self.base_frame) is not None else ""
+
+    def _prefixed_odom_frame(self, kids: dict[str, set[str]]) -> str:
+        """Of the parent frames ``kids`` of a tf odometry topic, the one that is ``odom`` under a prefix
+        (``robot2/odom``): the only one, or the one whose prefix is the scans' namespace (``/robot2/scan``)
+        when several robots share the topic; "" when none or not one."""
+        prefixed = sorted(p for p in kids if p.endswith("/" + DEFAULT_ODOM_FRAME))
+        mine = [
+            p
+            for p in prefixed
+            if "/" + p.removesuffix("/" + DEFAULT_ODOM_FRAME) == namespace(self.scan_topic)
+        ]
+        return (mine or prefixed)[0] if len(mine) == 1 or len(prefixed) == 1 else ""
 
     def _take_odometry_parent(self, base_parents: set[str], tf_frames: set[str]) -> None:
         """``odom_frame`` (left at its default) becomes the frame the nav_msgs/Odometry messages give their
