@@ -817,7 +817,7 @@ class RosLogReader:
             return ""
         topics = {self.odom_topic} | {t for t in self._robot_tf_topics() if is_static(t)}
         decs = {t: self._decoder(t) for t in topics if self._encoding_problem(t) is None}
-        kids: dict[str, set[str]] = {}  # each parent frame's children on the odometry topic
+        kids: dict[str, set[str]] = {}  # each parent frame's children
         links = {}  # every transform, as links
         n = 0  # messages of the odometry topic read
         for topic, _, data in self.source.raw_messages(set(decs)):
@@ -826,8 +826,7 @@ class RosLogReader:
                 break
             try:
                 for parent, child, *_ in decs[topic].transforms(data):
-                    if topic == self.odom_topic:
-                        kids.setdefault(parent, set()).add(child)
+                    kids.setdefault(parent, set()).add(child)
                     if parent != child:
                         links[(parent, child)] = np.eye(4)  # (only whether frames are linked is asked)
             except Exception:  # noqa: BLE001 - bad bytes: messages() counts them
