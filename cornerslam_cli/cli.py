@@ -478,10 +478,10 @@ RESULTS_MCAP_NOTE = (
 @cli.command()
 @click.argument("out_path", metavar="OUT.mcap", type=GivenPath(dir_okay=False))
 @click.option("--seed", default=0, show_default=True, help="Random seed (same seed, same log).")
-@click.option("--laps", default=1, show_default=True, help="Laps of the loop trajectory.")
-@click.option("--rate", default=10.0, show_default=True, help="Scan rate, Hz.")
-@click.option("--beams", default=1081, show_default=True, help="Beams per scan (over 270°).")
-@click.option("--speed", default=0.5, show_default=True, help="Robot speed, m/s.")
+@click.option("--laps", default=1, show_default=True, help="Laps of the loop trajectory, 1–100.")
+@click.option("--rate", default=10.0, show_default=True, help="Scan rate, Hz, 0.1–1000.")
+@click.option("--beams", default=1081, show_default=True, help="Beams per scan (over 270°), 2–100000.")
+@click.option("--speed", default=0.5, show_default=True, help="Robot speed, m/s, 0.05–5.")
 @verbosity_options(steps=False)
 def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
     """Write a synthetic indoor log OUT.mcap with ground truth OUT.gt.tum and true corners.

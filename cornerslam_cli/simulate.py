@@ -104,7 +104,8 @@ def corrupt_odometry(truth: np.ndarray, p: SimParams, rng: np.random.Generator) 
     return out
 
 
-# what simulate accepts: (option, lowest, highest); a log's size is bounded on top (MAX_*)
+# what simulate accepts: (option, lowest, highest), said in cli.py's help too (a test keeps the two the
+# same); a log's size is bounded on top (MAX_*)
 RANGES = (("--laps", 1, 100), ("--rate", 0.1, 1000.0), ("--beams", 2, 100_000), ("--speed", 0.05, 5.0))
 MAX_RANGES = 50_000_000  # scans × beams: ~200 MB of float32 ranges held before writing
 MAX_SECONDS = 20_000.0  # 10^6 odometry samples
@@ -122,8 +123,8 @@ def check_options(seed: int, laps: int, p: SimParams, waypoints: np.ndarray = OF
     seconds = laps * float(np.hypot(*np.diff(loop, axis=0).T).sum()) / p.speed
     if seconds > MAX_SECONDS or seconds * p.rate * p.beams > MAX_RANGES:
         raise ConfigError(
-            f"simulate would record {seconds:.0f} s of {p.rate:g} Hz scans of {p.beams} beams, more "
-            f"than it builds in memory ({MAX_SECONDS:.0f} s, {MAX_RANGES:.0e} ranges)",
+            f"simulate would record {seconds:.0f} s of {p.rate:g} Hz scans of {p.beams} beams, more than "
+            f"it builds in memory: at most {MAX_SECONDS:,.0f} s and {MAX_RANGES:,} ranges, scans × beams",
             "fewer --laps, a lower --rate or --beams, or a higher --speed",
         )
 

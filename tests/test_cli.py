@@ -535,6 +535,17 @@ def test_simulate_is_reproducible(tmp_path):
     assert a.with_suffix(".gt.tum").read_text() == b.with_suffix(".gt.tum").read_text()
 
 
+def test_simulates_help_gives_the_ranges_it_accepts():
+    """The ranges were said only by the errors of values outside them (a probe): --help gives them, the
+    same as simulate.RANGES."""
+    from cornerslam_cli.simulate import RANGES
+
+    text = " ".join(invoke("simulate", "--help").stdout.split())
+    for option, lo, hi in RANGES:
+        said = text.split(option, 1)[1].split(" --", 1)[0]
+        assert f"{lo:g}–{hi:g}." in said.replace(",", ""), (option, said)
+
+
 # ---------------------------------------------------------------------------- bad input: exit 2, one line
 def test_nonexistent_log(tmp_path):
     one_line_error(invoke("run", tmp_path / "nope.mcap", "--out", tmp_path / "o"), "nope.mcap")
