@@ -767,11 +767,10 @@ def config_command(log_path, config_path, overrides, preset, verbose, quiet):
             raise
         raise replaced_place(e, by_option) from None
     if log_path is None and config_path is None and cfg.input.laser_preset == "auto":  # each log's preset
-        from .config import set_leaves  # left to it, but for what --set gave (a file's: warned when run)
+        from .config import set_keys  # left to it, but for what --set gave (a file's: warned when run)
         from .lasers import PRESET_NOTE, dump_for_any_laser
 
-        given = {leaf for _, leaf, _ in set_leaves(overrides)}
-        click.echo(PRESET_NOTE + dump_for_any_laser(cfg, given), nl=False)
+        click.echo(PRESET_NOTE + dump_for_any_laser(cfg, set_keys(overrides)), nl=False)
     else:
         click.echo(dump_config(cfg), nl=False)
 

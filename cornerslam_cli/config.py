@@ -587,6 +587,11 @@ def override_leaves(keys: list[str], value: Any) -> list[tuple[str, Any]]:
     return [(key, value)]
 
 
+def set_keys(overrides: typing.Sequence[str]) -> set[str]:
+    """The dotted keys the ``overrides`` set (:func:`set_leaves`)."""
+    return {leaf for _, leaf, _ in set_leaves(overrides)}
+
+
 def set_leaves(overrides: typing.Sequence[str]) -> typing.Iterator[tuple[str, str, Any]]:
     """(the --set's text, dotted key, value) of each key the ``overrides`` set (:func:`override_leaves`:
     a mapping's keys too); a --set that :func:`parse_override` refuses is left out (its own error comes
@@ -637,7 +642,7 @@ def warn_ignored(
     one file may serve several commands (compare runs each associator of --assoc: a file's
     ``association.method: pca`` is no news when pca is one of them). A ``--set`` of such a key is the
     command's own to refuse (``options.check_method_not_set``)."""
-    given = {leaf for _, leaf, _ in set_leaves(overrides)}
+    given = set_keys(overrides)
     lines = getattr(data, "lines", {})
     for key, (why, runs) in ignored.items():
         node: Any = data

@@ -25,7 +25,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .config import Config, config_from, dump_config, located, read_config_file, set_leaves, warn_ignored
+from .config import (
+    Config,
+    config_from,
+    dump_config,
+    located,
+    override_leaves,
+    read_config_file,
+    set_keys,
+    warn_ignored,
+)
 from .errors import ConfigError, did_you_mean
 from .geometry import wrap_angle
 from .logs import open_log
@@ -88,13 +97,10 @@ PRESETS: dict[str, LaserPreset] = {
 PRESET_CHOICES = ("auto", "none", *PRESETS)  # what input.laser_preset may name
 
 
-def _leaves(tree: Mapping, prefix: str = "") -> Iterator[tuple[str, Any]]:
-    """(dotted key, value) of each leaf of a nested config mapping."""
+def _leaves(tree: Mapping) -> Iterator[tuple[str, Any]]:
+    """(dotted key, value) of each leaf of a nested config mapping (:func:`config.override_leaves`)."""
     for k, v in tree.items():
-        if isinstance(v, Mapping):
-            yield from _leaves(v, f"{prefix}{k}.")
-        else:
-            yield f"{prefix}{k}", v
+        yield from override_leaves([k], v)
 
 
 PRESET_KEYS = frozenset(k for p in PRESETS.values() for k, _ in _leaves(p.config))  # keys a preset may set
@@ -277,7 +283,7 @@ def resolve_config(
             f"{hint}{preset_choices()}",
         )
         raise located(e, data, overrides)
-    given = {leaf for _, leaf, _ in set_leaves(overrides)}  # (a --set's value wins over the file's)
+    given = set_keys(overrides)  # (a --set's value wins over the file's)
     if over := [k for k in overruled_by_file(data, name) if k not in given]:
         lines = getattr(data, "lines", {})
         keys = ", ".join(f"{k} (line {lines[k]})" if k in lines else k for k in over)

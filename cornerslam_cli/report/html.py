@@ -20,7 +20,7 @@ from pathlib import Path
 from ..results import Ate, MapConsistency, RelationError, RunSummary, to_json
 from .plots import COMPARE_FIGURES, RUN_FIGURES, compare_assocs, corrected_label, plot_compare, plot_run
 from .tables import COMPARISON_COLUMNS, COMPARISON_LOOP_COLUMNS, best_cells, read_csv
-from .text import span_lines
+from .text import span_text
 
 CSS = """
 body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 2em auto; max-width: 1200px;
@@ -132,7 +132,7 @@ def _summary_section(summary: RunSummary, run_dir: Path) -> list[str]:
     inp, counts, timing = summary.input, summary.counts, summary.timing
     pairs: list[tuple[str, object]] = [
         ("log", inp.log),
-        *[("span", line.removeprefix("span: ")) for line in span_lines(inp)],
+        *[("span", text) for text in [span_text(inp)] if text],
         ("format", inp.format),
         ("scan topic", inp.scan_topic),
         ("odometry", f"{inp.odom_topic} ({inp.odom_source})"),
@@ -335,8 +335,8 @@ def _compare_report(out_dir: Path) -> str:
     log_name = Path(log).name if assocs else out_dir.name
     title = f"cornerslam compare — {log_name} ({', '.join(assocs)})"
     at_once = max((s.timing.concurrent_filters or 1 for s in summaries.values()), default=1)
-    spans = span_lines(summaries[assocs[0]].input) if assocs else []
-    part = f" ({esc(spans[0].removeprefix('span: '))})" if spans else ""
+    span = span_text(summaries[assocs[0]].input) if assocs else ""
+    part = f" ({esc(span)})" if span else ""
     shared = (
         f" The {n} filters ran {at_once} at a time (<code>--jobs</code>): each one's times include waiting "
         "for the CPU, and which waited depends on the order of <code>--assoc</code> — their times are not "

@@ -45,17 +45,21 @@ def unusable_scans(c) -> str:
     return f"; {n} more scan{'s' if n != 1 else ''} unusable, not read: see the warnings" if n else ""
 
 
-def span_lines(i: RunInput) -> list[str]:
+def span_text(i: RunInput) -> str:
     """The part of the log a run processed, when ``--start``/``--end``/``--max-scans`` chose it (all of
-    it, perhaps: the line gives the scans): a run's figures over a slice read like the whole log's
-    otherwise."""
-    if i.span is None:
-        return []
-    p = i.span
-    return [
-        f"span: {p.options}: scans #{p.first_index}–#{p.last_index} of the log, "
+    it, perhaps: the text gives the scans), else "": a run's figures over a slice read like the whole
+    log's otherwise."""
+    if (p := i.span) is None:
+        return ""
+    return (
+        f"{p.options}: scans #{p.first_index}–#{p.last_index} of the log, "
         f"{p.first_time:.3f}–{p.last_time:.3f} s from its first scan"
-    ]
+    )
+
+
+def span_lines(i: RunInput) -> list[str]:
+    """:func:`span_text` as a printed line, none for the whole log."""
+    return [f"span: {text}"] if (text := span_text(i)) else []
 
 
 def summary_lines(s: RunSummary) -> list[str]:
