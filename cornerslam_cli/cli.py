@@ -526,26 +526,33 @@ def simulate(out_path, seed, laps, rate, beams, speed, verbose, quiet):
 )
 @verbosity_options(progress=False, steps=False)
 def evaluate(out_dir, ground_truth, relations, time_offset, correct_scale, verbose, quiet):
-    """Accuracy of a run's trajectory.tum against ground truth or relations (without either: the TUM ground
-    truth the run was scored against, when the file its summary.json names holds those poses here;
-    relations, whose --time-offset is not recorded, are given again).
+    """Accuracy of a run's trajectory.tum against ground truth or relations (without either: the ground
+    truth and relations the run was scored against, the relations at their --time-offset, each when the
+    file its summary.json names holds the same poses or relations here).
 
     \b
     Example:
       cornerslam evaluate cornerslam_out/intel_pca --relations intel.relations --time-offset 976052857.334
     """
     from .evaluate import evaluate_files
-    from .report.run_dir import check_one_run, check_unchanged, recorded_ground_truth
+    from .report.run_dir import check_one_run, check_unchanged, recorded_reference
     from .report.text import scored_line
 
     setup_logging(verbose, quiet)
     check_one_run(out_dir)  # a compare or batch directory: names its run directories
-    if not ground_truth and not relations:
-        ground_truth, why = recorded_ground_truth(out_dir)  # the one the run was scored against, if there
-        if not ground_truth:
-            why = f" ({why})" if why else ""
+    if not ground_truth and not relations:  # what the run was scored against, where the files still hold it
+        rec = recorded_reference(out_dir)
+        ground_truth, relations, time_offset = rec.ground_truth, rec.relations, rec.time_offset
+        why = f" ({'; '.join(rec.why_not)})" if rec.why_not else ""
+        if not ground_truth and not relations:
             raise click.UsageError(f"give --ground-truth FILE.tum or --relations FILE{why}")
-        log.info("ground truth: %s, as the run's summary.json names it", ground_truth)
+        if ground_truth:
+            log.info("ground truth: %s, as the run's summary.json names it", ground_truth)
+        if relations:
+            log.info("relations: %s at --time-offset %r, as the run's summary.json names them", relations,
+                     time_offset)  # fmt: skip
+        if rec.why_not:
+            log.info("not scored against%s", why)
     if correct_scale and not ground_truth:
         raise click.UsageError("--correct-scale scales the ATE: give --ground-truth FILE.tum too")
     check_time_offset(relations, time_offset)

@@ -104,6 +104,9 @@ class Accuracy(JsonResult):
     online_ate: Ate | None = (
         optional()
     )  # appended (issue 16): the causal estimate, when the output was smoothed
+    # appended (2026-12-06): --time-offset the relations were read with (relation time − log time), so
+    # `evaluate OUTDIR` can score against them again unasked
+    relations_time_offset: float | None = optional()
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -266,6 +269,7 @@ class Hashes(JsonResult):
     version: str
     ground_truth: str | None = optional()  # appended (2026-12-03)
     code: str | None = optional()  # appended (2026-12-05): sha256 of the build's source (summary.code_hash)
+    relations: str | None = optional()  # appended (2026-12-06): sha256 of the relations as read
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -597,7 +597,10 @@ def test_evaluate_without_a_reference_uses_the_runs_and_says_what_it_scored(sim_
     assert damaged.exit_code == 2 and said in damaged.stderr
     (out / "summary.json").unlink()
     none = evaluate(out)
-    assert none.exit_code == 2 and f"('{out}' has no summary.json to name the ground truth" in none.stderr
+    assert (
+        none.exit_code == 2
+        and f"('{out}' has no summary.json to name what the run was scored against" in none.stderr
+    )
 
 
 def test_evaluate_finds_a_runs_relative_ground_truth_only_from_where_it_ran(sim_log, tmp_path, monkeypatch):
@@ -737,30 +740,38 @@ def test_a_pose_just_outside_the_ground_truths_span_is_scored_as_evo_matches_it(
     assert a.n == scored and a.rmse < 0.02
 
 
-def test_evaluate_without_a_reference_names_the_relations_the_run_was_scored_against(sim_log, tmp_path):
+def test_evaluate_without_a_reference_scores_against_the_runs_relations_at_its_time_offset(sim_log, tmp_path):
     """A run scored with --relations only: `evaluate OUTDIR` said "give --ground-truth … or --relations"
-    and nothing of the file its summary.json names (a new-user walkthrough); it is not reused (its
-    --time-offset is not kept), and the error says so."""
+    (a new-user walkthrough), then that summary.json did not keep --time-offset. It keeps it now, with the
+    relations' sha256: evaluate scores against them at that offset, the run's own figure; a relations file
+    changed since is not taken for them, and the error says so."""
     from click.testing import CliRunner
 
     from cornerslam_cli.cli import cli
     from cornerslam_cli.report.tables import read_tum
+    from cornerslam_cli.results import RunSummary
 
     t, gt = read_tum(sim_log.with_suffix(".gt.tum"))
     rel = tmp_path / "sim.relations"
     pairs = [(i, i + 5) for i in range(0, len(t) - 5, 5)]
-    rel.write_text("".join(f"{t[i]} {t[j]} {' '.join(map(str, relative(gt[i], gt[j])[:2]))} 0 0 0 "
-                           f"{relative(gt[i], gt[j])[2]}\n" for i, j in pairs))  # fmt: skip
+    offset = 1000.25  # relation time − log time
+    rel.write_text("".join(f"{t[i] + offset} {t[j] + offset} {' '.join(map(str, relative(gt[i], gt[j])[:2]))}"
+                           f" 0 0 0 {relative(gt[i], gt[j])[2]}\n" for i, j in pairs))  # fmt: skip
     log, out = tmp_path / "sim.mcap", tmp_path / "run"
     log.write_bytes(sim_log.read_bytes())  # (no sim.gt.tum beside it: relations only)
-    args = ["run", str(log), "--out", str(out), "-q", "--relations", str(rel), "--time-offset", "0"]
+    args = ["run", str(log), "--out", str(out), "-q", "--relations", str(rel), "--time-offset", str(offset)]
     assert CliRunner().invoke(cli, args).exit_code == 0
+    acc = RunSummary.read(out).accuracy
+    assert acc.relations_time_offset == offset and acc.relations.n == len(pairs)
+    res = evaluate(out)
+    assert res.exit_code == 0, res.output
+    again = evaluate(out, "--relations", str(rel), "--time-offset", str(offset))
+    assert again.exit_code == 0 and res.stdout == again.stdout
+    assert f"{acc.relations.trans_mean:.3f}" in res.stdout and f"{len(pairs)}" in res.stdout
+    rel.write_text(rel.read_text().replace(f"{t[0] + offset}", f"{t[1] + offset}", 1))  # one relation moved
     res = evaluate(out)
     assert res.exit_code == 2
-    assert (
-        f"the run was scored against the relations '{rel}'; summary.json does not keep --time-offset"
-        in res.stderr
-    )
+    assert f"'{rel}' here does not hold the relations the run was scored against" in res.stderr
 
 
 @pytest.mark.parametrize("which", ["ground truth", "trajectory"])

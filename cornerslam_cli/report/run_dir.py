@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import LogError, ResultsError, display_path
-from ..evaluate import align_se2, apply_se2, interpolate_inside
+from ..evaluate import align_se2, apply_se2, interpolate_inside, read_relations
 from ..results import RunSummary
 from .ownership import file_size, output_kind, read_marker
 from .tables import read_csv, read_tum
@@ -109,39 +109,85 @@ def check_one_run(path: str | Path) -> None:
     )
 
 
-def recorded_ground_truth(path: str | Path) -> tuple[str | None, str]:
-    """The ground truth a run directory ``path`` was scored against (its summary.json's
-    ``accuracy.ground_truth``, as the run named it: relative to where it ran), when a file there from here
-    holds the same poses (sha256 against ``hashes.ground_truth``); else None and why not, to say (nothing
-    recorded: ""). A file of that name with other poses is not used: another file, or this one changed."""
-    from .summary import reference_hash
+@dataclass(frozen=True)
+class Recorded:
+    """What a run directory's summary.json says it was scored against, as far as the files here still
+    hold it (:func:`recorded_reference`): the ground truth, the relations and their time offset; for each
+    that is not used, why not (empty: nothing recorded)."""
 
+    ground_truth: str | None = None
+    relations: str | None = None
+    time_offset: float = 0.0
+    why_not: tuple[str, ...] = ()
+
+
+def recorded_reference(path: str | Path) -> Recorded:
+    """The ground truth and relations a run directory ``path`` was scored against (its summary.json's
+    ``accuracy.ground_truth`` / ``relations_file``, as the run named them: relative to where it ran, the
+    relations with their ``relations_time_offset``), each when a file there from here holds the same poses
+    or relations (sha256 against ``hashes.ground_truth`` / ``hashes.relations``); else not, and why. A
+    file of that name with other contents is not used: another file, or this one changed."""
     p = Path(path)
     if p.is_dir() and not (p / "summary.json").is_file():
-        return None, f"'{p}' has no summary.json to name the ground truth the run was scored against"
+        return Recorded(why_not=(f"'{p}' has no summary.json to name what the run was scored against",))
     try:
         s = RunSummary.read(p) if (p / "summary.json").is_file() else None
-    except ResultsError as e:  # damaged, cut short: the ground truth it names cannot be read from it
-        return None, e.msg  # ("cannot read the run summary '…/summary.json': why")
+    except ResultsError as e:  # damaged, cut short: what it names cannot be read from it
+        return Recorded(why_not=(e.msg,))  # ("cannot read the run summary '…/summary.json': why")
     acc = s.accuracy if s is not None else None
-    gt = acc.ground_truth if acc is not None else None
-    if not gt:
-        rel = acc.relations_file if acc is not None else None
-        why = f"the run was scored against the relations '{rel}'; summary.json does not keep --time-offset"
-        return None, why if rel else ""
-    if not Path(gt).is_file():
-        if "\ufffd" in gt:  # a name that is not UTF-8: summary.json (JSON) kept it with its bytes replaced
-            return None, f"the run was scored against '{gt}', a name that is not UTF-8, not kept as it is"
-        return None, f"the run was scored against '{gt}', not found from here"
-    if s.hashes.ground_truth is None:  # an older version's run: which file it was cannot be told
-        return None, f"the run names '{gt}' but kept no sha256 of its poses (an older version's run)"
+    if acc is None:
+        return Recorded()
+    why: list[str] = []
+    gt = _same_file(acc.ground_truth, "poses", s.hashes.ground_truth, _gt_hash, why)
+    rel = _same_file(acc.relations_file, "relations", s.hashes.relations, _relations_hash, why)
+    offset = acc.relations_time_offset
+    if rel and offset is None:  # (a hash without an offset: not written so; refused all the same)
+        rel = None
+        why.append(f"the run was scored against the relations '{acc.relations_file}' at a --time-offset "
+                   "its summary.json does not keep (an older version's run)")  # fmt: skip
+    return Recorded(gt, rel, offset or 0.0, tuple(why))
+
+
+def _gt_hash(name: str) -> str:
+    from .summary import reference_hash
+
+    return reference_hash(*read_tum(name, "ground truth", lambda _: None))
+
+
+def _relations_hash(name: str) -> str:
+    from .summary import reference_hash
+
+    logger = logging.getLogger("cornerslam")  # (quietly: scoring against it says what is odd about it)
+    level = logger.level
+    logger.setLevel(logging.ERROR)
+    try:
+        return reference_hash(read_relations(name))
+    finally:
+        logger.setLevel(level)
+
+
+def _same_file(name: str | None, what: str, recorded: str | None, hash_of, why: list[str]) -> str | None:
+    """``name`` when the file of that name here holds the ``what`` whose sha256 the run recorded; else
+    None, with why not appended to ``why`` (nothing: no such file recorded)."""
+    if not name:
+        return None
+    if not Path(name).is_file():
+        if "\ufffd" in name:  # a name that is not UTF-8: summary.json (JSON) kept it with its bytes replaced
+            why.append(f"the run was scored against '{name}', a name that is not UTF-8, not kept as it is")
+        else:
+            why.append(f"the run was scored against '{name}', not found from here")
+        return None
+    if recorded is None:  # an older version's run: which file it was cannot be told
+        why.append(f"the run names '{name}' but kept no sha256 of its {what} (an older version's run)")
+        return None
     try:  # (quietly: reading it to score says what is odd about it)
-        same = reference_hash(*read_tum(gt, "ground truth", lambda _: None)) == s.hashes.ground_truth
+        same = hash_of(name) == recorded
     except (OSError, LogError):
         same = False
     if not same:
-        return None, f"'{gt}' here does not hold the poses the run was scored against"
-    return gt, ""
+        why.append(f"'{name}' here does not hold the {what} the run was scored against")
+        return None
+    return name
 
 
 def check_unchanged(path: str | Path, name: str = "trajectory.tum") -> None:

@@ -224,6 +224,7 @@ class RunWriter:
             consistency,
             graph,
             None if ref.gt is None else reference_hash(*ref.gt),
+            None if ref.relations is None else reference_hash(ref.relations),
         )
         write_json(self.dest / "summary.json", summary.to_json())
         return summary
@@ -370,6 +371,7 @@ def accuracy_of(
         acc.update(
             relations_file=display_path(ref.relations_path),
             relations=relations,
+            relations_time_offset=offset,
             odom_relations=relation_error(stamps, odoms, rel, offset),
             scan_odom_relations=None
             if scan_odoms is None

@@ -82,6 +82,7 @@ def build_summary(
     consistency: MapConsistency | None = None,
     graph: HierarchicalSlam | None = None,
     gt_hash: str | None = None,
+    relations_hash: str | None = None,
 ) -> RunSummary:
     """The summary of a run (summary.json, INTERFACE.md): input, counts, timing totals (``t_grid``:
     the occupancy grid's), accuracy, hashes, versions, map ``consistency``; with the two-level SLAM
@@ -123,6 +124,7 @@ def build_summary(
             config=config_hash(cfg),
             version=__version__,
             ground_truth=gt_hash,
+            relations=relations_hash,
             code=code_hash(),
         ),
         config=cfg.to_dict(),
@@ -267,11 +269,12 @@ def config_hash(cfg: Config) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def reference_hash(stamps: np.ndarray, poses: np.ndarray) -> str:
-    """sha256 of a ground truth as read (stamps and 2D poses, float64): the same poses, the same
-    hash, however the file spells them; read once, so a ground truth given as a pipe is not read again."""
+def reference_hash(*arrays: np.ndarray) -> str:
+    """sha256 of a ground truth as read (stamps and 2D poses, float64), or of relations (their (k, 5)
+    array): the same poses, the same hash, however the file spells them; read once, so a ground truth
+    given as a pipe is not read again."""
     h = hashlib.sha256()
-    for a in (stamps, poses):
+    for a in arrays:
         h.update(np.ascontiguousarray(a, dtype="<f8").tobytes())
     return h.hexdigest()
 
