@@ -42,6 +42,7 @@ from .options import (  # noqa: E402
     FIGURE_PATH,
     FINITE,
     PRESET,
+    SCAN_INDEX,
     GivenPath,
     check_method_not_set,
     check_option_agrees,
@@ -565,8 +566,9 @@ def evaluate(out_dir, ground_truth, relations, time_offset, correct_scale, verbo
 @click.argument("log_path", metavar="LOG", type=GivenPath(log=True))
 @click.option(
     "--step",
-    type=click.IntRange(min=0),
-    help="Index of the scan in the log (0 = first, the default; a run's steps skip scans: see --at).",
+    type=SCAN_INDEX,
+    help="Index of the scan in the log, N or '#N' (0 = first, the default; a run's steps skip scans: "
+    "see --at).",
 )
 @click.option("--at", type=FINITE, help="The scan of this stamp, s (a run's step: trajectory.csv's stamp).")
 @click.option(

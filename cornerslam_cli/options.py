@@ -119,6 +119,23 @@ class _Finite(click.ParamType):
 FINITE = _Finite()
 
 
+class _ScanIndex(click.IntRange):
+    """``extract --step``: a scan index ≥ 0, also written ``#N`` as ``run --start '#N'`` takes it."""
+
+    name = "N"
+
+    def __init__(self):
+        super().__init__(min=0)
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, str) and value.startswith("#"):
+            value = value[1:]
+        return super().convert(value, param, ctx)
+
+
+SCAN_INDEX = _ScanIndex()
+
+
 class GivenPath(click.Path):
     """A file or directory name that is not ``''`` (an unset shell variable, ``--config "$CFG"``): as a
     path ``''`` is ``.``, the working directory, which the error then named; as an option's value it

@@ -380,6 +380,9 @@ def test_extract_step_is_the_steps_scan_and_its_features(tmp_path):
     assert str(e.value) == f"--step 6 is past the end of '{log}' (6 scans) (use 0..5)"
     res = invoke("extract", log, "--step", 4)
     assert res.stdout.startswith("scan 4 at 1700000000.450 s: 181 valid of 181 beams\n")
+    # written '#4' too, as run's --start '#4' takes a scan index (a probe: '#10' was refused)
+    assert invoke("extract", log, "--step", "#4").stdout == res.stdout
+    assert invoke("extract", log, "--step", "#x").exit_code == 2
     assert invoke("extract", log, "--step", 9).stderr == (
         f"error: --step 9 is past the end of '{log}' (6 scans) (use 0..5)\n"
     )
