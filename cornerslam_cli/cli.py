@@ -201,15 +201,21 @@ def _signal_word(e: KeyboardInterrupt) -> tuple[str, int]:
     return ("terminated", 143) if isinstance(e, _Terminated) else ("interrupted", 130)
 
 
+WRITE_NOTHING = ("info", "config", "evaluate")  # commands that only print: an interrupt loses no file
+
+
 def _interrupted(ctx: click.Context, e: KeyboardInterrupt) -> None:
-    """Exit 130 (Ctrl-C) or 143 (SIGTERM) with one line saying whether the output was written."""
+    """Exit 130 (Ctrl-C) or 143 (SIGTERM) with one line saying whether the output was written (of a
+    command that writes no file, only the word: "no output written" had them look for one)."""
     word, code = _signal_word(e)
     written = getattr(e, "output_written", None)  # the signal came after the commit
     if written is not None:
-        text = f"after the output was complete ('{written}' is written)"
+        text = f": after the output was complete ('{written}' is written)"
+    elif ctx.invoked_subcommand in WRITE_NOTHING:
+        text = ""
     else:
-        text = "no output written (an earlier output there, if any, is kept)"
-    click.echo(f"{word}: {text}", err=True)
+        text = ": no output written (an earlier output there, if any, is kept)"
+    click.echo(f"{word}{text}", err=True)
     ctx.exit(code)
 
 

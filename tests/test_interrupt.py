@@ -94,6 +94,25 @@ def test_a_signal_raised_inside_a_compiled_kernel_still_exits_as_the_signal(term
     assert "internal error" not in res.output
 
 
+@pytest.mark.parametrize(("command", "said"), [("info", ""), ("run", ": no output written")])
+def test_a_command_that_writes_no_file_is_not_said_to_have_written_none(command, said):
+    """`config`, `info` and `evaluate` only print: "interrupted: no output written (an earlier output
+    there, if any, is kept)" had a user look for an output (a probe). They say the word alone."""
+    import click
+    from click.testing import CliRunner
+
+    from cornerslam_cli.cli import _Cli
+
+    def stopped():
+        raise KeyboardInterrupt
+
+    group = _Cli()
+    group.add_command(click.Command(command, callback=stopped))
+    res = CliRunner().invoke(group, [command])
+    assert res.exit_code == 130 and res.output.startswith(f"interrupted{said}"), res.output
+    assert len(res.output.splitlines()) == 1
+
+
 def test_ctrl_c_while_the_command_is_still_importing_exits_130_in_one_line():
     """The console script's entry (cornerslam_cli.entry): a Ctrl-C that lands while the command line's
     modules are imported (here: raised by the import of cornerslam_cli.cli itself, in a fresh
