@@ -17,6 +17,7 @@ import math
 import os
 import shlex
 import stat
+import sys
 import tempfile
 
 import click
@@ -50,27 +51,33 @@ def config_options(f):
         "config_path",
         type=GivenPath(),
         callback=_config_read_once,
-        help="YAML config (default: built-in).",
+        help="YAML config (default: built-in; - reads standard input).",
     )(f)
     return f
 
 
 def _config_read_once(ctx: click.Context, param, value: str | None) -> str | None:
-    """A ``--config`` that is not a regular file — a pipe, ``<(...)``, ``/dev/null`` — is read once
+    """A ``--config`` that is not a regular file — ``-`` (standard input), a pipe, ``<(...)``,
+    ``/dev/null`` — is read once
     into a temporary copy (removed when the command ends): ``compare`` and ``batch`` load the config
     once per associator or combination, and a pipe gives its text only once. The copy is as large
     as the loader accepts plus a byte (it then says "too large"); errors name the path as given
     (see ``cli._Cli``)."""
     from .config import MAX_CONFIG_BYTES
 
-    try:
-        mode = os.stat(value).st_mode if value else 0
-    except OSError:
-        return value  # missing: the config loader says so
-    if not mode or stat.S_ISREG(mode) or stat.S_ISDIR(mode):
-        return value
-    with open(value, "rb") as f:
-        data = f.read(MAX_CONFIG_BYTES + 1)
+    if value == "-":  # standard input, as the convention goes (a file named '-' is ./-)
+        if sys.stdin is None:  # started with standard input closed (`<&-`)
+            raise click.BadParameter("standard input is closed: give the config file's name", ctx, param)
+        data = sys.stdin.buffer.read(MAX_CONFIG_BYTES + 1)
+    else:
+        try:
+            mode = os.stat(value).st_mode if value else 0
+        except OSError:
+            return value  # missing: the config loader says so
+        if not mode or stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+            return value
+        with open(value, "rb") as f:
+            data = f.read(MAX_CONFIG_BYTES + 1)
     fd, copy = tempfile.mkstemp(prefix="cornerslam-config-", suffix=".yaml")
     with os.fdopen(fd, "wb") as f:
         f.write(data)

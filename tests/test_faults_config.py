@@ -245,6 +245,24 @@ def test_a_config_from_a_pipe_is_read_once(tmp_path):
     assert cfg.sensor.sigma_r_near == 0.03  # the preset's layer applied
 
 
+def test_config_dash_reads_standard_input_and_its_errors_name_it(sim_log, tmp_path):
+    """``--config -`` read a file named '-' (a probe: "cannot read config file '-'"); it is standard input,
+    read once for every associator of a compare, and an error in it names '-' with its line."""
+    from click.testing import CliRunner
+
+    from cornerslam_cli.cli import cli
+    from cornerslam_cli.results import RunSummary
+
+    out = tmp_path / "cmp"
+    args = ["compare", str(sim_log), "--config", "-", "--out", str(out), "-q", "--assoc", "icnn,pca"]
+    res = CliRunner().invoke(cli, args, input="scan_match:\n  window: 7\n")
+    assert res.exit_code == 0, res.output
+    assert [RunSummary.read(out / a).config["scan_match"]["window"] for a in ("icnn", "pca")] == [7, 7]
+    res = CliRunner().invoke(cli, ["config", "--config", "-"], input="scan_match:\n  windo: 7\n")
+    assert res.exit_code == 2
+    assert res.stderr.startswith("error: config file '-' line 2: unknown config key 'scan_match.windo'")
+
+
 def test_dev_null_is_an_empty_config_and_data_is_not_modified():
     assert load_config("/dev/null") == Config()
     data = read_config_file("/dev/null")
