@@ -31,8 +31,11 @@ def extract_step(
     ``input.max_range``: ``cornerslam extract`` passes the front end's), else as read. ConfigError
     when the log has no such scan, naming the valid range; LogError when it yields no scan at all
     (every chunk corrupt, every scan undecodable: there is no range to name)."""
-    with open_log(Path(log_path), scan_topic=cfg.input.scan_topic, odom_topic=cfg.input.odom_topic) as reader:
-        if cfg.input.odom_topic:  # given though not needed: a wrong one is refused as run refuses it
+    inp = cfg.input
+    with open_log(
+        Path(log_path), scan_topic=inp.scan_topic, odom_topic=inp.odom_topic, scan_frame=inp.scan_frame
+    ) as reader:
+        if inp.odom_topic:  # given though not needed: a wrong one is refused as run refuses it
             reader.check()
         n, first, last = 0, None, None
         scans = reader.scans() if prepare is None else prepare(reader)

@@ -146,6 +146,7 @@ def open_input(
         odom_topic=inp.odom_topic,
         odom_frame=inp.odom_frame,
         base_frame=inp.base_frame,
+        scan_frame=inp.scan_frame,
     )
     reader.check()
     info = reader.info(inspect=False)  # (a run needs its topics, not its rates)

@@ -38,7 +38,7 @@ from .config import (
 from .errors import ConfigError, did_you_mean
 from .geometry import wrap_angle
 from .logs import open_log
-from .logs.params import LaserMountConfig
+from .logs.params import MOUNT_SAME, LaserMountConfig
 from .ranges import short_text
 from .types import Scan
 
@@ -127,9 +127,6 @@ def dump_for_any_laser(cfg: Config, given: Collection[str] = ()) -> str:
     return "\n".join(out) + "\n"
 
 
-MOUNT_SAME = 1e-4  # m or rad: input.laser.x/y/yaw within this of the log's mount are the same mount
-
-
 def mount_source(cfg: Config) -> str:
     """Where the config's laser mount (``input.laser``) came from, for a log without one on tf:
     ``preset`` (the laser preset's), ``default`` (the built-in one: none of x, y, yaw set — a 0 set is
@@ -196,6 +193,7 @@ def first_scan_geometry(log_path: str | Path, cfg: Config) -> tuple[int, float] 
             odom_topic=inp.odom_topic,
             odom_frame=inp.odom_frame,
             base_frame=inp.base_frame,
+            scan_frame=inp.scan_frame,
         ) as reader,
     ):
         scan = first_scan(reader)

@@ -190,6 +190,7 @@ def open_log(
     odom_topic: str = "",
     odom_frame: str = "odom",
     base_frame: str = "base_link",
+    scan_frame: str = "",
 ) -> LogReader:
     """Open a log for reading; the format is chosen by :func:`detect_format`.
 
@@ -199,7 +200,12 @@ def open_log(
     p = Path(path)
     fmt = detect_format(p)
     reader = READERS[fmt](
-        p, scan_topic=scan_topic, odom_topic=odom_topic, odom_frame=odom_frame, base_frame=base_frame
+        p,
+        scan_topic=scan_topic,
+        odom_topic=odom_topic,
+        odom_frame=odom_frame,
+        base_frame=base_frame,
+        scan_frame=scan_frame,
     )
     if fmt != "carmen" and (bag := split_bag_of(p)) is not None:
         reader.stats.warn(

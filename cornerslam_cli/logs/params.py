@@ -69,6 +69,11 @@ class LaserMountConfig:
         check_ranges(self)
 
 
+# m or rad: two laser mounts this close are the same (input.laser.x/y/yaw against the log's, two scan frames
+# of one topic on tf)
+MOUNT_SAME = 1e-4
+
+
 @dataclass(frozen=True)
 class InputConfig:
     """Which topics to read and how to treat beams."""
@@ -77,6 +82,9 @@ class InputConfig:
     odom_topic: str = ""  # "" = nav_msgs/Odometry topic, else tf odom→base
     odom_frame: str = "odom"
     base_frame: str = "base_link"
+    # the laser whose scans are used when two publish on one topic (their frame_ids differ and the tf
+    # mounts them apart): "" = the first scan's frame; the other's scans are left out, warned
+    scan_frame: str = ""
     # metres; 0 = use the scan's range_max; beams at or beyond are "no return"
     max_range: float = num(0.0, ge=0.0, le=10_000.0)
     # beams at the start of each scan to ignore (e.g. robot body)
