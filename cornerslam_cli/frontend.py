@@ -30,6 +30,7 @@ from .lasers import invalid_beams, laser_mount
 from .logs import ReadStats, open_log
 from .logs.deskew import deskew
 from .logs.keyframes import select_keyframes
+from .logs.order import in_stamp_order
 from .logs.sync import Synced, SyncStats, clocks_hint, reanchor_odometry, synchronise
 from .logs.unreadable import damaged_error, no_scan_read, raise_if_undecoded
 from .motion import ScanMatcher
@@ -203,7 +204,8 @@ def keyframe_pairs(src: Input, cfg: Config) -> Iterator[Synced]:
     if src.span.given:  # on the scans as read: those left out give their beams back to the reader's counts
         left_out = partial(_uncount, src.reader.stats)
         msgs = select(msgs, src.span, src.span_used, src.path.name, left_out, cfg.input.scan_time_offset)
-    msgs = scans_prepared(src.reader, cfg, src.laser_upside_down, msgs)
+    # (after the span: it reads ahead, and a scan read past the span's end would be counted as processed)
+    msgs = scans_prepared(src.reader, cfg, src.laser_upside_down, in_stamp_order(msgs))
     msgs = reanchor_odometry(msgs, cfg.input.odom_jump, src.stats, src.reader.stats.warn)
     synced = synchronise(msgs, src.stats, src.reader.stats.warn)  # its warning lands in summary.json too
     return _deskewed(select_keyframes(synced, cfg.keyframes, src.stats), src, cfg)
