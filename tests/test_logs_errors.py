@@ -585,6 +585,14 @@ def test_a_log_with_poses_but_no_odometry_names_the_pose_topics(tmp_path):
         LogError, match=r"no tf topic \(/robot_pose: geometry_msgs poses, not read as odometry\)"
     ):
         open_log(p).messages()  # (nav2's goal and initial pose, in every `record -a`, not named)
+    # with /tf_static beside them: "no tf topic" was said of it (a ROS-user probe)
+    static = [("/tf_static", "tf2_msgs/msg/TFMessage", int(1_700_000_000.0 * 1e9),
+               ros.tf(1_700_000_000.0, "base_link", "laser", 0.1, 0.0, 0.0))]  # fmt: skip
+    p = write_messages_mcap(tmp_path / "static.mcap", scan_messages("/scan") + static)
+    with pytest.raises(
+        LogError, match=r"no nav_msgs/Odometry topic and only /tf_static, whose transforms are fixed"
+    ):
+        open_log(p).messages()
 
 
 def test_a_laser_frame_named_unlike_the_tfs_is_hinted_at(tmp_path):

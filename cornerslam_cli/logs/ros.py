@@ -438,10 +438,13 @@ class RosLogReader:
             and t.rsplit("/", 1)[-1] not in NOT_POSES
         ]
         of_poses = f" ({listing(sorted(poses))}: geometry_msgs poses, not read as odometry)" if poses else ""
+        # (a probe: it said "no tf topic" of a log with /tf_static)
+        statics = [t for t in self._topics_of(*TF_TYPES) if is_static(t)]
+        no_tf = f"only {listing(statics)}, whose transforms are fixed" if statics else "no tf topic"
         return _OdomSel(
             "",
             "",
-            f"log '{name}' has no odometry: no nav_msgs/Odometry topic and no tf topic{of_poses}",
+            f"log '{name}' has no odometry: no nav_msgs/Odometry topic and {no_tf}{of_poses}",
             "select an odometry topic with --odom-topic (nav_msgs/Odometry or tf with "
             f"{short_text(self.odom_frame)}→{short_text(self.base_frame)})",
         )
