@@ -14,6 +14,8 @@ import time
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 
+import numpy as np
+
 from .config import Config
 from .errors import OutputError, display_path, printable
 from .frontend import Frame, Input, check_processed, frames, open_input
@@ -88,9 +90,20 @@ def run(
         if plot or mcap_path:
             extras = (("the figures", plot), ("the results MCAP", mcap_path))
             finishing(" and ".join(what for what, made in extras if made))
-        write_extras(stage, plot, mcap_out, mcap_path, ref.gt_path, scans, src.stats.anchors, offset)
+        tf_odom = logged_tf_odometry(src) if mcap_path else None
+        write_extras(stage, plot, mcap_out, mcap_path, ref.gt_path, scans, src.stats.anchors, offset, tf_odom)
         summary = summary.with_out_dir(stage.commit())
     return summary
+
+
+def logged_tf_odometry(src: Input) -> tuple[np.ndarray, np.ndarray] | None:
+    """The log's tf odom → base poses (stamps, poses) when the run read its odometry from another source
+    (a nav_msgs/Odometry topic) though the tf carries odom → base too: the results MCAP's map → odom is
+    built on them, as a viewer chains it with the log's tf (RosLogReader.tf_odometry_poses); else None."""
+    if not src.odom_on_tf or src.info.odom_source.startswith("tf"):
+        return None
+    read = getattr(src.reader, "tf_odometry_poses", None)
+    return read() if read is not None else None
 
 
 def warn_second_parent(src: Input) -> None:
@@ -141,12 +154,13 @@ def write_extras(
     scans: ScanStore | None = None,
     anchors: Sequence[tuple[float, tuple[float, float, float]]] = (),
     clock_offset: int = 0,
+    tf_odometry: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> None:
     """What a run writes besides its tables, staged before the commit: with ``plot`` the figures and
     report.html; the results MCAP into ``mcap_path``, the staged place of ``mcap_out``, with the
-    run's ``scans``, its odometry's re-anchorings (``anchors``: SyncStats's) and its log times
-    ``clock_offset`` ns ahead of the stamps (:func:`recorder_clock`). Both draw the ``ground_truth``
-    file the run was scored against."""
+    run's ``scans``, its odometry's re-anchorings (``anchors``: SyncStats's), its log times
+    ``clock_offset`` ns ahead of the stamps (:func:`recorder_clock`) and the log's ``tf_odometry``
+    (:func:`logged_tf_odometry`). Both draw the ``ground_truth`` file the run was scored against."""
     if plot:
         from .report.html import write_report
         from .report.plots import plot_run
@@ -160,7 +174,7 @@ def write_extras(
             raise OutputError(f"--mcap-out '{mcap_out}' is a file of the run itself", "give another name")
         with output_errors(mcap_out):
             write_results_mcap(
-                stage.path, mcap_path, stage.target, ground_truth, scans, anchors, clock_offset
+                stage.path, mcap_path, stage.target, ground_truth, scans, anchors, clock_offset, tf_odometry
             )
 
 

@@ -9,6 +9,7 @@ import dataclasses
 import logging
 import math
 
+import numpy as np
 import pytest
 from _log_fixtures import make_odoms, make_scans, write_messages_mcap
 
@@ -414,3 +415,45 @@ def test_tf_odometry_in_a_robots_prefixed_frames_is_found(tmp_path, shared):
         path, scan_topic="/robot2/scan", odom_frame="robot2/odom", base_frame="robot2/base_link"
     )
     assert [o.theta for o in by_hand.messages() if not hasattr(o, "ranges")] == [o.theta for o in odoms]
+
+
+def test_the_tfs_odometry_poses_are_read_beside_an_odometry_topic(tmp_path):
+    """A log with /odom and an odom → base_link on /tf (an EKF's, beside the wheels'): the results MCAP's
+    map → odom is built on the tf's poses (a ROS-user probe: on /odom's, the robot was drawn 0.6 m off its
+    corrected pose by a viewer chaining the log's tf). The reader gives them in stamp order, the robot's
+    only (another robot's tf and static transforms left out)."""
+    msgs = (
+        scans("/scan")
+        + odometry("/odom")
+        + tf_odometry("/tf")[::-1]
+        + [tf("/tf_static", "base_link", "laser", 0.0)]
+    )
+    msgs += [tf("/robot2/tf", "odom", "base_link", 1.0, T0 + 0.05)]  # another robot's: not read
+    log = open_log(write(tmp_path / "both.mcap", msgs))
+    assert log.info().odom_source == "nav_msgs/Odometry"
+    stamps, poses = log.tf_odometry_poses()
+    assert stamps == pytest.approx([T0 + 0.1 * i for i in range(6)])
+    assert poses == pytest.approx(np.array([[0.2, 0.0, 0.03 * i] for i in range(6)]))
+    alone = open_log(write(tmp_path / "odom.mcap", scans("/scan") + odometry("/odom")))
+    assert alone.tf_odometry_poses() is None
+
+
+def test_map_to_odom_is_built_on_the_logs_tf_odometry_inside_its_span(caplog):
+    """report.mcap_out.on_logged_tf: inside the tf's span the run's odometry poses are replaced by the tf's,
+    interpolated (hand-computed), outside kept; warned when they differ by more than TF_DIFFERS."""
+    from cornerslam_cli.report.mcap_out import TF_DIFFERS, on_logged_tf
+
+    odom = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.1], [2.0, 0.0, 0.2], [3.0, 0.0, 0.3]])
+    stamps = np.array([0.0, 1.0, 2.0, 3.0])
+    tf_stamps, tf_poses = np.array([0.5, 2.5]), np.array([[0.5, 1.0, 0.0], [2.5, 1.0, 0.4]])
+    with caplog.at_level(logging.WARNING, logger="cornerslam"):
+        out = on_logged_tf(odom, stamps, tf_stamps, tf_poses)
+    assert out == pytest.approx(
+        np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 0.1], [2.0, 1.0, 0.3], [3.0, 0.0, 0.3]])
+    )
+    assert "differs from the odometry the run used by up to 1.00 m" in caplog.text
+    caplog.clear()
+    near = tf_poses - [0.0, 1.0 - TF_DIFFERS / 2, 0.0]
+    with caplog.at_level(logging.WARNING, logger="cornerslam"):
+        on_logged_tf(odom, stamps, tf_stamps, near)
+    assert not caplog.text

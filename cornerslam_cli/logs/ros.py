@@ -918,6 +918,31 @@ class RosLogReader:
                 return frame
         return ""
 
+    def tf_odometry_poses(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The tf's odom_frame → base_frame poses on the scans' robot's tf topics, as (stamps (n,), poses
+        (n, 3)) in stamp order: what a viewer chains with a results MCAP's map → odom, which need not be the
+        Odometry topic a run read (a ROS-user probe: raw wheel odometry on /odom, an EKF's on tf, the
+        robot shown 0.6 m off its corrected pose). None when the tf has none."""
+        self.laser_to_base()  # (base_frame resolved)
+        topics = {t for t in self._robot_tf_topics() if not is_static(t)}
+        topics = {t for t in topics if self._encoding_problem(t) is None}
+        decs = {t: self._decoder(t) for t in topics}
+        rows = []
+        for topic, _, data in self.source.raw_messages(topics):
+            try:
+                for parent, child, (sec, nsec), t, q in decs[topic].transforms(data):
+                    if parent == self.odom_frame and child == self.base_frame and any(q):
+                        with np.errstate(invalid="ignore", over="ignore"):
+                            rows.append((sec + nsec * 1e-9, *pose2_from_matrix(transform_matrix(t, q))))
+            except Exception:  # noqa: BLE001 - bad bytes were counted when the run read them
+                continue
+        v = np.array(rows, dtype=float).reshape(-1, 4)
+        v = v[np.all(np.isfinite(v), axis=1)]
+        if not len(v):
+            return None
+        v = v[np.argsort(v[:, 0], kind="stable")]
+        return v[:, 0], v[:, 1:]
+
     def odom_tf_problem(self) -> tuple[tuple[str, str], bool] | None:
         """When odometry is read from tf and :meth:`laser_to_base` saw no odom_frame→base_frame
         transform: ((problem, hint) as ``messages()`` would raise them at the end of the log, whether

@@ -24,7 +24,9 @@ topic                                  schema                     messages
 ``/cornerslam/ground_truth_path``      foxglove.PosesInFrame      one, only with ground truth (SE(2)-
                                                                   aligned like the ATE)
 ``/cornerslam/tf``                     foxglove.FrameTransform    one per step: ``map`` → odom frame
-                                                                  (corrected ∘ the odometry as logged⁻¹)
+                                                                  (corrected ∘ the odometry as logged⁻¹;
+                                                                  the log's tf odom → base when it has
+                                                                  one beside the Odometry topic read)
 ``/cornerslam/odom_tf``                foxglove.FrameTransform    one per step, only when the log has no
                                                                   tf odom → base: odom → base frame
                                                                   from the log's odometry
@@ -60,6 +62,7 @@ from __future__ import annotations
 import base64
 import csv
 import json
+import logging
 from collections.abc import Sequence
 from decimal import Decimal
 from pathlib import Path
@@ -67,11 +70,13 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import display_path
-from ..geometry import compose, compose_inverse, inverse
+from ..geometry import compose, compose_inverse, interpolate, inverse
 from .occupancy import FREE, OCCUPIED, UNKNOWN, Grid, ScanStore, read_grid
 from .ownership import RESULTS_MCAP_LIBRARY
 from .run_dir import ELLIPSE_SIGMA, ellipse_polygons, load_run
 from .tables import json_text
+
+log = logging.getLogger("cornerslam.run")
 
 MAP_FRAME = "map"
 TOPICS = {
@@ -315,6 +320,7 @@ def write_results_mcap(
     scans: ScanStore | None = None,
     anchors: Sequence[tuple[float, tuple[float, float, float]]] = (),
     clock_offset: int = 0,
+    tf_odometry: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Path:
     """Write a run directory's trajectory, landmarks and segment map to ``path`` (MCAP, JSON + Foxglove
     schemas); returns ``path``. See the module docstring for the topics. ``results`` is the name of
@@ -323,7 +329,9 @@ def write_results_mcap(
     ``scans`` the run's scans, one per step (occupancy.ScanStore), published on ``/cornerslam/scan``;
     ``anchors`` the run's re-anchorings of its odometry (logs/sync.py SyncStats), taken back out of it;
     ``clock_offset`` [ns] added to every log and publish time (the log's recorder clock, ahead of the
-    stamps: pipeline.recorder_clock), not to the messages' own timestamps."""
+    stamps: pipeline.recorder_clock), not to the messages' own timestamps. ``tf_odometry``: the log's tf
+    odom → base (stamps, poses) where the run read another odometry: map → odom is built on it at the
+    steps inside its span, so that the log's own tf places the robot at its corrected pose."""
     from mcap.writer import Writer
 
     out_dir, path = Path(out_dir), Path(path)
@@ -333,6 +341,8 @@ def write_results_mcap(
     ns_of_step = dict(zip(run.steps.astype(int).tolist(), stamps_ns, strict=True))
     # odom-frame poses as logged, for the map → odom transform
     odom_raw = as_logged(read_odom(out_dir), [float(t) for t in stamp_texts], anchors)
+    if tf_odometry is not None:
+        odom_raw = on_logged_tf(odom_raw, np.array([float(t) for t in stamp_texts]), *tf_odometry)
     inp = run.summary.config.get("input", {})  # the run's config
     # the frame the odometry gave the poses in (a nav_msgs/Odometry's frame_id), else the config's
     odom_frame = run.summary.input.odom_frame or str(inp.get("odom_frame") or "odom")
@@ -412,6 +422,30 @@ def as_logged(odom: np.ndarray, stamps: Sequence[float], anchors: Sequence) -> n
     k = np.searchsorted(at, np.asarray(stamps, dtype=float), side="right") - 1  # the anchor in effect
     fix = np.vstack((np.zeros(3), np.array([a[1] for a in anchors])))[k + 1]
     return compose(inverse(fix), odom)
+
+
+TF_DIFFERS = 0.05  # m: the log's tf odometry this far from the run's is another estimate, warned of
+
+
+def on_logged_tf(
+    odom: np.ndarray, stamps: np.ndarray, tf_stamps: np.ndarray, tf_poses: np.ndarray
+) -> np.ndarray:
+    """The odometry poses ``odom`` at ``stamps`` replaced, inside the tf's span, by the log's tf odom → base
+    (``tf_stamps``, ``tf_poses``) interpolated there; warned when the two differ by over TF_DIFFERS (the
+    tf another estimate of the robot's motion: an EKF's beside the wheels' /odom)."""
+    inside = (stamps >= tf_stamps[0]) & (stamps <= tf_stamps[-1])
+    if not inside.any():
+        return odom
+    out = odom.copy()
+    out[inside] = interpolate(tf_stamps, tf_poses, stamps[inside])
+    off = float(np.max(np.hypot(*(out[inside, :2] - odom[inside, :2]).T)))
+    if off > TF_DIFFERS:
+        log.warning(
+            "the log's tf odom → base differs from the odometry the run used by up to %.2f m: the results "
+            "MCAP's map → odom is built on the tf's, so the log's own tf places the robot at its corrected "
+            "pose", off,
+        )  # fmt: skip
+    return out
 
 
 def read_odom(out_dir: Path) -> np.ndarray:
