@@ -31,7 +31,7 @@ from .logs import ReadStats, open_log
 from .logs.deskew import deskew
 from .logs.keyframes import select_keyframes
 from .logs.order import in_stamp_order
-from .logs.sync import Synced, SyncStats, clocks_hint, reanchor_odometry, synchronise
+from .logs.sync import Synced, SyncStats, clocks_hint, reanchor_odometry, spans_apart, synchronise
 from .logs.unreadable import damaged_error, no_scan_read, raise_if_undecoded
 from .motion import ScanMatcher
 from .motion.fusion import BiasTaken, OdometryFusion
@@ -274,6 +274,8 @@ def check_processed(src: Input, n_frames: int, n_points: int) -> None:
         if clocks := stats.other_clocks():
             raise LogError(f"log '{src.path}': no scan could be processed: {clocks}", clocks_hint(stats))
         skipped = f"; skipped: {why}" if (why := stats.skipped_why()) else ""
+        if apart := spans_apart(stats):
+            skipped += f"; {apart}"
         raise LogError(
             f"log '{src.path}': no scan could be processed ({stats.scans_in} scans read{skipped})",
             f"check that the scan and odometry topics overlap in time and that their {stamps} increase",

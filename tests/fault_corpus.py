@@ -757,7 +757,13 @@ def _input_faults_ii(d: Path, add: Callable[[str, Path, Expected], None]) -> Non
         Expected(
             "exit 2: no scan within the odometry's time span; the counts say why",
             2,
-            ("odom_clock.mcap", "no scan could be processed", f"{N} after the last odometry sample"),
+            (
+                "odom_clock.mcap",
+                "no scan could be processed",
+                f"{N} after the last odometry sample",
+                "and the odometry",
+                "s apart)",
+            ),  # (the two spans, which do not overlap)
         ),
     )
 

@@ -144,6 +144,17 @@ class SyncStats:
         )
 
 
+def spans_apart(stats: SyncStats) -> str:
+    """The scans' and the odometry's spans, when they do not overlap at all (a run that processed no scan
+    says why: "501 before the first odometry sample" did not say the odometry was stamped 1000 s earlier,
+    a probe); else ""."""
+    s, o = stats.scan_stamps, stats.odom_stamps
+    apart = max(o.lo - s.hi, s.lo - o.hi)
+    if not 0.0 < apart < np.inf:
+        return ""
+    return f"the scans are stamped {s.text()} and the odometry {o.text()}, {apart:.4g} s apart"
+
+
 def clocks_hint(stats: SyncStats) -> str:
     """What to check when :meth:`SyncStats.other_clocks` says why no scan met the odometry."""
     if stats.unstamped_scans():
