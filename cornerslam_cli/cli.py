@@ -291,6 +291,7 @@ def run(
 
     setup_logging(verbose, quiet)
     names = parse_assocs(assoc, allow_many=False, log_path=log_path)
+    check_mcap_name(mcap_out)
     check_time_offset(relations, time_offset)
     ground_truth = chosen_ground_truth(ground_truth, no_ground_truth)
     span = parse_span(start, end, max_scans)
@@ -474,6 +475,20 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
         raise LogError(*odom_tf[0])
     if odom_tf:  # the first 2,000 messages after the first scan only: likely, not certain
         reader.stats.warn("%s in the first 2,000 messages after the first scan (%s)", *odom_tf[0])
+
+
+OTHER_FORMATS = {".bag": "a ROS 1 bag", ".db3": "a ROS 2 bag's storage", ".json": "JSON", ".csv": "CSV"}
+
+
+def check_mcap_name(mcap_out: str | None) -> None:
+    """``--mcap-out`` writes MCAP: a name whose suffix says another format (``res.bag``) is refused — an
+    MCAP behind a .bag name fails in every tool that opens it by its name (a ROS-user probe)."""
+    suffix = Path(mcap_out).suffix.lower() if mcap_out else ""
+    if suffix in OTHER_FORMATS:
+        raise click.UsageError(
+            f"--mcap-out '{mcap_out}' names {OTHER_FORMATS[suffix]}, but it is written as MCAP: name it "
+            f"{Path(mcap_out).stem}.mcap"
+        )
 
 
 RESULTS_MCAP_NOTE = (

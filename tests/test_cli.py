@@ -101,6 +101,12 @@ def test_run_plot_and_mcap_out(sim_log, tmp_path):
     for name in ("map.png", "segments.png", "timing.png", "corners.png", "report.html"):
         assert (out / name).stat().st_size > 1000, name
     assert mc.read_bytes()[:8] == b"\x89MCAP0\r\n"
+    # a name of another format: refused before any work (a probe: an MCAP written as res.bag)
+    res = invoke("run", sim_log, "--out", tmp_path / "o2", "--mcap-out", tmp_path / "res.BAG", "-q")
+    assert (
+        res.exit_code == 2 and "names a ROS 1 bag, but it is written as MCAP: name it res.mcap" in res.stderr
+    )
+    assert not (tmp_path / "o2").exists() and not (tmp_path / "res.BAG").exists()
 
 
 def test_evaluate_reports_ate(sim_log, tmp_path):
