@@ -617,3 +617,12 @@ def test_a_laser_frame_named_unlike_the_tfs_is_hinted_at(tmp_path):
         "has no tf base_link→laser_link (its tf has 'laser': the scans' frame_id 'laser_link' misnamed?)"
         in res.stderr
     )
+
+
+def test_alike_frames_take_a_prefix_too():
+    """Scans in 'base_laser', the tf's 'laser': no hint was given (a ROS-user probe); a prefix is alike."""
+    from cornerslam_cli.logs.ros import _alike_frames
+
+    assert _alike_frames("base_laser", "laser") and _alike_frames("laser", "laser_link")
+    assert _alike_frames("/robot1/front_laser", "laser")
+    assert not _alike_frames("laser", "laser") and not _alike_frames("laserscan", "laser")

@@ -220,10 +220,11 @@ class _OdomSel:
 
 
 def _alike_frames(a: str, b: str) -> bool:
-    """Whether two tf frames are named alike: one the other with a suffix (``laser``, ``laser_link``,
-    ``laser_frame``), the namespace aside."""
+    """Whether two tf frames are named alike: one the other with a suffix or a prefix (``laser``,
+    ``laser_link``, ``laser_frame``, ``base_laser``: a probe's scans in base_laser, the tf's laser), the
+    namespace aside."""
     a, b = a.rsplit("/", 1)[-1], b.rsplit("/", 1)[-1]
-    return a != b and (a.startswith(b + "_") or b.startswith(a + "_"))
+    return a != b and any(x.startswith(y + "_") or x.endswith("_" + y) for x, y in ((a, b), (b, a)))
 
 
 def _median_offset(stamps: list[int], log_times: list[int]) -> int | None:
