@@ -5,9 +5,8 @@ from __future__ import annotations
 
 import heapq
 import logging
+import math
 from collections.abc import Iterable, Iterator
-
-import numpy as np
 
 from ..types import OdomSample, Scan
 
@@ -32,9 +31,9 @@ def in_stamp_order(
     synchronise has always judged them. Equal stamps keep the log's order; a stamp that is not finite is
     passed on as it comes."""
     heap: list = []
-    newest, seq, moved, kind_newest = -np.inf, 0, [0, 0], [-np.inf, -np.inf]
+    newest, seq, moved, kind_newest = -math.inf, 0, [0, 0], [-math.inf, -math.inf]
     for msg in messages:
-        if not np.isfinite(msg.stamp):
+        if not math.isfinite(msg.stamp):
             yield msg
             continue
         if msg.stamp < newest - window:
