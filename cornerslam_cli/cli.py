@@ -26,6 +26,7 @@ from .blas import single_threaded_blas
 single_threaded_blas()  # before numpy is first imported (blas.py says why)
 
 import click  # noqa: E402
+from click.core import ParameterSource  # noqa: E402
 
 from . import __version__  # noqa: E402
 from .errors import (  # noqa: E402
@@ -564,15 +565,17 @@ def evaluate(out_dir, ground_truth, relations, time_offset, correct_scale, verbo
     check_one_run(out_dir)  # a compare or batch directory: names its run directories
     if not ground_truth and not relations:  # what the run was scored against, where the files still hold it
         rec = recorded_reference(out_dir)
-        ground_truth, relations, time_offset = rec.ground_truth, rec.relations, rec.time_offset
+        given = click.get_current_context().get_parameter_source("time_offset") != ParameterSource.DEFAULT
+        ground_truth, relations = rec.ground_truth, rec.relations
+        time_offset = time_offset if given else rec.time_offset  # (one given is used: a review)
         why = f" ({'; '.join(rec.why_not)})" if rec.why_not else ""
         if not ground_truth and not relations:
             raise click.UsageError(f"give --ground-truth FILE.tum or --relations FILE{why}")
         if ground_truth:
             log.info("ground truth: %s, as the run's summary.json names it", ground_truth)
         if relations:
-            log.info("relations: %s at --time-offset %r, as the run's summary.json names them", relations,
-                     time_offset)  # fmt: skip
+            log.info("relations: %s at --time-offset %r, as %s", relations, time_offset,
+                     "given" if given else "the run's summary.json names them")  # fmt: skip
         if rec.why_not:
             log.info("not scored against%s", why)
     if correct_scale and not ground_truth:

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from .config import Config
-from .errors import ConfigError
+from .errors import ConfigError, LogError
 from .features import extract
 from .logs import open_log
 from .logs.unreadable import no_scan_read
@@ -32,11 +32,14 @@ def extract_step(
     when the log has no such scan, naming the valid range; LogError when it yields no scan at all
     (every chunk corrupt, every scan undecodable: there is no range to name)."""
     inp = cfg.input
-    with open_log(
-        Path(log_path), scan_topic=inp.scan_topic, odom_topic=inp.odom_topic, scan_frame=inp.scan_frame
-    ) as reader:
+    frames = {"odom_frame": inp.odom_frame, "base_frame": inp.base_frame, "scan_frame": inp.scan_frame}
+    with open_log(Path(log_path), scan_topic=inp.scan_topic, odom_topic=inp.odom_topic, **frames) as reader:
         if inp.odom_topic:  # given though not needed: a wrong one is refused as run refuses it
             reader.check()
+        if hasattr(reader, "scan_frame") and not _odometry_problem(reader):
+            # the tf read as a run reads it, so that the scans a run leaves out (another laser on the
+            # topic, mounted elsewhere) are left out here too and '#N' is the same scan (a review)
+            reader.laser_to_base()
         n, first, last = 0, None, None
         scans = reader.scans() if prepare is None else prepare(reader)
         for scan in scans:  # odometry is not needed for one scan's features
@@ -53,3 +56,13 @@ def extract_step(
             "give a stamp from a run's trajectory.csv stamp column, or --step N",
         )
     raise ConfigError(f"--step {step} is past the end of '{log_path}' ({n} scans)", f"use 0..{n - 1}")
+
+
+def _odometry_problem(reader: Any) -> bool:
+    """Whether a run would refuse ``reader``'s topics (no odometry: extract needs none, and then reads no
+    tf either — every scan of the topic is extracted)."""
+    try:
+        reader.check()
+    except LogError:
+        return True
+    return False

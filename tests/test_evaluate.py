@@ -572,6 +572,8 @@ def test_evaluate_without_a_reference_uses_the_runs_and_says_what_it_scored(sim_
     )
     alone = evaluate(out)
     assert alone.exit_code == 0 and alone.stdout == given.stdout and alone.stderr == ""
+    shifted = evaluate(out, "--time-offset", "5")  # no relations to shift: refused, as before (a review)
+    assert shifted.exit_code == 2 and "--time-offset shifts the times of --relations" in shifted.stderr
     kept = gt.read_text()
     rewrite(gt, lambda rows: rows[:-1])  # one pose fewer: not the poses the run was scored against
     changed = evaluate(out)  # (another file of that name, or this one edited: not taken for the run's)
@@ -768,6 +770,10 @@ def test_evaluate_without_a_reference_scores_against_the_runs_relations_at_its_t
     again = evaluate(out, "--relations", str(rel), "--time-offset", str(offset))
     assert again.exit_code == 0 and res.stdout == again.stdout
     assert f"{acc.relations.trans_mean:.3f}" in res.stdout and f"{len(pairs)}" in res.stdout
+    # a --time-offset given is used with them, not replaced by the recorded one (a review)
+    other = evaluate(out, "--time-offset", str(offset + 5))
+    explicit = evaluate(out, "--relations", str(rel), "--time-offset", str(offset + 5))
+    assert other.exit_code == 0 and other.stdout == explicit.stdout != res.stdout
     rel.write_text(rel.read_text().replace(f"{t[0] + offset}", f"{t[1] + offset}", 1))  # one relation moved
     res = evaluate(out)
     assert res.exit_code == 2

@@ -374,11 +374,7 @@ def test_a_second_laser_on_the_scan_topic_mounted_elsewhere_is_left_out(tmp_path
         return
     used, other = ("laser_b", "laser") if scan_frame else ("laser", "laser_b")
     assert frames == [used] * 3
-    why = (
-        "input.scan_frame chose it"
-        if scan_frame
-        else "another laser: the tf mounts it elsewhere, or not at all"
-    )
+    why = "input.scan_frame chose it" if scan_frame else "another laser: the tf mounts it elsewhere"
     assert log.stats.warnings == [
         f"two.mcap: 3 scans on '/scan' of frame '{other}' left out, only those of '{used}' used ({why}): "
         f"--set input.scan_frame={other} to map with that laser's instead"
@@ -415,6 +411,37 @@ def test_tf_odometry_in_a_robots_prefixed_frames_is_found(tmp_path, shared):
         path, scan_topic="/robot2/scan", odom_frame="robot2/odom", base_frame="robot2/base_link"
     )
     assert [o.theta for o in by_hand.messages() if not hasattr(o, "ranges")] == [o.theta for o in odoms]
+
+
+def test_a_laser_renamed_mid_log_whose_mount_comes_later_on_tf_is_kept(tmp_path):
+    """The tf read for the mount stops once the first laser is linked: a renamed laser whose mount comes
+    later on /tf was taken for another laser and half the log left out (a review). A frame not on the tf
+    read is unknown, kept (warned); extract leaves out what run leaves out, so '#N' is one scan."""
+    from dataclasses import replace
+
+    from cornerslam_cli.config import load_config
+    from cornerslam_cli.extract import extract_step
+
+    raw = [replace(s, frame_id="laser_b") if i >= 3 else s for i, s in enumerate(make_scans(6))]
+    msgs = [("/scan", "sensor_msgs/msg/LaserScan", int(s.stamp * 1e9), ROS.laserscan(s)) for s in raw]
+    msgs += tf_odometry("/tf") + [
+        tf("/tf", "base_link", "laser", 0.0, T0),
+        tf("/tf", "base_link", "laser_b", 0.0, T0 + 0.45),
+    ]
+    log = open_log(write(tmp_path / "renamed.mcap", msgs))
+    log.laser_to_base()
+    assert [m.frame_id for m in log.messages() if hasattr(m, "ranges")] == ["laser"] * 3 + ["laser_b"] * 3
+    assert "two lasers on one topic, or a driver restarted with another frame_id" in log.stats.warnings[0]
+    # two lasers alternating, mounted apart on /tf_static: extract's '#1' is run's second scan of 'laser'
+    raw = [replace(s, frame_id="laser_b") if i % 2 else s for i, s in enumerate(make_scans(6))]
+    msgs = [("/scan", "sensor_msgs/msg/LaserScan", int(s.stamp * 1e9), ROS.laserscan(s)) for s in raw]
+    msgs += odometry("/odom") + [
+        tf("/tf_static", "base_link", "laser", 0.0),
+        tf("/tf_static", "base_link", "laser_b", 1.5),
+    ]
+    apart = write(tmp_path / "apart.mcap", msgs)
+    n, scan, _, _ = extract_step(apart, 1, load_config(None, []))
+    assert (n, scan.stamp, scan.frame_id) == (1, raw[2].stamp, "laser")
 
 
 def test_the_tfs_odometry_poses_are_read_beside_an_odometry_topic(tmp_path):

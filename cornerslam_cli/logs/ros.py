@@ -1048,43 +1048,47 @@ class RosLogReader:
     def _use_frame(self, seen: dict[str, bool], frame: str, topic: str) -> bool:
         """Whether a scan of ``frame`` is used (``seen``: the frames so far, used or not). With
         ``input.scan_frame`` only its scans; else the first scan's frame's and those of any frame the tf
-        mounts as that laser (a driver restarted with another frame_id). Another laser on the same topic
-        — a frame the tf mounts elsewhere, or not at all while it mounts the first — is left out: every
-        scan placed with the first laser's mount made the map of two lasers a mess (a ROS-user probe: ATE
-        3.4 m against 0.03, worse than the odometry, with a warning). Where the tf mounts neither (or it
-        has not been read: ``extract``'s scans), every scan is used, placed with the first's mount, warned."""
+        does not mount elsewhere. Another laser on the same topic — a frame the tf mounts elsewhere — is
+        left out: every scan placed with the first laser's mount made the map of two lasers a mess (a
+        ROS-user probe: ATE 3.4 m against 0.03, worse than the odometry, with a warning). A frame the tf
+        mounts alike is one laser renamed; where the tf read does not mount it (or the first), every scan
+        is used, placed with the first's mount, warned."""
         if frame in seen:
             return seen[frame]
         if self.scan_frame or not seen:
             use = not self.scan_frame or frame == self.scan_frame
         else:
             first = self.laser_frame or next(iter(seen))
-            use = self._mounted_alike(frame)
+            mount = self._other_mount(frame)
+            use = mount != "elsewhere"
             if use:
-                alike = self._laser2base not in (None, False)  # (the tf mounts both alike)
                 self.stats.warn(
                     "%s: scans on '%s' come from frame '%s' besides '%s' (%s): every scan is placed with the "
                     "mount of '%s'",
                     self.path.name, short_text(topic), short_text(frame), short_text(first),
-                    "the tf mounts both alike: one laser renamed" if alike else
+                    "the tf mounts both alike: one laser renamed" if mount == "alike" else
                     "two lasers on one topic, or a driver restarted with another frame_id", short_text(first),
                 )  # fmt: skip
         seen[frame] = use
         return use
 
-    def _mounted_alike(self, frame: str) -> bool:
-        """``frame`` is mounted as the laser's (within MOUNT_SAME), or nothing tells (the laser's mount
-        not from the tf, or the tf not read)."""
+    def _other_mount(self, frame: str) -> str:
+        """How the tf read mounts ``frame`` against the laser's: ``alike`` (within MOUNT_SAME, upside down
+        alike), ``elsewhere``, or ``unknown`` — the laser's mount not from the tf, the tf not read, or
+        ``frame`` not on the part of it read (:meth:`laser_to_base` stops once the laser is linked: a
+        renamed laser's mount may come later on /tf — a review: half a log was left out for it)."""
         if self._laser2base in (None, False):
-            return True
+            return "unknown"
         with np.errstate(invalid="ignore", over="ignore"):
             T = chain_transform(self._tf_edges, self.base_frame, frame)
-        if T is None or (T[2, 2] < 0.0) != self._laser_upside_down:
-            return False
+        if T is None:
+            return "unknown"
+        if (T[2, 2] < 0.0) != self._laser_upside_down:
+            return "elsewhere"
         other = pose2_from_matrix(T)
         off = [abs(a - b) for a, b in zip(other[:2], self._laser2base[:2], strict=True)]  # type: ignore[index]
         off.append(abs(math.remainder(other[2] - self._laser2base[2], math.tau)))  # type: ignore[index]
-        return max(off) <= MOUNT_SAME
+        return "alike" if max(off) <= MOUNT_SAME else "elsewhere"
 
     def _warn_left_out(self, left_out: dict[str, int], topic: str) -> None:
         """Say which scans :meth:`_use_frame` left out, how many, and how to use them instead."""
@@ -1094,11 +1098,7 @@ class RosLogReader:
         n = sum(left_out.values())
         frames = ", ".join(f"'{short_text(f)}'" + (f" ({k})" if len(left_out) > 1 else "")
                            for f, k in list(left_out.items())[:5])  # fmt: skip
-        how = (
-            "input.scan_frame chose it"
-            if self.scan_frame
-            else "another laser: the tf mounts it elsewhere, or not at all"
-        )
+        how = "input.scan_frame chose it" if self.scan_frame else "another laser: the tf mounts it elsewhere"
         other = short_text(next(iter(left_out)))
         self.stats.warn(
             "%s: %d scans on '%s' of frame %s left out, only those of '%s' used (%s): "
