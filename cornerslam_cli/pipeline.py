@@ -12,6 +12,7 @@ import logging
 import os
 import time
 from collections.abc import Callable, Iterable, Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +29,7 @@ from .report.oserrors import output_errors
 from .report.outdir import StagedDir
 from .report.ownership import is_results_mcap
 from .report.run_writer import Reference, RunWriter, ground_truth_path, load_reference
+from .report.tables import write_json
 from .results import RunSummary
 from .slam import Slam
 from .span import Span
@@ -91,7 +93,14 @@ def run(
             extras = (("the figures", plot), ("the results MCAP", mcap_path))
             finishing(" and ".join(what for what, made in extras if made))
         tf_odom = logged_tf_odometry(src) if mcap_path else None
-        write_extras(stage, plot, mcap_out, mcap_path, ref.gt_path, scans, src.stats.anchors, offset, tf_odom)
+        said = len(src.reader.stats.warnings)
+        write_extras(stage, plot, mcap_out, mcap_path, ref.gt_path, scans, src.stats.anchors, offset, tf_odom,
+                     src.reader.stats.warn)  # fmt: skip
+        if (
+            len(src.reader.stats.warnings) > said
+        ):  # the results MCAP's: summary.json keeps them too (a review)
+            summary = replace(summary, warnings=tuple(src.reader.stats.warnings))
+            write_json(stage.path / "summary.json", summary.to_json())
         summary = summary.with_out_dir(stage.commit())
     return summary
 
@@ -155,12 +164,14 @@ def write_extras(
     anchors: Sequence[tuple[float, tuple[float, float, float]]] = (),
     clock_offset: int = 0,
     tf_odometry: tuple[np.ndarray, np.ndarray] | None = None,
+    warn: Callable[..., None] = log.warning,
 ) -> None:
     """What a run writes besides its tables, staged before the commit: with ``plot`` the figures and
     report.html; the results MCAP into ``mcap_path``, the staged place of ``mcap_out``, with the
     run's ``scans``, its odometry's re-anchorings (``anchors``: SyncStats's), its log times
     ``clock_offset`` ns ahead of the stamps (:func:`recorder_clock`) and the log's ``tf_odometry``
-    (:func:`logged_tf_odometry`). Both draw the ``ground_truth`` file the run was scored against."""
+    (:func:`logged_tf_odometry`), saying what is odd with ``warn``. Both draw the ``ground_truth`` file
+    the run was scored against."""
     if plot:
         from .report.html import write_report
         from .report.plots import plot_run
@@ -174,7 +185,15 @@ def write_extras(
             raise OutputError(f"--mcap-out '{mcap_out}' is a file of the run itself", "give another name")
         with output_errors(mcap_out):
             write_results_mcap(
-                stage.path, mcap_path, stage.target, ground_truth, scans, anchors, clock_offset, tf_odometry
+                stage.path,
+                mcap_path,
+                stage.target,
+                ground_truth,
+                scans,
+                anchors,
+                clock_offset,
+                tf_odometry,
+                warn,
             )
 
 

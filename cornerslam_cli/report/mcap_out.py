@@ -63,7 +63,7 @@ import base64
 import csv
 import json
 import logging
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from decimal import Decimal
 from pathlib import Path
 
@@ -321,6 +321,7 @@ def write_results_mcap(
     anchors: Sequence[tuple[float, tuple[float, float, float]]] = (),
     clock_offset: int = 0,
     tf_odometry: tuple[np.ndarray, np.ndarray] | None = None,
+    warn: Callable[..., None] | None = None,
 ) -> Path:
     """Write a run directory's trajectory, landmarks and segment map to ``path`` (MCAP, JSON + Foxglove
     schemas); returns ``path``. See the module docstring for the topics. ``results`` is the name of
@@ -342,7 +343,7 @@ def write_results_mcap(
     # odom-frame poses as logged, for the map → odom transform
     odom_raw = as_logged(read_odom(out_dir), [float(t) for t in stamp_texts], anchors)
     if tf_odometry is not None:
-        odom_raw = on_logged_tf(odom_raw, np.array([float(t) for t in stamp_texts]), *tf_odometry)
+        odom_raw = on_logged_tf(odom_raw, np.array([float(t) for t in stamp_texts]), *tf_odometry, warn)
     inp = run.summary.config.get("input", {})  # the run's config
     # the frame the odometry gave the poses in (a nav_msgs/Odometry's frame_id), else the config's
     odom_frame = run.summary.input.odom_frame or str(inp.get("odom_frame") or "odom")
@@ -428,7 +429,11 @@ TF_DIFFERS = 0.05  # m: the log's tf odometry this far from the run's is another
 
 
 def on_logged_tf(
-    odom: np.ndarray, stamps: np.ndarray, tf_stamps: np.ndarray, tf_poses: np.ndarray
+    odom: np.ndarray,
+    stamps: np.ndarray,
+    tf_stamps: np.ndarray,
+    tf_poses: np.ndarray,
+    warn: Callable[..., None] | None = None,
 ) -> np.ndarray:
     """The odometry poses ``odom`` at ``stamps`` replaced, inside the tf's span, by the log's tf odom → base
     (``tf_stamps``, ``tf_poses``) interpolated there; warned when the two differ by over TF_DIFFERS (the
@@ -440,7 +445,7 @@ def on_logged_tf(
     out[inside] = interpolate(tf_stamps, tf_poses, stamps[inside])
     off = float(np.max(np.hypot(*(out[inside, :2] - odom[inside, :2]).T)))
     if off > TF_DIFFERS:
-        log.warning(
+        (warn or log.warning)(
             "the log's tf odom → base differs from the odometry the run used by up to %.2f m: the results "
             "MCAP's map → odom is built on the tf's, so the log's own tf places the robot at its corrected "
             "pose", off,
