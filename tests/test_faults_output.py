@@ -655,8 +655,9 @@ def mcap_out_inside_out(w: World) -> Case:
 
 @fault(2, "is a file of the run itself")
 def mcap_out_is_a_file_of_the_run(w: World) -> Case:
-    """`--mcap-out OUT/summary.json` (a file the run writes itself): refused, nothing written"""
-    mc = w.tmp / "out" / "summary.json"
+    """`--mcap-out OUT/trajectory.tum` (a file the run writes itself): refused, nothing written (a .json
+    name is refused before that: written as MCAP, it would not be JSON)"""
+    mc = w.tmp / "out" / "trajectory.tum"
     return Case(["run", w.log, "--out", w.tmp / "out", "--mcap-out", mc], mc)
 
 
