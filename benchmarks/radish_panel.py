@@ -131,7 +131,9 @@ def main() -> None:
         "time): " + relation_line(gfs),
         "",
         "The same, read from its ODOM lines (`--set input.odom_topic=ODOM`; 1,498 of 14,541 go back in "
-        "time, so dropped, and the odometry is interpolated between the rest): " + relation_line(gfs_odom),
+        "time, by up to 2,684 s: those not put back in order are dropped, the lines after a jump back too "
+        "until their stamps pass it again, and the odometry is interpolated between the rest): "
+        + relation_line(gfs_odom),
         "",
     ]
     args.out.write_text("\n".join(text))
