@@ -722,7 +722,7 @@ def _batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, g
     check_claimable(out, "batch")  # a directory that is not a batch's: refused before any work
     swept = parse_sweeps(sweeps)
     check_sweep_not_set(overrides, swept)  # the sweep is set after each --set: one would be ignored
-    combos = plan(logs, names, swept, overrides, config_path)
+    combos = plan(logs, names, swept, overrides, config_path, out)
     progress = BatchProgress(not quiet)
     if not scheduler:  # (a cluster's workers compile where they run)
         _say_compiling(quiet)

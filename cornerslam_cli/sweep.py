@@ -61,6 +61,7 @@ def plan(
     sweeps: Mapping[str, Sequence[Any]] | None = None,
     overrides: Sequence[str] = (),
     config_path: str | Path | None = None,
+    out: str | Path | None = None,
 ) -> list[Combo]:
     """Every log × associator × point of the sweep grid (the last swept key varies fastest).
 
@@ -74,7 +75,7 @@ def plan(
     retired key) is said once, not once per value and combination.
     """
     with warnings_once():
-        return _plan(logs, assocs, sweeps, overrides, config_path)
+        return _plan(logs, assocs, sweeps, overrides, config_path, out)
 
 
 def _plan(
@@ -83,6 +84,7 @@ def _plan(
     sweeps: Mapping[str, Sequence[Any]] | None,
     overrides: Sequence[str],
     config_path: str | Path | None,
+    out: str | Path | None = None,
 ) -> list[Combo]:
     from .config import load_config, parse_override, replaced_place
     from .errors import LogError
@@ -108,7 +110,7 @@ def _plan(
     for p in map(str, logs):
         first.setdefault(os.path.realpath(p), p)
     logs = list(first.values())
-    labels = _log_labels(logs)
+    labels = _log_labels(logs, _labels_in(out) if out else {})
     combos = []
     for log, assoc in itertools.product(logs, assocs):
         for values in itertools.product(*sweeps.values()):
@@ -147,21 +149,52 @@ def _short_hash(text: str) -> str:
     return hashlib.sha1(os.fsencode(text)).hexdigest()[:8]
 
 
-def _log_labels(logs: Sequence[str]) -> dict[str, str]:
-    """Log → its part of the directory name: stem, else file name, else file name + path hash."""
+def _log_labels(logs: Sequence[str], known: Mapping[str, str] | None = None) -> dict[str, str]:
+    """Log → its part of the directory name: the one an earlier batch into the same OUT gave it
+    (``known``: resolved log path → label, :func:`_labels_in`) while no other log of this batch takes it;
+    else its stem, else its file name, else file name + path hash — unique among this batch's logs.
+    Without ``known`` a log's label depended on the batch's other logs (``x`` alone, ``x.clf`` beside an
+    ``x.mcap``): a batch of other logs into the same OUT re-ran it under a new name and left the old."""
     out: dict[str, str] = {}
+    real = {log: os.path.realpath(log) for log in logs}
+    taken: set[str] = set()
+    for log in logs:  # labels an earlier batch gave, where they stay unique
+        label = (known or {}).get(real[log])
+        if label is not None and label not in taken:
+            out[log] = label
+            taken.add(label)
     tiers = [
         lambda p: _safe(Path(p).name.split(".")[0] or "log"),
         lambda p: _safe(Path(p).name or "log"),
         lambda p: _safe(Path(p).name or "log") + "-" + _short_hash(str(Path(p).resolve())),
     ]
-    for log in logs:
+    rest = [log for log in logs if log not in out]
+    for log in rest:
         for tier in tiers:
             label = tier(log)
-            if sum(tier(other) == label for other in logs) == 1 or tier is tiers[-1]:
+            unique = sum(tier(other) == label for other in rest) == 1 and label not in taken
+            if unique or tier is tiers[-1]:
                 out[log] = label
+                taken.add(label)
                 break
     return out
+
+
+def _labels_in(out: str | Path) -> dict[str, str]:
+    """The log labels the run directories of an earlier batch in ``out`` carry: resolved log path (their
+    marker's) → the directory name's first part."""
+    from .report.ownership import read_marker
+
+    found: dict[str, str] = {}
+    try:
+        dirs = sorted(d for d in Path(out).iterdir() if d.is_dir() and "__" in d.name)
+    except OSError:  # (none yet, or not readable: batch says why when it claims it)
+        return found
+    for d in dirs:
+        marker = read_marker(d)
+        if marker is not None and marker.get("kind") == "run" and isinstance(marker.get("log"), str):
+            found.setdefault(marker["log"], d.name.split("__")[0])
+    return found
 
 
 def _dir_name(log_label: str, assoc: str, sweep: tuple[tuple[str, str], ...]) -> str:

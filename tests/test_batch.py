@@ -90,6 +90,24 @@ def test_plan_names_stay_distinct_for_clashing_logs_and_unsafe_values():
     assert names[0] != names[1]
 
 
+def test_a_logs_directory_name_is_the_one_an_earlier_batch_into_out_gave_it(tmp_path, monkeypatch):
+    """A batch of x.clf alone named its runs x__pca; a later batch of x.clf and x.mcap into the same OUT
+    named them x.clf__pca and x.mcap__pca, re-ran x.clf and left x__pca behind (a probe). A log keeps the
+    name its run directories in OUT carry (their marker's log), the others taking names beside it."""
+    from cornerslam_cli.report.ownership import mark_output
+
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "out"
+    (out / "x__pca").mkdir(parents=True)
+    mark_output(out / "x__pca", "run", Path("d1/x.clf"))
+    assert [c.name for c in plan(["d1/x.clf", "d1/x.mcap"], ["pca"])] == ["x.clf__pca", "x.mcap__pca"]
+    combos = plan(["d1/x.clf", "d1/x.mcap", "d2/x.mcap"], ["pca"], out=out)
+    assert [c.name for c in combos][:1] == ["x__pca"]
+    assert len({c.name for c in combos}) == 3 and not any(c.name == "x__pca" for c in combos[1:])
+    combos = plan(["d1/x.mcap"], ["pca"], out=out)  # another log: the name as before, unclaimed
+    assert [c.name for c in combos] == ["x__pca"]  # (its run is then refused as another log's: below)
+
+
 def test_plan_runs_a_log_once_however_its_path_is_spelled(tmp_path, monkeypatch):
     """`batch x.mcap ./x.mcap $PWD/x.mcap`: one combination (they were refused as two combinations
     mapping to one directory name, blamed on sweep values)."""
