@@ -576,6 +576,8 @@ def evaluate(out_dir, ground_truth, relations, time_offset, correct_scale, verbo
         if relations:
             log.info("relations: %s at --time-offset %r, as %s", relations, time_offset,
                      "given" if given else "the run's summary.json names them")  # fmt: skip
+            if given and time_offset != rec.time_offset:  # (a mistyped offset moves the figures far)
+                log.warning("scored at --time-offset %r, not the run's %r", time_offset, rec.time_offset)
         if rec.why_not:
             log.info("not scored against%s", why)
     if correct_scale and not ground_truth:

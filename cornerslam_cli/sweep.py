@@ -156,45 +156,62 @@ def _log_labels(logs: Sequence[str], known: Mapping[str, str] | None = None) -> 
     Without ``known`` a log's label depended on the batch's other logs (``x`` alone, ``x.clf`` beside an
     ``x.mcap``): a batch of other logs into the same OUT re-ran it under a new name and left the old."""
     out: dict[str, str] = {}
-    real = {log: os.path.realpath(log) for log in logs}
     taken: set[str] = set()
     for log in logs:  # labels an earlier batch gave, where they stay unique
-        label = (known or {}).get(real[log])
+        label = (known or {}).get(os.path.realpath(log))
         if label is not None and label not in taken:
             out[log] = label
             taken.add(label)
-    tiers = [
-        lambda p: _safe(Path(p).name.split(".")[0] or "log"),
-        lambda p: _safe(Path(p).name or "log"),
-        lambda p: _safe(Path(p).name or "log") + "-" + _short_hash(str(Path(p).resolve())),
-    ]
     rest = [log for log in logs if log not in out]
     for log in rest:
-        for tier in tiers:
+        for tier in _TIERS:
             label = tier(log)
             unique = sum(tier(other) == label for other in rest) == 1 and label not in taken
-            if unique or tier is tiers[-1]:
+            if unique or tier is _TIERS[-1]:
                 out[log] = label
                 taken.add(label)
                 break
     return out
 
 
+_TIERS = [  # a log's label, from the shortest (stem) to one no other path shares (file name + path hash)
+    lambda p: _safe(Path(p).name.split(".")[0] or "log"),
+    lambda p: _safe(Path(p).name or "log"),
+    lambda p: _safe(Path(p).name or "log") + "-" + _short_hash(str(Path(p).resolve())),
+]
+
+
 def _labels_in(out: str | Path) -> dict[str, str]:
     """The log labels the run directories of an earlier batch in ``out`` carry: resolved log path (their
-    marker's) → the directory name's first part."""
+    marker's) → the label. A directory's label is the one of its log's possible labels (:data:`_TIERS`)
+    that its name starts with (a label may itself hold ``__``: ``run (1).mcap`` is ``run__1_``); a log
+    with directories under several labels keeps the one with most; a label two logs' directories carry
+    is no one's (a review: it had one log resume and the other fail as another's)."""
     from .report.ownership import read_marker
 
-    found: dict[str, str] = {}
+    per_log: dict[str, dict[str, int]] = {}
     try:
         dirs = sorted(d for d in Path(out).iterdir() if d.is_dir() and "__" in d.name)
     except OSError:  # (none yet, or not readable: batch says why when it claims it)
-        return found
+        return {}
     for d in dirs:
         marker = read_marker(d)
-        if marker is not None and marker.get("kind") == "run" and isinstance(marker.get("log"), str):
-            found.setdefault(marker["log"], d.name.split("__")[0])
-    return found
+        if marker is None or marker.get("kind") != "run" or not isinstance(marker.get("log"), str):
+            continue
+        log = marker["log"]
+        fits = [t(log) for t in _TIERS if d.name.startswith(t(log) + "__")]
+        if fits:
+            label = max(fits, key=len)
+            per_log.setdefault(log, {})[label] = per_log.get(log, {}).get(label, 0) + 1
+    owners: dict[str, int] = {}
+    for labels in per_log.values():
+        for label in labels:
+            owners[label] = owners.get(label, 0) + 1
+    return {
+        log: label
+        for log, labels in per_log.items()
+        if owners[label := max(labels, key=lambda k: (labels[k], -len(k)))] == 1
+    }
 
 
 def _dir_name(log_label: str, assoc: str, sweep: tuple[tuple[str, str], ...]) -> str:

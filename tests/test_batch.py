@@ -106,6 +106,16 @@ def test_a_logs_directory_name_is_the_one_an_earlier_batch_into_out_gave_it(tmp_
     assert len({c.name for c in combos}) == 3 and not any(c.name == "x__pca" for c in combos[1:])
     combos = plan(["d1/x.mcap"], ["pca"], out=out)  # another log: the name as before, unclaimed
     assert [c.name for c in combos] == ["x__pca"]  # (its run is then refused as another log's: below)
+    # a label holding '__' ('run (1).mcap': run__1_) is read back whole, not cut at its first '__' (a
+    # review: the same batch re-ran it into run__pca each time)
+    (out / "run__1___pca").mkdir()
+    mark_output(out / "run__1___pca", "run", Path("d1/run (1).mcap"))
+    assert [c.name for c in plan(["d1/run (1).mcap"], ["pca"], out=out)] == ["run__1___pca"]
+    # a label two logs' directories carry is neither's (one resumed, the other failed as another's)
+    (out / "x__icnn").mkdir()
+    mark_output(out / "x__icnn", "run", Path("d2/x.clf"))
+    names = [c.name for c in plan(["d1/x.clf", "d2/x.clf"], ["pca", "icnn"], out=out)]
+    assert not {"x__pca", "x__icnn"} & set(names) and len(set(names)) == 4
 
 
 def test_plan_runs_a_log_once_however_its_path_is_spelled(tmp_path, monkeypatch):

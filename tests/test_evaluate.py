@@ -774,6 +774,13 @@ def test_evaluate_without_a_reference_scores_against_the_runs_relations_at_its_t
     other = evaluate(out, "--time-offset", str(offset + 5))
     explicit = evaluate(out, "--relations", str(rel), "--time-offset", str(offset + 5))
     assert other.exit_code == 0 and other.stdout == explicit.stdout != res.stdout
+    moved_away = rel.rename(rel.with_suffix(".away"))  # not found from here, with a ground truth beside:
+    (tmp_path / "sim.gt.tum").write_bytes(sim_log.with_suffix(".gt.tum").read_bytes())  # (not the run's)
+    from cornerslam_cli.report.run_dir import recorded_reference
+
+    rec = recorded_reference(out)  # its offset is not kept without the relations (a review: it was
+    assert rec.relations is None and rec.time_offset == 0.0  # refused as a --time-offset without them)
+    moved_away.rename(rel)
     rel.write_text(rel.read_text().replace(f"{t[0] + offset}", f"{t[1] + offset}", 1))  # one relation moved
     res = evaluate(out)
     assert res.exit_code == 2

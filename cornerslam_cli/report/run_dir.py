@@ -145,7 +145,7 @@ def recorded_reference(path: str | Path) -> Recorded:
         rel = None
         why.append(f"the run was scored against the relations '{acc.relations_file}' at a --time-offset "
                    "its summary.json does not keep (an older version's run)")  # fmt: skip
-    return Recorded(gt, rel, offset or 0.0, tuple(why))
+    return Recorded(gt, rel, (offset or 0.0) if rel else 0.0, tuple(why))  # (no relations: no offset)
 
 
 def _gt_hash(name: str) -> str:
