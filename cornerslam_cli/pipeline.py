@@ -96,9 +96,7 @@ def run(
         said = len(src.reader.stats.warnings)
         write_extras(stage, plot, mcap_out, mcap_path, ref.gt_path, scans, src.stats.anchors, offset, tf_odom,
                      src.reader.stats.warn)  # fmt: skip
-        if (
-            len(src.reader.stats.warnings) > said
-        ):  # the results MCAP's: summary.json keeps them too (a review)
+        if len(src.reader.stats.warnings) > said:  # the results MCAP's: kept in summary.json too
             summary = replace(summary, warnings=tuple(src.reader.stats.warnings))
             write_json(stage.path / "summary.json", summary.to_json())
         summary = summary.with_out_dir(stage.commit())
