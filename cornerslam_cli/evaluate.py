@@ -10,6 +10,7 @@ coverage and sparseness notes) share the span and gap rules (``in_holes``, ``GAP
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -191,12 +192,12 @@ RELATIONS_LAYOUT = "t1 t2 x y z roll pitch yaw"
 TUM_LIKE_NORM = 1e-3
 
 
-def read_relations(path: str | Path) -> np.ndarray:
+def read_relations(path: str | Path, warn: Callable[..., None] = log.warning) -> np.ndarray:
     """Kümmerle relations file: rows ``t1 t2 x y z roll pitch yaw`` → (k, 5) [t1, t2, x, y, yaw].
 
     Each row stands alone, so their order does not matter; a binary file, a line that is not 8
     finite numbers (more are ignored), a file without relations or a TUM trajectory (every line's last
-    four numbers a unit quaternion) raises ``LogError``."""
+    four numbers a unit quaternion) raises ``LogError``; what is odd but usable is said with ``warn``."""
     v, lines = read_number_rows(
         path, "relations file", LogError, "relation", RELATIONS_LAYOUT, 8, more_ok=True
     )
@@ -212,19 +213,19 @@ def read_relations(path: str | Path) -> np.ndarray:
     r = v[:, [0, 1, 2, 3, 7]]
     first = np.sort(np.unique(r, axis=0, return_index=True)[1])  # each distinct row's first line, in order
     if len(first) < len(r):  # a file joined to itself, a line pasted twice: each relation counts once
-        log.warning(
+        warn(
             "relations file '%s': %d of its %d relations repeat an earlier line exactly: counted once",
             path, len(r) - len(first), len(r),
         )  # fmt: skip
         r = r[first]
     pairs = np.unique(r[:, :2], axis=0)
     if len(pairs) < len(r):  # one pair measured twice, differently: both are scored, but say so
-        log.warning(
+        warn(
             "relations file '%s': %d of its %d relations repeat an earlier pair (t1, t2) with other values: "
             "each is scored", path, len(r) - len(pairs), len(r),
         )  # fmt: skip
     for note in relations_notes(r):
-        log.warning("relations file '%s': %s", path, note)
+        warn("relations file '%s': %s", path, note)
     return r
 
 

@@ -14,6 +14,7 @@ import hashlib
 import itertools
 import os
 import re
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -189,7 +190,7 @@ def _labels_in(out: str | Path) -> dict[str, str]:
     is no one's (a review: it had one log resume and the other fail as another's)."""
     from .report.ownership import read_marker
 
-    per_log: dict[str, dict[str, int]] = {}
+    per_log: dict[str, Counter[str]] = {}
     try:
         dirs = sorted(d for d in Path(out).iterdir() if d.is_dir() and "__" in d.name)
     except OSError:  # (none yet, or not readable: batch says why when it claims it)
@@ -201,12 +202,8 @@ def _labels_in(out: str | Path) -> dict[str, str]:
         log = marker["log"]
         fits = [t(log) for t in _TIERS if d.name.startswith(t(log) + "__")]
         if fits:
-            label = max(fits, key=len)
-            per_log.setdefault(log, {})[label] = per_log.get(log, {}).get(label, 0) + 1
-    owners: dict[str, int] = {}
-    for labels in per_log.values():
-        for label in labels:
-            owners[label] = owners.get(label, 0) + 1
+            per_log.setdefault(log, Counter())[max(fits, key=len)] += 1
+    owners = Counter(label for labels in per_log.values() for label in labels)
     return {
         log: label
         for log, labels in per_log.items()

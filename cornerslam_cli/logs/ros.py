@@ -20,6 +20,7 @@ from typing import Protocol
 import numpy as np
 
 from ..errors import LogError
+from ..geometry import wrap_angle
 from ..ranges import short_text
 from ..types import OdomSample, Scan
 from .base import (
@@ -1087,7 +1088,7 @@ class RosLogReader:
             return "elsewhere"
         other = pose2_from_matrix(T)
         off = [abs(a - b) for a, b in zip(other[:2], self._laser2base[:2], strict=True)]  # type: ignore[index]
-        off.append(abs(math.remainder(other[2] - self._laser2base[2], math.tau)))  # type: ignore[index]
+        off.append(abs(wrap_angle(other[2] - self._laser2base[2])))  # type: ignore[index]
         return "alike" if max(off) <= MOUNT_SAME else "elsewhere"
 
     def _warn_left_out(self, left_out: dict[str, int], topic: str) -> None:

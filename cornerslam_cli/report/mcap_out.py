@@ -341,9 +341,10 @@ def write_results_mcap(
     stamps_ns = [stamp_to_ns(t) for t in stamp_texts]
     ns_of_step = dict(zip(run.steps.astype(int).tolist(), stamps_ns, strict=True))
     # odom-frame poses as logged, for the map → odom transform
-    odom_raw = as_logged(read_odom(out_dir), [float(t) for t in stamp_texts], anchors)
+    stamps = np.array([float(t) for t in stamp_texts])
+    odom_raw = as_logged(read_odom(out_dir), stamps, anchors)
     if tf_odometry is not None:
-        odom_raw = on_logged_tf(odom_raw, np.array([float(t) for t in stamp_texts]), *tf_odometry, warn)
+        odom_raw = on_logged_tf(odom_raw, stamps, *tf_odometry, warn)
     inp = run.summary.config.get("input", {})  # the run's config
     # the frame the odometry gave the poses in (a nav_msgs/Odometry's frame_id), else the config's
     odom_frame = run.summary.input.odom_frame or str(inp.get("odom_frame") or "odom")
