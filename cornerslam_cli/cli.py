@@ -62,6 +62,7 @@ from .options import (  # noqa: E402
     topic_options,
     verbosity_options,
 )
+from .report.mcap_items import PROFILES  # noqa: E402
 from .report.progress import BatchProgress, Progress  # noqa: E402
 from .report.text import (  # noqa: E402
     batch_counts,
@@ -259,6 +260,13 @@ def cli() -> None:
 @reference_options
 @click.option("--plot", is_flag=True, help="Also draw the map, timing and corner plots and report.html.")
 @click.option("--mcap-out", type=GivenPath(), help="Also write the results as MCAP for Foxglove.")
+@click.option(
+    "--mcap-profile",
+    type=click.Choice(PROFILES),
+    default="foxglove",
+    show_default=True,
+    help="The --mcap-out file's encoding: Foxglove's schemas, or ROS 2 messages for `ros2 bag play`.",
+)
 @span_options
 @verbosity_options
 def run(
@@ -275,6 +283,7 @@ def run(
     time_offset,
     plot,
     mcap_out,
+    mcap_profile,
     start,
     end,
     max_scans,
@@ -292,7 +301,7 @@ def run(
 
     setup_logging(verbose, quiet)
     names = parse_assocs(assoc, allow_many=False, log_path=log_path)
-    check_mcap_name(mcap_out)
+    check_mcap_name(mcap_out, mcap_profile)
     check_time_offset(relations, time_offset)
     ground_truth = chosen_ground_truth(ground_truth, no_ground_truth)
     span = parse_span(start, end, max_scans)
@@ -313,6 +322,7 @@ def run(
             time_offset=time_offset,
             plot=plot,
             mcap_out=mcap_out,
+            mcap_profile=mcap_profile,
             config_path=config_path,
             span=span,
             compiling=lambda: compiled.append(_say_compiling(quiet)),
@@ -429,6 +439,7 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
 
     from .lasers import detect_preset, first_scan
     from .logs import open_log
+    from .logs.mcap import header_fields
     from .logs.unreadable import no_scan_read
     from .report.ownership import is_results_mcap
     from .report.run_writer import find_ground_truth
@@ -438,7 +449,10 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
     log_info = reader.info()
     if is_results_mcap(Path(log_path)) and not (scan_topic or odom_topic):  # run --mcap-out's: described
         lines = info_lines(log_path, replace(log_info, problems=()), None)
-        _echo([*lines[: lines.index("run would use:")], RESULTS_MCAP_NOTE])
+        ros2 = (header_fields(log_path) or ("", ""))[0] == "ros2"
+        _echo(
+            [*lines[: lines.index("run would use:")], RESULTS_MCAP_ROS2_NOTE if ros2 else RESULTS_MCAP_NOTE]
+        )
         return
     if log_info.problems:  # a log run refuses (no LaserScan, only odometry, …): its topics, then why
         scan = None
@@ -481,9 +495,14 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
 OTHER_FORMATS = {".bag": "a ROS 1 bag", ".db3": "a ROS 2 bag's storage", ".json": "JSON", ".csv": "CSV"}
 
 
-def check_mcap_name(mcap_out: str | None) -> None:
+def check_mcap_name(mcap_out: str | None, profile: str = "foxglove") -> None:
     """``--mcap-out`` writes MCAP: a name whose suffix says another format (``res.bag``) is refused — an
-    MCAP behind a .bag name fails in every tool that opens it by its name (a ROS-user probe)."""
+    MCAP behind a .bag name fails in every tool that opens it by its name (a ROS-user probe); a
+    ``--mcap-profile`` other than the default without ``--mcap-out`` would write nothing: refused too."""
+    if profile != "foxglove" and not mcap_out:
+        raise click.UsageError(
+            f"--mcap-profile {profile} is the encoding of the --mcap-out file: give --mcap-out FILE"
+        )
     suffix = Path(mcap_out).suffix.lower() if mcap_out else ""
     if suffix in OTHER_FORMATS:
         raise click.UsageError(
@@ -495,6 +514,11 @@ def check_mcap_name(mcap_out: str | None) -> None:
 RESULTS_MCAP_NOTE = (
     "results:  written by `cornerslam run --mcap-out` (Foxglove schemas: the trajectories, scans, segments, "
     "landmarks, occupancy grid); open it in Foxglove Studio. It is not a log to run"
+)
+RESULTS_MCAP_ROS2_NOTE = (
+    "results:  written by `cornerslam run --mcap-out` (ROS 2 messages: the trajectories, scans, segments, "
+    "landmarks, occupancy grid, map → odom on /tf); play it beside the log with `ros2 bag play` (Humble: "
+    "`-s mcap`), or open it in Foxglove Studio. It is not a log to run"
 )
 
 

@@ -53,6 +53,7 @@ def run(
     time_offset: float = 0.0,
     plot: bool = False,
     mcap_out: str | Path | None = None,
+    mcap_profile: str = "foxglove",
     config_path: str | Path | None = None,
     span: Span | None = None,
     compiling: Callable[[], None] | None = None,
@@ -61,7 +62,8 @@ def run(
     finishing: Callable[[str], None] = lambda what: None,
 ) -> RunSummary:
     """Run corner EKF-SLAM on one log and write the output directory atomically: the tables, with
-    ``plot`` the figures and report.html, and ``mcap_out`` beside it, all committed at once.
+    ``plot`` the figures and report.html, and ``mcap_out`` beside it (in ``mcap_profile``'s encoding,
+    report/mcap_out.py), all committed at once.
 
     The output places are checked before any work (report/ownership.py); the run's inputs — the log,
     the ground truth (also LOG.gt.tum found beside the log, unless ``ground_truth`` is False), the
@@ -95,7 +97,7 @@ def run(
         tf_odom = logged_tf_odometry(src) if mcap_path else None
         said = len(src.reader.stats.warnings)
         write_extras(stage, plot, mcap_out, mcap_path, ref.gt_path, scans, src.stats.anchors, offset, tf_odom,
-                     src.reader.stats.warn)  # fmt: skip
+                     src.reader.stats.warn, mcap_profile)  # fmt: skip
         if len(src.reader.stats.warnings) > said:  # the results MCAP's: kept in summary.json too
             summary = replace(summary, warnings=tuple(src.reader.stats.warnings))
             write_json(stage.path / "summary.json", summary.to_json())
@@ -163,13 +165,14 @@ def write_extras(
     clock_offset: int = 0,
     tf_odometry: tuple[np.ndarray, np.ndarray] | None = None,
     warn: Callable[..., None] = log.warning,
+    profile: str = "foxglove",
 ) -> None:
     """What a run writes besides its tables, staged before the commit: with ``plot`` the figures and
     report.html; the results MCAP into ``mcap_path``, the staged place of ``mcap_out``, with the
     run's ``scans``, its odometry's re-anchorings (``anchors``: SyncStats's), its log times
     ``clock_offset`` ns ahead of the stamps (:func:`recorder_clock`) and the log's ``tf_odometry``
-    (:func:`logged_tf_odometry`), saying what is odd with ``warn``. Both draw the ``ground_truth`` file
-    the run was scored against."""
+    (:func:`logged_tf_odometry`), in ``profile``'s encoding, saying what is odd with ``warn``. Both draw
+    the ``ground_truth`` file the run was scored against."""
     if plot:
         from .report.html import write_report
         from .report.plots import plot_run
@@ -192,6 +195,7 @@ def write_extras(
                 clock_offset,
                 tf_odometry,
                 warn,
+                profile,
             )
 
 

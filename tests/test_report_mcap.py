@@ -12,7 +12,8 @@ from _strict_json import strict
 from mcap.reader import make_reader
 from test_report_plots import make_report_outputs
 
-from cornerslam_cli.report.mcap_out import SCHEMAS, TOPIC_SCHEMAS, TOPICS, stamp_to_ns, write_results_mcap
+from cornerslam_cli.report.mcap_foxglove import SCHEMAS, TOPIC_SCHEMAS
+from cornerslam_cli.report.mcap_out import TOPICS, stamp_to_ns, write_results_mcap
 from cornerslam_cli.report.tables import read_csv
 
 

@@ -58,8 +58,15 @@ RESULTS_MCAP_LIBRARY = "cornerslam results"
 
 def header_library(path: str | Path) -> str | None:
     """The library an MCAP file's Header record names (what wrote it), or None for a file that is not an
-    MCAP or cannot be read. Reads the magic and the Header record only: its opcode and u64 length,
-    then the profile and the library as u32-length-prefixed strings."""
+    MCAP or cannot be read (:func:`header_fields`)."""
+    fields = header_fields(path)
+    return None if fields is None else fields[1]
+
+
+def header_fields(path: str | Path) -> tuple[str, str] | None:
+    """An MCAP file's Header record: (profile, library), or None for a file that is not an MCAP or cannot
+    be read. Reads the magic and the Header record only: its opcode and u64 length, then the profile and
+    the library as u32-length-prefixed strings."""
     try:
         with open(path, "rb") as f:
             head = f.read(len(MAGIC) + _REC.size + _U32.size + 4096)
@@ -68,11 +75,13 @@ def header_library(path: str | Path) -> str | None:
     pos = len(MAGIC) + _REC.size
     if not head.startswith(MAGIC) or len(head) < pos + _U32.size or head[len(MAGIC)] != OP_HEADER:
         return None
-    pos += _U32.size + _U32.unpack_from(head, pos)[0]  # past the profile
+    size = _U32.unpack_from(head, pos)[0]
+    profile = head[pos + _U32.size : pos + _U32.size + size].decode("utf-8", "replace")
+    pos += _U32.size + size  # past the profile
     if len(head) < pos + _U32.size:
         return None
     size = _U32.unpack_from(head, pos)[0]
-    return head[pos + _U32.size : pos + _U32.size + size].decode("utf-8", "replace")
+    return profile, head[pos + _U32.size : pos + _U32.size + size].decode("utf-8", "replace")
 
 
 Message = tuple[int, int, memoryview]  # channel id, log time (ns), data

@@ -34,6 +34,7 @@ import numpy as np
 from ..features.jit import kernel
 
 OCCUPIED, FREE, UNKNOWN = 0, 254, 205  # map_saver's trinary pixel values
+GRID_VALUES = {OCCUPIED: 100, FREE: 0, UNKNOWN: -1}  # the pixels → nav_msgs/OccupancyGrid's values
 OCCUPIED_THRESH, FREE_THRESH = 0.65, 0.196  # map_saver's thresholds: 0 → occupied, 254 → free, 205 → unknown
 HIT_SHARE = 4  # a cell is occupied when at least 1 in HIT_SHARE of the beams reaching it end in it
 MAX_POINTS = 8_000_000  # end points kept (64 MB as float32) before the store is thinned
