@@ -495,11 +495,12 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
 OTHER_FORMATS = {".bag": "a ROS 1 bag", ".db3": "a ROS 2 bag's storage", ".json": "JSON", ".csv": "CSV"}
 
 
-def check_mcap_name(mcap_out: str | None, profile: str = "foxglove") -> None:
+def check_mcap_name(mcap_out: str | None, profile: str) -> None:
     """``--mcap-out`` writes MCAP: a name whose suffix says another format (``res.bag``) is refused — an
     MCAP behind a .bag name fails in every tool that opens it by its name (a ROS-user probe); a
-    ``--mcap-profile`` other than the default without ``--mcap-out`` would write nothing: refused too."""
-    if profile != "foxglove" and not mcap_out:
+    ``--mcap-profile`` given without ``--mcap-out`` would write nothing: refused too."""
+    given = click.get_current_context().get_parameter_source("mcap_profile") != ParameterSource.DEFAULT
+    if given and not mcap_out:
         raise click.UsageError(
             f"--mcap-profile {profile} is the encoding of the --mcap-out file: give --mcap-out FILE"
         )
@@ -517,8 +518,9 @@ RESULTS_MCAP_NOTE = (
 )
 RESULTS_MCAP_ROS2_NOTE = (
     "results:  written by `cornerslam run --mcap-out` (ROS 2 messages: the trajectories, scans, segments, "
-    "landmarks, occupancy grid, map → odom on /tf); play it beside the log with `ros2 bag play` (Humble: "
-    "`-s mcap`), or open it in Foxglove Studio. It is not a log to run"
+    "landmarks, occupancy grid, its transforms on /tf); play it with `ros2 bag play`, beside the log in one "
+    "player from Jazzy on (`ros2 bag play -i LOG -i FILE`), or open it in Foxglove Studio. It is not a log "
+    "to run"
 )
 
 

@@ -180,11 +180,11 @@ def write_extras(
         plot_run(stage.path, ground_truth)
         write_report(stage.path)
     if mcap_path is not None:
-        from .report.mcap_out import write_results_mcap
+        from .report.mcap_out import stamps_refused, write_results_mcap
 
         if mcap_path.is_relative_to(stage.path) and mcap_path.exists():
             raise OutputError(f"--mcap-out '{mcap_out}' is a file of the run itself", "give another name")
-        with output_errors(mcap_out):
+        with output_errors(mcap_out), stamps_refused(mcap_out):
             write_results_mcap(
                 stage.path,
                 mcap_path,

@@ -19,8 +19,15 @@ from test_report_plots import make_report_outputs
 from cornerslam_cli.cli import cli
 from cornerslam_cli.logs.mcap import RESULTS_MCAP_LIBRARY, header_fields
 from cornerslam_cli.report.mcap_items import PROFILES
-from cornerslam_cli.report.mcap_out import TOPICS, stamp_to_ns, write_results_mcap
-from cornerslam_cli.report.mcap_ros2 import LATCHED, ROS_TOPICS, TYPES
+from cornerslam_cli.report.mcap_out import (
+    ROS2_LAST_SECOND,
+    TOPICS,
+    StampRangeError,
+    check_stamps,
+    stamp_to_ns,
+    write_results_mcap,
+)
+from cornerslam_cli.report.mcap_ros2 import LATCHED, ROS_TOPICS, SCAN_FRAME, TYPES
 from cornerslam_cli.report.occupancy import read_grid
 from cornerslam_cli.report.tables import read_csv
 
@@ -217,42 +224,108 @@ def test_one_profile_serves_every_distribution_the_layouts_are_the_same():
         TYPES["landmarks"], ros_version=2)[0].splitlines())  # (what does differ: a constant)  # fmt: skip
 
 
-def test_run_writes_scans_as_float64_clouds_in_map(sim_log, tmp_path):
-    """`run --mcap-profile ros2`: the scans as PointCloud2 x, y, z float64 in ``map``, the Foxglove
-    profile's float32 points plus their cloud's pose; `info` says what the file is; run refuses it."""
+def test_run_writes_scans_as_float32_clouds_in_a_frame_at_their_origin(sim_log, tmp_path):
+    """`run --mcap-profile ros2`: the scans as PointCloud2 x, y, z float32 (RViz draws no other position
+    type: a review found float64 clouds undrawn) in ``cornerslam_scan_origin``, which one /tf_static
+    message puts where the Foxglove profile's cloud pose is; `info` says what the file is; run refuses it."""
     base = ["run", str(sim_log), "-q", "--max-scans", "30"]
-    for profile in ("foxglove", "ros2"):
+    for profile in PROFILES:
         args = [*base, "--out", str(tmp_path / profile), "--mcap-out", str(tmp_path / f"{profile}.mcap")]
         res = CliRunner().invoke(cli, [*args, "--mcap-profile", profile])
         assert res.exit_code == 0, res.output
-    messages, _, _ = read_ros2(tmp_path / "ros2.mcap")
+    messages, channels, _ = read_ros2(tmp_path / "ros2.mcap")
     fox = read_foxglove(tmp_path / "foxglove.mcap")[TOPICS["scan"]]
     clouds = messages[TOPICS["scan"]]
     assert len(clouds) == len(fox) == 30
     for (_, c), (_, f) in zip(clouds, fox, strict=True):
         assert [(fl.name, fl.offset, fl.datatype) for fl in c.fields] == [
-            ("x", 0, 8),
-            ("y", 8, 8),
-            ("z", 16, 8),
+            ("x", 0, 7),
+            ("y", 4, 7),
+            ("z", 8, 7),
         ]
-        xyz = np.frombuffer(c.data.tobytes(), dtype="<f8").reshape(-1, 3)
+        assert (c.point_step, c.row_step, c.header.frame_id) == (12, 12 * c.width, SCAN_FRAME)
+        xyz = np.frombuffer(c.data.tobytes(), dtype="<f4").reshape(-1, 3)
         xy32 = np.frombuffer(base64.b64decode(f["data"]), dtype="<f4").reshape(-1, 2)
-        origin = np.array([f["pose"]["position"]["x"], f["pose"]["position"]["y"]])
-        assert c.width == len(xy32) > 0 and c.header.frame_id == "map"
-        np.testing.assert_array_equal(xyz[:, :2], xy32.astype(float) + origin)
-        assert not xyz[:, 2].any()
+        assert c.width == len(xy32) > 0 and not xyz[:, 2].any()
+        np.testing.assert_array_equal(xyz[:, :2], xy32)
+    assert channels["/tf_static"] == ("tf2_msgs/msg/TFMessage", "TRANSIENT_LOCAL")
+    ((_, static),) = messages["/tf_static"]
+    (t,) = static.transforms
+    pose = fox[0][1]["pose"]
+    assert (t.header.frame_id, t.child_frame_id) == ("map", SCAN_FRAME)
+    assert (t.transform.translation.x, t.transform.translation.y) == (
+        pose["position"]["x"],
+        pose["position"]["y"],
+    )
+    assert t.transform.rotation.w == 1.0
     said = CliRunner().invoke(cli, ["info", str(tmp_path / "ros2.mcap")])
-    assert said.exit_code == 0 and "`ros2 bag play`" in said.stdout.splitlines()[-1]
+    assert said.exit_code == 0 and "`ros2 bag play -i LOG -i FILE`" in said.stdout.splitlines()[-1]
     refused = CliRunner().invoke(
         cli, ["run", str(tmp_path / "ros2.mcap"), "--out", str(tmp_path / "x"), "-q"]
     )
     assert refused.exit_code == 2 and "is the results MCAP of a run" in refused.stderr
 
 
+def shifted_carmen(tmp_path: Path, seconds: float) -> Path:
+    """The first 60 lines of sample_logs/intel_cut.clf with every stamp moved by ``seconds``."""
+    src = Path(__file__).parents[1] / "sample_logs" / "intel_cut.clf"
+    out = []
+    for line in src.read_text().splitlines()[:60]:
+        f = line.split()
+        if f and f[0] in ("ODOM", "FLASER"):
+            at = 7 if f[0] == "ODOM" else 2 + int(f[1]) + 6  # ipc_timestamp, then logger_timestamp two on
+            f[at], f[at + 2] = (f"{float(f[i]) + seconds:.6f}" for i in (at, at + 2))
+        out.append(" ".join(f))
+    path = tmp_path / f"shifted{seconds:+.0f}.clf"
+    path.write_text("\n".join(out) + "\n")
+    return path
+
+
+@pytest.mark.parametrize(
+    ("seconds", "profile", "said"),
+    [
+        (2.2e9, "ros2", "past ROS 2's int32 seconds (2038-01-19) (write it with --mcap-profile foxglove)"),
+        (
+            -100.0,
+            "ros2",
+            "begin before 1970 (-67.093 s): MCAP's times are unsigned (run it without --mcap-out)",
+        ),
+        (-100.0, "foxglove", "begin before 1970"),
+    ],
+)
+def test_stamps_a_results_mcap_cannot_hold_are_refused_and_nothing_is_written(
+    tmp_path, seconds, profile, said
+):
+    """A log stamped past 2038 crashed the ROS 2 encoding (int32 seconds) and one stamped before 1970 both
+    (MCAP's unsigned times), exit 1 (a review): now exit 2 naming the file and what to do, no output."""
+    log, out = shifted_carmen(tmp_path, seconds), tmp_path / "o"
+    args = ["run", str(log), "--out", str(out), "-q", "--mcap-out", str(tmp_path / "r.mcap")]
+    res = CliRunner().invoke(cli, [*args, "--mcap-profile", profile])
+    assert res.exit_code == 2, res.output
+    assert res.stderr.startswith(
+        f"error: --mcap-out '{tmp_path / 'r.mcap'}' cannot be written: the log's stamps"
+    )
+    assert said in res.stderr and not out.exists() and not (tmp_path / "r.mcap").exists()
+    if seconds > 0:  # the Foxglove profile holds them
+        res = CliRunner().invoke(cli, [*args, "--mcap-profile", "foxglove"])
+        assert res.exit_code == 0 and (tmp_path / "r.mcap").exists(), res.output
+
+
+def test_check_stamps_at_the_boundaries():
+    last = ROS2_LAST_SECOND * 10**9 + 999_999_999
+    check_stamps(0, last, 0, "ros2")
+    check_stamps(0, last + 1, 0, "foxglove")
+    with pytest.raises(StampRangeError, match="int32 seconds"):
+        check_stamps(0, last + 1, 0, "ros2")
+    with pytest.raises(StampRangeError, match="before 1970"):
+        check_stamps(10**9, 2 * 10**9, -2 * 10**9, "foxglove")  # log times behind the stamps, below 0
+
+
 def test_a_profile_without_mcap_out_or_unknown_is_refused_before_any_work(sim_log, tmp_path):
     out = tmp_path / "o"
-    res = CliRunner().invoke(cli, ["run", str(sim_log), "--out", str(out), "--mcap-profile", "ros2"])
-    assert res.exit_code == 2 and "give --mcap-out FILE" in res.stderr and not out.exists()
+    for profile in PROFILES:  # (the default given too: it would write nothing)
+        res = CliRunner().invoke(cli, ["run", str(sim_log), "--out", str(out), "--mcap-profile", profile])
+        assert res.exit_code == 2 and "give --mcap-out FILE" in res.stderr and not out.exists()
     res = CliRunner().invoke(
         cli,
         [

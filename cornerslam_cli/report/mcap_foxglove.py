@@ -17,13 +17,20 @@ import json
 
 import numpy as np
 
-from .mcap_items import MAP_FRAME, TOPICS, Channel, LandmarkItem
-from .occupancy import GRID_VALUES, Grid
+from .mcap_items import (
+    CORNER_ARROW,
+    GREEN,
+    GREY,
+    LANDMARK_DIAMETER,
+    MAP_FRAME,
+    ORANGE,
+    TOPICS,
+    Channel,
+    LandmarkItem,
+)
+from .occupancy import Grid
 from .run_dir import ELLIPSE_SIGMA
 from .tables import json_text
-
-LANDMARK_RADIUS = 0.15  # m, sphere diameter in Foxglove
-CORNER_ARROW = 0.4  # m, length of the line showing a corner's direction φ
 
 
 # --- Foxglove JSON schemas (trimmed to the fields written; names as in foxglove-sdk) -------------------
@@ -206,10 +213,8 @@ INT8, FLOAT32 = 2, 7  # foxglove.NumericType
 
 def _grid(ns: int, grid: Grid) -> dict:
     """A foxglove.Grid of the occupancy grid in ``map``: cell (0, 0) at its origin, rows along +y, one
-    int8 ``occupancy`` per cell (GRID_VALUES)."""
-    values = np.full(grid.cells.shape, -1, dtype=np.int8)
-    for pixel, value in GRID_VALUES.items():
-        values[grid.cells == pixel] = value
+    int8 ``occupancy`` per cell (Grid.nav_values)."""
+    values = grid.nav_values()
     cols, size = grid.cells.shape[1], {"x": grid.resolution, "y": grid.resolution}
     return {"timestamp": _time(ns), "frame_id": MAP_FRAME, "pose": _pose(*grid.origin), "column_count": cols,
             "cell_size": size, "row_stride": cols, "cell_stride": 1,
@@ -236,7 +241,9 @@ class FoxgloveEncoding:
     profile = ""  # (MCAP's profile: none)
     metadata: dict[str, dict[str, str]] = {}  # (no metadata records of its own)
 
-    def channel(self, key: str) -> Channel:
+    def channel(self, key: str) -> Channel | None:
+        if key not in TOPIC_SCHEMAS:  # (a ROS-only item: the scans' origin, which a cloud's pose holds here)
+            return None
         name = TOPIC_SCHEMAS[key]
         return Channel(TOPICS[key], name, "jsonschema", json.dumps(SCHEMAS[name]).encode(), "json", {})
 
@@ -249,8 +256,8 @@ def _pose_in_frame(ns: int, pose: np.ndarray) -> dict:
 
 
 def _landmark(ns: int, lm: LandmarkItem) -> dict:
-    green, orange = _color(0.17, 0.63, 0.17), _color(1.0, 0.5, 0.05)
-    size = {"x": LANDMARK_RADIUS, "y": LANDMARK_RADIUS, "z": LANDMARK_RADIUS}
+    green, orange = _color(*GREEN), _color(*ORANGE)
+    size = {"x": LANDMARK_DIAMETER, "y": LANDMARK_DIAMETER, "z": LANDMARK_DIAMETER}
     sphere = {"pose": _pose(lm.x, lm.y), "size": size, "color": green}
     ellipse = _line(1, [_point(px, py) for px, py in lm.ellipse], green, 2.0)
     direction = _line(0, [_point(lm.x, lm.y), _point(*lm.tip(CORNER_ARROW))], orange, 2.0)
@@ -271,7 +278,7 @@ def _segments(ns: int, item: tuple[int, np.ndarray]) -> dict:
     entities = []
     if len(segs):
         pts = [_point(*p) for s in segs for p in (s[:2], s[2:])]
-        grey = _color(0.3, 0.3, 0.3, 0.8)
+        grey = _color(*GREY)
         entities.append(_entity(ns, f"segments/{step}", [], [_line(2, pts, grey, 1.0)]))
     return {"deletions": [], "entities": entities}
 

@@ -26,6 +26,9 @@ TOPICS = {
     "grid": "/cornerslam/grid",
 }
 PROFILES = ("foxglove", "ros2")  # --mcap-profile: the encodings (module docstring)
+LANDMARK_DIAMETER = 0.15  # m, the sphere at a landmark
+CORNER_ARROW = 0.4  # m, the line (arrow) from a landmark along its corner direction φ
+GREEN, ORANGE, GREY = (0.17, 0.63, 0.17, 1.0), (1.0, 0.5, 0.05, 1.0), (0.3, 0.3, 0.3, 0.8)  # r, g, b, a
 
 
 @dataclass(frozen=True)

@@ -51,15 +51,16 @@ Landmarks are the final estimates (map.csv holds only the final map), shown from
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import logging
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from decimal import Decimal
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import display_path
+from ..errors import OutputError, display_path
 from ..geometry import compose, compose_inverse, interpolate, inverse
 from .mcap_items import MAP_FRAME, PROFILES, TOPICS, LandmarkItem
 from .occupancy import ScanStore, read_grid
@@ -109,25 +110,29 @@ def write_results_mcap(
     out_dir, path = Path(out_dir), Path(path)
     run = load_run(out_dir, ground_truth)
     items = _items(out_dir, run, scans, anchors, tf_odometry, warn)
+    if items:
+        check_stamps(items[0][0], items[-1][0], clock_offset, profile)
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "wb") as f:
         w = Writer(f)
         w.start(profile=encoding.profile, library=RESULTS_MCAP_LIBRARY)
         schema_ids: dict[str, int] = {}
         channel_ids: dict[str, int] = {}  # by topic: two keys may share one (ROS 2's /tf)
-        used = {key for _, key, _ in items}  # a topic with nothing to say is not declared
-        for key in (k for k in TOPICS if k in used):
-            c = encoding.channel(key)
+        channels = {key: encoding.channel(key) for key in {key for _, key, _ in items}}
+        # a topic with nothing to say is not declared, nor an item the encoding does not write (None)
+        used = {key: c for key, c in channels.items() if c is not None}
+        for c in (used[k] for k in [*TOPICS, *sorted(set(used) - set(TOPICS))] if k in used):
             if c.schema not in schema_ids:
                 schema_ids[c.schema] = w.register_schema(c.schema, c.schema_encoding, c.schema_data)
             if c.topic not in channel_ids:
                 channel_ids[c.topic] = w.register_channel(
                     c.topic, c.message_encoding, schema_ids[c.schema], c.metadata
                 )
-        topic_of = {key: encoding.channel(key).topic for key in used}
         seq: dict[str, int] = dict.fromkeys(channel_ids, 0)
         for ns, key, item in items:
-            topic = topic_of[key]
+            if key not in used:
+                continue
+            topic = used[key].topic
             data = encoding.encode(ns, key, item)
             w.add_message(channel_ids[topic], ns + clock_offset, data, ns + clock_offset, seq[topic])
             seq[topic] += 1
@@ -144,6 +149,43 @@ def write_results_mcap(
         )
         w.finish()
     return path
+
+
+class StampRangeError(ValueError):
+    """The log's stamps do not fit the results MCAP's times (:func:`stamps_refused` names the file)."""
+
+    def __init__(self, msg: str, hint: str):
+        super().__init__(msg)
+        self.hint = hint
+
+
+@contextlib.contextmanager
+def stamps_refused(name: str | Path) -> Iterator[None]:
+    """A StampRangeError raised inside as the OutputError of the ``--mcap-out`` file ``name``: exit 2, the
+    run's output not written (a results MCAP asked for and missing would look complete)."""
+    try:
+        yield
+    except StampRangeError as e:
+        raise OutputError(f"--mcap-out '{display_path(name)}' cannot be written: {e}", e.hint) from None
+
+
+ROS2_LAST_SECOND = 2**31 - 1  # builtin_interfaces/Time.sec is an int32: 2038-01-19
+
+
+def check_stamps(first_ns: int, last_ns: int, clock_offset: int, profile: str) -> None:
+    """StampRangeError unless the stamps from ``first_ns`` to ``last_ns`` (and the log times, ``clock_offset``
+    ns ahead) fit: MCAP's times and Foxglove's are unsigned, ROS 2's seconds an int32."""
+    first_s = min(first_ns, first_ns + clock_offset) / 1e9
+    if first_s < 0:
+        raise StampRangeError(
+            f"the log's stamps begin before 1970 ({first_s:.3f} s): MCAP's times are unsigned",
+            "run it without --mcap-out",
+        )
+    if profile == "ros2" and last_ns // 1_000_000_000 > ROS2_LAST_SECOND:
+        raise StampRangeError(
+            f"the log's stamps reach {last_ns / 1e9:.3f} s, past ROS 2's int32 seconds (2038-01-19)",
+            "write it with --mcap-profile foxglove",
+        )
 
 
 def _encoding(profile: str):
@@ -169,8 +211,9 @@ def _items(
 ) -> list[tuple[int, str, object]]:
     """What the results MCAP says, before any encoding, in log-time order: (stamp ns, topic key, item) —
     a pose (3,) for ``pose``/``odom_pose``; (parent, child, pose) for ``tf``/``odom_tf``; (points (k, 2),
-    their origin (2,)) for ``scan``; (poses (n, 3), stamps ns or None) for the paths; a LandmarkItem;
-    (step, segments (k, 4) x1 y1 x2 y2) for ``segments``; an occupancy.Grid for ``grid``."""
+    their origin (2,)) for ``scan``, and that origin once for ``scan_origin`` (for an encoding whose
+    clouds hold no pose); (poses (n, 3), stamps ns or None) for the paths; a LandmarkItem; (step,
+    segments (k, 4) x1 y1 x2 y2) for ``segments``; an occupancy.Grid for ``grid``."""
     stamp_texts = _stamp_texts(out_dir / "trajectory.csv")
     stamps_ns = [stamp_to_ns(t) for t in stamp_texts]
     ns_of_step = dict(zip(run.steps.astype(int).tolist(), stamps_ns, strict=True))
@@ -195,6 +238,8 @@ def _items(
         items += [(ns, "odom_tf", (*frames, o)) for ns, o in zip(stamps_ns, odom_raw, strict=True)]
     if scans is not None:
         items += [(ns, "scan", (xy, scans.anchor)) for ns, xy in zip(stamps_ns, scans.points, strict=True)]
+        if stamps_ns:
+            items.append((stamps_ns[0], "scan_origin", scans.anchor))
     if stamps_ns:
         t0 = stamps_ns[0]
         items.append((t0, "path", (run.corrected, stamps_ns)))

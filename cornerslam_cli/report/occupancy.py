@@ -34,7 +34,6 @@ import numpy as np
 from ..features.jit import kernel
 
 OCCUPIED, FREE, UNKNOWN = 0, 254, 205  # map_saver's trinary pixel values
-GRID_VALUES = {OCCUPIED: 100, FREE: 0, UNKNOWN: -1}  # the pixels → nav_msgs/OccupancyGrid's values
 OCCUPIED_THRESH, FREE_THRESH = 0.65, 0.196  # map_saver's thresholds: 0 → occupied, 254 → free, 205 → unknown
 HIT_SHARE = 4  # a cell is occupied when at least 1 in HIT_SHARE of the beams reaching it end in it
 MAX_POINTS = 8_000_000  # end points kept (64 MB as float32) before the store is thinned
@@ -170,6 +169,13 @@ class Grid:
     cells: np.ndarray
     resolution: float
     origin: tuple[float, float]
+
+    def nav_values(self) -> np.ndarray:
+        """The cells as nav_msgs/OccupancyGrid's int8 values: 100 occupied, 0 free, −1 unknown."""
+        values = np.full(self.cells.shape, -1, dtype=np.int8)
+        values[self.cells == OCCUPIED] = 100
+        values[self.cells == FREE] = 0
+        return values
 
     def index(self, xy: np.ndarray) -> np.ndarray:
         """(n, 2) integer (row, col) of the cells holding the points ``xy`` (n, 2)."""
