@@ -148,6 +148,7 @@ def open_input(
         odom_frame=inp.odom_frame,
         base_frame=inp.base_frame,
         scan_frame=inp.scan_frame,
+        stamps=inp.stamps,
     )
     reader.check()
     info = reader.info(inspect=False)  # (a run needs its topics, not its rates)
@@ -259,11 +260,16 @@ def check_processed(src: Input, n_frames: int, n_points: int) -> None:
         why, hint = invalid_beams(src.reader)
         raise LogError(f"log '{src.path}': every beam of every scan is invalid{why}", hint)
     stamps = "timestamps" if (carmen := src.reader.format == "carmen") else "header stamps"  # (no header)
+    # what else to try: the recorder's time (a CARMEN line's logger timestamp), unless that is what was read
+    each = "line at its logger timestamp" if carmen else "message at the time the recorder got it"
+    receive = (
+        "" if getattr(src.reader, "receive", False) else f", or take each {each}: --set input.stamps=receive"
+    )
     if n_frames == 1 and stats.scans_in > 1 and stats.scan_time_backwards >= stats.scans_in - 1:
         raise LogError(  # one pose is no trajectory: every scan's header stamp is the first one's (zero?)
             f"log '{src.path}': only its first scan could be processed: the {stamps} of the other "
             f"{stats.scan_time_backwards} repeated or went backwards",
-            src.reader.stamp_hint if carmen else "check that the laser driver fills them",
+            (src.reader.stamp_hint if carmen else "check that the laser driver fills them") + receive,
         )
     if n_frames == 0:
         rs = src.reader.stats
@@ -272,13 +278,16 @@ def check_processed(src: Input, n_frames: int, n_points: int) -> None:
             raise damaged_error(src.path, rs, what) if rs.damaged else no_scan_read(src.path, what, stats=rs)
         raise_if_undecoded(src.path, rs)
         if clocks := stats.other_clocks():
-            raise LogError(f"log '{src.path}': no scan could be processed: {clocks}", clocks_hint(stats))
+            raise LogError(
+                f"log '{src.path}': no scan could be processed: {clocks}", clocks_hint(stats) + receive
+            )
         skipped = f"; skipped: {why}" if (why := stats.skipped_why()) else ""
         if apart := spans_apart(stats):
             skipped += f"; {apart}"
         raise LogError(
             f"log '{src.path}': no scan could be processed ({stats.scans_in} scans read{skipped})",
-            f"check that the scan and odometry topics overlap in time and that their {stamps} increase",
+            f"check that the scan and odometry topics overlap in time and that their {stamps} increase"
+            + receive,
         )
 
 

@@ -194,6 +194,7 @@ def first_scan_geometry(log_path: str | Path, cfg: Config) -> tuple[int, float] 
             odom_frame=inp.odom_frame,
             base_frame=inp.base_frame,
             scan_frame=inp.scan_frame,
+            stamps=inp.stamps,
         ) as reader,
     ):
         scan = first_scan(reader)

@@ -191,6 +191,7 @@ def open_log(
     odom_frame: str = "odom",
     base_frame: str = "base_link",
     scan_frame: str = "",
+    stamps: str = "header",
 ) -> LogReader:
     """Open a log for reading; the format is chosen by :func:`detect_format`.
 
@@ -206,6 +207,7 @@ def open_log(
         odom_frame=odom_frame,
         base_frame=base_frame,
         scan_frame=scan_frame,
+        stamps=stamps,
     )
     if fmt != "carmen" and (bag := split_bag_of(p)) is not None:
         reader.stats.warn(

@@ -326,8 +326,11 @@ class CarmenReader:
 
     format = "carmen"
 
-    def __init__(self, path: Path, scan_topic: str = "", odom_topic: str = "", **_frames):
+    def __init__(
+        self, path: Path, scan_topic: str = "", odom_topic: str = "", stamps: str = "header", **_frames
+    ):
         self.path = Path(path)
+        self.receive = stamps == "receive"  # input.stamps: the logger timestamps asked for
         self.stats = ReadStats()
         self._counts: dict[str, int] = {}
         self._whole: dict[str, int] = {}  # per laser / ODOM tag: whole lines with a stamp (the rest skipped)
@@ -394,7 +397,15 @@ class CarmenReader:
             self._tail[tag] = tail if lines > (standard.lines if standard else 0) else TAIL
             if (layout := layouts.get((tag, self._tail[tag]))) and layout.lines:
                 chosen[tag] = layout
-        self._logger_stamps = _stamps_stand_still(chosen)
+        if self.receive and (
+            short := [t for t, n in chosen.items() if n.logger is None or n.logger.lines < n.lines]
+        ):
+            raise LogError(
+                f"log '{self.path.name}': input.stamps=receive reads the lines' logger timestamps, which its "
+                f"{' and '.join(sorted(short))} lines do not all carry",
+                "set input.stamps=header",
+            )
+        self._logger_stamps = self.receive or _stamps_stand_still(chosen)
         for tag, layout in chosen.items():
             stamps = layout.logger if self._logger_stamps else layout  # (spans and order: those read)
             self._whole[tag], self._back[tag] = layout.lines, stamps.back
@@ -604,7 +615,8 @@ class CarmenReader:
     def stamp_hint(self) -> str:
         """What to check when the scans' stamps repeat or go back: the field they are read from."""
         if self._logger_stamps:
-            return "check the laser lines' logger timestamps (their timestamps never change)"
+            why = "input.stamps=receive" if self.receive else "their timestamps never change"
+            return f"check the laser lines' logger timestamps ({why})"
         return "check the laser lines' timestamp field"
 
     def _stamps_note(self) -> str:
@@ -632,7 +644,7 @@ class CarmenReader:
         max_range = self._max_range(scan_tag)
         where = self.path.name
         self._warn_odometry()
-        if self._logger_stamps:
+        if self._logger_stamps and not self.receive:  # (asked for: nothing to say)
             st.warn("%s: %s", where, self._stamps_note())
         unread, first_unread = 0, ""  # laser lines that could not be read; the first's number and why
         for lineno, line in enumerate(_lines(self.path, st), 1):

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Literal
 
 from ..ranges import check_ranges, num
 
@@ -90,6 +91,10 @@ class InputConfig:
     # beams at the start of each scan to ignore (e.g. robot body)
     skip_beams_start: int = num(0, ge=0, le=100_000)
     skip_beams_end: int = num(0, ge=0, le=100_000)
+    # the time each scan and odometry sample is taken at: its header stamp, or when the recorder received
+    # it (a ROS log's log time; a CARMEN line's logger_timestamp) — for a log whose laser and odometry
+    # stamp on different clocks, or not at all
+    stamps: Literal["header", "receive"] = "header"
     # seconds added to every scan stamp before syncing with odometry (large enough to bridge two clocks)
     scan_time_offset: float = num(0.0, ge=-1e10, le=1e10)
     # correct each beam for the robot's motion while the laser swept (logs/deskew.py), when the beams'

@@ -254,8 +254,11 @@ class RosLogReader:
         base_frame: str = "base_link",
         stats: ReadStats | None = None,
         scan_frame: str = "",
+        stamps: str = "header",
     ):
         self.source = source
+        # input.stamps "receive": every message taken at its log time (the recorder's), not its header stamp
+        self.receive = stamps == "receive"
         self.path = Path(path)
         self.format = source.format
         self.stats = stats if stats is not None else ReadStats()
@@ -623,8 +626,8 @@ class RosLogReader:
     def record_offset(self, n: int = 100) -> int | None:
         """How far the recorder's clock (the messages' log times) is ahead of the scans' header stamps
         [ns]: the median over the first ``n`` scans (a Gazebo run recorded without use_sim_time: 1.7e9 s);
-        None without a scan that can be read."""
-        return _median_offset(*self._first_scan_stamps(n))
+        None without a scan that can be read; 0 when the run takes the log times (``input.stamps``)."""
+        return 0 if self.receive else _median_offset(*self._first_scan_stamps(n))
 
     def _first_scan_stamps(self, n: int = 100) -> tuple[list[int], list[int]]:
         """The header stamps and the log times [ns] of the first ``n`` scans that can be read."""
@@ -930,12 +933,13 @@ class RosLogReader:
         topics = {t for t in topics if self._encoding_problem(t) is None}
         decs = {t: self._decoder(t) for t in topics}
         rows = []
-        for topic, _, data in self.source.raw_messages(topics):
+        for topic, log_time, data in self.source.raw_messages(topics):
             try:
                 for parent, child, (sec, nsec), t, q in decs[topic].transforms(data):
                     if parent == self.odom_frame and child == self.base_frame and any(q):
+                        at = log_time * 1e-9 if self.receive else sec + nsec * 1e-9  # (as the run's stamps)
                         with np.errstate(invalid="ignore", over="ignore"):
-                            rows.append((sec + nsec * 1e-9, *pose2_from_matrix(transform_matrix(t, q))))
+                            rows.append((at, *pose2_from_matrix(transform_matrix(t, q))))
             except Exception:  # noqa: BLE001 - bad bytes were counted when the run read them
                 continue
         v = np.array(rows, dtype=float).reshape(-1, 4)
@@ -997,7 +1001,7 @@ class RosLogReader:
                     if not self._use_frame(scan_frames, frame := strip_frame(m.frame_id), scan_t):
                         left_out[frame] = left_out.get(frame, 0) + 1
                         continue
-                    sec, nsec = m.stamp
+                    sec, nsec = divmod(log_time, 1_000_000_000) if self.receive else m.stamp
                     scan = make_scan(
                         st, where, sec + nsec * 1e-9, m.angle_min, m.angle_max, m.angle_increment,
                         m.range_min, m.range_max, m.ranges, m.frame_id, m.time_increment,
@@ -1020,6 +1024,8 @@ class RosLogReader:
                     child = _child_frame(odom_dec, data)
                     children[child] = children.get(child, 0) + 1
                 for (sec, nsec), x, y, q in poses:
+                    if self.receive:
+                        sec, nsec = divmod(log_time, 1_000_000_000)
                     sample = st.odometry_sample(odom_where, sec + nsec * 1e-9, float(x), float(y), q)
                     if sample is not None:
                         yield sample

@@ -1,0 +1,132 @@
+"""``input.stamps: receive``: every scan and odometry sample taken at the time the recorder received it (a
+ROS log's log time, a CARMEN line's logger timestamp) instead of its header stamp — for a log whose
+drivers stamp on two clocks (the odometry on a microcontroller's, the laser on the host's) or not at
+all, which a run refused (no scan met the odometry), saying how to get out of it only now."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from cornerslam_cli.cli import cli
+from cornerslam_cli.logs import open_log
+from cornerslam_cli.report.tables import read_csv
+
+SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"
+APART = 1000 * 10**9  # ns: the odometry's clock ahead of the recorder's
+
+
+def restamped_odometry(src: Path, dst: Path, shift_ns: int) -> Path:
+    """``src`` with each nav_msgs/Odometry header stamp moved by ``shift_ns``, every log time kept: the
+    odometry stamped on another clock, received when it was."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    with open(src, "rb") as f, open(dst, "wb") as g:
+        w = Writer(g)
+        w.start(profile="ros2", library="test")
+        ids: dict[int, int] = {}
+        for schema, channel, m in make_reader(f).iter_messages():
+            if channel.id not in ids:
+                sid = w.register_schema(schema.name, schema.encoding, schema.data)
+                ids[channel.id] = w.register_channel(channel.topic, channel.message_encoding, sid)
+            data = m.data
+            if schema.name == "nav_msgs/msg/Odometry":
+                msg = store.deserialize_cdr(data, schema.name)
+                t = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec + shift_ns
+                msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t, 10**9)
+                data = bytes(store.serialize_cdr(msg, schema.name))
+            w.add_message(ids[channel.id], m.log_time, data, m.publish_time)
+        w.finish()
+    return dst
+
+
+def run(log: Path, out: Path, *more: str):
+    return CliRunner().invoke(cli, ["run", str(log), "--out", str(out), "-q", "--max-scans", "60", *more])
+
+
+def test_odometry_on_another_clock_runs_on_the_recorders_time(sim_log, tmp_path):
+    log = restamped_odometry(sim_log, tmp_path / "two_clocks.mcap", APART)
+    refused = run(log, tmp_path / "header")
+    assert refused.exit_code == 2 and not (tmp_path / "header").exists()
+    assert "--set input.stamps=receive" in refused.stderr, refused.stderr
+    ran = run(log, tmp_path / "receive", "--set", "input.stamps=receive")
+    assert ran.exit_code == 0, ran.output
+    # the sim log's log times are its header stamps: the same run as on the log itself
+    assert run(sim_log, tmp_path / "original").exit_code == 0
+    mine, theirs = (
+        read_csv(tmp_path / "receive" / "trajectory.csv"),
+        read_csv(tmp_path / "original" / "trajectory.csv"),
+    )
+    assert len(mine["stamp"]) == len(theirs["stamp"]) > 10
+    for column in ("stamp", "x", "y", "theta", "odom_x", "odom_y"):
+        np.testing.assert_array_equal(mine[column], theirs[column], err_msg=column)
+
+
+def test_the_reader_stamps_scans_and_odometry_at_their_log_times(tmp_path):
+    """Each message taken at its log time, 0.25 s after its header stamp here; header stamps otherwise."""
+    from _log_fixtures import odom_messages, scan_messages, write_messages_mcap
+
+    late = 250_000_000
+    msgs = [(topic, kind, t + late, data) for topic, kind, t, data in scan_messages(n=5) + odom_messages(n=8)]
+    log = write_messages_mcap(tmp_path / "late.mcap", sorted(msgs, key=lambda m: m[2]))
+    headers = [m.stamp for m in open_log(log).messages()]
+    received = [m.stamp for m in open_log(log, stamps="receive").messages()]
+    assert len(headers) == len(received) == 13
+    np.testing.assert_allclose(np.array(received) - np.array(headers), 0.25, atol=1e-6)
+    assert open_log(log, stamps="receive").record_offset() == 0  # (the outputs' stamps are the recorder's)
+    assert abs(open_log(log).record_offset() - late) < 1000  # (the fixture rounds stamps to ns)
+
+
+def test_a_carmen_log_is_read_on_its_logger_timestamps(tmp_path):
+    """intel_cut.clf's logger timestamps are its timestamps: the same run; a log whose lines lack them is
+    refused, naming the key."""
+    clf = SAMPLES / "intel_cut.clf"
+    lines = clf.read_text().splitlines()[:120]
+    log = tmp_path / "cut.clf"
+    log.write_text("\n".join(lines) + "\n")
+    assert run(log, tmp_path / "h").exit_code == 0
+    assert run(log, tmp_path / "r", "--set", "input.stamps=receive").exit_code == 0
+    assert (tmp_path / "h" / "trajectory.csv").read_bytes() == (
+        tmp_path / "r" / "trajectory.csv"
+    ).read_bytes()
+    moved = []
+    for line in lines:  # the logger timestamps 5 s later: the run's stamps follow them
+        f = line.split()
+        if f and f[0] in ("ODOM", "FLASER"):
+            f[-1] = f"{float(f[-1]) + 5:.6f}"
+        moved.append(" ".join(f))
+    (tmp_path / "later.clf").write_text("\n".join(moved) + "\n")
+    assert run(tmp_path / "later.clf", tmp_path / "r5", "--set", "input.stamps=receive").exit_code == 0
+    np.testing.assert_allclose(
+        read_csv(tmp_path / "r5" / "trajectory.csv")["stamp"]
+        - read_csv(tmp_path / "h" / "trajectory.csv")["stamp"],
+        5.0,
+        atol=1e-6,
+    )
+    cut = [" ".join(line.split()[:-2]) if line.startswith(("ODOM", "FLASER")) else line for line in lines]
+    (tmp_path / "bare.clf").write_text("\n".join(cut) + "\n")
+    res = run(tmp_path / "bare.clf", tmp_path / "b", "--set", "input.stamps=receive")
+    assert res.exit_code == 2 and "input.stamps=receive reads the lines' logger timestamps" in res.stderr
+    assert not (tmp_path / "b").exists()
+
+
+def test_an_unknown_value_is_refused():
+    res = CliRunner().invoke(cli, ["config", "--set", "input.stamps=recorder"])
+    assert res.exit_code == 2 and "receive" in res.stderr
+
+
+@pytest.mark.parametrize("value", ["header", "receive"])
+def test_the_default_config_and_summary_say_which(sim_log, tmp_path, value):
+    import json
+
+    assert (
+        run(sim_log, tmp_path / value, "--set", f"input.stamps={value}", "--max-scans", "20").exit_code == 0
+    )
+    summary = json.loads((tmp_path / value / "summary.json").read_text())
+    assert summary["config"]["input"]["stamps"] == value
