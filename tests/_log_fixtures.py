@@ -118,3 +118,23 @@ def odom_messages(topic: str = "/odom", n: int = 5, encoding: str = "cdr"):
         (topic, "nav_msgs/msg/Odometry", int(o.stamp * 1e9), ros.odometry(o, "odom", "base_link"))
         for o in make_odoms(n)
     ]
+
+
+def rewrite_mcap(src: Path, dst: Path, change) -> Path:
+    """``src`` copied to ``dst`` message by message, each as ``change(schema, message)`` gives it:
+    (log time ns, publish time ns, data)."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    with open(src, "rb") as f, open(dst, "wb") as g:
+        w = Writer(g)
+        w.start(profile="ros2", library="test")
+        ids: dict[int, int] = {}
+        for schema, channel, m in make_reader(f).iter_messages():
+            if channel.id not in ids:
+                sid = w.register_schema(schema.name, schema.encoding, schema.data)
+                ids[channel.id] = w.register_channel(channel.topic, channel.message_encoding, sid)
+            log_time, publish_time, data = change(schema, m)
+            w.add_message(ids[channel.id], log_time, data, publish_time)
+        w.finish()
+    return dst

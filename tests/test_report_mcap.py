@@ -273,23 +273,17 @@ def test_results_play_beside_a_log_recorded_on_another_clock(sim_log, tmp_path):
     the wall clock's. The results' log times were the stamps: a Foxglove timeline of both files spanned
     decades and never played them together. Now they follow the log's recorder clock (its median offset
     over the first scans), warned; the messages keep their stamps."""
+    from _log_fixtures import rewrite_mcap
     from click.testing import CliRunner
-    from mcap.writer import Writer
 
     from cornerslam_cli.cli import cli
 
     ahead = 1_000_000 * 10**9  # ns: the recorder's clock ahead of the stamps
-    log = tmp_path / "wallclock.mcap"
-    with open(sim_log, "rb") as f, open(log, "wb") as g:
-        w = Writer(g)
-        w.start(profile="ros2", library="test")
-        ids: dict[int, int] = {}
-        for schema, channel, m in make_reader(f).iter_messages():
-            if channel.id not in ids:
-                sid = w.register_schema(schema.name, schema.encoding, schema.data)
-                ids[channel.id] = w.register_channel(channel.topic, channel.message_encoding, sid)
-            w.add_message(ids[channel.id], m.log_time + ahead, m.data, m.publish_time + ahead)
-        w.finish()
+    log = rewrite_mcap(
+        sim_log,
+        tmp_path / "wallclock.mcap",
+        lambda _, m: (m.log_time + ahead, m.publish_time + ahead, m.data),
+    )
     out = tmp_path / "o"
     args = [
         "run",

@@ -22,28 +22,20 @@ APART = 1000 * 10**9  # ns: the odometry's clock ahead of the recorder's
 def restamped_odometry(src: Path, dst: Path, shift_ns: int) -> Path:
     """``src`` with each nav_msgs/Odometry header stamp moved by ``shift_ns``, every log time kept: the
     odometry stamped on another clock, received when it was."""
-    from mcap.reader import make_reader
-    from mcap.writer import Writer
+    from _log_fixtures import rewrite_mcap
     from rosbags.typesys import Stores, get_typestore
 
     store = get_typestore(Stores.ROS2_HUMBLE)
-    with open(src, "rb") as f, open(dst, "wb") as g:
-        w = Writer(g)
-        w.start(profile="ros2", library="test")
-        ids: dict[int, int] = {}
-        for schema, channel, m in make_reader(f).iter_messages():
-            if channel.id not in ids:
-                sid = w.register_schema(schema.name, schema.encoding, schema.data)
-                ids[channel.id] = w.register_channel(channel.topic, channel.message_encoding, sid)
-            data = m.data
-            if schema.name == "nav_msgs/msg/Odometry":
-                msg = store.deserialize_cdr(data, schema.name)
-                t = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec + shift_ns
-                msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t, 10**9)
-                data = bytes(store.serialize_cdr(msg, schema.name))
-            w.add_message(ids[channel.id], m.log_time, data, m.publish_time)
-        w.finish()
-    return dst
+
+    def change(schema, m):
+        if schema.name != "nav_msgs/msg/Odometry":
+            return m.log_time, m.publish_time, m.data
+        msg = store.deserialize_cdr(m.data, schema.name)
+        t = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec + shift_ns
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t, 10**9)
+        return m.log_time, m.publish_time, bytes(store.serialize_cdr(msg, schema.name))
+
+    return rewrite_mcap(src, dst, change)
 
 
 def run(log: Path, out: Path, *more: str):
