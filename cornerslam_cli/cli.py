@@ -259,7 +259,11 @@ def cli() -> None:
 @topic_options
 @reference_options
 @click.option("--plot", is_flag=True, help="Also draw the map, timing and corner plots and report.html.")
-@click.option("--mcap-out", type=GivenPath(), help="Also write the results as MCAP for Foxglove.")
+@click.option(
+    "--mcap-out",
+    type=GivenPath(),
+    help="Also write the results as MCAP (Foxglove; --mcap-profile ros2: ROS 2).",
+)
 @click.option(
     "--mcap-profile",
     type=click.Choice(PROFILES),
@@ -581,7 +585,8 @@ def evaluate(out_dir, ground_truth, relations, time_offset, correct_scale, verbo
 
     \b
     Example:
-      cornerslam evaluate cornerslam_out/intel_pca --relations intel.relations --time-offset 976052857.334
+      cornerslam evaluate cornerslam_out/intel-noisy-odom_pca \\
+        --relations intel.relations --time-offset 976052857.334
     """
     from .evaluate import evaluate_files
     from .report.run_dir import check_one_run, check_unchanged, recorded_reference
