@@ -259,17 +259,21 @@ def check_processed(src: Input, n_frames: int, n_points: int) -> None:
     if n_frames > 0 and n_points == 0:
         why, hint = invalid_beams(src.reader)
         raise LogError(f"log '{src.path}': every beam of every scan is invalid{why}", hint)
-    stamps = "timestamps" if (carmen := src.reader.format == "carmen") else "header stamps"  # (no header)
-    # what else to try: the recorder's time (a CARMEN line's logger timestamp), unless that is what was read
-    each = "line at its logger timestamp" if carmen else "message at the time the recorder got it"
-    receive = (
-        "" if getattr(src.reader, "receive", False) else f", or take each {each}: --set input.stamps=receive"
-    )
+    reader = src.reader
+    carmen, receive = reader.format == "carmen", getattr(reader, "receive", False)
+    stamps = getattr(reader, "stamps_name", "timestamps" if carmen else "header stamps")  # what was read
+    # the other input.stamps, where it can help (the recorder's times, or back to the header stamps)
+    way_out = reader.stamps_way_out() if hasattr(reader, "stamps_way_out") else ""
     if n_frames == 1 and stats.scans_in > 1 and stats.scan_time_backwards >= stats.scans_in - 1:
+        check = (
+            "check that the recorder stamped each message"
+            if receive
+            else "check that the laser driver fills them"
+        )
         raise LogError(  # one pose is no trajectory: every scan's header stamp is the first one's (zero?)
             f"log '{src.path}': only its first scan could be processed: the {stamps} of the other "
             f"{stats.scan_time_backwards} repeated or went backwards",
-            (src.reader.stamp_hint if carmen else "check that the laser driver fills them") + receive,
+            (reader.stamp_hint if carmen else check) + way_out,
         )
     if n_frames == 0:
         rs = src.reader.stats
@@ -277,17 +281,16 @@ def check_processed(src: Input, n_frames: int, n_points: int) -> None:
             what = "no scan could be processed"
             raise damaged_error(src.path, rs, what) if rs.damaged else no_scan_read(src.path, what, stats=rs)
         raise_if_undecoded(src.path, rs)
-        if clocks := stats.other_clocks():
-            raise LogError(
-                f"log '{src.path}': no scan could be processed: {clocks}", clocks_hint(stats) + receive
-            )
+        if clocks := stats.other_clocks(receive):
+            check = "check that one recorder wrote both topics" if receive else clocks_hint(stats)
+            raise LogError(f"log '{src.path}': no scan could be processed: {clocks}", check + way_out)
         skipped = f"; skipped: {why}" if (why := stats.skipped_why()) else ""
         if apart := spans_apart(stats):
             skipped += f"; {apart}"
         raise LogError(
             f"log '{src.path}': no scan could be processed ({stats.scans_in} scans read{skipped})",
             f"check that the scan and odometry topics overlap in time and that their {stamps} increase"
-            + receive,
+            + way_out,
         )
 
 

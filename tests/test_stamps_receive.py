@@ -23,17 +23,10 @@ def restamped_odometry(src: Path, dst: Path, shift_ns: int) -> Path:
     """``src`` with each nav_msgs/Odometry header stamp moved by ``shift_ns``, every log time kept: the
     odometry stamped on another clock, received when it was."""
     from _log_fixtures import rewrite_mcap
-    from rosbags.typesys import Stores, get_typestore
-
-    store = get_typestore(Stores.ROS2_HUMBLE)
 
     def change(schema, m):
-        if schema.name != "nav_msgs/msg/Odometry":
-            return m.log_time, m.publish_time, m.data
-        msg = store.deserialize_cdr(m.data, schema.name)
-        t = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec + shift_ns
-        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t, 10**9)
-        return m.log_time, m.publish_time, bytes(store.serialize_cdr(msg, schema.name))
+        data = restamp(m.data, shift_ns) if schema.name == "nav_msgs/msg/Odometry" else m.data
+        return m.log_time, m.publish_time, data
 
     return rewrite_mcap(src, dst, change)
 
@@ -122,3 +115,98 @@ def test_the_default_config_and_summary_say_which(sim_log, tmp_path, value):
     )
     summary = json.loads((tmp_path / value / "summary.json").read_text())
     assert summary["config"]["input"]["stamps"] == value
+
+
+def test_transforms_of_one_message_keep_their_spacing_before_its_log_time(tmp_path):
+    """Odometry from tf with three odom → base_link transforms a message (10 ms apart): with receive all
+    took the message's one log time, two of three dropped as repeats (a review); each now keeps its
+    spacing before it."""
+    from _log_fixtures import scan_messages, write_messages_mcap
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    t = store.types
+
+    def transform(ns: int, x: float):
+        sec, nsec = divmod(ns, 10**9)
+        header = t["std_msgs/msg/Header"](
+            stamp=t["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec), frame_id="odom"
+        )
+        tr = t["geometry_msgs/msg/Transform"](
+            translation=t["geometry_msgs/msg/Vector3"](x=x, y=0.0, z=0.0),
+            rotation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+        )
+        return t["geometry_msgs/msg/TransformStamped"](
+            header=header, child_frame_id="base_link", transform=tr
+        )
+
+    t0, late = 1_700_000_000 * 10**9, 500_000_000
+    msgs = scan_messages(n=5)
+    for k in range(6):
+        stamps = [t0 + k * 100_000_000 + j * 10_000_000 for j in range(3)]
+        tf = t["tf2_msgs/msg/TFMessage"](transforms=[transform(s, 0.01 * i) for i, s in enumerate(stamps)])
+        data = bytes(store.serialize_cdr(tf, "tf2_msgs/msg/TFMessage"))
+        msgs.append(("/tf", "tf2_msgs/msg/TFMessage", stamps[-1] + late, data))
+    log = write_messages_mcap(tmp_path / "tf3.mcap", sorted(msgs, key=lambda m: m[2]))
+    odometry = [m.stamp for m in open_log(log, stamps="receive").messages() if not hasattr(m, "ranges")]
+    header = [m.stamp for m in open_log(log).messages() if not hasattr(m, "ranges")]
+    assert len(odometry) == len(header) == 18
+    np.testing.assert_allclose(np.array(odometry) - np.array(header), 0.5, atol=1e-6)
+
+
+def test_the_way_out_is_offered_only_where_it_can_help(sim_log, tmp_path):
+    """The hint to read the recorder's times was offered where they are apart too (and a CARMEN log
+    without logger timestamps sent the user round in a circle); with receive, a refusal spoke of header
+    stamps and offered no way back (a review)."""
+    from _log_fixtures import rewrite_mcap
+
+    def both(schema, m):  # the odometry on another clock in its header stamps and its log times alike
+        if schema.name != "nav_msgs/msg/Odometry":
+            return m.log_time, m.publish_time, m.data
+        return m.log_time + APART, m.publish_time + APART, restamp(m.data, APART)
+
+    log = rewrite_mcap(sim_log, tmp_path / "both.mcap", both)
+    res = run(log, tmp_path / "o")
+    assert res.exit_code == 2 and "s apart" in res.stderr and "input.stamps" not in res.stderr
+    one_time = rewrite_mcap(sim_log, tmp_path / "one_time.mcap", lambda _, m: (10**18, 10**18, m.data))
+    res = run(one_time, tmp_path / "o", "--set", "input.stamps=receive")
+    assert res.exit_code == 2 and "the log times of the other" in res.stderr, res.stderr
+    assert "check that the recorder stamped each message" in res.stderr
+    assert res.stderr.rstrip().endswith("or read the messages' header stamps: --set input.stamps=header)")
+    # CARMEN without logger timestamps, its odometry on another clock: no hint to read them
+    lines = (SAMPLES / "intel_cut.clf").read_text().splitlines()[:120]
+    bare = []
+    for line in lines:
+        f = line.split()
+        if f and f[0] in ("ODOM", "FLASER"):
+            f = f[:-2]
+            if f[0] == "ODOM":
+                f[-1] = f"{float(f[-1]) + 5000:.6f}"
+        bare.append(" ".join(f))
+    (tmp_path / "bare.clf").write_text("\n".join(bare) + "\n")
+    res = run(tmp_path / "bare.clf", tmp_path / "o")
+    assert res.exit_code == 2 and "input.stamps" not in res.stderr, res.stderr
+
+
+def restamp(data: bytes, shift_ns: int) -> bytes:
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    msg = store.deserialize_cdr(data, "nav_msgs/msg/Odometry")
+    total = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec + shift_ns
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(total, 10**9)
+    return bytes(store.serialize_cdr(msg, "nav_msgs/msg/Odometry"))
+
+
+def test_a_carmen_tag_not_read_may_lack_logger_timestamps(tmp_path):
+    """RLASER lines without logger timestamps beside the FLASER lines read: receive was refused for them."""
+    lines = (SAMPLES / "intel_cut.clf").read_text().splitlines()[:120]
+    extra = [" ".join(["RLASER", *line.split()[1:-2]]) for line in lines if line.startswith("FLASER")][:3]
+    (tmp_path / "rear.clf").write_text("\n".join([*lines, *extra]) + "\n")
+    res = run(tmp_path / "rear.clf", tmp_path / "o", "--set", "input.stamps=receive")
+    assert res.exit_code == 0, res.output
+
+
+def test_a_misspelt_value_in_code_is_refused(tmp_path):
+    with pytest.raises(ValueError, match="stamps must be one of header, receive, not 'recieve'"):
+        open_log(SAMPLES / "intel_cut.clf", stamps="recieve")

@@ -195,6 +195,8 @@ def open_log(
 ) -> LogReader:
     """Open a log for reading; the format is chosen by :func:`detect_format`.
 
+    ``stamps``: ``input.stamps`` — "header" (each message's header stamp) or "receive" (when the recorder
+    got it: a ROS log's log time, a CARMEN line's logger timestamp).
     Topic errors (no / several LaserScan, no odometry, missing requested topic) are raised by
     ``messages()``, ``laser_to_base()`` and ``check()``, not here, so ``info()`` can report them.
     """

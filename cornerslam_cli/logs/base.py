@@ -10,8 +10,8 @@ type, decoding (``cdr.py``, ``jsonmsg.py``), tf handling, counters. ``carmen.py`
 
 Conventions (all formats)
 -------------------------
-* Stamps are the *header* stamp of each message (sensor time), in seconds. Zero is a valid stamp
-  (simulated time starts at 0). Messages are yielded in log-time order.
+* Stamps are the *header* stamp of each message (sensor time; ``input.stamps: receive``: the recorder's
+  time), in seconds. Zero is a valid stamp (simulated time starts at 0). Messages in log-time order.
 * Message encodings: ``cdr`` (ROS 2), ``ros1`` and ``json`` (foxglove_bridge / rosbridge
   recordings, :mod:`.jsonmsg`); a chosen topic in another encoding (protobuf, flatbuffer, ...) is a
   LogError naming it, a tf topic in one is skipped with a warning.
@@ -257,17 +257,14 @@ class LogReader(Protocol):
     scan_topic: str
     odom_topic: str
     odom_on_tf: bool  # the log's tf carries odom→base (seen by laser_to_base())
+    receive: bool  # input.stamps "receive": messages taken at the recorder's time, not their header stamps
 
     def info(self, inspect: bool = True) -> LogInfo: ...  # inspect: as `cornerslam info` shows (reads more)
-
     def laser_to_base(self) -> Pose2 | None: ...
-
     def laser_upside_down(self) -> bool | None: ...  # None: the log's mount cannot say (the config's)
-
+    def stamps_way_out(self) -> str: ...  # the other input.stamps, as a refusal's hint, where it can help
     def messages(self) -> Iterator[Scan | OdomSample]: ...
-
     def scans(self) -> Iterator[Scan]: ...  # the scans alone: needs no odometry topic
-
     def close(self) -> None: ...
 
 

@@ -21,9 +21,10 @@ Conventions (as CARMEN's own ``carmen_string_to_laser_laser_message_orig``):
 * Max range: ROBOTLASER1 maximum_range; FLASER/RLASER the ``robot_front_laser_max`` /
   ``robot_rear_laser_max`` PARAM if the log has one, else 81.83 m (the SICK "no return" value of the
   classic Radish logs). Readings >= max range are no-return and dropped.
-* Stamps: the message timestamp field (sensor time), not the logger timestamp; lines in file order. A log
-  whose every laser and ODOM tag has one timestamp on all its lines (0: a converter that wrote none) and
-  logger timestamps that move is read on its logger timestamps, every tag alike, warned.
+* Stamps: the message timestamp field (sensor time), not the logger timestamp (unless ``input.stamps:
+  receive``: a tag read whose lines lack it is refused); lines in file order. A log whose every laser and
+  ODOM tag has one timestamp on all its lines (0: a converter that wrote none) and logger timestamps that
+  move is read on its logger timestamps, every tag alike, warned.
 * Odometry: ODOM lines when the log has any; otherwise the odometry pose fields of the laser lines (FLASER
   odom_x/y/theta, ROBOTLASER1 robot_x/y/theta), yielded just before their scan. Also those fields when ODOM
   lines go back in time more often than the laser lines do (a merged or re-stamped log: intel.gfs.log's 1,498
@@ -63,6 +64,7 @@ from ..errors import LogError
 from ..ranges import short_text
 from ..types import OdomSample, Scan
 from .base import LogInfo, Pose2, ReadStats, TopicInfo, make_scan
+from .params import receive_of
 
 LASER_TAGS = ("ROBOTLASER1", "FLASER", "RLASER", "ROBOTLASER2")
 ODOM_TAG = "ODOM"
@@ -330,7 +332,8 @@ class CarmenReader:
         self, path: Path, scan_topic: str = "", odom_topic: str = "", stamps: str = "header", **_frames
     ):
         self.path = Path(path)
-        self.receive = stamps == "receive"  # input.stamps: the logger timestamps asked for
+        self.receive = receive_of(stamps)  # input.stamps: the logger timestamps asked for
+        self._has_logger: dict[str, bool] = {}  # per laser / ODOM tag: a logger timestamp on every whole line
         self.stats = ReadStats()
         self._counts: dict[str, int] = {}
         self._whole: dict[str, int] = {}  # per laser / ODOM tag: whole lines with a stamp (the rest skipped)
@@ -342,10 +345,21 @@ class CarmenReader:
         self._end: float | None = None
         self._back: dict[str, int] = {}  # per tag: lines stamped before the line of that tag above them
         self._moving: set[str] = set()  # laser tags whose odometry fields are not all the same pose
-        self._logger_stamps = False  # every tag's timestamps stand still: the logger timestamps are read
+        self._logger_stamps = (
+            False  # the logger timestamps are read (input.stamps=receive, or timestamps that
+        )
+        # stand still on every tag)
         self._prescan()
         self._want_scan, self._want_odom = scan_topic, odom_topic
         self.scan_topic, self.odom_topic, self._problems = self._select()
+        if self.receive and (
+            short := [t for t in (self.scan_topic, self.odom_topic) if t and not self._has_logger[t]]
+        ):
+            raise LogError(  # (the tags read: another tag's lines may lack them)
+                f"log '{self.path.name}': input.stamps=receive reads the lines' logger timestamps, which its "
+                f"{' and '.join(sorted(set(short)))} lines do not all carry",
+                "set input.stamps=header",
+            )
 
     def _prescan(self) -> None:
         """Count line tags, read PARAMs, each tag's layout (the number of fields after the stamp most of
@@ -397,14 +411,7 @@ class CarmenReader:
             self._tail[tag] = tail if lines > (standard.lines if standard else 0) else TAIL
             if (layout := layouts.get((tag, self._tail[tag]))) and layout.lines:
                 chosen[tag] = layout
-        if self.receive and (
-            short := [t for t, n in chosen.items() if n.logger is None or n.logger.lines < n.lines]
-        ):
-            raise LogError(
-                f"log '{self.path.name}': input.stamps=receive reads the lines' logger timestamps, which its "
-                f"{' and '.join(sorted(short))} lines do not all carry",
-                "set input.stamps=header",
-            )
+        self._has_logger = {t: n.logger is not None and n.logger.lines >= n.lines for t, n in chosen.items()}
         self._logger_stamps = self.receive or _stamps_stand_still(chosen)
         for tag, layout in chosen.items():
             stamps = layout.logger if self._logger_stamps else layout  # (spans and order: those read)
@@ -610,6 +617,20 @@ class CarmenReader:
                 "odometry)",
                 self.path.name, odom,
             )  # fmt: skip
+
+    @property
+    def stamps_name(self) -> str:
+        """What the lines' times are read from, as the refusals name it."""
+        return "logger timestamps" if self._logger_stamps else "timestamps"
+
+    def stamps_way_out(self) -> str:
+        """The other ``input.stamps`` as a refusal's hint: the timestamps when the logger timestamps were
+        asked for; the logger timestamps when every line read carries one."""
+        if self.receive:
+            return ", or read the lines' timestamps: --set input.stamps=header"
+        if all(self._has_logger.get(t, False) for t in (self.scan_topic, self.odom_topic) if t):
+            return ", or take each line at its logger timestamp: --set input.stamps=receive"
+        return ""
 
     @property
     def stamp_hint(self) -> str:

@@ -110,3 +110,13 @@ class InputConfig:
 
     def __post_init__(self) -> None:
         check_ranges(self)
+
+
+STAMPS = ("header", "receive")  # input.stamps
+
+
+def receive_of(stamps: str) -> bool:
+    """Whether ``input.stamps`` (``stamps``, one of STAMPS) takes the recorder's times."""
+    if stamps not in STAMPS:
+        raise ValueError(f"stamps must be one of {', '.join(STAMPS)}, not {stamps!r}")
+    return stamps == "receive"

@@ -35,7 +35,7 @@ from .base import (
     normalize_msgtype,
     strip_frame,
 )
-from .params import MOUNT_SAME, InputConfig
+from .params import MOUNT_SAME, InputConfig, receive_of
 from .unreadable import damage_problem
 
 LASERSCAN = "sensor_msgs/LaserScan"
@@ -258,7 +258,7 @@ class RosLogReader:
     ):
         self.source = source
         # input.stamps "receive": every message taken at its log time (the recorder's), not its header stamp
-        self.receive = stamps == "receive"
+        self.receive = receive_of(stamps)
         self.path = Path(path)
         self.format = source.format
         self.stats = stats if stats is not None else ReadStats()
@@ -935,9 +935,11 @@ class RosLogReader:
         rows = []
         for topic, log_time, data in self.source.raw_messages(topics):
             try:
-                for parent, child, (sec, nsec), t, q in decs[topic].transforms(data):
+                transforms = decs[topic].transforms(data)
+                newest = max((sec * 1_000_000_000 + nsec for _, _, (sec, nsec), *_ in transforms), default=0)
+                for parent, child, (sec, nsec), t, q in transforms:
                     if parent == self.odom_frame and child == self.base_frame and any(q):
-                        at = log_time * 1e-9 if self.receive else sec + nsec * 1e-9  # (as the run's stamps)
+                        at = self._seconds(log_time, (sec, nsec), newest - sec * 1_000_000_000 - nsec)
                         with np.errstate(invalid="ignore", over="ignore"):
                             rows.append((at, *pose2_from_matrix(transform_matrix(t, q))))
             except Exception:  # noqa: BLE001 - bad bytes were counted when the run read them
@@ -972,6 +974,28 @@ class RosLogReader:
         self.laser_to_base()
         return self._laser_upside_down
 
+    def _seconds(self, log_time: int, stamp: tuple[int, int], behind_ns: int = 0) -> float:
+        """A message's time [s] as ``input.stamps`` says: its header ``stamp`` (sec, nsec), or its log time
+        less ``behind_ns`` (a transform stamped that much before the newest of its message)."""
+        sec, nsec = divmod(log_time - behind_ns, 1_000_000_000) if self.receive else stamp
+        return sec + nsec * 1e-9
+
+    @property
+    def stamps_name(self) -> str:
+        """What the messages' times are read from, as the refusals name it."""
+        return "log times" if self.receive else "header stamps"
+
+    def stamps_way_out(self) -> str:
+        """The other ``input.stamps`` as a refusal's hint: the header stamps when the log times were read;
+        the log times unless the recorder's times of the scan and odometry topics do not overlap either."""
+        if self.receive:
+            return ", or read the messages' header stamps: --set input.stamps=header"
+        spans = self.source.topic_spans()
+        s, o = spans.get(self.scan_topic), spans.get(self.odom_topic)
+        if s and o and (s[1] < o[0] or o[1] < s[0]):
+            return ""
+        return ", or take each message at the time the recorder got it: --set input.stamps=receive"
+
     def messages(self) -> Iterator[Scan | OdomSample]:
         """Scans and odometry samples in log-time order (raises LogError now if topics are missing)."""
         self.check()
@@ -1001,10 +1025,9 @@ class RosLogReader:
                     if not self._use_frame(scan_frames, frame := strip_frame(m.frame_id), scan_t):
                         left_out[frame] = left_out.get(frame, 0) + 1
                         continue
-                    sec, nsec = divmod(log_time, 1_000_000_000) if self.receive else m.stamp
                     scan = make_scan(
-                        st, where, sec + nsec * 1e-9, m.angle_min, m.angle_max, m.angle_increment,
-                        m.range_min, m.range_max, m.ranges, m.frame_id, m.time_increment,
+                        st, where, self._seconds(log_time, m.stamp), m.angle_min, m.angle_max,
+                        m.angle_increment, m.range_min, m.range_max, m.ranges, m.frame_id, m.time_increment,
                     )  # fmt: skip
                     if scan is not None:
                         yield scan
@@ -1023,10 +1046,11 @@ class RosLogReader:
                     poses = [odom_dec.odometry(data)]
                     child = _child_frame(odom_dec, data)
                     children[child] = children.get(child, 0) + 1
+                newest = max((sec * 1_000_000_000 + nsec for (sec, nsec), *_ in poses), default=0)
                 for (sec, nsec), x, y, q in poses:
-                    if self.receive:
-                        sec, nsec = divmod(log_time, 1_000_000_000)
-                    sample = st.odometry_sample(odom_where, sec + nsec * 1e-9, float(x), float(y), q)
+                    # (several transforms in one message keep their spacing before its log time)
+                    at = self._seconds(log_time, (sec, nsec), newest - sec * 1_000_000_000 - nsec)
+                    sample = st.odometry_sample(odom_where, at, float(x), float(y), q)
                     if sample is not None:
                         yield sample
             except LogError:

@@ -126,22 +126,26 @@ class SyncStats:
         """Whether two or more scans came and all had the same stamp (a driver that does not fill it)."""
         return self.scans_in >= 2 and self.scan_stamps.lo == self.scan_stamps.hi
 
-    def other_clocks(self) -> str:
+    def other_clocks(self, receive: bool = False) -> str:
         """Why no scan met the odometry, when their stamps are on different clocks (their spans do not
-        overlap and lie more than CLOCKS_APART apart), naming both spans; else ""."""
+        overlap and lie more than CLOCKS_APART apart), naming both spans; else "". ``receive``: the stamps
+        are the recorder's times (``input.stamps``), not header stamps."""
         s, o = self.scan_stamps, self.odom_stamps
         apart = max(o.lo - s.hi, s.lo - o.hi)  # inf with either unseen
         if self.scans_out or not CLOCKS_APART < apart < np.inf:
             return ""
         if self.unstamped_scans():
+            why = "the recorder gave them one time (a converted log?)" if receive else (
+                "the laser driver does not fill the scans' header stamps"
+            )  # fmt: skip
             return (
                 f"every one of its {self.scans_in} scans is stamped {s.lo:.3f} s (the odometry {o.text()}): "
-                "the laser driver does not fill the scans' header stamps"
+                + why
             )
-        return (
-            f"the scans are stamped {s.text()} and the odometry {o.text()}, {apart:.4g} s apart: "
+        why = "their log times are on different clocks (two recordings merged?)" if receive else (
             "their stamps are on different clocks"
-        )
+        )  # fmt: skip
+        return f"the scans are stamped {s.text()} and the odometry {o.text()}, {apart:.4g} s apart: {why}"
 
 
 def spans_apart(stats: SyncStats) -> str:
