@@ -210,3 +210,21 @@ def test_a_carmen_tag_not_read_may_lack_logger_timestamps(tmp_path):
 def test_a_misspelt_value_in_code_is_refused(tmp_path):
     with pytest.raises(ValueError, match="stamps must be one of header, receive, not 'recieve'"):
         open_log(SAMPLES / "intel_cut.clf", stamps="recieve")
+
+
+def test_a_carmen_log_read_on_its_logger_timestamps_already_is_offered_no_switch(tmp_path):
+    """Timestamps that stand still (a converter's 0) are read on the logger timestamps already: offering
+    input.stamps=receive there would change nothing."""
+    out = []
+    for line in (SAMPLES / "intel_cut.clf").read_text().splitlines()[:120]:
+        f = line.split()
+        if f and f[0] in ("ODOM", "FLASER"):
+            f[-3] = "0.000000"  # the timestamp; the logger timestamp (last) moves
+        out.append(" ".join(f))
+    (tmp_path / "still.clf").write_text("\n".join(out) + "\n")
+    reader = open_log(tmp_path / "still.clf")
+    assert reader.stamps_name == "logger timestamps" and reader.stamps_way_out() == ""
+    assert open_log(SAMPLES / "intel_cut.clf").stamps_way_out().endswith("--set input.stamps=receive")
+    assert (
+        open_log(SAMPLES / "intel_cut.clf", stamps="receive").stamps_way_out().endswith("input.stamps=header")
+    )

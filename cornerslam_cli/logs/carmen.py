@@ -345,10 +345,8 @@ class CarmenReader:
         self._end: float | None = None
         self._back: dict[str, int] = {}  # per tag: lines stamped before the line of that tag above them
         self._moving: set[str] = set()  # laser tags whose odometry fields are not all the same pose
-        self._logger_stamps = (
-            False  # the logger timestamps are read (input.stamps=receive, or timestamps that
-        )
-        # stand still on every tag)
+        # the logger timestamps are read (input.stamps=receive, or timestamps that stand still on every tag)
+        self._logger_stamps = False
         self._prescan()
         self._want_scan, self._want_odom = scan_topic, odom_topic
         self.scan_topic, self.odom_topic, self._problems = self._select()
@@ -625,9 +623,11 @@ class CarmenReader:
 
     def stamps_way_out(self) -> str:
         """The other ``input.stamps`` as a refusal's hint: the timestamps when the logger timestamps were
-        asked for; the logger timestamps when every line read carries one."""
+        asked for; the logger timestamps when every line read carries one (and they are not read already)."""
         if self.receive:
             return ", or read the lines' timestamps: --set input.stamps=header"
+        if self._logger_stamps:  # (read on them already: the timestamps stand still)
+            return ""
         if all(self._has_logger.get(t, False) for t in (self.scan_topic, self.odom_topic) if t):
             return ", or take each line at its logger timestamp: --set input.stamps=receive"
         return ""

@@ -935,13 +935,16 @@ class RosLogReader:
         rows = []
         for topic, log_time, data in self.source.raw_messages(topics):
             try:
-                transforms = decs[topic].transforms(data)
-                newest = max((sec * 1_000_000_000 + nsec for _, _, (sec, nsec), *_ in transforms), default=0)
-                for parent, child, (sec, nsec), t, q in transforms:
-                    if parent == self.odom_frame and child == self.base_frame and any(q):
-                        at = self._seconds(log_time, (sec, nsec), newest - sec * 1_000_000_000 - nsec)
-                        with np.errstate(invalid="ignore", over="ignore"):
-                            rows.append((at, *pose2_from_matrix(transform_matrix(t, q))))
+                odom = [
+                    (stamp, t, q)
+                    for parent, child, stamp, t, q in decs[topic].transforms(data)
+                    if parent == self.odom_frame and child == self.base_frame and any(q)
+                ]
+                newest = max((sec * 1_000_000_000 + nsec for (sec, nsec), *_ in odom), default=0)
+                for (sec, nsec), t, q in odom:  # (spaced before the log time as the run's samples are)
+                    at = self._seconds(log_time, (sec, nsec), newest - sec * 1_000_000_000 - nsec)
+                    with np.errstate(invalid="ignore", over="ignore"):
+                        rows.append((at, *pose2_from_matrix(transform_matrix(t, q))))
             except Exception:  # noqa: BLE001 - bad bytes were counted when the run read them
                 continue
         v = np.array(rows, dtype=float).reshape(-1, 4)
