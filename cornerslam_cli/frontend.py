@@ -260,20 +260,19 @@ def check_processed(src: Input, n_frames: int, n_points: int) -> None:
         why, hint = invalid_beams(src.reader)
         raise LogError(f"log '{src.path}': every beam of every scan is invalid{why}", hint)
     reader = src.reader
-    carmen, receive = reader.format == "carmen", getattr(reader, "receive", False)
-    stamps = getattr(reader, "stamps_name", "timestamps" if carmen else "header stamps")  # what was read
-    # the other input.stamps, where it can help (the recorder's times, or back to the header stamps)
-    way_out = reader.stamps_way_out() if hasattr(reader, "stamps_way_out") else ""
     if n_frames == 1 and stats.scans_in > 1 and stats.scan_time_backwards >= stats.scans_in - 1:
-        check = (
-            "check that the recorder stamped each message"
-            if receive
-            else "check that the laser driver fills them"
-        )
+        if reader.format == "carmen":
+            check = reader.stamp_hint
+        else:
+            check = (
+                "check that the recorder stamped each message"
+                if reader.receive
+                else "check that the laser driver fills them"
+            )
         raise LogError(  # one pose is no trajectory: every scan's header stamp is the first one's (zero?)
-            f"log '{src.path}': only its first scan could be processed: the {stamps} of the other "
-            f"{stats.scan_time_backwards} repeated or went backwards",
-            (reader.stamp_hint if carmen else check) + way_out,
+            f"log '{src.path}': only its first scan could be processed: the {reader.stamps_name} of the "
+            f"other {stats.scan_time_backwards} repeated or went backwards",
+            check + reader.stamps_way_out(),  # (the other input.stamps, where it can help)
         )
     if n_frames == 0:
         rs = src.reader.stats
@@ -281,16 +280,17 @@ def check_processed(src: Input, n_frames: int, n_points: int) -> None:
             what = "no scan could be processed"
             raise damaged_error(src.path, rs, what) if rs.damaged else no_scan_read(src.path, what, stats=rs)
         raise_if_undecoded(src.path, rs)
-        if clocks := stats.other_clocks(receive):
-            check = "check that one recorder wrote both topics" if receive else clocks_hint(stats)
+        way_out = reader.stamps_way_out()
+        if clocks := stats.other_clocks(reader.receive):
+            check = "check that one recorder wrote both topics" if reader.receive else clocks_hint(stats)
             raise LogError(f"log '{src.path}': no scan could be processed: {clocks}", check + way_out)
         skipped = f"; skipped: {why}" if (why := stats.skipped_why()) else ""
         if apart := spans_apart(stats):
             skipped += f"; {apart}"
         raise LogError(
             f"log '{src.path}': no scan could be processed ({stats.scans_in} scans read{skipped})",
-            f"check that the scan and odometry topics overlap in time and that their {stamps} increase"
-            + way_out,
+            f"check that the scan and odometry topics overlap in time and that their {reader.stamps_name} "
+            "increase" + way_out,
         )
 
 

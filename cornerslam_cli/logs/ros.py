@@ -940,9 +940,8 @@ class RosLogReader:
                     for parent, child, stamp, t, q in decs[topic].transforms(data)
                     if parent == self.odom_frame and child == self.base_frame and any(q)
                 ]
-                newest = max((sec * 1_000_000_000 + nsec for (sec, nsec), *_ in odom), default=0)
-                for (sec, nsec), t, q in odom:  # (spaced before the log time as the run's samples are)
-                    at = self._seconds(log_time, (sec, nsec), newest - sec * 1_000_000_000 - nsec)
+                times = self._times(log_time, [stamp for stamp, *_ in odom])  # (as the run's samples)
+                for at, (_, t, q) in zip(times, odom, strict=True):
                     with np.errstate(invalid="ignore", over="ignore"):
                         rows.append((at, *pose2_from_matrix(transform_matrix(t, q))))
             except Exception:  # noqa: BLE001 - bad bytes were counted when the run read them
@@ -982,6 +981,15 @@ class RosLogReader:
         less ``behind_ns`` (a transform stamped that much before the newest of its message)."""
         sec, nsec = divmod(log_time - behind_ns, 1_000_000_000) if self.receive else stamp
         return sec + nsec * 1e-9
+
+    def _times(self, log_time: int, stamps: list[tuple[int, int]]) -> list[float]:
+        """:meth:`_seconds` of the transforms of one message (their header ``stamps``): with the log times,
+        each keeps its spacing before the newest of them, which takes the message's log time."""
+        if not self.receive:
+            return [self._seconds(log_time, stamp) for stamp in stamps]
+        ns = [sec * 1_000_000_000 + nsec for sec, nsec in stamps]
+        newest = max(ns, default=0)
+        return [self._seconds(log_time, stamp, newest - n) for stamp, n in zip(stamps, ns, strict=True)]
 
     @property
     def stamps_name(self) -> str:
@@ -1049,10 +1057,8 @@ class RosLogReader:
                     poses = [odom_dec.odometry(data)]
                     child = _child_frame(odom_dec, data)
                     children[child] = children.get(child, 0) + 1
-                newest = max((sec * 1_000_000_000 + nsec for (sec, nsec), *_ in poses), default=0)
-                for (sec, nsec), x, y, q in poses:
-                    # (several transforms in one message keep their spacing before its log time)
-                    at = self._seconds(log_time, (sec, nsec), newest - sec * 1_000_000_000 - nsec)
+                times = self._times(log_time, [stamp for stamp, *_ in poses])
+                for at, (_, x, y, q) in zip(times, poses, strict=True):
                     sample = st.odometry_sample(odom_where, at, float(x), float(y), q)
                     if sample is not None:
                         yield sample
