@@ -435,21 +435,30 @@ def _say_compiling(quiet: bool) -> bool:
 
 @cli.command()
 @click.argument("log_path", metavar="LOG", type=GivenPath(log=True))
+@config_options
 @topic_options
 @verbosity_options(progress=False, steps=False)
-def info(log_path, scan_topic, odom_topic, verbose, quiet):
-    """Show what is in LOG: format, topics, types, counts, rates, and what `run` would use."""
+def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quiet):
+    """Show what is in LOG: format, topics, types, counts, rates, and what `run` would use — with
+    --config/--set, what it would use under them (input.*: topics, frames, stamps, the laser's mount and
+    preset).
+
+    \b
+    Example:
+      cornerslam info robot.bag --set input.stamps=receive --set input.base_frame=base_footprint
+    """
     from dataclasses import replace
 
-    from .lasers import detect_preset, first_scan
-    from .logs import open_log
+    from .lasers import first_scan, laser_mount
+    from .logs import open_configured
     from .logs.mcap import header_fields
     from .logs.unreadable import no_scan_read
     from .report.ownership import is_results_mcap
     from .report.run_writer import find_ground_truth
 
     setup_logging(verbose, quiet)
-    reader = open_log(Path(log_path), scan_topic=scan_topic or "", odom_topic=odom_topic or "")
+    cfg = _info_config(config_path, overrides, scan_topic, odom_topic, log_path)
+    reader = open_configured(Path(log_path), cfg.input)
     log_info = reader.info()
     if is_results_mcap(Path(log_path)) and not (scan_topic or odom_topic):  # run --mcap-out's: described
         lines = info_lines(log_path, replace(log_info, problems=()), None)
@@ -465,28 +474,33 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
                 scan = first_scan(reader)
             except LogError:
                 pass  # the error below says what run would refuse
-        preset = None if scan is None else detect_preset(scan.n_beams, scan.angle_increment)
+        preset = _info_preset(cfg, scan)
         _echo(info_lines(log_path, replace(log_info, problems=()), None, scan, preset, mount_read=False))
         reader.check()  # the first problem as the error: exit 2, as run
-    scan, unread, laser = None, None, None
+    scan, unread, laser, mount_text, upside_down = None, None, None, "", False
     try:  # (a topic declared with no message: run refuses it here, info lists the counts first)
-        laser = reader.laser_to_base()
+        laser, source, upside_down, _ = laser_mount(reader, cfg)  # the tf's, else the config's (as run)
+        laser, mount_text = _mount_shown(laser, source, cfg, log_info.format)
         scan = first_scan(reader) if log_info.scan_topic else None
     except LogError as e:  # info lists what it can: the topics, then why run would refuse the log
         unread = e
     if log_info.scan_topic and scan is None and unread is None:  # every chunk corrupt: no scan at all
         unread = no_scan_read(log_path, "run has none to process", topics_hint=False, stats=reader.stats)
-    preset = None if scan is None else detect_preset(scan.n_beams, scan.angle_increment)
+    preset = _info_preset(cfg, scan)
     if getattr(reader, "mount_problem", ""):  # a CARMEN log's laser poses that are no fixed mount
         log_info = replace(log_info, notes=(*log_info.notes, f"the log {reader.mount_problem}"))
     if gt := find_ground_truth(Path(log_path)):  # (what run and compare will score against, unasked)
         found = f"ground truth {display_path(gt)} beside it: run and compare score against it"
         log_info = replace(log_info, notes=(*log_info.notes, found))
-    upside_down = laser is not None and bool(reader.laser_upside_down())
     frames = None  # the robot's frame (the odometry's child_frame_id, else input.base_frame), the laser's
-    if laser is not None and getattr(reader, "laser_frame", None):
+    if laser is not None and not mount_text and getattr(reader, "laser_frame", None):
         frames = (reader.base_frame, reader.laser_frame)
-    _echo(info_lines(log_path, log_info, laser, scan, preset, upside_down, frames))
+    receive = cfg.input.stamps != "header"
+    lines = info_lines(log_path, log_info, laser, scan, preset, upside_down, frames, mount_text=mount_text)
+    if receive:  # (after the odometry line: what the scans and odometry are timed by)
+        at = lines.index("run would use:") + 3
+        lines.insert(at, f"  stamps    {reader.stamps_name} (input.stamps=receive)")
+    _echo(lines)
     if unread is not None:  # exit 2, as run
         raise unread
     odom_tf = getattr(reader, "odom_tf_problem", lambda: None)()  # ROS logs: tf odometry not on tf
@@ -494,6 +508,42 @@ def info(log_path, scan_topic, odom_topic, verbose, quiet):
         raise LogError(*odom_tf[0])
     if odom_tf:  # the first 2,000 messages after the first scan only: likely, not certain
         reader.stats.warn("%s in the first 2,000 messages after the first scan (%s)", *odom_tf[0])
+
+
+def _info_config(config_path, overrides, scan_topic, odom_topic, log_path):
+    """``info``'s config: as a run resolves it, the laser preset chosen for the log's first scan — or,
+    when that scan cannot be read (the log's problems: info lists its topics first, then refuses it as a
+    run would), without the preset."""
+    try:
+        return command_config(config_path, overrides, None, scan_topic, odom_topic, log_path)
+    except LogError:
+        return command_config(config_path, overrides, None, scan_topic, odom_topic)
+
+
+def _info_preset(cfg, scan) -> str | None:
+    """The laser preset a run takes for ``scan`` under ``cfg`` (``input.laser_preset``: auto by the scan's
+    geometry — None when none matches —, "none" or a name), None without a scan."""
+    from .lasers import detect_preset
+
+    choice = cfg.input.laser_preset
+    if scan is None:
+        return None
+    return detect_preset(scan.n_beams, scan.angle_increment) if choice == "auto" else choice
+
+
+def _mount_shown(laser, source, cfg, fmt) -> tuple[tuple[float, float, float] | None, str]:
+    """``info``'s laser mount from :func:`lasers.laser_mount`'s (``laser``, ``source``): the log's mount
+    as it is (text ""), the built-in default as None (info_lines says so), else the config's mount with
+    where it came from."""
+    if source == "tf":
+        return laser, ""
+    if source == "default":
+        return None, ""
+    where = "the laser preset " + cfg.input.laser_preset + "'s" if source == "preset" else "the config's"
+    why = "not in its laser lines" if fmt == "carmen" else "not on tf"
+    if not cfg.input.laser.from_tf:
+        why = "input.laser.from_tf=false"
+    return laser, f"{where} input.laser: {why}"
 
 
 OTHER_FORMATS = {".bag": "a ROS 1 bag", ".db3": "a ROS 2 bag's storage", ".json": "JSON", ".csv": "CSV"}

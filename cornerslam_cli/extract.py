@@ -9,7 +9,7 @@ from typing import Any
 from .config import Config
 from .errors import ConfigError, LogError
 from .features import extract
-from .logs import open_log
+from .logs import open_configured
 from .logs.unreadable import no_scan_read
 from .types import Corners, Scan, Segments
 
@@ -32,9 +32,7 @@ def extract_step(
     when the log has no such scan, naming the valid range; LogError when it yields no scan at all
     (every chunk corrupt, every scan undecodable: there is no range to name)."""
     inp = cfg.input
-    frames = {"odom_frame": inp.odom_frame, "base_frame": inp.base_frame, "scan_frame": inp.scan_frame,
-              "stamps": inp.stamps}  # fmt: skip
-    with open_log(Path(log_path), scan_topic=inp.scan_topic, odom_topic=inp.odom_topic, **frames) as reader:
+    with open_configured(Path(log_path), inp) as reader:
         if inp.odom_topic:  # given though not needed: a wrong one is refused as run refuses it
             reader.check()
         if hasattr(reader, "scan_frame") and not _odometry_problem(reader):

@@ -27,7 +27,7 @@ from .filter import load_kernels as load_filter_kernels
 from .filter.models import increment_noise
 from .geometry import matrix_from_pose, transform_points
 from .lasers import invalid_beams, laser_mount
-from .logs import ReadStats, open_log
+from .logs import ReadStats, open_configured
 from .logs.deskew import deskew
 from .logs.keyframes import select_keyframes
 from .logs.order import in_stamp_order
@@ -140,16 +140,7 @@ def open_input(
     extractor's and the scan matcher's compiled kernels (start-up work, not the first step's); ``span``:
     the part to process; ``compiling``: called just before the kernels load (the command line's note that a
     first run compiles them: after the log's checks, so that a bad log's error comes alone)."""
-    inp = cfg.input
-    reader = open_log(
-        Path(log_path),
-        scan_topic=inp.scan_topic,
-        odom_topic=inp.odom_topic,
-        odom_frame=inp.odom_frame,
-        base_frame=inp.base_frame,
-        scan_frame=inp.scan_frame,
-        stamps=inp.stamps,
-    )
+    reader = open_configured(Path(log_path), cfg.input)
     reader.check()
     info = reader.info(inspect=False)  # (a run needs its topics, not its rates)
     laser2base, source, upside_down, upside_down_source = laser_mount(reader, cfg)

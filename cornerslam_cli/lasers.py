@@ -37,7 +37,7 @@ from .config import (
 )
 from .errors import ConfigError, did_you_mean
 from .geometry import wrap_angle
-from .logs import open_log
+from .logs import open_configured
 from .logs.params import MOUNT_SAME, LaserMountConfig
 from .ranges import short_text
 from .types import Scan
@@ -184,19 +184,7 @@ def first_scan_geometry(log_path: str | Path, cfg: Config) -> tuple[int, float] 
 
     The reader's warnings are silenced here: the run reads the log again and reports them once.
     """
-    inp = cfg.input
-    with (
-        _reader_quiet(),
-        open_log(
-            Path(log_path),
-            scan_topic=inp.scan_topic,
-            odom_topic=inp.odom_topic,
-            odom_frame=inp.odom_frame,
-            base_frame=inp.base_frame,
-            scan_frame=inp.scan_frame,
-            stamps=inp.stamps,
-        ) as reader,
-    ):
+    with _reader_quiet(), open_configured(Path(log_path), cfg.input) as reader:
         scan = first_scan(reader)
     return None if scan is None else (scan.n_beams, scan.angle_increment)
 

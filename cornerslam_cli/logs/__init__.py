@@ -26,6 +26,7 @@ from .base import LogInfo, LogReader, ReadStats, TopicInfo
 from .carmen import GZIP_MAGIC, CarmenReader
 from .mcap import MAGIC as MCAP_MAGIC
 from .mcap import open_mcap
+from .params import InputConfig
 from .rosbag import STORAGE_SUFFIXES, open_rosbag1, open_rosbag2, split_bag_of
 
 __all__ = [
@@ -36,6 +37,7 @@ __all__ = [
     "TopicInfo",
     "check_regular",
     "detect_format",
+    "open_configured",
     "open_log",
 ]
 
@@ -217,3 +219,17 @@ def open_log(
             "bag's directory to read them all)", p.name, bag, p.parent.name or ".",
         )  # fmt: skip
     return reader
+
+
+def open_configured(path: str | Path, inp: InputConfig) -> LogReader:
+    """:func:`open_log` on the topics, frames and stamps of the config's ``input`` section, as a run
+    reads the log (``run``, ``extract``, ``info`` and the laser preset's look at the first scan alike)."""
+    return open_log(
+        path,
+        scan_topic=inp.scan_topic,
+        odom_topic=inp.odom_topic,
+        odom_frame=inp.odom_frame,
+        base_frame=inp.base_frame,
+        scan_frame=inp.scan_frame,
+        stamps=inp.stamps,
+    )

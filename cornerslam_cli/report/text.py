@@ -309,11 +309,13 @@ def info_lines(
     upside_down: bool = False,
     tf_frames: tuple[str, str] | None = None,
     mount_read: bool = True,
+    mount_text: str = "",
 ) -> list[str]:
     """``cornerslam info``: the log's format, topics with counts and rates, what a run would use
     (``laser``: the laser's (x, y, yaw) in the base frame from tf — ``tf_frames`` names the two,
     e.g. (base_footprint, laser) — a CARMEN log's ROBOTLASER1 laser pose — or None, and
-    ``upside_down`` there; not ``mount_read``: not looked up, the log's problems coming first; ``scan``:
+    ``upside_down`` there; ``mount_text``: ``laser`` is instead the config's mount, from where it says;
+    not ``mount_read``: not looked up, the log's problems coming first; ``scan``:
     the first scan, its geometry and beam times, with the laser ``preset`` it matches), problems and
     notes."""
     n = "unknown" if i.n_messages is None else i.n_messages
@@ -337,8 +339,8 @@ def info_lines(
     if laser is not None:
         flip = ", upside down: scans mirrored" if upside_down else ""
         x, y, yaw = laser
-        source = ROBOTLASER_SOURCE if i.format == "carmen" else "from tf"
-        if tf_frames and i.format != "carmen":
+        source = mount_text or (ROBOTLASER_SOURCE if i.format == "carmen" else "from tf")
+        if tf_frames and i.format != "carmen" and not mount_text:
             source += f" {short_text(tf_frames[0])}→{short_text(tf_frames[1])}"
         lines.append(f"  laser     x={x:.3f} m y={y:.3f} m yaw={yaw:.3f} rad{flip} ({source})")
     elif not i.scan_topic and i.format != "carmen":  # tf gives the mount of the scan topic's frame: none yet
@@ -368,6 +370,8 @@ def scan_lines(scan: Scan, preset: str | None) -> list[str]:
     inc = math.degrees(abs(scan.angle_increment))
     fov = inc * max(scan.n_beams - 1, 0)
     which = f"preset {preset}" if preset else "no laser preset matches (the config's sensor model)"
+    if preset == "none":  # (input.laser_preset=none: none asked for)
+        which = "no laser preset (input.laser_preset=none: the config's sensor model)"
     spread = f"over {fov:.1f}° ({inc:.3f}° apart)" if scan.n_beams > 1 else "(a single beam)"
     lines = [f"  beams     {scan.n_beams} {spread}, {scan.range_min:.3f}–{scan.range_max:.3f} m: {which}"]
     if scan.range_max <= scan.range_min:  # (a driver's parameter: a run refuses the log)
