@@ -5,6 +5,7 @@ all, which a run refused (no scan met the odometry), saying how to get out of it
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -108,7 +109,6 @@ def test_an_unknown_value_is_refused():
 
 @pytest.mark.parametrize("value", ["header", "receive"])
 def test_the_default_config_and_summary_say_which(sim_log, tmp_path, value):
-    import json
 
     assert (
         run(sim_log, tmp_path / value, "--set", f"input.stamps={value}", "--max-scans", "20").exit_code == 0
@@ -228,3 +228,24 @@ def test_a_carmen_log_read_on_its_logger_timestamps_already_is_offered_no_switch
     assert (
         open_log(SAMPLES / "intel_cut.clf", stamps="receive").stamps_way_out().endswith("input.stamps=header")
     )
+
+
+def test_a_ground_truth_a_receive_run_does_not_meet_is_said_to_be_on_the_other_clock(sim_log, tmp_path):
+    """Every message logged 1000 s after its header stamp (a recorder on another clock): a receive run
+    is stamped on the recorder's clock, which the ground truth (on the header clock) does not overlap —
+    the warning says which clock the run is on; a header run is scored."""
+    from _log_fixtures import rewrite_mcap
+
+    log = rewrite_mcap(
+        sim_log, tmp_path / "late.mcap", lambda schema, m: (m.log_time + APART, m.publish_time, m.data)
+    )
+    gt = sim_log.with_suffix(".gt.tum")
+    (tmp_path / "late.gt.tum").write_bytes(gt.read_bytes())
+    assert run(log, tmp_path / "h").exit_code == 0
+    assert json.loads((tmp_path / "h" / "summary.json").read_text())["accuracy"]["ate"]["n"] > 10
+    res = run(log, tmp_path / "r", "--set", "input.stamps=receive")
+    assert res.exit_code == 0, res.output
+    summary = json.loads((tmp_path / "r" / "summary.json").read_text())
+    assert "ate" not in (summary.get("accuracy") or {})
+    (warning,) = [w for w in summary["warnings"] if "does not overlap" in w]
+    assert "the run is stamped on the recorder's clock (input.stamps=receive)" in warning, warning

@@ -205,7 +205,9 @@ class RunWriter:
         if motions is not None:
             write_tum(self.dest / "scan_matched.tum", stamps, motions)
         warn_still_odometry(src, odoms, motions)
-        accuracy, notes = accuracy_of(stamps, poses, odoms, ref, motions, None if graph is None else online)
+        accuracy, notes = accuracy_of(
+            stamps, poses, odoms, ref, motions, None if graph is None else online, src.reader.receive
+        )
         for text in notes:
             src.reader.stats.warn(text)
         t_grid = time.perf_counter()
@@ -334,17 +336,26 @@ def accuracy_of(
     ref: Reference,
     scan_odoms: np.ndarray | None = None,
     online: np.ndarray | None = None,
+    receive: bool = False,
 ) -> tuple[Accuracy | None, list[str]]:
     """ATE/RPE against the ground truth and the relation metric, for the estimate and for odometry (and
     for the scan-matched odometry when there is one: what the corners add on top of it), and the
     warnings about them: a ground truth read out of time order, a ground truth that does not overlap
     the run in time (then there is no ATE/RPE, rather than NaN), no relation inside the run. ``online``:
-    the causal estimate when ``poses`` were smoothed (two-level SLAM), scored beside them."""
+    the causal estimate when ``poses`` were smoothed (two-level SLAM), scored beside them; ``receive``:
+    the run's stamps are the recorder's (``input.stamps=receive``), which a ground truth stamped on the
+    sensors' clock may not meet (said so)."""
     acc: dict = {}  # Accuracy's fields
     notes = list(ref.notes)
     name = f"ground truth '{ref.gt_path}'"
+    apart = ref.gt is not None and overlap_problem(stamps, ref.gt[0], name)
+    if apart and receive:
+        clock = (
+            "the run is stamped on the recorder's clock (input.stamps=receive), the ground truth perhaps on"
+        )
+        apart = (f"{apart[0]} — {clock} the sensors' (the header stamps)", apart[1])
     problem = ref.gt is not None and (
-        overlap_problem(stamps, ref.gt[0], name)
+        apart
         # (on the log's odometry: what the log says, the same for every associator of a compare, and
         # not the estimate's failure — a stuck or drifting run is scored, not taken for a bad reference)
         or mirror_problem(stamps, odoms, *ref.gt, name, "the log's odometry")
