@@ -546,6 +546,21 @@ def _mount_shown(laser, source, cfg, fmt) -> tuple[tuple[float, float, float] | 
     return laser, f"{where} input.laser: {why}"
 
 
+def _recorded_offset_hint(e: LogError, out_dir, relations, time_offset: float) -> LogError:
+    """``e`` (evaluate's refusal), its hint naming the --time-offset the run scored these same relations
+    at, when no relation fell inside at another (``--relations`` given again without ``--time-offset``:
+    0, which puts the Intel relations 976,052,857 s away). An offset given is not second-guessed: the
+    hint only."""
+    from .report.run_dir import recorded_offset
+
+    if not relations or not e.msg.startswith("no relation in "):
+        return e
+    offset = recorded_offset(out_dir, relations)  # (the same relations, by content: a file moved since)
+    if offset is None or offset == time_offset:
+        return e
+    return LogError(e.msg, f"the run scored them at --time-offset {offset!r}: give it")
+
+
 OTHER_FORMATS = {".bag": "a ROS 1 bag", ".db3": "a ROS 2 bag's storage", ".json": "JSON", ".csv": "CSV"}
 
 
@@ -659,13 +674,16 @@ def evaluate(out_dir, ground_truth, relations, time_offset, correct_scale, verbo
                      "given" if given else "the run's summary.json names them")  # fmt: skip
             if given and time_offset != rec.time_offset:  # (a mistyped offset moves the figures far)
                 log.warning("scored at --time-offset %r, not the run's %r", time_offset, rec.time_offset)
-        if rec.why_not:
-            log.info("not scored against%s", why)
+        if rec.why_not:  # the other one scored: a table of both would lose a row without a word
+            log.warning("not scored against%s", why)
     if correct_scale and not ground_truth:
         raise click.UsageError("--correct-scale scales the ATE: give --ground-truth FILE.tum too")
     check_time_offset(relations, time_offset)
     check_unchanged(out_dir)  # its trajectory.tum cut short since: not scored as the whole run
-    res = evaluate_files(out_dir, ground_truth, relations, time_offset, correct_scale)
+    try:
+        res = evaluate_files(out_dir, ground_truth, relations, time_offset, correct_scale)
+    except LogError as e:  # no relation inside at the default offset: the run's own, when it had one
+        raise _recorded_offset_hint(e, out_dir, relations, time_offset) from None
     _echo([*evaluation_lines(res), scored_line(out_dir, ground_truth, relations, correct_scale)])
 
 

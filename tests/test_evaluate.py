@@ -787,6 +787,44 @@ def test_evaluate_without_a_reference_scores_against_the_runs_relations_at_its_t
     assert f"'{rel}' here does not hold the relations the run was scored against" in res.stderr
 
 
+def test_evaluate_says_which_reference_of_the_run_it_left_out_and_the_offset_it_scored_at(sim_log, tmp_path):
+    """A run scored against a ground truth and relations, the relations moved away since: `evaluate OUTDIR`
+    scored the ground truth alone and said why only under -v (a hostile-user probe) — warned now; the
+    relations given again without --time-offset (0) fall outside the run: the error names the run's offset."""
+    from click.testing import CliRunner
+
+    from cornerslam_cli.cli import cli
+    from cornerslam_cli.report.tables import read_tum
+
+    t, gt = read_tum(sim_log.with_suffix(".gt.tum"))
+    rel, offset = tmp_path / "sim.relations", 1000.25
+    rows = [(t[i] + offset, t[i + 5] + offset, relative(gt[i], gt[i + 5])) for i in range(0, len(t) - 5, 5)]
+    rel.write_text("".join(f"{a} {b} {r[0]} {r[1]} 0 0 0 {r[2]}\n" for a, b, r in rows))
+    out = tmp_path / "run"
+    args = [
+        "run",
+        str(sim_log),
+        "--out",
+        str(out),
+        "-q",
+        "--relations",
+        str(rel),
+        "--time-offset",
+        str(offset),
+    ]
+    assert CliRunner().invoke(cli, args).exit_code == 0
+    both = evaluate(out)
+    assert both.exit_code == 0 and "relation" in both.stdout.lower() and not both.stderr, both.output
+    away = rel.rename(tmp_path / "elsewhere.relations")
+    res = evaluate(out)
+    assert res.exit_code == 0 and "ATE" in res.stdout, res.output
+    assert f"not scored against (the run was scored against '{rel}', not found from here)" in res.stderr
+    res = evaluate(out, "--relations", str(away))  # another name, the same relations
+    assert res.exit_code == 2 and f"the run scored them at --time-offset {offset!r}: give it" in res.stderr
+    res = evaluate(out, "--relations", str(away), "--time-offset", "3")  # a wrong one given: the same hint
+    assert res.exit_code == 2 and f"the run scored them at --time-offset {offset!r}: give it" in res.stderr
+
+
 @pytest.mark.parametrize("which", ["ground truth", "trajectory"])
 def test_two_clocks_are_not_taken_for_microseconds(files, which):
     """A log stamped in seconds since 1970 against a half-hour ground truth stamped from 0 (or the other

@@ -148,6 +148,20 @@ def recorded_reference(path: str | Path) -> Recorded:
     return Recorded(gt, rel, (offset or 0.0) if rel else 0.0, tuple(why))  # (no relations: no offset)
 
 
+def recorded_offset(path: str | Path, relations: str | Path) -> float | None:
+    """The --time-offset the run directory ``path`` scored the relations of the file ``relations`` at (by
+    their sha256, whatever the file's name now), None when it did not score these or kept no offset."""
+    p = Path(path)
+    try:
+        s = RunSummary.read(p) if (p / "summary.json").is_file() else None
+        acc = s.accuracy if s is not None else None
+        if acc is None or acc.relations_time_offset is None or s.hashes.relations is None:
+            return None
+        return acc.relations_time_offset if _relations_hash(str(relations)) == s.hashes.relations else None
+    except (ResultsError, OSError, LogError):  # (what evaluate refused already: nothing to add)
+        return None
+
+
 def _gt_hash(name: str) -> str:
     from .summary import reference_hash
 
