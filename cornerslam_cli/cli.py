@@ -875,9 +875,10 @@ def config_command(log_path, config_path, overrides, preset, verbose, quiet):
     """Print the fully resolved config as YAML: built-in defaults < laser preset < --config < --set.
 
     With LOG, the laser preset is chosen from its first scan, as `run` would; --preset picks it instead,
-    as `--set input.laser_preset=NAME` would (over a --config file's choice). Without LOG, --preset or
-    --config, the keys a laser preset sets are commented out (but for those --set gives): as --config the
-    output leaves each log its preset. The output is a valid --config file.
+    as `--set input.laser_preset=NAME` would (over a --config file's choice). Without LOG or --preset (and
+    no preset named in the --config file), the keys a laser preset sets are commented out but for those
+    --set or the --config file gives: as --config the output leaves each log its preset. The output is a
+    valid --config file.
 
     \b
     Example:
@@ -900,11 +901,12 @@ def config_command(log_path, config_path, overrides, preset, verbose, quiet):
         if by_option is None or not e.msg.startswith(override_place(by_option)):
             raise
         raise replaced_place(e, by_option) from None
-    if log_path is None and config_path is None and cfg.input.laser_preset == "auto":  # each log's preset
-        from .config import set_keys  # left to it, but for what --set gave (a file's: warned when run)
-        from .lasers import PRESET_NOTE, dump_for_any_laser
+    if log_path is None and cfg.input.laser_preset == "auto":  # each log's preset left to it, but for
+        from .config import set_keys  # what --set and the --config file set (a file's: warned when run)
+        from .lasers import PRESET_NOTE, dump_for_any_laser, file_keys
 
-        click.echo(PRESET_NOTE + dump_for_any_laser(cfg, set_keys(overrides)), nl=False)
+        given = set_keys(overrides) | (file_keys(config_path) if config_path is not None else set())
+        click.echo(PRESET_NOTE + dump_for_any_laser(cfg, given), nl=False)
     else:
         click.echo(dump_config(cfg), nl=False)
 

@@ -127,6 +127,11 @@ def dump_for_any_laser(cfg: Config, given: Collection[str] = ()) -> str:
     return "\n".join(out) + "\n"
 
 
+def file_keys(config_path: str | Path) -> set[str]:
+    """The dotted keys a config file sets (read again: a pipe was copied once, options.py)."""
+    return {k for k, _ in _leaves(read_config_file(config_path))}
+
+
 def mount_source(cfg: Config) -> str:
     """Where the config's laser mount (``input.laser``) came from, for a log without one on tf:
     ``preset`` (the laser preset's), ``default`` (the built-in one: none of x, y, yaw set — a 0 set is

@@ -1172,6 +1172,12 @@ def test_config_prints_the_resolved_config_that_run_uses(tmp_path):
     given = invoke("config", "--set", "sensor.model=piecewise", "--set", "lines.min_points=6").stdout
     assert "\n  model: piecewise\n" in given and "\n  min_points: 6\n" in given  # given: kept, if defaults
     assert "\n  # a: 0.01\n" in given
+    # a --config file's keys are kept as the --set's; the preset's others stay commented out (a probe: `config
+    # --config FILE` pinned the built-in sensor model, which as --config then replaced every log's preset's)
+    (tmp_path / "mine.yaml").write_text("sensor:\n  sigma_r_rel: 0.02\nekf:\n  alpha1: 0.07\n")
+    mine = invoke("config", "--config", tmp_path / "mine.yaml").stdout
+    assert "\n  sigma_r_rel: 0.02\n" in mine and "\n  # model: piecewise\n" in mine and "alpha1: 0.07" in mine
+    assert invoke("config", "--config", "/dev/null").stdout == invoke("config").stdout
     none = Config(input=dataclasses.replace(Config().input, laser_preset="none"))
     assert invoke("config", "--preset", "none").stdout == dump_config(none)  # (no preset: every key)
     res = invoke("config", "--preset", "hokuyo_urg04lx")
