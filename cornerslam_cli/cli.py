@@ -756,6 +756,12 @@ def _figure_target(plot_path: str) -> Path:
                 f"'{display_path(plot_path)}' exists and is not a figure cornerslam extract wrote",
                 "give a new file name, or move that file away",
             )
+        place = next(p for p in target.parents if p.exists())  # (made when written: the nearest existing)
+        if not os.access(place, os.W_OK | os.X_OK):  # a read-only mount, no permission: before the scan's
+            raise OutputError(  # table is printed, not after it (a probe)
+                f"cannot write --plot '{display_path(plot_path)}': '{display_path(place)}' is not writable",
+                "give a place you can write to",
+            )
     return target
 
 

@@ -356,6 +356,20 @@ def test_extract_plot_cut_short_keeps_the_earlier_figure_and_leaves_no_part(sim_
     assert svg.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["scan.svg"]
 
 
+def test_extract_plot_to_a_place_it_cannot_write_is_refused_before_the_scan_is_printed(
+    sim_log, tmp_path, monkeypatch
+):
+    """A read-only mount (os.access says so: root passes permission bits) was found out only after the
+    scan's table had been printed (a probe): refused first, naming the nearest existing directory."""
+    import os
+
+    real = os.access
+    monkeypatch.setattr(os, "access", lambda p, mode: False if Path(p) == tmp_path else real(p, mode))
+    res = invoke("extract", sim_log, "--step", 3, "--plot", tmp_path / "figs" / "scan.png")
+    assert res.exit_code == 2 and not res.stdout and f"'{tmp_path}' is not writable" in res.stderr, res.output
+    assert not (tmp_path / "figs").exists()
+
+
 @pytest.mark.parametrize("name", ["scan.gif", "scan.webp", "scan.pgf", "scan.svgz"])
 def test_extract_plot_refuses_formats_whose_files_it_could_not_recognise_later(sim_log, tmp_path, name):
     """Only formats whose file can name cornerslam as its creator: an extract figure in any other could
