@@ -201,7 +201,7 @@ def read_relations(path: str | Path, warn: Callable[..., None] = log.warning) ->
     v, lines = read_number_rows(
         path, "relations file", LogError, "relation", RELATIONS_LAYOUT, 8, more_ok=True
     )
-    refuse_far(v, lines, [2, 3, 4], f"relations file '{path}'", LogError, RELATIONS_LAYOUT)
+    refuse_far(v, lines, [2, 3, 4], f"relations file '{path}'", LogError, RELATIONS_LAYOUT, stamps=[0, 1])
     q = v[:, 4:8]
     if len(v) >= 2 and np.all(np.abs(np.einsum("ij,ij->i", q, q) - 1.0) < TUM_LIKE_NORM):
         # every row's last four numbers a unit quaternion: z roll pitch yaw would need |yaw| = 1 on each

@@ -26,6 +26,9 @@ UTF16_BOMS = (codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)
 SNIFF_BYTES = 1 << 16  # a binary file (a multi-GB bag given as ground truth) is refused on these
 MAX_ROWS_BYTES = 256 << 20  # a table of numbers (3 million TUM poses): an endless pipe stops here
 MAX_POSITION = 1e9  # metres, as odometry (logs/base.MAX_ODOM_XY): squared, 1e308 m made an ATE of "inf m"
+# seconds: nanoseconds since 1970 (a ROS exporter's, ~1.7e18, said to be nanoseconds when scored) pass;
+# ±1.7e308 made every interpolation overflow into a NaN score, exit 0 (a probe)
+MAX_STAMP = 1e19
 
 
 def read_text(
@@ -137,13 +140,16 @@ def refuse_far(
     name: str,
     error: type[CornerslamError],
     layout: str,
+    stamps: list[int],
 ) -> None:
     """Raise ``error`` naming the first line of ``values`` (rows of :func:`read_number_rows`, their
-    ``lines``) whose position ``columns`` (metres) reach past :data:`MAX_POSITION`: no score of it is
-    a number."""
-    far = np.flatnonzero(np.any(np.abs(values[:, columns]) > MAX_POSITION, axis=1))
-    if len(far):
-        raise error(
-            f"{name} line {lines[far[0]]} has a position beyond ±{MAX_POSITION:.0e} m",
-            f"positions are metres; expected: {layout}",
-        )
+    ``lines``) whose position ``columns`` (metres) reach past :data:`MAX_POSITION`, or whose ``stamps``
+    columns (seconds) past :data:`MAX_STAMP`: no score of it is a number."""
+    for cols, bound, what in ((stamps, MAX_STAMP, "a stamp"), (columns, MAX_POSITION, "a position")):
+        far = np.flatnonzero(np.any(np.abs(values[:, cols]) > bound, axis=1))
+        if len(far):
+            unit = "s" if cols is stamps else "m"
+            raise error(
+                f"{name} line {lines[far[0]]} has {what} beyond ±{bound:.0e} {unit}",
+                f"{'stamps are seconds' if cols is stamps else 'positions are metres'}; expected: {layout}",
+            )

@@ -358,6 +358,25 @@ def test_a_single_pose_ground_truth_is_refused_as_such_not_as_no_overlap(files):
 
 
 @pytest.mark.parametrize("option", ["--ground-truth", "--relations", "trajectory"])
+def test_stamps_too_large_to_score_are_refused_naming_the_line(files, tmp_path, option):
+    """Stamps of ±1.7e308 s: every interpolation overflowed into "ATE rmse nan m" under numpy's warnings,
+    exit 0 (a probe). (Nanoseconds since 1970 still pass, to be said to be nanoseconds: test above.)"""
+    est, gt = files
+    t = [r.split()[0] for r in est.read_text().splitlines()]
+    if option == "--relations":
+        bad = tmp_path / "bad.relations"
+        bad.write_text(f"{t[1]} {t[5]} 0.1 0 0 0 0 0\n{t[2]} 1.7e308 0.1 0 0 0 0 0\n")
+        res = evaluate(est, option, bad)
+    else:
+        bad = gt if option == "--ground-truth" else est
+        rewrite(bad, lambda rows: [*rows[:3], " ".join(["1.7e308", *rows[3].split()[1:]]), *rows[4:]])
+        res = evaluate(est, "--ground-truth", gt)
+    assert res.exit_code == 2, res.output
+    assert f"'{bad}' line {2 if option == '--relations' else 4} has a stamp beyond ±1e+19 s" in res.stderr
+    assert "nan" not in res.output and "RuntimeWarning" not in res.output
+
+
+@pytest.mark.parametrize("option", ["--ground-truth", "--relations", "trajectory"])
 def test_positions_too_large_to_score_are_refused_naming_the_line(files, tmp_path, option):
     """A position of 1e308 m (a corrupted or mis-scaled file): evaluate printed "ATE rmse inf m" or
     "translation inf ± nan m" under numpy's overflow warnings and exited 0."""

@@ -176,7 +176,7 @@ def read_tum(
             "should be, each line has 0 0 0 and a number that is not ±1)",
             f"give it as --relations; a TUM file has lines {TUM_LAYOUT}",
         )
-    refuse_far(a, lines, [1, 2, 3], name, LogError, TUM_LAYOUT)
+    refuse_far(a, lines, [1, 2, 3], name, LogError, TUM_LAYOUT, stamps=[0])
     back = np.flatnonzero(np.diff(a[:, 0]) < 0)
     if len(back):
         i = int(back[0])
