@@ -157,11 +157,25 @@ def _run_alone(
     ground_truth: bool,
 ) -> list[dict]:
     """:func:`_run_claimed` in the claimed directory ``out``, its only writer."""
+    columns = batch_columns([k for k, _ in combos[0].sweep] if combos else [])
+    rows = [_row(c, "pending") for c in combos]
+    writer = _CsvWriter(out / BATCH_CSV, columns)
+    # every combination pending, before the logs are hashed (seconds for large logs): a Ctrl-C from here
+    # on leaves this batch's table, as the message says (an earlier batch's, or none, was left: a probe)
+    writer.write(rows)
+    try:
+        return _fill_table(combos, out, jobs, client, progress, config_path, ground_truth, rows, writer)
+    except KeyboardInterrupt as e:
+        e.batch_table = str(out / BATCH_CSV)  # (cli's message names it only then)
+        raise
+
+
+def _fill_table(combos, out, jobs, client, progress, config_path, ground_truth, rows, writer) -> list[dict]:
+    """:func:`_run_alone`'s table ``rows`` (all pending, written by ``writer``) filled in: each combination
+    checked (its log hashed once, a complete earlier run skipped), the rest run."""
     from .config import Config, from_dict
     from .report.summary import code_hash, config_hash, input_hash
 
-    columns = batch_columns([k for k, _ in combos[0].sweep] if combos else [])
-    rows = [_row(c, "pending") for c in combos]
     state = BatchState(len(combos))
     log_hashes: dict[str, str | None] = {}
     gt_hashes: dict[str, str | None | bool] = {}  # False: a ground truth the run cannot read
@@ -192,7 +206,6 @@ def _run_alone(
             state.skipped += 1
         else:
             todo.append(i)
-    writer = _CsvWriter(out / BATCH_CSV, columns)
     writer.write(rows)
 
     def tick() -> None:  # the counts to the status line (between finished combinations: its clock, its ETA)

@@ -840,11 +840,9 @@ def _batch(logs, assocs, sweeps, config_path, overrides, out, jobs, scheduler, g
         progress.close()
         word, code = _signal_word(e)
         wait = "once the runs the cluster's workers had begun have ended (they go on) " if scheduler else ""
-        click.echo(
-            f"{word}: {Path(out) / BATCH_CSV} lists the finished combinations (the rest 'pending'); "
-            f"run the same command again {wait}to resume",
-            err=True,
-        )
+        table = getattr(e, "batch_table", None)  # written once the directory is claimed: else none yet
+        done = f"{table} lists the finished combinations (the rest 'pending')" if table else "no run begun"
+        click.echo(f"{word}: {done}; run the same command again {wait}to resume", err=True)
         raise click.exceptions.Exit(code) from None
     progress.close()
     if not quiet:

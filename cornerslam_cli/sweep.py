@@ -87,7 +87,7 @@ def _plan(
     config_path: str | Path | None,
     out: str | Path | None = None,
 ) -> list[Combo]:
-    from .config import load_config, parse_override, replaced_place
+    from .config import load_config, override_place, parse_override, replaced_place
     from .errors import LogError
     from .lasers import resolve_config
 
@@ -121,6 +121,11 @@ def _plan(
             with warnings_copied() as notes:
                 try:
                     cfg = resolve_config(log, config_path, sets)
+                except ConfigError as e:  # a swept laser preset that is none: the --sweep's, not a --set's
+                    swept = [f"{k}={v}" for k, v in sweep if e.msg.startswith(override_place(f"{k}={v}"))]
+                    if not swept:
+                        raise
+                    raise replaced_place(e, swept[0], f"--sweep {swept[0]}: ") from None
                 except LogError as e:  # the log's rows fail; the batch goes on
                     cfg, error = load_config(config_path, sets), one_line(e)
             name = _dir_name(labels[log], assoc, sweep)

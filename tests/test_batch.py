@@ -267,6 +267,8 @@ def test_plan_resolves_each_config_as_run_does():
         ("association.pca.group_size=3,x", "association.pca.group_size=x"),
         ("association.pca.group_size=0", "group_size=0"),
         ("association.method=icnn,pca", "--assoc"),
+        # checked when the preset is resolved for the log: it was named a --set the user never gave (a probe)
+        ("input.laser_preset=foo,none", "error: --sweep input.laser_preset=foo: config key"),
     ],
 )
 def test_bad_sweeps_exit_2_naming_the_key(tmp_path, sweep, message):
@@ -931,6 +933,34 @@ def test_an_interrupted_batch_on_a_cluster_says_its_runs_go_on(logs, tmp_path, m
     assert res.exit_code == 130, res.output
     said = "run the same command again once the runs the cluster's workers had begun have ended (they go on)"
     assert (said in res.stderr) == bool(scheduler) and "to resume" in res.stderr
+
+
+def test_a_batch_interrupted_while_it_hashes_the_logs_leaves_its_own_table(logs, tmp_path, monkeypatch):
+    """Ctrl-C while the logs were hashed (seconds for large ones), before the table was written: the
+    message named batch.csv "listing the finished combinations", which was an earlier batch's, complete,
+    or none (a probe). The table of every combination pending is written first; before the directory is
+    claimed, the message says no run began."""
+    out = tmp_path / "b"
+    assert (
+        CliRunner().invoke(cli, ["batch", str(logs[0]), "--assoc", "icnn", "--out", str(out), "-q"]).exit_code
+        == 0
+    )
+    assert [r["status"] for r in read_batch(out / "batch.csv")] == ["ok"]
+
+    def interrupted(*args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("cornerslam_cli.report.summary.input_hash", interrupted)
+    res = CliRunner().invoke(cli, ["batch", str(logs[0]), "--assoc", "icnn,pca", "--out", str(out), "-q"])
+    assert res.exit_code == 130, res.output
+    assert (
+        f"interrupted: {out / 'batch.csv'} lists the finished combinations (the rest 'pending')" in res.stderr
+    )
+    rows = read_batch(out / "batch.csv")
+    assert [(r["assoc"], r["status"]) for r in rows] == [("icnn", "pending"), ("pca", "pending")]
+    monkeypatch.setattr("cornerslam_cli.batch.claim_dir", interrupted)
+    res = CliRunner().invoke(cli, ["batch", str(logs[0]), "--out", str(tmp_path / "new"), "-q"])
+    assert res.exit_code == 130 and "interrupted: no run begun; run the same command again" in res.stderr
 
 
 def test_a_dask_scheduler_without_workers_is_said(caplog):
