@@ -178,6 +178,7 @@ def test_batch_lines_table_failures_and_totals():
         "failed (2x): /data/bad.bag: no scans (check --scan-topic)",
         "4 combinations: 1 ran, 1 skipped (complete), 2 failed",
     ]
+    assert batch_lines(rows[:1], [])[-1] == "1 combination: 1 ran, 0 skipped (complete), 0 failed"
     # two folders' logs of one name: told apart by their paths (both were "office.mcap")
     twins = [rows[0], {**rows[1], "log": "/other/office.mcap"}]
     assert [line.split()[0] for line in batch_lines(twins, ["association.pca.group_size"])[1:3]] == [

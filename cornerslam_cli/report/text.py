@@ -289,8 +289,8 @@ def batch_lines(rows: list[dict], keys: list[str]) -> list[str]:
     lines += [f"failed ({n}x): {log_path}: {error}" for (log_path, error), n in failures.items()]
     failed, skipped = batch_counts(rows)
     lines.append(
-        f"{len(rows)} combinations: {len(rows) - failed - skipped} ran, {skipped} skipped (complete), "
-        f"{failed} failed"
+        f"{len(rows)} combination{'' if len(rows) == 1 else 's'}: {len(rows) - failed - skipped} ran, "
+        f"{skipped} skipped (complete), {failed} failed"
     )
     return lines
 
