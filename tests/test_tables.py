@@ -85,6 +85,15 @@ def test_a_staged_dir_not_committed_takes_away_the_directories_it_made(tmp_path)
     with pytest.raises(OutputError):  # refused while staging (a name too long): the same
         StagedDir(tmp_path / "other" / "deep" / ("x" * 300))
     assert not (tmp_path / "other").exists()
+    # a staged file's: `run --out a/out --mcap-out b/c/r.mcap` interrupted left b/c/ (noted since 2026-12-05)
+    (tmp_path / "new" / "mine.txt").unlink()
+    (tmp_path / "new").rmdir()
+    with pytest.raises(RuntimeError):
+        with StagedDir(tmp_path / "new" / "out") as st:
+            st.stage_file(tmp_path / "b" / "c" / "r.mcap").write_text("partial")
+            st.stage_file(tmp_path / "new" / "n" / "r2.mcap")  # (beside the output's own new directory)
+            raise RuntimeError("interrupted")
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_write_json_is_strict_json(tmp_path):

@@ -92,6 +92,11 @@ def _temp_file(parent: Path, start: str) -> Path:
     return Path(tmp)
 
 
+def _missing_dirs(d: Path) -> list[Path]:
+    """``d`` and the directories above it that do not exist, deepest first: those a mkdir -p makes."""
+    return [p for p in (d, *d.parents) if not p.exists()]
+
+
 def _staged_file(dest: Path) -> tuple[Path, int | None]:
     """A new empty hidden file beside ``dest`` to write it in, before renaming it onto ``dest`` (with the
     mode the umask gives a new file; ``mkstemp`` alone gives 0600), and the fd holding its flock."""
@@ -238,8 +243,9 @@ class StagedDir:
         self.committed = False
         with output_errors(self.shown):
             self._check_replaceable()
-            # the directories above the target this output makes: an output not committed takes them away
-            self.made = [d for d in (self.target.parent, *self.target.parent.parents) if not d.exists()]
+            # the directories above the target (and above each staged file) this output makes, deepest
+            # first: an output not committed takes them away
+            self.made: list[list[Path]] = [_missing_dirs(self.target.parent)]
             self.target.parent.mkdir(parents=True, exist_ok=True)
             try:
                 self.path = self._stage()
@@ -271,13 +277,15 @@ class StagedDir:
             release(self.held.pop())
 
     def _unmake(self) -> None:
-        """Take away the directories above the target this output made (``made``), deepest first; one
-        another file has come into since is left, and those above it."""
-        for d in self.made:
-            try:
-                d.rmdir()
-            except OSError:
-                break
+        """Take away the directories above the target and the staged files this output made (``made``),
+        the last made first, each deepest first; one another file has come into since is left, and
+        those above it."""
+        for chain in reversed(self.made):
+            for d in chain:
+                try:
+                    d.rmdir()
+                except OSError:
+                    break
 
     def _check_replaceable(self) -> None:
         check_replaceable(self.target, self.kind, self.inputs, self.shown, self.inside)
@@ -342,6 +350,7 @@ class StagedDir:
             if ours is not None and final.is_file() and not ours(final):
                 why = "give a new file name, or move that file away"
                 raise OutputError(f"'{shown}' exists and is not a results file cornerslam wrote", why)
+            self.made.append(_missing_dirs(final.parent))  # (--mcap-out new/r.mcap: new/ left after Ctrl-C)
             final.parent.mkdir(parents=True, exist_ok=True)
             clear_stale(final)
             staged, fd = _staged_file(final)
