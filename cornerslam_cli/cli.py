@@ -45,6 +45,7 @@ from .options import (  # noqa: E402
     PRESET,
     SCAN_INDEX,
     GivenPath,
+    Whole,
     check_method_not_set,
     check_option_agrees,
     check_sweep_not_set,
@@ -359,7 +360,7 @@ def run(
     "--jobs",
     default=1,
     show_default=True,
-    type=click.IntRange(1, 64),
+    type=Whole(1, 64),
     help="Parallel processes (the filters' times then include waiting for the CPU: compare times with 1).",
 )
 @span_options
@@ -779,9 +780,7 @@ def _figure_target(plot_path: str) -> Path:
 )
 @config_options
 @click.option("--out", required=True, type=GivenPath(), help="Batch directory (resumable).")
-@click.option(
-    "--jobs", default=None, type=click.IntRange(1, 256), help="Local worker processes [default: CPUs]."
-)
+@click.option("--jobs", default=None, type=Whole(1, 256), help="Local worker processes [default: CPUs].")
 @click.option(
     "--scheduler", default=None, metavar="tcp://HOST:PORT", help="Run on this Dask scheduler instead."
 )

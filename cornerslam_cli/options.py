@@ -126,6 +126,12 @@ class _Finite(click.ParamType):
 FINITE = _Finite()
 
 
+class Whole(click.IntRange):
+    """A whole number within a range: click's own says "'abc' is not a valid integer range" (a probe)."""
+
+    name = "integer"
+
+
 class _ScanIndex(click.IntRange):
     """``extract --step``: a scan index ≥ 0, also written ``#N`` as ``run --start '#N'`` takes it."""
 
@@ -267,7 +273,7 @@ def span_options(f):
     """``--start``, ``--end`` and ``--max-scans``: process part of the log (read by :func:`parse_span`)."""
     f = click.option(
         "--max-scans",
-        type=click.IntRange(min=1),
+        type=Whole(min=1),
         default=None,
         help="Process at most N scans from the start.",
     )(f)

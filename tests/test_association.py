@@ -48,7 +48,7 @@ def test_unknown_associator_names_the_closest():
     with pytest.raises(ConfigError) as e:
         make_associator(AssociationConfig(method="jbcc"))
     assert e.value.msg == "unknown associator 'jbcc'"
-    assert e.value.hint == "did you mean 'jcbb'? (icnn, jcbb, pca)"
+    assert e.value.hint == "did you mean 'jcbb'? Choices: icnn, jcbb, pca"
 
 
 @pytest.mark.parametrize(

@@ -1028,15 +1028,19 @@ def test_a_usage_error_is_one_line_naming_the_help(args, line, tmp_path, monkeyp
 @pytest.mark.parametrize(
     ("text", "allow_many", "line"),
     [
-        ("icnn,jbcc", True, "--assoc: unknown associator 'jbcc' (did you mean 'jcbb'? (icnn, jcbb, pca))"),
+        (
+            "icnn,jbcc",
+            True,
+            "--assoc: unknown associator 'jbcc' (did you mean 'jcbb'? Choices: icnn, jcbb, pca)",
+        ),
         ("icnn,qqqq", True, "--assoc: unknown associator 'qqqq' (choose one of: icnn, jcbb, pca)"),
-        ("jbcc", False, "--assoc: unknown associator 'jbcc' (did you mean 'jcbb'? (icnn, jcbb, pca))"),
+        ("jbcc", False, "--assoc: unknown associator 'jbcc' (did you mean 'jcbb'? Choices: icnn, jcbb, pca)"),
         (
             "pca,",
             False,
-            "--assoc: unknown associator 'pca,' (did you mean 'pca'? (icnn, jcbb, pca))",
+            "--assoc: unknown associator 'pca,' (did you mean 'pca'? Choices: icnn, jcbb, pca)",
         ),  # one name
-        ("PCA", False, "--assoc: unknown associator 'PCA' (did you mean 'pca'? (icnn, jcbb, pca))"),
+        ("PCA", False, "--assoc: unknown associator 'PCA' (did you mean 'pca'? Choices: icnn, jcbb, pca)"),
     ],
 )
 def test_parse_assocs_unknown_name_names_the_closest(text, allow_many, line, monkeypatch):
@@ -1066,7 +1070,8 @@ def test_every_command_reports_a_bad_assoc_in_the_same_words(command, sim_log, t
     out = ["--out", tmp_path / "o"]
     res = invoke(command, sim_log, "--assoc", "icnn,jbcc" if command != "run" else "jbcc", *out)
     assert (
-        res.stderr == "error: --assoc: unknown associator 'jbcc' (did you mean 'jcbb'? (icnn, jcbb, pca))\n"
+        res.stderr
+        == "error: --assoc: unknown associator 'jbcc' (did you mean 'jcbb'? Choices: icnn, jcbb, pca)\n"
     )
     assert res.exit_code == 2 and not (tmp_path / "o").exists()
     if command != "run":
@@ -1078,7 +1083,7 @@ def test_every_command_reports_a_bad_assoc_in_the_same_words(command, sim_log, t
     res = invoke(command, sim_log, "--set", "association.method=pcaa", *out)
     assert res.stderr == (
         "error: --set 'association.method=pcaa': config key 'association.method' = 'pcaa' is not an "
-        "associator (did you mean 'pca'? (icnn, jcbb, pca))\n"
+        "associator (did you mean 'pca'? Choices: icnn, jcbb, pca)\n"
     )
 
 

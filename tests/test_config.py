@@ -421,7 +421,7 @@ def test_an_unknown_associator_in_a_config_file_names_the_file_and_line(tmp_path
         resolve_config(None, p)
     assert str(e.value) == (
         f"config file '{p}' line 4: config key 'association.method' = 'jbcc' is not an associator "
-        "(did you mean 'jcbb'? (icnn, jcbb, pca))"
+        "(did you mean 'jcbb'? Choices: icnn, jcbb, pca)"
     )
     with pytest.raises(ConfigError) as e:
         resolve_config(None, p, ["association.method=pcaa"])

@@ -38,7 +38,7 @@ def associator_class(method: str) -> type:
     if cls is None:
         names = ", ".join(ASSOCIATORS)
         dym = did_you_mean(method.lower(), ASSOCIATORS, cutoff=0.3)  # ('PCA': 'pca')
-        hint = f"{dym} ({names})" if dym else f"choose one of: {names}"
+        hint = f"{dym} Choices: {names}" if dym else f"choose one of: {names}"
         raise ConfigError(f"unknown associator '{method}'", hint)
     return cls
 
