@@ -1437,3 +1437,13 @@ def test_a_given_out_holding_another_logs_output_says_it_is_replaced(tmp_path):
     assert res.stderr.count(said) == 1, res.stderr
     assert json.loads((out / "summary.json").read_text())["input"]["log"] == str(b)
     assert "holds the output of" not in invoke("run", b, "--out", out).stderr
+
+
+@pytest.mark.parametrize(
+    ("command", "option"), [("batch", "--jobs"), ("compare", "--jobs"), ("run", "--max-scans")]
+)
+def test_a_count_that_is_no_number_is_said_to_be_no_integer(command, option, tmp_path):
+    """click's IntRange said "'abc' is not a valid integer range" (a probe)."""
+    log = Path(__file__).resolve().parents[1] / "sample_logs" / "intel_cut.clf"
+    res = invoke(command, log, option, "abc", "--out", tmp_path / "o")
+    one_line_error(res, f"invalid value for '{option}': 'abc' is not a valid integer (see ")
