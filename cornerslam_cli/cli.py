@@ -458,10 +458,11 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
     from .report.run_writer import find_ground_truth
 
     setup_logging(verbose, quiet)
-    cfg = _info_config(config_path, overrides, scan_topic, odom_topic, log_path)
+    cfg = _info_config(config_path, overrides, scan_topic, odom_topic)
     reader = open_configured(Path(log_path), cfg.input)
     log_info = reader.info()
-    if is_results_mcap(Path(log_path)) and not (scan_topic or odom_topic):  # run --mcap-out's: described
+    topics = cfg.input.scan_topic or cfg.input.odom_topic  # (--scan-topic, or its --set)
+    if is_results_mcap(Path(log_path)) and not topics:  # run --mcap-out's: described
         lines = info_lines(log_path, replace(log_info, problems=()), None)
         ros2 = (header_fields(log_path) or ("", ""))[0] == "ros2"
         _echo(
@@ -476,7 +477,8 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
             except LogError:
                 pass  # the error below says what run would refuse
         preset = _info_preset(cfg, scan)
-        _echo(info_lines(log_path, replace(log_info, problems=()), None, scan, preset, mount_read=False))
+        lines = info_lines(log_path, replace(log_info, problems=()), None, scan, preset, mount_read=False)
+        _echo(_with_stamps(lines, reader))
         reader.check()  # the first problem as the error: exit 2, as run
     scan, unread, laser, mount_text, upside_down = None, None, None, "", False
     try:  # (a topic declared with no message: run refuses it here, info lists the counts first)
@@ -496,12 +498,8 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
     frames = None  # the robot's frame (the odometry's child_frame_id, else input.base_frame), the laser's
     if laser is not None and not mount_text and getattr(reader, "laser_frame", None):
         frames = (reader.base_frame, reader.laser_frame)
-    receive = cfg.input.stamps != "header"
     lines = info_lines(log_path, log_info, laser, scan, preset, upside_down, frames, mount_text=mount_text)
-    if receive:  # (after the odometry line: what the scans and odometry are timed by)
-        at = lines.index("run would use:") + 3
-        lines.insert(at, f"  stamps    {reader.stamps_name} (input.stamps=receive)")
-    _echo(lines)
+    _echo(_with_stamps(lines, reader))
     if unread is not None:  # exit 2, as run
         raise unread
     odom_tf = getattr(reader, "odom_tf_problem", lambda: None)()  # ROS logs: tf odometry not on tf
@@ -511,14 +509,20 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
         reader.stats.warn("%s in the first 2,000 messages after the first scan (%s)", *odom_tf[0])
 
 
-def _info_config(config_path, overrides, scan_topic, odom_topic, log_path):
-    """``info``'s config: as a run resolves it, the laser preset chosen for the log's first scan — or,
-    when that scan cannot be read (the log's problems: info lists its topics first, then refuses it as a
-    run would), without the preset."""
-    try:
-        return command_config(config_path, overrides, None, scan_topic, odom_topic, log_path)
-    except LogError:
-        return command_config(config_path, overrides, None, scan_topic, odom_topic)
+def _info_config(config_path, overrides, scan_topic, odom_topic):
+    """``info``'s config: the user's layers as a run resolves them, without the laser preset (no preset
+    sets an ``input`` key, so the log is read alike; the preset info shows is chosen from the first scan
+    it reads anyway, :func:`_info_preset` — resolving it here read the log a second time)."""
+    return command_config(config_path, overrides, None, scan_topic, odom_topic)
+
+
+def _with_stamps(lines: list[str], reader) -> list[str]:
+    """``info``'s lines with, under ``input.stamps=receive``, what the scans and odometry are timed by
+    (after the odometry line)."""
+    if not reader.receive:
+        return lines
+    at = lines.index("run would use:") + 3
+    return [*lines[:at], f"  stamps    {reader.stamps_name} (input.stamps=receive)", *lines[at:]]
 
 
 def _info_preset(cfg, scan) -> str | None:
@@ -535,16 +539,15 @@ def _info_preset(cfg, scan) -> str | None:
 def _mount_shown(laser, source, cfg, fmt) -> tuple[tuple[float, float, float] | None, str]:
     """``info``'s laser mount from :func:`lasers.laser_mount`'s (``laser``, ``source``): the log's mount
     as it is (text ""), the built-in default as None (info_lines says so), else the config's mount with
-    where it came from."""
+    why it is used."""
     if source == "tf":
         return laser, ""
     if source == "default":
         return None, ""
-    where = "the laser preset " + cfg.input.laser_preset + "'s" if source == "preset" else "the config's"
     why = "not in its laser lines" if fmt == "carmen" else "not on tf"
     if not cfg.input.laser.from_tf:
         why = "input.laser.from_tf=false"
-    return laser, f"{where} input.laser: {why}"
+    return laser, f"the config's input.laser: {why}"  # (no laser preset sets a mount)
 
 
 def _recorded_offset_hint(e: LogError, out_dir, relations, time_offset: float) -> LogError:
@@ -758,8 +761,10 @@ def _figure_target(plot_path: str) -> Path:
                 "give a new file name, or move that file away",
             )
         place = next(p for p in target.parents if p.exists())  # (made when written: the nearest existing)
-        if not os.access(place, os.W_OK | os.X_OK):  # a read-only mount, no permission: before the scan's
-            raise OutputError(  # table is printed, not after it (a probe)
+        # a read-only mount, no permission: refused before the scan's table is printed, not after it (a
+        # probe); a file where a directory should be is said when written
+        if place.is_dir() and not os.access(place, os.W_OK | os.X_OK):
+            raise OutputError(
                 f"cannot write --plot '{display_path(plot_path)}': '{display_path(place)}' is not writable",
                 "give a place you can write to",
             )

@@ -245,12 +245,13 @@ def relations_notes(r: np.ndarray) -> list[str]:
 
 
 def overlap_problem(
-    est_t: np.ndarray, gt_t: np.ndarray, gt_name: str, est_name: str = "the trajectory"
+    est_t: np.ndarray, gt_t: np.ndarray, gt_name: str, est_name: str = "the trajectory", clocks: str = ""
 ) -> tuple[str, str] | None:
     """Why ``gt_name`` (stamps ``gt_t``, sorted) cannot score a trajectory with stamps ``est_t``, and
     what to do about it, or None: ATE and RPE need at least two trajectory poses within the ground
     truth's time span. Stamps in nanoseconds (micro-, milli-) on either side are named so: a ROS
-    exporter's, the trajectory's too (``est_name``: an ``evaluate`` of a file a user brings)."""
+    exporter's, the trajectory's too (``est_name``: an ``evaluate`` of a file a user brings).
+    ``clocks``: said when the two do not overlap at all (which clock the trajectory is on)."""
     if len(est_t) < 2:  # not a matter of overlap: "1 of its 1 poses fall within" read as a contradiction
         why = f"the trajectory has a single pose: ATE and RPE against {gt_name} need two or more"
         return why, "process more scans"
@@ -293,6 +294,8 @@ def overlap_problem(
     if (est_t[0] >= EPOCH_STAMPS) != (gt_t[0] >= EPOCH_STAMPS):  # one on a wall clock, one from ~0
         wall, other = (est_name, gt_name) if est_t[0] >= EPOCH_STAMPS else (gt_name, est_name)
         why += f": {wall} is stamped in wall-clock time (seconds since 1970), {other} is not — two clocks"
+    if clocks:
+        why += f" — {clocks}"
     return why, "is it this log's ground truth? Its stamps must use the log's clock"
 
 

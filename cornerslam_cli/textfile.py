@@ -145,11 +145,11 @@ def refuse_far(
     """Raise ``error`` naming the first line of ``values`` (rows of :func:`read_number_rows`, their
     ``lines``) whose position ``columns`` (metres) reach past :data:`MAX_POSITION`, or whose ``stamps``
     columns (seconds) past :data:`MAX_STAMP`: no score of it is a number."""
-    for cols, bound, what in ((stamps, MAX_STAMP, "a stamp"), (columns, MAX_POSITION, "a position")):
-        far = np.flatnonzero(np.any(np.abs(values[:, cols]) > bound, axis=1))
-        if len(far):
-            unit = "s" if cols is stamps else "m"
-            raise error(
-                f"{name} line {lines[far[0]]} has {what} beyond ±{bound:.0e} {unit}",
-                f"{'stamps are seconds' if cols is stamps else 'positions are metres'}; expected: {layout}",
-            )
+    far_stamp = np.any(np.abs(values[:, stamps]) > MAX_STAMP, axis=1)
+    far = np.flatnonzero(far_stamp | np.any(np.abs(values[:, columns]) > MAX_POSITION, axis=1))
+    if len(far):  # the first such line, whichever it has
+        if far_stamp[far[0]]:
+            what, hint = f"a stamp beyond ±{MAX_STAMP:.0e} s", "stamps are seconds"
+        else:
+            what, hint = f"a position beyond ±{MAX_POSITION:.0e} m", "positions are metres"
+        raise error(f"{name} line {lines[far[0]]} has {what}", f"{hint}; expected: {layout}")

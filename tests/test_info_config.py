@@ -127,3 +127,28 @@ def test_info_refuses_a_bad_set_as_run_does_and_lists_a_broken_log_under_one(tmp
     res = invoke("info", log, "--set", "input.stamps=receive")
     assert res.exit_code == 2 and "has no odometry" in res.stderr, res.output
     assert "/scan" in res.stdout and "  odometry  - (none found)" in res.stdout
+
+
+def test_info_shows_an_upside_down_laser_at_the_default_mount_and_warns_once(tmp_path):
+    """input.laser.upside_down alone (the mount still the built-in default) was not shown, though the run
+    mirrors the scans; a retired key's warning came twice (the config resolved twice) (a review)."""
+    clf = SAMPLES / "intel_cut.clf"
+    res = invoke("info", clf, "--set", "input.laser.upside_down=true")
+    assert line(res.stdout, "  laser ").endswith(
+        "(built-in default x=0 y=0 yaw=0), upside down: scans mirrored"
+    )
+    res = invoke("info", clf, "--set", "scan_match.retry_fit=1")
+    assert res.exit_code == 0 and res.stderr.count("retry_fit") == 1, res.stderr
+
+
+def test_a_results_mcap_is_read_as_a_log_under_a_set_topic_as_under_the_option(sim_log, tmp_path):
+    """--set input.scan_topic=/scan described a results MCAP as results, --scan-topic /scan read it as a
+    log: the same now, whichever way the topic is given (a review)."""
+    results = tmp_path / "r.mcap"
+    ran = invoke("run", sim_log, "--out", tmp_path / "o", "-q", "--max-scans", "5", "--mcap-out", results)
+    assert ran.exit_code == 0, ran.output
+    assert "It is not a log to run" in invoke("info", results).stdout
+    by_option = invoke("info", results, "--scan-topic", "/scan")
+    by_set = invoke("info", results, "--set", "input.scan_topic=/scan")
+    assert (by_set.exit_code, by_set.stdout) == (by_option.exit_code, by_option.stdout)
+    assert "It is not a log to run" not in by_set.stdout

@@ -249,3 +249,9 @@ def test_a_ground_truth_a_receive_run_does_not_meet_is_said_to_be_on_the_other_c
     assert "ate" not in (summary.get("accuracy") or {})
     (warning,) = [w for w in summary["warnings"] if "does not overlap" in w]
     assert "the run is stamped on the recorder's clock (input.stamps=receive)" in warning, warning
+    # only where the two do not overlap: a ground truth of one pose is not put down to the clocks (a review)
+    (tmp_path / "late.gt.tum").write_text(gt.read_text().splitlines()[0] + "\n")
+    assert run(log, tmp_path / "one", "--set", "input.stamps=receive").exit_code == 0
+    warnings = json.loads((tmp_path / "one" / "summary.json").read_text())["warnings"]
+    (warning,) = [w for w in warnings if "single pose" in w]
+    assert "recorder's clock" not in warning, warning

@@ -150,12 +150,16 @@ def recorded_reference(path: str | Path) -> Recorded:
 
 def recorded_offset(path: str | Path, relations: str | Path) -> float | None:
     """The --time-offset the run directory ``path`` scored the relations of the file ``relations`` at (by
-    their sha256, whatever the file's name now), None when it did not score these or kept no offset."""
+    their sha256, whatever the file's name now), None when it did not score these, scored none of them
+    there (an offset that fails too), kept no offset, or ``relations`` is no regular file (a pipe is read
+    once: opened again it would wait for a writer)."""
     p = Path(path)
     try:
         s = RunSummary.read(p) if (p / "summary.json").is_file() else None
         acc = s.accuracy if s is not None else None
         if acc is None or acc.relations_time_offset is None or s.hashes.relations is None:
+            return None
+        if acc.relations is None or acc.relations.n == 0 or not Path(relations).is_file():
             return None
         return acc.relations_time_offset if _relations_hash(str(relations)) == s.hashes.relations else None
     except (ResultsError, OSError, LogError):  # (what evaluate refused already: nothing to add)

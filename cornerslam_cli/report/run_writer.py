@@ -348,14 +348,9 @@ def accuracy_of(
     acc: dict = {}  # Accuracy's fields
     notes = list(ref.notes)
     name = f"ground truth '{ref.gt_path}'"
-    apart = ref.gt is not None and overlap_problem(stamps, ref.gt[0], name)
-    if apart and receive:
-        clock = (
-            "the run is stamped on the recorder's clock (input.stamps=receive), the ground truth perhaps on"
-        )
-        apart = (f"{apart[0]} — {clock} the sensors' (the header stamps)", apart[1])
+    clocks = "the run is stamped on the recorder's clock (input.stamps=receive), the ground truth perhaps on"
     problem = ref.gt is not None and (
-        apart
+        overlap_problem(stamps, ref.gt[0], name, clocks=f"{clocks} the sensors'" if receive else "")
         # (on the log's odometry: what the log says, the same for every associator of a compare, and
         # not the estimate's failure — a stuck or drifting run is scored, not taken for a bad reference)
         or mirror_problem(stamps, odoms, *ref.gt, name, "the log's odometry")

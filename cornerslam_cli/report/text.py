@@ -336,8 +336,8 @@ def info_lines(
     lines.append("run would use:")
     lines.append(f"  scans     {short_text(i.scan_topic, 200) or '-'}")
     lines.append(f"  odometry  {short_text(i.odom_topic, 200) or '-'} ({i.odom_source or _no_odometry(i)})")
+    flip = ", upside down: scans mirrored" if upside_down else ""
     if laser is not None:
-        flip = ", upside down: scans mirrored" if upside_down else ""
         x, y, yaw = laser
         source = mount_text or (ROBOTLASER_SOURCE if i.format == "carmen" else "from tf")
         if tf_frames and i.format != "carmen" and not mount_text:
@@ -349,7 +349,8 @@ def info_lines(
         lines.append("  laser     - (not looked up: the problem below comes first)")
     else:
         where = "not in its laser lines" if i.format == "carmen" else "not on tf"
-        lines.append(f"  laser     {where}: from the config's input.laser (built-in default x=0 y=0 yaw=0)")
+        default = "from the config's input.laser (built-in default x=0 y=0 yaw=0)"
+        lines.append(f"  laser     {where}: {default}{flip}")
     if scan is not None:
         lines += scan_lines(scan, preset)
     lines += [f"problem:   {text}" for text in i.problems]
