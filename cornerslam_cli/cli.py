@@ -450,7 +450,7 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
     """
     from dataclasses import replace
 
-    from .lasers import first_scan, laser_mount
+    from .lasers import first_scan, laser_mount, overruled_mount
     from .logs import open_configured
     from .logs.mcap import header_fields
     from .logs.unreadable import no_scan_read
@@ -483,6 +483,9 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
     scan, unread, laser, mount_text, upside_down = None, None, None, "", False
     try:  # (a topic declared with no message: run refuses it here, info lists the counts first)
         laser, source, upside_down, _ = laser_mount(reader, cfg)  # the tf's, else the config's (as run)
+        if source == "tf" and (keys := overruled_mount(cfg, laser)):  # (run warns of it)
+            note = f"the log's mount is used: {keys} ignored (input.laser.from_tf=false uses the config's)"
+            log_info = replace(log_info, notes=(*log_info.notes, note))
         laser, mount_text = _mount_shown(laser, source, cfg, log_info.format)
         scan = first_scan(reader) if log_info.scan_topic else None
     except LogError as e:  # info lists what it can: the topics, then why run would refuse the log

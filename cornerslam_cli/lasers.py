@@ -341,19 +341,15 @@ def warn_mount(src, cfg: Config) -> None:
             "input.laser.x/y/yaw to its mount%s)",
             src.path.name, why, keep,
         )  # fmt: skip
-    mount = cfg.input.laser
-    given = {k: v for k, v in (("x", mount.x), ("y", mount.y), ("yaw", mount.yaw)) if v is not None}
-    log_mount = dict(zip(("x", "y", "yaw"), src.laser2base, strict=True))
-    off = [abs(wrap_angle(v - log_mount[k]) if k == "yaw" else v - log_mount[k]) for k, v in given.items()]
-    if src.laser_source == "tf" and max(off, default=0.0) > MOUNT_SAME:
-        keys = " ".join(f"input.laser.{k}={v:g}" for k, v in given.items())
+    keys = overruled_mount(cfg, src.laser2base) if src.laser_source == "tf" else ""
+    if keys:
         whose = (
             "ROBOTLASER1 lines place" if src.info.format == "carmen" else f"tf {_tf_text(src, cfg)} mounts"
         )
         src.reader.stats.warn(
             "log '%s': its %s the laser at x=%.3f y=%.3f yaw=%.3f, and that mount is used: %s ignored (set "
             "input.laser.from_tf=false to use the config's mount instead)",
-            src.path.name, whose, *src.laser2base, keys + (" is" if len(given) == 1 else " are"),
+            src.path.name, whose, *src.laser2base, keys,
         )  # fmt: skip
     if cfg.input.laser.upside_down and src.laser_upside_down_source == "tf" and not src.laser_upside_down:
         src.reader.stats.warn(
@@ -362,6 +358,19 @@ def warn_mount(src, cfg: Config) -> None:
             "mount instead, with input.laser.x/y/yaw)",
             src.path.name, _tf_text(src, cfg),
         )  # fmt: skip
+
+
+def overruled_mount(cfg: Config, log_mount: tuple[float, float, float]) -> str:
+    """The config's ``input.laser.x/y/yaw`` that the log's own mount ``log_mount`` overrules, where they
+    differ from it (``"input.laser.x=0.2 is"``), or ``""``: what a run warns of and ``info`` notes."""
+    mount = cfg.input.laser
+    given = {k: v for k, v in (("x", mount.x), ("y", mount.y), ("yaw", mount.yaw)) if v is not None}
+    logs = dict(zip(("x", "y", "yaw"), log_mount, strict=True))
+    off = [abs(wrap_angle(v - logs[k]) if k == "yaw" else v - logs[k]) for k, v in given.items()]
+    if max(off, default=0.0) <= MOUNT_SAME:
+        return ""
+    keys = " ".join(f"input.laser.{k}={v:g}" for k, v in given.items())
+    return keys + (" is" if len(given) == 1 else " are")
 
 
 def _tf_text(src, cfg: Config) -> str:

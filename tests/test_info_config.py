@@ -152,3 +152,16 @@ def test_a_results_mcap_is_read_as_a_log_under_a_set_topic_as_under_the_option(s
     by_set = invoke("info", results, "--set", "input.scan_topic=/scan")
     assert (by_set.exit_code, by_set.stdout) == (by_option.exit_code, by_option.stdout)
     assert "It is not a log to run" not in by_set.stdout
+
+
+def test_info_notes_a_config_mount_the_logs_own_overrules(sim_log):
+    """The config's input.laser.x where the log's tf mounts the laser: run warns it is ignored; info said
+    nothing (a review)."""
+    res = invoke("info", sim_log, "--set", "input.laser.x=0.5")
+    assert res.exit_code == 0, res.output
+    assert (
+        "note:      the log's mount is used: input.laser.x=0.5 is ignored (input.laser.from_tf=false uses "
+        "the config's)" in res.stdout.splitlines()
+    )
+    assert "ignored" not in invoke("info", sim_log).stdout
+    assert "  laser " in res.stdout and "from tf" in line(res.stdout, "  laser ")
