@@ -41,6 +41,7 @@ def test_odometry_on_another_clock_runs_on_the_recorders_time(sim_log, tmp_path)
     refused = run(log, tmp_path / "header")
     assert refused.exit_code == 2 and not (tmp_path / "header").exists()
     assert "--set input.stamps=receive" in refused.stderr, refused.stderr
+    assert len(refused.stderr.strip().splitlines()) == 1, refused.stderr  # (a warning said it first: a probe)
     ran = run(log, tmp_path / "receive", "--set", "input.stamps=receive")
     assert ran.exit_code == 0, ran.output
     # the sim log's log times are its header stamps: the same run as on the log itself

@@ -312,8 +312,10 @@ def _velocity(odom: deque[OdomSample], t: float, pose: np.ndarray) -> np.ndarray
 
 
 def _warn_skipped(st: SyncStats, warn: Callable[..., None]) -> None:
-    """One warning summing up the scans and odometry samples that synchronise skipped."""
-    if not (st.scans_skipped or st.odom_time_backwards):
+    """One warning summing up the scans and odometry samples that synchronise skipped — none when it kept no
+    scan: the run then fails with an error that says the same (frontend.check_processed; the two lines
+    said it twice, a probe)."""
+    if not (st.scans_skipped or st.odom_time_backwards) or not st.scans_out:
         return
     scans = st.skipped_why()
     n_scans, n_odom = st.scans_skipped, st.odom_time_backwards
@@ -321,8 +323,7 @@ def _warn_skipped(st: SyncStats, warn: Callable[..., None]) -> None:
         f"{n_scans} scan{'s' if n_scans != 1 else ''}: {scans}" if scans else "",
         f"{n_odom} odometry sample{'s' if n_odom != 1 else ''} whose {_stamps(n_odom)}" if n_odom else "",
     ]
-    clocks = st.other_clocks()
-    warn("skipped %s%s", "; ".join(s for s in said if s), f" ({clocks}: {clocks_hint(st)})" if clocks else "")
+    warn("skipped %s", "; ".join(s for s in said if s))  # (other clocks: the error, none kept)
 
 
 def _stamps(n: int) -> str:
