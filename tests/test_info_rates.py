@@ -138,3 +138,33 @@ def test_mcap_rates_when_the_chunk_index_times_are_zero(tmp_path, zeroed):
     assert len(log.source.index.chunks) > 3
     r = {t.name: t.rate_hz for t in log.info().topics}
     assert r["/scan"] == pytest.approx(10.0) and r["/odom"] == pytest.approx(10.0)
+
+
+def test_messages_a_nanosecond_apart_get_no_rate(tmp_path):
+    """Two static broadcasters latched at the start: two /tf_static messages 1 ns apart showed
+    "1000000000.00 Hz" (a ROS-user probe); no rate under a millisecond's span."""
+    from _log_fixtures import write_messages_mcap
+
+    t = int(T0 * 1e9)
+    msgs = [("/tf_static", "tf2_msgs/msg/TFMessage", t + i, ROS.tf(T0, "base_link", f"l{i}", 0.1, 0.0, 0.0))
+            for i in range(2)]  # fmt: skip
+    msgs += [
+        ("/scan", "sensor_msgs/msg/LaserScan", int(s.stamp * 1e9), ROS.laserscan(s)) for s in make_scans(5)
+    ]
+    log = write_messages_mcap(tmp_path / "static.mcap", sorted(msgs, key=lambda m: m[2]))
+    topics = {i.name: i for i in open_log(log).info().topics}
+    assert topics["/tf_static"].count == 2 and topics["/tf_static"].rate_hz is None
+    assert topics["/scan"].rate_hz == pytest.approx(10.0, rel=1e-6)
+
+
+def test_the_clock_note_is_not_given_when_the_run_takes_the_recorders_times(sim_log, tmp_path):
+    """Header stamps 1000 s behind the log times: info notes that a run stamps its outputs on the headers'
+    — not so under input.stamps=receive, which takes the recorder's (a ROS-user probe: it said both)."""
+    from _log_fixtures import rewrite_mcap
+
+    log = rewrite_mcap(
+        sim_log, tmp_path / "late.mcap", lambda schema, m: (m.log_time + 10**12, m.publish_time, m.data)
+    )
+    header = open_log(log).info().notes
+    assert any("header stamps are 1000.0 s behind its record times" in n for n in header), header
+    assert not any("record times" in n for n in open_log(log, stamps="receive").info().notes)

@@ -282,6 +282,20 @@ def test_another_robots_odometry_is_set_aside(tmp_path):
     ]
 
 
+def test_a_scan_topic_not_found_does_not_call_the_robots_odometry_another_robots(tmp_path):
+    """`info --scan-topic scan` on a log of /robot1/* alone: a warning that '/robot1/odom' was another
+    robot's came before the error naming '/robot1/scan' (no scan topic chosen, every namespace looked
+    like another robot's; a ROS-user probe)."""
+    from cornerslam_cli.errors import LogError
+
+    log = open_log(
+        write(tmp_path / "ns.mcap", scans("/robot1/scan") + odometry("/robot1/odom")), scan_topic="scan"
+    )
+    assert log.stats.warnings == []
+    with pytest.raises(LogError, match="/robot1/scan"):
+        log.check()
+
+
 def test_an_empty_odometry_topic_is_named_when_tf_has_no_odometry_either(tmp_path):
     """/odom declared and empty, /tf with the mount and a localiser's map → odom only: the error was of the
     tf alone, though the Odometry topic is why tf was read."""

@@ -42,6 +42,7 @@ LASERSCAN = "sensor_msgs/LaserScan"
 ODOMETRY = "nav_msgs/Odometry"
 TF_TYPES = ("tf2_msgs/TFMessage", "tf/tfMessage")
 INFO_LISTS = "`cornerslam info LOG` lists the topics"
+MIN_RATE_SPAN = 1e-3  # s: a topic's messages closer together than this have no rate worth showing
 CLOCK_APART = 1.0  # s: a recorder clock this far from the scans' header stamps is another clock (not a delay)
 MAX_TILT = 5.0  # degrees: a laser tilted more than this from level (upright or upside down) is warned about
 
@@ -424,6 +425,8 @@ class RosLogReader:
             why = f"{listing(mine)} has no messages" if mine else "the Odometry topics are other robots'"
             note = f"{why}: tf odometry taken" if odoms else ""
             return self._noted(_OdomSel(self._tf_odometry_topic(robot_tfs), "tf"), note)
+        if len(odoms) == 1 and not self.scan_topic:  # no scan topic chosen (its problem comes first): no
+            return _OdomSel(odoms[0], "odometry")  # robot to call the odometry another's (a probe)
         if len(odoms) == 1:  # only another robot's
             self.stats.warn(
                 "log '%s': odometry '%s' taken, the only one, though another robot's scans are in its "
@@ -568,7 +571,8 @@ class RosLogReader:
         for c in sorted(self._channels.values(), key=lambda c: c.topic):
             rate = None
             span = (spans[c.topic][1] - spans[c.topic][0]) * 1e-9 if c.topic in spans else duration
-            if c.count is not None and c.count > 1 and span > 0:
+            # (two /tf_static messages 1 ns apart, two broadcasters latched at the start: no "1e9 Hz")
+            if c.count is not None and c.count > 1 and span >= MIN_RATE_SPAN:
                 rate = (c.count - 1) / span
             topics.append(TopicInfo(c.topic, normalize_msgtype(c.msgtype), c.count, rate, c.encoding))
         problems = tuple(f"{p} ({h})" for p, h in self._problems())
@@ -605,8 +609,9 @@ class RosLogReader:
 
     def _clock_note(self) -> str:
         """info's note when the scans' header stamps are another clock than the recorder's (the log's
-        start and duration are the recorder's; a run's stamps, --start and the outputs are the headers')."""
-        if not self.scan_topic or self._scan_problems():
+        start and duration are the recorder's; a run's stamps, --start and the outputs are the headers');
+        none when the run takes the recorder's times (``input.stamps=receive``)."""
+        if not self.scan_topic or self._scan_problems() or self.receive:
             return ""
         stamps, log_times = self._first_scan_stamps()
         if len(stamps) >= 2 and min(stamps) == max(stamps):  # (not another clock: none)
