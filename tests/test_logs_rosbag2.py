@@ -237,3 +237,38 @@ def test_a_file_compressed_split_bag_names_no_file_it_cannot_open_alone(bags):
     info["compression_format"] = ""  # (the same names, not compressed: the first is named)
     (sq / "metadata.yaml").write_text(yaml.safe_dump(meta))
     assert _unreadable_storage(sq) == "a.db3.zstd"
+
+
+@pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
+def test_a_storage_file_of_a_bag_compressed_message_by_message_is_refused_alone(tmp_path, storage):
+    """`compression_mode: message`: each message's bytes are zstd-compressed, so the storage file read
+    alone gave "unsupported CDR encapsulation 28b5" for every message, then an error blaming --max-scans
+    (a ROS-user probe). Refused in one line naming the bag's directory, which reads as the bag it is."""
+    from rosbags.rosbag2 import StoragePlugin
+    from rosbags.rosbag2 import Writer as BagWriter
+    from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
+
+    from cornerslam_cli.logs.writers import RosSerializer
+    from cornerslam_cli.logs.writers.ros import RosTopics, ros_messages
+
+    ros, bag = RosSerializer("cdr"), tmp_path / "packed"
+    w = BagWriter(
+        bag, version=9, storage_plugin={"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}[storage]
+    )
+    w.set_compression(CompressionMode.MESSAGE, CompressionFormat.ZSTD)
+    w.open()
+    conns = {}
+    for topic, typename, t, data in ros_messages(ros, make_scans(10), make_odoms(12), RosTopics()):
+        if topic not in conns:
+            conns[topic] = w.add_connection(topic, typename, typestore=ros.store)
+        w.write(conns[topic], t, data)
+    w.close()
+    (alone,) = [f for f in bag.iterdir() if f.name != "metadata.yaml"]
+    with pytest.raises(LogError) as e:
+        open_log(alone)
+    assert str(e.value) == (
+        f"'{alone}' is a storage file of the ROS 2 bag 'packed', whose messages are compressed one by one "
+        f"(zstd): read alone, they cannot be decoded (give the bag's directory: {bag})"
+    )
+    scans, odoms, warnings, _ = _read(bag)
+    assert len(scans) == 10 and len(odoms) == 12 and not warnings

@@ -27,7 +27,7 @@ from .carmen import GZIP_MAGIC, CarmenReader
 from .mcap import MAGIC as MCAP_MAGIC
 from .mcap import open_mcap
 from .params import InputConfig
-from .rosbag import STORAGE_SUFFIXES, open_rosbag1, open_rosbag2, split_bag_of
+from .rosbag import STORAGE_SUFFIXES, message_compression_of, open_rosbag1, open_rosbag2, split_bag_of
 
 __all__ = [
     "READERS",
@@ -204,6 +204,12 @@ def open_log(
     """
     p = Path(path)
     fmt = detect_format(p)
+    if fmt != "carmen" and (packed := message_compression_of(p)) is not None:
+        raise LogError(
+            f"'{display_path(p)}' is a storage file of the ROS 2 bag '{p.parent.name or '.'}', whose "
+            f"messages are compressed one by one ({packed}): read alone, they cannot be decoded",
+            f"give the bag's directory: {display_path(p.parent)}",
+        )
     reader = READERS[fmt](
         p,
         scan_topic=scan_topic,

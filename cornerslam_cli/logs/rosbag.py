@@ -271,6 +271,21 @@ def split_bag_of(path: Path) -> int | None:
     return len(files) if len(files) > 1 and path.name in files else None
 
 
+def message_compression_of(path: Path) -> str | None:
+    """The compression format (zstd) of the ROS 2 bag whose metadata.yaml lists the storage file ``path``
+    when it compresses each message on its own (``compression_mode: message``), else None: such a file
+    read alone gives compressed bytes for messages (the bag's directory is read through rosbags)."""
+    if path.suffix not in STORAGE_SUFFIXES or path.is_dir():
+        return None
+    try:
+        info = yaml.safe_load((path.parent / META).read_text())["rosbag2_bagfile_information"]
+        listed = path.name in [Path(str(f)).name for f in info["relative_file_paths"]]
+        mode, fmt = str(info.get("compression_mode") or "").lower(), str(info.get("compression_format") or "")
+    except Exception:  # noqa: BLE001 - no bag beside it, or metadata that cannot be read so: read it as it is
+        return None
+    return (fmt or "compressed") if listed and mode == "message" else None
+
+
 def _sole_storage(path: Path, stats: ReadStats) -> Path:
     """What to read of a ROS 2 bag: its one MCAP file when metadata.yaml says so (mcap storage, one
     file, no file compression); the one storage file of a directory without metadata.yaml (warned);
