@@ -256,3 +256,17 @@ def test_a_ground_truth_a_receive_run_does_not_meet_is_said_to_be_on_the_other_c
     warnings = json.loads((tmp_path / "one" / "summary.json").read_text())["warnings"]
     (warning,) = [w for w in warnings if "single pose" in w]
     assert "recorder's clock" not in warning, warning
+
+
+def test_info_notes_odometry_on_another_clock_with_the_way_out(sim_log, tmp_path):
+    """Odometry header stamps two hours ahead of the scans': info said nothing, run refused the log (a
+    ROS-user probe). A note names the two clocks and input.stamps=receive; none under it, nor on the log."""
+    log = restamped_odometry(sim_log, tmp_path / "two_clocks.mcap", 7200 * 10**9)
+    notes = open_log(log).info().notes
+    assert any(
+        n.startswith("its odometry's header stamps are about 7200 s ahead of its scans': two clocks")
+        and "--set input.stamps=receive" in n
+        for n in notes
+    ), notes
+    assert not any("odometry's header stamps" in n for n in open_log(log, stamps="receive").info().notes)
+    assert not any("odometry's header stamps" in n for n in open_log(sim_log).info().notes)

@@ -36,6 +36,7 @@ from .base import (
     strip_frame,
 )
 from .params import MOUNT_SAME, InputConfig, receive_of
+from .sync import CLOCKS_APART
 from .unreadable import damage_problem
 
 LASERSCAN = "sensor_msgs/LaserScan"
@@ -619,6 +620,8 @@ class RosLogReader:
                 f"the header stamp of its first {len(stamps)} scans is {stamps[0] * 1e-9:.3f} s, every "
                 "one: the laser driver does not fill it (a run needs each scan's time: check the driver)"
             )
+        if odometry := self._odometry_clock_note(stamps):
+            return odometry
         offset = _median_offset(stamps, log_times)  # (the same scans: read once)
         if offset is None or abs(offset) <= CLOCK_APART * 1e9:
             return ""
@@ -626,6 +629,32 @@ class RosLogReader:
         return (
             f"its scans' header stamps are {abs(offset) * 1e-9:.1f} s {way} its record times (start and "
             "duration above are the recorder's; a run's stamps, --start/--end and its outputs, the headers')"
+        )
+
+    def _odometry_clock_note(self, scan_stamps: list[int], n: int = 20) -> str:
+        """info's note when the Odometry topic's header stamps (its first ``n``) lie more than CLOCKS_APART
+        from the scans' (``scan_stamps``): two clocks, on which a run meets no scan (it said nothing, and
+        run refused the log; a probe)."""
+        if self._odom_sel.kind != "odometry" or not scan_stamps or self._encoding_problem(self.odom_topic):
+            return ""  # (an encoding no decoder reads: info's problem, run's error)
+        dec, odometry = self._decoder(self.odom_topic), []
+        for _, _, data in itertools.islice(self.source.raw_messages({self.odom_topic}), 4 * n):
+            try:
+                sec, nsec = dec.odometry(data)[0]
+            except Exception:  # noqa: BLE001 - bad bytes: the run counts them
+                continue
+            odometry.append(sec * 1_000_000_000 + nsec)
+            if len(odometry) >= n:
+                break
+        if not odometry:
+            return ""
+        apart = (min(odometry) - min(scan_stamps)) * 1e-9  # (the first of each: near one another in a log)
+        if abs(apart) <= CLOCKS_APART:
+            return ""
+        way = "ahead of" if apart > 0 else "behind"
+        return (
+            f"its odometry's header stamps are about {abs(apart):.0f} s {way} its scans': two clocks, on "
+            "which a run meets no scan (--set input.stamps=receive takes each message at its record time)"
         )
 
     def record_offset(self, n: int = 100) -> int | None:
