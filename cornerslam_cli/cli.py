@@ -586,6 +586,11 @@ def check_mcap_name(mcap_out: str | None, profile: str) -> None:
             f"--mcap-out '{mcap_out}' names {OTHER_FORMATS[suffix]}, but it is written as MCAP: name it "
             f"{Path(mcap_out).stem}.mcap"
         )
+    if mcap_out and suffix != ".mcap":  # (written all the same: a name is the user's to choose)
+        log.warning(
+            "--mcap-out '%s' does not end in .mcap: `ros2 bag play` and Foxglove choose their reader by "
+            "it (name it %s.mcap to open it there)", mcap_out, Path(mcap_out).name
+        )  # fmt: skip
 
 
 RESULTS_MCAP_NOTE = (

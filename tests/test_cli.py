@@ -1447,3 +1447,14 @@ def test_a_count_that_is_no_number_is_said_to_be_no_integer(command, option, tmp
     log = Path(__file__).resolve().parents[1] / "sample_logs" / "intel_cut.clf"
     res = invoke(command, log, option, "abc", "--out", tmp_path / "o")
     one_line_error(res, f"invalid value for '{option}': 'abc' is not a valid integer (see ")
+
+
+def test_a_results_mcap_name_without_the_mcap_suffix_is_written_and_warned(tmp_path):
+    """rosbag2 and Foxglove choose their reader by the .mcap suffix: a name without it played nowhere
+    without a word (a ROS-user probe)."""
+    log = Path(__file__).resolve().parents[1] / "sample_logs" / "intel_cut.clf"
+    res = invoke("run", log, "--max-scans", "5", "--out", tmp_path / "o", "--mcap-out", tmp_path / "res")
+    assert res.exit_code == 0 and (tmp_path / "res").is_file(), res.output
+    assert f"--mcap-out '{tmp_path / 'res'}' does not end in .mcap" in res.stderr
+    res = invoke("run", log, "--max-scans", "5", "--out", tmp_path / "p", "--mcap-out", tmp_path / "r.MCAP")
+    assert res.exit_code == 0 and "does not end in .mcap" not in res.stderr
