@@ -480,11 +480,14 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
         lines = info_lines(log_path, replace(log_info, problems=()), None, scan, preset, mount_read=False)
         _echo(_with_stamps(lines, reader))
         reader.check()  # the first problem as the error: exit 2, as run
-    scan, unread, laser, mount_text, upside_down = None, None, None, "", False
+    scan, unread, laser, mount_text, upside_down, flip_source = None, None, None, "", False, ""
     try:  # (a topic declared with no message: run refuses it here, info lists the counts first)
-        laser, source, upside_down, _ = laser_mount(reader, cfg)  # the tf's, else the config's (as run)
+        laser, source, upside_down, flip_source = laser_mount(reader, cfg)  # the tf's, else the config's
         if source == "tf" and (keys := overruled_mount(cfg, laser)):  # (run warns of it)
             note = f"the log's mount is used: {keys} ignored (input.laser.from_tf=false uses the config's)"
+            log_info = replace(log_info, notes=(*log_info.notes, note))
+        if cfg.input.laser.upside_down and flip_source == "tf" and not upside_down:  # (run warns of it too)
+            note = "the log's tf mounts the laser upright: input.laser.upside_down=true is ignored"
             log_info = replace(log_info, notes=(*log_info.notes, note))
         laser, mount_text = _mount_shown(laser, source, cfg, log_info.format)
         scan = first_scan(reader) if log_info.scan_topic else None
@@ -501,7 +504,10 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
     frames = None  # the robot's frame (the odometry's child_frame_id, else input.base_frame), the laser's
     if laser is not None and not mount_text and getattr(reader, "laser_frame", None):
         frames = (reader.base_frame, reader.laser_frame)
-    lines = info_lines(log_path, log_info, laser, scan, preset, upside_down, frames, mount_text=mount_text)
+    lines = info_lines(
+        log_path, log_info, laser, scan, preset, upside_down, frames, mount_text=mount_text,
+        flip_from_config=flip_source == "config",
+    )  # fmt: skip
     _echo(_with_stamps(lines, reader))
     if unread is not None:  # exit 2, as run
         raise unread

@@ -313,6 +313,29 @@ def test_info_names_a_carmen_robotlaser_mount_as_run_does(tmp_path):
     assert line.endswith(" rad (from the log's ROBOTLASER1 laser pose)") and "tf" not in line, line
 
 
+def test_info_says_whose_upside_down_it_shows_as_run_takes_it(tmp_path, sim_log):
+    """A planar ROBOTLASER1 mount cannot say the laser is upside down: the config's flag is used, and info
+    labelled it with the log's pose; a tf mounting the laser upright overrules the flag (run warns), and
+    info said nothing (a review)."""
+    from click.testing import CliRunner
+
+    from cornerslam_cli.cli import cli
+
+    raw, odoms, _ = _sample_log()
+    raw, odoms = raw[:5], [o for o in odoms if o.stamp <= raw[4].stamp + 0.5]
+    log = write_carmen(tmp_path / "r.clf", raw, odoms, laser="ROBOTLASER1")
+    res = CliRunner().invoke(cli, ["info", str(log), "--set", "input.laser.upside_down=true"])
+    (line,) = [t for t in res.output.splitlines() if t.startswith("  laser ")]
+    assert line.endswith(
+        " rad, upside down (input.laser.upside_down): scans mirrored (from the log's ROBOTLASER1 laser pose)"
+    ), line
+    res = CliRunner().invoke(cli, ["info", str(sim_log), "--set", "input.laser.upside_down=true"])
+    assert "note:      the log's tf mounts the laser upright: input.laser.upside_down=true is ignored" in (
+        res.output.splitlines()
+    )
+    assert "upside" not in CliRunner().invoke(cli, ["info", str(sim_log)]).output
+
+
 def test_a_carmen_flaser_log_without_a_mount_is_not_said_to_lack_tf(tmp_path):
     """A FLASER log carries no laser mount and CARMEN has no tf: the warning, run's mount line and info
     say the log's laser lines give none (they said "has no tf base_link→laser … or

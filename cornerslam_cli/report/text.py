@@ -310,11 +310,13 @@ def info_lines(
     tf_frames: tuple[str, str] | None = None,
     mount_read: bool = True,
     mount_text: str = "",
+    flip_from_config: bool = False,
 ) -> list[str]:
     """``cornerslam info``: the log's format, topics with counts and rates, what a run would use
     (``laser``: the laser's (x, y, yaw) in the base frame from tf — ``tf_frames`` names the two,
     e.g. (base_footprint, laser) — a CARMEN log's ROBOTLASER1 laser pose — or None, and
-    ``upside_down`` there; ``mount_text``: ``laser`` is instead the config's mount, from where it says;
+    ``upside_down`` there (``flip_from_config``: that from the config, the log's mount being planar);
+    ``mount_text``: ``laser`` is instead the config's mount, from where it says;
     not ``mount_read``: not looked up, the log's problems coming first; ``scan``:
     the first scan, its geometry and beam times, with the laser ``preset`` it matches), problems and
     notes."""
@@ -337,6 +339,8 @@ def info_lines(
     lines.append(f"  scans     {short_text(i.scan_topic, 200) or '-'}")
     lines.append(f"  odometry  {short_text(i.odom_topic, 200) or '-'} ({i.odom_source or _no_odometry(i)})")
     flip = ", upside down: scans mirrored" if upside_down else ""
+    if upside_down and flip_from_config and laser is not None and not mount_text:  # (a planar log mount)
+        flip = ", upside down (input.laser.upside_down): scans mirrored"
     if laser is not None:
         x, y, yaw = laser
         source = mount_text or (ROBOTLASER_SOURCE if i.format == "carmen" else "from tf")
