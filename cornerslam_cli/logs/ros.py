@@ -12,7 +12,7 @@ from __future__ import annotations
 import difflib
 import itertools
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Protocol
@@ -637,15 +637,8 @@ class RosLogReader:
         run refused the log; a probe)."""
         if self._odom_sel.kind != "odometry" or not scan_stamps or self._encoding_problem(self.odom_topic):
             return ""  # (an encoding no decoder reads: info's problem, run's error)
-        dec, odometry = self._decoder(self.odom_topic), []
-        for _, _, data in itertools.islice(self.source.raw_messages({self.odom_topic}), 4 * n):
-            try:
-                sec, nsec = dec.odometry(data)[0]
-            except Exception:  # noqa: BLE001 - bad bytes: the run counts them
-                continue
-            odometry.append(sec * 1_000_000_000 + nsec)
-            if len(odometry) >= n:
-                break
+        dec = self._decoder(self.odom_topic)
+        odometry, _ = self._first_stamps(self.odom_topic, lambda data: dec.odometry(data)[0], n, 4 * n)
         if not odometry:
             return ""
         apart = (min(odometry) - min(scan_stamps)) * 1e-9  # (the first of each: near one another in a log)
@@ -665,10 +658,18 @@ class RosLogReader:
 
     def _first_scan_stamps(self, n: int = 100) -> tuple[list[int], list[int]]:
         """The header stamps and the log times [ns] of the first ``n`` scans that can be read."""
-        dec, stamps, log_times = self._decoder(self.scan_topic), [], []
-        for _, log_time, data in self.source.raw_messages({self.scan_topic}):
+        dec = self._decoder(self.scan_topic)
+        return self._first_stamps(self.scan_topic, lambda data: dec.laserscan(data).stamp, n)
+
+    def _first_stamps(
+        self, topic: str, stamp_of: Callable, n: int, tries: int | None = None
+    ) -> tuple[list[int], list[int]]:
+        """The header stamps (``stamp_of`` a message's bytes: (sec, nsec)) and the log times [ns] of the
+        first ``n`` messages on ``topic`` that can be read, of its first ``tries`` (None: all)."""
+        stamps, log_times = [], []
+        for _, log_time, data in itertools.islice(self.source.raw_messages({topic}), tries):
             try:
-                sec, nsec = dec.laserscan(data).stamp
+                sec, nsec = stamp_of(data)
             except Exception:  # noqa: BLE001 - bad bytes: the run counts them
                 continue
             stamps.append(sec * 1_000_000_000 + nsec)

@@ -217,16 +217,21 @@ def _unreadable_storage(directory: Path) -> str | None:
     return None
 
 
-def _bag_info(directory: Path) -> tuple[str, bool, list[str]] | None:
-    """(storage identifier, file-compressed, storage file names) from the metadata.yaml in ``directory``;
-    None when there is none or it cannot be read so (rosbags, which reads the bag, says what is wrong)."""
+def _bag_info(directory: Path) -> tuple[str, bool, list[str], str] | None:
+    """(storage identifier, compressed, storage file names, the compression format when each message is
+    compressed on its own — ``compression_mode: message`` — else "") from the metadata.yaml in
+    ``directory``; None when there is none or it cannot be read so (rosbags, which reads the bag, says
+    what is wrong)."""
     try:
         info = yaml.safe_load((directory / META).read_text())["rosbag2_bagfile_information"]
         files = info["relative_file_paths"]
-        storage, compressed = str(info["storage_identifier"]), bool(info.get("compression_format"))
+        storage, packed = str(info["storage_identifier"]), str(info.get("compression_format") or "")
+        per_message = str(info.get("compression_mode") or "").lower() == "message"
     except Exception:  # noqa: BLE001 - any unreadable metadata: no answer here
         return None
-    return (storage, compressed, [str(f) for f in files]) if isinstance(files, list) else None
+    if not isinstance(files, list):
+        return None
+    return storage, bool(packed), [str(f) for f in files], (packed or "compressed") if per_message else ""
 
 
 def _sqlite_files(path: Path) -> list[Path]:
@@ -275,15 +280,10 @@ def message_compression_of(path: Path) -> str | None:
     """The compression format (zstd) of the ROS 2 bag whose metadata.yaml lists the storage file ``path``
     when it compresses each message on its own (``compression_mode: message``), else None: such a file
     read alone gives compressed bytes for messages (the bag's directory is read through rosbags)."""
-    if path.suffix not in STORAGE_SUFFIXES or path.is_dir():
+    info = _bag_info(path.parent) if path.suffix in STORAGE_SUFFIXES and not path.is_dir() else None
+    if info is None or not info[3] or path.name not in [Path(f).name for f in info[2]]:
         return None
-    try:
-        info = yaml.safe_load((path.parent / META).read_text())["rosbag2_bagfile_information"]
-        listed = path.name in [Path(str(f)).name for f in info["relative_file_paths"]]
-        mode, fmt = str(info.get("compression_mode") or "").lower(), str(info.get("compression_format") or "")
-    except Exception:  # noqa: BLE001 - no bag beside it, or metadata that cannot be read so: read it as it is
-        return None
-    return (fmt or "compressed") if listed and mode == "message" else None
+    return info[3]
 
 
 def _sole_storage(path: Path, stats: ReadStats) -> Path:
