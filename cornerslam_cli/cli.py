@@ -451,7 +451,7 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
     from dataclasses import replace
 
     from .lasers import first_scan, laser_mount, overruled_mount
-    from .logs import open_configured
+    from .logs import alone_info, open_configured, read_alone
     from .logs.mcap import header_fields
     from .logs.unreadable import no_scan_read
     from .report.ownership import is_results_mcap
@@ -461,6 +461,9 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
     cfg = _info_config(config_path, overrides, scan_topic, odom_topic)
     reader = open_configured(Path(log_path), cfg.input)
     log_info = reader.info()
+    alone = read_alone(cfg.input)  # (input.odometry=scans: the odometry a run would use is the scans')
+    if alone:
+        log_info = alone_info(reader, log_info)
     topics = cfg.input.scan_topic or cfg.input.odom_topic  # (--scan-topic, or its --set)
     if is_results_mcap(Path(log_path)) and not topics:  # run --mcap-out's: described
         lines = info_lines(log_path, replace(log_info, problems=()), None)
@@ -479,7 +482,7 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
         preset = _info_preset(cfg, scan)
         lines = info_lines(log_path, replace(log_info, problems=()), None, scan, preset, mount_read=False)
         _echo(_with_stamps(lines, reader))
-        reader.check()  # the first problem as the error: exit 2, as run
+        reader.check(odometry=not alone)  # the first problem as the error: exit 2, as run
     scan, unread, laser, mount_text, upside_down, flip_source = None, None, None, "", False, ""
     try:  # (a topic declared with no message: run refuses it here, info lists the counts first)
         laser, source, upside_down, flip_source = laser_mount(reader, cfg)  # the tf's, else the config's
@@ -511,7 +514,7 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
     _echo(_with_stamps(lines, reader))
     if unread is not None:  # exit 2, as run
         raise unread
-    odom_tf = getattr(reader, "odom_tf_problem", lambda: None)()  # ROS logs: tf odometry not on tf
+    odom_tf = None if alone else getattr(reader, "odom_tf_problem", lambda: None)()  # ROS: tf odometry gone
     if odom_tf and odom_tf[1]:  # every tf message read: run would fail at the end of the log
         raise LogError(*odom_tf[0])
     if odom_tf:  # the first 2,000 messages after the first scan only: likely, not certain

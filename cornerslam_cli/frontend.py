@@ -27,7 +27,7 @@ from .filter import load_kernels as load_filter_kernels
 from .filter.models import increment_noise
 from .geometry import matrix_from_pose, transform_points
 from .lasers import invalid_beams, laser_mount
-from .logs import ReadStats, open_configured
+from .logs import ReadStats, alone_info, open_configured, read_alone
 from .logs.deskew import deskew
 from .logs.keyframes import select_keyframes
 from .logs.order import in_stamp_order
@@ -36,6 +36,7 @@ from .logs.unreadable import damaged_error, no_scan_read, raise_if_undecoded
 from .motion import ScanMatcher
 from .motion.fusion import BiasTaken, OdometryFusion
 from .motion.icp import load_kernels as load_motion_kernels
+from .motion.scan_odometry import ScanOdometry, with_scan_odometry
 from .ranges import short_text
 from .span import Span, SpanUsed, select
 from .types import Corners, Scan, Segments
@@ -131,6 +132,8 @@ class Input:
     # compare --jobs: the filters running at once over these frames (summary.json timing.concurrent_filters:
     # their times include waiting for the CPU)
     filters_at_once: int = 1
+    # input.odometry=scans: the odometry made from the scans (motion/scan_odometry.py); None: the log's
+    scan_odometry: ScanOdometry | None = None
 
 
 def open_input(
@@ -141,10 +144,15 @@ def open_input(
     the part to process; ``compiling``: called just before the kernels load (the command line's note that a
     first run compiles them: after the log's checks, so that a bad log's error comes alone)."""
     reader = open_configured(Path(log_path), cfg.input)
-    reader.check()
+    scans_alone = read_alone(cfg.input)
+    reader.check(odometry=not scans_alone)
     info = reader.info(inspect=False)  # (a run needs its topics, not its rates)
     laser2base, source, upside_down, upside_down_source = laser_mount(reader, cfg)
-    matcher = ScanMatcher(cfg.scan_match, odometry_noise(cfg)) if cfg.scan_match.enabled else None
+    # on the scans alone their odometry is already scan-matched (motion/scan_odometry.py): matching each
+    # keyframe again, on a map of the same scans, and fusing the two as if independent would only make the
+    # motion look surer than it is — the filter takes the odometry with its motion model (ekf.alpha*)
+    fuse = cfg.scan_match.enabled and not scans_alone
+    matcher = ScanMatcher(cfg.scan_match, odometry_noise(cfg)) if fuse else None
     if matcher is not None and cfg.submaps.enabled and cfg.graph.recalibrate:  # (before any use)
         matcher.fusion = OdometryFusion(cfg.scan_match, whole_run=True)  # keeps every sample
     if compiling is not None:
@@ -154,10 +162,16 @@ def open_input(
         load_association_kernels()
         load_filter_kernels()
     # loop closing and the keyframe graph's refinement run ICP too
-    if matcher is not None or (cfg.submaps.enabled and (cfg.loops.enabled or cfg.graph.refine)):
+    if (
+        scans_alone
+        or matcher is not None
+        or (cfg.submaps.enabled and (cfg.loops.enabled or cfg.graph.refine))
+    ):
         with signals_deferred():
             load_motion_kernels()
     odom_on_tf = info.odom_source.startswith("tf") or reader.odom_on_tf
+    if scans_alone:  # the log's odometry, if any, is not read (nor is its tf odometry republished)
+        info, odom_on_tf = alone_info(reader, info), False
     span = span or Span()
     total = _scan_count(info)
     log.info(
@@ -172,6 +186,7 @@ def open_input(
     return Input(
         Path(log_path), reader, info, laser2base, source, upside_down, total, SyncStats(), matcher,
         odom_on_tf, span, laser_upside_down_source=upside_down_source,
+        scan_odometry=ScanOdometry(cfg.scan_match) if scans_alone else None,
     )  # fmt: skip
 
 
@@ -192,12 +207,14 @@ def odometry_noise(cfg: Config) -> Callable[[np.ndarray], np.ndarray]:
 def keyframe_pairs(src: Input, cfg: Config) -> Iterator[Synced]:
     """The log's keyframes (streaming): scans prepared (logs/sync.py's synchroniser, keyframe selection)
     with the odometry at their stamps, deskewed."""
-    msgs = src.reader.messages()
+    msgs = src.reader.messages() if src.scan_odometry is None else src.reader.scans()
     if src.span.given:  # on the scans as read: those left out give their beams back to the reader's counts
         left_out = partial(_uncount, src.reader.stats)
         msgs = select(msgs, src.span, src.span_used, src.path.name, left_out, cfg.input.scan_time_offset)
     # (after the span: it reads ahead, and a scan read past the span's end would be counted as processed)
     msgs = scans_prepared(src.reader, cfg, src.laser_upside_down, in_stamp_order(msgs))
+    if src.scan_odometry is not None:
+        msgs = with_scan_odometry(msgs, src.scan_odometry, src.laser2base)
     msgs = reanchor_odometry(msgs, cfg.input.odom_jump, src.stats, src.reader.stats.warn)
     synced = synchronise(msgs, src.stats, src.reader.stats.warn)  # its warning lands in summary.json too
     return _deskewed(select_keyframes(synced, cfg.keyframes, src.stats), src, cfg)
@@ -216,10 +233,16 @@ def frames(src: Input, cfg: Config, progress: Callable[[int, int], None] | None 
         head = list(itertools.islice(pairs, cfg.scan_match.warmup))
         src.matcher.warm_up([(transform_points(p.scan.points(), src.laser2base), p.odom) for p in head])
         pairs = itertools.chain(head, pairs)
+    charged = 0.0  # the scan odometry's seconds charged to the steps so far
     for pair in pairs:
         frame = replace(extract_frame(pair.scan, pair.odom, cfg, src.laser2base), odom_jump=pair.odom_jump)
         if src.matcher is not None:
             frame = _scan_matched(frame, pair.scan, src.matcher, src.laser2base)
+        elif src.scan_odometry is not None:  # its time since the last step (it runs a few scans ahead)
+            frame, charged = (
+                replace(frame, t_scan_match=src.scan_odometry.seconds - charged),
+                src.scan_odometry.seconds,
+            )
         yield frame
         if progress is not None:
             progress(src.stats.scans_in, src.total_scans)

@@ -187,3 +187,9 @@ def yaw_from_quaternion(x, y, z, w):
     sy = 2.0 * (w * z + x * y)
     cy = 1.0 - 2.0 * (y * y + z * z)
     return math.atan2(sy, cy) if np.ndim(sy) == 0 else np.arctan2(sy, cy)
+
+
+def apart(a: np.ndarray, b: np.ndarray, distance: float, angle: float) -> bool:
+    """Whether poses ``a`` and ``b`` lie ``distance`` or more apart, or differ by ``angle`` or more in
+    heading."""
+    return bool(np.hypot(a[0] - b[0], a[1] - b[1]) >= distance or abs(wrap_angle(a[2] - b[2])) >= angle)

@@ -196,6 +196,18 @@ class Counts(JsonResult):
 
 
 @dataclass(frozen=True, kw_only=True)
+class ScanOdometryStats(JsonResult):
+    """The odometry a run on the scans alone made (``input.odometry: scans``, motion/scan_odometry.py): the
+    scans given a pose, those registered from a correlative search's pose, those no registration fitted
+    (placed at the constant-velocity guess), and the seconds it took (in timing.csv's t_scan_match)."""
+
+    scans: int
+    searched: int
+    coasted: int
+    seconds: float
+
+
+@dataclass(frozen=True, kw_only=True)
 class OdometryModel(JsonResult):
     """What the front end learnt by the end of the run (motion/fusion.py): the odometry's noise scale
     and the scan match's (times their models), the odometer scale error and the heading drift (rad/m);
@@ -291,6 +303,8 @@ class RunSummary(JsonResult):
     versions: dict
     odometry_model: OdometryModel | None = optional()  # appended (issue 15): what the front end learnt
     consistency: MapConsistency | None = optional()  # appended (issue 17): map consistency, no ground truth
+    # appended: the odometry made from the scans (input.odometry: scans); absent: the log's odometry
+    scan_odometry: ScanOdometryStats | None = optional()
     out_dir: str | None = field(default=None, metadata={"json": False})
 
     @classmethod

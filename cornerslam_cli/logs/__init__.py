@@ -14,6 +14,7 @@ every problem with the input.
 from __future__ import annotations
 
 import codecs
+import dataclasses
 import gzip
 import shlex
 import stat
@@ -21,7 +22,8 @@ import zlib
 from collections.abc import Callable
 from pathlib import Path
 
-from ..errors import LogError, display_path, symlink_loop
+from ..errors import ConfigError, LogError, display_path, symlink_loop
+from ..ranges import short_text
 from .base import LogInfo, LogReader, ReadStats, TopicInfo
 from .carmen import GZIP_MAGIC, CarmenReader
 from .mcap import MAGIC as MCAP_MAGIC
@@ -194,11 +196,13 @@ def open_log(
     base_frame: str = "base_link",
     scan_frame: str = "",
     stamps: str = "header",
+    scans_alone: bool = False,
 ) -> LogReader:
     """Open a log for reading; the format is chosen by :func:`detect_format`.
 
     ``stamps``: ``input.stamps`` — "header" (each message's header stamp) or "receive" (when the recorder
-    got it: a ROS log's log time, a CARMEN line's logger timestamp).
+    got it: a ROS log's log time, a CARMEN line's logger timestamp). ``scans_alone``: a run reads its
+    scans only (``input.odometry: scans``): a log without odometry passes ``check()``.
     Topic errors (no / several LaserScan, no odometry, missing requested topic) are raised by
     ``messages()``, ``laser_to_base()`` and ``check()``, not here, so ``info()`` can report them.
     """
@@ -219,6 +223,7 @@ def open_log(
         scan_frame=scan_frame,
         stamps=stamps,
     )
+    reader.scans_alone = scans_alone
     if fmt != "carmen" and (bag := split_bag_of(p)) is not None:
         reader.stats.warn(
             "%s is one of the %d storage files of the ROS 2 bag '%s': only its messages are read (give the "
@@ -238,4 +243,33 @@ def open_configured(path: str | Path, inp: InputConfig) -> LogReader:
         base_frame=inp.base_frame,
         scan_frame=inp.scan_frame,
         stamps=inp.stamps,
+        scans_alone=inp.odometry == "scans",
     )
+
+
+SCANS_SOURCE = "the scans (input.odometry=scans)"  # summary.json's input.odom_source on the scans alone
+
+
+def read_alone(inp: InputConfig) -> bool:
+    """Whether a run reads the scans alone (``input.odometry: scans``, motion/scan_odometry.py); a
+    ConfigError when an odometry topic is chosen beside it (the two contradict each other)."""
+    if inp.odometry != "scans":
+        return False
+    if inp.odom_topic:
+        raise ConfigError(
+            f"input.odom_topic '{short_text(inp.odom_topic)}' is given, but input.odometry=scans reads no "
+            "odometry",
+            "leave out one of --odom-topic and --set input.odometry=scans",
+        )
+    return True
+
+
+def alone_info(reader: LogReader, info: LogInfo) -> LogInfo:
+    """``info`` as a run on the scans alone reads the log: its odometry is the scans' (SCANS_SOURCE), and
+    only what stops it reading the scans is a problem (``cornerslam info``)."""
+    try:
+        reader.check(odometry=False)
+        problems: tuple[str, ...] = ()
+    except LogError as e:
+        problems = (f"{e.msg} ({e.hint})" if e.hint else e.msg,)
+    return dataclasses.replace(info, odom_topic="", odom_source=SCANS_SOURCE, problems=problems)

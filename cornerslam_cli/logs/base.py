@@ -259,6 +259,7 @@ class LogReader(Protocol):
     odom_on_tf: bool  # the log's tf carries odom→base (seen by laser_to_base())
     receive: bool  # input.stamps "receive": messages taken at the recorder's time, not their header stamps
     stamps_name: str  # what the messages' times are read from, as refusals name it ("header stamps", …)
+    scans_alone: bool  # a run reads the scans only (input.odometry: scans): check() asks no odometry
 
     def info(self, inspect: bool = True) -> LogInfo: ...  # inspect: as `cornerslam info` shows (reads more)
     def laser_to_base(self) -> Pose2 | None: ...

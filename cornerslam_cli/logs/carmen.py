@@ -493,7 +493,13 @@ class CarmenReader:
             return f"the whole ODOM lines end at {o1:.3f} s, before {after} of the {len(times)} {scan} lines"
         return ""
 
-    def check(self) -> None:
+    scans_alone = False  # (open_log sets it; the laser lines carry odometry: check() asks the same)
+
+    def check(self, odometry: bool | None = None) -> None:
+        """Raise LogError if a run could not read this log's scans and odometry. ``odometry`` False (the
+        scans alone) asks no less: a log without laser lines fails on them first, and one with them has
+        their odometry fields; only a missing --odom-topic is an odometry problem, and a run on the scans
+        alone refuses that option before."""
         if self._problems:
             raise LogError(*self._problems[0])
 

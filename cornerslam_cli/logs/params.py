@@ -81,6 +81,9 @@ class InputConfig:
 
     scan_topic: str = ""  # "" = choose by message type
     odom_topic: str = ""  # "" = nav_msgs/Odometry topic, else tf odom→base
+    # where the motion between scans comes from: the log's odometry (odom_topic), or the scans alone —
+    # each registered on the ones before (motion/scan_odometry.py), for a log without wheel odometry
+    odometry: Literal["log", "scans"] = "log"
     odom_frame: str = "odom"
     base_frame: str = "base_link"
     # the laser whose scans are used when two publish on one topic (their frame_ids differ and the tf

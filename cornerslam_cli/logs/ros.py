@@ -246,6 +246,8 @@ class RosLogReader:
     never by :meth:`info`, which reports them.
     """
 
+    scans_alone = False  # (open_log sets it: input.odometry scans)
+
     def __init__(
         self,
         source: RawSource,
@@ -455,7 +457,8 @@ class RosLogReader:
             "",
             f"log '{name}' has no odometry: no nav_msgs/Odometry topic and {no_tf}{of_poses}",
             "select an odometry topic with --odom-topic (nav_msgs/Odometry or tf with "
-            f"{short_text(self.odom_frame)}→{short_text(self.base_frame)})",
+            f"{short_text(self.odom_frame)}→{short_text(self.base_frame)}), or run on the scans alone: "
+            "--set input.odometry=scans",
         )
 
     def _other_robots(self, topic: str) -> bool:
@@ -537,9 +540,11 @@ class RosLogReader:
             problems = [p for t in (self.scan_topic, self.odom_topic) if (p := self._encoding_problem(t))]
         return problems
 
-    def check(self, odometry: bool = True) -> None:
+    def check(self, odometry: bool | None = None) -> None:
         """Raise LogError if a run could not choose its scan and odometry topics or decode them (with
-        ``odometry`` False: its scan topic alone, as ``extract`` needs)."""
+        ``odometry`` False: its scan topic alone, as ``extract`` and a run on the scans alone need; None:
+        as the run reads it, ``scans_alone``)."""
+        odometry = not self.scans_alone if odometry is None else odometry
         problems = self._problems() if odometry else self._scan_problems()
         if problems:
             raise LogError(*problems[0])
@@ -846,7 +851,7 @@ class RosLogReader:
         if self._robot_resolved:
             return self.base_frame
         self._robot_resolved = True
-        if self.base_frame != DEFAULT_BASE_FRAME:
+        if self.base_frame != DEFAULT_BASE_FRAME or not self._odom_sel.kind:  # (no odometry: the scans alone)
             return self.base_frame
         if self._odom_sel.kind == "odometry":
             robot, how = self._odometry_frame(), "its child_frame_id"

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry import (
+    apart,
     compose,
     pose_from_matrix,
     relative,
@@ -364,12 +365,8 @@ class ScanMatcher:
         to one point per voxel (the window's first: the newest placements win a cell), normals computed on
         it (denser than one scan: better normals on sparse 1° scans)."""
         cfg = self.cfg
-        if self.last_map_pose is not None:
-            d = np.hypot(*(pose[:2] - self.last_map_pose[:2]))
-            a = abs(wrap_angle(pose[2] - self.last_map_pose[2]))
-            if d < cfg.map_update_distance and a < cfg.map_update_angle:
-                return
-        if len(points) < NORMAL_NEIGHBOURS:
+        last, apart_enough = self.last_map_pose, (cfg.map_update_distance, cfg.map_update_angle)
+        if len(points) < NORMAL_NEIGHBOURS or (last is not None and not apart(pose, last, *apart_enough)):
             return
         self.last_map_pose = pose.copy()
         placed = transform_points(points, pose)

@@ -38,6 +38,7 @@ MAX_SCALE_ERROR = 0.25
 # the odometry's position "never moves" within this (m) over the run, while the scans went this far across
 STILL_XY, STILL_SCANS_WENT = 1e-6, 0.3
 BLIND_STEPS = 10  # steps in a row with no valid beam, warned of
+COASTED_SHARE = 0.05  # scans the scan odometry placed at its guess beyond this share of them: warned of
 
 
 @dataclass
@@ -91,6 +92,7 @@ def build_summary(
     model = odometry_model(src.matcher)
     warn_odometry_model(src, model)
     warn_blind(src, totals)
+    warn_coasted(src)
     return RunSummary(
         cornerslam_version=__version__,
         mode="slam",
@@ -117,6 +119,7 @@ def build_summary(
         final_pose=tuple(final_pose.tolist()),
         odometry_model=model,
         consistency=consistency,
+        scan_odometry=None if src.scan_odometry is None else src.scan_odometry.stats(),
         warnings=tuple(src.reader.stats.warnings),
         accuracy=accuracy,
         hashes=Hashes(
@@ -190,6 +193,20 @@ def warn_blind(src: Input, totals: Totals) -> None:
             "odometry alone there (a laser covered or blinded? a driver writing NaN or inf?)",
             src.path.name, n, first, last, last - first,
         )  # fmt: skip
+
+
+def warn_coasted(src: Input) -> None:
+    """Warn when the odometry made from the scans (input.odometry: scans) placed more than COASTED_SHARE of
+    them at its constant-velocity guess, no registration fitting: there the trajectory is a guess."""
+    odo = src.scan_odometry
+    if odo is None or odo.coasted <= COASTED_SHARE * odo.scans:
+        return
+    src.reader.stats.warn(
+        "log '%s': %d of the %d scans fitted no registration on the scans before them and were placed where "
+        "the robot's last motion would have taken it (input.odometry=scans: the trajectory there is a guess; "
+        "a log with wheel odometry is surer)",
+        src.path.name, odo.coasted, odo.scans,
+    )  # fmt: skip
 
 
 def warn_still_odometry(src: Input, odoms: np.ndarray, motions: np.ndarray | None) -> None:

@@ -65,6 +65,7 @@ def span_lines(i: RunInput) -> list[str]:
 def summary_lines(s: RunSummary) -> list[str]:
     """``cornerslam run``: counts, stage times, accuracy when there is a reference, the output."""
     c, t = s.counts, s.timing
+    odometry = "scan odometry" if s.scan_odometry is not None else "odometry"  # (input.odometry: scans)
     lines = [
         f"{s.input.log}: {c.steps} steps ({c.scans_in} scans, {c.scans_skipped} skipped, "
         f"{c.keyframes_skipped} between keyframes{unusable_scans(c)}), {c.landmarks} landmarks, "
@@ -74,7 +75,8 @@ def summary_lines(s: RunSummary) -> list[str]:
         mount_line(s.input),
         *preset_lines(s.config),
         *deskew_lines(s.input),
-        f"time: extract {t.t_extract:.2f}s scan match {t.t_scan_match or 0.0:.2f}s "
+        f"time: extract {t.t_extract:.2f}s {'scan odometry' if s.scan_odometry else 'scan match'} "
+        f"{t.t_scan_match or 0.0:.2f}s "
         f"predict {t.t_predict:.2f}s match {t.t_match:.2f}s "
         f"update {t.t_update:.2f}s ({t.scans_per_second:.0f} steps/s), wall {t.wall_time:.1f}s",
     ]
@@ -92,17 +94,17 @@ def summary_lines(s: RunSummary) -> list[str]:
     acc = s.accuracy
     if acc is not None and acc.ate is not None:
         lines.append(
-            f"ATE RMSE {acc.ate.rmse:.3f} m (odometry {acc.odom_ate.rmse:.3f} m"
+            f"ATE RMSE {acc.ate.rmse:.3f} m ({odometry} {acc.odom_ate.rmse:.3f} m"
             + (f", scan-matched {acc.scan_odom_ate.rmse:.3f} m" if acc.scan_odom_ate else "")
             + f") against {acc.ground_truth}"
             + (f", over {acc.ate.n} of the {s.counts.steps} poses" if acc.ate.n < s.counts.steps else "")
             + (f" ({acc.ate.in_holes} in its gaps not scored)" if acc.ate.in_holes else "")
         )
     if s.consistency is not None:
-        lines.append(consistency_line(s.consistency))
+        lines.append(consistency_line(s.consistency, odometry))
     if acc is not None and acc.relations is not None:
         lines.append(f"relations: {relation_text(acc.relations)}")
-        lines.append(f"  odometry: {relation_text(acc.odom_relations)}")
+        lines.append(f"  {odometry}: {relation_text(acc.odom_relations)}")
         if acc.scan_odom_relations is not None:
             lines.append(f"  scan-matched odometry: {relation_text(acc.scan_odom_relations)}")
     lines.append(f"wrote {s.out_dir}")
@@ -123,16 +125,16 @@ CARMEN_DEFAULT_SOURCE = "the built-in default: not in the log's laser lines, not
 UPSIDE_DOWN_SOURCES = {"tf": "from the log's tf", "config": "from the config's input.laser.upside_down"}
 
 
-def consistency_line(c: MapConsistency) -> str:
+def consistency_line(c: MapConsistency, odometry: str = "odometry") -> str:
     """How well the map agrees with itself (summary.json ``consistency``): a figure without ground truth."""
-    cells = f"map cells {c.cells_vs_odom:.2f}× the odometry's"
+    cells = f"map cells {c.cells_vs_odom:.2f}× the {odometry}'s"
     if not c.revisit_share:
         return f"map consistency: {cells}; the run never comes back to a place (no revisit misalignment)"
     revisit = f"revisit misalignment {100 * c.revisit_mean:.1f} cm on {100 * c.revisit_share:.0f} % of points"
     odom = (
-        f"odometry {100 * c.odom_revisit_mean:.1f} cm on {100 * c.odom_revisit_share:.0f} %"
+        f"{odometry} {100 * c.odom_revisit_mean:.1f} cm on {100 * c.odom_revisit_share:.0f} %"
         if c.odom_revisit_share
-        else "odometry never back"
+        else f"{odometry} never back"
     )
     return f"map consistency: {revisit} ({odom}), {cells}"
 
@@ -143,6 +145,8 @@ def topics_line(inp: RunInput) -> str:
     if inp.format == "carmen":
         return f"read: {short_text(inp.scan_topic, 200)} lines, odometry from {inp.odom_source or odom}"
     source = f" ({inp.odom_source})" if inp.odom_source else ""
+    if not inp.odom_topic and inp.odom_source:  # (input.odometry: scans)
+        return f"topics: scans {short_text(inp.scan_topic, 200)}, odometry from {inp.odom_source}"
     return f"topics: scans {short_text(inp.scan_topic, 200)}, odometry {odom}{source}"
 
 
@@ -337,7 +341,12 @@ def info_lines(
         lines.append(f"  {name:<{wide[0]}} {msgtype:<{wide[1]}} {count:>8} msgs {rate}{note}")
     lines.append("run would use:")
     lines.append(f"  scans     {short_text(i.scan_topic, 200) or '-'}")
-    lines.append(f"  odometry  {short_text(i.odom_topic, 200) or '-'} ({i.odom_source or _no_odometry(i)})")
+    if not i.odom_topic and i.odom_source:  # (input.odometry: scans)
+        lines.append(f"  odometry  from {i.odom_source}")
+    else:
+        lines.append(
+            f"  odometry  {short_text(i.odom_topic, 200) or '-'} ({i.odom_source or _no_odometry(i)})"
+        )
     flip = ", upside down: scans mirrored" if upside_down else ""
     if upside_down and flip_from_config and laser is not None and not mount_text:  # (a planar log mount)
         flip = ", upside down (input.laser.upside_down): scans mirrored"

@@ -73,3 +73,24 @@ def write_mcap(
             w.add_metadata(name, record)
         w.finish()
     return path
+
+
+def copy_mcap_without(src: str | Path, dst: str | Path, topics: set[str]) -> Path:
+    """``src`` copied to ``dst`` record by record, the messages of ``topics`` left out (a log without its
+    odometry, for a run on the scans alone: tests, benchmarks/scan_odometry_panel.py)."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    with open(src, "rb") as f, open(dst, "wb") as g:
+        w = Writer(g)
+        w.start(profile="ros2", library=LIBRARY)
+        ids: dict[int, int] = {}
+        for schema, channel, m in make_reader(f).iter_messages():
+            if channel.topic in topics:
+                continue
+            if channel.id not in ids:
+                sid = w.register_schema(schema.name, schema.encoding, schema.data)
+                ids[channel.id] = w.register_channel(channel.topic, channel.message_encoding, sid)
+            w.add_message(ids[channel.id], m.log_time, m.data, m.publish_time)
+        w.finish()
+    return Path(dst)
