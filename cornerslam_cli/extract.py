@@ -9,7 +9,7 @@ from typing import Any
 from .config import Config
 from .errors import ConfigError, LogError
 from .features import extract
-from .logs import open_configured
+from .logs import open_configured, read_alone
 from .logs.unreadable import no_scan_read
 from .types import Corners, Scan, Segments
 
@@ -32,6 +32,7 @@ def extract_step(
     when the log has no such scan, naming the valid range; LogError when it yields no scan at all
     (every chunk corrupt, every scan undecodable: there is no range to name)."""
     inp = cfg.input
+    read_alone(inp)  # (--odom-topic beside input.odometry=scans: refused, as run refuses it)
     with open_configured(Path(log_path), inp) as reader:
         if inp.odom_topic:  # given though not needed: a wrong one is refused as run refuses it
             reader.check()

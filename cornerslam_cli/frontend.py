@@ -170,8 +170,8 @@ def open_input(
         with signals_deferred():
             load_motion_kernels()
     odom_on_tf = info.odom_source.startswith("tf") or reader.odom_on_tf
-    if scans_alone:  # the log's odometry, if any, is not read (nor is its tf odometry republished)
-        info, odom_on_tf = alone_info(reader, info), False
+    if scans_alone:  # the log's odometry, if any, is not read (a results MCAP hangs map from its tf's)
+        info = alone_info(reader, info)
     span = span or Span()
     total = _scan_count(info)
     log.info(

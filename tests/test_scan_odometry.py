@@ -66,6 +66,16 @@ def test_a_lap_of_dense_scans_follows_the_true_motion():
     assert odo.searched <= 3  # small steps: ICP from the guess (the first scans are searched)
 
 
+def test_searched_counts_scans_once():
+    """Two searches run on a scan far from the last (around the guess and around the robot standing
+    still): a scan counts once, whichever won."""
+    truth = [np.array([2.0, 2.0, 0.0])]
+    for k in range(7):
+        truth.append(compose(truth[-1], np.array([0.8, 0.0, 0.5 * (-1) ** k])))
+    odo, _ = odometry_of(office_world(), np.array(truth), seed=5)
+    assert 0 < odo.searched <= odo.scans - 1
+
+
 def test_sparse_scans_that_turn_back_are_found_by_the_search_around_the_robot_standing_still():
     """Scans 0.4–0.8 m apart turning +0.5 rad then −0.5 rad in turn (a log thinned by distance, as the
     radish ones): the constant-velocity guess is 1 rad off at each reversal, beyond the search window
@@ -79,6 +89,42 @@ def test_sparse_scans_that_turn_back_are_found_by_the_search_around_the_robot_st
     _, poses = odometry_of(world, truth, seed=5)
     d, a = step_errors(poses, truth)
     assert d.max() < 0.05 and a.max() < math.radians(1.0), (d, np.degrees(a))
+
+
+def test_steps_larger_than_icps_basin_are_searched_even_where_icp_from_the_guess_fits():
+    """Scans 1 m apart turning ±0.3 rad in turn: ICP from the constant-velocity guess (0.6 rad off at
+    each reversal) fits above min_fit at a wrong pose, so searching only when it fits under min_fit is
+    not enough (then: 0.2 m and 23° off); the last step being beyond ICP's basin starts the search."""
+    truth = [np.array([2.0, 2.0, 0.0])]
+    for k in range(7):
+        truth.append(compose(truth[-1], np.array([1.0, 0.0, 0.3 * (-1) ** k])))
+    _, poses = odometry_of(office_world(), np.array(truth), seed=5)
+    d, a = step_errors(poses, np.array(truth))
+    assert d.max() < 0.05 and a.max() < math.radians(1.0), (d, np.degrees(a))
+
+
+def test_the_laser_mount_is_applied_once():
+    """Scans taken by a laser 0.5 m ahead, 0.2 m left and turned 90° on the robot: the samples are the
+    base's poses (its increments right to 2 cm and 0.3°), not the laser's."""
+    world, rng = office_world(), np.random.default_rng(4)
+    mount = (0.5, 0.2, math.pi / 2)
+    truth = smooth_headings(path_poses(OFFICE_LOOP, 0.1), 15)[:80]
+    msgs = []
+    for k, base in enumerate(truth):
+        p = scan_points(world, compose(base, np.array(mount)), rng)
+        msgs.append(scan_message(1.0 + 0.1 * k, p))
+    out = with_scan_odometry(msgs, ScanOdometry(load_config().scan_match), mount)
+    poses = np.array([[m.x, m.y, m.theta] for m in out if isinstance(m, OdomSample)])
+    d, a = step_errors(poses, truth)
+    assert d.max() < 0.02 and a.max() < math.radians(0.3), (d.max(), math.degrees(a.max()))
+
+
+def scan_message(stamp: float, points: np.ndarray) -> Scan:
+    """A Scan of ``points`` (sensor frame), beams in increasing bearing order."""
+    r, a = np.hypot(points[:, 0], points[:, 1]), np.arctan2(points[:, 1], points[:, 0])
+    order = np.argsort(a)
+    n = len(r)
+    return Scan(stamp, r[order], a[order], np.arange(n), n, 0.1, 30.0, math.radians(1.0))
 
 
 def test_a_scan_with_no_points_coasts_on_the_last_increment():
@@ -98,10 +144,7 @@ def test_stamps_that_do_not_advance_get_no_odometry_sample():
     world, rng = office_world(), np.random.default_rng(2)
 
     def scan(t, x):
-        p = scan_points(world, np.array([x, 2.0, 0.0]), rng)
-        r, a = np.hypot(p[:, 0], p[:, 1]), np.arctan2(p[:, 1], p[:, 0])
-        n = len(r)
-        return Scan(t, r, a, np.arange(n), n, 0.1, 30.0, math.radians(1.0))
+        return scan_message(t, scan_points(world, np.array([x, 2.0, 0.0]), rng))
 
     msgs = [
         scan(1.0, 2.0),
@@ -147,6 +190,8 @@ def test_a_log_without_odometry_runs_on_its_scans(scans_only, tmp_path):
     s = json.loads((tmp_path / "o" / "summary.json").read_text())
     assert s["accuracy"]["ate"]["rmse"] < 0.10
     assert s["input"]["odom_source"] == "the scans (input.odometry=scans)" and s["input"]["odom_topic"] == ""
+    assert list(s)[-1] == "scan_odometry"  # appended after every other key
+    assert s["accuracy"]["odom_ate"]["rmse"] < 0.05  # the scan odometry itself
     odo = s["scan_odometry"]
     assert odo["scans"] == s["counts"]["scans_in"] and odo["coasted"] == 0
     assert s["counts"].get("scans_matched") is None  # no second matching of the same scans

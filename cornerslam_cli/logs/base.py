@@ -261,6 +261,7 @@ class LogReader(Protocol):
     stamps_name: str  # what the messages' times are read from, as refusals name it ("header stamps", …)
     scans_alone: bool  # a run reads the scans only (input.odometry: scans): check() asks no odometry
 
+    def check(self, odometry: bool | None = None) -> None: ...  # LogError; odometry None: as scans_alone says
     def info(self, inspect: bool = True) -> LogInfo: ...  # inspect: as `cornerslam info` shows (reads more)
     def laser_to_base(self) -> Pose2 | None: ...
     def laser_upside_down(self) -> bool | None: ...  # None: the log's mount cannot say (the config's)

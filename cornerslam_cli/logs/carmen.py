@@ -618,7 +618,7 @@ class CarmenReader:
             self.stats.warn(
                 "%s: the odometry pose fields of its %s lines never move: the run takes the robot as "
                 "standing still and moves it only as far as its scan matches correct that (give a log with "
-                "odometry)",
+                "odometry, or run on the scans alone: --set input.odometry=scans)",
                 self.path.name, odom,
             )  # fmt: skip
 
@@ -662,15 +662,18 @@ class CarmenReader:
         return self._iter()
 
     def scans(self) -> Iterator[Scan]:
-        """The scans alone (``extract``): CARMEN laser lines carry their own odometry."""
-        return (m for m in self.messages() if isinstance(m, Scan))
+        """The scans alone (``extract``, a run on the scans alone): the odometry is neither read nor
+        warned of."""
+        self.check()
+        return self._iter(odometry=False)  # type: ignore[return-value]
 
-    def _iter(self) -> Iterator[Scan | OdomSample]:
+    def _iter(self, odometry: bool = True) -> Iterator[Scan | OdomSample]:
         st = self.stats
-        scan_tag, odom_tag = self.scan_topic, self.odom_topic
+        scan_tag, odom_tag = self.scan_topic, self.odom_topic if odometry else None
         max_range = self._max_range(scan_tag)
         where = self.path.name
-        self._warn_odometry()
+        if odometry:
+            self._warn_odometry()
         if self._logger_stamps and not self.receive:  # (asked for: nothing to say)
             st.warn("%s: %s", where, self._stamps_note())
         unread, first_unread = 0, ""  # laser lines that could not be read; the first's number and why

@@ -1,18 +1,21 @@
 """Odometry from the scans alone (``input.odometry: scans``): for a log without wheel odometry.
 
 Each scan is registered (point-to-line ICP, :func:`icp.register`) on a local map of the last ``window``
-scans that moved the robot far enough, from a constant-velocity guess: the robot is taken to keep the
-velocity of its last increment, KISS-ICP's motion model (Vizzo et al. 2023) in 2-D. Where the scans leave a
-direction free (a featureless corridor) ICP's weak prior keeps the guess along it: the robot coasts at the
-speed it had. A registration that fits under ``min_fit`` is tried again from the best pose of a correlative
-search (motion/correlative.py) over ``search_max_*`` around the guess — a sudden turn or stop the model did
-not foresee —; when none fits, the guess is taken (counted: :attr:`ScanOdometry.coasted`). The settings are
-the scan matcher's (``scan_match.*``).
+scans that moved the robot far enough, from a constant-velocity guess: the robot is taken to repeat its
+last increment, KISS-ICP's motion model (Vizzo et al. 2023) in 2-D — per scan, not per second: logs thinned
+by distance keep a scan a metre, not a time, apart. Where the scans leave a direction free (a featureless
+corridor) ICP's weak prior keeps the guess along it: the robot coasts as it moved. When the last increment
+is larger than ICP's basin (half its length, or half its turn plus TURN_PER_METRE of it, beyond
+``search_min_*``: scans far apart), when ICP fits under ``min_fit``, and on the first START scans, a
+correlative search (motion/correlative.py) over ``search_max_*`` runs around the guess and around the robot
+standing still (a stop, a turn the other way), and ICP from its best pose replaces ICP from the guess
+when it fits better by FIT_MARGIN. When no registration fits, the guess is taken (counted:
+:attr:`ScanOdometry.coasted`). The settings are the scan matcher's (``scan_match.*``).
 
 The poses become the run's odometry, one sample at each scan's stamp (:func:`with_scan_odometry`):
-keyframes, deskewing and the front end's fusion use them as they would wheel odometry — the fusion learns
-how far to trust them as it learns a wheel odometer's noise (motion/fusion.py). Their frame starts at the
-first scan, at the origin.
+keyframes, deskewing and the filter's motion input (with its motion noise model, ``ekf.alpha*``: the front
+end does not match the scans a second time) take them as they would wheel odometry. Their frame starts at
+the first scan's base, at the origin.
 """
 
 from __future__ import annotations
@@ -81,7 +84,7 @@ class ScanOdometry:
         if self.local is None or len(points) < 3:
             self.coasted += 1
             return guess
-        reg = register(points, self.local, guess, cfg)
+        reg = first = register(points, self.local, guess, cfg)
         length = float(np.hypot(*self.increment[:2]))
         change = (CHANGE * length, CHANGE * abs(self.increment[2]) + TURN_PER_METRE * length)
         if (
@@ -93,11 +96,12 @@ class ScanOdometry:
             # the whole window, around the guess and around the robot standing still: a stop, or a turn
             # the other way (sparse logs: a scan a metre, tens of degrees of turn, apart)
             window = Window(cfg.search_max_xy, cfg.search_max_theta)
-            for centre in (guess, self.pose):
+            for centre in (guess, self.pose) if np.any(self.increment) else (guess,):
                 reg = self._searched(points, centre, window, guess, reg)
         if reg.fit < cfg.min_fit:
             self.coasted += 1
             return guess
+        self.searched += reg is not first
         return reg.pose
 
     def _searched(
@@ -108,10 +112,7 @@ class ScanOdometry:
         cfg = self.cfg
         found = search(points, self.local.points, centre, window, cfg.search_resolution, cfg.search_sigma)
         other = register(points, self.local, found.pose, cfg, prior=guess)
-        if other.fit <= reg.fit + FIT_MARGIN:
-            return reg
-        self.searched += 1
-        return other
+        return other if other.fit > reg.fit + FIT_MARGIN else reg
 
     def _grow_map(self, points: np.ndarray, pose: np.ndarray) -> None:
         """Add the scan to the local map when the robot moved ``map_update_*`` since the last that joined."""

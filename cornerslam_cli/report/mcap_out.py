@@ -220,8 +220,9 @@ def _items(
     # odom-frame poses as logged, for the map → odom transform
     stamps = np.array([float(t) for t in stamp_texts])
     odom_raw = as_logged(read_odom(out_dir), stamps, anchors)
-    if tf_odometry is not None:
-        odom_raw = on_logged_tf(odom_raw, stamps, *tf_odometry, warn)
+    if tf_odometry is not None:  # (on the scans alone the log's tf and the run's odometry always differ)
+        alone = run.summary.scan_odometry is not None
+        odom_raw = on_logged_tf(odom_raw, stamps, *tf_odometry, (lambda *_: None) if alone else warn)
     inp = run.summary.config.get("input", {})  # the run's config
     # the frame the odometry gave the poses in (a nav_msgs/Odometry's frame_id), else the config's
     odom_frame = run.summary.input.odom_frame or str(inp.get("odom_frame") or "odom")

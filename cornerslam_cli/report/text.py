@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..errors import display_path
+from ..logs import SCANS_SOURCE
 from ..ranges import short_text
 
 if TYPE_CHECKING:
@@ -75,7 +76,7 @@ def summary_lines(s: RunSummary) -> list[str]:
         mount_line(s.input),
         *preset_lines(s.config),
         *deskew_lines(s.input),
-        f"time: extract {t.t_extract:.2f}s {'scan odometry' if s.scan_odometry else 'scan match'} "
+        f"time: extract {t.t_extract:.2f}s {'scan odometry' if s.scan_odometry is not None else 'scan match'} "
         f"{t.t_scan_match or 0.0:.2f}s "
         f"predict {t.t_predict:.2f}s match {t.t_match:.2f}s "
         f"update {t.t_update:.2f}s ({t.scans_per_second:.0f} steps/s), wall {t.wall_time:.1f}s",
@@ -145,7 +146,7 @@ def topics_line(inp: RunInput) -> str:
     if inp.format == "carmen":
         return f"read: {short_text(inp.scan_topic, 200)} lines, odometry from {inp.odom_source or odom}"
     source = f" ({inp.odom_source})" if inp.odom_source else ""
-    if not inp.odom_topic and inp.odom_source:  # (input.odometry: scans)
+    if inp.odom_source == SCANS_SOURCE:  # (input.odometry: scans)
         return f"topics: scans {short_text(inp.scan_topic, 200)}, odometry from {inp.odom_source}"
     return f"topics: scans {short_text(inp.scan_topic, 200)}, odometry {odom}{source}"
 
@@ -341,7 +342,7 @@ def info_lines(
         lines.append(f"  {name:<{wide[0]}} {msgtype:<{wide[1]}} {count:>8} msgs {rate}{note}")
     lines.append("run would use:")
     lines.append(f"  scans     {short_text(i.scan_topic, 200) or '-'}")
-    if not i.odom_topic and i.odom_source:  # (input.odometry: scans)
+    if i.odom_source == SCANS_SOURCE:  # (input.odometry: scans)
         lines.append(f"  odometry  from {i.odom_source}")
     else:
         lines.append(
