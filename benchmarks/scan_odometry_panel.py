@@ -10,8 +10,8 @@ it. Nothing is tuned per log. Figures: the radish buildings' ATE against the cor
 relation error; the Mines rover's revisit misalignment (no reference: the map's agreement with itself);
 the simulated office loop (``sample_logs/sim_office.mcap``, its ground truth) with its odometry taken
 out. The radish buildings also run on their scans alone with the motion noise model four times tighter
-(``ekf.alpha1..4`` ÷ 4), the variant the mode's default was chosen against. Writes ``docs/results/scan_odometry_panel.md``. Deterministic: a re-run gives the same figures
-(timings aside).
+(``ekf.alpha1..4`` ÷ 4), the variant the mode's default was chosen against. Writes
+``docs/results/scan_odometry_panel.md``. Deterministic: a re-run gives the same figures (timings aside).
 """
 
 from __future__ import annotations

@@ -910,6 +910,7 @@ def config_command(log_path, config_path, overrides, preset, verbose, quiet):
       cornerslam config sample_logs/intel_cut.clf --set association.method=jcbb > my.yaml
     """
     from .config import ConfigError, dump_config, override_place, replaced_place, yaml_quoted
+    from .logs import read_alone
 
     setup_logging(verbose, quiet)
     check_option_agrees(overrides, {"input.laser_preset": preset})  # (it silently won)
@@ -926,6 +927,7 @@ def config_command(log_path, config_path, overrides, preset, verbose, quiet):
         if by_option is None or not e.msg.startswith(override_place(by_option)):
             raise
         raise replaced_place(e, by_option) from None
+    read_alone(cfg.input)  # (--odom-topic beside input.odometry=scans: refused, as run refuses it)
     if log_path is None and cfg.input.laser_preset == "auto":  # each log's preset left to it, but for
         from .config import set_keys  # what --set and the --config file set (a file's: warned when run)
         from .lasers import PRESET_NOTE, dump_for_any_laser, file_keys

@@ -226,7 +226,13 @@ def run_filter(
             "submaps.enabled=false runs the single map"
         )
     if cfg.graph.recalibrate and (graph is None or src.matcher is None):
-        why = "submaps.enabled=false runs the single map" if graph is None else "scan_match.enabled=false"
+        why = (
+            "submaps.enabled=false runs the single map"
+            if graph is None
+            else "input.odometry=scans fuses no scan matches with it"
+            if src.scan_odometry is not None
+            else "scan_match.enabled=false"
+        )
         src.reader.stats.warn(
             f"graph.recalibrate=true is ignored: it carries the odometry bias the scan matcher learnt back "
             f"into the keyframe graph's steps, and {why}"

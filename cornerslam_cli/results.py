@@ -197,13 +197,13 @@ class Counts(JsonResult):
 
 @dataclass(frozen=True, kw_only=True)
 class ScanOdometryStats(JsonResult):
-    """The odometry a run on the scans alone made (``input.odometry: scans``, motion/scan_odometry.py): the
-    scans given a pose, those registered from a correlative search's pose, those no registration fitted
-    (placed at the constant-velocity guess), and the seconds it took (in timing.csv's t_scan_match)."""
+    """The odometry a run on the scans alone made (``input.odometry: scans``, motion/scan_odometry.py): its
+    scans, searched, coasted (no registration fitted: the guess taken), after a gap, and its seconds."""
 
     scans: int
     searched: int
     coasted: int
+    gaps: int  # scans after a gap of GAP times the scans' usual spacing (motion/scan_odometry.py), warned
     seconds: float
 
 

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from mcap.reader import make_reader
 
 from cornerslam_cli.cli import cli
 from cornerslam_cli.config import load_config
@@ -127,6 +128,19 @@ def scan_message(stamp: float, points: np.ndarray) -> Scan:
     return Scan(stamp, r[order], a[order], np.arange(n), n, 0.1, 30.0, math.radians(1.0))
 
 
+def test_a_gap_in_the_scans_is_counted():
+    """Ten scans dropped from a run at 10 Hz: the scan after them is counted as after a gap, with its
+    stamp and how long the gap was; the scans before it are not."""
+    world, rng = office_world(), np.random.default_rng(6)
+    truth = smooth_headings(path_poses(OFFICE_LOOP, 0.05), 15)[:60]
+    odo = ScanOdometry(load_config().scan_match)
+    for k, p in enumerate(truth):
+        if not 40 <= k < 50:
+            odo.step(scan_points(world, p, rng), 0.1 * k)
+    assert odo.gaps == [(pytest.approx(5.0), pytest.approx(1.1))]
+    assert odo.stats().gaps == 1
+
+
 def test_a_scan_with_no_points_coasts_on_the_last_increment():
     """No registration without points: the pose is the last one moved by the last increment, counted."""
     world, rng = office_world(), np.random.default_rng(1)
@@ -222,3 +236,60 @@ def test_a_carmen_log_runs_on_its_scans(tmp_path):
     assert s["scan_odometry"]["scans"] == s["counts"]["scans_in"]
     odom = np.loadtxt(tmp_path / "o" / "odometry.tum")
     np.testing.assert_allclose(odom[0, 1:4], 0.0, atol=1e-12)  # the scans' own frame, not the log's
+
+
+def test_a_log_with_tf_odometry_on_the_scans_alone_keeps_its_tf_tree(sim_log, tmp_path):
+    """A log whose odometry is on /tf, run on its scans alone with a results MCAP: summary.json says the
+    log's tf carries odom → base_link, the results MCAP publishes no second one beside it (map → odom is
+    built on the log's tf, as with wheel odometry), and does not warn that the two odometries differ
+    (they always do here)."""
+    import math
+
+    from _log_fixtures import write_messages_mcap
+
+    from cornerslam_cli.logs.writers import RosSerializer
+
+    ros = RosSerializer("cdr")
+    msgs = []
+    with open(sim_log, "rb") as f:
+        for schema, channel, m in make_reader(f).iter_messages():
+            if channel.topic != "/odom":
+                msgs.append((channel.topic, schema.name, m.log_time, m.data))
+                continue
+            o = ros.store.deserialize_cdr(m.data, "nav_msgs/msg/Odometry")
+            p, q = o.pose.pose.position, o.pose.pose.orientation
+            tf = ros.tf(m.log_time * 1e-9, "odom", "base_link", p.x, p.y, 2 * math.atan2(q.z, q.w))
+            msgs.append(("/tf", "tf2_msgs/msg/TFMessage", m.log_time, tf))
+    log = write_messages_mcap(tmp_path / "tf.mcap", sorted(msgs, key=lambda x: x[2]))
+    out, results = tmp_path / "o", tmp_path / "r.mcap"
+    res = invoke("run", log, "--out", out, "--mcap-out", results, "-q", "--set", "input.odometry=scans")
+    assert res.exit_code == 0, res.output
+    s = json.loads((out / "summary.json").read_text())
+    assert s["input"]["odom_on_tf"] is True
+    assert not any("differs from the odometry the run used" in w for w in s["warnings"])
+    with open(results, "rb") as f:
+        topics = {c.topic for c in make_reader(f).get_summary().channels.values()}
+    assert "/cornerslam/tf" in topics and "/cornerslam/odom_tf" not in topics
+
+
+def test_a_carmen_log_whose_pose_fields_never_move_is_not_warned_of_on_the_scans_alone(tmp_path):
+    """The log a run on the scans alone is for: laser lines with still pose fields and no ODOM lines.
+    With its odometry it is warned of (and told of the mode); on the scans alone, not."""
+    lines = []
+    for line in open("sample_logs/intel_cut.clf"):
+        tok = line.split()
+        if not tok or tok[0] == "ODOM":
+            continue
+        if tok[0] == "FLASER":
+            n = int(tok[1])
+            tok[2 + n : 2 + n + 6] = ["0"] * 6  # its laser and robot poses: still
+        lines.append(" ".join(tok))
+    log = tmp_path / "still.clf"
+    log.write_text("\n".join(lines) + "\n")
+    still = "odometry pose fields of its FLASER lines never move"
+    res = invoke("run", log, "--out", tmp_path / "a", "-q")
+    warnings = json.loads((tmp_path / "a" / "summary.json").read_text())["warnings"]
+    assert res.exit_code == 0 and any(still in w and "--set input.odometry=scans" in w for w in warnings)
+    res = invoke("run", log, "--out", tmp_path / "b", "-q", "--set", "input.odometry=scans")
+    warnings = json.loads((tmp_path / "b" / "summary.json").read_text())["warnings"]
+    assert res.exit_code == 0 and not any(still in w for w in warnings), warnings

@@ -259,7 +259,7 @@ def read_alone(inp: InputConfig) -> bool:
         raise ConfigError(
             f"input.odom_topic '{short_text(inp.odom_topic)}' is given, but input.odometry=scans reads no "
             "odometry",
-            "leave out one of --odom-topic and --set input.odometry=scans",
+            "give one of input.odom_topic (--odom-topic) and input.odometry=scans, not both",
         )
     return True
 

@@ -597,7 +597,13 @@ class RosLogReader:
             odom_source=self._odom_source_label(),
             problems=problems,
             notes=tuple(
-                n for n in (self._scan_note, self._odom_sel.note, self._clock_note() if inspect else "") if n
+                n
+                for n in (
+                    self._scan_note,
+                    "" if self.scans_alone else self._odom_sel.note,  # (the odometry is not read)
+                    self._clock_note() if inspect else "",
+                )
+                if n
             ),
         )
 
@@ -640,7 +646,12 @@ class RosLogReader:
         """info's note when the Odometry topic's header stamps (its first ``n``) lie more than CLOCKS_APART
         from the scans' (``scan_stamps``): two clocks, on which a run meets no scan (it said nothing, and
         run refused the log; a probe)."""
-        if self._odom_sel.kind != "odometry" or not scan_stamps or self._encoding_problem(self.odom_topic):
+        if (
+            self._odom_sel.kind != "odometry"
+            or self.scans_alone  # (the odometry is not read)
+            or not scan_stamps
+            or self._encoding_problem(self.odom_topic)
+        ):
             return ""  # (an encoding no decoder reads: info's problem, run's error)
         dec = self._decoder(self.odom_topic)
         odometry, _ = self._first_stamps(self.odom_topic, lambda data: dec.odometry(data)[0], n, 4 * n)

@@ -6,7 +6,8 @@ last increment, KISS-ICP's motion model (Vizzo et al. 2023) in 2-D — per scan,
 by distance keep a scan a metre, not a time, apart. Where the scans leave a direction free (a featureless
 corridor) ICP's weak prior keeps the guess along it: the robot coasts as it moved. When the last increment
 is larger than ICP's basin (half its length, or half its turn plus TURN_PER_METRE of it, beyond
-``search_min_*``: scans far apart), when ICP fits under ``min_fit``, and on the first START scans, a
+``search_min_*``: scans far apart), when ICP fits under ``min_fit``, after a gap in time (GAP times the
+scans' usual spacing: counted, the run warns) and on the first START scans, a
 correlative search (motion/correlative.py) over ``search_max_*`` runs around the guess and around the robot
 standing still (a stop, a turn the other way), and ICP from its best pose replaces ICP from the guess
 when it fits better by FIT_MARGIN. When no registration fits, the guess is taken (counted:
@@ -41,6 +42,10 @@ CHANGE = 0.5
 TURN_PER_METRE = 0.25
 START = 3  # scans before the increment is known: each searched
 FIT_MARGIN = 0.02  # a search's registration replaces the guess's when it fits better by more than this
+# a scan this many times later than the median spacing of the last GAP_WINDOW (scans dropped, a recording
+# paused): the last increment says little of the motion across it — searched as if lost, and counted
+GAP = 5.0
+GAP_WINDOW = 20
 
 
 class ScanOdometry:
@@ -57,6 +62,8 @@ class ScanOdometry:
         self.scans = 0  # scans given a pose
         self.coasted = 0  # of them, placed at the guess: no registration fitted
         self.searched = 0  # of them, registered from a correlative search's pose
+        self.gaps: list[tuple[float, float]] = []  # (stamp, seconds) of the scans after a gap (GAP)
+        self.spacing: deque[float] = deque(maxlen=GAP_WINDOW)  # the last scans' time apart
         self.seconds = 0.0  # spent in :meth:`step`
 
     def step(self, points: np.ndarray, stamp: float) -> np.ndarray | None:
@@ -70,7 +77,12 @@ class ScanOdometry:
         elif not stamp > self.stamp:
             return None
         else:
-            pose = self._register(points, compose(self.pose, self.increment))
+            dt = stamp - self.stamp
+            gap = len(self.spacing) == self.spacing.maxlen and dt > GAP * float(np.median(self.spacing))
+            if gap:
+                self.gaps.append((stamp, dt))
+            self.spacing.append(dt)
+            pose = self._register(points, compose(self.pose, self.increment), gap)
             self.increment = relative(self.pose, pose)
         self.pose, self.stamp = pose, stamp
         self.scans += 1
@@ -78,7 +90,7 @@ class ScanOdometry:
         self.seconds += time.perf_counter() - t0
         return pose.copy()
 
-    def _register(self, points: np.ndarray, guess: np.ndarray) -> np.ndarray:
+    def _register(self, points: np.ndarray, guess: np.ndarray, gap: bool = False) -> np.ndarray:
         cfg = self.cfg
         points = points[voxel_thin(points, cfg.scan_voxel)]
         if self.local is None or len(points) < 3:
@@ -89,6 +101,7 @@ class ScanOdometry:
         change = (CHANGE * length, CHANGE * abs(self.increment[2]) + TURN_PER_METRE * length)
         if (
             reg.fit < cfg.min_fit
+            or gap
             or self.scans < START
             or change[0] > cfg.search_min_xy
             or change[1] > cfg.search_min_theta
@@ -110,7 +123,10 @@ class ScanOdometry:
         """``reg``, or the registration from the best pose of a correlative search of ``window`` around
         ``centre`` if it fits better by FIT_MARGIN."""
         cfg = self.cfg
-        found = search(points, self.local.points, centre, window, cfg.search_resolution, cfg.search_sigma)
+        near = points[np.einsum("ij,ij->i", points, points) <= cfg.search_range**2]  # (as ScanMatcher's)
+        if len(near) < 3:
+            return reg
+        found = search(near, self.local.points, centre, window, cfg.search_resolution, cfg.search_sigma)
         other = register(points, self.local, found.pose, cfg, prior=guess)
         return other if other.fit > reg.fit + FIT_MARGIN else reg
 
@@ -129,7 +145,11 @@ class ScanOdometry:
     def stats(self) -> ScanOdometryStats:
         """summary.json's ``scan_odometry``."""
         return ScanOdometryStats(
-            scans=self.scans, searched=self.searched, coasted=self.coasted, seconds=round(self.seconds, 6)
+            scans=self.scans,
+            searched=self.searched,
+            coasted=self.coasted,
+            gaps=len(self.gaps),
+            seconds=round(self.seconds, 6),
         )
 
 

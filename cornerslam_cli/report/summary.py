@@ -88,11 +88,11 @@ def build_summary(
     """The summary of a run (summary.json, INTERFACE.md): input, counts, timing totals (``t_grid``:
     the occupancy grid's), accuracy, hashes, versions, map ``consistency``; with the two-level SLAM
     ``graph`` its submaps and loop closures counted and its loop-closing time."""
-    info = src.info
+    info, odo = src.info, src.scan_odometry
     model = odometry_model(src.matcher)
     warn_odometry_model(src, model)
     warn_blind(src, totals)
-    warn_coasted(src)
+    warn_scan_odometry(src)
     return RunSummary(
         cornerslam_version=__version__,
         mode="slam",
@@ -115,7 +115,7 @@ def build_summary(
         ),
         assoc=cfg.association.method,
         counts=run_counts(src, totals, n_landmarks, graph),
-        timing=run_timing(totals, wall0, t_grid, graph, src.filters_at_once),
+        timing=run_timing(totals, wall0, t_grid, graph, src.filters_at_once, odo and odo.seconds),
         final_pose=tuple(final_pose.tolist()),
         odometry_model=model,
         consistency=consistency,
@@ -188,17 +188,27 @@ def warn_blind(src: Input, totals: Totals) -> None:
     ROS-user probe: 20 blind scans in a row, no word)."""
     n, first, last = totals.blind_longest
     if n >= BLIND_STEPS and n < totals.steps:  # (every step blind: the run refuses the log)
+        went = "its odometry alone" if src.scan_odometry is None else "its last motion (input.odometry=scans)"
         src.reader.stats.warn(
-            "log '%s': %d steps in a row had no valid beam (%.3f to %.3f s, %.1f s): the robot went on its "
-            "odometry alone there (a laser covered or blinded? a driver writing NaN or inf?)",
-            src.path.name, n, first, last, last - first,
+            "log '%s': %d steps in a row had no valid beam (%.3f to %.3f s, %.1f s): the robot went on %s "
+            "there (a laser covered or blinded? a driver writing NaN or inf?)",
+            src.path.name, n, first, last, last - first, went,
         )  # fmt: skip
 
 
-def warn_coasted(src: Input) -> None:
-    """Warn when the odometry made from the scans (input.odometry: scans) placed more than COASTED_SHARE of
+def warn_scan_odometry(src: Input) -> None:
+    """Warn when the odometry made from the scans (input.odometry: scans) met gaps in time (its guess, the
+    last increment, says little of the motion across one), and when it placed more than COASTED_SHARE of
     them at its constant-velocity guess, no registration fitting: there the trajectory is a guess."""
     odo = src.scan_odometry
+    if odo is not None and odo.gaps:
+        stamp, dt = max(odo.gaps, key=lambda g: g[1])
+        src.reader.stats.warn(
+            "log '%s': the scans stop for up to %.1f s (%d times, the longest before the scan at %.3f s): on "
+            "the scans alone the motion across a gap is found only within scan_match.search_max_xy/_theta "
+            "of the motion before it (input.odometry=scans: a log with wheel odometry is surer there)",
+            src.path.name, dt, len(odo.gaps), stamp,
+        )  # fmt: skip
     if odo is None or odo.coasted <= COASTED_SHARE * odo.scans:
         return
     src.reader.stats.warn(
@@ -257,12 +267,17 @@ def run_timing(
     t_grid: float | None = None,
     graph: HierarchicalSlam | None = None,
     at_once: int = 1,
+    scan_odometry: float | None = None,
 ) -> Timing:
     """The stage times summed over the steps, the slowest matching step, the wall time since ``wall0``
     and the occupancy grid's time ``t_grid``; with the two-level SLAM ``graph``, the loop closing and
     graph optimisation (over the steps and at the end, closing the last submap); ``at_once``: the filters
-    that ran at the same time (compare --jobs), recorded when more than one."""
-    times = totals.times
+    that ran at the same time (compare --jobs), recorded when more than one; ``scan_odometry``: the whole
+    time of the odometry made from the scans (input.odometry=scans), which the steps were charged only up
+    to the last of them (its scans after it too)."""
+    times = totals.times.copy()
+    if scan_odometry is not None:
+        times[4] = scan_odometry
     t_loop = None if graph is None else float(times[5] + graph.t_loop)
     return Timing(
         t_extract=float(times[0]),

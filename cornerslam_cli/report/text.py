@@ -66,7 +66,8 @@ def span_lines(i: RunInput) -> list[str]:
 def summary_lines(s: RunSummary) -> list[str]:
     """``cornerslam run``: counts, stage times, accuracy when there is a reference, the output."""
     c, t = s.counts, s.timing
-    odometry = "scan odometry" if s.scan_odometry is not None else "odometry"  # (input.odometry: scans)
+    alone = s.scan_odometry is not None  # (input.odometry: scans)
+    odometry = "scan odometry" if alone else "odometry"
     lines = [
         f"{s.input.log}: {c.steps} steps ({c.scans_in} scans, {c.scans_skipped} skipped, "
         f"{c.keyframes_skipped} between keyframes{unusable_scans(c)}), {c.landmarks} landmarks, "
@@ -76,7 +77,7 @@ def summary_lines(s: RunSummary) -> list[str]:
         mount_line(s.input),
         *preset_lines(s.config),
         *deskew_lines(s.input),
-        f"time: extract {t.t_extract:.2f}s {'scan odometry' if s.scan_odometry is not None else 'scan match'} "
+        f"time: extract {t.t_extract:.2f}s {'scan odometry' if alone else 'scan match'} "
         f"{t.t_scan_match or 0.0:.2f}s "
         f"predict {t.t_predict:.2f}s match {t.t_match:.2f}s "
         f"update {t.t_update:.2f}s ({t.scans_per_second:.0f} steps/s), wall {t.wall_time:.1f}s",
