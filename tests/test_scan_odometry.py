@@ -128,6 +128,20 @@ def scan_message(stamp: float, points: np.ndarray) -> Scan:
     return Scan(stamp, r[order], a[order], np.arange(n), n, 0.1, 30.0, math.radians(1.0))
 
 
+def test_a_beam_20_km_away_does_not_blow_up_the_search():
+    """The correlative search's grid spans the points it places: one beam at 20 km (a driver's range_max
+    of 1e5) asked for 42 GiB. It takes the points within scan_match.search_range, as the front end's
+    matcher does; the first scans, always searched, register as before."""
+    world, rng = office_world(), np.random.default_rng(7)
+    odo = ScanOdometry(load_config().scan_match)
+    truth = np.array([[2.0 + 0.3 * k, 2.0, 0.0] for k in range(4)])
+    poses = np.array(
+        [odo.step(np.vstack((scan_points(world, p, rng), [[2e4, 0.0]])), k) for k, p in enumerate(truth)]
+    )
+    d, a = step_errors(poses, truth)
+    assert d.max() < 0.02 and a.max() < math.radians(0.3)
+
+
 def test_a_gap_in_the_scans_is_counted():
     """Ten scans dropped from a run at 10 Hz: the scan after them is counted as after a gap, with its
     stamp and how long the gap was; the scans before it are not."""
