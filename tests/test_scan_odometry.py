@@ -213,8 +213,11 @@ def test_a_log_without_odometry_runs_on_its_scans(scans_only, tmp_path):
     """The simulated office loop without its odometry: within 10 cm of the truth (its wheel odometry
     alone is off by metres), the scan odometry's counts and time in summary.json and timing.csv, and
     the printed lines say where the odometry came from."""
-    res = invoke("run", scans_only, "--out", tmp_path / "o", "--set", "input.odometry=scans")
+    res = invoke("run", scans_only, "--out", tmp_path / "o", "--set", "input.odometry=scans", "--plot")
     assert res.exit_code == 0, res.output
+    html = (tmp_path / "o" / "report.html").read_text()
+    assert "scan odometry time [s]" in html and "scans: searched, coasted, after a gap" in html
+    assert '<td class="name">scan odometry</td>' in html and "scan matching time" not in html
     s = json.loads((tmp_path / "o" / "summary.json").read_text())
     assert s["accuracy"]["ate"]["rmse"] < 0.10
     assert s["input"]["odom_source"] == "the scans (input.odometry=scans)" and s["input"]["odom_topic"] == ""

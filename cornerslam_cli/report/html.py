@@ -18,7 +18,15 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from ..results import Ate, MapConsistency, RelationError, RunSummary, to_json
-from .plots import COMPARE_FIGURES, RUN_FIGURES, compare_assocs, corrected_label, plot_compare, plot_run
+from .plots import (
+    COMPARE_FIGURES,
+    RUN_FIGURES,
+    compare_assocs,
+    corrected_label,
+    odometry_label,
+    plot_compare,
+    plot_run,
+)
 from .tables import COMPARISON_COLUMNS, COMPARISON_LOOP_COLUMNS, best_cells, read_csv
 from .text import span_text
 
@@ -135,21 +143,27 @@ def _summary_section(summary: RunSummary, run_dir: Path) -> list[str]:
         *[("span", text) for text in [span_text(inp)] if text],
         ("format", inp.format),
         ("scan topic", inp.scan_topic),
-        ("odometry", f"{inp.odom_topic} ({inp.odom_source})"),
+        ("odometry", f"{inp.odom_topic} ({inp.odom_source})" if inp.odom_topic else inp.odom_source),
         ("associator", summary.assoc),
         ("steps", counts.steps),
         ("landmarks", counts.landmarks),
         ("matched corners", counts.matched_total),
     ]
+    alone = summary.scan_odometry  # (input.odometry: scans)
     for key, label in TIME_LABELS.items():
         if getattr(timing, key) is not None:  # no scan matching time in a summary from before it
+            label = "scan odometry time" if key == "t_scan_match" and alone is not None else label
             pairs.append((f"{label} [s]", float(getattr(timing, key))))
+    if alone is not None:
+        pairs.append(
+            ("scans: searched, coasted, after a gap", f"{alone.searched}, {alone.coasted}, {alone.gaps}")
+        )
     pairs.append(("max matching time per step [ms]", 1e3 * timing.t_match_max))
     pairs.append(("scans per second", timing.scans_per_second))
     pairs.append(("final pose x, y [m], θ [rad]", ", ".join(f"{v:.3f}" for v in summary.final_pose)))
     out = ["<h2>Summary</h2>", _kv_table(pairs)]
     out += _accuracy_section(summary)
-    out += _consistency_section(summary.consistency, corrected_label(summary))
+    out += _consistency_section(summary.consistency, corrected_label(summary), odometry_label(summary))
     out += _loops_section(run_dir, summary)
     out.append("<h3>Warnings</h3>")
     if summary.warnings:
@@ -169,7 +183,7 @@ def _accuracy_section(summary: RunSummary) -> list[str]:
     out = ["<h3>Accuracy</h3>"]
     if acc.ate is not None or acc.odom_ate is not None:
         more = (("scan-matched odometry", acc.scan_odom_ate), ("online (causal)", acc.online_ate))
-        named = [(corrected_label(summary), acc.ate), ("odometry", acc.odom_ate)]
+        named = [(corrected_label(summary), acc.ate), (odometry_label(summary), acc.odom_ate)]
         named += [(n, a) for n, a in more if a]
         rows = [[name, *_ate_cells(a)] for name, a in named]
         out += [
@@ -181,7 +195,7 @@ def _accuracy_section(summary: RunSummary) -> list[str]:
     if extra:
         out.append(_kv_table(extra))
     if acc.relations is not None:
-        named = ((corrected_label(summary), acc.relations), ("odometry", acc.odom_relations))
+        named = ((corrected_label(summary), acc.relations), (odometry_label(summary), acc.odom_relations))
         named += (("scan-matched odometry", acc.scan_odom_relations),) if acc.scan_odom_relations else ()
         source = esc(acc.relations_file or "")
         out += [
@@ -204,13 +218,14 @@ def _relation_cells(e: RelationError | None) -> list:
     return [math.nan if v is None else v for v in values] + [f"{e.n} of {e.n_total}"]
 
 
-def _consistency_section(c: MapConsistency | None, name: str) -> list[str]:
-    """The map-consistency figures (no ground truth needed): the estimate (called ``name``) vs odometry."""
+def _consistency_section(c: MapConsistency | None, name: str, odometry: str = "odometry") -> list[str]:
+    """The map-consistency figures (no ground truth needed): the estimate (called ``name``) vs the
+    odometry (called ``odometry``)."""
     if c is None:
         return []
     rows = [
         [name, c.occupied_cells, c.cells_vs_odom, 100 * c.revisit_mean, 100 * c.revisit_share],
-        ["odometry", c.odom_occupied_cells, 1.0, 100 * c.odom_revisit_mean, 100 * c.odom_revisit_share],
+        [odometry, c.odom_occupied_cells, 1.0, 100 * c.odom_revisit_mean, 100 * c.odom_revisit_share],
     ]
     return [
         "<h3>Map consistency</h3>",

@@ -195,7 +195,8 @@ def _draw_map(ax, run: RunData, segments_alpha: float = 0.18, legend: bool = Tru
         ax.plot(g[:, 0], g[:, 1], color=COLORS["ground_truth"], lw=1.1, ls=":", zorder=4,
                 label="ground truth (aligned)")  # fmt: skip
     o, c = run.odometry, run.corrected
-    (odometry,) = ax.plot(o[:, 0], o[:, 1], color=COLORS["odometry"], lw=0.9, ls="--", label="odometry")
+    name = odometry_label(run.summary)
+    (odometry,) = ax.plot(o[:, 0], o[:, 1], color=COLORS["odometry"], lw=0.9, ls="--", label=name)
     if run.scan_odometry is not None:
         m = run.scan_odometry
         ax.plot(
@@ -212,9 +213,14 @@ def _draw_map(ax, run: RunData, segments_alpha: float = 0.18, legend: bool = Tru
         ax.apply_aspect()  # the limits as drawn: the equal aspect widens the ones framed on the map
         (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
         if not np.all((o[:, 0] >= x0) & (o[:, 0] <= x1) & (o[:, 1] >= y0) & (o[:, 1] <= y1)):
-            odometry.set_label("odometry (runs off the plot)")  # (framed on the map, not on the drift)
+            odometry.set_label(f"{name} (runs off the plot)")  # (framed on the map, not on the drift)
     if legend:
         ax.legend(loc="best", fontsize=8, framealpha=0.85)
+
+
+def odometry_label(summary: RunSummary) -> str:
+    """What the run's odometry is called: the scans' own on the scans alone (input.odometry: scans)."""
+    return "odometry" if summary.scan_odometry is None else "scan odometry"
 
 
 def corrected_label(summary: RunSummary) -> str:
