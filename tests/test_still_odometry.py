@@ -102,8 +102,8 @@ def test_a_long_run_of_blind_steps_is_warned_of():
         return t
 
     said = []
-    src = SimpleNamespace(path=Path("b.mcap"), reader=SimpleNamespace(stats=SimpleNamespace(
-        warn=lambda fmt, *a: said.append(fmt % a))))  # fmt: skip
+    stats = SimpleNamespace(warn=lambda fmt, *a: said.append(fmt % a))
+    src = SimpleNamespace(path=Path("b.mcap"), scan_odometry=None, reader=SimpleNamespace(stats=stats))
     blind = [100] * 5 + [0] * 3 + [100] * 4 + [0] * BLIND_STEPS + [100] * 6  # two runs: 3 and BLIND_STEPS
     warn_blind(src, totals(blind))
     assert said == [
@@ -114,3 +114,6 @@ def test_a_long_run_of_blind_steps_is_warned_of():
     warn_blind(src, totals([100] * 5 + [0] * (BLIND_STEPS - 1) + [100]))
     warn_blind(src, totals([0] * 30))
     assert not said
+    src.scan_odometry = object()  # on the scans alone (input.odometry=scans) there is no odometry to go on
+    warn_blind(src, totals(blind))
+    assert said and "the robot went on its last motion (input.odometry=scans) there" in said[0]
