@@ -153,6 +153,12 @@ def test_a_gap_in_the_scans_is_counted():
             odo.step(scan_points(world, p, rng), 0.1 * k)
     assert odo.gaps == [(pytest.approx(5.0), pytest.approx(1.1))]
     assert odo.stats().gaps == 1
+    # scans thinned by distance (a radish log's): seconds apart when the robot went slowly — no gap
+    odo, t = ScanOdometry(load_config().scan_match), 0.0
+    for k, p in enumerate(truth):
+        t += 0.5 if k % 7 else 6.0
+        odo.step(scan_points(world, p, rng), t)
+    assert odo.gaps == []
 
 
 def test_a_scan_with_no_points_coasts_on_the_last_increment():
@@ -310,3 +316,39 @@ def test_a_carmen_log_whose_pose_fields_never_move_is_not_warned_of_on_the_scans
     res = invoke("run", log, "--out", tmp_path / "b", "-q", "--set", "input.odometry=scans")
     warnings = json.loads((tmp_path / "b" / "summary.json").read_text())["warnings"]
     assert res.exit_code == 0 and not any(still in w for w in warnings), warnings
+    assert still in invoke("info", log).stderr  # info reads its first scan as a run reads the log (a review)
+    assert still not in invoke("info", log, "--set", "input.odometry=scans").stderr
+
+
+def test_on_the_scans_alone_a_carmen_logs_odom_lines_need_no_logger_timestamps(tmp_path):
+    """input.stamps=receive reads the logger timestamps of the lines a run reads: on the scans alone the
+    ODOM lines are not read, and their missing logger timestamps do not refuse the log (a review)."""
+    lines = []
+    for line in open("sample_logs/intel_cut.clf"):
+        tok = line.split()
+        lines.append(" ".join(tok[:-2] if tok and tok[0] == "ODOM" else tok))  # (no hostname, logger stamp)
+    log = tmp_path / "odom_short.clf"
+    log.write_text("\n".join(lines) + "\n")
+    receive = ["--set", "input.stamps=receive"]
+    res = invoke("run", log, "--out", tmp_path / "a", "-q", *receive)
+    assert res.exit_code == 2 and "ODOM lines do not all carry" in res.stderr
+    res = invoke("run", log, "--out", tmp_path / "b", "-q", *receive, "--set", "input.odometry=scans")
+    assert res.exit_code == 0, res.output
+
+
+def test_on_the_scans_alone_a_mirrored_run_is_scored_not_blamed_on_the_ground_truth(scans_only, tmp_path):
+    """A laser mounted upside down, unsaid, mirrors the scans' odometry: the ground truth is not called a
+    mirrored frame (the check made on the log's odometry) and the run is scored (a review)."""
+    flip = [
+        "--set",
+        "input.laser.from_tf=false",
+        "--set",
+        "input.laser.x=0.1",
+        "--set",
+        "input.laser.upside_down=true",
+    ]
+    res = invoke("run", scans_only, "--out", tmp_path / "o", "-q", "--set", "input.odometry=scans", *flip)
+    assert res.exit_code == 0, res.output
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert s["accuracy"]["ate"] is not None
+    assert not any("mirrored frame" in w for w in s["warnings"])

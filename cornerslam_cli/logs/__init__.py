@@ -222,8 +222,8 @@ def open_log(
         base_frame=base_frame,
         scan_frame=scan_frame,
         stamps=stamps,
+        scans_alone=scans_alone,
     )
-    reader.scans_alone = scans_alone
     if fmt != "carmen" and (bag := split_bag_of(p)) is not None:
         reader.stats.warn(
             "%s is one of the %d storage files of the ROS 2 bag '%s': only its messages are read (give the "

@@ -329,9 +329,16 @@ class CarmenReader:
     format = "carmen"
 
     def __init__(
-        self, path: Path, scan_topic: str = "", odom_topic: str = "", stamps: str = "header", **_frames
+        self,
+        path: Path,
+        scan_topic: str = "",
+        odom_topic: str = "",
+        stamps: str = "header",
+        scans_alone: bool = False,
+        **_frames,
     ):
         self.path = Path(path)
+        self.scans_alone = scans_alone  # a run reads the scans only (input.odometry: scans)
         self.receive = receive_of(stamps)  # input.stamps: the logger timestamps asked for
         self._has_logger: dict[str, bool] = {}  # per laser / ODOM tag: a logger timestamp on every whole line
         self.stats = ReadStats()
@@ -351,7 +358,11 @@ class CarmenReader:
         self._want_scan, self._want_odom = scan_topic, odom_topic
         self.scan_topic, self.odom_topic, self._problems = self._select()
         if self.receive and (
-            short := [t for t in (self.scan_topic, self.odom_topic) if t and not self._has_logger[t]]
+            short := [
+                t
+                for t in (self.scan_topic, "" if scans_alone else self.odom_topic)  # (the tags a run reads)
+                if t and not self._has_logger[t]
+            ]
         ):
             raise LogError(  # (the tags read: another tag's lines may lack them)
                 f"log '{self.path.name}': input.stamps=receive reads the lines' logger timestamps, which its "
@@ -492,8 +503,6 @@ class CarmenReader:
         if overlap and after > ODOM_UNCOVERED * len(times):
             return f"the whole ODOM lines end at {o1:.3f} s, before {after} of the {len(times)} {scan} lines"
         return ""
-
-    scans_alone = False  # (open_log sets it; the laser lines carry odometry: check() asks the same)
 
     def check(self, odometry: bool | None = None) -> None:
         """Raise LogError if a run could not read this log's scans and odometry. ``odometry`` False (the
@@ -662,8 +671,10 @@ class CarmenReader:
         return self._iter()
 
     def scans(self) -> Iterator[Scan]:
-        """The scans alone (``extract``, a run on the scans alone): the odometry is neither read nor
-        warned of."""
+        """The scans alone (``extract``, ``info``'s first scan: the odometry read and warned of as a run
+        would; on the scans alone, ``scans_alone``, it is neither read nor warned of)."""
+        if not self.scans_alone:
+            return (m for m in self.messages() if isinstance(m, Scan))
         self.check()
         return self._iter(odometry=False)  # type: ignore[return-value]
 

@@ -246,8 +246,6 @@ class RosLogReader:
     never by :meth:`info`, which reports them.
     """
 
-    scans_alone = False  # (open_log sets it: input.odometry scans)
-
     def __init__(
         self,
         source: RawSource,
@@ -259,7 +257,9 @@ class RosLogReader:
         stats: ReadStats | None = None,
         scan_frame: str = "",
         stamps: str = "header",
+        scans_alone: bool = False,
     ):
+        self.scans_alone = scans_alone  # a run reads the scans only (input.odometry: scans)
         self.source = source
         # input.stamps "receive": every message taken at its log time (the recorder's), not its header stamp
         self.receive = receive_of(stamps)

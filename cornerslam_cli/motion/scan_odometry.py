@@ -42,10 +42,13 @@ CHANGE = 0.5
 TURN_PER_METRE = 0.25
 START = 3  # scans before the increment is known: each searched
 FIT_MARGIN = 0.02  # a search's registration replaces the guess's when it fits better by more than this
-# a scan this many times later than the median spacing of the last GAP_WINDOW (scans dropped, a recording
-# paused): the last increment says little of the motion across it — searched as if lost, and counted
+# a scan this many times later than the median spacing of the last GAP_WINDOW, when none of those was more
+# than REGULAR times it (a laser's steady rate: scans dropped, a recording paused — not a log thinned by
+# distance, whose scans come seconds apart when the robot stood): the last increment says little of the
+# motion across it — searched as if lost, and counted
 GAP = 5.0
 GAP_WINDOW = 20
+REGULAR = 2.0
 
 
 class ScanOdometry:
@@ -78,7 +81,8 @@ class ScanOdometry:
             return None
         else:
             dt = stamp - self.stamp
-            gap = len(self.spacing) == self.spacing.maxlen and dt > GAP * float(np.median(self.spacing))
+            usual = float(np.median(self.spacing)) if len(self.spacing) == self.spacing.maxlen else np.inf
+            gap = dt > GAP * usual and max(self.spacing) <= REGULAR * usual
             if gap:
                 self.gaps.append((stamp, dt))
             self.spacing.append(dt)

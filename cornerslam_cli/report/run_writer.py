@@ -206,7 +206,14 @@ class RunWriter:
             write_tum(self.dest / "scan_matched.tum", stamps, motions)
         warn_still_odometry(src, odoms, motions)
         accuracy, notes = accuracy_of(
-            stamps, poses, odoms, ref, motions, None if graph is None else online, src.reader.receive
+            stamps,
+            poses,
+            odoms,
+            ref,
+            motions,
+            None if graph is None else online,
+            src.reader.receive,
+            alone=src.scan_odometry is not None,
         )
         for text in notes:
             src.reader.stats.warn(text)
@@ -337,6 +344,7 @@ def accuracy_of(
     scan_odoms: np.ndarray | None = None,
     online: np.ndarray | None = None,
     receive: bool = False,
+    alone: bool = False,
 ) -> tuple[Accuracy | None, list[str]]:
     """ATE/RPE against the ground truth and the relation metric, for the estimate and for odometry (and
     for the scan-matched odometry when there is one: what the corners add on top of it), and the
@@ -344,7 +352,9 @@ def accuracy_of(
     the run in time (then there is no ATE/RPE, rather than NaN), no relation inside the run. ``online``:
     the causal estimate when ``poses`` were smoothed (two-level SLAM), scored beside them; ``receive``:
     the run's stamps are the recorder's (``input.stamps=receive``), which a ground truth stamped on the
-    sensors' clock may not meet (said so)."""
+    sensors' clock may not meet (said so); ``alone``: the odometry is the scans' (input.odometry=scans),
+    which a laser mounted upside down unsaid mirrors, or a range unit scales — no sign of the ground truth's
+    frame, so the mirror and units checks, made on the log's odometry, are not made (the ATE shows it)."""
     acc: dict = {}  # Accuracy's fields
     notes = list(ref.notes)
     name = f"ground truth '{ref.gt_path}'"
@@ -353,8 +363,8 @@ def accuracy_of(
         overlap_problem(stamps, ref.gt[0], name, clocks=f"{clocks} the sensors'" if receive else "")
         # (on the log's odometry: what the log says, the same for every associator of a compare, and
         # not the estimate's failure — a stuck or drifting run is scored, not taken for a bad reference)
-        or mirror_problem(stamps, odoms, *ref.gt, name, "the log's odometry")
-        or units_problem(stamps, odoms, *ref.gt, name, "the log's odometry")
+        or (not alone and mirror_problem(stamps, odoms, *ref.gt, name, "the log's odometry"))
+        or (not alone and units_problem(stamps, odoms, *ref.gt, name, "the log's odometry"))
     )
     if problem:
         notes.append(f"{problem[0]}: no ATE/RPE")
