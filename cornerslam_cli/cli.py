@@ -482,7 +482,7 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
         preset = _info_preset(cfg, scan)
         lines = info_lines(log_path, replace(log_info, problems=()), None, scan, preset, mount_read=False)
         _echo(_with_stamps(lines, reader))
-        reader.check(odometry=not alone)  # the first problem as the error: exit 2, as run
+        reader.check()  # the first problem as the error: exit 2, as run (on the scans alone: theirs)
     scan, unread, laser, mount_text, upside_down, flip_source = None, None, None, "", False, ""
     try:  # (a topic declared with no message: run refuses it here, info lists the counts first)
         laser, source, upside_down, flip_source = laser_mount(reader, cfg)  # the tf's, else the config's

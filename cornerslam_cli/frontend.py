@@ -145,7 +145,7 @@ def open_input(
     first run compiles them: after the log's checks, so that a bad log's error comes alone)."""
     reader = open_configured(Path(log_path), cfg.input)
     scans_alone = read_alone(cfg.input)
-    reader.check(odometry=not scans_alone)
+    reader.check()  # (on the scans alone, open_configured's reader asks no odometry)
     info = reader.info(inspect=False)  # (a run needs its topics, not its rates)
     laser2base, source, upside_down, upside_down_source = laser_mount(reader, cfg)
     # on the scans alone their odometry is already scan-matched (motion/scan_odometry.py): matching each

@@ -189,6 +189,11 @@ def yaw_from_quaternion(x, y, z, w):
     return math.atan2(sy, cy) if np.ndim(sy) == 0 else np.arctan2(sy, cy)
 
 
+def within_range(points: np.ndarray, reach: float) -> np.ndarray:
+    """The ``points`` (k, 2) within ``reach`` of the origin."""
+    return points[np.einsum("ij,ij->i", points, points) <= reach**2]
+
+
 def apart(a: np.ndarray, b: np.ndarray, distance: float, angle: float) -> bool:
     """Whether poses ``a`` and ``b`` lie ``distance`` or more apart, or differ by ``angle`` or more in
     heading."""

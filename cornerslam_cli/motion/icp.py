@@ -39,6 +39,7 @@ from ..geometry import (
     relative,
     rotate_pose_covariance,
     transform_points,
+    within_range,
     wrap_angle,
 )
 from .correlative import Window, search
@@ -310,7 +311,7 @@ class ScanMatcher:
         reg, searched = register(points, self.local, guess, cfg), False
         window = self._window(cov_o)
         wide = window.xy > cfg.search_min_xy or window.theta > cfg.search_min_theta
-        near = points[np.einsum("ij,ij->i", points, points) <= cfg.search_range**2] if wide else points[:0]
+        near = within_range(points, cfg.search_range) if wide else points[:0]
         if len(near) >= 3:
             # the odometry may be outside ICP's basin: ICP also from the best pose of the whole window,
             # kept when it fits clearly better (near-equal fits: the one from the odometry, e.g. along

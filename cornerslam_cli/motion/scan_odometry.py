@@ -27,7 +27,7 @@ from collections.abc import Iterable, Iterator
 
 import numpy as np
 
-from ..geometry import apart, compose, relative, transform_points
+from ..geometry import apart, compose, relative, transform_points, within_range
 from ..results import ScanOdometryStats
 from ..types import OdomSample, Scan
 from .correlative import Window, search
@@ -113,8 +113,9 @@ class ScanOdometry:
             # the whole window, around the guess and around the robot standing still: a stop, or a turn
             # the other way (sparse logs: a scan a metre, tens of degrees of turn, apart)
             window = Window(cfg.search_max_xy, cfg.search_max_theta)
+            near = within_range(points, cfg.search_range)  # (as ScanMatcher's: a 20 km beam's grid)
             for centre in (guess, self.pose) if np.any(self.increment) else (guess,):
-                reg = self._searched(points, centre, window, guess, reg)
+                reg = self._searched(points, near, centre, window, guess, reg)
         if reg.fit < cfg.min_fit:
             self.coasted += 1
             return guess
@@ -122,12 +123,17 @@ class ScanOdometry:
         return reg.pose
 
     def _searched(
-        self, points: np.ndarray, centre: np.ndarray, window: Window, guess: np.ndarray, reg: Registration
+        self,
+        points: np.ndarray,
+        near: np.ndarray,
+        centre: np.ndarray,
+        window: Window,
+        guess: np.ndarray,
+        reg: Registration,
     ) -> Registration:
-        """``reg``, or the registration from the best pose of a correlative search of ``window`` around
-        ``centre`` if it fits better by FIT_MARGIN."""
+        """``reg``, or the registration of ``points`` from the best pose of a correlative search of
+        ``window`` around ``centre`` (of the points ``near``) if it fits better by FIT_MARGIN."""
         cfg = self.cfg
-        near = points[np.einsum("ij,ij->i", points, points) <= cfg.search_range**2]  # (as ScanMatcher's)
         if len(near) < 3:
             return reg
         found = search(near, self.local.points, centre, window, cfg.search_resolution, cfg.search_sigma)
