@@ -21,7 +21,7 @@ from cornerslam_cli.report.text import (
     scan_heading,
     summary_lines,
 )
-from cornerslam_cli.results import Accuracy, Ate, RelationError
+from cornerslam_cli.results import Accuracy, Ate, RelationError, ScanOdometryStats
 from cornerslam_cli.types import Scan
 
 
@@ -147,6 +147,19 @@ def test_comparison_lines_columns_follow_the_references():
         "scan-matched odometry (the filter's motion input): ATE 0.082 m, relations - m",
     ]
     assert comparison_lines([]) == comparison_lines(plain)[:1]  # the header alone
+
+
+def test_comparison_lines_name_the_scan_odometry_on_the_scans_alone():
+    """input.odometry=scans: the odometry columns are the scans' own odometry, and say so, aligned."""
+    acc = replace(accuracy(scan_odom_relations=None), scan_odom_ate=None)  # (no second matching)
+    stats = ScanOdometryStats(scans=9, searched=1, coasted=0, gaps=0, seconds=0.1)
+    alone = replace(summary("pca", acc), scan_odometry=stats)
+    assert comparison_lines([alone]) == [
+        "assoc   steps landmarks  matched  t_match s   max ms  t_total s    ATE m scan odom ATE m"
+        "      relations m scan odom relations m",
+        "pca       500        88     2777      0.500     12.3       4.57    0.012           1.425"
+        "    0.123 ± 0.046                     -",
+    ]
 
 
 def test_batch_lines_table_failures_and_totals():

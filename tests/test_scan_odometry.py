@@ -15,6 +15,8 @@ from cornerslam_cli.evaluate import align_se2
 from cornerslam_cli.geometry import compose, relative, wrap_angle
 from cornerslam_cli.logs.writers.mcap import copy_mcap_without
 from cornerslam_cli.motion.scan_odometry import ScanOdometry, with_scan_odometry
+from cornerslam_cli.report.plots import _accuracy_note
+from cornerslam_cli.results import RunSummary
 from cornerslam_cli.simworld import OFFICE_LOOP, office_world, path_poses, raycast
 from cornerslam_cli.types import OdomSample, Scan
 
@@ -239,6 +241,17 @@ def test_a_log_without_odometry_runs_on_its_scans(scans_only, tmp_path):
     assert info.exit_code == 0, info.output
     assert "odometry  from the scans (input.odometry=scans)" in info.stdout
     assert "base_link→laser" in info.stdout  # the mount from the tf, without odometry to name the robot
+
+
+def test_compare_on_the_scans_alone_names_the_scan_odometry(scans_only, tmp_path):
+    """compare's table, report.html and the maps' titles say that the odometry scored is the scans'."""
+    out = tmp_path / "c"
+    alone = ("--set", "input.odometry=scans", "--end", "#150")
+    res = invoke("compare", scans_only, "--assoc", "pca", "--out", out, *alone)
+    assert res.exit_code == 0, res.output
+    assert " scan odom ATE m" in res.stdout.splitlines()[0]
+    assert "The odom_* columns score the scans' own odometry" in (out / "report.html").read_text()
+    assert "(scan odometry " in _accuracy_note(RunSummary.read(out / "pca"))
 
 
 def test_an_odometry_topic_beside_the_scans_alone_is_refused(sim_log, tmp_path):

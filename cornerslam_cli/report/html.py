@@ -359,6 +359,8 @@ def _compare_report(out_dir: Path) -> str:
         if at_once > 1
         else ""
     )
+    if assocs and summaries[assocs[0]].scan_odometry is not None:  # (input.odometry: scans)
+        shared += " The odom_* columns score the scans' own odometry (<code>input.odometry=scans</code>)."
     body = [
         f"<h1>{esc(title)}</h1>",
         "<nav>" + "".join(f'<a href="#assoc-{esc(a)}">{esc(a)}</a>' for a in assocs) + "</nav>",

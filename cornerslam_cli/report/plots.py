@@ -277,7 +277,7 @@ def _accuracy_note(summary: RunSummary) -> str:
         return ""
     text = f"ATE RMSE {acc.ate.rmse:.3f} m"
     if acc.odom_ate is not None and not math.isnan(acc.odom_ate.rmse):
-        text += f" (odometry {acc.odom_ate.rmse:.3f} m)"
+        text += f" ({odometry_label(summary)} {acc.odom_ate.rmse:.3f} m)"
     return text
 
 

@@ -205,10 +205,12 @@ def comparison_lines(summaries: list[RunSummary]) -> list[str]:
     )
     has_gt = any(s.accuracy is not None and s.accuracy.ate is not None for s in summaries)
     has_rel = any(s.accuracy is not None and s.accuracy.relations is not None for s in summaries)
+    alone = bool(summaries) and summaries[0].scan_odometry is not None  # (one input for all associators)
+    odom, w_ate, w_rel = ("scan odom", 15, 21) if alone else ("odom", 10, 18)
     if has_gt:
-        head += f" {'ATE m':>8} {'odom ATE m':>10}"
+        head += f" {'ATE m':>8} {odom + ' ATE m':>{w_ate}}"
     if has_rel:
-        head += f" {'relations m':>16} {'odom relations m':>18}"
+        head += f" {'relations m':>16} {odom + ' relations m':>{w_rel}}"
     has_loops = any(s.counts.submaps is not None for s in summaries)
     if has_loops:
         head += f" {'submaps':>7} {'loops ok':>8} {'refused':>7}" + (
@@ -223,9 +225,10 @@ def comparison_lines(summaries: list[RunSummary]) -> list[str]:
         )
         a = s.accuracy  # (one run scored and another not: '-' cells, not a crash)
         if has_gt:
-            line += f" {a.ate.rmse:>8.3f} {a.odom_ate.rmse:>10.3f}" if a and a.ate else f" {'-':>8} {'-':>10}"
+            ate, odom_ate = (f"{a.ate.rmse:.3f}", f"{a.odom_ate.rmse:.3f}") if a and a.ate else ("-", "-")
+            line += f" {ate:>8} {odom_ate:>{w_ate}}"
         if has_rel:
-            line += f" {mean_std(a and a.relations):>16} {mean_std(a and a.odom_relations):>18}"
+            line += f" {mean_std(a and a.relations):>16} {mean_std(a and a.odom_relations):>{w_rel}}"
         if has_loops:
             line += _loop_columns(s, has_gt)
         lines.append(line)
