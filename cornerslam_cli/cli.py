@@ -492,6 +492,8 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
         if cfg.input.laser.upside_down and flip_source == "tf" and not upside_down:  # (run warns of it too)
             note = "the log's tf mounts the laser upright: input.laser.upside_down=true is ignored"
             log_info = replace(log_info, notes=(*log_info.notes, note))
+        if source == "default" and (near := getattr(reader, "near_frames", "")):  # (run warns of it too)
+            log_info = replace(log_info, notes=(*log_info.notes, near.strip()[1:-1]))
         laser, mount_text = _mount_shown(laser, source, cfg, log_info.format)
         scan = first_scan(reader) if log_info.scan_topic else None
     except LogError as e:  # info lists what it can: the topics, then why run would refuse the log

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 from pathlib import Path
@@ -617,6 +618,40 @@ def test_a_laser_frame_named_unlike_the_tfs_is_hinted_at(tmp_path):
         "has no tf base_link→laser_link (its tf has 'laser': the scans' frame_id 'laser_link' misnamed?)"
         in res.stderr
     )
+
+
+def test_a_laser_under_another_robot_frame_is_hinted_at(tmp_path):
+    """A laser mounted on 'base_footprint' (nav2's robot frame) in a log with no base_link, run on its scans
+    alone (no odometry names the robot's frame): the default-mount warning and info name input.base_frame,
+    and with it the tf's mount is taken."""
+    ros = RosSerializer("cdr")
+    t0 = 1_700_000_000.0
+    mount = [("/tf_static", "tf2_msgs/msg/TFMessage", int(t0 * 1e9),
+              ros.tf(t0, "base_footprint", "laser", 0.1, 0.0, 0.3))]  # fmt: skip
+    p = write_messages_mcap(tmp_path / "f.mcap", mount + scans_changed(frame_id="laser"))
+    alone = ["--set", "input.odometry=scans"]
+    hint = "its tf places 'laser' under 'base_footprint': if that is the robot's frame, --set "
+    hint += "input.base_frame="
+    res = CliRunner().invoke(cli, ["run", str(p), "--out", str(tmp_path / "a"), *alone])
+    assert res.exit_code == 0, res.output
+    assert f"has no tf base_link→laser ({hint}" in res.stderr
+    info = CliRunner().invoke(cli, ["info", str(p), *alone])
+    assert info.exit_code == 0, info.output
+    assert f"note:      {hint}base_footprint" in info.stdout
+    told = ["--set", "input.base_frame=base_footprint"]
+    res = CliRunner().invoke(cli, ["run", str(p), "--out", str(tmp_path / "b"), *alone, *told])
+    assert res.exit_code == 0 and "has no tf" not in res.stderr
+    mount = json.loads((tmp_path / "b" / "summary.json").read_text())["input"]["laser_to_base"]
+    assert mount == pytest.approx([0.1, 0.0, 0.3])
+
+
+def test_tf_root_climbs_to_the_top_and_stops_on_a_loop():
+    from cornerslam_cli.logs.ros import tf_root
+
+    e = np.eye(4)
+    edges = {("base_footprint", "base_link"): e, ("base_link", "laser_mount"): e, ("laser_mount", "laser"): e}
+    assert tf_root(edges, "laser") == tf_root(edges, "base_footprint") == "base_footprint"
+    assert tf_root({("a", "b"): e, ("b", "a"): e}, "a") in ("a", "b")  # (tf2 refuses a loop: no hang)
 
 
 def test_alike_frames_take_a_prefix_too():

@@ -105,6 +105,17 @@ def pose2_from_matrix(T: np.ndarray) -> Pose2:
     return float(T[0, 3]), float(T[1, 3]), math.atan2(T[1, 0], T[0, 0])
 
 
+def tf_root(edges: dict[tuple[str, str], np.ndarray], frame: str) -> str:
+    """The topmost frame above ``frame`` along the tf ``edges`` (parent, child); ``frame`` when it has no
+    parent there (a loop of edges stops where it would come round)."""
+    parent_of = {child: parent for parent, child in edges}
+    seen = {frame}
+    while (parent := parent_of.get(frame)) is not None and parent not in seen:
+        seen.add(parent)
+        frame = parent
+    return frame
+
+
 def tilt_from_level(T: np.ndarray) -> float:
     """Degrees between the z axis of a 4x4 transform's child frame and the parent's z axis or its
     opposite: 0 for a level laser, upright or upside down."""
@@ -826,6 +837,12 @@ class RosLogReader:
             alike = sorted({f for edge in edges for f in edge if f != frame and _alike_frames(f, frame)})
             if alike:
                 self.near_frames = f" (its tf has '{alike[0]}': the scans' frame_id '{frame}' misnamed?)"
+            elif (root := tf_root(edges, frame)) != frame:  # on the tf, under another robot frame's name
+                laser, robot = short_text(frame), short_text(root)
+                self.near_frames = (
+                    f" (its tf places '{laser}' under '{robot}': if that is the robot's frame, --set "
+                    f"input.base_frame={robot})"
+                )
         if self._laser2base is not None and not all(math.isfinite(v) for v in self._laser2base):
             self.stats.warn("%s: the tf %s→%s is not finite: ignored", self.path.name, self.base_frame, frame)
             self._laser2base = None
