@@ -300,7 +300,13 @@ def overlap_problem(
 
 
 def mirror_problem(
-    est_t: np.ndarray, est: np.ndarray, gt_t: np.ndarray, gt: np.ndarray, gt_name: str, est_name: str
+    est_t: np.ndarray,
+    est: np.ndarray,
+    gt_t: np.ndarray,
+    gt: np.ndarray,
+    gt_name: str,
+    est_name: str,
+    from_scans: bool = False,
 ) -> tuple[str, str] | None:
     """Why ``gt_name`` cannot score ``est_name`` when it is in a mirrored frame — z down (NED/FRD, as
     PX4/MAVROS and many motion-capture setups write it): its y and yaw the negative of a z-up frame's —, and
@@ -308,7 +314,9 @@ def mirror_problem(
     evo's, whose 3-D fit turns it over (an evo-user probe). Told by the turns, step by step: a mirror
     turns the other way at every step, a heading drift only adds to each (a review: a drifting estimate
     fitted a bent corridor better mirrored). Said when, over MIRROR_TURNS rad of the ground truth's turns
-    or more, the steps' turns agree MIRRORED times better negated than as they are."""
+    or more, the steps' turns agree MIRRORED times better negated than as they are. ``from_scans``:
+    ``est`` was made from the scans alone (input.odometry: scans), which a laser taken upright when it is
+    upside down, or the other way, mirrors as much: both causes are named."""
     inside, g = interpolate_inside(gt_t, gt, est_t)
     ours, theirs = (wrap_angle(np.diff(p[:, 2])) for p in (est[inside], g))
     if np.abs(theirs).sum() < MIRROR_TURNS:
@@ -316,12 +324,20 @@ def mirror_problem(
     as_is, mirrored = float(np.mean((ours - theirs) ** 2)), float(np.mean((ours + theirs) ** 2))
     if not as_is > MIRRORED * mirrored:
         return None
-    why = (
-        f"{gt_name} is in a mirrored frame (z down: NED/FRD?): {est_name} turns the other way at its steps "
-        f"(their turns differ by {np.degrees(np.sqrt(as_is)):.2f}° RMS, negated by "
-        f"{np.degrees(np.sqrt(mirrored)):.2f}°)"
+    turns = (
+        f"turns the other way at its steps (their turns differ by {np.degrees(np.sqrt(as_is)):.2f}° RMS, "
+        f"negated by {np.degrees(np.sqrt(mirrored)):.2f}°)"
     )
-    return why, "convert it to a z-up frame by negating its y and yaw: ROS REP 103's, x forward and y left"
+    convert = "convert it to a z-up frame by negating its y and yaw: ROS REP 103's, x forward and y left"
+    if not from_scans:
+        return f"{gt_name} is in a mirrored frame (z down: NED/FRD?): {est_name} {turns}", convert
+    causes = (
+        "a laser upside down taken as upright, or the other way (input.laser.upside_down, the tf's roll), or "
+        "a ground truth in a z-down frame (NED/FRD)"
+    )
+    return f"{gt_name} and {est_name} are mirrored ({causes}): {est_name} {turns}", (
+        f"check the laser's mount; if it is right, {convert}"
+    )
 
 
 def units_problem(

@@ -349,9 +349,10 @@ def test_on_the_scans_alone_a_carmen_logs_odom_lines_need_no_logger_timestamps(t
     assert res.exit_code == 0, res.output
 
 
-def test_on_the_scans_alone_a_mirrored_run_is_scored_not_blamed_on_the_ground_truth(scans_only, tmp_path):
-    """A laser mounted upside down, unsaid, mirrors the scans' odometry: the ground truth is not called a
-    mirrored frame (the check made on the log's odometry) and the run is scored (a review)."""
+def test_on_the_scans_alone_a_mirrored_run_is_not_scored_and_both_causes_are_named(scans_only, tmp_path):
+    """A laser taken upside down when it is upright mirrors the scans' odometry as a ground truth in a
+    z-down frame would: not blamed on the ground truth alone (a review), and not scored either — a mirror's
+    ATE means nothing (a probe: 5.8 m, no word)."""
     flip = [
         "--set",
         "input.laser.from_tf=false",
@@ -363,5 +364,23 @@ def test_on_the_scans_alone_a_mirrored_run_is_scored_not_blamed_on_the_ground_tr
     res = invoke("run", scans_only, "--out", tmp_path / "o", "-q", "--set", "input.odometry=scans", *flip)
     assert res.exit_code == 0, res.output
     s = json.loads((tmp_path / "o" / "summary.json").read_text())
-    assert s["accuracy"]["ate"] is not None
-    assert not any("mirrored frame" in w for w in s["warnings"])
+    assert s["accuracy"] is None or s["accuracy"].get("ate") is None
+    (warning,) = [w for w in s["warnings"] if "mirrored" in w]
+    assert "and the scans' odometry are mirrored (a laser upside down taken as upright" in warning
+    assert "z-down frame" in warning and warning.endswith("no ATE/RPE")
+
+
+def test_on_the_scans_alone_a_ground_truth_in_millimetres_is_not_scored(scans_only, tmp_path):
+    """A ground truth in mm beside a log run on its scans alone: not scored, said so (a probe: ATE 9 km)."""
+    log = tmp_path / "mm.mcap"
+    log.write_bytes(scans_only.read_bytes())
+    gt = np.loadtxt(scans_only.with_suffix(".gt.tum"))
+    gt[:, 1:4] *= 1000.0
+    np.savetxt(log.with_suffix(".gt.tum"), gt)
+    res = invoke("run", log, "--out", tmp_path / "o", "-q", "--set", "input.odometry=scans")
+    assert res.exit_code == 0, res.output
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert s["accuracy"] is None or s["accuracy"].get("ate") is None
+    assert any(
+        "the scans' odometry are in different units" in w and "millimetres" in w for w in s["warnings"]
+    )
