@@ -472,6 +472,7 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
             [*lines[: lines.index("run would use:")], RESULTS_MCAP_ROS2_NOTE if ros2 else RESULTS_MCAP_NOTE]
         )
         return
+    beams = {"deskew": cfg.input.deskew, "beam_time": cfg.input.beam_time}  # (as a run would use them)
     if log_info.problems:  # a log run refuses (no LaserScan, only odometry, …): its topics, then why
         scan = None
         if log_info.scan_topic:  # scans without odometry: their first is read all the same (scans())
@@ -480,7 +481,9 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
             except LogError:
                 pass  # the error below says what run would refuse
         preset = _info_preset(cfg, scan)
-        lines = info_lines(log_path, replace(log_info, problems=()), None, scan, preset, mount_read=False)
+        lines = info_lines(
+            log_path, replace(log_info, problems=()), None, scan, preset, mount_read=False, **beams
+        )
         _echo(_with_stamps(lines, reader))
         reader.check()  # the first problem as the error: exit 2, as run (on the scans alone: theirs)
     scan, unread, laser, mount_text, upside_down, flip_source = None, None, None, "", False, ""
@@ -511,7 +514,7 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
         frames = (reader.base_frame, reader.laser_frame)
     lines = info_lines(
         log_path, log_info, laser, scan, preset, upside_down, frames, mount_text=mount_text,
-        flip_from_config=flip_source == "config",
+        flip_from_config=flip_source == "config", **beams,
     )  # fmt: skip
     _echo(_with_stamps(lines, reader))
     if unread is not None:  # exit 2, as run

@@ -194,6 +194,15 @@ def test_info_shows_the_first_scans_beams_preset_and_beam_times(sim_log, tmp_pat
     assert res.exit_code == 0, res.output
     assert "  beams     181 over 180.0° (1.000° apart), 0.100–30.000 m: preset sick_lms_1deg" in res.output
     assert "  beam times 100.00 µs apart (the log's time_increment, 18.0 ms a sweep): deskewed" in res.output
+    # as a run would use them under the config (a probe: info said "deskewed" under input.deskew=false)
+    res = invoke("info", tmp_path / "ti.mcap", "--set", "input.deskew=false")
+    assert "(the log's time_increment, 18.0 ms a sweep): not deskewed (input.deskew=false)" in res.output
+    res = invoke("info", sim_log, "--set", "input.beam_time=-2e-5")
+    assert "  beam times 20.00 µs apart (not in the log: input.beam_time, 10.8 ms a sweep): deskewed" in (
+        res.output
+    )
+    res = invoke("info", sim_log, "--set", "input.deskew=false")
+    assert "  beam times not in the log: scans used as recorded (input.deskew=false)" in res.output
     one = [RawScan(T0 + 0.1 * i, 0.0, 0.01, np.array([5.0]), 0.1, 30.0) for i in range(3)]
     res = invoke("info", write_mcap(tmp_path / "one.mcap", one, odoms))
     assert res.exit_code == 0, res.output

@@ -320,6 +320,8 @@ def info_lines(
     mount_read: bool = True,
     mount_text: str = "",
     flip_from_config: bool = False,
+    deskew: bool = True,
+    beam_time: float = 0.0,
 ) -> list[str]:
     """``cornerslam info``: the log's format, topics with counts and rates, what a run would use
     (``laser``: the laser's (x, y, yaw) in the base frame from tf — ``tf_frames`` names the two,
@@ -327,8 +329,8 @@ def info_lines(
     ``upside_down`` there (``flip_from_config``: that from the config, the log's mount being planar);
     ``mount_text``: ``laser`` is instead the config's mount, from where it says;
     not ``mount_read``: not looked up, the log's problems coming first; ``scan``:
-    the first scan, its geometry and beam times, with the laser ``preset`` it matches), problems and
-    notes."""
+    the first scan, its geometry and beam times, with the laser ``preset`` it matches, and whether a run
+    would deskew it: ``deskew`` and ``beam_time``, the config's), problems and notes."""
     n = "unknown" if i.n_messages is None else i.n_messages
     lines = [f"file:      {display_path(log_path)}", f"format:    {i.format}", f"messages:  {n}"]
     if i.start is not None:
@@ -370,7 +372,7 @@ def info_lines(
         default = "from the config's input.laser (built-in default x=0 y=0 yaw=0)"
         lines.append(f"  laser     {where}: {default}{flip}")
     if scan is not None:
-        lines += scan_lines(scan, preset)
+        lines += scan_lines(scan, preset, deskew, beam_time)
     lines += [f"problem:   {text}" for text in i.problems]
     lines += [f"note:      {text}" for text in i.notes]
     return lines
@@ -383,9 +385,10 @@ def _no_odometry(i: LogInfo) -> str:
     return f"{n} nav_msgs/Odometry topics: choose one with --odom-topic" if n > 1 else "none found"
 
 
-def scan_lines(scan: Scan, preset: str | None) -> list[str]:
+def scan_lines(scan: Scan, preset: str | None, deskew: bool = True, beam_time: float = 0.0) -> list[str]:
     """``info``'s lines on the first scan: its beams, the laser preset a run would take for them
-    (lasers.py, ``input.laser_preset: auto``) and whether its beams' times are known (deskewing)."""
+    (lasers.py, ``input.laser_preset: auto``) and whether its beams' times are known and used as a run
+    uses them (``deskew``, ``beam_time``: the config's ``input.deskew`` and ``input.beam_time``)."""
     inc = math.degrees(abs(scan.angle_increment))
     fov = inc * max(scan.n_beams - 1, 0)
     which = f"preset {preset}" if preset else "no laser preset matches (the config's sensor model)"
@@ -395,14 +398,15 @@ def scan_lines(scan: Scan, preset: str | None) -> list[str]:
     lines = [f"  beams     {scan.n_beams} {spread}, {scan.range_min:.3f}–{scan.range_max:.3f} m: {which}"]
     if scan.range_max <= scan.range_min:  # (a driver's parameter: a run refuses the log)
         lines[0] += " — range_max at or below range_min: every reading counts as no return"
-    if scan.time_increment:
-        sweep = 1e3 * abs(scan.time_increment) * max(scan.n_beams - 1, 0)
-        lines.append(
-            f"  beam times {1e6 * abs(scan.time_increment):.2f} µs apart (the log's time_increment, "
-            f"{sweep:.1f} ms a sweep): deskewed"
-        )
+    dt, where = (scan.time_increment, "the log's time_increment") if scan.time_increment else (beam_time, "")
+    used = "deskewed" if deskew else "not deskewed (input.deskew=false)"
+    if dt:  # (frontend._deskewed: the message's own time_increment, else input.beam_time)
+        sweep = 1e3 * abs(dt) * max(scan.n_beams - 1, 0)
+        where = where or "not in the log: input.beam_time"
+        lines.append(f"  beam times {1e6 * abs(dt):.2f} µs apart ({where}, {sweep:.1f} ms a sweep): {used}")
     else:
-        lines.append("  beam times not in the log: scans used as recorded (input.beam_time to deskew)")
+        why = "input.beam_time to deskew" if deskew else "input.deskew=false"
+        lines.append(f"  beam times not in the log: scans used as recorded ({why})")
     return lines
 
 
