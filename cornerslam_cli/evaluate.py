@@ -382,9 +382,12 @@ SAME_SPAN = 2.0  # two files' time spans this close in length are in one unit
 
 def _reads_as(scaled: np.ndarray, other: np.ndarray) -> bool:
     """Whether stamps ``scaled`` (one file's, divided by a unit's scale) read as the same clock as
-    ``other``'s: two or more within its span, ≥ FASTEST_POSES apart (seconds since 1970 as µs fall in a
+    ``other``'s: two or more within its span and two or more of its within theirs (a ground truth on a
+    clock 100,000 s off, read as ms, put two poses in a 0.7 s span inside a partial run's, none of the run's
+    in that span: called milliseconds, a probe), ≥ FASTEST_POSES apart (seconds since 1970 as µs fall in a
     half-hour span from 0)."""
-    return _within(scaled, other) >= 2 and _spacing(scaled) >= FASTEST_POSES
+    both = _within(scaled, other) >= 2 and _within(other, scaled) >= 2
+    return both and _spacing(scaled) >= FASTEST_POSES
 
 
 def _same_unit(a: np.ndarray, b: np.ndarray) -> bool:

@@ -943,6 +943,18 @@ def test_a_ground_truth_stamped_from_0_is_not_taken_for_milliseconds(gt_first):
     assert why.startswith("gt.tum has its stamps in milliseconds, not seconds"), why
 
 
+def test_a_ground_truth_on_a_clock_100000_s_off_is_not_taken_for_milliseconds():
+    """A part of a log thinned by distance (a scan every 2 s, 18-171 s) against its whole ground truth
+    with every stamp 100,000 s later: read as ms, two of its poses fall in the run's span, inside 0.7 s
+    where the run has no pose, and the warning said milliseconds (a probe): two clocks, said so."""
+    from cornerslam_cli.evaluate import overlap_problem
+
+    log = 18.0 + np.arange(0.0, 708.0, 2.07)
+    why, hint = overlap_problem(log[:74], log + 100_000.0, "gt.tum")
+    assert "milliseconds" not in why and why.startswith("gt.tum does not overlap the trajectory"), why
+    assert "Its stamps must use the log's clock" in hint
+
+
 def mirrored(rows: list[str]) -> list[str]:
     """TUM rows in a z-down frame (NED/FRD): y and the yaw negated (qx, qy, qz, qw of a pure yaw)."""
     out = []
