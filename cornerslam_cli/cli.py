@@ -455,7 +455,7 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
     from .logs.mcap import header_fields
     from .logs.unreadable import no_scan_read
     from .report.ownership import is_results_mcap
-    from .report.run_writer import find_ground_truth
+    from .report.run_writer import find_ground_truth, load_reference
 
     setup_logging(verbose, quiet)
     cfg = _info_config(config_path, overrides, scan_topic, odom_topic)
@@ -508,6 +508,10 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
         log_info = replace(log_info, notes=(*log_info.notes, f"the log {reader.mount_problem}"))
     if gt := find_ground_truth(Path(log_path)):  # (what run and compare will score against, unasked)
         found = f"ground truth {display_path(gt)} beside it: run and compare score against it"
+        try:
+            load_reference(Path(log_path))  # (read as run reads it: a file it refuses is said so)
+        except CornerslamError as e:
+            found = f"run and compare exit 2 on the ground truth beside it: {e.msg} ({e.hint})"
         log_info = replace(log_info, notes=(*log_info.notes, found))
     frames = None  # the robot's frame (the odometry's child_frame_id, else input.base_frame), the laser's
     if laser is not None and not mount_text and getattr(reader, "laser_frame", None):

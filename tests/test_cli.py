@@ -175,6 +175,12 @@ def test_info_notes_the_ground_truth_a_run_would_score_against(sim_log, tmp_path
     alone = tmp_path / "alone.mcap"
     alone.write_bytes(sim_log.read_bytes())
     assert "ground truth" not in invoke("info", alone).stdout
+    # one run refuses: said so, not "score against it" (a probe)
+    (tmp_path / "alone.gt.tum").write_text("1 2 3\n")
+    res = invoke("info", alone)
+    assert res.exit_code == 0 and "score against it" not in res.stdout
+    assert "note:      run and compare exit 2 on the ground truth beside it: ground truth " in res.stdout
+    assert "line 1 has 3 values" in res.stdout
 
 
 def test_info_shows_the_first_scans_beams_preset_and_beam_times(sim_log, tmp_path):
