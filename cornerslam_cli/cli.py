@@ -450,6 +450,7 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
     """
     from dataclasses import replace
 
+    from .frontend import skipped_all
     from .lasers import first_scan, laser_mount, overruled_mount
     from .logs import alone_info, open_configured, read_alone
     from .logs.mcap import header_fields
@@ -503,6 +504,8 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
         unread = e
     if log_info.scan_topic and scan is None and unread is None:  # every chunk corrupt: no scan at all
         unread = no_scan_read(log_path, "run has none to process", topics_hint=False, stats=reader.stats)
+    if scan is not None and unread is None:  # (a run refuses it at its first scan: a probe)
+        unread = skipped_all(cfg.input, scan.n_beams, log_info.scan_topic)
     preset = _info_preset(cfg, scan)
     if getattr(reader, "mount_problem", ""):  # a CARMEN log's laser poses that are no fixed mount
         log_info = replace(log_info, notes=(*log_info.notes, f"the log {reader.mount_problem}"))

@@ -345,12 +345,8 @@ def scans_prepared(reader, cfg: Config, upside_down: bool = False, msgs=None):
     for msg in msgs:
         if isinstance(msg, Scan):
             emptied += not first and lo + hi >= msg.n_beams
-            if first and lo + hi >= msg.n_beams:
-                raise ConfigError(
-                    f"input.skip_beams_start={lo} and input.skip_beams_end={hi} skip all "
-                    f"{msg.n_beams} beams of the scans on '{short_text(reader.scan_topic)}'",
-                    f"keep their sum below {msg.n_beams} (beams skipped at each end of a scan)",
-                )
+            if first and (error := skipped_all(inp, msg.n_beams, reader.scan_topic)):
+                raise error
             first = False
             keep = (msg.beam_index >= lo) & (msg.beam_index < msg.n_beams - hi)
             if max_range > 0.0:
@@ -370,6 +366,19 @@ def scans_prepared(reader, cfg: Config, upside_down: bool = False, msgs=None):
             "'%s': processed without beams (odometry only)",
             lo, hi, emptied, short_text(reader.scan_topic),
         )  # fmt: skip
+
+
+def skipped_all(inp, n_beams: int, topic: str) -> ConfigError | None:
+    """The error of ``input.skip_beams_*`` (``inp``: the config's input section) that skip every one of a
+    first scan's ``n_beams`` on ``topic``, else None: run refuses it, info says so as run would."""
+    lo, hi = inp.skip_beams_start, inp.skip_beams_end
+    if lo + hi < n_beams:
+        return None
+    return ConfigError(
+        f"input.skip_beams_start={lo} and input.skip_beams_end={hi} skip all {n_beams} beams of the scans "
+        f"on '{short_text(topic)}'",
+        f"keep their sum below {n_beams} (beams skipped at each end of a scan)",
+    )
 
 
 def _scan_count(info) -> int:

@@ -513,6 +513,10 @@ def test_extract_keeps_the_beams_a_run_keeps(tmp_path):
     assert res.stdout.startswith("scan 1 at 1700000000.150 s: 60 valid of 181 beams\n"), res.stdout
     res = invoke("extract", log, "--set", "input.skip_beams_start=100", "--set", "input.skip_beams_end=81")
     one_line_error(res, "input.skip_beams_start=100 and input.skip_beams_end=81 skip all 181 beams")
+    # info lists the log, then exits 2 as run would (a probe: exit 0, not a word)
+    res = invoke("info", log, "--set", "input.skip_beams_start=100", "--set", "input.skip_beams_end=81")
+    assert res.exit_code == 2 and "  beams     181 over 180.0°" in res.stdout
+    assert res.stderr.startswith("error: input.skip_beams_start=100 and input.skip_beams_end=81 skip all 181")
 
 
 @pytest.mark.parametrize("fmt", ["mcap-cdr", "rosbag1", "rosbag2-sqlite3"])
