@@ -451,7 +451,7 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
     from dataclasses import replace
 
     from .frontend import skipped_all
-    from .lasers import first_scan, laser_mount, overruled_mount
+    from .lasers import first_scan, laser_mount, mismatch_text, overruled_mount
     from .logs import alone_info, open_configured, read_alone
     from .logs.mcap import header_fields
     from .logs.unreadable import no_scan_read
@@ -507,6 +507,9 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
     if scan is not None and unread is None:  # (a run refuses it at its first scan: a probe)
         unread = skipped_all(cfg.input, scan.n_beams, log_info.scan_topic)
     preset = _info_preset(cfg, scan)
+    pinned = cfg.input.laser_preset not in ("auto", "none") and scan is not None  # (run warns of another's)
+    if pinned and (text := mismatch_text(preset, scan.n_beams, scan.angle_increment, log_path)):
+        log_info = replace(log_info, notes=(*log_info.notes, text))
     if getattr(reader, "mount_problem", ""):  # a CARMEN log's laser poses that are no fixed mount
         log_info = replace(log_info, notes=(*log_info.notes, f"the log {reader.mount_problem}"))
     if gt := find_ground_truth(Path(log_path)):  # (what run and compare will score against, unasked)

@@ -223,21 +223,29 @@ def _check_method(method: str, data: dict, overrides: Sequence[str]) -> None:
 def warn_mismatch(name: str, log_path: str | Path, cfg: Config) -> None:
     """A warning when the pinned preset ``name`` is not the laser of the log's scans (a config written
     by ``cornerslam config`` for another log names its preset): its sensor model and extraction settings
-    are then another sensor's. Only the beams' spacing is compared: fewer beams at the preset's spacing
-    are its laser's scans cropped by the driver, which pinning the preset is how to model."""
+    are then another sensor's (:func:`mismatch_text`)."""
     geometry = first_scan_geometry(log_path, cfg)
+    if geometry is not None and (text := mismatch_text(name, *geometry, log_path)):
+        log.warning("%s", text)
+
+
+def mismatch_text(name: str, beams: int, increment: float, log_path: str | Path) -> str:
+    """Why the preset ``name`` is not the laser of scans of ``beams`` beams ``increment`` rad apart, and
+    the preset that fits them; "" when it is. Only the beams' spacing is compared: fewer beams at the
+    preset's spacing are its laser's scans cropped by the driver, which pinning the preset is how to model."""
     p = PRESETS[name]
-    if geometry is None or spaced_as(p, geometry[1]):
-        return
-    beams, inc = geometry
-    fits = detect_preset(beams, inc)
-    log.warning(
-        "input.laser_preset '%s' is for %s beams %.3g° apart, but the scans of '%s' have %d beams %.3g° "
-        "apart: its sensor model and extraction settings are another laser's (%s)",
-        name, "/".join(map(str, p.beams)), p.increment_deg, Path(os.path.abspath(log_path)).name, beams,
-        math.degrees(abs(inc)),
-        f"'{fits}' fits them; set input.laser_preset to it or to auto" if fits else "set it to auto or none",
-    )  # fmt: skip
+    if spaced_as(p, increment):
+        return ""
+    fits = detect_preset(beams, increment)
+    what = (
+        f"'{fits}' fits them; set input.laser_preset to it or to auto" if fits else "set it to auto or none"
+    )
+    made_for = f"{'/'.join(map(str, p.beams))} beams {p.increment_deg:.3g}° apart"
+    return (
+        f"input.laser_preset '{name}' is for {made_for}, but the scans of "
+        f"'{Path(os.path.abspath(log_path)).name}' have {beams} beams {math.degrees(abs(increment)):.3g}° "
+        f"apart: its sensor model and extraction settings are another laser's ({what})"
+    )
 
 
 def resolve_config(

@@ -125,6 +125,17 @@ def test_a_pinned_preset_another_lasers_scans_do_not_fit_is_warned_about(caplog)
     with caplog.at_level("WARNING"):
         resolve_config(SAMPLES / "intel_cut.clf", None, pinned)  # its own laser: nothing to say
     assert not [r for r in caplog.records if r.levelname == "WARNING"]
+    # info says so too, as a note (a probe: it showed "preset sick_lms_1deg" beside 682 beams, silent)
+    from click.testing import CliRunner
+
+    from cornerslam_cli.cli import cli
+
+    runner = CliRunner()
+    res = runner.invoke(cli, ["info", str(SAMPLES / "mines_exp3_cut.bag"), "--set", pinned[0]])
+    assert "note:      input.laser_preset 'sick_lms_1deg' is for 180/181 beams" in res.stdout, res.output
+    assert "'hokuyo_urg04lx' fits them" in res.stdout
+    res = runner.invoke(cli, ["info", str(SAMPLES / "intel_cut.clf"), "--set", pinned[0]])
+    assert "input.laser_preset 'sick_lms_1deg' is for" not in res.stdout
 
 
 def test_a_pinned_preset_is_not_warned_about_for_its_own_laser_cropped(tmp_path, caplog):
