@@ -74,6 +74,21 @@ def test_the_scans_robot_gives_the_mount_and_the_odometry(tmp_path, robot):
     assert not log.stats.warnings
 
 
+def test_info_on_two_robots_says_the_scan_topic_chooses_the_odometry_too(tmp_path):
+    """info on two robots' log, no topic chosen: exit 2 (run would refuse), and the odometry line names
+    --scan-topic besides --odom-topic (a probe: only --odom-topic, though the scans' namespace chooses)."""
+    from click.testing import CliRunner
+
+    from cornerslam_cli.cli import cli
+
+    res = CliRunner().invoke(cli, ["info", str(two_robots(tmp_path))])
+    assert res.exit_code == 2 and "choose one with --scan-topic" in res.stderr
+    want = "  odometry  - (2 nav_msgs/Odometry topics: choose one with --odom-topic, or --scan-topic: "
+    assert any(line.startswith(want) for line in res.stdout.splitlines()), res.stdout
+    res = CliRunner().invoke(cli, ["info", str(tmp_path / "two.mcap"), "--scan-topic", "/robot2/scan"])
+    assert res.exit_code == 0 and "  odometry  /robot2/odom (nav_msgs/Odometry)" in res.stdout
+
+
 def test_the_scans_robot_gives_the_tf_odometry(tmp_path):
     log = open_log(two_robots(tmp_path, odom=tf_odometry), scan_topic="/robot2/scan")
     assert log.odom_topic == "/robot2/tf"

@@ -379,10 +379,14 @@ def info_lines(
 
 
 def _no_odometry(i: LogInfo) -> str:
-    """Why ``info`` names no odometry topic: several Odometry topics (run takes one named /odom, else
+    """Why ``info`` names no odometry topic: several Odometry topics (run takes one named /odom, or the
+    one in the scans' namespace — with no scan topic chosen yet, --scan-topic may choose it —, else
     refuses to guess), or none."""
     n = sum(t.msgtype == "nav_msgs/Odometry" for t in i.topics)
-    return f"{n} nav_msgs/Odometry topics: choose one with --odom-topic" if n > 1 else "none found"
+    if n <= 1:
+        return "none found"
+    robot = "" if i.scan_topic else ", or --scan-topic: the one in the scans' namespace is taken"
+    return f"{n} nav_msgs/Odometry topics: choose one with --odom-topic{robot}"
 
 
 def scan_lines(scan: Scan, preset: str | None, deskew: bool = True, beam_time: float = 0.0) -> list[str]:
