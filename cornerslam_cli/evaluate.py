@@ -376,18 +376,20 @@ UNITS_TOLERANCE = 0.15  # decades: a path 100 or 1000 times the other's within �
 MIRROR_TURNS, MIRRORED = 1.0, 3.0
 UNITS_MIN_PATH = 0.5  # m: the shorter path of the two at least (a run stuck in place is no unit)
 FASTEST_POSES = 1e-5  # s: the closest spacing stamps are taken to have (ns since 1970 as floats: 256 ns)
+DENSER = 300.0  # stamps read in another unit are not taken as this many times denser than the other file's
 EPOCH_STAMPS = 1e8  # s: stamps from here on (1973) are read as wall-clock time
 SAME_SPAN = 2.0  # two files' time spans this close in length are in one unit
 
 
 def _reads_as(scaled: np.ndarray, other: np.ndarray) -> bool:
     """Whether stamps ``scaled`` (one file's, divided by a unit's scale) read as the same clock as
-    ``other``'s: two or more within its span and two or more of its within theirs (a ground truth on a
-    clock 100,000 s off, read as ms, put two poses in a 0.7 s span inside a partial run's, none of the run's
-    in that span: called milliseconds, a probe), ≥ FASTEST_POSES apart (seconds since 1970 as µs fall in a
-    half-hour span from 0)."""
-    both = _within(scaled, other) >= 2 and _within(other, scaled) >= 2
-    return both and _spacing(scaled) >= FASTEST_POSES
+    ``other``'s: two or more within its span, ≥ FASTEST_POSES apart (seconds since 1970 as µs fall in a
+    half-hour span from 0) and no more than DENSER times as dense as ``other``'s (a ground truth on a clock
+    100,000 s off, read as ms, put poses 2 ms apart inside a run's span where the run's are 2 s apart:
+    called milliseconds, a probe; a 1 kHz motion capture is 100 times a 10 Hz laser's rate, a 10 Hz ground
+    truth read as ms 1,000 times)."""
+    fastest = max(FASTEST_POSES, _spacing(other) / DENSER)
+    return _within(scaled, other) >= 2 and _spacing(scaled) >= fastest
 
 
 def _same_unit(a: np.ndarray, b: np.ndarray) -> bool:

@@ -953,6 +953,19 @@ def test_a_ground_truth_on_a_clock_100000_s_off_is_not_taken_for_milliseconds():
     why, hint = overlap_problem(log[:74], log + 100_000.0, "gt.tum")
     assert "milliseconds" not in why and why.startswith("gt.tum does not overlap the trajectory"), why
     assert "Its stamps must use the log's clock" in hint
+    # a review: at 10 Hz the run has poses inside the 0.7 s too — the ground truth read as ms is 1,000
+    # times as dense as the run
+    log = 18.0 + np.arange(0.0, 708.0, 0.1)
+    why, _ = overlap_problem(log[:1530], log + 100_000.0, "gt.tum")
+    assert "milliseconds" not in why and why.startswith("gt.tum does not overlap the trajectory"), why
+    # while a real unit error is named: a 1 kHz motion capture in ms, a trajectory in ms against a 1 Hz
+    # ground truth (a review: a check of the other direction had lost it)
+    mocap = 1000.0 + np.arange(0.0, 20.0, 0.001)
+    why, _ = overlap_problem(1000.0 + np.arange(0.0, 20.0, 0.1), mocap * 1e3, "gt.tum")
+    assert why.startswith("gt.tum has its stamps in milliseconds, not seconds"), why
+    run = 1010.05 + np.arange(15) * 0.1
+    why, _ = overlap_problem(run * 1e3, 1000.0 + np.arange(100.0), "gt.tum")
+    assert why.startswith("the trajectory has its stamps in milliseconds, not seconds"), why
 
 
 def mirrored(rows: list[str]) -> list[str]:
