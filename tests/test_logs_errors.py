@@ -650,8 +650,20 @@ def test_tf_root_climbs_to_the_top_and_stops_on_a_loop():
 
     e = np.eye(4)
     edges = {("base_footprint", "base_link"): e, ("base_link", "laser_mount"): e, ("laser_mount", "laser"): e}
-    assert tf_root(edges, "laser") == tf_root(edges, "base_footprint") == "base_footprint"
-    assert tf_root({("a", "b"): e, ("b", "a"): e}, "a") in ("a", "b")  # (tf2 refuses a loop: no hang)
+    static = dict.fromkeys(edges, "/tf_static")
+    assert tf_root(edges, "laser", static) == tf_root(edges, "base_footprint", static) == "base_footprint"
+    loop = {("a", "b"): e, ("b", "a"): e}
+    assert tf_root(loop, "a", dict.fromkeys(loop, "/tf_static")) in (
+        "a",
+        "b",
+    )  # (tf2 refuses a loop: no hang)
+    # a review: the robot's pose in its odometry frame (dynamic), or a mount on a world frame, is no robot
+    moving = {**edges, ("odom_combined", "base_footprint"): e}
+    assert (
+        tf_root(moving, "laser", {**static, ("odom_combined", "base_footprint"): "/tf"}) == "base_footprint"
+    )
+    assert tf_root({("map", "laser"): e}, "laser", {("map", "laser"): "/tf_static"}) == "laser"
+    assert tf_root(edges, "laser", dict.fromkeys(edges, "/robot1/tf")) == "laser"
 
 
 def test_alike_frames_take_a_prefix_too():

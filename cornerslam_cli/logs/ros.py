@@ -105,12 +105,17 @@ def pose2_from_matrix(T: np.ndarray) -> Pose2:
     return float(T[0, 3]), float(T[1, 3]), math.atan2(T[1, 0], T[0, 0])
 
 
-def tf_root(edges: dict[tuple[str, str], np.ndarray], frame: str) -> str:
-    """The topmost frame above ``frame`` along the tf ``edges`` (parent, child); ``frame`` when it has no
-    parent there (a loop of edges stops where it would come round)."""
-    parent_of = {child: parent for parent, child in edges}
+WORLD_FRAMES = ("map", "odom", "world", "earth")  # REP 105's: never a robot's frame
+
+
+def tf_root(edges: dict[tuple[str, str], np.ndarray], frame: str, topics: dict[tuple[str, str], str]) -> str:
+    """The topmost frame above ``frame`` along the static tf ``edges`` (parent, child; ``topics``: the
+    topic each came on — the mount of a laser on its robot is static, the robot's pose in odom_combined or
+    map is not: a review), short of a REP 105 world frame; ``frame`` when it has no such parent (a loop of
+    edges stops where it would come round)."""
+    parent_of = {child: parent for (parent, child) in edges if is_static(topics[(parent, child)])}
     seen = {frame}
-    while (parent := parent_of.get(frame)) is not None and parent not in seen:
+    while (parent := parent_of.get(frame)) is not None and parent not in seen and parent not in WORLD_FRAMES:
         seen.add(parent)
         frame = parent
     return frame
@@ -837,7 +842,7 @@ class RosLogReader:
             alike = sorted({f for edge in edges for f in edge if f != frame and _alike_frames(f, frame)})
             if alike:
                 self.near_frames = f" (its tf has '{alike[0]}': the scans' frame_id '{frame}' misnamed?)"
-            elif (root := tf_root(edges, frame)) != frame:  # on the tf, under another robot frame's name
+            elif (root := tf_root(edges, frame, edge_topic)) != frame:  # under another robot frame's name
                 laser, robot = short_text(frame), short_text(root)
                 self.near_frames = (
                     f" (its tf places '{laser}' under '{robot}': if that is the robot's frame, --set "
