@@ -514,10 +514,13 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
         log_info = replace(log_info, notes=(*log_info.notes, f"the log {reader.mount_problem}"))
     if gt := find_ground_truth(Path(log_path)):  # (what run and compare will score against, unasked)
         found = f"ground truth {display_path(gt)} beside it: run and compare score against it"
-        try:
-            load_reference(Path(log_path))  # (read as run reads it: a file it refuses is said so)
+        try:  # read as run reads it, a file it refuses said so (not one over INFO_GT_BYTES: seconds)
+            if gt.stat().st_size <= INFO_GT_BYTES:
+                load_reference(Path(log_path))
         except CornerslamError as e:
             found = f"run and compare exit 2 on the ground truth beside it: {e.msg} ({e.hint})"
+        except OSError:
+            pass  # (run says why it cannot read it)
         log_info = replace(log_info, notes=(*log_info.notes, found))
     frames = None  # the robot's frame (the odometry's child_frame_id, else input.base_frame), the laser's
     if laser is not None and not mount_text and getattr(reader, "laser_frame", None):
@@ -534,6 +537,9 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
         raise LogError(*odom_tf[0])
     if odom_tf:  # the first 2,000 messages after the first scan only: likely, not certain
         reader.stats.warn("%s in the first 2,000 messages after the first scan (%s)", *odom_tf[0])
+
+
+INFO_GT_BYTES = 16 * 2**20  # info reads a ground truth beside the log up to this size (~400,000 poses, ~2 s)
 
 
 def _info_config(config_path, overrides, scan_topic, odom_topic):

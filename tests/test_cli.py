@@ -167,7 +167,7 @@ def test_info_names_the_topics_run_would_use(sim_log):
     assert "scans     /scan" in res.output and "odometry  /odom" in res.output
 
 
-def test_info_notes_the_ground_truth_a_run_would_score_against(sim_log, tmp_path):
+def test_info_notes_the_ground_truth_a_run_would_score_against(sim_log, tmp_path, monkeypatch):
     """run and compare score against LOG.gt.tum unasked; info said nothing of it (an evo-user probe)."""
     res = invoke("info", sim_log)
     gt = sim_log.with_suffix(".gt.tum")
@@ -181,6 +181,11 @@ def test_info_notes_the_ground_truth_a_run_would_score_against(sim_log, tmp_path
     assert res.exit_code == 0 and "score against it" not in res.stdout
     assert "note:      run and compare exit 2 on the ground truth beside it: ground truth " in res.stdout
     assert "line 1 has 3 values" in res.stdout
+    # one over INFO_GT_BYTES is not read (a review: 122 MB took info 16 s): said as before, run checks it
+    import cornerslam_cli.cli as cli_module
+
+    monkeypatch.setattr(cli_module, "INFO_GT_BYTES", 5)
+    assert "run and compare score against it" in invoke("info", alone).stdout
 
 
 def test_info_shows_the_first_scans_beams_preset_and_beam_times(sim_log, tmp_path):
