@@ -188,6 +188,16 @@ def test_info_notes_the_ground_truth_a_run_would_score_against(sim_log, tmp_path
     assert "run and compare score against it" in invoke("info", alone).stdout
 
 
+def test_a_log_whose_name_leaves_no_room_for_gt_tum_is_read(sim_log, tmp_path):
+    """A log named with 249 bytes: LOG.mcap.gt.tum is longer than a file name may be, and looking for it
+    raised ENAMETOOLONG — info and run exited 1, internal error (a review). No ground truth then."""
+    log = tmp_path / ("x" * 244 + ".mcap")
+    log.write_bytes(sim_log.read_bytes())
+    res = invoke("info", log)
+    assert res.exit_code == 0, res.output
+    assert "ground truth" not in res.stdout
+
+
 def test_info_shows_the_first_scans_beams_preset_and_beam_times(sim_log, tmp_path):
     """The simulated log: 541 beams over 270° (no preset has them), no time_increment (scans as
     recorded); 181 SICK-like beams with time_increment: the SICK preset, the beam times and sweep."""

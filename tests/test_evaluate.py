@@ -946,25 +946,37 @@ def test_a_ground_truth_stamped_from_0_is_not_taken_for_milliseconds(gt_first):
 def test_a_ground_truth_on_a_clock_100000_s_off_is_not_taken_for_milliseconds():
     """A part of a log thinned by distance (a scan every 2 s, 18-171 s) against its whole ground truth
     with every stamp 100,000 s later: read as ms, two of its poses fall in the run's span, inside 0.7 s
-    where the run has no pose, and the warning said milliseconds (a probe): two clocks, said so."""
+    where the run has no pose, and the error said milliseconds and to write them in seconds (a probe).
+    Stamps read in another unit on weak evidence — none of the other file's inside their span, or over
+    DENSER times as dense — are said as the other reading of two clocks; on good evidence, a unit."""
     from cornerslam_cli.evaluate import overlap_problem
+
+    def two_clocks(why: str) -> bool:
+        return why.startswith("gt.tum does not overlap the trajectory") and "(or a unit: " in why
 
     log = 18.0 + np.arange(0.0, 708.0, 2.07)
     why, hint = overlap_problem(log[:74], log + 100_000.0, "gt.tum")
-    assert "milliseconds" not in why and why.startswith("gt.tum does not overlap the trajectory"), why
+    assert two_clocks(why) and "gt.tum's stamps read in milliseconds fall within" in why, why
     assert "Its stamps must use the log's clock" in hint
-    # a review: at 10 Hz the run has poses inside the 0.7 s too — the ground truth read as ms is 1,000
-    # times as dense as the run
+    # reviews: at 10 Hz the run has poses inside those 0.7 s — the ground truth read as ms is 1,000 times
+    # as dense as the run; the mirror case, a sparse run 100,000 s ahead of a 10 Hz ground truth
     log = 18.0 + np.arange(0.0, 708.0, 0.1)
-    why, _ = overlap_problem(log[:1530], log + 100_000.0, "gt.tum")
-    assert "milliseconds" not in why and why.startswith("gt.tum does not overlap the trajectory"), why
-    # while a real unit error is named: a 1 kHz motion capture in ms, a trajectory in ms against a 1 Hz
-    # ground truth (a review: a check of the other direction had lost it)
+    assert two_clocks(overlap_problem(log[:1530], log + 100_000.0, "gt.tum")[0])
+    why = overlap_problem(18.0 + np.arange(0.0, 150.0, 2.0) + 100_000.0, log, "gt.tum")[0]
+    assert two_clocks(why) and "the trajectory's stamps read in milliseconds" in why, why
+    # a 1 kHz motion capture in ms against a 10 Hz run: a unit; against a run a pose every 2 s, both said
     mocap = 1000.0 + np.arange(0.0, 20.0, 0.001)
-    why, _ = overlap_problem(1000.0 + np.arange(0.0, 20.0, 0.1), mocap * 1e3, "gt.tum")
-    assert why.startswith("gt.tum has its stamps in milliseconds, not seconds"), why
+    why, hint = overlap_problem(1000.0 + np.arange(0.0, 20.0, 0.1), mocap * 1e3, "gt.tum")
+    assert (
+        why.startswith("gt.tum has its stamps in milliseconds, not seconds")
+        and hint == "write its stamps in seconds"
+    )
+    assert two_clocks(overlap_problem(1000.0 + np.arange(0.0, 20.0, 2.0), mocap * 1e3, "gt.tum")[0])
+    # a trajectory in ms against a 1 Hz ground truth: 15 poses over 1.4 s, one ground-truth pose among them
     run = 1010.05 + np.arange(15) * 0.1
-    why, _ = overlap_problem(run * 1e3, 1000.0 + np.arange(100.0), "gt.tum")
+    why = overlap_problem(run * 1e3, 1000.0 + np.arange(100.0), "gt.tum")[0]
+    assert two_clocks(why) and "the trajectory's stamps read in milliseconds" in why, why
+    why = overlap_problem((1010.05 + np.arange(50) * 0.1) * 1e3, 1000.0 + np.arange(100.0), "gt.tum")[0]
     assert why.startswith("the trajectory has its stamps in milliseconds, not seconds"), why
 
 

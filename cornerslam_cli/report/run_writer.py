@@ -280,7 +280,16 @@ def find_ground_truth(log_path: Path) -> Path | None:
             return None
     names = [log_path] + ([log_path.with_suffix("")] if log_path.suffix == ".gz" else [])
     candidates = [c for p in names for c in (p.with_name(p.name + ".gt.tum"), p.with_suffix(".gt.tum"))]
-    return next((c for c in candidates if c.is_file()), None)
+    return next((c for c in candidates if _is_file(c)), None)
+
+
+def _is_file(path: Path) -> bool:
+    """``path.is_file()``, False where the name cannot be looked up (a log's name of 249-255 bytes makes
+    LOG.gt.tum longer than a file name may be: Python 3.11 raises ENAMETOOLONG, a review)."""
+    try:
+        return path.is_file()
+    except OSError:
+        return False
 
 
 @dataclass(frozen=True)
