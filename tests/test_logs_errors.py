@@ -663,6 +663,7 @@ def test_tf_root_climbs_to_the_top_and_stops_on_a_loop():
         tf_root(moving, "laser", {**static, ("odom_combined", "base_footprint"): "/tf"}) == "base_footprint"
     )
     assert tf_root({("map", "laser"): e}, "laser", {("map", "laser"): "/tf_static"}) == "laser"
+    assert tf_root({("robot1/map", "laser"): e}, "laser", {("robot1/map", "laser"): "/tf_static"}) == "laser"
     assert tf_root(edges, "laser", dict.fromkeys(edges, "/robot1/tf")) == "laser"
 
 

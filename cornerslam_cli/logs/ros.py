@@ -115,10 +115,15 @@ def tf_root(edges: dict[tuple[str, str], np.ndarray], frame: str, topics: dict[t
     edges stops where it would come round)."""
     parent_of = {child: parent for (parent, child) in edges if is_static(topics[(parent, child)])}
     seen = {frame}
-    while (parent := parent_of.get(frame)) is not None and parent not in seen and parent not in WORLD_FRAMES:
+    while (parent := parent_of.get(frame)) is not None and parent not in seen and not _world(parent):
         seen.add(parent)
         frame = parent
     return frame
+
+
+def _world(frame: str) -> bool:
+    """A REP 105 world frame, also under a robot's prefix (``robot1/map``)."""
+    return frame.rsplit("/", 1)[-1] in WORLD_FRAMES
 
 
 def tilt_from_level(T: np.ndarray) -> float:
