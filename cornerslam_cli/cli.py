@@ -515,7 +515,9 @@ def info(log_path, config_path, overrides, scan_topic, odom_topic, verbose, quie
     if gt := find_ground_truth(Path(log_path)):  # (what run and compare will score against, unasked)
         found = f"ground truth {display_path(gt)} beside it: run and compare score against it"
         try:  # read as run reads it, a file it refuses said so (not one over INFO_GT_BYTES: seconds)
-            if gt.stat().st_size <= INFO_GT_BYTES:
+            if (size := gt.stat().st_size) > INFO_GT_BYTES:
+                found += f" (its {size / 2**20:.0f} MiB not read here: run checks them)"
+            else:
                 load_reference(Path(log_path))
         except CornerslamError as e:
             found = f"run and compare exit 2 on the ground truth beside it: {e.msg} ({e.hint})"

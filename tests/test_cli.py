@@ -185,7 +185,10 @@ def test_info_notes_the_ground_truth_a_run_would_score_against(sim_log, tmp_path
     import cornerslam_cli.cli as cli_module
 
     monkeypatch.setattr(cli_module, "INFO_GT_BYTES", 5)
-    assert "run and compare score against it" in invoke("info", alone).stdout
+    assert (
+        "run and compare score against it (its 0 MiB not read here: run checks them)"
+        in invoke("info", alone).stdout
+    )
 
 
 def test_a_log_whose_name_leaves_no_room_for_gt_tum_is_read(sim_log, tmp_path):
