@@ -328,7 +328,8 @@ def mirror_problem(
     ours, theirs = (wrap_angle(np.diff(p[:, 2])) for p in (est[inside], g))
     if np.abs(theirs).sum() < MIRROR_TURNS:
         return None
-    as_is, mirrored = float(np.mean((ours - theirs) ** 2)), float(np.mean((ours + theirs) ** 2))
+    # (each difference wrapped too: turns of 179° and -179° differ by 2°, not 358° — a probe)
+    as_is, mirrored = (float(np.mean(wrap_angle(ours + sign * theirs) ** 2)) for sign in (-1.0, 1.0))
     if not as_is > MIRRORED * mirrored:
         return None
     turns = (
@@ -457,10 +458,11 @@ def evaluate_files(
             log.warning("%s", note)
         if note := sparse_note(f"ground truth '{ground_truth}'", gt_t, t, "trajectory"):
             log.warning("%s", note)
-        scaled = (
-            est if out["ate"].scale is None else est * np.array([out["ate"].scale, out["ate"].scale, 1.0])
-        )
-        out.update(vars(rpe(t, scaled, gt_t, gt)))  # (scale corrected too, as evo_rpe -as)
+        s = out["ate"].scale
+        scaled = est if s is None else est * np.array([s, s, 1.0])
+        # (scale corrected too, as evo_rpe -as; per metre of the trajectory: a ground truth in mm has its
+        # metre's window s of its units long, not 1 — the figure moved with the unit, a probe)
+        out.update(vars(rpe(t, scaled, gt_t, gt, delta_m=1.0 if s is None else s)))
     if relations:
         e = relation_error(t, est, read_relations(relations), time_offset)
         if e.n == 0:

@@ -138,6 +138,14 @@ def test_evaluate_reports_ate(sim_log, tmp_path):
     assert invoke("evaluate", out, "--ground-truth", sim_log.with_suffix(".gt.tum")).exit_code == 0
 
 
+def test_evaluate_of_a_directory_that_does_not_exist_says_so(tmp_path):
+    """A mistyped run directory was answered "give --ground-truth FILE.tum or --relations FILE" (a probe)."""
+    res = invoke("evaluate", tmp_path / "nonexist")
+    assert res.exit_code == 2
+    want = f"error: '{tmp_path / 'nonexist'}' does not exist"
+    assert res.stderr.strip() == f"{want} (give a run's output directory or a trajectory file)"
+
+
 def test_evaluate_correct_scale_reports_the_scale_and_needs_ground_truth(tmp_path):
     t = np.arange(40.0)
     gt = np.column_stack((np.cos(t / 6) * 8, np.sin(t / 4) * 5, t / 6))

@@ -1037,6 +1037,14 @@ def test_correct_scale_scales_the_rpe_too(files, tmp_path):
     assert evaluate_files(half, gt).rpe_step_rmse > 2.0 * whole.rpe_step_rmse  # (not corrected: half size)
     res = evaluate(half, "--ground-truth", gt, "--correct-scale")
     assert "per metre" in res.stdout and "(scale corrected ×" in res.stdout.splitlines()[1]
+    # per metre is a ratio: a ground truth in mm, corrected, gives the metres' figure (a probe: 0.0226
+    # against 0.0074 — its window was 1 mm of the ground truth's path)
+    gt_t, gt_poses = read_tum(gt)
+    mm = tmp_path / "mm.tum"
+    write_tum(mm, gt_t, gt_poses * np.array([1000.0, 1000.0, 1.0]))
+    in_mm = evaluate_files(est, mm, correct_scale=True)
+    assert in_mm.rpe_per_m == pytest.approx(whole.rpe_per_m, rel=1e-6)
+    assert in_mm.rpe_step_rmse == pytest.approx(1000.0 * whole.rpe_step_rmse, rel=1e-6)  # (in its units)
 
 
 @pytest.mark.parametrize("factor, unit", [(1000.0, "millimetres"), (100.0, "centimetres")])
@@ -1095,6 +1103,17 @@ def test_a_drifting_estimate_is_scored_not_taken_for_a_mirrored_ground_truth(dri
     assert mirror_problem(t, est, t, mirrored, "gt", "the trajectory")[0].startswith(
         "gt is in a mirrored frame"
     )
+
+
+def test_turns_either_side_of_half_a_turn_are_not_taken_for_a_mirror():
+    """A probe: a simulated log at 0.1 Hz turned 164° where its ground truth turned -179.6° (= 180.4°):
+    the turns, 17° apart, differed by 343° unwrapped, against 16° negated — its own ground truth was
+    refused as in a mirrored frame."""
+    from cornerslam_cli.evaluate import mirror_problem
+
+    t = np.array([0.0, 10.0])
+    gt, est = (np.array([[0.0, 0.0, 0.0], [1.0, 0.0, np.radians(turn)]]) for turn in (-179.6, 163.6))
+    assert mirror_problem(t, est, t, gt, "gt", "the trajectory") is None
 
 
 def test_a_run_stuck_in_place_is_not_taken_for_a_ground_truth_in_millimetres():
