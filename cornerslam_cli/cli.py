@@ -705,7 +705,8 @@ def evaluate(out_dir, ground_truth, relations, time_offset, correct_scale, verbo
     check_one_run(out_dir)  # a compare or batch directory: names its run directories
     if not ground_truth and not relations:  # what the run was scored against, where the files still hold it
         if not os.path.lexists(out_dir):  # (a mistyped run directory, said so: not a want of references)
-            raise LogError(f"'{out_dir}' does not exist", "give a run's output directory or a trajectory file")
+            hint = "give a run's output directory or a trajectory file"
+            raise LogError(f"'{out_dir}' does not exist", hint)
         rec = recorded_reference(out_dir)
         given = click.get_current_context().get_parameter_source("time_offset") != ParameterSource.DEFAULT
         ground_truth, relations = rec.ground_truth, rec.relations
