@@ -603,6 +603,20 @@ def test_simulate_is_reproducible(tmp_path):
     assert a.with_suffix(".gt.tum").read_text() == b.with_suffix(".gt.tum").read_text()
 
 
+def test_a_simulated_logs_static_tf_is_offered_latched(sim_log):
+    """ros2 bag play offers each topic with the QoS the bag recorded: simulate recorded none, so /tf_static
+    was played volatile and a listener started after the first message never got the laser's mount (a
+    probe). It is offered transient local, keep last 1, as tf2's static broadcaster does; the rest as
+    before, the default."""
+    from rosbags.rosbag2 import Reader
+
+    with Reader(sim_log) as reader:
+        qos = {c.topic: c.ext.offered_qos_profiles for c in reader.connections}
+    (static,) = qos["/tf_static"]
+    assert static.durability.name == "TRANSIENT_LOCAL" and static.depth == 1
+    assert qos["/scan"] == [] and qos["/odom"] == []
+
+
 def test_simulates_help_gives_the_ranges_it_accepts():
     """The ranges were said only by the errors of values outside them (a probe): --help gives them, the
     same as simulate.RANGES."""

@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..logs.writers.mcap import qos_profile
 from .mcap_items import (
     CORNER_ARROW,
     GREEN,
@@ -75,18 +76,6 @@ LINE_WIDTH = 0.02  # m, ellipses and segments
 ARROW_SCALE = (0.03, 0.08, 0.1)  # m: shaft diameter, head diameter, head length
 FLOAT32 = 7  # sensor_msgs/PointField
 STORE = "ros2_jazzy"  # rosbags' type store whose definitions are embedded (the module docstring)
-
-
-def qos_profile(latched: bool) -> str:
-    """``offered_qos_profiles`` in rosbag2's numeric (version 8) YAML: reliable, keep last (1 when
-    ``latched``, with transient local durability, else 10, volatile), the rest default."""
-    zero = "\n    sec: 0\n    nsec: 0"
-    return (
-        f"- history: 1\n  depth: {1 if latched else 10}\n  reliability: 1\n"
-        f"  durability: {1 if latched else 2}\n"
-        f"  deadline:{zero}\n  lifespan:{zero}\n  liveliness: 1\n  liveliness_lease_duration:{zero}\n"
-        "  avoid_ros_namespace_conventions: false"
-    )
 
 
 class Ros2Encoding:

@@ -280,16 +280,9 @@ def find_ground_truth(log_path: Path) -> Path | None:
             return None
     names = [log_path] + ([log_path.with_suffix("")] if log_path.suffix == ".gz" else [])
     candidates = [c for p in names for c in (p.with_name(p.name + ".gt.tum"), p.with_suffix(".gt.tum"))]
-    return next((c for c in candidates if _is_file(c)), None)
-
-
-def _is_file(path: Path) -> bool:
-    """``path.is_file()``, False where the name cannot be looked up (a log's name of 249-255 bytes makes
-    LOG.gt.tum longer than a file name may be: Python 3.11 raises ENAMETOOLONG, a review)."""
-    try:
-        return path.is_file()
-    except OSError:
-        return False
+    # (os.path.isfile, not Path.is_file: a log named with 249-255 bytes puts LOG.gt.tum's name over the
+    # limit, and Python 3.11's is_file raises ENAMETOOLONG — info and run exited 1, a review)
+    return next((c for c in candidates if os.path.isfile(c)), None)
 
 
 @dataclass(frozen=True)
@@ -361,10 +354,8 @@ def accuracy_of(
     the run in time (then there is no ATE/RPE, rather than NaN), no relation inside the run. ``online``:
     the causal estimate when ``poses`` were smoothed (two-level SLAM), scored beside them; ``receive``:
     the run's stamps are the recorder's (``input.stamps=receive``), which a ground truth stamped on the
-    sensors' clock may not meet (said so); ``alone``: the odometry is the scans' (input.odometry=scans),
-    which a laser taken upright when it is upside down mirrors as a ground truth in a z-down frame would:
-    the mirror check names both causes; a LaserScan's ranges are metres (REP 103), so the units check is
-    made on it as on the log's odometry (a ground truth in mm scored an ATE of 9 km: a probe)."""
+    sensors' clock may not meet (said so); ``alone``: the odometry is the scans' (input.odometry=scans):
+    a mirror names the laser's mount as a cause too; the units check holds (LaserScan ranges are metres)."""
     acc: dict = {}  # Accuracy's fields
     notes = list(ref.notes)
     name = f"ground truth '{ref.gt_path}'"

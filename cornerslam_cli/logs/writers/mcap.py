@@ -6,10 +6,23 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from ...types import OdomSample
+from ..ros import is_static
 from .base import RawScan
 from .ros import RosTopics, ros_messages, serializer, shuffled
 
 LIBRARY = "cornerslam"  # the Header record's library of a log written here (simulate.py checks it)
+
+
+def qos_profile(latched: bool) -> str:
+    """``offered_qos_profiles`` in rosbag2's numeric (version 8) YAML: reliable, keep last (1 when
+    ``latched``, with transient local durability, else 10, volatile), the rest default."""
+    zero = "\n    sec: 0\n    nsec: 0"
+    return (
+        f"- history: 1\n  depth: {1 if latched else 10}\n  reliability: 1\n"
+        f"  durability: {1 if latched else 2}\n"
+        f"  deadline:{zero}\n  lifespan:{zero}\n  liveliness: 1\n  liveliness_lease_duration:{zero}\n"
+        "  avoid_ros_namespace_conventions: false"
+    )
 
 
 def write_mcap(
@@ -65,8 +78,12 @@ def write_mcap(
                     encoding=ros.schema_encoding,
                     data=ros.msgdef(typename).encode(),
                 )
+                # ROS 2: /tf_static offered latched, as tf2's static broadcaster does (ros2 bag play
+                # offers what the bag recorded; without it a listener started later never gets the mount)
+                latched = ros.profile == "ros2" and is_static(topic)
+                meta = {"offered_qos_profiles": qos_profile(True)} if latched else {}
                 cid = channels[topic] = w.register_channel(
-                    topic=topic, message_encoding=ros.message_encoding, schema_id=sid
+                    topic=topic, message_encoding=ros.message_encoding, schema_id=sid, metadata=meta
                 )
             w.add_message(channel_id=cid, log_time=t, data=data, publish_time=t)
         for name, record in (metadata or {}).items():
