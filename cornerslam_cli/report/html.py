@@ -23,12 +23,11 @@ from .plots import (
     RUN_FIGURES,
     compare_assocs,
     corrected_label,
-    odometry_label,
     plot_compare,
     plot_run,
 )
 from .tables import COMPARISON_COLUMNS, COMPARISON_LOOP_COLUMNS, best_cells, read_csv
-from .text import span_text
+from .text import odometry_label, span_text
 
 CSS = """
 body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 2em auto; max-width: 1200px;

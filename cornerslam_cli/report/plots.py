@@ -39,6 +39,7 @@ import numpy as np
 from ..results import RunSummary
 from .run_dir import RunData, ellipse_polygons, load_run
 from .tables import COMPARISON_COLUMNS, read_csv
+from .text import odometry_label
 
 log = logging.getLogger(__name__)
 
@@ -216,11 +217,6 @@ def _draw_map(ax, run: RunData, segments_alpha: float = 0.18, legend: bool = Tru
             odometry.set_label(f"{name} (runs off the plot)")  # (framed on the map, not on the drift)
     if legend:
         ax.legend(loc="best", fontsize=8, framealpha=0.85)
-
-
-def odometry_label(summary: RunSummary) -> str:
-    """What the run's odometry is called: the scans' own on the scans alone (input.odometry: scans)."""
-    return "odometry" if summary.scan_odometry is None else "scan odometry"
 
 
 def corrected_label(summary: RunSummary) -> str:

@@ -63,11 +63,16 @@ def span_lines(i: RunInput) -> list[str]:
     return [f"span: {text}"] if (text := span_text(i)) else []
 
 
+def odometry_label(summary: RunSummary) -> str:
+    """What the run's odometry is called: the scans' own on the scans alone (input.odometry: scans)."""
+    return "odometry" if summary.scan_odometry is None else "scan odometry"
+
+
 def summary_lines(s: RunSummary) -> list[str]:
     """``cornerslam run``: counts, stage times, accuracy when there is a reference, the output."""
     c, t = s.counts, s.timing
     alone = s.scan_odometry is not None  # (input.odometry: scans)
-    odometry = "scan odometry" if alone else "odometry"
+    odometry = odometry_label(s)
     lines = [
         f"{s.input.log}: {c.steps} steps ({c.scans_in} scans, {c.scans_skipped} skipped, "
         f"{c.keyframes_skipped} between keyframes{unusable_scans(c)}), {c.landmarks} landmarks, "
